@@ -1,0 +1,563 @@
+"""Run outputs, written as the run goes.
+
+Every file is either appended to line by line (``tracks.csv``, flushed after each batch of rows) or replaced
+atomically (``run.json``, ``particles.npz``: written to a temporary file in the same folder, fsync'ed, then
+renamed over the old one), so an interrupted run (Ctrl-C, crash) leaves valid partial results and never a
+half-written file.
+
+Files of a run directory (see :class:`RunWriter`):
+
+* ``run.json``: tracker, status (``running`` / ``complete`` / ``interrupted`` / ``failed``), config, versions,
+  start/finish times, frames written, per-stage timings, summary.
+* ``tracks.csv``: one line per (frame, target): ``frame,id,x,y,z`` then tracker-specific columns.
+* ``particles.npz``: subsampled particle clouds of some frames.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import dataclasses
+import enum
+import io
+import json
+import logging
+import math
+import os
+import platform
+import tempfile
+import time
+from collections.abc import Iterable, Sequence
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import OutputError, WptrackError
+
+log = logging.getLogger(__name__)
+
+TRACKS_FILE = "tracks.csv"
+RUN_FILE = "run.json"
+PARTICLES_FILE = "particles.npz"
+
+#: The first columns of every tracks.csv.
+BASE_COLUMNS = ("frame", "id", "x", "y", "z")
+
+# --------------------------------------------------------------------------------------------- atomic writes
+
+
+def _fsync_dir(directory: Path) -> None:
+    """Make a rename durable (best effort: not every platform lets a folder be opened)."""
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def _atomic_file(path: str | os.PathLike) -> Any:
+    """Yield a binary file object on a temporary file next to ``path``; on success fsync and rename it to ``path``.
+
+    On any exception (including KeyboardInterrupt) the temporary file is removed and ``path`` is untouched.
+    """
+    target = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            yield f
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+    _fsync_dir(target.parent)
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
+    """Replace ``path`` with ``data`` atomically (temporary file in the same folder, fsync, ``os.replace``)."""
+    with _atomic_file(path) as f:
+        f.write(data)
+
+
+def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> None:
+    """Replace ``path`` with ``text`` atomically (no newline translation)."""
+    atomic_write_bytes(path, text.encode(encoding))
+
+
+def _jsonable(obj: Any) -> Any:
+    """Convert ``obj`` into plain JSON types: numpy scalars/arrays, paths, dataclasses, enums, sets, tuples.
+
+    Non-finite floats become ``None`` so that the output is strict JSON.
+    """
+    if obj is None or isinstance(obj, (bool, str)):
+        return obj
+    if isinstance(obj, int):
+        return int(obj)
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, np.generic):
+        return _jsonable(obj.item())
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, set, frozenset)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, os.PathLike):
+        return os.fspath(obj)
+    if isinstance(obj, enum.Enum):
+        return _jsonable(obj.value)
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return _jsonable(dataclasses.asdict(obj))
+    return str(obj)
+
+
+def atomic_write_json(path: str | os.PathLike, obj: Any, indent: int | None = 2) -> None:
+    """Write ``obj`` as strict JSON (NaN/inf as null; numpy, paths and dataclasses converted), atomically."""
+    text = json.dumps(_jsonable(obj), indent=indent, allow_nan=False) + "\n"
+    atomic_write_text(path, text)
+
+
+def atomic_save_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
+    """Save arrays to an uncompressed ``.npz`` file atomically (``path`` is used as given; no suffix added)."""
+    with _atomic_file(path) as f:
+        np.savez(f, **arrays)
+
+
+def ensure_writable_dir(path: str | os.PathLike) -> Path:
+    """Create an output folder (with parents) and check that files can be written into it.
+
+    Args:
+        path: Folder path.
+
+    Returns:
+        The folder as a :class:`~pathlib.Path`.
+
+    Raises:
+        OutputError: ``output directory 'x' is not writable: <reason>`` when the path is a file, lies under a file,
+            cannot be created, or a test file cannot be written in it.
+    """
+    p = Path(path)
+
+    def fail(reason: str) -> OutputError:
+        return OutputError(f"output directory '{p}' is not writable: {reason}")
+
+    if p.exists() and not p.is_dir():
+        raise fail("it exists and is a file")
+    for parent in p.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise fail(f"'{parent}' is a file, not a folder")
+            break
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise fail(e.strerror or str(e)) from None
+    try:
+        fd, tmp = tempfile.mkstemp(dir=p, prefix=".wptrack-write-test-")
+        os.close(fd)
+        os.unlink(tmp)
+    except OSError as e:
+        raise fail(e.strerror or str(e)) from None
+    return p
+
+
+# ----------------------------------------------------------------------------------------------- versions
+
+
+def versions() -> dict[str, str | None]:
+    """Versions of wptrack, warp, numpy, cv2 (OpenCV) and Python; ``None`` for a package that is not installed."""
+    from . import __version__
+
+    out: dict[str, str | None] = {"wptrack": __version__}
+    for key, module in (("warp", "warp"), ("numpy", "numpy"), ("cv2", "cv2")):
+        try:
+            mod = __import__(module)
+            out[key] = str(getattr(mod, "__version__", None) or getattr(getattr(mod, "config", None), "version", None))
+        except Exception:  # a broken optional install must not stop a run
+            out[key] = None
+    out["python"] = platform.python_version()
+    return out
+
+
+def _now() -> str:
+    """Local time, ISO 8601 with offset, to the second."""
+    return datetime.now(timezone.utc).astimezone().isoformat(timespec="seconds")
+
+
+# ----------------------------------------------------------------------------------------------- RunWriter
+
+
+def _format_value(value: Any) -> Any:
+    """Format one CSV cell: ints as ints, floats with ``%.6f`` (``nan``/``inf`` spelled out), strings as-is."""
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value.item()
+    if value is None:
+        return ""
+    if isinstance(value, (bool, np.bool_)):
+        return "1" if value else "0"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        if math.isnan(v):
+            return "nan"
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        return f"{v:.6f}"
+    text = str(value)
+    if "\n" in text or "\r" in text:
+        raise ValueError(f"tracks values must not contain line breaks: {text!r}")
+    return text
+
+
+class RunWriter:
+    """Write a run's outputs (``run.json``, ``tracks.csv``, ``particles.npz``) as the run goes.
+
+    ``run.json`` is written at once with ``"status": "running"`` and rewritten (atomically) on :meth:`set_info`,
+    every ``flush_seconds`` while rows/particles come in, and on :meth:`close`. ``tracks.csv`` lines are written
+    and flushed at the end of every :meth:`add_rows` call (fsync'ed at most every ``flush_seconds`` and on
+    close). ``particles.npz`` is rewritten atomically at most every ``flush_seconds`` and on close.
+
+    Use it as a context manager: leaving the block normally closes with ``"complete"``, by KeyboardInterrupt
+    (or SystemExit) with ``"interrupted"``, by another exception with ``"failed"`` (the error is recorded in
+    ``run.json``); exceptions are always re-raised.
+
+    Args:
+        out_dir: Output folder (created if needed).
+        tracker: Tracker name recorded in run.json.
+        columns: tracks.csv header: ``frame, id, x, y, z`` then extra columns (e.g. ``sx, sy, sz``).
+        config: Tracker/run configuration recorded in run.json (made JSON-safe).
+        particles_every: Keep the particles of frames whose number is a multiple of this; 0 keeps none.
+        particles_max: At most this many particles per frame (deterministic evenly-strided subsample).
+        flush_seconds: Minimum interval between periodic rewrites of run.json/particles.npz (and CSV fsyncs).
+
+    Raises:
+        OutputError: The folder cannot be written.
+        ValueError: ``columns`` does not start with ``frame, id, x, y, z`` or has duplicates; bad parameters.
+    """
+
+    def __init__(
+        self,
+        out_dir: str | os.PathLike,
+        tracker: str,
+        columns: Sequence[str],
+        config: dict[str, Any],
+        particles_every: int = 1,
+        particles_max: int = 2000,
+        flush_seconds: float = 2.0,
+    ) -> None:
+        columns = [str(c) for c in columns]
+        if tuple(columns[: len(BASE_COLUMNS)]) != BASE_COLUMNS:
+            raise ValueError(f"tracks columns must start with {','.join(BASE_COLUMNS)}, got {columns}")
+        if len(set(columns)) != len(columns):
+            raise ValueError(f"duplicate tracks columns: {columns}")
+        bad = [c for c in columns if not c or any(ch in c for ch in ',"\n\r')]
+        if bad:
+            raise ValueError(f"invalid tracks column names: {bad}")
+        if particles_every < 0 or particles_max < 1 or flush_seconds < 0:
+            raise ValueError(
+                f"need particles_every >= 0, particles_max >= 1, flush_seconds >= 0; got {particles_every}, "
+                f"{particles_max}, {flush_seconds}"
+            )
+        self.out_dir = ensure_writable_dir(out_dir)
+        self.tracks_path = self.out_dir / TRACKS_FILE
+        self.run_path = self.out_dir / RUN_FILE
+        self.particles_path = self.out_dir / PARTICLES_FILE
+        self.columns = columns
+        self.particles_every = int(particles_every)
+        self.particles_max = int(particles_max)
+        self.flush_seconds = float(flush_seconds)
+        self.status = "running"
+        self.rows_written = 0
+        self._frames: set[int] = set()
+        self._particles: list[tuple[int, np.ndarray, np.ndarray]] = []
+        self._particles_dirty = False
+        self._timings: dict[str, list[float]] = {}
+        self._t0 = time.monotonic()
+        self._last_flush = self._t0
+        self._closed = False
+        self._run: dict[str, Any] = {
+            "tracker": tracker,
+            "status": "running",
+            "started": _now(),
+            "finished": None,
+            "elapsed_s": None,
+            "frames": 0,
+            "rows": 0,
+            "config": _jsonable(config),
+            "versions": versions(),
+            "columns": list(columns),
+            "files": {"tracks": TRACKS_FILE, "particles": None},
+            "timings": {},
+            "summary": None,
+        }
+        self._reserved = set(self._run)
+        try:
+            self._csv_file = open(self.tracks_path, "w", encoding="utf-8", newline="")
+        except OSError as e:
+            raise OutputError(f"cannot write {self.tracks_path}: {e.strerror or e}") from None
+        self._csv_file.write(",".join(columns) + "\n")
+        self._csv_file.flush()
+        self._write_run_json()
+        log.info("writing run outputs to %s", self.out_dir)
+
+    # ------------------------------------------------------------------ public API
+
+    def set_info(self, **kw: Any) -> None:
+        """Merge extra top-level fields into run.json (e.g. ``device="cuda:0", seed=1``) and rewrite it.
+
+        Raises:
+            ValueError: A key is one that RunWriter manages itself (status, config, timings, ...).
+        """
+        clash = sorted(set(kw) & self._reserved)
+        if clash:
+            raise ValueError(f"run.json fields {clash} are managed by RunWriter and cannot be set with set_info")
+        self._run.update(_jsonable(kw))
+        if not self._closed:
+            self._write_run_json()
+
+    def add_rows(self, rows: Iterable[Sequence[Any]]) -> None:
+        """Append rows to tracks.csv and flush them (whole lines, one write per call).
+
+        Args:
+            rows: Rows with one value per column, in ``columns`` order. Floats are written with ``%.6f``
+                (metres: micrometre resolution), ints as ints, bools as 0/1, None as empty, strings as-is
+                (CSV-quoted when needed).
+
+        Raises:
+            ValueError: A row has the wrong number of values (nothing of this call is written then).
+        """
+        self._check_open()
+        buf = io.StringIO()
+        writer = csv.writer(buf, lineterminator="\n")
+        frames = []
+        n = 0
+        for row in rows:
+            row = list(row)
+            if len(row) != len(self.columns):
+                raise ValueError(
+                    f"tracks row has {len(row)} values, expected {len(self.columns)} ({self.columns}): {row}"
+                )
+            writer.writerow([_format_value(v) for v in row])
+            frames.append(row[0])
+            n += 1
+        if n == 0:
+            return
+        self._csv_file.write(buf.getvalue())
+        self._csv_file.flush()
+        self.rows_written += n
+        for f in frames:
+            with contextlib.suppress(TypeError, ValueError):
+                self._frames.add(int(f))
+        self._maybe_flush()
+
+    def add_particles(self, frame: int, positions: np.ndarray, weights: np.ndarray | None = None) -> None:
+        """Record a frame's particles (kept in memory; written to particles.npz periodically and on close).
+
+        Only frames whose number is a multiple of ``particles_every`` are kept. More than ``particles_max``
+        particles are subsampled with an even deterministic stride (weights subsampled alike, not renormalised).
+
+        Args:
+            frame: Frame index.
+            positions: ``(K, 3)`` particle positions in metres.
+            weights: ``(K,)`` particle weights; ``None`` records uniform weights ``1/K``.
+
+        Raises:
+            ValueError: Wrong shapes.
+        """
+        self._check_open()
+        if self.particles_every == 0 or int(frame) % self.particles_every != 0:
+            return
+        pos = np.asarray(positions)
+        if pos.ndim != 2 or pos.shape[1] != 3:
+            raise ValueError(f"particle positions must have shape (K, 3), got {pos.shape}")
+        k = pos.shape[0]
+        if weights is None:
+            w = np.full(k, 1.0 / k if k else np.nan, dtype=np.float32)
+        else:
+            w = np.asarray(weights).reshape(-1)
+            if w.shape[0] != k:
+                raise ValueError(f"particle weights must have shape ({k},), got {np.shape(weights)}")
+        if k > self.particles_max:
+            idx = (np.arange(self.particles_max, dtype=np.int64) * k) // self.particles_max
+            pos, w = pos[idx], w[idx]
+        self._particles.append((int(frame), pos.astype(np.float32, copy=True), w.astype(np.float32, copy=True)))
+        self._particles_dirty = True
+        self._maybe_flush()
+
+    def add_timing(self, stage: str, seconds: float) -> None:
+        """Add one duration sample (seconds) to a stage; run.json reports total, count, mean and median."""
+        self._timings.setdefault(stage, []).append(float(seconds))
+
+    def timings(self) -> dict[str, dict[str, float]]:
+        """Per-stage summary: ``{stage: {"total_s", "count", "mean_ms", "median_ms"}}``."""
+        out = {}
+        for stage, samples in self._timings.items():
+            arr = np.asarray(samples, dtype=np.float64)
+            out[stage] = {
+                "total_s": float(arr.sum()),
+                "count": int(arr.size),
+                "mean_ms": float(arr.mean() * 1e3),
+                "median_ms": float(np.median(arr) * 1e3),
+            }
+        return out
+
+    @property
+    def frames_written(self) -> int:
+        """Number of distinct frame numbers among the rows written."""
+        return len(self._frames)
+
+    def flush(self) -> None:
+        """fsync tracks.csv and rewrite particles.npz (if changed) and run.json now."""
+        if self._closed:
+            return
+        self._csv_file.flush()
+        os.fsync(self._csv_file.fileno())
+        if self._particles_dirty:
+            self._write_particles()
+        self._write_run_json()
+        self._last_flush = time.monotonic()
+
+    def close(self, status: str = "complete", summary: dict[str, Any] | None = None) -> None:
+        """Finish the run: close tracks.csv, write the final particles.npz and run.json (idempotent).
+
+        Args:
+            status: ``"complete"``, ``"interrupted"``, ``"failed"`` (any string is recorded).
+            summary: Tracker summary recorded in run.json (e.g. mean error, frames lost).
+        """
+        if self._closed:
+            return
+        self._closed = True
+        self.status = status
+        try:
+            self._csv_file.flush()
+            os.fsync(self._csv_file.fileno())
+        finally:
+            self._csv_file.close()
+        if self._particles:
+            self._write_particles()
+        self._run.update(status=status, finished=_now())
+        if summary is not None:
+            self._run["summary"] = _jsonable(summary)
+        self._write_run_json()
+        log.info(
+            "run %s: %d frames, %d rows written to %s", status, self.frames_written, self.rows_written, self.out_dir
+        )
+
+    def __enter__(self) -> RunWriter:
+        return self
+
+    def __exit__(self, exc_type: Any, exc: BaseException | None, tb: Any) -> bool:
+        if exc_type is None:
+            self.close("complete")
+            return False
+        status = "failed" if isinstance(exc, Exception) else "interrupted"
+        if status == "failed":
+            self._run["error"] = f"{exc_type.__name__}: {exc}"
+        try:
+            self.close(status)
+        except Exception:  # keep the original exception
+            log.exception("could not finish the run outputs in %s", self.out_dir)
+        return False
+
+    # ------------------------------------------------------------------ internals
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise RuntimeError(f"RunWriter for {self.out_dir} is closed")
+
+    def _maybe_flush(self) -> None:
+        if time.monotonic() - self._last_flush >= self.flush_seconds:
+            self.flush()
+
+    def _write_particles(self) -> None:
+        n = len(self._particles)
+        k = max((p.shape[0] for _, p, _ in self._particles), default=0)
+        frames = np.array([f for f, _, _ in self._particles], dtype=np.int32)
+        positions = np.full((n, k, 3), np.nan, dtype=np.float32)
+        weights = np.full((n, k), np.nan, dtype=np.float32)
+        for i, (_, p, w) in enumerate(self._particles):
+            positions[i, : p.shape[0]] = p
+            weights[i, : w.shape[0]] = w
+        atomic_save_npz(self.particles_path, frames=frames, positions=positions, weights=weights)
+        self._run["files"]["particles"] = PARTICLES_FILE
+        self._particles_dirty = False
+
+    def _write_run_json(self) -> None:
+        self._run["elapsed_s"] = round(time.monotonic() - self._t0, 3)
+        self._run["frames"] = self.frames_written
+        self._run["rows"] = self.rows_written
+        self._run["timings"] = self.timings()
+        atomic_write_json(self.run_path, self._run)
+
+
+# ----------------------------------------------------------------------------------------------- reading
+
+
+def _column_array(name: str, values: list[str]) -> np.ndarray:
+    """Numeric column -> int64 (all integers) or float64 (empty cells as NaN); otherwise a str array."""
+    if not values:
+        return np.zeros(0, dtype=np.int64 if name in ("frame", "id") else np.float64)
+    try:
+        return np.array([int(v) for v in values], dtype=np.int64)
+    except ValueError:
+        pass
+    try:
+        return np.array([float(v) if v.strip() else np.nan for v in values], dtype=np.float64)
+    except ValueError:
+        return np.array(values, dtype=str)
+
+
+def read_tracks(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """Read a tracks.csv / groundtruth.csv into columns.
+
+    Blank lines and lines starting with ``#`` are skipped. A last line without a newline and with too few values
+    (a run killed in the middle of a write) is dropped with a warning.
+
+    Args:
+        path: CSV file with a header line.
+
+    Returns:
+        ``{column: (N,) array}`` in header order: int64 when every value is an integer, float64 when every
+        value is a number (empty cells as NaN), otherwise a str array.
+
+    Raises:
+        WptrackError: The file is missing/unreadable, has no header, or a row has the wrong number of values.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise WptrackError(f"tracks file not found: {p}") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise WptrackError(f"cannot read tracks file {p}: {e}") from None
+    lines = text.splitlines(keepends=True)
+    records = [(i + 1, line) for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")]
+    if not records:
+        raise WptrackError(f"tracks file {p} is empty (expected a header line such as frame,id,x,y,z)")
+    header = [h.strip() for h in next(csv.reader([records[0][1]]))]
+    if len(set(header)) != len(header) or not all(header):
+        raise WptrackError(f"tracks file {p}: invalid header {header}")
+    data: list[list[str]] = [[] for _ in header]
+    body = records[1:]
+    for j, (lineno, line) in enumerate(body):
+        row = next(csv.reader([line]))
+        if len(row) != len(header):
+            if j == len(body) - 1 and not line.endswith("\n") and len(row) < len(header):
+                log.warning("%s: dropping the incomplete last line %d", p, lineno)
+                break
+            raise WptrackError(f"tracks file {p}, line {lineno}: {len(row)} values, expected {len(header)}")
+        for col, value in zip(data, row, strict=True):
+            col.append(value.strip())
+    return {name: _column_array(name, col) for name, col in zip(header, data, strict=True)}

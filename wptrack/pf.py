@@ -1,0 +1,301 @@
+"""The particle-filter engine shared by the point trackers (S1 colour, and the 3D-observation filter of the
+extended paper's section III.C): particle state, estimates, resampling, CUDA graphs.
+
+A frame is a fixed chain of launches::
+
+    predict+score (tracker kernel: gather parents, motion, likelihood, log-weights)
+    -> block max / final max          (max log-weight and MAP index)
+    -> block moments / final moments  (weights for resampling, MMSE mean, spread, ESS, resample decision)
+    -> optional subsample for reports
+    -> resample (float64 CDF, scheme by name) -> ancestors for the next frame
+    -> frame counter += 1 (on device: it keys the random streams)
+
+Nothing in the chain reads back to the host or allocates; on CUDA the chain is captured once per ping-pong
+parity as a CUDA graph and replayed. Per-frame parameters (frame number, sigma, ESS threshold) live in
+small device arrays, so a replay sees their current values. The only device-to-host copy per frame is the
+estimate vector (and, when asked for, a small subsample of particles for reports).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import warp as wp
+
+from .errors import ConfigError
+from .kernels import motion as kmotion
+from .kernels import reduce as kreduce
+from .resampling import SCHEMES, Resampler
+
+log = logging.getLogger(__name__)
+
+BLOCK = 256
+"""Threads per block of the reduction kernels (CUDA; the CPU backend runs one thread per block)."""
+
+
+@dataclass
+class Estimate:
+    """The filter's output for one frame (host arrays; metres in the world frame)."""
+
+    frame: int
+    """0-based frame index."""
+    mean: np.ndarray
+    """(3,) weighted mean of the particles (MMSE estimate), metres."""
+    std: np.ndarray
+    """(3,) weighted standard deviation per axis (spread of the cloud), metres."""
+    map: np.ndarray
+    """(3,) the particle with the highest weight (MAP estimate), metres."""
+    ess: float
+    """Effective sample size (sum w)^2 / sum w^2, in particles."""
+    loglik: float
+    """log of the mean particle weight: the frame's log-likelihood estimate (when resampled every frame)."""
+    resampled: bool
+    """Whether the particles were resampled after this frame (ESS trigger)."""
+    particles: np.ndarray | None = None
+    """(K, 3) float32 subsample of the weighted particle cloud (only when requested), metres."""
+    weights: np.ndarray | None = None
+    """(K,) float32 weights of that subsample relative to the best particle."""
+    timings: dict[str, float] = field(default_factory=dict)
+    """Seconds spent per stage for this frame (host wall clock; see ParticleFilter.step)."""
+
+
+def _seed_words(seed: int) -> wp.vec2ui:
+    if not isinstance(seed, (int, np.integer)) or seed < 0 or seed >= 2**64:
+        raise ConfigError(f"seed: expected an integer in [0, 2^64), got {seed!r}")
+    seed = int(seed)
+    return wp.vec2ui(seed & 0xFFFFFFFF, (seed >> 32) & 0xFFFFFFFF)
+
+
+def check_particles(n: int) -> int:
+    """Validate a particle count (positive integer, below the 32-bit index limit)."""
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n <= 0:
+        raise ConfigError(f"particles: expected a positive integer, got {n!r}")
+    if n >= 2**31 - 1:
+        raise ConfigError(f"particles: {n} exceeds the limit of 2^31 - 2 particles")
+    return int(n)
+
+
+class ParticleFilter:
+    """Particle state and the shared per-frame chain for trackers whose particles are 3D points.
+
+    Subclasses implement :meth:`_launch_predict_score` (their motion + observation kernel) and upload their
+    observation in :meth:`_upload` before the chain runs.
+
+    Device state (allocated once, N = ``particles``):
+        x: two (N,) ``wp.vec3`` ping-pong buffers of particle positions, metres.
+        logw: two (N,) float32 ping-pong buffers of log-weights (unnormalised).
+        ancestors: (N,) int32 parent of each particle for the next prediction (identity after init).
+        resampled: (1,) int32, 1 when the last frame resampled (next log-weights restart from 0).
+        weights: (N,) float64 exp(logw - max), the resampler's input.
+        est: (16,) float64 estimate vector (layout ``kernels.reduce.EST_*``).
+        frame: (1,) int32 filter iteration, keys the random streams.
+    """
+
+    def __init__(
+        self,
+        particles: int,
+        sigma: float,
+        device: str,
+        seed: int = 0,
+        resampling: str = "systematic",
+        ess_threshold: float = 1.0,
+        keep_particles: int = 0,
+        use_graph: bool | None = None,
+    ) -> None:
+        n = check_particles(particles)
+        if not (isinstance(sigma, (int, float)) and math.isfinite(sigma) and sigma > 0):
+            raise ConfigError(f"sigma: expected a motion deviation > 0 metres, got {sigma!r}")
+        if resampling not in SCHEMES:
+            raise ConfigError(f"resampling: unknown scheme {resampling!r}; expected one of {', '.join(SCHEMES)}")
+        if not (0.0 < ess_threshold <= 1.0):
+            raise ConfigError(f"ess_threshold: expected a fraction in (0, 1], got {ess_threshold!r}")
+        self.n = n
+        self.device = str(wp.get_device(device))
+        self.is_cuda = wp.get_device(device).is_cuda
+        self.seed = _seed_words(seed)
+        self.use_graph = self.is_cuda if use_graph is None else (bool(use_graph) and self.is_cuda)
+        self.chunk = BLOCK
+        self.blocks = (n + self.chunk - 1) // self.chunk
+        d = self.device
+        self.x = [wp.zeros(n, dtype=wp.vec3, device=d), wp.zeros(n, dtype=wp.vec3, device=d)]
+        self.logw = [wp.zeros(n, dtype=wp.float32, device=d), wp.zeros(n, dtype=wp.float32, device=d)]
+        self.ancestors = wp.array(np.arange(n, dtype=np.int32), device=d)
+        self.resampled = wp.ones(1, dtype=wp.int32, device=d)
+        self.weights = wp.zeros(n, dtype=wp.float64, device=d)
+        self.est = wp.zeros(kreduce.EST_SIZE, dtype=wp.float64, device=d)
+        self.best_index = wp.zeros(1, dtype=wp.int32, device=d)
+        self.part_max = wp.zeros(self.blocks, dtype=wp.float32, device=d)
+        self.part_arg = wp.zeros(self.blocks, dtype=wp.int32, device=d)
+        self.part = wp.zeros((self.blocks, kreduce.N_SUMS), dtype=wp.float64, device=d)
+        self.frame = wp.zeros(1, dtype=wp.int32, device=d)
+        self.sigma = wp.array([sigma], dtype=wp.float32, device=d)
+        self.ess_threshold = wp.array([ess_threshold], dtype=wp.float32, device=d)
+        self.resampler = Resampler(resampling, n, d)
+        self.keep = min(int(keep_particles), n)
+        self.stride = max(1, n // self.keep) if self.keep else 1
+        if self.keep:
+            self.sub_x = wp.zeros(self.keep, dtype=wp.vec3, device=d)
+            self.sub_w = wp.zeros(self.keep, dtype=wp.float32, device=d)
+        pinned = self.is_cuda
+        self.est_host = wp.zeros(kreduce.EST_SIZE, dtype=wp.float64, device="cpu", pinned=pinned)
+        if self.keep:
+            self.sub_x_host = wp.zeros(self.keep, dtype=wp.vec3, device="cpu", pinned=pinned)
+            self.sub_w_host = wp.zeros(self.keep, dtype=wp.float32, device="cpu", pinned=pinned)
+        self.parity = 0
+        self.frames_done = 0
+        self._graphs: list = [None, None]
+        self._warm = [False, False]
+
+    # --- initialisation ---------------------------------------------------------------------------
+    def init_point(self, point) -> None:
+        """Put every particle at ``point`` (3,) metres (Barrera et al.: the first prediction spreads them)."""
+        p = np.asarray(point, dtype=np.float64).reshape(-1)
+        if p.shape != (3,) or not np.all(np.isfinite(p)):
+            raise ConfigError(f"init: expected 3 finite coordinates in metres, got {point!r}")
+        wp.launch(
+            kmotion.init_point_kernel,
+            dim=self.n,
+            inputs=[wp.vec3(*p)],
+            outputs=[self.x[self.parity]],
+            device=self.device,
+        )
+        self._reset_weights()
+
+    def init_box(self, lo, hi) -> None:
+        """Particles uniform in the box [lo, hi] (metres)."""
+        lo = np.asarray(lo, dtype=np.float64).reshape(-1)
+        hi = np.asarray(hi, dtype=np.float64).reshape(-1)
+        if lo.shape != (3,) or hi.shape != (3,) or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+            raise ConfigError("init box: expected two finite 3-vectors (min, max) in metres")
+        if np.any(lo > hi):
+            raise ConfigError(f"init box: min {lo.tolist()} must not exceed max {hi.tolist()}")
+        wp.launch(
+            kmotion.init_box_kernel,
+            dim=self.n,
+            inputs=[wp.vec3(*lo), wp.vec3(*hi), self.seed],
+            outputs=[self.x[self.parity]],
+            device=self.device,
+        )
+        self._reset_weights()
+
+    def _reset_weights(self) -> None:
+        self.ancestors.assign(np.arange(self.n, dtype=np.int32))
+        self.resampled.fill_(1)
+        self.logw[self.parity].zero_()
+
+    def set_sigma(self, sigma: float) -> None:
+        """Change sigma_m (metres) between frames; a graph replay picks the new value up."""
+        if not (math.isfinite(sigma) and sigma > 0):
+            raise ConfigError(f"sigma: expected a motion deviation > 0 metres, got {sigma!r}")
+        self.sigma.fill_(float(sigma))
+
+    @property
+    def particles(self) -> wp.array:
+        """(N,) wp.vec3 current particle positions (after the last prediction), metres."""
+        return self.x[self.parity]
+
+    @property
+    def log_weights(self) -> wp.array:
+        """(N,) float32 current log-weights (unnormalised)."""
+        return self.logw[self.parity]
+
+    # --- the per-frame chain -----------------------------------------------------------------------
+    def _launch_predict_score(self, src: int, dst: int) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _launch_observation(self) -> None:
+        """Per-frame observation preparation on the device (e.g. colour mask + integral image)."""
+
+    def _chain(self, src: int, dst: int) -> None:
+        d = self.device
+        self._launch_observation()
+        self._launch_predict_score(src, dst)
+        x, logw = self.x[dst], self.logw[dst]
+        wp.launch_tiled(
+            kreduce.block_max_kernel,
+            dim=[self.blocks],
+            inputs=[logw, self.n, self.chunk],
+            outputs=[self.part_max, self.part_arg],
+            block_dim=BLOCK,
+            device=d,
+        )
+        wp.launch_tiled(
+            kreduce.final_max_kernel,
+            dim=[1],
+            inputs=[self.part_max, self.part_arg, self.blocks],
+            outputs=[self.est, self.best_index],
+            block_dim=BLOCK,
+            device=d,
+        )
+        wp.launch_tiled(
+            kreduce.block_moments_kernel,
+            dim=[self.blocks],
+            inputs=[logw, x, self.n, self.chunk, self.est],
+            outputs=[self.weights, self.part],
+            block_dim=BLOCK,
+            device=d,
+        )
+        wp.launch_tiled(
+            kreduce.final_moments_kernel,
+            dim=[1],
+            inputs=[self.part, self.blocks, self.n, x, self.best_index, self.ess_threshold],
+            outputs=[self.est, self.resampled],
+            block_dim=BLOCK,
+            device=d,
+        )
+        if self.keep:
+            wp.launch(
+                kreduce.subsample_kernel,
+                dim=self.keep,
+                inputs=[x, self.weights, self.stride],
+                outputs=[self.sub_x, self.sub_w],
+                device=d,
+            )
+        self.resampler(self.weights, self.seed, self.frame, self.ancestors, enabled=self.resampled)
+        wp.launch(kreduce.increment_kernel, dim=1, inputs=[self.frame], device=d)
+        wp.copy(self.est_host, self.est)
+        if self.keep:
+            wp.copy(self.sub_x_host, self.sub_x)
+            wp.copy(self.sub_w_host, self.sub_w)
+
+    def _run_chain(self, src: int, dst: int) -> None:
+        """Run the chain; on CUDA the first run of each parity loads the modules, the second captures a
+        graph (launch arguments, buffers and device-side parameters are fixed), later ones replay it."""
+        if not self.use_graph or not self._warm[src]:
+            self._chain(src, dst)
+            self._warm[src] = True
+            return
+        if self._graphs[src] is None:
+            with wp.ScopedCapture(device=self.device) as capture:
+                self._chain(src, dst)
+            self._graphs[src] = capture.graph
+        wp.capture_launch(self._graphs[src])
+
+    def advance(self) -> Estimate:
+        """Run one frame of the chain on the already uploaded observation and return the estimate."""
+        t0 = time.perf_counter()
+        src, dst = self.parity, 1 - self.parity
+        self._run_chain(src, dst)
+        wp.synchronize_device(self.device)
+        self.parity = dst
+        e = self.est_host.numpy()
+        est = Estimate(
+            frame=self.frames_done,
+            mean=e[kreduce.EST_MEAN : kreduce.EST_MEAN + 3].copy(),
+            std=e[kreduce.EST_STD : kreduce.EST_STD + 3].copy(),
+            map=e[kreduce.EST_MAP : kreduce.EST_MAP + 3].copy(),
+            ess=float(e[kreduce.EST_ESS]),
+            loglik=float(e[kreduce.EST_LOGLIK]),
+            resampled=bool(e[kreduce.EST_RESAMPLED]),
+        )
+        if self.keep:
+            est.particles = self.sub_x_host.numpy().copy()
+            w = self.sub_w_host.numpy().copy()
+            est.weights = w
+        est.timings["filter"] = time.perf_counter() - t0
+        self.frames_done += 1
+        return est

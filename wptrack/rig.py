@@ -1,0 +1,787 @@
+"""Camera rig model shared by every tracker.
+
+A :class:`Rig` is an ordered tuple of calibrated pinhole :class:`Camera` objects (OpenCV conventions: camera axes x
+right, y down, z forward; ``X_cam = R @ X_world + t``; world units are metres, image units pixels, and pixel centres
+lie at integer coordinates) plus an optional working volume.
+
+Rig files are YAML (``.yaml``/``.yml``) or JSON (``.json``) with the same keys::
+
+    volume: {min: [x, y, z], max: [x, y, z]}   # optional, metres
+    cameras:
+      - name: cam0
+        width: 320                     # pixels
+        height: 240
+        K: [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]
+        dist: [k1, k2, p1, p2, k3]     # optional (zeros if absent; 4 or 5 entries)
+        R: [[...], [...], [...]]       # world-to-camera rotation, or  rvec: [rx, ry, rz]
+        t: [tx, ty, tz]                # metres
+      - name: cam1                     # optional for an opencv: entry (default: the file stem)
+        opencv: cam1.yml               # cv2.FileStorage file, relative to the rig file
+
+An ``opencv:`` entry reads ``camera_matrix``, ``distortion_coefficients``, ``rvec`` or ``R``, ``tvec`` or ``T``,
+``image_width`` and ``image_height``; keys written beside ``opencv:`` override the file's values.
+
+Every problem raises :class:`~wptrack.errors.RigError` with a one-line message naming the file, the camera (index and
+name) and the field, e.g. ``rig.yaml: cameras[1] 'cam1': K: focal length fx must be > 0, got -3.0``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import tempfile
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import yaml
+
+from wptrack.errors import OutputError, RigError
+
+__all__ = ["Camera", "Rig", "save_opencv"]
+
+ROTATION_TOL = 1e-6
+"""Tolerance on ``max |R^T R - I|``, on ``|det R - 1|`` and on the R/rvec agreement (max abs difference)."""
+
+BOUNDS_PAD_M = 0.25
+"""Padding (metres) around the camera centres used by :meth:`Rig.bounds` when no volume is set."""
+
+_CAMERA_KEYS = ("name", "width", "height", "K", "dist", "R", "rvec", "t", "opencv")
+_RIG_KEYS = ("cameras", "volume")
+_FIELD_HELP = {
+    "width": "image width in pixels",
+    "height": "image height in pixels",
+    "K": "3x3 intrinsic matrix [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]",
+    "t": "world-to-camera translation [tx, ty, tz] in metres",
+}
+_SUFFIXES = (".yaml", ".yml", ".json")
+_OPENCV_KEYS = {  # rig-entry field -> OpenCV FileStorage key(s), first found wins
+    "width": ("image_width",),
+    "height": ("image_height",),
+    "K": ("camera_matrix",),
+    "dist": ("distortion_coefficients",),
+    "t": ("tvec", "T"),
+}
+
+
+# ----------------------------------------------------------------------------------------------------- helpers
+
+
+def _fmt(value: Any) -> str:
+    """Short one-line rendering of a user value for error messages."""
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, np.ndarray):
+        text = np.array2string(value, precision=6, separator=", ", threshold=20).replace("\n", "")
+    else:
+        text = repr(value)
+    text = " ".join(text.split())
+    return text if len(text) <= 120 else text[:117] + "..."
+
+
+def _array(value: Any, shape: tuple[int, ...], what: str, where: str, field: str) -> np.ndarray:
+    """Coerce ``value`` to a finite float64 array of ``shape``.
+
+    Vectors (``shape == (n,)``) also accept ``(n, 1)`` and ``(1, n)`` input, as OpenCV writes them.
+
+    Raises:
+        RigError: not numeric, wrong shape or non-finite.
+    """
+    if isinstance(value, (str, bytes, Mapping)) or value is None:
+        raise RigError(f"{where}: {field}: expected {what}, got {_fmt(value)}")
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise RigError(f"{where}: {field}: expected {what}, got {_fmt(value)}") from None
+    if len(shape) == 1 and arr.ndim == 2 and 1 in arr.shape and arr.size == shape[0]:
+        arr = arr.reshape(shape)
+    if arr.shape != shape:
+        raise RigError(f"{where}: {field}: expected {what}, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise RigError(f"{where}: {field}: values must be finite, got {_fmt(arr)}")
+    return arr
+
+
+def _readonly(arr: np.ndarray) -> np.ndarray:
+    out = np.ascontiguousarray(arr, dtype=np.float64).copy()
+    out.setflags(write=False)
+    return out
+
+
+def _positive_int(value: Any, where: str, field: str) -> int:
+    """A positive integer (integral floats such as ``320.0`` accepted, booleans refused)."""
+    unit = "pixels" if field in ("width", "height") else "count"
+    ok = False
+    if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)):
+        ok = value > 0
+    elif isinstance(value, (float, np.floating)):
+        ok = math.isfinite(value) and value > 0 and float(value).is_integer()
+    if not ok:
+        raise RigError(f"{where}: {field}: must be a positive integer ({unit}), got {_fmt(value)}")
+    return int(value)
+
+
+def _check_rotation(R: np.ndarray, where: str, field: str = "R") -> None:
+    err = float(np.max(np.abs(R.T @ R - np.eye(3))))
+    if err > ROTATION_TOL:
+        raise RigError(
+            f"{where}: {field}: not a rotation matrix, max |R^T R - I| = {err:.3g} > {ROTATION_TOL:g} "
+            "(rows must be orthonormal)"
+        )
+    det = float(np.linalg.det(R))
+    if abs(det - 1.0) > ROTATION_TOL:
+        raise RigError(f"{where}: {field}: determinant must be +1 (a rotation, not a reflection), got {det:.6g}")
+
+
+def _rodrigues_to_matrix(rvec: np.ndarray) -> np.ndarray:
+    R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
+    return np.asarray(R, dtype=np.float64)
+
+
+def _validated_fields(
+    name: Any, width: Any, height: Any, K: Any, dist: Any, R: Any, t: Any, where: str
+) -> tuple[str, int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Validate and coerce camera fields; ``where`` prefixes every error message."""
+    if not isinstance(name, str) or not name.strip():
+        raise RigError(f"{where}: name: must be a non-empty string, got {_fmt(name)}")
+    width = _positive_int(width, where, "width")
+    height = _positive_int(height, where, "height")
+
+    K = _array(K, (3, 3), "a 3x3 matrix [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]", where, "K")
+    for label, value in (("fx", K[0, 0]), ("fy", K[1, 1])):
+        if not value > 0:
+            raise RigError(f"{where}: K: focal length {label} must be > 0, got {float(value)!r}")
+    if K[0, 1] != 0.0:
+        raise RigError(f"{where}: K: skew K[0][1] must be 0 (not supported), got {float(K[0, 1])!r}")
+    if K[1, 0] != 0.0 or not np.array_equal(K[2], [0.0, 0.0, 1.0]):
+        raise RigError(f"{where}: K: expected the form [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], got {_fmt(K.tolist())}")
+
+    if dist is None:
+        dist = np.zeros(5)
+    else:
+        if isinstance(dist, (str, bytes, Mapping)):
+            raise RigError(f"{where}: dist: expected 4 or 5 coefficients [k1, k2, p1, p2, k3], got {_fmt(dist)}")
+        try:
+            d = np.array(dist, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise RigError(
+                f"{where}: dist: expected 4 or 5 coefficients [k1, k2, p1, p2, k3], got {_fmt(dist)}"
+            ) from None
+        if d.ndim > 2 or (d.ndim == 2 and 1 not in d.shape):
+            raise RigError(f"{where}: dist: expected 4 or 5 coefficients [k1, k2, p1, p2, k3], got shape {d.shape}")
+        d = d.reshape(-1)
+        if not np.all(np.isfinite(d)):
+            raise RigError(f"{where}: dist: values must be finite, got {_fmt(d)}")
+        if d.size > 5 and np.all(d[5:] == 0.0):
+            d = d[:5]  # e.g. an 8/12/14-coefficient OpenCV model whose higher terms are unused
+        if d.size not in (4, 5):
+            raise RigError(
+                f"{where}: dist: expected 4 or 5 coefficients [k1, k2, p1, p2, k3] "
+                f"(higher-order models unsupported), got {d.size}"
+            )
+        dist = np.concatenate([d, np.zeros(5 - d.size)])
+
+    R = _array(R, (3, 3), "a 3x3 world-to-camera rotation matrix", where, "R")
+    _check_rotation(R, where)
+    t = _array(t, (3,), "3 values [tx, ty, tz] in metres", where, "t")
+    return name, width, height, K, dist, R, t
+
+
+def _camera_where(source: str, index: int | None, name: Any) -> str:
+    if index is None:
+        return f"{source}: camera {_fmt(name)}"
+    return f"{source}: cameras[{index}] {_fmt(name)}"
+
+
+# ----------------------------------------------------------------------------------------------------- OpenCV files
+
+
+def _read_node(node: Any) -> Any:
+    """Convert a cv2.FileNode to a Python/numpy value (matrix, nested list, number or string)."""
+    if node.isMap():
+        mat = node.mat()
+        if mat is None:
+            raise ValueError("not an opencv-matrix")
+        return np.asarray(mat, dtype=np.float64)
+    if node.isSeq():
+        return [_read_node(node.at(i)) for i in range(node.size())]
+    if node.isString():
+        return node.string()
+    return node.real()
+
+
+def _read_opencv(path: Path, where: str) -> dict[str, Any]:
+    """Read the camera keys of an OpenCV FileStorage calibration file into rig-entry keys."""
+    if not path.is_file():
+        raise RigError(f"{where}: opencv: file not found: {path}")
+    try:
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+        opened = fs.isOpened()
+    except Exception as exc:  # cv2 raises cv2.error or SystemError on unparsable files
+        raise RigError(f"{where}: opencv: cannot read {path} as an OpenCV FileStorage file: {_fmt(str(exc))}") from None
+    if not opened:
+        raise RigError(f"{where}: opencv: cannot open {path} as an OpenCV FileStorage file")
+    out: dict[str, Any] = {}
+    try:
+
+        def get(key: str) -> Any:
+            try:
+                node = fs.getNode(key)
+                if node.empty() or node.isNone():
+                    return None
+                return _read_node(node)
+            except Exception:
+                raise RigError(f"{where}: opencv: {path}: key '{key}' is not a number or matrix") from None
+
+        for field, keys in _OPENCV_KEYS.items():
+            value = next((v for v in (get(k) for k in keys) if v is not None), None)
+            if value is not None:
+                out[field] = value
+        rvec, R = get("rvec"), get("R")
+        if rvec is not None:
+            out["rvec"] = rvec
+        if R is not None:
+            out["R"] = R
+    finally:
+        fs.release()
+    return out
+
+
+def save_opencv(camera: Camera, path: str | os.PathLike[str]) -> None:
+    """Write ``camera`` as an OpenCV FileStorage file (format chosen by cv2 from the suffix: .yml/.yaml/.xml/.json).
+
+    Keys written: ``image_width``, ``image_height``, ``camera_matrix`` (3x3), ``distortion_coefficients`` (1x5),
+    ``R`` (3x3), ``rvec`` (3x1) and ``tvec`` (3x1, metres) - the keys a rig ``opencv:`` entry reads. The file is
+    written atomically (temporary file in the same directory, then ``os.replace``).
+
+    Raises:
+        OutputError: the file cannot be written.
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
+    try:
+        fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
+        if not fs.isOpened():
+            raise OSError("cannot open for writing")
+        fs.write("image_width", int(camera.width))
+        fs.write("image_height", int(camera.height))
+        fs.write("camera_matrix", np.array(camera.K))
+        fs.write("distortion_coefficients", np.array(camera.dist).reshape(1, 5))
+        fs.write("R", np.array(camera.R))
+        fs.write("rvec", camera.rvec.reshape(3, 1))
+        fs.write("tvec", np.array(camera.t).reshape(3, 1))
+        fs.release()
+        os.replace(tmp, path)
+    except (OSError, cv2.error) as exc:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise OutputError(f"{path}: cannot write OpenCV camera file: {_fmt(str(exc))}") from None
+
+
+# ----------------------------------------------------------------------------------------------------- Camera
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """A calibrated pinhole camera with OpenCV (Brown-Conrady) distortion.
+
+    Attributes:
+        name: Unique name within a rig.
+        width: Image width, pixels.
+        height: Image height, pixels.
+        K: (3, 3) float64 intrinsics ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` in pixels (zero skew).
+        dist: (5,) float64 OpenCV distortion coefficients ``k1 k2 p1 p2 k3`` (zeros if absent).
+        R: (3, 3) float64 world-to-camera rotation (camera axes x right, y down, z forward).
+        t: (3,) float64 world-to-camera translation, metres: ``X_cam = R @ X_world + t``.
+
+    Arrays are stored as contiguous read-only float64 copies. Construction validates every field and raises
+    :class:`RigError` (source ``<memory>``) on bad input; ``dist=None`` means no distortion.
+    """
+
+    name: str
+    width: int
+    height: int
+    K: np.ndarray
+    dist: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+
+    def __post_init__(self) -> None:
+        where = _camera_where("<memory>", None, self.name)
+        name, width, height, K, dist, R, t = _validated_fields(
+            self.name, self.width, self.height, self.K, self.dist, self.R, self.t, where
+        )
+        object.__setattr__(self, "name", name)
+        object.__setattr__(self, "width", width)
+        object.__setattr__(self, "height", height)
+        object.__setattr__(self, "K", _readonly(K))
+        object.__setattr__(self, "dist", _readonly(dist))
+        object.__setattr__(self, "R", _readonly(R))
+        object.__setattr__(self, "t", _readonly(t))
+
+    # -- derived quantities
+
+    @property
+    def center(self) -> np.ndarray:
+        """(3,) camera centre in world coordinates, metres (``-R.T @ t``)."""
+        return -self.R.T @ self.t
+
+    @property
+    def rvec(self) -> np.ndarray:
+        """(3,) Rodrigues rotation vector of ``R``, radians."""
+        rvec, _ = cv2.Rodrigues(np.array(self.R))
+        return np.asarray(rvec, dtype=np.float64).reshape(3)
+
+    @property
+    def fx(self) -> float:
+        """Horizontal focal length, pixels."""
+        return float(self.K[0, 0])
+
+    @property
+    def fy(self) -> float:
+        """Vertical focal length, pixels."""
+        return float(self.K[1, 1])
+
+    @property
+    def cx(self) -> float:
+        """Principal point x, pixels."""
+        return float(self.K[0, 2])
+
+    @property
+    def cy(self) -> float:
+        """Principal point y, pixels."""
+        return float(self.K[1, 2])
+
+    # -- construction helpers
+
+    @classmethod
+    def look_at(
+        cls,
+        name: str,
+        width: int,
+        height: int,
+        position: Sequence[float] | np.ndarray,
+        target: Sequence[float] | np.ndarray,
+        fx: float,
+        fy: float | None = None,
+        cx: float | None = None,
+        cy: float | None = None,
+        up: Sequence[float] | np.ndarray = (0, 0, 1),
+        roll_deg: float = 0.0,
+        dist: Sequence[float] | np.ndarray | None = None,
+    ) -> Camera:
+        """A camera at ``position`` looking at ``target``.
+
+        The optical axis (+z) points from ``position`` to ``target``; the image 'up' direction (camera -y) is as
+        close to world ``up`` as possible. ``roll_deg`` then rotates the camera about its optical axis: with
+        ``roll_deg=90`` world ``up`` appears towards image left (-u), as for a camera mounted sideways that delivers
+        a portrait image; with ``-90`` it appears towards image right (+u).
+
+        Args:
+            name: Camera name.
+            width: Image width, pixels.
+            height: Image height, pixels.
+            position: (3,) camera centre, world metres.
+            target: (3,) point looked at, world metres.
+            fx: Horizontal focal length, pixels.
+            fy: Vertical focal length, pixels (default ``fx``).
+            cx: Principal point x, pixels (default ``(width - 1) / 2``).
+            cy: Principal point y, pixels (default ``(height - 1) / 2``).
+            up: (3,) world 'up' direction (need not be unit length).
+            roll_deg: Rotation about the optical axis, degrees.
+            dist: Optional distortion coefficients (4 or 5).
+
+        Raises:
+            RigError: invalid values, ``position == target`` or viewing direction parallel to ``up``.
+        """
+        where = f"<memory>: look_at {_fmt(name)}"
+        pos = _array(position, (3,), "3 values [x, y, z] in metres", where, "position")
+        tgt = _array(target, (3,), "3 values [x, y, z] in metres", where, "target")
+        upv = _array(up, (3,), "3 values [x, y, z]", where, "up")
+        if not math.isfinite(float(roll_deg)):
+            raise RigError(f"{where}: roll_deg: must be finite, got {roll_deg!r}")
+        forward = tgt - pos
+        norm = float(np.linalg.norm(forward))
+        if norm == 0.0:
+            raise RigError(f"{where}: target: must differ from position, both are {_fmt(pos.tolist())}")
+        z = forward / norm
+        up_norm = float(np.linalg.norm(upv))
+        if up_norm == 0.0:
+            raise RigError(f"{where}: up: must be a non-zero vector")
+        upv = upv / up_norm
+        up_perp = upv - float(upv @ z) * z
+        if float(np.linalg.norm(up_perp)) < 1e-9:
+            raise RigError(f"{where}: up: viewing direction {_fmt(z.tolist())} is parallel to up; choose another up")
+        y = -up_perp / np.linalg.norm(up_perp)
+        x = np.cross(y, z)
+        a = math.radians(float(roll_deg))
+        c, s = math.cos(a), math.sin(a)
+        x, y = c * x + s * y, -s * x + c * y
+        R = np.stack([x, y, z])
+        t = -R @ pos
+        fy = fx if fy is None else fy
+        cx = (width - 1) / 2.0 if cx is None else cx
+        cy = (height - 1) / 2.0 if cy is None else cy
+        K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]], dtype=np.float64)
+        return cls(name=name, width=width, height=height, K=K, dist=dist, R=R, t=t)
+
+    # -- geometry
+
+    def project(self, points: Sequence[Sequence[float]] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Project world points into the image (with lens distortion, via ``cv2.projectPoints``).
+
+        Points behind the camera still get pixel coordinates (mirrored); check ``depth > 0``.
+
+        Args:
+            points: (N, 3) world points, metres.
+
+        Returns:
+            ``(uv, depth)``: (N, 2) float64 pixel coordinates and (N,) float64 depth (camera-frame z, metres).
+
+        Raises:
+            ValueError: ``points`` is not an (N, 3) array.
+        """
+        pts = np.asarray(points, dtype=np.float64)
+        if pts.ndim != 2 or pts.shape[1] != 3:
+            raise ValueError(f"points must have shape (N, 3), got {pts.shape}")
+        depth = pts @ self.R[2] + self.t[2]
+        if pts.shape[0] == 0:
+            return np.zeros((0, 2)), depth
+        uv, _ = cv2.projectPoints(
+            np.ascontiguousarray(pts).reshape(-1, 1, 3),
+            self.rvec.reshape(3, 1),
+            np.array(self.t).reshape(3, 1),
+            np.array(self.K),
+            np.array(self.dist),
+        )
+        return np.asarray(uv, dtype=np.float64).reshape(-1, 2), depth
+
+    def scaled(self, width: int, height: int) -> Camera:
+        """The same camera at another resolution.
+
+        ``fx`` and ``cx`` are multiplied by ``width / self.width``, ``fy`` and ``cy`` by ``height / self.height``;
+        distortion and pose are unchanged, so projections scale: ``u' = u * sx``, ``v' = v * sy``.
+
+        Args:
+            width: New image width, pixels.
+            height: New image height, pixels.
+        """
+        where = _camera_where("<memory>", None, self.name) + " scaled()"
+        width = _positive_int(width, where, "width")
+        height = _positive_int(height, where, "height")
+        sx, sy = width / self.width, height / self.height
+        K = np.array(self.K)
+        K[0, 0] *= sx
+        K[0, 2] *= sx
+        K[1, 1] *= sy
+        K[1, 2] *= sy
+        return Camera(name=self.name, width=width, height=height, K=K, dist=self.dist, R=self.R, t=self.t)
+
+    # -- serialisation
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-Python representation (the rig-file camera entry): name, width, height, K, dist, R, t."""
+        return {
+            "name": self.name,
+            "width": int(self.width),
+            "height": int(self.height),
+            "K": self.K.tolist(),
+            "dist": self.dist.tolist(),
+            "R": self.R.tolist(),
+            "t": self.t.tolist(),
+        }
+
+    @classmethod
+    def from_dict(
+        cls, d: Mapping[str, Any], source: str = "<dict>", index: int = 0, base_dir: Path | None = None
+    ) -> Camera:
+        """Build a camera from a rig-file entry.
+
+        Args:
+            d: The entry: ``name``, ``width``, ``height``, ``K``, optional ``dist``, ``R`` and/or ``rvec``, ``t``;
+                or ``opencv: file`` (plus optional overriding keys).
+            source: File name used in error messages.
+            index: Index of the entry in the rig's camera list (error messages; default name ``cam{index}``).
+            base_dir: Directory that relative ``opencv:`` paths are resolved against (default: current directory).
+
+        Raises:
+            RigError: any invalid, missing or unknown field.
+        """
+        if not isinstance(d, Mapping):
+            raise RigError(f"{source}: cameras[{index}]: expected a mapping of camera fields, got {_fmt(d)}")
+        raw_name = d.get("name")
+        entry: dict[str, Any] = {}
+        cv_path: Path | None = None
+        if "opencv" in d:
+            ref = d["opencv"]
+            if not isinstance(ref, (str, os.PathLike)) or not str(ref):
+                where = _camera_where(source, index, raw_name if raw_name is not None else f"cam{index}")
+                raise RigError(f"{where}: opencv: expected a file path, got {_fmt(ref)}")
+            cv_path = Path(ref)
+            if not cv_path.is_absolute() and base_dir is not None:
+                cv_path = Path(base_dir) / cv_path
+            if raw_name is None:
+                raw_name = cv_path.stem
+            entry.update(_read_opencv(cv_path, _camera_where(source, index, raw_name)))
+        if raw_name is None:
+            raw_name = f"cam{index}"
+        if isinstance(raw_name, (int, np.integer)) and not isinstance(raw_name, bool):
+            raw_name = str(raw_name)
+        where = _camera_where(source, index, raw_name)
+
+        unknown = [k for k in d if k not in _CAMERA_KEYS]
+        if unknown:
+            raise RigError(f"{where}: unknown field {_fmt(unknown[0])} (expected one of {', '.join(_CAMERA_KEYS)})")
+        if "R" in d or "rvec" in d:  # a rotation given beside opencv: replaces the file's rotation (either form)
+            entry.pop("R", None)
+            entry.pop("rvec", None)
+        entry.update({k: v for k, v in d.items() if k not in ("name", "opencv")})
+
+        missing = [f for f in ("width", "height", "K", "t") if f not in entry]
+        if "R" not in entry and "rvec" not in entry:
+            missing.append("R")
+        if missing:
+            field = missing[0]
+            help_ = _FIELD_HELP.get(field, "world-to-camera rotation")
+            if cv_path is not None:
+                keys = ("rvec", "R") if field == "R" else _OPENCV_KEYS[field]
+                names = " or ".join(f"'{k}'" for k in keys)
+                raise RigError(f"{where}: opencv: {cv_path}: missing key {names} ({help_})")
+            names = "'R' or 'rvec'" if field == "R" else f"'{field}'"
+            raise RigError(f"{where}: missing field {names} ({help_})")
+
+        R = entry.get("R")
+        if "rvec" in entry:
+            rvec = _array(entry["rvec"], (3,), "a Rodrigues vector [rx, ry, rz] in radians", where, "rvec")
+            R_from_rvec = _rodrigues_to_matrix(rvec)
+            if R is None:
+                R = R_from_rvec
+            else:
+                R = _array(R, (3, 3), "a 3x3 world-to-camera rotation matrix", where, "R")
+                _check_rotation(R, where)
+                diff = float(np.max(np.abs(R - R_from_rvec)))
+                if diff > ROTATION_TOL:
+                    raise RigError(
+                        f"{where}: rvec: disagrees with R (max difference {diff:.3g} > {ROTATION_TOL:g}); give only one"
+                    )
+        fields = _validated_fields(
+            raw_name, entry["width"], entry["height"], entry["K"], entry.get("dist"), R, entry["t"], where
+        )
+        return cls(*fields)
+
+
+# ----------------------------------------------------------------------------------------------------- Rig
+
+
+@dataclass(frozen=True, eq=False)
+class Rig:
+    """An ordered set of uniquely named cameras plus an optional working volume.
+
+    Attributes:
+        cameras: The cameras, in file order.
+        volume: Optional working volume ``(min_xyz, max_xyz)``, each (3,) float64 metres, ``min < max``.
+        source: The file the rig came from (used in error messages), ``<memory>`` otherwise.
+    """
+
+    cameras: tuple[Camera, ...]
+    volume: tuple[np.ndarray, np.ndarray] | None = None
+    source: str = "<memory>"
+
+    def __post_init__(self) -> None:
+        source = str(self.source)
+        object.__setattr__(self, "source", source)
+        cameras = tuple(self.cameras)
+        if not cameras:
+            raise RigError(f"{source}: cameras: the rig has no cameras (expected a non-empty list)")
+        seen: dict[str, int] = {}
+        for i, cam in enumerate(cameras):
+            if not isinstance(cam, Camera):
+                raise RigError(f"{source}: cameras[{i}]: expected a Camera, got {type(cam).__name__}")
+            if cam.name in seen:
+                raise RigError(
+                    f"{source}: cameras[{i}] {_fmt(cam.name)}: name: duplicate camera name "
+                    f"(also cameras[{seen[cam.name]}]); names must be unique"
+                )
+            seen[cam.name] = i
+        object.__setattr__(self, "cameras", cameras)
+        if self.volume is not None:
+            object.__setattr__(self, "volume", _parse_volume(self.volume, source))
+
+    def __len__(self) -> int:
+        return len(self.cameras)
+
+    def __iter__(self) -> Iterator[Camera]:
+        return iter(self.cameras)
+
+    def __getitem__(self, key: int | str) -> Camera:
+        """Camera by position (negative allowed) or by name.
+
+        Raises:
+            RigError: no such index or name.
+            TypeError: ``key`` is neither an int nor a str.
+        """
+        if isinstance(key, str):
+            for cam in self.cameras:
+                if cam.name == key:
+                    return cam
+            raise RigError(f"{self.source}: no camera named {key!r} (cameras: {', '.join(self.names)})")
+        if isinstance(key, (int, np.integer)) and not isinstance(key, bool):
+            n = len(self.cameras)
+            if not -n <= key < n:
+                raise RigError(f"{self.source}: camera index {int(key)} out of range (the rig has {n} cameras)")
+            return self.cameras[int(key)]
+        raise TypeError(f"camera key must be an int index or a str name, got {type(key).__name__}")
+
+    @property
+    def names(self) -> list[str]:
+        """Camera names, in rig order."""
+        return [cam.name for cam in self.cameras]
+
+    # -- files
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> Rig:
+        """Load a rig from a ``.yaml``/``.yml`` or ``.json`` file.
+
+        Raises:
+            RigError: missing, unreadable or invalid file.
+        """
+        path = Path(path)
+        source = str(path)
+        suffix = path.suffix.lower()
+        if suffix not in _SUFFIXES:
+            raise RigError(f"{source}: unsupported rig file extension {path.suffix!r} (expected .yaml, .yml or .json)")
+        if not path.exists():
+            raise RigError(f"{source}: rig file not found")
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise RigError(f"{source}: cannot read rig file: {_fmt(str(exc))}") from None
+        try:
+            data = json.loads(text) if suffix == ".json" else yaml.safe_load(text)
+        except (json.JSONDecodeError, yaml.YAMLError) as exc:
+            kind = "JSON" if suffix == ".json" else "YAML"
+            raise RigError(f"{source}: not valid {kind}: {' '.join(str(exc).split())}") from None
+        return cls.from_dict(data, source=source, base_dir=path.parent)
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write the rig as YAML or JSON (chosen by suffix), atomically (temp file in the same dir + ``os.replace``).
+
+        Raises:
+            RigError: unsupported suffix.
+            OutputError: the file cannot be written.
+        """
+        path = Path(path)
+        suffix = path.suffix.lower()
+        if suffix not in _SUFFIXES:
+            raise RigError(f"{path}: unsupported rig file extension {path.suffix!r} (expected .yaml, .yml or .json)")
+        data = self.to_dict()
+        if suffix == ".json":
+            text = json.dumps(data, indent=2) + "\n"
+        else:
+            text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None)
+        tmp_name: str | None = None
+        try:
+            with tempfile.NamedTemporaryFile(
+                "w", encoding="utf-8", dir=path.parent, prefix=f".{path.name}.", suffix=".tmp", delete=False
+            ) as fh:
+                tmp_name = fh.name
+                fh.write(text)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp_name, path)
+        except OSError as exc:
+            if tmp_name is not None:
+                with contextlib.suppress(OSError):
+                    os.unlink(tmp_name)
+            raise OutputError(f"{path}: cannot write rig file: {_fmt(str(exc))}") from None
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-Python representation (the rig-file layout): ``cameras`` and, if set, ``volume``."""
+        out: dict[str, Any] = {}
+        if self.volume is not None:
+            out["volume"] = {"min": self.volume[0].tolist(), "max": self.volume[1].tolist()}
+        out["cameras"] = [cam.to_dict() for cam in self.cameras]
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Any, source: str = "<dict>", base_dir: Path | None = None) -> Rig:
+        """Build a rig from the rig-file layout (see the module docstring).
+
+        Args:
+            d: Mapping with ``cameras`` (list of camera entries) and optional ``volume`` ``{min, max}``.
+            source: File name used in error messages.
+            base_dir: Directory for relative ``opencv:`` paths.
+
+        Raises:
+            RigError: any invalid field.
+        """
+        if not isinstance(d, Mapping):
+            raise RigError(f"{source}: expected a mapping with a 'cameras' list at the top level, got {_fmt(d)}")
+        unknown = [k for k in d if k not in _RIG_KEYS]
+        if unknown:
+            raise RigError(f"{source}: unknown top-level field {_fmt(unknown[0])} (expected cameras, volume)")
+        if "cameras" not in d:
+            raise RigError(f"{source}: missing field 'cameras' (a non-empty list of cameras)")
+        entries = d["cameras"]
+        if not isinstance(entries, list) or not entries:
+            raise RigError(f"{source}: cameras: expected a non-empty list of cameras, got {_fmt(entries)}")
+        cameras = tuple(Camera.from_dict(e, source=source, index=i, base_dir=base_dir) for i, e in enumerate(entries))
+        volume = None
+        if d.get("volume") is not None:
+            vol = d["volume"]
+            if not isinstance(vol, Mapping) or set(vol) != {"min", "max"}:
+                raise RigError(
+                    f"{source}: volume: expected {{min: [x, y, z], max: [x, y, z]}} in metres, got {_fmt(vol)}"
+                )
+            volume = (vol["min"], vol["max"])
+        return cls(cameras=cameras, volume=volume, source=source)
+
+    # -- queries
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Working volume ``(min_xyz, max_xyz)``, each (3,) float64 metres.
+
+        The configured volume if set, else the bounding box of the camera centres padded by 0.25 m on every side.
+        """
+        if self.volume is not None:
+            return np.array(self.volume[0]), np.array(self.volume[1])
+        centres = np.stack([cam.center for cam in self.cameras])
+        return centres.min(axis=0) - BOUNDS_PAD_M, centres.max(axis=0) + BOUNDS_PAD_M
+
+    def check_frame_size(self, index: int, width: int, height: int, source: str) -> None:
+        """Check that a frame from ``source`` matches camera ``index``'s calibrated size.
+
+        Args:
+            index: Camera index in the rig.
+            width: Frame width, pixels.
+            height: Frame height, pixels.
+            source: The frame source (video path, folder...) for the message.
+
+        Raises:
+            RigError: the sizes differ.
+        """
+        cam = self[index]
+        if int(width) != cam.width or int(height) != cam.height:
+            raise RigError(
+                f"{source}: frame size {width}x{height} differs from camera '{cam.name}' calibration "
+                f"{cam.width}x{cam.height} in {self.source}"
+            )
+
+
+def _parse_volume(volume: Any, source: str) -> tuple[np.ndarray, np.ndarray]:
+    where = source
+    if isinstance(volume, Mapping) or not isinstance(volume, (tuple, list)) or len(volume) != 2:
+        raise RigError(f"{where}: volume: expected (min_xyz, max_xyz) in metres, got {_fmt(volume)}")
+    lo = _array(volume[0], (3,), "3 values [x, y, z] in metres", where, "volume: min")
+    hi = _array(volume[1], (3,), "3 values [x, y, z] in metres", where, "volume: max")
+    if not np.all(lo < hi):
+        raise RigError(
+            f"{where}: volume: min must be < max on every axis, got min {_fmt(lo.tolist())} max {_fmt(hi.tolist())}"
+        )
+    return _readonly(lo), _readonly(hi)

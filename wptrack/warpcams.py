@@ -1,0 +1,94 @@
+"""Rig -> device: the ``kernels.camera.Camera`` structs of a rig, with offsets into flat per-frame buffers."""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .kernels.camera import Camera as CameraStruct
+from .rig import Camera, Rig
+
+R2_FOLD_MARGIN = 2.25
+"""Points up to 1.5x the normalised radius of the image corners are projected; further ones are 'not seen'."""
+
+
+def fold_radius2(dist: np.ndarray) -> float:
+    """Squared normalised radius where r * (1 + k1 r^2 + k2 r^4 + k3 r^6) stops increasing (inf if never).
+
+    Beyond it OpenCV's radial model folds far off-axis points back into the image; such points are treated
+    as not seen. Tangential terms are small and ignored here.
+    """
+    k1, k2, _p1, _p2, k3 = (float(v) for v in dist)
+    r = np.linspace(0.0, 20.0, 40001)
+    r2 = r * r
+    deriv = 1.0 + 3.0 * k1 * r2 + 5.0 * k2 * r2 * r2 + 7.0 * k3 * r2 * r2 * r2
+    bad = np.nonzero(deriv <= 0.0)[0]
+    return float(r2[bad[0]]) if bad.size else float("inf")
+
+
+def corner_radius2(cam: Camera) -> float:
+    """Largest squared normalised radius of the (undistorted) image corners and edge midpoints."""
+    import cv2
+
+    w, h = cam.width, cam.height
+    pts = np.array(
+        [
+            [0, 0],
+            [w - 1, 0],
+            [0, h - 1],
+            [w - 1, h - 1],
+            [(w - 1) / 2, 0],
+            [(w - 1) / 2, h - 1],
+            [0, (h - 1) / 2],
+            [w - 1, (h - 1) / 2],
+        ],
+        dtype=np.float64,
+    ).reshape(-1, 1, 2)
+    und = cv2.undistortPoints(pts, cam.K, cam.dist).reshape(-1, 2)
+    return float(np.max(np.sum(und * und, axis=1)))
+
+
+def camera_struct(cam: Camera, pixel_offset: int = 0, integral_offset: int = 0) -> CameraStruct:
+    """One rig camera as the kernels' struct."""
+    s = CameraStruct()
+    s.R = wp.mat33(*cam.R.astype(np.float32).ravel())
+    s.t = wp.vec3(*cam.t.astype(np.float32))
+    s.f = wp.vec2(cam.fx, cam.fy)
+    s.c = wp.vec2(cam.cx, cam.cy)
+    k1, k2, p1, p2, k3 = (float(v) for v in cam.dist)
+    s.k = wp.vec3(k1, k2, k3)
+    s.p = wp.vec2(p1, p2)
+    s.r2_max = float(min(R2_FOLD_MARGIN * corner_radius2(cam), fold_radius2(cam.dist), 1.0e6))
+    s.width = int(cam.width)
+    s.height = int(cam.height)
+    s.pixel_offset = int(pixel_offset)
+    s.integral_offset = int(integral_offset)
+    return s
+
+
+class DeviceRig:
+    """A rig on a device, with its cameras' images laid out back to back in flat buffers.
+
+    Attributes:
+        cams: (M,) ``wp.array`` of camera structs.
+        pixel_offsets: (M + 1,) start of each camera's image in flat pixel buffers (last = total pixels).
+        integral_offsets: (M + 1,) start of each (H+1) x (W+1) integral image (last = total size).
+        max_pixels, max_width, max_height: launch bounds over cameras.
+    """
+
+    def __init__(self, rig: Rig, device: str) -> None:
+        self.rig = rig
+        sizes = [(c.width, c.height) for c in rig.cameras]
+        self.pixel_offsets = np.concatenate([[0], np.cumsum([w * h for w, h in sizes])]).astype(np.int64)
+        self.integral_offsets = np.concatenate([[0], np.cumsum([(w + 1) * (h + 1) for w, h in sizes])]).astype(np.int64)
+        structs = [
+            camera_struct(c, int(self.pixel_offsets[i]), int(self.integral_offsets[i]))
+            for i, c in enumerate(rig.cameras)
+        ]
+        self.cams = wp.array(structs, dtype=CameraStruct, device=device)
+        self.total_pixels = int(self.pixel_offsets[-1])
+        self.total_integral = int(self.integral_offsets[-1])
+        self.max_pixels = max(w * h for w, h in sizes)
+        self.max_width = max(w for w, _ in sizes)
+        self.max_height = max(h for _, h in sizes)
+        self.num_cameras = len(sizes)
