@@ -9,11 +9,18 @@ from .errors import DeviceError
 log = logging.getLogger(__name__)
 
 
-def init_warp(quiet: bool = True) -> None:
-    """Initialise Warp once, quietly (kernel compilation messages go to the log, not stdout)."""
+def quiet_warp(quiet: bool = True) -> None:
+    """Silence Warp's start-up banner and kernel-cache messages (``quiet=False`` restores them)."""
     import warp as wp
 
     wp.config.quiet = quiet
+    wp.config.log_level = wp.LOG_WARNING if quiet else wp.LOG_INFO
+
+
+def init_warp() -> None:
+    """Initialise Warp (idempotent)."""
+    import warp as wp
+
     wp.init()
 
 

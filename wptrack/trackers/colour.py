@@ -31,6 +31,7 @@ from ..errors import ConfigError, FrameError
 from ..kernels import colour as kcolour
 from ..kernels import scoring as kscoring
 from ..pf import Estimate, ParticleFilter, check_particles
+from ..resampling import SCHEMES
 from ..rig import Rig
 from ..warpcams import DeviceRig
 
@@ -116,6 +117,10 @@ class ColorConfig:
             raise ConfigError(f"sigma: expected a motion deviation > 0 metres, got {self.sigma!r}")
         if self.score_mode not in SCORE_MODES:
             raise ConfigError(f"score_mode: expected one of {', '.join(SCORE_MODES)}, got {self.score_mode!r}")
+        if self.resampling not in SCHEMES:
+            raise ConfigError(f"resampling: unknown scheme {self.resampling!r}; expected one of {', '.join(SCHEMES)}")
+        if not (0.0 < self.ess_threshold <= 1.0):
+            raise ConfigError(f"ess_threshold: expected a fraction in (0, 1], got {self.ess_threshold!r}")
         if self.keep_particles < 0:
             raise ConfigError(f"keep_particles: expected >= 0, got {self.keep_particles}")
 

@@ -1,0 +1,183 @@
+"""Command line: end-to-end on a tiny scene, and every bad input of the foundation issue gives one clear
+line on stderr, exit code 2, no traceback and no output written."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import warp as wp
+
+from wptrack.cli import main
+from wptrack.frames import write_video
+from wptrack.io import read_tracks
+from wptrack.rig import Camera, Rig
+
+BALL = np.array([0.42, 0.45, 0.035])
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory) -> dict:
+    """Two small cameras watching a pink disc at BALL, 6 frames each (FFV1/MJPG video)."""
+    import cv2
+
+    d = tmp_path_factory.mktemp("scene")
+    c1 = Camera.look_at("cam1", 96, 72, (0.5, 0.0, 0.195), (0.4, 0.45, 0.05), 90.0)
+    c2 = Camera.look_at("cam2", 72, 96, (0.07, 0.485, 0.085), (0.45, 0.45, 0.05), 90.0, roll_deg=90)
+    rig = Rig((c1, c2))
+    rig.save(d / "rig.yaml")
+    videos = []
+    for cam in rig.cameras:
+        img = np.full((cam.height, cam.width, 3), 90, np.uint8)
+        uv, depth = cam.project(BALL[None])
+        r = max(2, int(0.035 * cam.fx / depth[0]))
+        cv2.circle(img, (int(round(uv[0, 0])), int(round(uv[0, 1]))), r, (180, 60, 230), -1)
+        path = d / f"{cam.name}.avi"
+        write_video(path, [img] * 6, fps=10)
+        videos.append(str(path))
+    return {"dir": d, "rig": str(d / "rig.yaml"), "videos": videos}
+
+
+def track_args(scene, out, *extra):
+    args = [
+        "track",
+        "color",
+        "-q",
+        "--rig",
+        scene["rig"],
+        "--hue",
+        "300",
+        "340",
+        "--sat",
+        "0.3",
+        "1",
+        "--init",
+        "0.42",
+        "0.45",
+        "0.05",
+        "--particles",
+        "300",
+        "--device",
+        "cpu",
+        "--out",
+        str(out),
+    ]
+    for v in scene["videos"]:
+        args += ["--video", v]
+    return args + list(extra)
+
+
+def test_track_color_end_to_end(scene, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(track_args(scene, out, "--keep-particles", "50")) == 0
+    t = read_tracks(out / "tracks.csv")
+    assert list(t)[:5] == ["frame", "id", "x", "y", "z"]
+    assert list(t["frame"]) == list(range(6))
+    est = np.column_stack([t["x"], t["y"], t["z"]])
+    assert np.linalg.norm(est[-1] - BALL) < 0.03
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "complete" and run["frames"] == 6
+    assert run["device"] == "cpu" and run["seed"] == 0
+    assert run["config"]["tracker"]["particles"] == 300
+    assert {"upload", "filter", "decode"} <= set(run["timings"])
+    assert run["versions"]["warp"] == wp.config.version
+    p = np.load(out / "particles.npz")
+    assert p["positions"].shape == (6, 50, 3)
+    assert "tracked 6 frames" in capsys.readouterr().out
+
+
+def test_same_seed_same_output(scene, tmp_path):
+    for name in ("a", "b"):
+        assert main(track_args(scene, tmp_path / name, "--seed", "7")) == 0
+    assert (tmp_path / "a" / "tracks.csv").read_text() == (tmp_path / "b" / "tracks.csv").read_text()
+    assert main(track_args(scene, tmp_path / "c", "--seed", "8")) == 0
+    assert (tmp_path / "a" / "tracks.csv").read_text() != (tmp_path / "c" / "tracks.csv").read_text()
+
+
+def _bad_rig(scene, tmp_path):
+    text = Path(scene["rig"]).read_text().replace("width: 96", "width: -96", 1)
+    p = tmp_path / "bad_rig.yaml"
+    p.write_text(text)
+    return p
+
+
+BAD_INPUTS = {
+    "missing video": (lambda s, t: ["--video", str(t / "nope.avi"), "--video", s["videos"][1]], "nope.avi"),
+    "unreadable video": (lambda s, t: ["--video", str(_garbage(t)), "--video", s["videos"][1]], "garbage.avi"),
+    "rig bad field": (lambda s, t: ["--rig", str(_bad_rig(s, t))], "width"),
+    "camera count": (lambda s, t: ["--video", s["videos"][0]], "camera"),
+    "hue out of range": (lambda s, t: ["--hue", "300", "400"], "hue"),
+    "sat out of range": (lambda s, t: ["--sat", "0.3", "1.5"], "sat"),
+    "particles zero": (lambda s, t: ["--particles", "0"], "particles"),
+    "particles negative": (lambda s, t: ["--particles", "-5"], "particles"),
+    "sigma zero": (lambda s, t: ["--sigma", "0"], "sigma"),
+    "sigma negative": (lambda s, t: ["--sigma", "-0.1"], "sigma"),
+    "unknown resampling": (lambda s, t: ["--resampling", "bogus"], "resampling"),
+}
+
+
+def _garbage(tmp_path):
+    p = tmp_path / "garbage.avi"
+    p.write_bytes(b"this is not a video" * 100)
+    return p
+
+
+def _replace(args, extra):
+    """Apply overrides: options given in `extra` replace those in `args` (``--video`` replaces all videos)."""
+    out, i = [], 0
+    keys = {e for e in extra if e.startswith("--")}
+    while i < len(args):
+        a = args[i]
+        if a in keys:
+            i += 1
+            while i < len(args) and not args[i].startswith("--"):
+                i += 1
+            continue
+        out.append(a)
+        i += 1
+    return out + extra
+
+
+@pytest.mark.parametrize("case", sorted(BAD_INPUTS))
+def test_bad_input_clear_error(scene, tmp_path, capsys, case):
+    make, needle = BAD_INPUTS[case]
+    out = tmp_path / "out"
+    args = _replace(track_args(scene, out), make(scene, tmp_path))
+    code = main(args)
+    err = capsys.readouterr().err
+    assert code == 2, err
+    lines = [ln for ln in err.strip().splitlines() if not ln.startswith("Warp CUDA warning")]
+    assert len(lines) == 1 and lines[0].startswith("wptrack: error:"), err
+    assert needle in lines[0]
+    assert "Traceback" not in err
+    assert not out.exists(), "nothing may be written for a bad input"
+
+
+def test_output_not_writable(scene, tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    code = main(track_args(scene, blocker / "run"))
+    err = capsys.readouterr().err
+    assert code == 2 and "not writable" in err and "Traceback" not in err
+
+
+@pytest.mark.skipif(bool(wp.get_cuda_devices()), reason="CUDA is available here")
+def test_cuda_unavailable(scene, tmp_path, capsys):
+    out = tmp_path / "out"
+    code = main(_replace(track_args(scene, out), ["--device", "cuda"]))
+    err = capsys.readouterr().err
+    assert code == 2 and "CUDA is not available" in err
+    assert not out.exists()
+
+
+def test_console_script_subprocess_exit_code(scene, tmp_path):
+    """The installed entry point: a user mistake is one line and exit 2, no traceback."""
+    out = tmp_path / "out"
+    args = _replace(track_args(scene, out), ["--particles", "0"])
+    r = subprocess.run([sys.executable, "-m", "wptrack.cli", *args], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2
+    assert "wptrack: error: particles" in r.stderr and "Traceback" not in r.stderr
