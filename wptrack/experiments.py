@@ -58,7 +58,7 @@ def jump_experiment(
         "summary": [per sigma: iterations to converge initially and after the jump (error < tol for hold
         iterations)]}``.
     """
-    if not sigmas:
+    if len(sigmas) == 0:
         raise ConfigError("sigma: give at least one value")
     if any(not (s > 0) for s in sigmas):
         raise ConfigError(f"sigma: values must be > 0 metres, got {list(sigmas)}")

@@ -1,0 +1,43 @@
+"""Every example script runs unchanged with few frames on every device."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def load(name: str):
+    spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_track_colour_example(device, capsys):
+    summary = load("track_colour").main(["--device", device, "--frames", "30"])
+    assert summary["frames"] == 30
+    assert summary["converged_at"] is not None and summary["mean_error_after"] < 0.03
+    assert "frame    0" in capsys.readouterr().out
+
+
+def test_sigma_sweep_example(device, tmp_path):
+    table = load("sigma_sweep").main(
+        ["--device", device, "--frames", "20", "--steps", "3", "--runs", "2", "--out", str(tmp_path)]
+    )
+    assert table["errors"].shape == (3, 20)
+    assert (tmp_path / "errors.csv").read_text().startswith("sigma,iteration,error_mean,error_std")
+
+
+def test_every_example_is_tested():
+    tested = {"track_colour", "sigma_sweep"}
+    assert {p.stem for p in EXAMPLES.glob("*.py")} == tested, "add a test for the new example"
+
+
+@pytest.mark.parametrize("name", ["track_colour", "sigma_sweep"])
+def test_examples_have_device_and_frames_flags(name):
+    text = (EXAMPLES / f"{name}.py").read_text()
+    assert "--device" in text and "--frames" in text
