@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 
+from wptrack.device import quiet_warp
 from wptrack.experiments import default_sigmas, jump_experiment, write_sweep
 
 
@@ -20,6 +21,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--particles", type=int, default=200)
     ap.add_argument("--out", default="sigma-sweep")
     args = ap.parse_args(argv)
+    quiet_warp()
     sigmas = default_sigmas(args.steps)
     jump_at = min(30, args.frames // 2)
     table = jump_experiment(

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wptrack.device import quiet_warp
 from wptrack.frames import open_frames
 from wptrack.io import read_tracks
 from wptrack.metrics import summarize
@@ -32,6 +33,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--sigma", type=float, default=0.03, help="sigma_m, metres")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
+    quiet_warp()
 
     with tempfile.TemporaryDirectory() as tmp:
         scene = render_scene("s1-lab", Path(tmp) / "scene", frames=args.frames, seed=args.seed)

@@ -32,12 +32,22 @@ def test_sigma_sweep_example(device, tmp_path):
     assert (tmp_path / "errors.csv").read_text().startswith("sigma,iteration,error_mean,error_std")
 
 
+def test_drift_example(device):
+    out = load("drift").main(["--device", device, "--frames", "12"])
+    # the mechanism of the drift: on the ball's image in cam1, moves away from the camera survive more often
+    for row in out["profile"]:
+        assert row["keep_further"] > row["keep_closer"]
+        assert row["bias"] > 0
+    assert out["profile"][3]["depth"] == 0.0 and out["profile"][3]["loglik"][1] > -1.0  # both see the ball
+    assert len(out["runs"]["further"]) == 12
+
+
 def test_every_example_is_tested():
-    tested = {"track_colour", "sigma_sweep"}
+    tested = {"track_colour", "sigma_sweep", "drift"}
     assert {p.stem for p in EXAMPLES.glob("*.py")} == tested, "add a test for the new example"
 
 
-@pytest.mark.parametrize("name", ["track_colour", "sigma_sweep"])
+@pytest.mark.parametrize("name", ["track_colour", "sigma_sweep", "drift"])
 def test_examples_have_device_and_frames_flags(name):
     text = (EXAMPLES / f"{name}.py").read_text()
     assert "--device" in text and "--frames" in text

@@ -4,6 +4,7 @@ error vs iteration when the object jumps (Fig. 6) and the sigma_m sweep (Fig. 7)
 from __future__ import annotations
 
 import csv
+import json
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -139,3 +140,83 @@ def read_sweep(path) -> dict:
     for r in rows:
         errors[sigmas.index(float(r["sigma"])), int(r["iteration"])] = float(r["error_mean"])
     return {"sigmas": np.asarray(sigmas), "errors": errors}
+
+
+def drift_study(
+    scene_dir,
+    camera: int = 0,
+    depths: Sequence[float] = (-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3, 0.5),
+    sigma: float = 0.03,
+    samples: int = 20000,
+    frame_index: int = 0,
+    device: str = "auto",
+    seed: int = 0,
+) -> list[dict]:
+    """The systematic drift along a camera's optical ray (Barrera et al., section III, Fig. 5), measured.
+
+    Points are placed on the ray from ``camera`` through the ball (ground truth of frame ``frame_index``) at
+    ``depth`` metres beyond the ball (negative: nearer the camera). For each point the observation model of eqs.
+    5-7 is evaluated per camera on the real frame, and ``samples`` gaussian moves N(0, sigma) of the point are
+    scored: among moves that keep the point's likelihood in ``camera`` (window count m > 1), how many went further
+    from the camera than closer. Far from the other cameras' views only ``camera`` rewards a particle, and a move
+    towards the camera leaves the (narrowing) cone of the ball's image more often than a move away from it; the
+    cloud then drifts away from the camera.
+
+    Returns:
+        One dict per depth: ``depth`` (m), ``loglik`` per camera (log p_c at the point), ``keep_further`` and
+        ``keep_closer`` (fractions of moves that stay on the ball's image in ``camera``), ``bias`` (mean depth
+        change of the moves that stay, metres: > 0 means drift away from the camera).
+    """
+    import warp as wp
+
+    from .frames import open_frames
+    from .io import read_tracks
+    from .kernels import scoring as kscoring
+    from .rig import Rig
+    from .trackers.colour import HSITarget
+    from .warpcams import DeviceRig
+
+    scene_dir = Path(scene_dir)
+    meta = json.loads((scene_dir / "scene.json").read_text())
+    rig = Rig.load(scene_dir / "rig.yaml")
+    gt = read_tracks(scene_dir / "groundtruth.csv")
+    ball = np.array([gt["x"][frame_index], gt["y"][frame_index], gt["z"][frame_index]])
+    frames = iter(open_frames([str(scene_dir / v) for v in meta["videos"]], max_frames=frame_index + 1))
+    for _ in range(frame_index + 1):
+        images = next(frames)
+    device = resolve_device(device)
+    t = meta["target"]
+    target = HSITarget(hue=tuple(t["hue"]), sat=tuple(t["sat"]), intensity=tuple(t["intensity"])).to_struct()
+    drig = DeviceRig(rig, device)
+    bgr = wp.array(np.concatenate([im.reshape(-1) for im in images]), dtype=wp.uint8, device=device)
+    dummy = wp.zeros(1, dtype=wp.int32, device=device)
+    centre = rig[camera].center
+    ray = (ball - centre) / np.linalg.norm(ball - centre)
+    rng = np.random.default_rng(seed)
+    rows = []
+    for depth in depths:
+        p = ball + depth * ray
+        pts = np.concatenate([p[None], p + rng.normal(0.0, sigma, (samples, 3))]).astype(np.float32)
+        counts = wp.zeros((len(rig), len(pts)), dtype=wp.int32, device=device)
+        wp.launch(
+            kscoring.window_count_kernel,
+            dim=(len(rig), len(pts)),
+            inputs=[drig.cams, target, bgr, dummy, kscoring.SCORE_DIRECT, wp.array(pts, dtype=wp.vec3, device=device)],
+            outputs=[counts],
+            device=device,
+        )
+        c = counts.numpy()
+        loglik = [float(np.log(max(int(m), 1) / 25.0)) for m in c[:, 0]]
+        moves = pts[1:] - p
+        along = moves @ ray
+        keep = c[camera, 1:] > 1
+        rows.append(
+            {
+                "depth": float(depth),
+                "loglik": loglik,
+                "keep_further": float(keep[along > 0].mean()),
+                "keep_closer": float(keep[along < 0].mean()),
+                "bias": float(along[keep].mean()) if keep.any() else float("nan"),
+            }
+        )
+    return rows
