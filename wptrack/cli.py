@@ -12,6 +12,7 @@ import logging
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -97,7 +98,7 @@ def run_color_tracking(
         "rig": str(Path(rig_path).resolve()),
         "videos": [str(v) for v in videos],
         "target": {"hue": target.hue, "sat": target.sat, "intensity": target.intensity},
-        "tracker": {**config.__dict__, "score_mode_resolved": tracker.score_mode},
+        "tracker": {**asdict(config), "score_mode_resolved": tracker.score_mode},
     }
     errors: list[float] = []
     with RunWriter(out_dir, "color", TRACK_COLUMNS, run_config, particles_max=max(1, config.keep_particles)) as out:
@@ -155,14 +156,7 @@ def _color_config_from_args(args):
 
 
 def cmd_track_color(args) -> int:
-    config = _color_config_from_args(args)
-    if config.init is None and config.init_box is None:
-        from .rig import Rig
-
-        lo, hi = Rig.load(args.rig).bounds()
-        from dataclasses import replace
-
-        config = replace(config, init_box=(tuple(lo), tuple(hi)))
+    config = _color_config_from_args(args)  # without an init box the tracker uses the rig's working volume
     summary = run_color_tracking(
         args.rig,
         args.video,
