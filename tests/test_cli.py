@@ -98,6 +98,17 @@ def test_same_seed_same_output(scene, tmp_path):
     assert (tmp_path / "a" / "tracks.csv").read_text() != (tmp_path / "c" / "tracks.csv").read_text()
 
 
+def test_init_random_uses_the_rig_volume(scene, tmp_path):
+    out = tmp_path / "run"
+    args = [a for a in track_args(scene, out) if a not in ("--init", "0.42", "0.45", "0.05")] + ["--init-random"]
+    assert main(args) == 0
+    run = json.loads((out / "run.json").read_text())
+    lo, hi = Rig.load(scene["rig"]).bounds()
+    np.testing.assert_allclose(run["config"]["tracker"]["init_box"], [lo, hi])
+    assert run["config"]["tracker"]["init"] is None
+    assert len(read_tracks(out / "tracks.csv")["frame"]) == 6
+
+
 def _bad_rig(scene, tmp_path):
     text = Path(scene["rig"]).read_text().replace("width: 96", "width: -96", 1)
     p = tmp_path / "bad_rig.yaml"

@@ -98,7 +98,7 @@ def run_color_tracking(
         "rig": str(Path(rig_path).resolve()),
         "videos": [str(v) for v in videos],
         "target": {"hue": target.hue, "sat": target.sat, "intensity": target.intensity},
-        "tracker": {**asdict(config), "score_mode_resolved": tracker.score_mode},
+        "tracker": {**asdict(tracker.config), "score_mode_resolved": tracker.score_mode},
     }
     errors: list[float] = []
     with RunWriter(out_dir, "color", TRACK_COLUMNS, run_config, particles_max=max(1, config.keep_particles)) as out:

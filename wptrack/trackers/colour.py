@@ -21,7 +21,7 @@ import logging
 import math
 import time
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 import warp as wp
@@ -202,12 +202,13 @@ class ColorTracker(ParticleFilter):
         else:
             self.mask = wp.zeros(1, dtype=wp.uint8, device=d)
             self.integral = wp.zeros(1, dtype=wp.int32, device=d)
+        if config.init is None and config.init_box is None:
+            config = replace(config, init_box=tuple(tuple(float(c) for c in v) for v in rig.bounds()))
+            self.config = config
         if config.init is not None:
             self.init_point(config.init)
-        elif config.init_box is not None:
-            self.init_box(*config.init_box)
         else:
-            self.init_box(*rig.bounds())
+            self.init_box(*config.init_box)
         log.info(
             "colour tracker: %d particles, %d cameras, %s scoring, device %s",
             config.particles,
