@@ -138,3 +138,11 @@ def test_gaussian3d_filter_converges_after_a_jump(device):
     jumped = target + np.array([2.0, 0.0, 0.0])
     errs = [np.linalg.norm(pf.step(jumped).mean - jumped) for _ in range(40)]
     assert errs[0] > 1.0 and errs[-1] < 0.05
+
+
+def test_too_many_particles_is_a_clear_error_before_allocation(device):
+    from wptrack.pf import available_bytes
+
+    n = min(2**31 - 2, available_bytes(device) // 8)  # > 8 bytes each cannot fit
+    with pytest.raises(ConfigError, match=r"particles: .* GiB .* free; the limit here is about \d+ particles"):
+        ColorTracker(small_rig(), TARGET, particles=n, init=(0, 0, 0), device=device)

@@ -262,6 +262,43 @@ def cmd_convergence(args) -> int:
     return 0
 
 
+# --- bench ---------------------------------------------------------------------------------------------------
+def cmd_bench(args) -> int:
+    from .bench import HEADER, format_row, load_suites
+    from .device import resolve_device
+    from .io import atomic_write_json, versions
+
+    suites = load_suites()
+    if args.tracker not in suites:
+        raise ConfigError(f"--tracker: unknown suite {args.tracker!r}; expected one of {', '.join(suites)}")
+    device = resolve_device(args.device)
+    import warp as wp
+
+    suite = suites[args.tracker]
+    grid = suite.default_grid(wp.get_device(device).is_cuda)
+    if args.particles:
+        grid = [c for c in grid if c.particles in {int(p) for p in args.particles}] or [
+            type(grid[0])(int(p), c) for p in args.particles for c in sorted({g.cameras for g in grid})
+        ]
+    if args.cameras:
+        grid = [type(grid[0])(p, c) for p in sorted({g.particles for g in grid}) for c in args.cameras]
+    results = []
+    print(HEADER)
+    for case in grid:
+        r = suite.run_case(case, device, frames=args.frames, numpy_max=args.numpy_max)
+        results.append(r)
+        print(format_row(r), flush=True)
+        if args.out:
+            atomic_write_json(args.out, {"device": device, "versions": versions(), "results": results})
+    if args.out:
+        print(f"results: {args.out}")
+    bad = [r for r in results if r.get("equivalent") is False]
+    if bad:
+        print(f"wptrack: {len(bad)} case(s) disagree with the NumPy reference", file=sys.stderr)
+        return 1
+    return 0
+
+
 # --- parser -------------------------------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="wptrack", description="Particle-filter 3D object tracking from calibrated cameras (Warp).")
@@ -347,6 +384,16 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--out", required=True, help="output folder (errors.csv, summary.json)")
     _add_device(v)
     v.set_defaults(func=cmd_convergence)
+
+    b = sub.add_parser("bench", parents=[common], help="benchmark suites (needs the benchmarks/ folder)")
+    b.add_argument("--tracker", default="color", help="suite name (default: color)")
+    b.add_argument("--particles", type=float, nargs="+", help="particle counts (default: the suite's grid)")
+    b.add_argument("--cameras", type=int, nargs="+", help="camera counts (default: the suite's grid)")
+    b.add_argument("--frames", type=_positive_int, default=50, help="timed frames per case")
+    b.add_argument("--numpy-max", type=int, default=100_000, help="largest N also run by the NumPy reference")
+    b.add_argument("--out", default=None, help="write the results as JSON here")
+    _add_device(b)
+    b.set_defaults(func=cmd_bench)
     return p
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -70,6 +71,44 @@ def _seed_words(seed: int) -> wp.vec2ui:
     return wp.vec2ui(seed & 0xFFFFFFFF, (seed >> 32) & 0xFFFFFFFF)
 
 
+POINT_STATE_BYTES = 2 * 12 + 2 * 4 + 4 + 8
+"""Device bytes per particle of the point-particle state: positions (2 x vec3 ping-pong), log-weights (2 x
+float32), ancestors (int32), normalised weights (float64)."""
+
+
+def resampler_bytes(scheme: str) -> int:
+    """Device bytes per particle of a resampling scheme: the float64 CDF, plus (residual) counts, positions,
+    residuals and their CDF; plus up to 8 bytes of prefix-sum scratch."""
+    return 8 + 8 + (4 + 4 + 8 + 8 if scheme == "residual" else 0)
+
+
+def available_bytes(device: str) -> int:
+    """Free memory of a device: CUDA free memory, or the host's available physical memory for the CPU."""
+    import os
+
+    dev = wp.get_device(device)
+    if dev.is_cuda:
+        return int(dev.free_memory)
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
+        return 1 << 62
+
+
+def check_fits(n: int, per_particle: int, fixed: int, device: str, what: str = "particles") -> None:
+    """Raise ConfigError before allocating when ``n`` particles of ``per_particle`` bytes (plus ``fixed`` bytes)
+    cannot fit in the device's free memory (a 10 % margin is kept for the runtime and scratch)."""
+    need = n * per_particle + fixed
+    free = available_bytes(device)
+    usable = int(0.9 * free)
+    if need > usable:
+        limit = max(0, (usable - fixed) // per_particle)
+        raise ConfigError(
+            f"{what}: {n} particles need {need / 2**30:.2f} GiB on {device} ({per_particle} bytes each) but only "
+            f"{free / 2**30:.2f} GiB is free; the limit here is about {limit} particles"
+        )
+
+
 def check_particles(n: int) -> int:
     """Validate a particle count (positive integer, below the 32-bit index limit)."""
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n <= 0:
@@ -113,6 +152,7 @@ class ParticleFilter:
             raise ConfigError(f"resampling: unknown scheme {resampling!r}; expected one of {', '.join(SCHEMES)}")
         if not (0.0 < ess_threshold <= 1.0):
             raise ConfigError(f"ess_threshold: expected a fraction in (0, 1], got {ess_threshold!r}")
+        check_fits(n, POINT_STATE_BYTES + resampler_bytes(resampling), 0, device)
         self.n = n
         self.device = str(wp.get_device(device))
         self.is_cuda = wp.get_device(device).is_cuda
@@ -210,10 +250,8 @@ class ParticleFilter:
     def _launch_observation(self) -> None:
         """Per-frame observation preparation on the device (e.g. colour mask + integral image)."""
 
-    def _chain(self, src: int, dst: int) -> None:
+    def _estimate(self, dst: int) -> None:
         d = self.device
-        self._launch_observation()
-        self._launch_predict_score(src, dst)
         x, logw = self.x[dst], self.logw[dst]
         wp.launch_tiled(
             kreduce.block_max_kernel,
@@ -255,12 +293,31 @@ class ParticleFilter:
                 outputs=[self.sub_x, self.sub_w],
                 device=d,
             )
+
+    def _resample(self) -> None:
         self.resampler(self.weights, self.seed, self.frame, self.ancestors, enabled=self.resampled)
-        wp.launch(kreduce.increment_kernel, dim=1, inputs=[self.frame], device=d)
+        wp.launch(kreduce.increment_kernel, dim=1, inputs=[self.frame], device=self.device)
+
+    def _readback(self) -> None:
         wp.copy(self.est_host, self.est)
         if self.keep:
             wp.copy(self.sub_x_host, self.sub_x)
             wp.copy(self.sub_w_host, self.sub_w)
+
+    def stages(self, src: int, dst: int) -> list[tuple[str, Callable[[], None]]]:
+        """The frame chain as named stages (for profiling): observe, predict_score, estimate, resample,
+        readback. Running them in order is one filter iteration."""
+        return [
+            ("observe", self._launch_observation),
+            ("predict_score", lambda: self._launch_predict_score(src, dst)),
+            ("estimate", lambda: self._estimate(dst)),
+            ("resample", self._resample),
+            ("readback", self._readback),
+        ]
+
+    def _chain(self, src: int, dst: int) -> None:
+        for _name, stage in self.stages(src, dst):
+            stage()
 
     def _run_chain(self, src: int, dst: int) -> None:
         """Run the chain; on CUDA the first run of each parity loads the modules, the second captures a
@@ -274,6 +331,56 @@ class ParticleFilter:
                 self._chain(src, dst)
             self._graphs[src] = capture.graph
         wp.capture_launch(self._graphs[src])
+
+    def time_frames(self, count: int) -> list[float]:
+        """Run ``count`` frames of the device chain on the uploaded observation (graph replay on CUDA) and return
+        the device time of each, seconds (CUDA events; wall clock on the CPU). No estimate is read back."""
+        times = []
+        if self.is_cuda:
+            ev = [wp.Event(self.device, enable_timing=True) for _ in range(count + 1)]
+            wp.record_event(ev[0])
+            for k in range(count):
+                src, dst = self.parity, 1 - self.parity
+                self._run_chain(src, dst)
+                self.parity = dst
+                wp.record_event(ev[k + 1])
+            wp.synchronize_device(self.device)
+            times = [wp.get_event_elapsed_time(ev[k], ev[k + 1]) / 1000.0 for k in range(count)]
+        else:
+            for _ in range(count):
+                t0 = time.perf_counter()
+                src, dst = self.parity, 1 - self.parity
+                self._run_chain(src, dst)
+                self.parity = dst
+                times.append(time.perf_counter() - t0)
+        self.frames_done += count
+        return times
+
+    def profile(self) -> dict[str, float]:
+        """Run one frame stage by stage without a graph and return seconds per stage (CUDA events on GPUs,
+        wall clock on the CPU, whose launches are synchronous). The observation must already be uploaded.
+        The filter advances by one frame, as with :meth:`advance`."""
+        src, dst = self.parity, 1 - self.parity
+        times: dict[str, float] = {}
+        if self.is_cuda:
+            events = [wp.Event(self.device, enable_timing=True) for _ in range(6)]
+            wp.record_event(events[0])
+            names = []
+            for k, (name, stage) in enumerate(self.stages(src, dst)):
+                stage()
+                wp.record_event(events[k + 1])
+                names.append(name)
+            wp.synchronize_device(self.device)
+            for k, name in enumerate(names):
+                times[name] = wp.get_event_elapsed_time(events[k], events[k + 1]) / 1000.0
+        else:
+            for name, stage in self.stages(src, dst):
+                t0 = time.perf_counter()
+                stage()
+                times[name] = time.perf_counter() - t0
+        self.parity = dst
+        self.frames_done += 1
+        return times
 
     def advance(self) -> Estimate:
         """Run one frame of the chain on the already uploaded observation and return the estimate."""

@@ -218,7 +218,8 @@ class ColorTracker(ParticleFilter):
         )
 
     # --- observation --------------------------------------------------------------------------------
-    def _upload(self, images: Sequence[np.ndarray]) -> None:
+    def upload(self, images: Sequence[np.ndarray]) -> None:
+        """Validate one BGR image per camera and copy them to the device (the frame's only host->device copy)."""
         cams = self.rig.cameras
         if len(images) != len(cams):
             raise FrameError(f"got {len(images)} images for a rig of {len(cams)} cameras")
@@ -288,7 +289,7 @@ class ColorTracker(ParticleFilter):
     def step(self, images: Sequence[np.ndarray]) -> Estimate:
         """Track one synchronised set of frames (one (H, W, 3) uint8 BGR image per camera, rig order)."""
         t0 = time.perf_counter()
-        self._upload(images)
+        self.upload(images)
         t1 = time.perf_counter()
         est = self.advance()
         est.timings["upload"] = t1 - t0

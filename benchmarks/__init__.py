@@ -1,0 +1,9 @@
+"""wptrack benchmark suites (run them with ``wptrack bench``). Each suite registers itself in ``SUITES``; a new
+tracker plugs in with a module defining a suite class (``name``, ``default_grid(device)``, ``run_case(...)``) and
+one line here."""
+
+from __future__ import annotations
+
+from .colour import ColourSuite
+
+SUITES = {ColourSuite.name: ColourSuite}
