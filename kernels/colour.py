@@ -87,43 +87,136 @@ def target_mask_kernel(
     mask[q] = wp.uint8(pixel_matches(target, bgr, q))
 
 
+SEGMENT = wp.constant(32)
+"""Pixels per thread in the segmented scans of the integral image."""
+
+
 @wp.kernel
-def integral_rows_kernel(
+def row_segment_sums_kernel(
     cams: wp.array(dtype=Camera),
     mask: wp.array(dtype=wp.uint8),
+    seg: wp.array3d(dtype=wp.int32),
+):
+    """Integral image, pass 1 of 4: sum of each 32-pixel segment of every mask row. Launch (M, max H, segments);
+    ``seg`` (M, max H, ceil(max W / 32))."""
+    c, y, s = wp.tid()
+    cam = cams[c]
+    if y >= cam.height:
+        return
+    x0 = s * SEGMENT
+    x1 = wp.min(x0 + SEGMENT, cam.width)
+    src = cam.pixel_offset + y * cam.width
+    acc = int(0)
+    for x in range(x0, x1):
+        acc += int(mask[src + x])
+    seg[c, y, s] = acc
+
+
+@wp.kernel
+def row_scan_kernel(
+    cams: wp.array(dtype=Camera),
+    mask: wp.array(dtype=wp.uint8),
+    seg: wp.array3d(dtype=wp.int32),
     integral: wp.array(dtype=wp.int32),
 ):
-    """Row prefix sums: launch (M, max H). ``integral`` row y+1 col x+1 = sum of mask[y, 0..x]."""
-    c, y = wp.tid()
+    """Integral image, pass 2 of 4: row prefix sums (earlier segments' sums + a scan of this segment) into rows
+    1..H of the (H+1) x (W+1) integral image; row 0 and column 0 are zero."""
+    c, y, s = wp.tid()
     cam = cams[c]
     if y >= cam.height:
         return
     w1 = cam.width + 1
+    x0 = s * SEGMENT
+    if x0 >= cam.width:
+        return
+    x1 = wp.min(x0 + SEGMENT, cam.width)
+    acc = int(0)
+    for k in range(s):
+        acc += seg[c, y, k]
     base = cam.integral_offset + (y + 1) * w1
     src = cam.pixel_offset + y * cam.width
-    acc = int(0)
-    integral[base] = 0
-    for x in range(cam.width):
+    if s == 0:
+        integral[base] = 0
+    for x in range(x0, x1):
         acc += int(mask[src + x])
         integral[base + x + 1] = acc
     if y == 0:
-        for x in range(w1):
-            integral[cam.integral_offset + x] = 0
+        for x in range(x0, x1):
+            integral[cam.integral_offset + x + 1] = 0
+        if s == 0:
+            integral[cam.integral_offset] = 0
 
 
 @wp.kernel
-def integral_cols_kernel(
+def col_segment_sums_kernel(
     cams: wp.array(dtype=Camera),
     integral: wp.array(dtype=wp.int32),
+    seg: wp.array3d(dtype=wp.int32),
 ):
-    """Column prefix sums over the row sums: launch (M, max W + 1); completes the integral image."""
-    c, x = wp.tid()
+    """Integral image, pass 3 of 4: sum of each 32-row segment of every column of the row sums. Launch
+    (M, max W + 1, segments); ``seg`` (M, max W + 1, ceil(max H / 32))."""
+    c, x, s = wp.tid()
     cam = cams[c]
     if x > cam.width:
         return
     w1 = cam.width + 1
+    y0 = 1 + s * SEGMENT
+    y1 = wp.min(y0 + SEGMENT, cam.height + 1)
     acc = int(0)
-    for y in range(1, cam.height + 1):
-        k = cam.integral_offset + y * w1 + x
-        acc += integral[k]
-        integral[k] = acc
+    for y in range(y0, y1):
+        acc += integral[cam.integral_offset + y * w1 + x]
+    seg[c, x, s] = acc
+
+
+@wp.kernel
+def col_scan_kernel(
+    cams: wp.array(dtype=Camera),
+    seg: wp.array3d(dtype=wp.int32),
+    integral: wp.array(dtype=wp.int32),
+):
+    """Integral image, pass 4 of 4: column prefix sums in place (earlier segments' sums + a scan of this one)."""
+    c, x, s = wp.tid()
+    cam = cams[c]
+    if x > cam.width:
+        return
+    w1 = cam.width + 1
+    y0 = 1 + s * SEGMENT
+    if y0 > cam.height:
+        return
+    y1 = wp.min(y0 + SEGMENT, cam.height + 1)
+    acc = int(0)
+    for k in range(s):
+        acc += seg[c, x, k]
+    for y in range(y0, y1):
+        i = cam.integral_offset + y * w1 + x
+        acc += integral[i]
+        integral[i] = acc
+
+
+@wp.kernel
+def window_map_kernel(
+    cams: wp.array(dtype=Camera),
+    integral: wp.array(dtype=wp.int32),
+    window: wp.array(dtype=wp.uint8),
+):
+    """Per pixel, the number of target pixels in the 5x5 window centred on it (0..25), from the integral image
+    (4 reads per pixel): a particle then needs one read per camera. Launch (M, max W*H); flat like the mask."""
+    c, p = wp.tid()
+    cam = cams[c]
+    if p >= cam.width * cam.height:
+        return
+    py = p / cam.width
+    px = p - py * cam.width
+    x0 = wp.max(px - 2, 0)
+    x1 = wp.min(px + 2, cam.width - 1) + 1
+    y0 = wp.max(py - 2, 0)
+    y1 = wp.min(py + 2, cam.height - 1) + 1
+    w1 = cam.width + 1
+    b = cam.integral_offset
+    m = (
+        integral[b + y1 * w1 + x1]
+        - integral[b + y0 * w1 + x1]
+        - integral[b + y1 * w1 + x0]
+        + integral[b + y0 * w1 + x0]
+    )
+    window[cam.pixel_offset + p] = wp.uint8(m)

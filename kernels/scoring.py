@@ -7,7 +7,9 @@ the product over cameras (eq. 5), i.e. a sum of logs. Window pixels outside the 
 Two ways to count m, with identical results:
 - ``SCORE_DIRECT``: classify the 25 window pixels of the BGR frame on the fly (the paper's choice; no
   whole-image colour filtering, best while 25 N < W H).
-- ``SCORE_INTEGRAL``: 4 reads of the per-camera integral image of the target mask (best for large N).
+- ``SCORE_INTEGRAL``: 4 reads of the per-camera integral image of the target mask.
+- ``SCORE_MAP``: 1 read of a per-pixel window-count map built from the integral image once per frame (best for
+  large N: the per-particle reads, random accesses to L2, dominate the frame at 1e7+ particles).
 """
 
 import warp as wp
@@ -20,6 +22,7 @@ wp.set_module_options({"enable_backward": False})
 
 SCORE_DIRECT = wp.constant(0)
 SCORE_INTEGRAL = wp.constant(1)
+SCORE_MAP = wp.constant(2)
 HALF_WINDOW = wp.constant(2)
 LOG_WINDOW_AREA = wp.constant(3.2188758248682006)  # log(25)
 
@@ -61,6 +64,7 @@ def window_count(
     target: ColourTarget,
     bgr: wp.array(dtype=wp.uint8),
     integral: wp.array(dtype=wp.int32),
+    window: wp.array(dtype=wp.uint8),
     mode: int,
     x: wp.vec3,
 ):
@@ -72,6 +76,8 @@ def window_count(
     py = pixel_of(uvz[1])
     if px < 0 or py < 0 or px >= cam.width or py >= cam.height:
         return -1
+    if mode == SCORE_MAP:
+        return int(window[cam.pixel_offset + py * cam.width + px])
     if mode == SCORE_INTEGRAL:
         return window_count_integral(cam, integral, px, py)
     return window_count_direct(cam, target, bgr, px, py)
@@ -83,13 +89,14 @@ def colour_log_likelihood(
     target: ColourTarget,
     bgr: wp.array(dtype=wp.uint8),
     integral: wp.array(dtype=wp.int32),
+    window: wp.array(dtype=wp.uint8),
     mode: int,
     x: wp.vec3,
 ):
     """log w = sum over cameras of log p_c (eqs. 5-7): log(1/25) outside, log(max(m, 1)/25) inside."""
     total = float(0.0)
     for c in range(cams.shape[0]):
-        m = window_count(cams[c], target, bgr, integral, mode, x)
+        m = window_count(cams[c], target, bgr, integral, window, mode, x)
         total += wp.log(float(wp.max(m, 1))) - LOG_WINDOW_AREA
     return total
 
@@ -100,13 +107,14 @@ def window_count_kernel(
     target: ColourTarget,
     bgr: wp.array(dtype=wp.uint8),
     integral: wp.array(dtype=wp.int32),
+    window: wp.array(dtype=wp.uint8),
     mode: int,
     points: wp.array(dtype=wp.vec3),
     counts: wp.array2d(dtype=wp.int32),
 ):
     """Window counts ``counts[c, i]`` (M, N) of every point in every camera (-1: outside). For tests."""
     c, i = wp.tid()
-    counts[c, i] = window_count(cams[c], target, bgr, integral, mode, points[i])
+    counts[c, i] = window_count(cams[c], target, bgr, integral, window, mode, points[i])
 
 
 @wp.kernel
@@ -115,13 +123,14 @@ def colour_score_kernel(
     target: ColourTarget,
     bgr: wp.array(dtype=wp.uint8),
     integral: wp.array(dtype=wp.int32),
+    window: wp.array(dtype=wp.uint8),
     mode: int,
     points: wp.array(dtype=wp.vec3),
     loglik: wp.array(dtype=wp.float32),
 ):
     """Log-likelihood of every point (eqs. 5-7), without prediction."""
     i = wp.tid()
-    loglik[i] = colour_log_likelihood(cams, target, bgr, integral, mode, points[i])
+    loglik[i] = colour_log_likelihood(cams, target, bgr, integral, window, mode, points[i])
 
 
 @wp.kernel
@@ -130,6 +139,7 @@ def colour_predict_score_kernel(
     target: ColourTarget,
     bgr: wp.array(dtype=wp.uint8),
     integral: wp.array(dtype=wp.int32),
+    window: wp.array(dtype=wp.uint8),
     mode: int,
     particles: wp.array(dtype=wp.vec3),
     ancestors: wp.array(dtype=wp.int32),
@@ -153,7 +163,7 @@ def colour_predict_score_kernel(
     base = float(0.0)
     if resampled[0] == 0:
         base = logw_prev[i]
-    logw_out[i] = base + colour_log_likelihood(cams, target, bgr, integral, mode, x)
+    logw_out[i] = base + colour_log_likelihood(cams, target, bgr, integral, window, mode, x)
 
 
 @wp.kernel

@@ -9,8 +9,23 @@ from wptrack.cli import main
 
 def test_bench_color_tiny(tmp_path, capsys, device):
     out = tmp_path / "bench.json"
-    code = main(["bench", "-q", "--device", device, "--particles", "2000", "--cameras", "1", "2", "--frames", "3",
-                 "--out", str(out)])
+    code = main(
+        [
+            "bench",
+            "-q",
+            "--device",
+            device,
+            "--particles",
+            "2000",
+            "--cameras",
+            "1",
+            "2",
+            "--frames",
+            "3",
+            "--out",
+            str(out),
+        ]
+    )
     text = capsys.readouterr().out
     assert code == 0, text
     res = json.loads(out.read_text())["results"]

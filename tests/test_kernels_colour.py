@@ -10,7 +10,7 @@ from wptrack.kernels import scoring as kscoring
 
 from wptrack.rig import Camera, Rig
 from wptrack.trackers.colour import HSITarget
-from wptrack.warpcams import DeviceRig, camera_struct
+from wptrack.warpcams import ColourMaps, DeviceRig, camera_struct
 
 
 def hsi_ref(bgr: np.ndarray):
@@ -67,31 +67,9 @@ def upload(frames, device):
 
 
 def mask_and_integral(drig: DeviceRig, target: HSITarget, bgr, device):
-    mask = wp.zeros(drig.total_pixels, dtype=wp.uint8, device=device)
-    integral = wp.zeros(drig.total_integral, dtype=wp.int32, device=device)
-    st = target.to_struct()
-    wp.launch(
-        kcolour.target_mask_kernel,
-        dim=(drig.num_cameras, drig.max_pixels),
-        inputs=[drig.cams, st, bgr],
-        outputs=[mask],
-        device=device,
-    )
-    wp.launch(
-        kcolour.integral_rows_kernel,
-        dim=(drig.num_cameras, drig.max_height),
-        inputs=[drig.cams, mask],
-        outputs=[integral],
-        device=device,
-    )
-    wp.launch(
-        kcolour.integral_cols_kernel,
-        dim=(drig.num_cameras, drig.max_width + 1),
-        inputs=[drig.cams],
-        outputs=[integral],
-        device=device,
-    )
-    return mask, integral
+    maps = ColourMaps(drig, device, window=True)
+    maps.launch(target.to_struct(), bgr)
+    return maps.mask, maps.integral, maps.window
 
 
 @pytest.mark.parametrize("target", TARGETS)
@@ -99,7 +77,7 @@ def test_mask_matches_reference(device, rng, target):
     rig = make_rig(rng)
     frames = random_frames(rig, rng)
     drig = DeviceRig(rig, device)
-    mask, integral = mask_and_integral(drig, target, upload(frames, device), device)
+    mask, integral, window = mask_and_integral(drig, target, upload(frames, device), device)
     m = mask.numpy()
     for c, f in enumerate(frames):
         got = m[drig.pixel_offsets[c] : drig.pixel_offsets[c + 1]].reshape(f.shape[:2]).astype(bool)
@@ -113,6 +91,11 @@ def test_mask_matches_reference(device, rng, target):
         ref_ii = np.zeros_like(ii)
         ref_ii[1:, 1:] = np.cumsum(np.cumsum(got.astype(np.int64), 0), 1)
         np.testing.assert_array_equal(ii, ref_ii)
+        # window map: 5x5 counts around every pixel, clipped at the borders
+        padded = np.pad(got.astype(np.int64), 2)
+        ref_win = sum(padded[dy : dy + f.shape[0], dx : dx + f.shape[1]] for dy in range(5) for dx in range(5))
+        win = window.numpy()[drig.pixel_offsets[c] : drig.pixel_offsets[c + 1]].reshape(f.shape[:2])
+        np.testing.assert_array_equal(win, ref_win)
 
 
 def test_hue_wraparound_and_intensity_limits(device):
@@ -155,22 +138,23 @@ def test_window_counts_direct_equals_integral_and_reference(device, rng):
     drig = DeviceRig(rig, device)
     target = TARGETS[0]
     bgr = upload(frames, device)
-    mask, integral = mask_and_integral(drig, target, bgr, device)
+    mask, integral, window = mask_and_integral(drig, target, bgr, device)
     n = 3000
     pts = rng.uniform([0.0, 0.0, -0.1], [0.9, 0.9, 0.4], (n, 3))
     P = wp.array(pts, dtype=wp.vec3, device=device)
     counts = {}
-    for mode in (kscoring.SCORE_DIRECT, kscoring.SCORE_INTEGRAL):
+    for mode in (kscoring.SCORE_DIRECT, kscoring.SCORE_INTEGRAL, kscoring.SCORE_MAP):
         out = wp.zeros((2, n), dtype=wp.int32, device=device)
         wp.launch(
             kscoring.window_count_kernel,
             dim=(2, n),
-            inputs=[drig.cams, target.to_struct(), bgr, integral, mode, P],
+            inputs=[drig.cams, target.to_struct(), bgr, integral, window, mode, P],
             outputs=[out],
             device=device,
         )
         counts[mode] = out.numpy()
     np.testing.assert_array_equal(counts[kscoring.SCORE_DIRECT], counts[kscoring.SCORE_INTEGRAL])
+    np.testing.assert_array_equal(counts[kscoring.SCORE_DIRECT], counts[kscoring.SCORE_MAP])
     m = mask.numpy()
     inside_total = 0
     for c, cam in enumerate(rig.cameras):
@@ -186,7 +170,7 @@ def test_window_counts_direct_equals_integral_and_reference(device, rng):
     wp.launch(
         kscoring.colour_score_kernel,
         dim=n,
-        inputs=[drig.cams, target.to_struct(), bgr, integral, kscoring.SCORE_DIRECT, P],
+        inputs=[drig.cams, target.to_struct(), bgr, integral, window, kscoring.SCORE_DIRECT, P],
         outputs=[loglik],
         device=device,
     )

@@ -58,10 +58,11 @@ def test_converges_and_is_deterministic(device, frames):
     assert not np.array_equal(a[-1].mean, c[-1].mean)
 
 
-def test_direct_and_integral_scoring_identical(device, frames):
+@pytest.mark.parametrize("mode", ["integral", "map"])
+def test_scoring_modes_identical(device, frames, mode):
     td, d = run(device, frames[:8], score_mode="direct")
-    ti, i = run(device, frames[:8], score_mode="integral")
-    assert (td.score_mode, ti.score_mode) == ("direct", "integral")
+    ti, i = run(device, frames[:8], score_mode=mode)
+    assert (td.score_mode, ti.score_mode) == ("direct", mode)
     for ed, ei in zip(d, i, strict=True):
         np.testing.assert_array_equal(ed.mean, ei.mean)
         assert ed.ess == ei.ess
@@ -71,7 +72,7 @@ def test_direct_and_integral_scoring_identical(device, frames):
 def test_auto_mode_follows_the_crossover(device):
     rig = small_rig()  # 2 * 160 * 120 = 38400 pixels: crossover at N = 1536
     assert ColorTracker(rig, TARGET, particles=1000, init=(0, 0, 0), device=device).score_mode == "direct"
-    assert ColorTracker(rig, TARGET, particles=2000, init=(0, 0, 0), device=device).score_mode == "integral"
+    assert ColorTracker(rig, TARGET, particles=2000, init=(0, 0, 0), device=device).score_mode == "map"
 
 
 def test_graph_replay_matches_plain_launches(device, frames):

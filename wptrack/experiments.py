@@ -190,6 +190,7 @@ def drift_study(
     drig = DeviceRig(rig, device)
     bgr = wp.array(np.concatenate([im.reshape(-1) for im in images]), dtype=wp.uint8, device=device)
     dummy = wp.zeros(1, dtype=wp.int32, device=device)
+    dummy8 = wp.zeros(1, dtype=wp.uint8, device=device)
     centre = rig[camera].center
     ray = (ball - centre) / np.linalg.norm(ball - centre)
     rng = np.random.default_rng(seed)
@@ -201,7 +202,15 @@ def drift_study(
         wp.launch(
             kscoring.window_count_kernel,
             dim=(len(rig), len(pts)),
-            inputs=[drig.cams, target, bgr, dummy, kscoring.SCORE_DIRECT, wp.array(pts, dtype=wp.vec3, device=device)],
+            inputs=[
+                drig.cams,
+                target,
+                bgr,
+                dummy,
+                dummy8,
+                kscoring.SCORE_DIRECT,
+                wp.array(pts, dtype=wp.vec3, device=device),
+            ],
             outputs=[counts],
             device=device,
         )

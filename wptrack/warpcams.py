@@ -92,3 +92,58 @@ class DeviceRig:
         self.max_width = max(w for w, _ in sizes)
         self.max_height = max(h for _, h in sizes)
         self.num_cameras = len(sizes)
+
+
+class ColourMaps:
+    """Per-frame colour maps of a rig on a device, built by kernels from the uploaded BGR frames: the target mask,
+    its integral image per camera (four parallel segmented-scan passes) and, optionally, the 5x5 window-count
+    map (one byte per pixel).
+
+    Buffers (flat over cameras, allocated once):
+        mask: (sum W*H,) uint8, 1 where the pixel matches the target.
+        integral: (sum (W+1)*(H+1),) int32 integral images (row 0 and column 0 zero).
+        window: (sum W*H,) uint8 target pixels in the 5x5 window around each pixel (only with ``window=True``).
+    """
+
+    def __init__(self, drig: DeviceRig, device: str, window: bool = False) -> None:
+        from .kernels import colour as kcolour
+
+        self.k = kcolour
+        self.drig = drig
+        self.device = device
+        seg = int(kcolour.SEGMENT)
+        m = drig.num_cameras
+        self.mask = wp.zeros(drig.total_pixels, dtype=wp.uint8, device=device)
+        self.integral = wp.zeros(drig.total_integral, dtype=wp.int32, device=device)
+        self.row_segments = (drig.max_width + seg - 1) // seg
+        self.col_segments = (drig.max_height + seg - 1) // seg
+        self.row_seg = wp.zeros((m, drig.max_height, self.row_segments), dtype=wp.int32, device=device)
+        self.col_seg = wp.zeros((m, drig.max_width + 1, self.col_segments), dtype=wp.int32, device=device)
+        self.has_window = window
+        self.window = wp.zeros(drig.total_pixels if window else 1, dtype=wp.uint8, device=device)
+
+    def launch(self, target, bgr: wp.array) -> None:
+        """Build the maps of the current frame (``target``: a ``kernels.colour.ColourTarget`` struct)."""
+        k, dr, d = self.k, self.drig, self.device
+        m = dr.num_cameras
+        wp.launch(
+            k.target_mask_kernel, dim=(m, dr.max_pixels), inputs=[dr.cams, target, bgr], outputs=[self.mask], device=d
+        )
+        rows = (m, dr.max_height, self.row_segments)
+        cols = (m, dr.max_width + 1, self.col_segments)
+        wp.launch(k.row_segment_sums_kernel, dim=rows, inputs=[dr.cams, self.mask], outputs=[self.row_seg], device=d)
+        wp.launch(
+            k.row_scan_kernel, dim=rows, inputs=[dr.cams, self.mask, self.row_seg], outputs=[self.integral], device=d
+        )
+        wp.launch(
+            k.col_segment_sums_kernel, dim=cols, inputs=[dr.cams, self.integral], outputs=[self.col_seg], device=d
+        )
+        wp.launch(k.col_scan_kernel, dim=cols, inputs=[dr.cams, self.col_seg], outputs=[self.integral], device=d)
+        if self.has_window:
+            wp.launch(
+                k.window_map_kernel,
+                dim=(m, dr.max_pixels),
+                inputs=[dr.cams, self.integral],
+                outputs=[self.window],
+                device=d,
+            )

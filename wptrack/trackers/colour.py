@@ -33,11 +33,11 @@ from ..kernels import scoring as kscoring
 from ..pf import Estimate, ParticleFilter, check_particles
 from ..resampling import SCHEMES
 from ..rig import Rig
-from ..warpcams import DeviceRig
+from ..warpcams import ColourMaps, DeviceRig
 
 log = logging.getLogger(__name__)
 
-SCORE_MODES = ("auto", "direct", "integral")
+SCORE_MODES = ("auto", "direct", "integral", "map")
 
 
 @dataclass(frozen=True)
@@ -92,7 +92,9 @@ class ColorConfig:
         resampling: scheme name: systematic, stratified, multinomial or residual.
         ess_threshold: resample when ESS <= threshold * N; 1.0 resamples every frame (CONDENSATION).
         score_mode: ``direct`` (25 reads of the frame per camera), ``integral`` (integral image of the
-            colour mask, 4 reads) or ``auto``: integral when 25 N > total pixels (the paper's crossover).
+            colour mask, 4 reads), ``map`` (a per-pixel window-count map made from the integral image, 1 read) or
+            ``auto``: map when 25 N > total pixels (the paper's crossover), else direct. All give identical
+            results.
         seed: seed of the counter-based random streams (same seed + device -> identical output).
         keep_particles: particles per frame copied back for reports (0 = none).
     """
@@ -139,8 +141,7 @@ class ColorTracker(ParticleFilter):
 
     Per-frame device buffers (besides ``ParticleFilter``'s state):
         bgr: (sum W*H*3,) uint8 frames of all cameras back to back (BGR, as OpenCV decodes them).
-        mask: (sum W*H,) uint8 target mask (integral mode only).
-        integral: (sum (W+1)*(H+1),) int32 integral images of the mask (integral mode only).
+        maps: :class:`wptrack.warpcams.ColourMaps` (mask, integral images, window map) in integral/map mode.
     """
 
     def __init__(
@@ -188,20 +189,22 @@ class ColorTracker(ParticleFilter):
         if mode == "auto":
             # Paper, section II.B: whole-image filtering costs W*H classifications per camera, the window
             # model 25 N; past the crossover the integral image wins.
-            mode = "integral" if 25 * config.particles > total_pixels else "direct"
+            # The window-count map is the integral image's 4 reads done once per pixel instead of per particle.
+            mode = "map" if 25 * config.particles > total_pixels else "direct"
         self.score_mode = mode
-        self._mode_id = kscoring.SCORE_INTEGRAL if mode == "integral" else kscoring.SCORE_DIRECT
+        self._mode_id = {
+            "direct": kscoring.SCORE_DIRECT,
+            "integral": kscoring.SCORE_INTEGRAL,
+            "map": kscoring.SCORE_MAP,
+        }[mode]
         self._target = target.to_struct()
         d = self.device
         self.bgr = wp.zeros(3 * total_pixels, dtype=wp.uint8, device=d)
         self._staging = wp.zeros(3 * total_pixels, dtype=wp.uint8, device="cpu", pinned=self.is_cuda)
         self._staging_np = self._staging.numpy()
-        if mode == "integral":
-            self.mask = wp.zeros(total_pixels, dtype=wp.uint8, device=d)
-            self.integral = wp.zeros(self.drig.total_integral, dtype=wp.int32, device=d)
-        else:
-            self.mask = wp.zeros(1, dtype=wp.uint8, device=d)
-            self.integral = wp.zeros(1, dtype=wp.int32, device=d)
+        self.maps = ColourMaps(self.drig, d, window=mode == "map") if mode in ("integral", "map") else None
+        self._integral = self.maps.integral if self.maps else wp.zeros(1, dtype=wp.int32, device=d)
+        self._window = self.maps.window if self.maps else wp.zeros(1, dtype=wp.uint8, device=d)
         if config.init is None and config.init_box is None:
             config = replace(config, init_box=tuple(tuple(float(c) for c in v) for v in rig.bounds()))
             self.config = config
@@ -238,30 +241,8 @@ class ColorTracker(ParticleFilter):
         wp.copy(self.bgr, self._staging)
 
     def _launch_observation(self) -> None:
-        if self.score_mode != "integral":
-            return
-        d, dr = self.device, self.drig
-        wp.launch(
-            kcolour.target_mask_kernel,
-            dim=(dr.num_cameras, dr.max_pixels),
-            inputs=[dr.cams, self._target, self.bgr],
-            outputs=[self.mask],
-            device=d,
-        )
-        wp.launch(
-            kcolour.integral_rows_kernel,
-            dim=(dr.num_cameras, dr.max_height),
-            inputs=[dr.cams, self.mask],
-            outputs=[self.integral],
-            device=d,
-        )
-        wp.launch(
-            kcolour.integral_cols_kernel,
-            dim=(dr.num_cameras, dr.max_width + 1),
-            inputs=[dr.cams],
-            outputs=[self.integral],
-            device=d,
-        )
+        if self.maps is not None:
+            self.maps.launch(self._target, self.bgr)
 
     def _launch_predict_score(self, src: int, dst: int) -> None:
         wp.launch(
@@ -271,7 +252,8 @@ class ColorTracker(ParticleFilter):
                 self.drig.cams,
                 self._target,
                 self.bgr,
-                self.integral,
+                self._integral,
+                self._window,
                 self._mode_id,
                 self.x[src],
                 self.ancestors,
