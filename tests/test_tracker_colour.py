@@ -141,9 +141,15 @@ def test_gaussian3d_filter_converges_after_a_jump(device):
     assert errs[0] > 1.0 and errs[-1] < 0.05
 
 
-def test_too_many_particles_is_a_clear_error_before_allocation(device):
-    from wptrack.pf import available_bytes
+def test_too_many_particles_is_a_clear_error_before_allocation(device, monkeypatch):
+    import wptrack.pf as pf
 
-    n = min(2**31 - 2, available_bytes(device) // 8)  # > 8 bytes each cannot fit
-    with pytest.raises(ConfigError, match=r"particles: .* GiB .* free; the limit here is about \d+ particles"):
-        ColorTracker(small_rig(), TARGET, particles=n, init=(0, 0, 0), device=device)
+    monkeypatch.setattr(pf, "available_bytes", lambda dev: 64 * 2**20)  # pretend 64 MiB are free
+    before = wp.get_mempool_used_mem_current(device) if wp.get_device(device).is_cuda else None
+    with pytest.raises(ConfigError, match=r"particles: 2000000 particles need .* GiB .* free; the limit here is about"):
+        ColorTracker(small_rig(), TARGET, particles=2_000_000, init=(0, 0, 0), device=device)
+    if before is not None:
+        assert wp.get_mempool_used_mem_current(device) == before  # nothing was allocated
+    # the limit it names fits
+    limit = int(0.9 * 64 * 2**20) // (pf.POINT_STATE_BYTES + pf.resampler_bytes("systematic"))
+    ColorTracker(small_rig(), TARGET, particles=limit, init=(0, 0, 0), device=device)

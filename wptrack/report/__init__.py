@@ -44,8 +44,18 @@ log = logging.getLogger(__name__)
 REPORT_DIR = "report"
 """Default report folder name inside the run folder."""
 
-_OWN_FILES = ("scene_*.png", "camview_*.png", "overlay_*.png", "birdseye.png", "error_vs_frame.png", "timings.png",
-              "sweep_heatmap.png", "movie.mp4", "movie.webm", "movie.gif")
+_OWN_FILES = (
+    "scene_*.png",
+    "camview_*.png",
+    "overlay_*.png",
+    "birdseye.png",
+    "error_vs_frame.png",
+    "timings.png",
+    "sweep_heatmap.png",
+    "movie.mp4",
+    "movie.webm",
+    "movie.gif",
+)
 
 
 def choose_frames(data: RunData, requested: Sequence[int] | None, count: int = 4) -> list[int]:

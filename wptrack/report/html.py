@@ -68,8 +68,7 @@ def _figure_html(fig: Any) -> str:
     if fig.kind == "video":
         mime = "video/webm" if fig.path.endswith(".webm") else "video/mp4"
         body = (
-            f'<video controls loop muted autoplay playsinline preload="auto">'
-            f'<source src="{src}" type="{mime}"></video>'
+            f'<video controls loop muted autoplay playsinline preload="auto"><source src="{src}" type="{mime}"></video>'
         )
     else:
         body = f'<a href="{src}"><img src="{src}" alt="{escape(fig.caption, quote=True)}"></a>'
@@ -132,8 +131,11 @@ def _header_rows(ctx: ReportContext, description: str) -> dict[str, list[tuple[s
         blocks["Metrics"] = metrics
         timings = run.get("timings") or {}
         blocks["Timings (per frame)"] = [
-            (k, f"median {v.get('median_ms', np.nan):.2f} ms, mean {v.get('mean_ms', np.nan):.2f} ms, "
-             f"total {v.get('total_s', np.nan):.2f} s")
+            (
+                k,
+                f"median {v.get('median_ms', np.nan):.2f} ms, mean {v.get('mean_ms', np.nan):.2f} ms, "
+                f"total {v.get('total_s', np.nan):.2f} s",
+            )
             for k, v in timings.items()
             if isinstance(v, dict)
         ]
@@ -169,9 +171,7 @@ def write_index(ctx: ReportContext, sections: list[Section], description: str = 
         title = "wptrack report: sigma_m sweep"
         sub = str(ctx.sweep["path"]) if ctx.sweep else ""
     blocks = _header_rows(ctx, description)
-    cards = "".join(
-        f"<div><h3>{escape(name)}</h3>{_table(rows)}</div>" for name, rows in blocks.items() if rows
-    )
+    cards = "".join(f"<div><h3>{escape(name)}</h3>{_table(rows)}</div>" for name, rows in blocks.items() if rows)
     notes = list(ctx.notes) + (list(data.notes) if data is not None else [])
     nav = " ".join(f'<a href="#{escape(s.key, quote=True)}">{escape(s.title)}</a>' for s in sections)
     raw = ""
@@ -182,7 +182,7 @@ def write_index(ctx: ReportContext, sections: list[Section], description: str = 
             + "</pre></details>"
         )
     page = (
-        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+        '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
         '<meta name="viewport" content="width=device-width, initial-scale=1">'
         f"<title>{escape(title)}</title><style>{_CSS}</style></head><body>"
         f"<header><h1>{escape(title)}</h1><p>{escape(sub)}</p></header><main>"

@@ -67,6 +67,7 @@ def new_plotter(width: int, height: int, background: str = "white") -> Any:
     pv = import_pyvista()
     plotter = pv.Plotter(off_screen=True, window_size=(int(width), int(height)), lighting="light kit")
     plotter.set_background(background)
+    plotter.theme.allow_empty_mesh = True  # this plotter's copy of the theme: dynamic meshes start empty
     return plotter
 
 

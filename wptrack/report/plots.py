@@ -170,9 +170,9 @@ def error_plot(data: Any, path: Path, summary: dict | None = None) -> None:
             sel = t["id"] == obj
             spread = np.sqrt(t["sx"][sel] ** 2 + t["sy"][sel] ** 2 + t["sz"][sel] ** 2)
             ax.plot(t["frame"][sel], 100 * spread, color=_c(estimate_rgb(k)), lw=1.2, label=f"object {obj}")
-        ax.set_yscale("log")
+        ax.set_ylim(bottom=0)
     ax.set_ylabel("spread (cm)")
-    ax.grid(True, which="both", alpha=0.3)
+    ax.grid(True, alpha=0.3)
     ax = axes[i + 1]
     if "ess" in t:
         n = ((data.config.get("tracker") or {}).get("particles")) if isinstance(data.config, dict) else None

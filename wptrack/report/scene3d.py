@@ -164,7 +164,7 @@ def add_rig(plotter: Any, pv: Any, rig: Any, depth: float, labels: bool = True) 
         c = frustum_corners(cam, depth)
         lines = [2, 0, 1, 2, 0, 2, 2, 0, 3, 2, 0, 4, 5, 1, 2, 3, 4, 1]
         mesh = pv.PolyData(c, lines=np.array(lines, dtype=np.int64))
-        plotter.add_mesh(mesh, color=_rgb(FRUSTUM_RGB), line_width=2, lighting=False)
+        plotter.add_mesh(mesh, color=_rgb(FRUSTUM_RGB), line_width=2, lighting=False, render=False)
         top_mid = 0.5 * (c[1] + c[2])  # TL-TR midpoint: the image top
         tick = top_mid + 0.25 * (top_mid - 0.5 * (c[3] + c[4]))
         plotter.add_mesh(
@@ -172,6 +172,7 @@ def add_rig(plotter: Any, pv: Any, rig: Any, depth: float, labels: bool = True) 
             color=_rgb(FRUSTUM_RGB),
             line_width=2,
             lighting=False,
+            render=False,
         )
     if labels:
         centers = np.array([cam.center for cam in rig.cameras])
@@ -183,6 +184,7 @@ def add_rig(plotter: Any, pv: Any, rig: Any, depth: float, labels: bool = True) 
             shape=None,
             show_points=False,
             always_visible=True,
+            render=False,
         )
 
 
@@ -203,11 +205,15 @@ def add_ground(plotter: Any, pv: Any, geo: SceneGeometry, rig: Any) -> None:
     if segs:
         pts = np.array([p for s in segs for p in s])
         lines = np.column_stack([np.full(len(segs), 2), np.arange(0, 2 * len(segs), 2), np.arange(1, 2 * len(segs), 2)])
-        plotter.add_mesh(pv.PolyData(pts, lines=lines.ravel()), color=(0.78, 0.78, 0.78), line_width=1, lighting=False)
+        plotter.add_mesh(
+            pv.PolyData(pts, lines=lines.ravel()), color=(0.78, 0.78, 0.78), line_width=1, lighting=False, render=False
+        )
     if rig is not None and rig.volume is not None:
         vlo, vhi = rig.bounds()
+        if np.linalg.norm(vhi - vlo) > 3.0 * np.linalg.norm(geo.hi - geo.lo):
+            return  # a room-sized volume around a bench-sized scene: its outline would only cross the view
         box = pv.Box(bounds=(vlo[0], vhi[0], vlo[1], vhi[1], vlo[2], vhi[2]))
-        plotter.add_mesh(box.extract_all_edges(), color=(0.55, 0.55, 0.55), line_width=1, lighting=False)
+        plotter.add_mesh(box.extract_all_edges(), color=(0.55, 0.55, 0.55), line_width=1, lighting=False, render=False)
 
 
 def _nice_step(x: float) -> float:
@@ -247,7 +253,7 @@ def overview_view(plotter: Any, geo: SceneGeometry, rig: Any) -> None:
     side = np.cross(up, back)
     direction = np.cos(np.radians(40)) * (np.cos(np.radians(25)) * back + np.sin(np.radians(25)) * side)
     direction = direction + np.sin(np.radians(40)) * up
-    dist = geo.radius / np.sin(np.radians(15.0)) * 1.05
+    dist = geo.radius / np.tan(np.radians(15.0)) * 0.8
     plotter.camera_position = [tuple(center + dist * direction), tuple(center), tuple(up)]
     plotter.camera.view_angle = 30.0
     plotter.renderer.ResetCameraClippingRange()
@@ -262,12 +268,16 @@ def add_trajectories(
         for traj in data.groundtruth.values():
             line = _polyline(pv, traj.xyz)
             if line is not None:
-                actors.append(plotter.add_mesh(line, color=_rgb(TRUTH_RGB), line_width=width, lighting=False))
+                actors.append(
+                    plotter.add_mesh(line, color=_rgb(TRUTH_RGB), line_width=width, lighting=False, render=False)
+                )
     for k, traj in enumerate(data.estimates.values()):
         xyz = traj.xyz if upto is None else traj.xyz[traj.frames <= upto]
         line = _polyline(pv, xyz)
         if line is not None:
-            actors.append(plotter.add_mesh(line, color=_rgb(estimate_rgb(k)), line_width=width, lighting=False))
+            actors.append(
+                plotter.add_mesh(line, color=_rgb(estimate_rgb(k)), line_width=width, lighting=False, render=False)
+            )
     return actors
 
 
@@ -315,6 +325,7 @@ def _cloud_actor(plotter: Any, mesh: Any, point_size: float, scalar_bar: bool) -
         point_size=point_size,
         show_scalar_bar=scalar_bar,
         lighting=False,
+        render=False,
         **kw,
     )
 
@@ -366,11 +377,11 @@ def _render_stills(ctx: ReportContext, data: RunData) -> list[Figure]:
         overview_view(pl, geo, data.rig)
         title = pl.add_text("whole run", position="upper_left", font_size=11, color="black")
         path = ctx.out_dir / "scene_overview.png"
-        pl.screenshot(str(path))
+        shot(pl, path)
         frames_txt = ", ".join(str(f) for f in ctx.frames)
         figs.append(Figure(path.name, f"Whole run: trajectories, and particle clouds of frames {frames_txt}"))
         for a in dynamic:
-            pl.remove_actor(a)
+            pl.remove_actor(a, render=False)
         # one still per chosen frame
         for f in ctx.frames:
             dynamic = []
@@ -379,13 +390,13 @@ def _render_stills(ctx: ReportContext, data: RunData) -> list[Figure]:
                 if len(pos):
                     dynamic.append(_cloud_actor(pl, cloud_polydata(pv, pos, wt, ctx.options.max_points), 7, False))
             dynamic += add_markers(pl, pv, data, f, radius)
-            title.SetInput(f"frame {f}")
+            _set_text(title, f"frame {f}")
             path = ctx.out_dir / f"scene_frame{f:05d}.png"
             pl.renderer.ResetCameraClippingRange()
-            pl.screenshot(str(path))
+            shot(pl, path)
             figs.append(Figure(path.name, f"Frame {f}: particle cloud, estimate (orange) and ground truth (green)"))
             for a in dynamic:
-                pl.remove_actor(a)
+                pl.remove_actor(a, render=False)
     finally:
         pl.close()
     return figs
@@ -423,7 +434,7 @@ def render_camera_views(ctx: ReportContext, data: RunData) -> list[Figure]:
 
     pv = import_pyvista()
     rig = data.rig
-    frame = ctx.frames[0] if ctx.frames else int(data.frames[0])
+    frame = ctx.frames[-1] if ctx.frames else int(data.frames[-1])
     images = read_frames(data.videos or [], [frame]).get(frame)
     if images is None:
         return []
@@ -441,7 +452,7 @@ def render_camera_views(ctx: ReportContext, data: RunData) -> list[Figure]:
         for cam, image in zip(rig.cameras, images, strict=False):
             pl.window_size = (cam.width, cam.height)
             apply_camera(pl, cam)
-            rgba = pl.screenshot(transparent_background=True, return_img=True)
+            rgba = shot(pl, transparent=True)
             und = cv2.undistort(image, np.asarray(cam.K), np.asarray(cam.dist))
             out = composite(und, rgba)
             path = ctx.out_dir / f"camview_{_safe(cam.name)}.png"
@@ -466,6 +477,14 @@ def composite(bgr: np.ndarray, rgba: np.ndarray) -> np.ndarray:
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)
 
 
+def _set_text(actor: Any, text: str) -> None:
+    """Change the text of an ``add_text`` actor (a corner annotation or a text actor)."""
+    if hasattr(actor, "SetInput"):
+        actor.SetInput(text)
+    else:
+        actor.SetText(2, text)  # corner annotation: 2 = upper left
+
+
 def _safe(name: str) -> str:
     return "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in name) or "camera"
 
@@ -483,42 +502,81 @@ def movie_frames(data: RunData, limit: int) -> list[int]:
 
 
 def iter_movie(ctx: ReportContext, data: RunData) -> Iterator[np.ndarray]:
-    """Render the movie's frames ((H, W, 3) uint8 RGB), reusing one plotter; it is closed when the loop ends."""
+    """Render the movie's frames ((H, W, 3) uint8 RGB), reusing one plotter; it is closed when the loop ends.
+
+    Static actors (frusta, ground, ground truth) are added once; the cloud, the estimated trajectories so far and
+    the markers are meshes updated in place, so each movie frame costs one render.
+    """
     pv = import_pyvista()
     geo = scene_geometry(data, ctx.frames)
     w, h = ctx.options.movie_size
-    radius = 0.012 * float(np.max(geo.hi - geo.lo))
     pl = new_plotter(w, h)
     try:
         if data.rig is not None:
             add_rig(pl, pv, data.rig, geo.frustum_depth)
         add_ground(pl, pv, geo, data.rig)
-        add_trajectories(pl, pv, data, upto=-1, width=2.0)  # ground truth only (no estimate frames <= -1)
+        add_trajectories(pl, pv, data, upto=-(10**12), width=2.0)  # ground truth only
         overview_view(pl, geo, data.rig)
-        title = pl.add_text("", position="upper_left", font_size=10, color="black")
-        cloud = pv.PolyData(np.zeros((1, 3)))
-        cloud.point_data["weight"] = np.zeros(1)
-        cloud_actor = _cloud_actor(pl, cloud, 5, scalar_bar=False) if data.particles is not None else None
-        if cloud_actor is not None:
-            cloud_actor.SetVisibility(False)
-        dynamic: list[Any] = []
+        title = pl.add_text("", position="upper_left", font_size=10, color="black", render=False)
+        cloud = _empty_cloud(pv)
+        cloud_actor = _cloud_actor(pl, cloud, 5, scalar_bar=False)
+        est_lines, est_points = [], []
+        for k, _ in enumerate(data.estimates):
+            est_lines.append(pv.PolyData())
+            pl.add_mesh(est_lines[-1], color=_rgb(estimate_rgb(k)), line_width=3, lighting=False, render=False)
+        truth_marks = pv.PolyData()
+        marker_size = max(8.0, h / 30.0)
+        pl.add_mesh(
+            truth_marks,
+            color=_rgb(TRUTH_RGB),
+            point_size=marker_size,
+            render_points_as_spheres=True,
+            lighting=False,
+            render=False,
+        )
+        for k, _ in enumerate(data.estimates):
+            est_points.append(pv.PolyData())
+            pl.add_mesh(
+                est_points[-1],
+                color=_rgb(estimate_rgb(k)),
+                point_size=marker_size,
+                render_points_as_spheres=True,
+                lighting=False,
+                render=False,
+            )
         for f in movie_frames(data, ctx.options.movie_frames):
-            for a in dynamic:
-                pl.remove_actor(a)
-            dynamic = add_trajectories(pl, pv, data, upto=f, truth=False, width=3.0)
-            dynamic += add_markers(pl, pv, data, f, radius)
-            if cloud_actor is not None:
+            if data.particles is not None:
                 pos, wt = data.particles.cloud(f)
-                if len(pos):
-                    cloud.copy_from(cloud_polydata(pv, pos, wt, ctx.options.max_points))
-                    cloud.set_active_scalars("weight")
-                cloud_actor.SetVisibility(bool(len(pos)))
-            title.SetInput(f"frame {f}")
+                cloud.copy_from(cloud_polydata(pv, pos, wt, ctx.options.max_points) if len(pos) else _empty_cloud(pv))
+            cloud_actor.SetVisibility(data.particles is not None and cloud.n_points > 0)
+            for k, traj in enumerate(data.estimates.values()):
+                line = _polyline(pv, traj.xyz[traj.frames <= f])
+                est_lines[k].copy_from(line if line is not None else pv.PolyData())
+                p = traj.at(np.array([f]))
+                est_points[k].copy_from(pv.PolyData(p) if np.all(np.isfinite(p)) else pv.PolyData())
+            truths = [t.at(np.array([f]))[0] for t in (data.groundtruth or {}).values()]
+            truths = [p for p in truths if np.all(np.isfinite(p))]
+            truth_marks.copy_from(pv.PolyData(np.array(truths)) if truths else pv.PolyData())
+            _set_text(title, f"frame {f}")
             pl.renderer.ResetCameraClippingRange()
-            pl.render()
-            yield pl.screenshot(return_img=True)
+            yield shot(pl)
     finally:
         pl.close()
+
+
+def _empty_cloud(pv: Any) -> Any:
+    mesh = pv.PolyData(np.zeros((0, 3)))
+    mesh.point_data["weight"] = np.zeros(0)
+    return mesh
+
+
+def shot(plotter: Any, path: Any = None, transparent: bool = False) -> np.ndarray | None:
+    """Render now and return the image (RGB, or RGBA if ``transparent``) or write it to ``path``."""
+    plotter.render()  # a no-op before the first screenshot, which renders by itself
+    if path is not None:
+        plotter.screenshot(str(path), transparent_background=transparent)
+        return None
+    return plotter.screenshot(transparent_background=transparent, return_img=True)
 
 
 def section_movie(ctx: ReportContext) -> Section | None:
@@ -546,8 +604,9 @@ def section_movie(ctx: ReportContext) -> Section | None:
     alternates = (files.mp4.name,) if files.mp4 is not None else ()
     if files.web is not None:
         kind = "video" if files.web.suffix == ".webm" else "image"
-        sec.figures.append(Figure(files.web.name, f"{files.frames} frames at {ctx.options.movie_fps:g} fps", kind,
-                                  alternates))
+        sec.figures.append(
+            Figure(files.web.name, f"{files.frames} frames at {ctx.options.movie_fps:g} fps", kind, alternates)
+        )
     elif files.mp4 is not None:
         sec.figures.append(Figure(files.mp4.name, f"{files.frames} frames (MP4)", "video"))
     return sec
