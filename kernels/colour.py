@@ -23,6 +23,8 @@ class ColourTarget:
     s_max: float
     i_min: float
     i_max: float
+    lower: wp.vec4  # hue range on the half B <= G (hue = acos c) as two intervals of c = cos(hue): lo1 hi1 lo2 hi2
+    upper: wp.vec4  # the same for the half B > G (hue = 360 - acos c)
 
 
 @wp.func
@@ -44,22 +46,37 @@ def rgb_to_hsi(r: float, g: float, b: float):
 
 
 @wp.func
+def in_intervals(c: float, iv: wp.vec4):
+    return (c >= iv[0] and c <= iv[1]) or (c >= iv[2] and c <= iv[3])
+
+
+@wp.func
 def matches(target: ColourTarget, r: float, g: float, b: float):
-    """1 if the RGB pixel matches the HSI target, else 0."""
-    hsi = rgb_to_hsi(r, g, b)
-    h = hsi[0]
-    hue_ok = False
-    if target.h_min <= target.h_max:
-        hue_ok = h >= target.h_min and h <= target.h_max
-    else:
-        hue_ok = h >= target.h_min or h <= target.h_max
-    if (
-        hue_ok
-        and hsi[1] >= target.s_min
-        and hsi[1] <= target.s_max
-        and hsi[2] >= target.i_min
-        and hsi[2] <= target.i_max
-    ):
+    """1 if the RGB pixel matches the HSI target, else 0.
+
+    Same test as comparing :func:`rgb_to_hsi`'s hue with [H_min, H_max], without the arc cosine: the hue range is
+    precomputed (host side) as intervals of cos(hue) on each half of the hue circle (B <= G: hue in [0, 180];
+    B > G: hue in (180, 360)), where the cosine is monotonic.
+    """
+    total = r + g + b
+    i = total / 3.0
+    if i < target.i_min or i > target.i_max or total <= 0.0:
+        return 0
+    s = 1.0 - 3.0 * wp.min(r, wp.min(g, b)) / total
+    if s < target.s_min or s > target.s_max:
+        return 0
+    num = 0.5 * ((r - g) + (r - b))
+    den = wp.sqrt((r - g) * (r - g) + (r - b) * (g - b))
+    c = float(1.0)  # grey: hue 0
+    upper = False
+    if den > 1.0e-6:
+        c = wp.clamp(num / den, -1.0, 1.0)
+        upper = b > g
+    if upper:
+        if in_intervals(c, target.upper):
+            return 1
+        return 0
+    if in_intervals(c, target.lower):
         return 1
     return 0
 
@@ -200,13 +217,11 @@ def window_map_kernel(
     window: wp.array(dtype=wp.uint8),
 ):
     """Per pixel, the number of target pixels in the 5x5 window centred on it (0..25), from the integral image
-    (4 reads per pixel): a particle then needs one read per camera. Launch (M, max W*H); flat like the mask."""
-    c, p = wp.tid()
+    (4 reads per pixel): a particle then needs one read per camera. Launch (M, max H, max W); flat like the mask."""
+    c, py, px = wp.tid()
     cam = cams[c]
-    if p >= cam.width * cam.height:
+    if py >= cam.height or px >= cam.width:
         return
-    py = p / cam.width
-    px = p - py * cam.width
     x0 = wp.max(px - 2, 0)
     x1 = wp.min(px + 2, cam.width - 1) + 1
     y0 = wp.max(py - 2, 0)
@@ -219,4 +234,4 @@ def window_map_kernel(
         - integral[b + y1 * w1 + x0]
         + integral[b + y0 * w1 + x0]
     )
-    window[cam.pixel_offset + p] = wp.uint8(m)
+    window[cam.pixel_offset + py * cam.width + px] = wp.uint8(m)

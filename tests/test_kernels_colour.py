@@ -59,6 +59,9 @@ def random_frames(rig: Rig, rng) -> list[np.ndarray]:
 TARGETS = [
     HSITarget(hue=(300, 340), sat=(0.3, 1.0), intensity=(30, 230)),
     HSITarget(hue=(330, 30), sat=(0.2, 0.9)),  # wraps through 0
+    HSITarget(hue=(170, 20), sat=(0.05, 1.0)),  # wraps, and covers both halves of the hue circle
+    HSITarget(hue=(100, 260), sat=(0.1, 0.8)),  # crosses 180
+    HSITarget(hue=(0, 360), sat=(0.5, 1.0)),  # every hue
 ]
 
 
@@ -82,7 +85,7 @@ def test_mask_matches_reference(device, rng, target):
     for c, f in enumerate(frames):
         got = m[drig.pixel_offsets[c] : drig.pixel_offsets[c + 1]].reshape(f.shape[:2]).astype(bool)
         ref, near = match_ref(f, target, eps=1e-4)
-        assert ref.sum() > 20
+        assert 20 < ref.sum() < ref.size - 20  # the test must see both classes
         np.testing.assert_array_equal(got[~near], ref[~near])
         # integral image: exact prefix sums of the kernel's own mask
         ii = integral.numpy()[drig.integral_offsets[c] : drig.integral_offsets[c + 1]].reshape(

@@ -170,6 +170,8 @@ def cmd_track_color(args) -> int:
         progress=not args.quiet,
     )
     _print_summary(summary, args.out)
+    if args.report:
+        _report_after_tracking(args.out)
     return 0
 
 
@@ -230,6 +232,25 @@ def cmd_demo(args) -> int:
         progress=not args.quiet,
     )
     _print_summary(summary, out / "track")
+    if args.report:
+        _report_after_tracking(out / "track")
+    return 0
+
+
+# --- report -------------------------------------------------------------------------------------------------
+def _report_after_tracking(run_dir) -> None:
+    from .report import build_report
+
+    print("rendering the report ...")
+    print(f"report: {build_report(run_dir)}")
+
+
+def cmd_report(args) -> int:
+    from .report import ReportOptions, build_report
+
+    options = ReportOptions(movie=not args.no_movie, movie_frames=args.movie_frames)
+    path = build_report(args.run_dir, out_dir=args.out, sweep=args.sweep, frames=args.frames, options=options)
+    print(f"report: {path}")
     return 0
 
 
@@ -316,6 +337,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--particles", type=_positive_int, default=200)
     d.add_argument("--seed", type=int, default=0)
     _add_device(d)
+    d.add_argument(
+        "--report", action=argparse.BooleanOptionalAction, default=True, help="render the report (default: on)"
+    )
     d.set_defaults(func=cmd_demo)
 
     s = sub.add_parser("synth", parents=[common], help="render a synthetic calibrated scene with ground truth")
@@ -367,6 +391,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--groundtruth", default=None, help="groundtruth.csv to report the error against")
     c.add_argument("--out", required=True, help="output folder")
     _add_device(c)
+    c.add_argument(
+        "--report", action=argparse.BooleanOptionalAction, default=False, help="render OUT/report (default: off)"
+    )
     c.set_defaults(func=cmd_track_color)
 
     v = sub.add_parser(
@@ -384,6 +411,17 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--out", required=True, help="output folder (errors.csv, summary.json)")
     _add_device(v)
     v.set_defaults(func=cmd_convergence)
+
+    r = sub.add_parser(
+        "report", parents=[common], help="render a run's report (3D views, overlays, plots, movie, index.html)"
+    )
+    r.add_argument("run_dir", help="run folder (run.json, tracks.csv, particles.npz) or a sweep folder (errors.csv)")
+    r.add_argument("--out", default=None, help="report folder (default: RUN_DIR/report)")
+    r.add_argument("--sweep", default=None, help="errors.csv (or its folder) of 'wptrack convergence' to add")
+    r.add_argument("--frames", type=int, nargs="+", default=None, help="frames whose particle clouds are shown")
+    r.add_argument("--movie-frames", type=_positive_int, default=100, help="at most this many movie frames")
+    r.add_argument("--no-movie", action="store_true", help="skip the movie")
+    r.set_defaults(func=cmd_report)
 
     b = sub.add_parser("bench", parents=[common], help="benchmark suites (needs the benchmarks/ folder)")
     b.add_argument("--tracker", default="color", help="suite name (default: color)")

@@ -142,7 +142,7 @@ class ColourMaps:
         if self.has_window:
             wp.launch(
                 k.window_map_kernel,
-                dim=(m, dr.max_pixels),
+                dim=(m, dr.max_height, dr.max_width),
                 inputs=[dr.cams, self.integral],
                 outputs=[self.window],
                 device=d,

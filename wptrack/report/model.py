@@ -102,6 +102,7 @@ class ReportContext:
         notes: Page-level notes.
         timings: Seconds spent per section (filled by :func:`timed`).
         renderer: The VTK render window class used, once known.
+        cache: Data shared between section builders (e.g. the chosen frames' images).
     """
 
     out_dir: Path
@@ -112,6 +113,7 @@ class ReportContext:
     notes: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     renderer: str | None = None
+    cache: dict[str, Any] = field(default_factory=dict)
 
     @contextmanager
     def timed(self, name: str) -> Iterator[None]:

@@ -1,5 +1,5 @@
 """Movie encoding: ``movie.mp4`` (MPEG-4 via OpenCV, for players and download) and, for the page, ``movie.webm``
-(VP9/VP8 via OpenCV's FFmpeg, which browsers play) or, where no WebM encoder is available, an animated
+(VP8/VP9 via OpenCV's FFmpeg, which browsers play) or, where no WebM encoder is available, an animated
 ``movie.gif`` (Pillow). No network-installed encoder is needed."""
 
 from __future__ import annotations
@@ -20,7 +20,8 @@ from ..errors import WptrackError
 
 log = logging.getLogger(__name__)
 
-WEBM_CODECS = ("VP90", "VP80")
+WEBM_CODECS = ("VP80", "VP90")
+"""WebM codecs tried in order (VP8 encodes about three times faster than VP9 here)."""
 
 
 @dataclass

@@ -12,7 +12,7 @@ import numpy as np
 
 from .data import RunData
 from .model import Figure, ReportContext, Section
-from .scene3d import TRUTH_RGB, estimate_rgb, read_frames
+from .scene3d import TRUTH_RGB, estimate_rgb, frames_for
 
 log = logging.getLogger(__name__)
 
@@ -160,7 +160,7 @@ def render_overlays(ctx: ReportContext, data: RunData) -> list[Figure]:
     """Write ``overlay_frameNNNNN.png`` for each chosen frame; returns the figures."""
     import cv2
 
-    frames = read_frames(data.videos or [], ctx.frames)
+    frames = frames_for(ctx, data)
     figs = []
     for f in ctx.frames:
         images = frames.get(f)

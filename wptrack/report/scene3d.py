@@ -253,7 +253,7 @@ def overview_view(plotter: Any, geo: SceneGeometry, rig: Any) -> None:
     side = np.cross(up, back)
     direction = np.cos(np.radians(40)) * (np.cos(np.radians(25)) * back + np.sin(np.radians(25)) * side)
     direction = direction + np.sin(np.radians(40)) * up
-    dist = geo.radius / np.tan(np.radians(15.0)) * 0.8
+    dist = geo.radius / np.tan(np.radians(15.0)) * 0.7
     plotter.camera_position = [tuple(center + dist * direction), tuple(center), tuple(up)]
     plotter.camera.view_angle = 30.0
     plotter.renderer.ResetCameraClippingRange()
@@ -358,7 +358,7 @@ def _render_stills(ctx: ReportContext, data: RunData) -> list[Figure]:
     geo = scene_geometry(data, ctx.frames)
     w, h = ctx.options.still_size
     figs = []
-    pl = new_plotter(w, h)
+    pl = new_plotter(w, h, multi_samples=4)
     try:
         ctx.renderer = renderer_info(pl)
         if data.rig is not None:
@@ -403,24 +403,85 @@ def _render_stills(ctx: ReportContext, data: RunData) -> list[Figure]:
 
 
 def read_frames(videos: list[str], wanted: Sequence[int]) -> dict[int, list[np.ndarray]]:
-    """Read the wanted frames (0-based) of synchronised videos: ``{frame: [BGR image per camera]}``.
+    """Read the wanted frames (0-based) of each camera: ``{frame: [BGR image per camera]}``.
 
-    Frames beyond the end of the videos are simply absent from the result.
+    Video files are read sequentially, skipping unwanted frames without converting them (``grab``); image
+    sequences read only the wanted files. Frames beyond the end of any camera's sequence are absent from the
+    result.
     """
-    from ..frames import open_frames
-
-    wanted_set = set(int(f) for f in wanted)
+    wanted_set = sorted({int(f) for f in wanted if int(f) >= 0})
     if not wanted_set:
         return {}
-    out: dict[int, list[np.ndarray]] = {}
-    last = max(wanted_set)
-    frames = open_frames(list(videos), stop_at_shortest=True, max_frames=last + 1)
-    for k, images in enumerate(frames):
-        if k in wanted_set:
-            out[k] = [np.array(im) for im in images]
+    per_camera = [_source_frames(spec, wanted_set) for spec in videos]
+    return {f: [pc[f] for pc in per_camera] for f in wanted_set if all(f in pc for pc in per_camera)}
+
+
+def _source_frames(spec: str, wanted: list[int]) -> dict[int, np.ndarray]:
+    from ..frames import VideoSource, open_source
+
+    src = open_source(spec)
+    out: dict[int, np.ndarray] = {}
+    last = wanted[-1]
+    if isinstance(src, VideoSource):
+        return _video_frames(src, wanted)
+    for k, frame in enumerate(src):
+        if k in wanted:
+            out[k] = np.array(frame)
         if k >= last:
             break
     return out
+
+
+def _video_frames(src: Any, wanted: list[int]) -> dict[int, np.ndarray]:
+    """Wanted frames of a video: seek (``CAP_PROP_POS_FRAMES``) over long gaps, checking the position after each
+    seek; if a seek lands elsewhere the rest is read sequentially (``grab`` without conversion)."""
+    import cv2
+
+    out: dict[int, np.ndarray] = {}
+    cap = src._open()
+    try:
+        pos, seek = 0, True
+        for f in wanted:
+            if f >= len(src):
+                break
+            if seek and f - pos > 8:
+                cap.set(cv2.CAP_PROP_POS_FRAMES, f)
+                if int(round(cap.get(cv2.CAP_PROP_POS_FRAMES))) == f:
+                    pos = f
+                else:  # inexact seeking for this codec: start again, sequentially
+                    log.debug("seeking in %s is inexact; reading sequentially", src.path)
+                    seek = False
+                    cap.release()
+                    cap = src._open()
+                    pos = 0
+            while pos < f and cap.grab():
+                pos += 1
+            if pos != f:
+                break
+            ok, frame = cap.read()
+            pos += 1
+            if not ok or frame is None:
+                break
+            out[f] = frame if frame.ndim == 3 and frame.shape[2] == 3 else _bgr3(frame)
+    finally:
+        cap.release()
+    return out
+
+
+def _bgr3(frame: np.ndarray) -> np.ndarray:
+    import cv2
+
+    if frame.ndim == 2:
+        return cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
+    return cv2.cvtColor(frame, cv2.COLOR_BGRA2BGR)
+
+
+def frames_for(ctx: ReportContext, data: RunData) -> dict[int, list[np.ndarray]]:
+    """The chosen frames' images (read once per report, cached in the context)."""
+    if "images" not in ctx.cache:
+        with ctx.timed("reading frames"):
+            ctx.cache["images"] = read_frames(data.videos or [], ctx.frames) if data.videos else {}
+    return ctx.cache["images"]
 
 
 def render_camera_views(ctx: ReportContext, data: RunData) -> list[Figure]:
@@ -435,13 +496,13 @@ def render_camera_views(ctx: ReportContext, data: RunData) -> list[Figure]:
     pv = import_pyvista()
     rig = data.rig
     frame = ctx.frames[-1] if ctx.frames else int(data.frames[-1])
-    images = read_frames(data.videos or [], [frame]).get(frame)
+    images = frames_for(ctx, data).get(frame)
     if images is None:
         return []
     figs = []
     geo = scene_geometry(data, ctx.frames)
     radius = 0.006 * float(np.max(geo.hi - geo.lo))
-    pl = new_plotter(rig[0].width, rig[0].height, background="black")
+    pl = new_plotter(rig[0].width, rig[0].height, background="black", multi_samples=4)
     try:
         add_trajectories(pl, pv, data, width=2.0)
         add_markers(pl, pv, data, frame, radius)
@@ -507,6 +568,8 @@ def iter_movie(ctx: ReportContext, data: RunData) -> Iterator[np.ndarray]:
     Static actors (frusta, ground, ground truth) are added once; the cloud, the estimated trajectories so far and
     the markers are meshes updated in place, so each movie frame costs one render.
     """
+    import cv2
+
     pv = import_pyvista()
     geo = scene_geometry(data, ctx.frames)
     w, h = ctx.options.movie_size
@@ -517,7 +580,6 @@ def iter_movie(ctx: ReportContext, data: RunData) -> Iterator[np.ndarray]:
         add_ground(pl, pv, geo, data.rig)
         add_trajectories(pl, pv, data, upto=-(10**12), width=2.0)  # ground truth only
         overview_view(pl, geo, data.rig)
-        title = pl.add_text("", position="upper_left", font_size=10, color="black", render=False)
         cloud = _empty_cloud(pv)
         cloud_actor = _cloud_actor(pl, cloud, 5, scalar_bar=False)
         est_lines, est_points = [], []
@@ -557,9 +619,11 @@ def iter_movie(ctx: ReportContext, data: RunData) -> Iterator[np.ndarray]:
             truths = [t.at(np.array([f]))[0] for t in (data.groundtruth or {}).values()]
             truths = [p for p in truths if np.all(np.isfinite(p))]
             truth_marks.copy_from(pv.PolyData(np.array(truths)) if truths else pv.PolyData())
-            _set_text(title, f"frame {f}")
             pl.renderer.ResetCameraClippingRange()
-            yield shot(pl)
+            img = np.ascontiguousarray(shot(pl)[..., :3])
+            # the frame number drawn on the image: updating a VTK text actor costs ~15 ms per frame in software
+            cv2.putText(img, f"frame {f}", (8, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 0), 1, cv2.LINE_AA)
+            yield img
     finally:
         pl.close()
 

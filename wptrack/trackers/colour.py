@@ -71,11 +71,33 @@ class HSITarget:
                 raise ConfigError(f"{name}: min {lo:g} must not exceed max {hi:g}")
             object.__setattr__(self, name, (lo, hi))
 
+    def hue_intervals(self) -> tuple[list[tuple[float, float]], list[tuple[float, float]]]:
+        """The hue range as intervals of cos(hue) on the two halves of the hue circle: B <= G (hue = acos c,
+        0..180 degrees) and B > G (hue = 360 - acos c). At most two intervals per half."""
+        lo, hi = self.hue
+        ranges = [(lo, hi)] if lo <= hi else [(lo, 360.0), (0.0, hi)]
+        lower, upper = [], []
+        for a, b in ranges:
+            if a <= 180.0:  # part in [0, 180]: c in [cos b', cos a]
+                lower.append((math.cos(math.radians(min(b, 180.0))), math.cos(math.radians(a))))
+            if b >= 180.0:  # part in [180, 360]: acos c in [360 - b, 360 - a]
+                a2, b2 = max(a, 180.0), b
+                upper.append((math.cos(math.radians(360.0 - a2)), math.cos(math.radians(360.0 - b2))))
+        return lower, upper
+
     def to_struct(self) -> kcolour.ColourTarget:
         s = kcolour.ColourTarget()
         s.h_min, s.h_max = self.hue
         s.s_min, s.s_max = self.sat
         s.i_min, s.i_max = self.intensity
+        lower, upper = self.hue_intervals()
+        empty = (2.0, -2.0)  # an interval no cosine falls in
+        lower = (lower + [empty, empty])[:2]
+        upper = (upper + [empty, empty])[:2]
+        # widen by one float32 ulp-ish so that exact boundary hues (e.g. 0 and 360) stay inside
+        eps = 1e-7
+        s.lower = wp.vec4(lower[0][0] - eps, lower[0][1] + eps, lower[1][0] - eps, lower[1][1] + eps)
+        s.upper = wp.vec4(upper[0][0] - eps, upper[0][1] + eps, upper[1][0] - eps, upper[1][1] + eps)
         return s
 
 
