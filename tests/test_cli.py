@@ -83,7 +83,7 @@ def test_track_color_end_to_end(scene, tmp_path, capsys):
     assert run["status"] == "complete" and run["frames"] == 6
     assert run["device"] == "cpu" and run["seed"] == 0
     assert run["config"]["tracker"]["particles"] == 300
-    assert {"upload", "filter", "decode"} <= set(run["timings"])
+    assert {"upload", "filter", "decode_wait"} <= set(run["timings"])
     assert run["versions"]["warp"] == wp.config.version
     p = np.load(out / "particles.npz")
     assert p["positions"].shape == (6, 50, 3)

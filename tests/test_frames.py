@@ -291,3 +291,38 @@ def test_video_writer_mp4_and_size_check(tmp_path, rng):
             writer.write(_frames(rng, 1, w=8, h=8)[0])
     assert writer.codec in ("mp4v", "avc1")
     assert len(list(open_source(tmp_path / "v.mp4"))) == 3
+
+
+def test_prefetch_order_errors_and_early_stop():
+    import threading
+    import time
+
+    from wptrack.frames import prefetch
+
+    assert list(prefetch(range(50), depth=3)) == list(range(50))
+
+    def failing():
+        yield 1
+        yield 2
+        raise FrameError("broken.avi: unreadable frame 2")
+
+    got = []
+    with pytest.raises(FrameError, match="broken.avi"):
+        for x in prefetch(failing()):
+            got.append(x)
+    assert got == [1, 2]
+
+    produced = []
+
+    def slow():
+        for k in range(1000):
+            produced.append(k)
+            yield k
+
+    p = prefetch(slow(), depth=2)
+    for x in p:
+        if x == 3:
+            break
+    time.sleep(0.3)
+    assert len(produced) < 10, "the thread must stop after the consumer leaves"
+    assert not any(t.name == "wptrack-prefetch" and t.is_alive() for t in threading.enumerate())
