@@ -5,5 +5,6 @@ one line here."""
 from __future__ import annotations
 
 from .colour import ColourSuite
+from .endtoend import EndToEndSuite
 
-SUITES = {ColourSuite.name: ColourSuite}
+SUITES = {ColourSuite.name: ColourSuite, EndToEndSuite.name: EndToEndSuite}

@@ -40,3 +40,29 @@ def test_bench_color_tiny(tmp_path, capsys, device):
 def test_bench_unknown_suite(capsys):
     assert main(["bench", "--tracker", "nope", "--device", "cpu"]) == 2
     assert "unknown suite" in capsys.readouterr().err
+
+
+def test_bench_end_to_end_tiny(tmp_path, capsys):
+    out = tmp_path / "e2e.json"
+    assert (
+        main(
+            [
+                "bench",
+                "-q",
+                "--tracker",
+                "color-e2e",
+                "--device",
+                "cpu",
+                "--particles",
+                "1000",
+                "--frames",
+                "5",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    (r,) = json.loads(out.read_text())["results"]
+    assert r["frames"] == 5 and r["decode_s"] > 0 and r["total_s"] > 0
+    assert "decode alone" in capsys.readouterr().out

@@ -24,6 +24,11 @@ def load_suites() -> dict:
 
 
 def format_row(r: dict) -> str:
+    if "decode_s" in r:
+        return (
+            f"{r['tracker']:9s} {r['particles']:>10d} {r['cameras']:>4d} {r['frames']:>4d} frames: decode alone "
+            f"{r['decode_s']:.3f} s, decode + track {r['total_s']:.3f} s ({100 * r['overhead_vs_decode']:+.1f} %)"
+        )
     npy = f"{r['numpy_ms']:9.2f}" if "numpy_ms" in r else "        -"
     eq = {True: "yes", False: "NO"}.get(r.get("equivalent"), "-")
     st = " ".join(f"{k}={v:.3f}" for k, v in r["stages_ms"].items())
