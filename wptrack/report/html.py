@@ -28,7 +28,9 @@ td,th{border:1px solid #ddd;padding:3px 8px;text-align:left;vertical-align:top}
 th{background:#eef1f7}
 .grid{display:flex;flex-wrap:wrap;gap:18px;align-items:flex-start}
 .cards{display:flex;flex-wrap:wrap;gap:18px;align-items:flex-start}
-figure{margin:0;background:#fff;border:1px solid #ddd;padding:6px;max-width:100%}
+figure{margin:0;background:#fff;border:1px solid #ddd;padding:6px;max-width:calc(50% - 24px)}
+figure.wide{max-width:calc(100% - 14px)}
+@media (max-width:1100px){figure{max-width:calc(100% - 14px)}}
 figure img,figure video{max-width:100%;height:auto;display:block}
 figcaption{font-size:13px;color:#555;padding-top:4px;max-width:820px}
 .note{background:#fff6d9;border-left:4px solid #e0b000;padding:4px 10px;margin:6px 0;font-size:14px}
@@ -72,7 +74,8 @@ def _figure_html(fig: Any) -> str:
         )
     else:
         body = f'<a href="{src}"><img src="{src}" alt="{escape(fig.caption, quote=True)}"></a>'
-    return f"<figure>{body}<figcaption>{cap}</figcaption></figure>"
+    cls = ' class="wide"' if fig.wide else ""
+    return f"<figure{cls}>{body}<figcaption>{cap}</figcaption></figure>"
 
 
 def _section_html(sec: Section) -> str:

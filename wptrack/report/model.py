@@ -33,12 +33,14 @@ class Figure:
         caption: One-line caption.
         kind: ``"image"`` (PNG/GIF shown with <img>) or ``"video"`` (shown with <video>).
         alternates: Further files of the same content, e.g. ``("movie.mp4",)`` offered as downloads.
+        wide: Show at full page width (e.g. several cameras side by side) rather than two per row.
     """
 
     path: str
     caption: str
     kind: str = "image"
     alternates: tuple[str, ...] = ()
+    wide: bool = False
 
 
 @dataclass

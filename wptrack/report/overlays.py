@@ -179,5 +179,5 @@ def render_overlays(ctx: ReportContext, data: RunData) -> list[Figure]:
         canvas, _ = compose(drawn, labels)
         path = ctx.out_dir / f"overlay_frame{f:05d}.png"
         cv2.imwrite(str(path), canvas)
-        figs.append(Figure(path.name, f"Frame {f}: particles projected into each camera"))
+        figs.append(Figure(path.name, f"Frame {f}: particles projected into each camera", wide=True))
     return figs

@@ -487,7 +487,8 @@ def frames_for(ctx: ReportContext, data: RunData) -> dict[int, list[np.ndarray]]
 def render_camera_views(ctx: ReportContext, data: RunData) -> list[Figure]:
     """The 3D scene rendered from each rig camera (exact pinhole, see :mod:`.vtkcam`) over its undistorted frame.
 
-    One plotter renders every camera (its window resized per camera). The frame shown is the first chosen frame.
+    One plotter renders every camera (its window resized per camera), at ``overlay_scale`` times the camera's
+    resolution (``Camera.scaled``). The frame shown is the last chosen frame.
     """
     import cv2
 
@@ -510,11 +511,15 @@ def render_camera_views(ctx: ReportContext, data: RunData) -> list[Figure]:
             pos, wt = data.particles.cloud(frame)
             if len(pos):
                 _cloud_actor(pl, cloud_polydata(pv, pos, wt, ctx.options.max_points), 4, False)
-        for cam, image in zip(rig.cameras, images, strict=False):
+        k = max(1, int(ctx.options.overlay_scale))
+        for cam0, image in zip(rig.cameras, images, strict=False):
+            cam = cam0.scaled(k * cam0.width, k * cam0.height) if k > 1 else cam0
             pl.window_size = (cam.width, cam.height)
             apply_camera(pl, cam)
             rgba = shot(pl, transparent=True)
-            und = cv2.undistort(image, np.asarray(cam.K), np.asarray(cam.dist))
+            und = cv2.undistort(image, np.asarray(cam0.K), np.asarray(cam0.dist))
+            if k > 1:
+                und = cv2.resize(und, (cam.width, cam.height), interpolation=cv2.INTER_LINEAR)
             out = composite(und, rgba)
             path = ctx.out_dir / f"camview_{_safe(cam.name)}.png"
             cv2.imwrite(str(path), out)
