@@ -37,7 +37,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 import yaml
 
@@ -139,6 +138,8 @@ def _check_rotation(R: np.ndarray, where: str, field: str = "R") -> None:
 
 
 def _rodrigues_to_matrix(rvec: np.ndarray) -> np.ndarray:
+    import cv2
+
     R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
     return np.asarray(R, dtype=np.float64)
 
@@ -217,6 +218,8 @@ def _read_node(node: Any) -> Any:
 
 def _read_opencv(path: Path, where: str) -> dict[str, Any]:
     """Read the camera keys of an OpenCV FileStorage calibration file into rig-entry keys."""
+    import cv2
+
     if not path.is_file():
         raise RigError(f"{where}: opencv: file not found: {path}")
     try:
@@ -262,6 +265,8 @@ def save_opencv(camera: Camera, path: str | os.PathLike[str]) -> None:
     Raises:
         OutputError: the file cannot be written.
     """
+    import cv2
+
     path = Path(path)
     tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
     try:
@@ -334,6 +339,8 @@ class Camera:
     @property
     def rvec(self) -> np.ndarray:
         """(3,) Rodrigues rotation vector of ``R``, radians."""
+        import cv2
+
         rvec, _ = cv2.Rodrigues(np.array(self.R))
         return np.asarray(rvec, dtype=np.float64).reshape(3)
 
@@ -446,6 +453,8 @@ class Camera:
         Raises:
             ValueError: ``points`` is not an (N, 3) array.
         """
+        import cv2
+
         pts = np.asarray(points, dtype=np.float64)
         if pts.ndim != 2 or pts.shape[1] != 3:
             raise ValueError(f"points must have shape (N, 3), got {pts.shape}")
