@@ -104,6 +104,27 @@ def target_mask_kernel(
     mask[q] = wp.uint8(pixel_matches(target, bgr, q))
 
 
+HALF_WINDOW = wp.constant(2)
+"""The paper's 5x5 window: 2 pixels each side of the projected pixel."""
+
+
+@wp.func
+def window_count_integral(cam: Camera, integral: wp.array(dtype=wp.int32), px: int, py: int):
+    """m from the integral image: the 5x5 window clipped to the image, 4 reads."""
+    x0 = wp.max(px - HALF_WINDOW, 0)
+    x1 = wp.min(px + HALF_WINDOW, cam.width - 1) + 1
+    y0 = wp.max(py - HALF_WINDOW, 0)
+    y1 = wp.min(py + HALF_WINDOW, cam.height - 1) + 1
+    w1 = cam.width + 1
+    base = cam.integral_offset
+    return (
+        integral[base + y1 * w1 + x1]
+        - integral[base + y0 * w1 + x1]
+        - integral[base + y1 * w1 + x0]
+        + integral[base + y0 * w1 + x0]
+    )
+
+
 SEGMENT = wp.constant(32)
 """Pixels per thread in the segmented scans of the integral image."""
 
@@ -222,16 +243,4 @@ def window_map_kernel(
     cam = cams[c]
     if py >= cam.height or px >= cam.width:
         return
-    x0 = wp.max(px - 2, 0)
-    x1 = wp.min(px + 2, cam.width - 1) + 1
-    y0 = wp.max(py - 2, 0)
-    y1 = wp.min(py + 2, cam.height - 1) + 1
-    w1 = cam.width + 1
-    b = cam.integral_offset
-    m = (
-        integral[b + y1 * w1 + x1]
-        - integral[b + y0 * w1 + x1]
-        - integral[b + y1 * w1 + x0]
-        + integral[b + y0 * w1 + x0]
-    )
-    window[cam.pixel_offset + py * cam.width + px] = wp.uint8(m)
+    window[cam.pixel_offset + py * cam.width + px] = wp.uint8(window_count_integral(cam, integral, px, py))

@@ -15,7 +15,7 @@ Two ways to count m, with identical results:
 import warp as wp
 
 from .camera import Camera, pixel_of, project
-from .colour import ColourTarget, pixel_matches
+from .colour import HALF_WINDOW, ColourTarget, pixel_matches, window_count_integral
 from .motion import gaussian_walk
 
 wp.set_module_options({"enable_backward": False})
@@ -23,7 +23,6 @@ wp.set_module_options({"enable_backward": False})
 SCORE_DIRECT = wp.constant(0)
 SCORE_INTEGRAL = wp.constant(1)
 SCORE_MAP = wp.constant(2)
-HALF_WINDOW = wp.constant(2)
 LOG_WINDOW_AREA = wp.constant(3.2188758248682006)  # log(25)
 
 
@@ -39,23 +38,6 @@ def window_count_direct(cam: Camera, target: ColourTarget, bgr: wp.array(dtype=w
                 if x >= 0 and x < cam.width:
                     m += pixel_matches(target, bgr, cam.pixel_offset + y * cam.width + x)
     return m
-
-
-@wp.func
-def window_count_integral(cam: Camera, integral: wp.array(dtype=wp.int32), px: int, py: int):
-    """m from the integral image: the 5x5 window clipped to the image, 4 reads."""
-    x0 = wp.max(px - HALF_WINDOW, 0)
-    x1 = wp.min(px + HALF_WINDOW, cam.width - 1) + 1
-    y0 = wp.max(py - HALF_WINDOW, 0)
-    y1 = wp.min(py + HALF_WINDOW, cam.height - 1) + 1
-    w1 = cam.width + 1
-    base = cam.integral_offset
-    return (
-        integral[base + y1 * w1 + x1]
-        - integral[base + y0 * w1 + x1]
-        - integral[base + y1 * w1 + x0]
-        + integral[base + y0 * w1 + x0]
-    )
 
 
 @wp.func

@@ -299,12 +299,10 @@ def cmd_bench(args) -> int:
 
     suite = suites[args.tracker]
     grid = suite.default_grid(wp.get_device(device).is_cuda)
-    if args.particles:
-        grid = [c for c in grid if c.particles in {int(p) for p in args.particles}] or [
-            type(grid[0])(int(p), c) for p in args.particles for c in sorted({g.cameras for g in grid})
-        ]
-    if args.cameras:
-        grid = [type(grid[0])(p, c) for p in sorted({g.particles for g in grid}) for c in args.cameras]
+    if args.particles or args.cameras:  # the product of the given values, the suite's defaults for the others
+        counts = [int(p) for p in args.particles] if args.particles else sorted({g.particles for g in grid})
+        cams = args.cameras or sorted({g.cameras for g in grid})
+        grid = [type(grid[0])(p, c) for c in cams for p in counts]
     results = []
     print(HEADER)
     for case in grid:

@@ -21,7 +21,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -384,6 +384,18 @@ class ParticleFilter:
         self.parity = dst
         self.frames_done += 1
         return times
+
+    def step(self, observation) -> Estimate:  # pragma: no cover - implemented by each tracker
+        """Upload one frame's observation and run one iteration."""
+        raise NotImplementedError
+
+    def track(self, observations: Iterable, max_frames: int | None = None) -> Iterator[Estimate]:
+        """Iterate over observations (e.g. ``wptrack.frames.open_frames`` for image trackers), yielding one
+        estimate each, for at most ``max_frames`` frames."""
+        for k, obs in enumerate(observations):
+            if max_frames is not None and k >= max_frames:
+                return
+            yield self.step(obs)
 
     def advance(self) -> Estimate:
         """Run one frame of the chain on the already uploaded observation and return the estimate."""

@@ -20,7 +20,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
@@ -298,10 +298,3 @@ class ColorTracker(ParticleFilter):
         est = self.advance()
         est.timings["upload"] = t1 - t0
         return est
-
-    def track(self, frames: Iterable[Sequence[np.ndarray]], max_frames: int | None = None) -> Iterator[Estimate]:
-        """Iterate over synchronised frames (e.g. ``wptrack.frames.open_frames``), yielding one estimate each."""
-        for k, images in enumerate(frames):
-            if max_frames is not None and k >= max_frames:
-                return
-            yield self.step(images)

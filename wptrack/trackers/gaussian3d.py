@@ -8,7 +8,6 @@ model, to study convergence speed against sigma_m without the image likelihood.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator
 
 import numpy as np
 import warp as wp
@@ -90,7 +89,3 @@ class Gaussian3DTracker(ParticleFilter):
         self._obs_host.numpy()[0] = obs
         wp.copy(self.observation, self._obs_host)
         return self.advance()
-
-    def track(self, observations: Iterable) -> Iterator[Estimate]:
-        for obs in observations:
-            yield self.step(obs)
