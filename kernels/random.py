@@ -25,6 +25,12 @@ STREAM_RESAMPLE = wp.constant(2)
 STREAM_INIT = wp.constant(3)
 STREAM_RESIDUAL = wp.constant(4)
 STREAM_SYNTH = wp.constant(5)
+STREAM_TEMPLATE_EVENT = wp.constant(6)  # S3: object deletion
+STREAM_TEMPLATE_ADD = wp.constant(7)  # S3: object addition (one draw per particle)
+STREAM_TEMPLATE_NOISE = wp.constant(8)  # S3: diffusion noise, first 4 normals per object
+STREAM_TEMPLATE_NOISE2 = wp.constant(9)  # S3: diffusion noise, next 4 normals per object
+STREAM_TEMPLATE_INIT = wp.constant(10)  # S3: prior draws of an added object (dims, heading)
+STREAM_TEMPLATE_INIT2 = wp.constant(11)  # S3: prior draws of an added object (velocity)
 
 
 @wp.func

@@ -192,6 +192,101 @@ def _print_summary(summary: dict, out_dir) -> None:
     print(f"outputs: {out_dir}/tracks.csv, run.json, particles.npz")
 
 
+# --- track templates -----------------------------------------------------------------------------------------
+def _template_config_from_args(args, fps: float | None):
+    from .trackers.templates import TemplateConfig
+
+    kw = {
+        "particles": args.particles,
+        "max_objects": args.max_objects,
+        "camera": int(args.camera) if args.camera.isdigit() else args.camera,
+        "classes": tuple(args.classes),
+        "seed": args.seed,
+        "resampling": args.resampling,
+    }
+    for name in ("scale", "t_add", "t_del", "add_min_gain", "min_existence", "candidate_step_px"):
+        value = getattr(args, name)
+        if value is not None:
+            kw[name] = value
+    if args.fps is not None:
+        kw["fps"] = args.fps
+    elif fps:
+        kw["fps"] = fps
+    return TemplateConfig(**kw)
+
+
+def _mask_config_from_args(args):
+    from .masks import MaskConfig
+
+    return MaskConfig(
+        method=args.mask_method,
+        history=args.mask_history,
+        var_threshold=args.mask_threshold if args.mask_method == "mog2" and args.mask_threshold else 16.0,
+        dist2_threshold=args.mask_threshold if args.mask_method == "knn" and args.mask_threshold else 400.0,
+        detect_shadows=not args.keep_shadows,
+        open_px=args.open_px,
+        close_px=args.close_px,
+        min_area=args.min_area,
+    )
+
+
+def cmd_track_templates(args) -> int:
+    from .frames import open_source
+    from .run_templates import run_template_tracking
+
+    fps = None
+    if args.video is not None and args.fps is None:
+        fps = open_source(args.video).fps
+    config = _template_config_from_args(args, fps)
+    summary = run_template_tracking(
+        args.rig,
+        args.out,
+        config,
+        video=args.video,
+        masks=args.masks,
+        mask_config=_mask_config_from_args(args),
+        device=args.device,
+        max_frames=args.max_frames,
+        save_masks=args.save_masks,
+        virtual=not args.no_virtual,
+        progress=not args.quiet,
+    )
+    print(
+        f"tracked {summary['frames']} frames on {summary['device']}: {summary['objects']} objects "
+        f"({summary['classes']['human']} human, {summary['classes']['vehicle']} vehicle)"
+    )
+    print(f"outputs: {args.out}/tracks.csv, best.csv, run.json" + ("" if args.no_virtual else ", virtual.avi"))
+    if args.groundtruth:
+        _print_evaluation(args.groundtruth, Path(args.out) / "tracks.csv", 1.0)
+    if args.report:
+        _report_after_tracking(args.out)
+    return 0
+
+
+# --- evaluate ------------------------------------------------------------------------------------------------
+def _print_evaluation(groundtruth, tracks, threshold: float, out: str | None = None) -> None:
+    from .evaluation import evaluate
+    from .io import atomic_write_json
+
+    ev = evaluate(groundtruth, tracks, threshold=threshold)
+    cls = "n/a" if ev.classification_accuracy is None else f"{ev.classification_accuracy:.3f}"
+    print(
+        f"accuracy {ev.accuracy:.3f} (tracking {ev.tracking_accuracy:.3f} x classification {cls}); "
+        f"MOTA {ev.mota:.3f}, IDF1 {ev.idf1:.3f}, ID switches {ev.id_switches} at {threshold} m"
+    )
+    if out:
+        atomic_write_json(out, ev.to_dict())
+        print(f"evaluation: {out}")
+
+
+def cmd_evaluate(args) -> int:
+    tracks = Path(args.tracks)
+    if tracks.is_dir():
+        tracks = tracks / "tracks.csv"
+    _print_evaluation(args.groundtruth, tracks, args.threshold, args.out)
+    return 0
+
+
 # --- synth --------------------------------------------------------------------------------------------------
 def cmd_synth(args) -> int:
     from .synth import render_scene
@@ -395,6 +490,54 @@ def build_parser() -> argparse.ArgumentParser:
         "--report", action=argparse.BooleanOptionalAction, default=False, help="render OUT/report (default: off)"
     )
     c.set_defaults(func=cmd_track_color)
+
+    tt = tsub.add_parser(
+        "templates",
+        parents=[common],
+        help="humans and vehicles on a ground plane from one camera (S3, Juza et al.)",
+        description="3D template particle filter: each particle a whole scene of human/vehicle templates, "
+        "weighted by the XOR of its virtual image and the motion mask; new objects from the UOH.",
+    )
+    tt.add_argument("--rig", required=True, help="rig file (YAML/JSON) with the camera and optional 'ground' plane")
+    tt.add_argument("--video", default=None, help="the camera's video or image folder (background subtraction)")
+    tt.add_argument("--masks", default=None, help="binary motion masks (video or image folder) instead of --video")
+    tt.add_argument("--camera", default="0", help="rig camera name or index (default 0)")
+    tt.add_argument("--particles", type=_positive_int, default=1000, help="N (default 1000)")
+    tt.add_argument("--max-objects", type=int, default=8, help="R_max objects per particle, 1..16 (default 8)")
+    tt.add_argument("--classes", nargs="+", default=["human", "vehicle"], help="classes to add (human vehicle)")
+    tt.add_argument("--fps", type=float, default=None, help="frame rate (default: the video's, else 15)")
+    tt.add_argument("--scale", type=float, default=None, help="s of eq. 6 (default 5000)")
+    tt.add_argument("--t-add", type=float, default=None, help="T_add of eq. 12 (default 0.3)")
+    tt.add_argument("--t-del", type=float, default=None, help="T_del of eq. 13 (default 0.02)")
+    tt.add_argument("--add-min-gain", type=float, default=None, help="candidate gain / area to add (default 0.2)")
+    tt.add_argument("--min-existence", type=float, default=None, help="report objects above this (default 0.5)")
+    tt.add_argument("--candidate-step-px", type=int, default=None, help="addition grid pitch, pixels (default 8)")
+    tt.add_argument("--resampling", default="systematic", help="systematic, stratified, multinomial or residual")
+    tt.add_argument("--mask-method", default="mog2", choices=["mog2", "knn"], help="background subtraction")
+    tt.add_argument("--mask-history", type=_positive_int, default=200, help="background model history, frames")
+    tt.add_argument("--mask-threshold", type=float, default=None, help="MOG2 varThreshold / KNN dist2Threshold")
+    tt.add_argument("--keep-shadows", action="store_true", help="count shadow pixels as foreground")
+    tt.add_argument("--open-px", type=int, default=3, help="morphological opening, pixels (0: off)")
+    tt.add_argument("--close-px", type=int, default=5, help="morphological closing, pixels (0: off)")
+    tt.add_argument("--min-area", type=int, default=0, help="drop foreground blobs smaller than this, pixels")
+    tt.add_argument("--seed", type=int, default=0)
+    tt.add_argument("--max-frames", type=_positive_int, default=None)
+    tt.add_argument("--save-masks", action="store_true", help="write the masks used to masks.avi")
+    tt.add_argument("--no-virtual", action="store_true", help="do not write virtual.avi")
+    tt.add_argument("--groundtruth", default=None, help="groundtruth.csv: print accuracy, MOTA and IDF1")
+    tt.add_argument("--out", required=True, help="output folder")
+    tt.add_argument("--report", action="store_true", help="render the HTML report afterwards")
+    _add_device(tt)
+    tt.set_defaults(func=cmd_track_templates)
+
+    e = sub.add_parser(
+        "evaluate", parents=[common], help="accuracy, MOTA and IDF1 of tracks against ground truth (ground plane)"
+    )
+    e.add_argument("tracks", help="tracks.csv or a run folder")
+    e.add_argument("--groundtruth", required=True, help="groundtruth.csv (wptrack synth writes one)")
+    e.add_argument("--threshold", type=float, default=1.0, help="match distance on the ground plane, metres")
+    e.add_argument("--out", default=None, help="write the evaluation as JSON here")
+    e.set_defaults(func=cmd_evaluate)
 
     v = sub.add_parser(
         "convergence", parents=[common], help="filter dynamics with 3D observations (extended paper, section III.C)"

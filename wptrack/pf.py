@@ -121,7 +121,108 @@ def check_particles(n: int) -> int:
     return int(n)
 
 
-class ParticleFilter:
+class FrameChain:
+    """A filter whose frame is a fixed chain of device launches over ping-pong buffers (parity 0/1).
+
+    Subclasses set ``device``, ``is_cuda``, ``use_graph``, ``parity``, ``frames_done``, ``_graphs = [None, None]``
+    and ``_warm = [False, False]``, and implement :meth:`stages` and ``step``. This base runs the chain (CUDA graph
+    capture per parity after a warm-up run), times it and iterates over observations.
+    """
+
+    device: str
+    is_cuda: bool
+    use_graph: bool
+    parity: int
+    frames_done: int
+    _graphs: list
+    _warm: list[bool]
+
+    def stages(self, src: int, dst: int) -> list[tuple[str, Callable[[], None]]]:  # pragma: no cover - abstract
+        """The frame chain as named stages; running them in order is one filter iteration."""
+        raise NotImplementedError
+
+    def step(self, observation):  # pragma: no cover - implemented by each tracker
+        """Upload one frame's observation and run one iteration."""
+        raise NotImplementedError
+
+    def _chain(self, src: int, dst: int) -> None:
+        for _name, stage in self.stages(src, dst):
+            stage()
+
+    def _run_chain(self, src: int, dst: int) -> None:
+        """Run the chain; on CUDA the first run of each parity loads the modules, the second captures a
+        graph (launch arguments, buffers and device-side parameters are fixed), later ones replay it."""
+        if not self.use_graph or not self._warm[src]:
+            self._chain(src, dst)
+            self._warm[src] = True
+            return
+        if self._graphs[src] is None:
+            with wp.ScopedCapture(device=self.device) as capture:
+                self._chain(src, dst)
+            self._graphs[src] = capture.graph
+        wp.capture_launch(self._graphs[src])
+
+    def time_frames(self, count: int) -> list[float]:
+        """Run ``count`` frames of the device chain on the uploaded observation (graph replay on CUDA) and return
+        the device time of each, seconds (CUDA events; wall clock on the CPU). No estimate is read back."""
+        times = []
+        if self.is_cuda:
+            ev = [wp.Event(self.device, enable_timing=True) for _ in range(count + 1)]
+            wp.record_event(ev[0])
+            for k in range(count):
+                src, dst = self.parity, 1 - self.parity
+                self._run_chain(src, dst)
+                self.parity = dst
+                wp.record_event(ev[k + 1])
+            wp.synchronize_device(self.device)
+            times = [wp.get_event_elapsed_time(ev[k], ev[k + 1]) / 1000.0 for k in range(count)]
+        else:
+            for _ in range(count):
+                t0 = time.perf_counter()
+                src, dst = self.parity, 1 - self.parity
+                self._run_chain(src, dst)
+                self.parity = dst
+                times.append(time.perf_counter() - t0)
+        self.frames_done += count
+        return times
+
+    def profile(self) -> dict[str, float]:
+        """Run one frame stage by stage without a graph and return seconds per stage (CUDA events on GPUs,
+        wall clock on the CPU, whose launches are synchronous). The observation must already be uploaded.
+        The filter advances by one frame, as with :meth:`advance`."""
+        src, dst = self.parity, 1 - self.parity
+        times: dict[str, float] = {}
+        if self.is_cuda:
+            stages = self.stages(src, dst)
+            events = [wp.Event(self.device, enable_timing=True) for _ in range(len(stages) + 1)]
+            wp.record_event(events[0])
+            names = []
+            for k, (name, stage) in enumerate(stages):
+                stage()
+                wp.record_event(events[k + 1])
+                names.append(name)
+            wp.synchronize_device(self.device)
+            for k, name in enumerate(names):
+                times[name] = wp.get_event_elapsed_time(events[k], events[k + 1]) / 1000.0
+        else:
+            for name, stage in self.stages(src, dst):
+                t0 = time.perf_counter()
+                stage()
+                times[name] = time.perf_counter() - t0
+        self.parity = dst
+        self.frames_done += 1
+        return times
+
+    def track(self, observations: Iterable, max_frames: int | None = None) -> Iterator:
+        """Iterate over observations (e.g. ``wptrack.frames.open_frames`` for image trackers), yielding one
+        estimate each, for at most ``max_frames`` frames."""
+        for k, obs in enumerate(observations):
+            if max_frames is not None and k >= max_frames:
+                return
+            yield self.step(obs)
+
+
+class ParticleFilter(FrameChain):
     """Particle state and the shared per-frame chain for trackers whose particles are 3D points.
 
     Subclasses implement :meth:`_launch_predict_score` (their motion + observation kernel) and upload their
@@ -318,84 +419,9 @@ class ParticleFilter:
             ("readback", self._readback),
         ]
 
-    def _chain(self, src: int, dst: int) -> None:
-        for _name, stage in self.stages(src, dst):
-            stage()
-
-    def _run_chain(self, src: int, dst: int) -> None:
-        """Run the chain; on CUDA the first run of each parity loads the modules, the second captures a
-        graph (launch arguments, buffers and device-side parameters are fixed), later ones replay it."""
-        if not self.use_graph or not self._warm[src]:
-            self._chain(src, dst)
-            self._warm[src] = True
-            return
-        if self._graphs[src] is None:
-            with wp.ScopedCapture(device=self.device) as capture:
-                self._chain(src, dst)
-            self._graphs[src] = capture.graph
-        wp.capture_launch(self._graphs[src])
-
-    def time_frames(self, count: int) -> list[float]:
-        """Run ``count`` frames of the device chain on the uploaded observation (graph replay on CUDA) and return
-        the device time of each, seconds (CUDA events; wall clock on the CPU). No estimate is read back."""
-        times = []
-        if self.is_cuda:
-            ev = [wp.Event(self.device, enable_timing=True) for _ in range(count + 1)]
-            wp.record_event(ev[0])
-            for k in range(count):
-                src, dst = self.parity, 1 - self.parity
-                self._run_chain(src, dst)
-                self.parity = dst
-                wp.record_event(ev[k + 1])
-            wp.synchronize_device(self.device)
-            times = [wp.get_event_elapsed_time(ev[k], ev[k + 1]) / 1000.0 for k in range(count)]
-        else:
-            for _ in range(count):
-                t0 = time.perf_counter()
-                src, dst = self.parity, 1 - self.parity
-                self._run_chain(src, dst)
-                self.parity = dst
-                times.append(time.perf_counter() - t0)
-        self.frames_done += count
-        return times
-
-    def profile(self) -> dict[str, float]:
-        """Run one frame stage by stage without a graph and return seconds per stage (CUDA events on GPUs,
-        wall clock on the CPU, whose launches are synchronous). The observation must already be uploaded.
-        The filter advances by one frame, as with :meth:`advance`."""
-        src, dst = self.parity, 1 - self.parity
-        times: dict[str, float] = {}
-        if self.is_cuda:
-            events = [wp.Event(self.device, enable_timing=True) for _ in range(6)]
-            wp.record_event(events[0])
-            names = []
-            for k, (name, stage) in enumerate(self.stages(src, dst)):
-                stage()
-                wp.record_event(events[k + 1])
-                names.append(name)
-            wp.synchronize_device(self.device)
-            for k, name in enumerate(names):
-                times[name] = wp.get_event_elapsed_time(events[k], events[k + 1]) / 1000.0
-        else:
-            for name, stage in self.stages(src, dst):
-                t0 = time.perf_counter()
-                stage()
-                times[name] = time.perf_counter() - t0
-        self.parity = dst
-        self.frames_done += 1
-        return times
-
     def step(self, observation) -> Estimate:  # pragma: no cover - implemented by each tracker
         """Upload one frame's observation and run one iteration."""
         raise NotImplementedError
-
-    def track(self, observations: Iterable, max_frames: int | None = None) -> Iterator[Estimate]:
-        """Iterate over observations (e.g. ``wptrack.frames.open_frames`` for image trackers), yielding one
-        estimate each, for at most ``max_frames`` frames."""
-        for k, obs in enumerate(observations):
-            if max_frames is not None and k >= max_frames:
-                return
-            yield self.step(obs)
 
     def advance(self) -> Estimate:
         """Run one frame of the chain on the already uploaded observation and return the estimate."""

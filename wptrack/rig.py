@@ -2,11 +2,13 @@
 
 A :class:`Rig` is an ordered tuple of calibrated pinhole :class:`Camera` objects (OpenCV conventions: camera axes x
 right, y down, z forward; ``X_cam = R @ X_world + t``; world units are metres, image units pixels, and pixel centres
-lie at integer coordinates) plus an optional working volume.
+lie at integer coordinates) plus an optional working volume and an optional ground plane (default: z = 0, the
+plane the S3 template tracker's objects stand on; ``x_axis`` defaults to world x projected onto the plane).
 
 Rig files are YAML (``.yaml``/``.yml``) or JSON (``.json``) with the same keys::
 
     volume: {min: [x, y, z], max: [x, y, z]}   # optional, metres
+    ground: {origin: [x, y, z], normal: [nx, ny, nz], x_axis: [ax, ay, az]}   # optional plane objects move on
     cameras:
       - name: cam0
         width: 320                     # pixels
@@ -51,7 +53,7 @@ BOUNDS_PAD_M = 0.25
 """Padding (metres) around the camera centres used by :meth:`Rig.bounds` when no volume is set."""
 
 _CAMERA_KEYS = ("name", "width", "height", "K", "dist", "R", "rvec", "t", "opencv")
-_RIG_KEYS = ("cameras", "volume")
+_RIG_KEYS = ("cameras", "volume", "ground")
 _FIELD_HELP = {
     "width": "image width in pixels",
     "height": "image height in pixels",
@@ -600,6 +602,7 @@ class Rig:
     cameras: tuple[Camera, ...]
     volume: tuple[np.ndarray, np.ndarray] | None = None
     source: str = "<memory>"
+    ground: GroundPlane | None = None
 
     def __post_init__(self) -> None:
         source = str(self.source)
@@ -620,6 +623,13 @@ class Rig:
         object.__setattr__(self, "cameras", cameras)
         if self.volume is not None:
             object.__setattr__(self, "volume", _parse_volume(self.volume, source))
+        if self.ground is not None and not isinstance(self.ground, GroundPlane):
+            object.__setattr__(self, "ground", GroundPlane.from_dict(self.ground, source))
+
+    @property
+    def ground_plane(self) -> GroundPlane:
+        """The configured ground plane, or z = 0 (world x and y as plane axes)."""
+        return self.ground if self.ground is not None else GroundPlane()
 
     def __len__(self) -> int:
         return len(self.cameras)
@@ -715,6 +725,8 @@ class Rig:
         out: dict[str, Any] = {}
         if self.volume is not None:
             out["volume"] = {"min": self.volume[0].tolist(), "max": self.volume[1].tolist()}
+        if self.ground is not None:
+            out["ground"] = self.ground.to_dict()
         out["cameras"] = [cam.to_dict() for cam in self.cameras]
         return out
 
@@ -734,7 +746,7 @@ class Rig:
             raise RigError(f"{source}: expected a mapping with a 'cameras' list at the top level, got {_fmt(d)}")
         unknown = [k for k in d if k not in _RIG_KEYS]
         if unknown:
-            raise RigError(f"{source}: unknown top-level field {_fmt(unknown[0])} (expected cameras, volume)")
+            raise RigError(f"{source}: unknown top-level field {_fmt(unknown[0])} (expected cameras, volume, ground)")
         if "cameras" not in d:
             raise RigError(f"{source}: missing field 'cameras' (a non-empty list of cameras)")
         entries = d["cameras"]
@@ -749,7 +761,8 @@ class Rig:
                     f"{source}: volume: expected {{min: [x, y, z], max: [x, y, z]}} in metres, got {_fmt(vol)}"
                 )
             volume = (vol["min"], vol["max"])
-        return cls(cameras=cameras, volume=volume, source=source)
+        ground = GroundPlane.from_dict(d["ground"], source) if d.get("ground") is not None else None
+        return cls(cameras=cameras, volume=volume, source=source, ground=ground)
 
     # -- queries
 
@@ -781,6 +794,82 @@ class Rig:
                 f"{source}: frame size {width}x{height} differs from camera '{cam.name}' calibration "
                 f"{cam.width}x{cam.height} in {self.source}"
             )
+
+
+@dataclass(frozen=True)
+class GroundPlane:
+    """The plane objects move on (S3 template tracker), as an orthonormal frame in world coordinates.
+
+    Attributes:
+        origin: (3,) a point of the plane, metres (ground coordinates (0, 0)).
+        normal: (3,) unit normal pointing up (away from the ground, towards the objects' tops).
+        x_axis: (3,) unit in-plane direction of the ground x coordinate; ground y is ``normal x x_axis``.
+    """
+
+    origin: np.ndarray | Sequence[float] = (0.0, 0.0, 0.0)
+    normal: np.ndarray | Sequence[float] = (0.0, 0.0, 1.0)
+    x_axis: np.ndarray | Sequence[float] | None = None
+
+    def __post_init__(self) -> None:
+        where = "ground"
+        origin = _array(self.origin, (3,), "3 values [x, y, z] in metres", "<memory>", f"{where}: origin")
+        normal = _array(self.normal, (3,), "3 values [nx, ny, nz]", "<memory>", f"{where}: normal")
+        nn = float(np.linalg.norm(normal))
+        if not nn > 1e-9:
+            raise RigError(f"<memory>: {where}: normal: expected a non-zero vector, got {_fmt(normal.tolist())}")
+        normal = normal / nn
+        if self.x_axis is None:
+            guess = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        else:
+            guess = _array(self.x_axis, (3,), "3 values [ax, ay, az]", "<memory>", f"{where}: x_axis")
+        axis = guess - normal * float(guess @ normal)
+        na = float(np.linalg.norm(axis))
+        if not na > 1e-6:
+            raise RigError(f"<memory>: {where}: x_axis: must not be parallel to the normal, got {_fmt(guess.tolist())}")
+        object.__setattr__(self, "origin", _readonly(origin))
+        object.__setattr__(self, "normal", _readonly(normal))
+        object.__setattr__(self, "x_axis", _readonly(axis / na))
+
+    @property
+    def y_axis(self) -> np.ndarray:
+        """(3,) unit in-plane direction of the ground y coordinate (``normal x x_axis``)."""
+        return np.cross(self.normal, self.x_axis)
+
+    def to_world(self, xy: np.ndarray, height: np.ndarray | float = 0.0) -> np.ndarray:
+        """World points of ground coordinates ``xy`` (..., 2) at ``height`` above the plane, metres -> (..., 3)."""
+        xy = np.asarray(xy, dtype=np.float64)
+        h = np.asarray(height, dtype=np.float64)[..., None]
+        return self.origin + xy[..., :1] * self.x_axis + xy[..., 1:2] * self.y_axis + h * self.normal
+
+    def to_ground(self, points: np.ndarray) -> np.ndarray:
+        """Ground coordinates (..., 2) of world points (..., 3) projected onto the plane, metres."""
+        d = np.asarray(points, dtype=np.float64) - self.origin
+        return np.stack([d @ self.x_axis, d @ self.y_axis], axis=-1)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The rig-file entry: origin, normal, x_axis."""
+        return {"origin": self.origin.tolist(), "normal": self.normal.tolist(), "x_axis": self.x_axis.tolist()}
+
+    @classmethod
+    def from_dict(cls, d: Any, source: str) -> GroundPlane:
+        """Parse a rig file's ``ground`` entry.
+
+        Raises:
+            RigError: not a mapping, unknown keys, or invalid vectors (the message names the file and field).
+        """
+        if isinstance(d, GroundPlane):
+            return d
+        if not isinstance(d, Mapping) or not set(d) <= {"origin", "normal", "x_axis"}:
+            raise RigError(
+                f"{source}: ground: expected {{origin: [x, y, z], normal: [nx, ny, nz], x_axis: [ax, ay, az]}} "
+                f"(metres; x_axis optional), got {_fmt(d)}"
+            )
+        try:
+            return cls(
+                origin=d.get("origin", (0.0, 0.0, 0.0)), normal=d.get("normal", (0.0, 0.0, 1.0)), x_axis=d.get("x_axis")
+            )
+        except RigError as exc:
+            raise RigError(str(exc).replace("<memory>", source, 1)) from None
 
 
 def _parse_volume(volume: Any, source: str) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,378 @@
+"""Template rasterization for the S3 template tracker (Juza et al., section 3): 3D templates on a ground plane
+projected through a calibrated camera (OpenCV distortion included) and filled in the image.
+
+Every object is made of ``PIECES`` convex 3D pieces, each given by at most ``HULL_MAX`` vertices:
+
+* human (``KIND_HUMAN``, dims = (height, body radius, head radius) metres): piece 0 is the body, a regular octagonal
+  prism inscribed in a vertical cylinder of the body radius from the ground to ``height - 2 head radius``;
+  piece 1 is the head, a 14-vertex polyhedron (octahedron + cube vertices) inscribed in the head sphere.
+* vehicle (``KIND_VEHICLE``, dims = (length, width, height) metres, heading alpha radians): piece 0 the lower
+  body box (full length and width, ``LOWER`` of the height), piece 1 the cabin box (``CABIN_LENGTH`` of the length,
+  ``CABIN_WIDTH`` of the width, from the lower body to the full height).
+
+A piece's image is the convex hull of its projected vertices (gift wrapping, at most ``HULL_MAX`` vertices). A
+pixel ``(u, v)`` (centre at integer coordinates, OpenCV convention) is covered by a piece when its centre lies in
+the closed hull; a row's coverage is a span ``[ceil(x_left), floor(x_right)]`` found from the hull's edges. The
+virtual scene ``v_i`` of a particle (eq. 4) is the union of its pieces' spans. Nothing here materialises an
+image per particle: consumers (``kernels.xor``, ``kernels.uoh``) walk the spans row by row.
+"""
+
+import warp as wp
+
+from .camera import Camera, project
+
+wp.set_module_options({"enable_backward": False})
+
+MAX_SLOTS = wp.constant(16)
+"""Largest R_max (objects per particle) the kernels support."""
+PIECES = wp.constant(2)
+"""Convex pieces per object."""
+MAX_PIECES = wp.constant(32)
+"""MAX_SLOTS * PIECES: the most pieces a particle can have."""
+HULL_MAX = wp.constant(16)
+"""Most vertices per piece (and per projected hull)."""
+
+KIND_NONE = wp.constant(0)
+KIND_HUMAN = wp.constant(1)
+KIND_VEHICLE = wp.constant(2)
+
+LOWER = wp.constant(0.55)  # vehicle: lower body height / total height
+CABIN_LENGTH = wp.constant(0.6)  # vehicle: cabin length / total length
+CABIN_WIDTH = wp.constant(0.9)  # vehicle: cabin width / total width
+OCTAGON = wp.constant(0.7853981633974483)  # 2 pi / 8
+INV_SQRT3 = wp.constant(0.5773502691896258)
+
+vec16 = wp.types.vector(length=16, dtype=wp.float32)
+vec32i = wp.types.vector(length=32, dtype=wp.int32)
+
+
+@wp.struct
+class GroundPlane:
+    """The plane objects move on, as an orthonormal frame in world coordinates (metres).
+
+    A ground position ``(x, y)`` and a height ``h`` above the plane map to ``origin + x e1 + y e2 + h normal``.
+    """
+
+    origin: wp.vec3
+    e1: wp.vec3
+    e2: wp.vec3
+    normal: wp.vec3
+
+
+@wp.func
+def plane_point(plane: GroundPlane, x: float, y: float, h: float):
+    """World point of ground coordinates (x, y) and height h above the plane, metres."""
+    return plane.origin + x * plane.e1 + y * plane.e2 + h * plane.normal
+
+
+@wp.func
+def piece_vertices(kind: int, piece: int):
+    """Number of vertices of ``piece`` of an object of ``kind`` (0 when the object has no such piece)."""
+    if kind == KIND_HUMAN:
+        if piece == 0:
+            return 16
+        return 14
+    if kind == KIND_VEHICLE:
+        return 8
+    return 0
+
+
+@wp.func
+def piece_vertex(kind: int, piece: int, k: int, dims: wp.vec3, heading: float):
+    """Vertex ``k`` of a piece in the object's frame: (along e1, along e2, height), metres, relative to the
+    object's ground position (its ground-contact centre)."""
+    if kind == KIND_HUMAN:
+        height = dims[0]
+        body_r = dims[1]
+        head_r = dims[2]
+        if piece == 0:
+            top = wp.max(height - 2.0 * head_r, 0.1)
+            a = float(k % 8) * OCTAGON
+            h = float(0.0)
+            if k >= 8:
+                h = top
+            return wp.vec3(body_r * wp.cos(a), body_r * wp.sin(a), h)
+        c = height - head_r
+        if k < 6:
+            axis = k / 2
+            sign = 1.0 - 2.0 * float(k % 2)
+            d = wp.vec3(0.0, 0.0, 0.0)
+            d[axis] = sign * head_r
+            return wp.vec3(d[0], d[1], c + d[2])
+        j = k - 6
+        sx = 1.0 - 2.0 * float(j % 2)
+        sy = 1.0 - 2.0 * float((j / 2) % 2)
+        sz = 1.0 - 2.0 * float(j / 4)
+        r = head_r * INV_SQRT3
+        return wp.vec3(sx * r, sy * r, c + sz * r)
+    # vehicle boxes, rotated by the heading about the plane normal
+    length = dims[0]
+    width = dims[1]
+    height = dims[2]
+    hl = 0.5 * length
+    hw = 0.5 * width
+    z0 = float(0.0)
+    z1 = LOWER * height
+    if piece == 1:
+        hl = hl * CABIN_LENGTH
+        hw = hw * CABIN_WIDTH
+        z0 = z1
+        z1 = height
+    lx = hl * (1.0 - 2.0 * float(k % 2))
+    ly = hw * (1.0 - 2.0 * float((k / 2) % 2))
+    z = z0
+    if k >= 4:
+        z = z1
+    ca = wp.cos(heading)
+    sa = wp.sin(heading)
+    return wp.vec3(ca * lx - sa * ly, sa * lx + ca * ly, z)
+
+
+@wp.func
+def convex_hull(xs: vec16, ys: vec16, n: int):
+    """Gift wrapping of ``n`` <= HULL_MAX points: returns (hull_x, hull_y, count), vertices in order.
+
+    Collinear points on an edge are skipped (the farthest one is kept); coincident points count once.
+    """
+    hx = vec16()
+    hy = vec16()
+    start = int(0)
+    for j in range(1, n):
+        if xs[j] < xs[start] or (xs[j] == xs[start] and ys[j] < ys[start]):
+            start = j
+    count = int(0)
+    cur = start
+    for _it in range(HULL_MAX):
+        hx[count] = xs[cur]
+        hy[count] = ys[cur]
+        count += 1
+        cand = cur
+        for j in range(n):
+            if j != cur:
+                if cand == cur:
+                    cand = j
+                else:
+                    ax = xs[cand] - xs[cur]
+                    ay = ys[cand] - ys[cur]
+                    bx = xs[j] - xs[cur]
+                    by = ys[j] - ys[cur]
+                    cross = ax * by - ay * bx
+                    if cross < 0.0 or (cross == 0.0 and bx * bx + by * by > ax * ax + ay * ay):
+                        cand = j
+        if cand == cur:
+            break
+        if xs[cand] == xs[cur] and ys[cand] == ys[cur]:
+            break
+        cur = cand
+        if cur == start:
+            break
+    return hx, hy, count
+
+
+@wp.kernel
+def template_hulls_kernel(
+    cam: Camera,
+    plane: GroundPlane,
+    kind: wp.array2d(dtype=wp.int32),
+    pos: wp.array2d(dtype=wp.vec2),
+    heading: wp.array2d(dtype=wp.float32),
+    dims: wp.array2d(dtype=wp.vec3),
+    hull_pts: wp.array3d(dtype=wp.vec2),
+    hull_n: wp.array2d(dtype=wp.int32),
+    hull_rows: wp.array2d(dtype=wp.vec2i),
+    hull_depth: wp.array2d(dtype=wp.float32),
+):
+    """Project every object of every particle and store its pieces' image hulls.
+
+    Launch with ``dim=(N, R)``. Inputs are (N, R) per slot: ``kind`` (KIND_*), ``pos`` ground position (metres),
+    ``heading`` (radians), ``dims`` (metres, see the module docstring). Outputs per piece ``q = slot * PIECES +
+    piece``: ``hull_pts`` (N, R * PIECES, HULL_MAX) hull vertices (pixels), ``hull_n`` vertex count (0: the piece
+    does not exist, is partly behind the camera or misses the image), ``hull_rows`` (first, last) image row the
+    piece covers (clipped to the image), ``hull_depth`` camera depth of the object's ground point (metres).
+    """
+    i, s = wp.tid()
+    k = kind[i, s]
+    p = pos[i, s]
+    a = heading[i, s]
+    d = dims[i, s]
+    ground = plane_point(plane, p[0], p[1], 0.0)
+    g = project(cam, ground)
+    for piece in range(PIECES):
+        q = s * PIECES + piece
+        n = piece_vertices(k, piece)
+        xs = vec16()
+        ys = vec16()
+        visible = n > 0
+        for j in range(n):
+            v = piece_vertex(k, piece, j, d, a)
+            uvz = project(cam, plane_point(plane, p[0] + v[0], p[1] + v[1], v[2]))
+            if uvz[2] <= 0.0:
+                visible = False
+            xs[j] = uvz[0]
+            ys[j] = uvz[1]
+        count = int(0)
+        row0 = int(0)
+        row1 = int(-1)
+        if visible:
+            hx, hy, count = convex_hull(xs, ys, n)
+            xmin = hx[0]
+            xmax = hx[0]
+            ymin = hy[0]
+            ymax = hy[0]
+            for j in range(count):
+                hull_pts[i, q, j] = wp.vec2(hx[j], hy[j])
+                xmin = wp.min(xmin, hx[j])
+                xmax = wp.max(xmax, hx[j])
+                ymin = wp.min(ymin, hy[j])
+                ymax = wp.max(ymax, hy[j])
+            row0 = wp.max(int(wp.ceil(ymin)), 0)
+            row1 = wp.min(int(wp.floor(ymax)), cam.height - 1)
+            if row0 > row1 or xmax < 0.0 or xmin > float(cam.width - 1):
+                count = 0
+        if count == 0:
+            row0 = 0
+            row1 = -1
+        hull_n[i, q] = count
+        hull_rows[i, q] = wp.vec2i(row0, row1)
+        hull_depth[i, q] = g[2]
+
+
+@wp.func
+def hull_span(hull_pts: wp.array3d(dtype=wp.vec2), i: int, q: int, n: int, y: float, width: int):
+    """Columns ``(u0, u1)`` of image row ``y`` covered by hull ``q`` of particle ``i`` (``u1 < u0``: none).
+
+    The row's intersection with the closed convex hull is ``[x_left, x_right]``; covered pixels are those whose
+    centres lie in it, clipped to ``[0, width - 1]``.
+    """
+    xl = float(3.0e38)
+    xr = float(-3.0e38)
+    for k in range(n):
+        a = hull_pts[i, q, k]
+        b = hull_pts[i, q, (k + 1) % n]
+        lo = wp.min(a[1], b[1])
+        hi = wp.max(a[1], b[1])
+        if y >= lo and y <= hi:
+            if a[1] == b[1]:
+                xl = wp.min(xl, wp.min(a[0], b[0]))
+                xr = wp.max(xr, wp.max(a[0], b[0]))
+            else:
+                x = a[0] + (y - a[1]) * (b[0] - a[0]) / (b[1] - a[1])
+                xl = wp.min(xl, x)
+                xr = wp.max(xr, x)
+    u0 = int(0)
+    u1 = int(-1)
+    if xl <= xr:
+        u0 = wp.max(int(wp.ceil(xl)), 0)
+        u1 = wp.min(int(wp.floor(xr)), width - 1)
+    return u0, u1
+
+
+@wp.func
+def row_intervals(
+    hull_pts: wp.array3d(dtype=wp.vec2),
+    hull_n: wp.array2d(dtype=wp.int32),
+    hull_rows: wp.array2d(dtype=wp.vec2i),
+    i: int,
+    pieces: int,
+    y: int,
+    width: int,
+):
+    """The covered columns of row ``y`` of particle ``i``'s virtual scene as disjoint sorted intervals.
+
+    Returns ``(count, starts, ends)``: ``count`` merged intervals ``[starts[k], ends[k]]`` (inclusive columns),
+    sorted, separated by at least one uncovered pixel.
+    """
+    s0 = vec32i()
+    s1 = vec32i()
+    n = int(0)
+    yf = float(y)
+    for q in range(pieces):
+        m = hull_n[i, q]
+        if m > 0:
+            r = hull_rows[i, q]
+            if y >= r[0] and y <= r[1]:
+                u0, u1 = hull_span(hull_pts, i, q, m, yf, width)
+                if u0 <= u1:
+                    j = n
+                    while j > 0 and s0[j - 1] > u0:
+                        s0[j] = s0[j - 1]
+                        s1[j] = s1[j - 1]
+                        j -= 1
+                    s0[j] = u0
+                    s1[j] = u1
+                    n += 1
+    m0 = vec32i()
+    m1 = vec32i()
+    count = int(0)
+    for k in range(n):
+        if count > 0 and s0[k] <= m1[count - 1] + 1:
+            m1[count - 1] = wp.max(m1[count - 1], s1[k])
+        else:
+            m0[count] = s0[k]
+            m1[count] = s1[k]
+            count += 1
+    return count, m0, m1
+
+
+@wp.kernel
+def render_virtual_kernel(
+    hull_pts: wp.array3d(dtype=wp.vec2),
+    hull_n: wp.array2d(dtype=wp.int32),
+    hull_rows: wp.array2d(dtype=wp.vec2i),
+    pieces: int,
+    particles: wp.array(dtype=wp.int32),
+    out: wp.array3d(dtype=wp.uint8),
+):
+    """Materialise the binary virtual scenes ``v_i`` (eq. 4) of selected particles (reports and tests).
+
+    Launch with ``dim=(K, H)``; ``particles`` (K,) indices; ``out`` (K, H, W) is 1 on covered pixels, else 0.
+    """
+    k, y = wp.tid()
+    i = particles[k]
+    width = out.shape[2]
+    for x in range(width):
+        out[k, y, x] = wp.uint8(0)
+    count, m0, m1 = row_intervals(hull_pts, hull_n, hull_rows, i, pieces, y, width)
+    for c in range(count):
+        for x in range(m0[c], m1[c] + 1):
+            out[k, y, x] = wp.uint8(1)
+
+
+@wp.kernel
+def render_labels_kernel(
+    hull_pts: wp.array3d(dtype=wp.vec2),
+    hull_n: wp.array2d(dtype=wp.int32),
+    hull_rows: wp.array2d(dtype=wp.vec2i),
+    hull_depth: wp.array2d(dtype=wp.float32),
+    pieces: int,
+    best: wp.array(dtype=wp.int32),
+    out: wp.array2d(dtype=wp.uint8),
+):
+    """The virtual scene of particle ``best[0]`` with each pixel set to 1 + the slot of the nearest object
+    covering it (0: background); nearer objects hide farther ones (painter's order by ground-point depth).
+
+    Launch with ``dim=H``; ``out`` (H, W) uint8.
+    """
+    y = wp.tid()
+    i = best[0]
+    width = out.shape[1]
+    for x in range(width):
+        out[y, x] = wp.uint8(0)
+    yf = float(y)
+    drawn = vec32i()
+    for _pass in range(pieces):
+        # the farthest piece not drawn yet
+        far = int(-1)
+        far_d = float(-3.0e38)
+        for q in range(pieces):
+            if drawn[q] == 0 and hull_n[i, q] > 0:
+                if hull_depth[i, q] > far_d:
+                    far_d = hull_depth[i, q]
+                    far = q
+        if far >= 0:
+            drawn[far] = 1
+            r = hull_rows[i, far]
+            if y >= r[0] and y <= r[1]:
+                u0, u1 = hull_span(hull_pts, i, far, hull_n[i, far], yf, width)
+                for x in range(u0, u1 + 1):
+                    out[y, x] = wp.uint8(far / PIECES + 1)

@@ -1,0 +1,168 @@
+"""Per-object estimates of the S3 template tracker from the weighted particle set, without single-address
+atomics (same block pattern as ``kernels.reduce``).
+
+Every slot holds one persistent label across all particles (``uoh.choose_addition_kernel``), so the estimate of
+object s is a weighted moment over the particles whose slot s is alive: existence probability
+``sum_i w_i alive_is / sum_i w_i``, weighted means of ground position, speed, heading, dims and age.
+"""
+
+import warp as wp
+
+from .dynamics import TemplateState
+from .raster import KIND_NONE, KIND_VEHICLE
+from .reduce import EST_MAXLOGW
+
+wp.set_module_options({"enable_backward": False})
+
+NS = wp.constant(15)
+"""Per-block sums per slot: w, w^2, w a, a, w a x, w a y, w a x^2, w a y^2, w a speed, w a cos(dir), w a sin(dir),
+w a dims (3), w a age (a = slot alive)."""
+
+# Columns of the per-slot estimate (float64, shape (R, NE)).
+SE_EXIST = wp.constant(0)  # existence probability
+SE_COUNT = wp.constant(1)  # particles holding the object
+SE_X = wp.constant(2)  # weighted mean ground position x, y (metres)
+SE_STD = wp.constant(4)  # weighted standard deviation of x, y (metres)
+SE_SPEED = wp.constant(6)  # weighted mean speed (m/s)
+SE_HEADING = wp.constant(7)  # direction of motion / orientation (radians, circular mean)
+SE_DIMS = wp.constant(8)  # weighted mean dims (3, metres)
+SE_AGE = wp.constant(11)  # weighted mean age (s)
+SE_ESS = wp.constant(12)  # effective sample size (same in every row)
+SE_LOGLIK = wp.constant(13)  # log of the mean weight (same in every row)
+NE = wp.constant(16)
+
+
+@wp.kernel
+def block_slot_moments_kernel(
+    state: TemplateState,
+    n: int,
+    chunk: int,
+    est: wp.array(dtype=wp.float64),
+    weights: wp.array(dtype=wp.float64),
+    part: wp.array3d(dtype=wp.float64),
+):
+    """Normalised weights ``w_i = exp(logw_i - max)`` (written by slot 0's blocks, for resampling) and per-block
+    sums of every slot; launch with ``wp.launch_tiled(dim=[blocks, R], block_dim=B)``; part (blocks, R, NS)."""
+    b, s, lane = wp.tid()
+    start = b * chunk
+    stop = wp.min(start + chunk, n)
+    mx = est[EST_MAXLOGW]
+    acc = wp.vector(dtype=wp.float64, length=15)
+    for i in range(start + lane, stop, wp.block_dim()):
+        w = wp.exp(wp.float64(state.logw[i]) - mx)
+        if s == 0:
+            weights[i] = w
+        acc[0] += w
+        acc[1] += w * w
+        k = state.kind[i, s]
+        if k != KIND_NONE:
+            p = state.pos[i, s]
+            v = state.vel[i, s]
+            d = state.dims[i, s]
+            direction = state.heading[i, s]
+            speed = wp.length(v)
+            if k == KIND_VEHICLE:
+                speed = wp.abs(v[0])
+                if v[0] < 0.0:
+                    direction = direction + wp.pi
+            x = wp.float64(p[0])
+            y = wp.float64(p[1])
+            acc[2] += w
+            acc[3] += wp.float64(1.0)
+            acc[4] += w * x
+            acc[5] += w * y
+            acc[6] += w * x * x
+            acc[7] += w * y * y
+            acc[8] += w * wp.float64(speed)
+            acc[9] += w * wp.float64(wp.cos(direction))
+            acc[10] += w * wp.float64(wp.sin(direction))
+            acc[11] += w * wp.float64(d[0])
+            acc[12] += w * wp.float64(d[1])
+            acc[13] += w * wp.float64(d[2])
+            acc[14] += w * wp.float64(state.age[i, s])
+    for f in range(NS):
+        t = wp.tile_sum(wp.tile(acc[f]))
+        if lane == 0:
+            part[b, s, f] = t[0]
+
+
+@wp.kernel
+def final_slot_moments_kernel(
+    part: wp.array3d(dtype=wp.float64),
+    blocks: int,
+    n: int,
+    est: wp.array(dtype=wp.float64),
+    ess_threshold: wp.array(dtype=wp.float32),
+    slot_est: wp.array2d(dtype=wp.float64),
+    slot_count: wp.array(dtype=wp.float64),
+    resample: wp.array(dtype=wp.int32),
+):
+    """Combine the per-block sums (launch ``wp.launch_tiled(dim=[R], block_dim=B)``, one block per slot) into
+    ``slot_est`` (R, NE) and ``slot_count`` (R,); slot 0 also decides resampling (ESS <= threshold x N)."""
+    s, lane = wp.tid()
+    acc = wp.vector(dtype=wp.float64, length=15)
+    for j in range(lane, blocks, wp.block_dim()):
+        for f in range(NS):
+            acc[f] += part[j, s, f]
+    tot = wp.vector(dtype=wp.float64, length=15)
+    for f in range(NS):
+        t = wp.tile_sum(wp.tile(acc[f]))
+        tot[f] = t[0]
+    if lane == 0:
+        zero = wp.float64(0.0)
+        sw = tot[0]
+        wa = tot[2]
+        slot_est[s, SE_EXIST] = wa / sw
+        slot_est[s, SE_COUNT] = tot[3]
+        slot_count[s] = tot[3]
+        if wa > zero:
+            mx = tot[4] / wa
+            my = tot[5] / wa
+            slot_est[s, SE_X] = mx
+            slot_est[s, SE_X + 1] = my
+            slot_est[s, SE_STD] = wp.sqrt(wp.max(tot[6] / wa - mx * mx, zero))
+            slot_est[s, SE_STD + 1] = wp.sqrt(wp.max(tot[7] / wa - my * my, zero))
+            slot_est[s, SE_SPEED] = tot[8] / wa
+            slot_est[s, SE_HEADING] = wp.atan2(tot[10], tot[9])
+            slot_est[s, SE_DIMS] = tot[11] / wa
+            slot_est[s, SE_DIMS + 1] = tot[12] / wa
+            slot_est[s, SE_DIMS + 2] = tot[13] / wa
+            slot_est[s, SE_AGE] = tot[14] / wa
+        else:
+            for f in range(SE_X, SE_ESS):
+                slot_est[s, f] = zero
+        ess = sw * sw / tot[1]
+        slot_est[s, SE_ESS] = ess
+        slot_est[s, SE_LOGLIK] = est[EST_MAXLOGW] + wp.log(sw / wp.float64(n))
+        if s == 0:
+            flag = int(0)
+            if ess <= wp.float64(ess_threshold[0]) * wp.float64(n) + wp.float64(1.0e-9):
+                flag = 1
+            resample[0] = flag
+
+
+@wp.kernel
+def gather_particle_kernel(
+    state: TemplateState,
+    best: wp.array(dtype=wp.int32),
+    penalty: wp.array(dtype=wp.int32),
+    out: wp.array2d(dtype=wp.float32),
+):
+    """Copy particle ``best[0]``'s slots into ``out`` (R, 11): kind, label, x, y, heading, vel (2), dims (3),
+    penalty m (pixels, every row). Launch ``dim=R``."""
+    s = wp.tid()
+    i = best[0]
+    out[s, 0] = float(state.kind[i, s])
+    out[s, 1] = float(state.label[i, s])
+    p = state.pos[i, s]
+    v = state.vel[i, s]
+    d = state.dims[i, s]
+    out[s, 2] = p[0]
+    out[s, 3] = p[1]
+    out[s, 4] = state.heading[i, s]
+    out[s, 5] = v[0]
+    out[s, 6] = v[1]
+    out[s, 7] = d[0]
+    out[s, 8] = d[1]
+    out[s, 9] = d[2]
+    out[s, 10] = float(penalty[i])

@@ -1,0 +1,177 @@
+"""Uncovered Object Histogram and object addition of the S3 template tracker (Juza et al., section 4, eqs. 10-12).
+
+``UOH(w, h) = sum_i NOT v_i(w, h)`` where q(w, h) = 1, else 0 (eq. 10), is ``q * (N - coverage count)``: the
+coverage counts come from the per-row difference array that ``xor.xor_score_kernel`` fills (no per-pixel
+atomics). Object addition (eq. 11) picks, from a fixed candidate set (ground-grid position x type x orientation
+at the prior's mean size), the object that lowers the UOH the most when added to every particle. Adding o to
+all particles sets the UOH to 0 on o's pixels, so the UOH sum drops by ``sum_{p in o} UOH(p)``; we score
+
+    gain(o) = (1 / N) sum_{p in o} (N - cov(p)) (q(p) - beta (1 - q(p)))
+
+i.e. the UOH mass o covers minus beta times the background it would cover in particles that do not cover it
+yet. ``beta = 0`` is eq. 11 exactly; ``beta = 1`` makes gain(o) the mean decrease of the XOR penalty (eq. 4)
+over the particles, which stops a large template from winning by covering several people and the gaps between
+them. The best candidate is proposed when gain(o) >= min_gain x area(o).
+"""
+
+import warp as wp
+
+from .raster import hull_span
+
+wp.set_module_options({"enable_backward": False})
+
+NEG_INF = wp.constant(-3.0e38)
+
+
+@wp.kernel
+def coverage_uoh_kernel(
+    q: wp.array2d(dtype=wp.uint8),
+    n: int,
+    beta: float,
+    cov_diff: wp.array2d(dtype=wp.int32),
+    uoh: wp.array2d(dtype=wp.int32),
+    gain_rows: wp.array2d(dtype=wp.float64),
+):
+    """Coverage counts, UOH (eq. 10) and row prefix sums of the addition gain; clears ``cov_diff``.
+
+    Launch with ``dim=H``. ``q`` (H, W) motion mask; ``n`` particles; ``cov_diff`` (H, W+1) difference array
+    (read, then zeroed for the next frame); ``uoh`` (H, W) output; ``gain_rows`` (H, W+1) with
+    ``gain_rows[y, x] = sum_{x' < x} (N - cov) (q - beta (1 - q))``.
+    """
+    y = wp.tid()
+    width = q.shape[1]
+    cov = int(0)
+    g = wp.float64(0.0)
+    gain_rows[y, 0] = g
+    nb = wp.float64(beta)
+    for x in range(width):
+        cov += cov_diff[y, x]
+        cov_diff[y, x] = 0
+        free = n - cov
+        if q[y, x] != wp.uint8(0):
+            uoh[y, x] = free
+            g += wp.float64(free)
+        else:
+            uoh[y, x] = 0
+            g -= nb * wp.float64(free)
+        gain_rows[y, x + 1] = g
+    cov_diff[y, width] = 0
+
+
+@wp.kernel
+def candidate_spans_kernel(
+    hull_pts: wp.array3d(dtype=wp.vec2),
+    hull_n: wp.array2d(dtype=wp.int32),
+    hull_rows: wp.array2d(dtype=wp.vec2i),
+    offsets: wp.array(dtype=wp.int32),
+    pieces: int,
+    width: int,
+    spans: wp.array(dtype=wp.vec2i),
+):
+    """Spans of every candidate's pieces, once when the model is built.
+
+    Launch with ``dim=C`` (candidates as one-slot particles). Candidate c's pieces are written one after another
+    from ``offsets[c]``: for each visible piece, one ``(u0, u1)`` per row of ``hull_rows`` (``u1 < u0``: empty).
+    """
+    c = wp.tid()
+    o = offsets[c]
+    for q in range(pieces):
+        m = hull_n[c, q]
+        if m > 0:
+            r = hull_rows[c, q]
+            for y in range(r[0], r[1] + 1):
+                u0, u1 = hull_span(hull_pts, c, q, m, float(y), width)
+                spans[o] = wp.vec2i(u0, u1)
+                o += 1
+
+
+@wp.kernel
+def candidate_score_kernel(
+    hull_rows: wp.array2d(dtype=wp.vec2i),
+    hull_n: wp.array2d(dtype=wp.int32),
+    offsets: wp.array(dtype=wp.int32),
+    spans: wp.array(dtype=wp.vec2i),
+    pieces: int,
+    gain_rows: wp.array2d(dtype=wp.float64),
+    n: int,
+    min_gain: float,
+    min_area: int,
+    score: wp.array(dtype=wp.float32),
+    area: wp.array(dtype=wp.int32),
+):
+    """Addition gain of every candidate (eq. 11, see the module docstring); launch ``dim=C``.
+
+    Pixels covered by both pieces of a candidate count once (the head overlaps the body, the cabin the lower
+    body): a row's second span contributes only its part outside the first. ``score[c]`` is the gain in pixels
+    (a mean over particles) or -3e38 when the candidate is not eligible (gain < min_gain x area or area <
+    min_area pixels); ``area[c]`` its pixel count.
+    """
+    c = wp.tid()
+    o = offsets[c]
+    g = wp.float64(0.0)
+    px = int(0)
+    # piece 0 spans, then piece 1 spans minus their overlap with piece 0 on the same row
+    r0 = wp.vec2i(0, -1)
+    o0 = o
+    if hull_n[c, 0] > 0:
+        r0 = hull_rows[c, 0]
+    for q in range(pieces):
+        if hull_n[c, q] > 0:
+            r = hull_rows[c, q]
+            for y in range(r[0], r[1] + 1):
+                s = spans[o]
+                o += 1
+                u0 = s[0]
+                u1 = s[1]
+                if u0 <= u1:
+                    g += gain_rows[y, u1 + 1] - gain_rows[y, u0]
+                    px += u1 - u0 + 1
+                    if q > 0 and y >= r0[0] and y <= r0[1]:
+                        t = spans[o0 + y - r0[0]]
+                        a = wp.max(u0, t[0])
+                        b = wp.min(u1, t[1])
+                        if a <= b:
+                            g -= gain_rows[y, b + 1] - gain_rows[y, a]
+                            px -= b - a + 1
+    gain = g / wp.float64(n)
+    area[c] = px
+    if px >= min_area and gain >= wp.float64(min_gain) * wp.float64(px):
+        score[c] = wp.float32(gain)
+    else:
+        score[c] = NEG_INF
+
+
+@wp.kernel
+def choose_addition_kernel(
+    best: wp.array(dtype=wp.int32),
+    best_score: wp.array(dtype=wp.float64),
+    best_slot: int,
+    cand_kind: wp.array(dtype=wp.int32),
+    slot_count: wp.array(dtype=wp.float64),
+    slots: int,
+    next_label: wp.array(dtype=wp.int32),
+    slot_label: wp.array(dtype=wp.int32),
+    slot_kind: wp.array(dtype=wp.int32),
+    add: wp.array(dtype=wp.int32),
+):
+    """Decide this frame's addition (launch ``dim=1``).
+
+    Every slot holds one label across all particles. When the best candidate is eligible and some slot is empty
+    in every particle (``slot_count[s] == 0``), the lowest such slot gets a new persistent label
+    (``next_label``, then incremented) and the candidate's kind; ``add = (slot, candidate)``; otherwise
+    ``add[0] = -1``. ``best_score[best_slot]`` is the candidate argmax's score (``reduce.final_max_kernel``).
+    """
+    add[0] = -1
+    add[1] = -1
+    c = best[0]
+    if best_score[best_slot] < wp.float64(-1.0e37) or c < 0 or c >= cand_kind.shape[0]:
+        return
+    for s in range(slots):
+        if slot_count[s] == wp.float64(0.0):
+            label = next_label[0]
+            next_label[0] = label + 1
+            slot_label[s] = label
+            slot_kind[s] = cand_kind[c]
+            add[0] = s
+            add[1] = c
+            return

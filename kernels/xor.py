@@ -1,0 +1,107 @@
+"""XOR matching penalty, complexity penalty and log-weights of the S3 template tracker (Juza et al., eqs. 4-6).
+
+The matching penalty of particle i against the motion image q (H x W, values 0/1) is the number of pixels where q
+and the virtual scene v_i differ (eq. 4). It is computed without an image per particle:
+``m_i = |q| + |v_i| - 2 |q AND v_i|``, where ``|v_i|`` and ``|q AND v_i|`` are summed over the covered spans of
+each row only (``|q AND span|`` from the row prefix sums of q in O(1)). The same pass records the particle's
+spans in a per-row difference array of coverage counts (two atomic adds per span, spread over the image), from
+which ``kernels.uoh`` builds the Uncovered Object Histogram.
+"""
+
+import warp as wp
+
+from .raster import PIECES, row_intervals
+
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.kernel
+def mask_rows_kernel(q: wp.array2d(dtype=wp.uint8), qrow: wp.array2d(dtype=wp.int32)):
+    """Row prefix sums of the motion mask: ``qrow[y, x] = sum(q[y, :x] != 0)``; launch ``dim=H``; qrow (H, W+1)."""
+    y = wp.tid()
+    acc = int(0)
+    qrow[y, 0] = 0
+    for x in range(q.shape[1]):
+        if q[y, x] != wp.uint8(0):
+            acc += 1
+        qrow[y, x + 1] = acc
+
+
+@wp.kernel
+def mask_total_kernel(qrow: wp.array2d(dtype=wp.int32), total: wp.array(dtype=wp.int32)):
+    """``total[0] = |q|`` from the row prefix sums (launch ``dim=1``)."""
+    acc = int(0)
+    w = qrow.shape[1] - 1
+    for y in range(qrow.shape[0]):
+        acc += qrow[y, w]
+    total[0] = acc
+
+
+@wp.kernel
+def xor_score_kernel(
+    hull_pts: wp.array3d(dtype=wp.vec2),
+    hull_n: wp.array2d(dtype=wp.int32),
+    hull_rows: wp.array2d(dtype=wp.vec2i),
+    kind: wp.array2d(dtype=wp.int32),
+    age: wp.array2d(dtype=wp.float32),
+    qrow: wp.array2d(dtype=wp.int32),
+    qtotal: wp.array(dtype=wp.int32),
+    cost_a: wp.vec3,
+    cost_b: wp.vec3,
+    scale: float,
+    logw: wp.array(dtype=wp.float32),
+    penalty: wp.array(dtype=wp.int32),
+    complexity: wp.array(dtype=wp.float32),
+    cov_diff: wp.array2d(dtype=wp.int32),
+):
+    """Matching penalty (eq. 4), complexity penalty (eq. 5) and log-weight (eq. 6) of every particle.
+
+    Launch with ``wp.launch_tiled(dim=[N], block_dim=B)``: block ``i`` is particle ``i`` and its threads stride
+    over the rows its templates cover (one thread per block on the CPU backend).
+
+    Args:
+        hull_pts, hull_n, hull_rows: the particles' piece hulls from ``raster.template_hulls_kernel``.
+        kind: (N, R) KIND_* per slot. age: (N, R) seconds each object has been in the particle (tau of eq. 5).
+        qrow: (H, W+1) row prefix sums of the motion mask; qtotal: (1,) |q|.
+        cost_a, cost_b: a_r and b_r of eq. 5 indexed by kind (pixels).
+        scale: s / (W H) of eq. 6 (1 / pixels).
+        logw: (N,) log-weight, updated in place: ``logw_i += -(m_i + c_i) s / (W H)`` (it holds the prior
+            log-weight after prediction: 0 after resampling).
+        penalty: (N,) m_i, pixels (exact). complexity: (N,) c_i, pixels.
+        cov_diff: (H, W+1) per-row difference array of coverage counts; each covered span [u0, u1] adds 1 at
+            u0 and -1 at u1 + 1 (zeroed again by ``uoh.coverage_uoh_kernel``).
+    """
+    i, lane = wp.tid()
+    slots = kind.shape[1]
+    pieces = slots * PIECES
+    width = qrow.shape[1] - 1
+    y0 = int(2147483647)
+    y1 = int(-1)
+    for q in range(pieces):
+        if hull_n[i, q] > 0:
+            r = hull_rows[i, q]
+            y0 = wp.min(y0, r[0])
+            y1 = wp.max(y1, r[1])
+    covered = int(0)
+    both = int(0)
+    for y in range(y0 + lane, y1 + 1, wp.block_dim()):
+        count, m0, m1 = row_intervals(hull_pts, hull_n, hull_rows, i, pieces, y, width)
+        for k in range(count):
+            a = m0[k]
+            b = m1[k]
+            covered += b - a + 1
+            both += qrow[y, b + 1] - qrow[y, a]
+            wp.atomic_add(cov_diff, y, a, 1)
+            wp.atomic_add(cov_diff, y, b + 1, -1)
+    tc = wp.tile_sum(wp.tile(covered))
+    tb = wp.tile_sum(wp.tile(both))
+    if lane == 0:
+        m = qtotal[0] + tc[0] - 2 * tb[0]  # eq. 4 as |q| + |v| - 2 |q AND v|
+        cost = float(0.0)
+        for s in range(slots):
+            kk = kind[i, s]
+            if kk > 0:
+                cost += cost_a[kk] + cost_b[kk] * wp.exp(-age[i, s])  # eq. 5
+        penalty[i] = m
+        complexity[i] = cost
+        logw[i] = logw[i] - (float(m) + cost) * scale  # eq. 6 in log space

@@ -1,0 +1,282 @@
+"""Binary motion (foreground) masks, the observations ``q_t`` of the single-camera template tracker of Juza et al.
+
+:class:`MotionMasks` yields one ``(H, W)`` ``uint8`` mask per frame with values ``{0, 1}`` (1 = moving / foreground),
+made in one of two ways:
+
+* **background subtraction** of a camera's frames (``method="mog2"`` or ``"knn"``): OpenCV's
+  ``cv2.createBackgroundSubtractorMOG2`` / ``cv2.createBackgroundSubtractorKNN``; shadow pixels (OpenCV's value
+  127, when ``detect_shadows``) count as background; then :func:`clean_mask`: a morphological opening (removes
+  isolated noise pixels), a closing (fills small holes), both with elliptical kernels, and optionally the removal
+  of connected components smaller than ``min_area`` pixels;
+* **given masks** (``method="given"``): a video, image folder, glob or array of masks made elsewhere (colour or
+  grey); a pixel is foreground when any channel is ``> threshold``. Given masks are only thresholded, not
+  cleaned (``open_px``, ``close_px`` and ``min_area`` apply to subtracted masks only).
+
+Frames and masks are read through :mod:`wptrack.frames`, so every source it accepts works here. With a calibrated
+:class:`~wptrack.rig.Camera`, the source's frame size is checked against the calibration before any frame is
+processed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .errors import ConfigError, FrameError
+from .frames import FrameSource, open_source, prefetch
+from .rig import Camera
+
+__all__ = ["METHODS", "SHADOW_VALUE", "MaskConfig", "MotionMasks", "clean_mask", "open_masks"]
+
+#: Mask methods: OpenCV background subtractors, or masks given as files/arrays.
+METHODS = ("mog2", "knn", "given")
+
+#: Value OpenCV's background subtractors write for shadow pixels (counted as background here).
+SHADOW_VALUE = 127
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+def _is_real(value: Any) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
+
+@dataclass(frozen=True)
+class MaskConfig:
+    """How motion masks are made.
+
+    Attributes:
+        method: ``"mog2"`` (Gaussian-mixture background model), ``"knn"`` (K-nearest-neighbour background model) or
+            ``"given"`` (the source already holds masks; see ``threshold``).
+        history: Frames of history the background model is learnt over (>= 1).
+        var_threshold: MOG2 only: squared Mahalanobis distance above which a pixel is foreground (> 0).
+        dist2_threshold: KNN only: squared distance (in 8-bit intensity units squared) to the nearest samples
+            above which a pixel is foreground (> 0).
+        detect_shadows: Let the subtractor mark shadows (darker pixels of the same colour), which then count as
+            background; ``False`` makes shadows foreground.
+        learning_rate: Background-model learning rate in ``[0, 1]`` per frame, or ``-1`` for OpenCV's automatic
+            rate (about ``1 / min(frames seen, history)``).
+        open_px: Diameter in pixels of the elliptical kernel of the morphological opening (>= 0; 0 or 1 disables).
+        close_px: Diameter in pixels of the elliptical kernel of the morphological closing (>= 0; 0 or 1 disables).
+        min_area: Connected components (8-connected) with fewer pixels than this are removed (>= 0; 0 disables).
+        threshold: Given masks only: a pixel is foreground when any channel is ``> threshold`` (0 to 254).
+
+    Raises:
+        ConfigError: A field is out of range; the message names the field and the expected range.
+    """
+
+    method: str = "mog2"
+    history: int = 200
+    var_threshold: float = 16.0
+    dist2_threshold: float = 400.0
+    detect_shadows: bool = True
+    learning_rate: float = -1.0
+    open_px: int = 3
+    close_px: int = 5
+    min_area: int = 0
+    threshold: int = 127
+
+    def __post_init__(self) -> None:
+        def fail(field: str, expected: str) -> None:
+            raise ConfigError(f"MaskConfig.{field}: must be {expected}, got {getattr(self, field)!r}")
+
+        if not isinstance(self.method, str) or self.method not in METHODS:
+            fail("method", "one of " + ", ".join(repr(m) for m in METHODS))
+        if not _is_int(self.history) or self.history < 1:
+            fail("history", "an integer >= 1 (frames)")
+        for field in ("var_threshold", "dist2_threshold"):
+            value = getattr(self, field)
+            if not _is_real(value) or not math.isfinite(value) or value <= 0:
+                fail(field, "a finite number > 0")
+        if not isinstance(self.detect_shadows, (bool, np.bool_)):
+            fail("detect_shadows", "True or False")
+        lr = self.learning_rate
+        if not _is_real(lr) or not (lr == -1 or 0 <= lr <= 1):
+            fail("learning_rate", "in [0, 1] (per frame) or -1 (automatic)")
+        for field in ("open_px", "close_px"):
+            if not _is_int(getattr(self, field)) or getattr(self, field) < 0:
+                fail(field, "an integer >= 0 (kernel diameter in pixels; 0 disables)")
+        if not _is_int(self.min_area) or self.min_area < 0:
+            fail("min_area", "an integer >= 0 (pixels; 0 disables)")
+        if not _is_int(self.threshold) or not 0 <= self.threshold <= 254:
+            fail("threshold", "an integer in [0, 254] (foreground: pixel > threshold)")
+
+
+def _kernel(diameter: int) -> np.ndarray:
+    import cv2
+
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (diameter, diameter))
+
+
+def clean_mask(mask: np.ndarray, config: MaskConfig) -> np.ndarray:
+    """Clean a binary mask: opening, then closing (elliptical kernels), then small-component removal.
+
+    Pixels outside the image count as foreground for the erosions, so foreground touching the border is not
+    eroded from outside (an all-ones mask stays all ones).
+
+    Args:
+        mask: ``(H, W)`` uint8 mask with values ``{0, 1}``.
+        config: Uses ``open_px``, ``close_px`` and ``min_area``.
+
+    Returns:
+        ``(H, W)`` uint8 mask with values ``{0, 1}`` (a new array, or ``mask`` itself when nothing is enabled).
+    """
+    import cv2
+
+    if config.open_px > 1:
+        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, _kernel(config.open_px))
+    if config.close_px > 1:
+        mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, _kernel(config.close_px))
+    if config.min_area > 1:
+        count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        keep = stats[:, cv2.CC_STAT_AREA] >= config.min_area
+        keep[0] = False  # label 0 is the background
+        mask = keep.astype(np.uint8)[labels]
+    return mask
+
+
+class MotionMasks:
+    """A sequence of binary motion masks, one per frame of a source.
+
+    Args:
+        source: An opened frame source: camera frames (``method`` ``"mog2"``/``"knn"``) or masks (``"given"``).
+        config: How masks are made (see :class:`MaskConfig`).
+        camera: If given, the source's frame size must equal the camera's calibrated ``(width, height)``.
+        rig_source: The rig file the camera came from, named in the size-mismatch message.
+        prefetch_depth: Frames decoded ahead by a background thread (0: decode in the iterating thread).
+
+    Raises:
+        FrameError: The source's frame size differs from ``camera``'s calibration.
+        ConfigError: ``prefetch_depth`` is negative.
+
+    Iterating yields ``(H, W)`` uint8 masks with values ``{0, 1}``. Every iteration starts from the first frame
+    with a fresh background model, so iterating twice gives the same masks. A frame whose size differs from the
+    first frame's raises :class:`FrameError` naming the frame index.
+    """
+
+    def __init__(
+        self,
+        source: FrameSource,
+        config: MaskConfig = MaskConfig(),
+        camera: Camera | None = None,
+        rig_source: str | None = None,
+        prefetch_depth: int = 2,
+    ) -> None:
+        if not isinstance(config, MaskConfig):
+            raise ConfigError(f"config must be a MaskConfig, got {type(config).__name__}")
+        if not _is_int(prefetch_depth) or prefetch_depth < 0:
+            raise ConfigError(f"prefetch_depth: must be an integer >= 0 (frames), got {prefetch_depth!r}")
+        self.source = source
+        self.config = config
+        self.camera = camera
+        self.prefetch_depth = int(prefetch_depth)
+        if camera is not None and (source.width, source.height) != (camera.width, camera.height):
+            where = f" in {rig_source}" if rig_source else ""
+            raise FrameError(
+                f"{source.name}: {self._kind} size {source.width}x{source.height} differs from camera "
+                f"'{camera.name}' calibration {camera.width}x{camera.height}{where}"
+            )
+
+    @property
+    def _kind(self) -> str:
+        return "mask" if self.config.method == "given" else "frame"
+
+    @property
+    def name(self) -> str:
+        """The source's label (path, or ``"array"``)."""
+        return self.source.name
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """``(width, height)`` of the masks, pixels."""
+        return (self.source.width, self.source.height)
+
+    def __len__(self) -> int:
+        """Number of masks (the source's frame count)."""
+        return len(self.source)
+
+    def _subtractor(self) -> Any:
+        import cv2
+
+        c = self.config
+        if c.method == "mog2":
+            return cv2.createBackgroundSubtractorMOG2(
+                history=c.history, varThreshold=float(c.var_threshold), detectShadows=bool(c.detect_shadows)
+            )
+        return cv2.createBackgroundSubtractorKNN(
+            history=c.history, dist2Threshold=float(c.dist2_threshold), detectShadows=bool(c.detect_shadows)
+        )
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        c = self.config
+        width, height = self.size
+        frames = prefetch(self.source, depth=self.prefetch_depth) if self.prefetch_depth else self.source
+        subtractor = None if c.method == "given" else self._subtractor()
+        try:
+            for index, frame in enumerate(frames):
+                if frame.shape[:2] != (height, width):
+                    raise FrameError(
+                        f"{self.name}: {self._kind} {index} is {frame.shape[1]}x{frame.shape[0]} pixels, but the "
+                        f"sequence started with {width}x{height} (the frame size must not change)"
+                    )
+                if subtractor is None:
+                    image = frame if frame.ndim == 3 else frame[..., None]
+                    yield np.any(image > c.threshold, axis=2).view(np.uint8)
+                    continue
+                foreground = subtractor.apply(frame, learningRate=float(c.learning_rate))
+                yield clean_mask((foreground > SHADOW_VALUE).view(np.uint8), c)
+        finally:
+            if isinstance(frames, prefetch):
+                frames.close()
+
+    def __repr__(self) -> str:
+        return f"MotionMasks({self.name!r}, {self.config.method}, {len(self)} masks, {self.size[0]}x{self.size[1]})"
+
+
+def open_masks(
+    video: str | os.PathLike | np.ndarray | None = None,
+    masks: str | os.PathLike | np.ndarray | None = None,
+    config: MaskConfig = MaskConfig(),
+    camera: Camera | None = None,
+    *,
+    rig_source: str | None = None,
+    name: str | None = None,
+) -> MotionMasks:
+    """Open a camera's motion masks, from its frames (background subtraction) or from given masks.
+
+    Args:
+        video: Camera frames: a video file, image folder, glob or uint8 array ``(T, H, W[, 3])``
+            (see :func:`wptrack.frames.open_source`); masks are made with ``config.method`` (``"mog2"``/``"knn"``).
+        masks: Given masks, in any of the same forms (colour or grey; foreground: any channel > ``threshold``).
+            ``config.method`` is taken as ``"given"`` whatever it says.
+        config: Mask settings.
+        camera: If given, the frame/mask size is checked against its calibrated size before anything is read
+            beyond the first frame.
+        rig_source: The rig file ``camera`` came from, for the size-mismatch message.
+        name: Label for messages (default: the path, or ``"array"``).
+
+    Returns:
+        The masks (iterable, with ``len`` and ``size``).
+
+    Raises:
+        ConfigError: Not exactly one of ``video`` / ``masks``, or ``method="given"`` with ``video``.
+        FrameError: The source cannot be opened, or its size differs from ``camera``'s calibration.
+    """
+    if (video is None) == (masks is None):
+        raise ConfigError("give exactly one of video (camera frames) or masks (given motion masks)")
+    if video is not None and config.method == "given":
+        raise ConfigError("MaskConfig.method 'given' expects masks=..., not video=... (or use 'mog2' or 'knn')")
+    if masks is not None and config.method != "given":
+        config = dataclasses.replace(config, method="given")
+    spec = video if video is not None else masks
+    assert spec is not None
+    source = open_source(spec, name=name)
+    return MotionMasks(source, config=config, camera=camera, rig_source=rig_source)

@@ -1,0 +1,933 @@
+"""S3: 3D template tracker from one calibrated camera (Juza, Marik, Rojicek and Stluka, "3D Template-Based Single
+Camera Multiple Object Tracking").
+
+Several objects of two types (humans, vehicles) move on a ground plane seen by one camera. Each particle is a whole
+scene: up to R_max objects (``max_objects``), each a 3D template (``kernels.raster``). A frame is one chain of
+device launches (CUDA graph on GPUs)::
+
+    motion mask q -> row prefix sums, |q|
+    -> template hulls (project every object of every particle, distortion included)
+    -> XOR penalty m_i (eq. 4), complexity c_i (eq. 5), log-weight (eq. 6); coverage counts
+    -> UOH (eq. 10), candidate gains and the best candidate (eq. 11)
+    -> max log-weight, per-object weighted estimates (existence, position, class, dims, heading), best particle
+    -> addition decision (slot + new label), resampling by cumulative weights (eq. 7, float64 CDF)
+    -> prediction: deletion (eq. 13), addition (eq. 12), noise, drift (eqs. 8-9)
+
+Every slot holds one persistent label in all particles, so an object's estimate is a weighted moment over the
+particles that hold it, and labels survive resampling. Objects are reported when their existence probability (the
+weight of the particles holding them) is at least ``min_existence``.
+
+Units: metres, seconds, radians on the ground plane (its own 2D frame, see ``wptrack.rig.GroundPlane``); pixels in
+the image.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from wptrack.errors import ConfigError, FrameError, RigError
+from wptrack.kernels import dynamics as kdyn
+from wptrack.kernels import raster as kraster
+from wptrack.kernels import reduce as kreduce
+from wptrack.kernels import slots as kslots
+from wptrack.kernels import uoh as kuoh
+from wptrack.kernels import xor as kxor
+from wptrack.pf import BLOCK, MAX_BLOCKS, FrameChain, _seed_words, check_fits, check_particles, resampler_bytes
+from wptrack.resampling import SCHEMES, Resampler
+from wptrack.rig import Camera, GroundPlane, Rig
+from wptrack.warpcams import camera_struct
+
+log = logging.getLogger(__name__)
+
+CLASSES: tuple[str, ...] = ("human", "vehicle")
+"""Object classes, in KIND order (KIND_HUMAN = 1, KIND_VEHICLE = 2)."""
+SCORE_BLOCK = 64
+"""Threads per particle in the XOR scoring kernel (they stride over the particle's image rows)."""
+
+
+def _vec3(value: Any, name: str, positive: bool = True) -> tuple[float, float, float]:
+    try:
+        arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name}: expected 3 numbers, got {value!r}") from None
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise ConfigError(f"{name}: expected 3 finite numbers, got {value!r}")
+    if positive and np.any(arr < 0):
+        raise ConfigError(f"{name}: expected values >= 0 (metres), got {arr.tolist()}")
+    return (float(arr[0]), float(arr[1]), float(arr[2]))
+
+
+def _nonneg(value: Any, name: str, unit: str, upper: float | None = None, strict: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+        raise ConfigError(f"{name}: expected a number ({unit}), got {value!r}")
+    v = float(value)
+    if not math.isfinite(v) or v < 0 or (strict and v == 0) or (upper is not None and v > upper):
+        rng = f"in [0, {upper}]" if upper is not None else ("> 0" if strict else ">= 0")
+        raise ConfigError(f"{name}: expected a value {rng} ({unit}), got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class HumanPrior:
+    """Human template (body prism + head), its prior and its dynamics (eq. 8).
+
+    dims = (height, body radius, head radius), metres. Deviations are per frame.
+    """
+
+    dims_mean: tuple[float, float, float] = (1.72, 0.18, 0.10)
+    """Prior mean of an added human (and the size of the addition candidates), m."""
+    dims_sd: tuple[float, float, float] = (0.08, 0.03, 0.01)
+    """Prior deviation of an added human's dims, m."""
+    dims_min: tuple[float, float, float] = (1.2, 0.10, 0.07)
+    dims_max: tuple[float, float, float] = (2.1, 0.32, 0.15)
+    sigma_dims: tuple[float, float, float] = (0.01, 0.005, 0.002)
+    """sigma_d of eq. 8, m per frame."""
+    sigma_speed: float = 0.25
+    """sigma_v of eq. 8 (each velocity component), m/s per frame."""
+    init_speed_sd: float = 0.5
+    """Velocity deviation of an added human, m/s."""
+    speed_max: float = 3.0
+    """Velocity magnitude limit, m/s."""
+    cost_a: float = 20.0
+    """a_r of eq. 5, pixels."""
+    cost_b: float = 60.0
+    """b_r of eq. 5, pixels."""
+
+    def __post_init__(self) -> None:
+        for name in ("dims_mean", "dims_sd", "dims_min", "dims_max", "sigma_dims"):
+            object.__setattr__(self, name, _vec3(getattr(self, name), f"human.{name}"))
+        for name, unit in (("sigma_speed", "m/s"), ("init_speed_sd", "m/s"), ("cost_a", "px"), ("cost_b", "px")):
+            object.__setattr__(self, name, _nonneg(getattr(self, name), f"human.{name}", unit))
+        object.__setattr__(self, "speed_max", _nonneg(self.speed_max, "human.speed_max", "m/s", strict=True))
+        _check_dims("human", self.dims_mean, self.dims_min, self.dims_max)
+
+
+@dataclass(frozen=True)
+class VehiclePrior:
+    """Vehicle template (lower body + cabin boxes), its prior and its dynamics (eq. 9).
+
+    dims = (length, width, height), metres. Deviations are per frame.
+    """
+
+    dims_mean: tuple[float, float, float] = (4.4, 1.8, 1.5)
+    dims_sd: tuple[float, float, float] = (0.3, 0.08, 0.08)
+    dims_min: tuple[float, float, float] = (3.0, 1.4, 1.1)
+    dims_max: tuple[float, float, float] = (6.5, 2.5, 2.4)
+    sigma_dims: tuple[float, float, float] = (0.03, 0.01, 0.01)
+    sigma_speed: float = 0.6
+    """sigma_v of eq. 9, m/s per frame."""
+    sigma_turn: float = 0.15
+    """sigma_theta of eq. 9, rad/s per frame."""
+    init_speed_sd: float = 3.0
+    init_heading_sd: float = 0.2
+    """Heading deviation of an added vehicle around the candidate's orientation, rad."""
+    speed_max: float = 20.0
+    turn_max: float = 1.0
+    """|theta| limit, rad/s."""
+    orientations: int = 4
+    """Candidate orientations in [0, pi) (a box is symmetric under a half turn)."""
+    cost_a: float = 40.0
+    cost_b: float = 120.0
+
+    def __post_init__(self) -> None:
+        for name in ("dims_mean", "dims_sd", "dims_min", "dims_max", "sigma_dims"):
+            object.__setattr__(self, name, _vec3(getattr(self, name), f"vehicle.{name}"))
+        for name, unit in (
+            ("sigma_speed", "m/s"),
+            ("sigma_turn", "rad/s"),
+            ("init_speed_sd", "m/s"),
+            ("init_heading_sd", "rad"),
+            ("cost_a", "px"),
+            ("cost_b", "px"),
+        ):
+            object.__setattr__(self, name, _nonneg(getattr(self, name), f"vehicle.{name}", unit))
+        object.__setattr__(self, "speed_max", _nonneg(self.speed_max, "vehicle.speed_max", "m/s", strict=True))
+        object.__setattr__(self, "turn_max", _nonneg(self.turn_max, "vehicle.turn_max", "rad/s", strict=True))
+        if isinstance(self.orientations, bool) or not isinstance(self.orientations, int) or self.orientations < 1:
+            raise ConfigError(f"vehicle.orientations: expected an integer >= 1, got {self.orientations!r}")
+        _check_dims("vehicle", self.dims_mean, self.dims_min, self.dims_max)
+
+
+def _check_dims(kind: str, mean, lo, hi) -> None:
+    if not all(0 < a <= b for a, b in zip(lo, hi, strict=True)):
+        raise ConfigError(f"{kind}.dims_min/dims_max: expected 0 < min <= max per dimension, got {lo} and {hi}")
+    if not all(a <= m <= b for a, m, b in zip(lo, mean, hi, strict=True)):
+        raise ConfigError(f"{kind}.dims_mean: {mean} must lie within dims_min {lo} and dims_max {hi}")
+
+
+@dataclass(frozen=True)
+class TemplateConfig:
+    """Configuration of the template tracker (defaults suit 640x480 surveillance video at 10-25 fps)."""
+
+    particles: int = 1000
+    """N, particles (each a whole scene)."""
+    max_objects: int = 8
+    """R_max, objects per particle (at most 16)."""
+    camera: str | int = 0
+    """The rig camera that sees the scene (name or index)."""
+    fps: float = 15.0
+    """Frame rate of the sequence, frames per second (Delta t = 1 / fps in eqs. 8-9)."""
+    scale: float = 5000.0
+    """s of eq. 6: log w_i = -(m_i + c_i) s / (W H)."""
+    t_add: float = 0.3
+    """T_add of eq. 12: fraction of particles that receive the frame's proposed object."""
+    t_del: float = 0.02
+    """T_del of eq. 13: per-frame deletion probability of each object in each particle."""
+    sigma_pos: float = 0.03
+    """Position diffusion added to eqs. 8-9, m per frame (helps new objects settle)."""
+    human: HumanPrior = field(default_factory=HumanPrior)
+    vehicle: VehiclePrior = field(default_factory=VehiclePrior)
+    classes: tuple[str, ...] = CLASSES
+    """Object classes the tracker may add."""
+    candidate_step_px: int = 8
+    """Addition candidates: ground points under an image grid of this pitch, pixels."""
+    max_range: float = 60.0
+    """Addition candidates farther from the camera than this are dropped, m."""
+    add_min_gain: float = 0.2
+    """A candidate is proposed when its gain (eq. 11 score) is at least this fraction of its area."""
+    add_beta: float = 0.5
+    """Weight of uncovered background in the addition gain (0: eq. 11 exactly; see ``kernels.uoh``)."""
+    min_candidate_area: int = 30
+    """Smallest candidate silhouette, pixels."""
+    min_existence: float = 0.5
+    """Objects are reported when the weight of the particles holding them reaches this fraction."""
+    resampling: str = "systematic"
+    ess_threshold: float = 1.0
+    """Resample when ESS <= threshold x N (1: every frame, as in the paper)."""
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        check_particles(self.particles)
+        if isinstance(self.max_objects, bool) or not isinstance(self.max_objects, (int, np.integer)):
+            raise ConfigError(f"max_objects: expected an integer R_max in [1, 16], got {self.max_objects!r}")
+        if not 1 <= int(self.max_objects) <= int(kraster.MAX_SLOTS):
+            raise ConfigError(f"max_objects: R_max must be in [1, {int(kraster.MAX_SLOTS)}], got {self.max_objects}")
+        _nonneg(self.fps, "fps", "frames/s", strict=True)
+        _nonneg(self.scale, "scale", "s of eq. 6", strict=True)
+        _nonneg(self.t_add, "t_add", "probability", upper=1.0)
+        _nonneg(self.t_del, "t_del", "probability", upper=1.0)
+        _nonneg(self.sigma_pos, "sigma_pos", "m")
+        _nonneg(self.max_range, "max_range", "m", strict=True)
+        _nonneg(self.add_min_gain, "add_min_gain", "fraction")
+        _nonneg(self.add_beta, "add_beta", "weight")
+        _nonneg(self.min_existence, "min_existence", "fraction", upper=1.0)
+        if not isinstance(self.human, HumanPrior):
+            raise ConfigError("human: expected a HumanPrior")
+        if not isinstance(self.vehicle, VehiclePrior):
+            raise ConfigError("vehicle: expected a VehiclePrior")
+        classes = tuple(self.classes)
+        if not classes or any(c not in CLASSES for c in classes) or len(set(classes)) != len(classes):
+            raise ConfigError(f"classes: expected a non-empty subset of {list(CLASSES)}, got {list(classes)}")
+        object.__setattr__(self, "classes", classes)
+        for name in ("candidate_step_px", "min_candidate_area"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise ConfigError(f"{name}: expected an integer >= 1 (pixels), got {v!r}")
+        if self.resampling not in SCHEMES:
+            raise ConfigError(f"resampling: unknown scheme {self.resampling!r}; expected one of {', '.join(SCHEMES)}")
+        if not (isinstance(self.ess_threshold, (int, float)) and 0.0 < self.ess_threshold <= 1.0):
+            raise ConfigError(f"ess_threshold: expected a fraction in (0, 1], got {self.ess_threshold!r}")
+        _seed_words(self.seed)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-Python form (run.json)."""
+        d = asdict(self)
+        d["classes"] = list(self.classes)
+        return d
+
+
+@dataclass
+class TrackedObject:
+    """One object of the estimate (world frame and ground-plane coordinates; metres, radians, seconds)."""
+
+    id: int
+    """Persistent label."""
+    cls: str
+    """``"human"`` or ``"vehicle"``."""
+    position: np.ndarray
+    """(3,) ground-contact point in world coordinates, metres."""
+    ground: np.ndarray
+    """(2,) ground-plane coordinates, metres."""
+    dims: np.ndarray
+    """(3,) human (height, body radius, head radius) or vehicle (length, width, height), metres."""
+    heading: float
+    """Direction of motion (vehicle: orientation towards its motion) in the ground plane, radians."""
+    speed: float
+    """m/s."""
+    existence: float = 1.0
+    """Weight of the particles that hold the object (1 for the best particle's objects)."""
+    std: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    """(2,) spread of the ground position over the particles, metres."""
+    age: float = 0.0
+    """Mean time the object has been tracked, seconds."""
+
+    @property
+    def size(self) -> tuple[float, float, float]:
+        """(length, width, height) in metres (a human's length and width are the body diameter)."""
+        if self.cls == "human":
+            return (2 * float(self.dims[1]), 2 * float(self.dims[1]), float(self.dims[0]))
+        return (float(self.dims[0]), float(self.dims[1]), float(self.dims[2]))
+
+
+@dataclass
+class TemplateEstimate:
+    """The tracker's output for one frame."""
+
+    frame: int
+    objects: list[TrackedObject]
+    """Objects whose existence >= min_existence, by id."""
+    best: list[TrackedObject]
+    """The objects of the best (MAP) particle."""
+    penalty: int
+    """XOR matching penalty m of the best particle, pixels (eq. 4)."""
+    foreground: int
+    """|q|: foreground pixels of the motion mask."""
+    ess: float
+    loglik: float
+    added: tuple[int, str] | None
+    """(label, class) of the object proposed to the particles after this frame, if any."""
+    virtual: np.ndarray | None = None
+    """(H, W) uint8 virtual scene of the best particle: 0 background, 1 + slot of the nearest object."""
+    uoh: np.ndarray | None = None
+    """(H, W) int32 Uncovered Object Histogram (eq. 10), when requested."""
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def ground_rays(camera: Camera, plane: GroundPlane, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Intersect the viewing rays of ``pixels`` (K, 2) with the ground plane (distortion included).
+
+    Returns:
+        ``(ground, distance)``: (K, 2) ground coordinates (metres) and (K,) distance from the camera centre along
+        the ray (metres; ``inf`` where the ray misses the plane or hits it behind the camera).
+    """
+    import cv2
+
+    pts = np.asarray(pixels, dtype=np.float64).reshape(-1, 1, 2)
+    norm = cv2.undistortPoints(pts, np.asarray(camera.K), np.asarray(camera.dist)).reshape(-1, 2)
+    rays_cam = np.concatenate([norm, np.ones((norm.shape[0], 1))], axis=1)
+    rays = rays_cam @ np.asarray(camera.R)  # R^T d for each row
+    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+    centre = camera.center
+    denom = rays @ plane.normal
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = ((plane.origin - centre) @ plane.normal) / denom
+    ok = np.isfinite(lam) & (lam > 0) & (np.abs(denom) > 1e-9)
+    dist = np.where(ok, lam, np.inf)
+    points = centre + np.where(ok, lam, 0.0)[:, None] * rays
+    return plane.to_ground(points), dist
+
+
+def _plane_struct(plane: GroundPlane) -> kraster.GroundPlane:
+    s = kraster.GroundPlane()
+    s.origin = wp.vec3(*plane.origin)
+    s.e1 = wp.vec3(*plane.x_axis)
+    s.e2 = wp.vec3(*plane.y_axis)
+    s.normal = wp.vec3(*plane.normal)
+    return s
+
+
+def _new_state(n: int, r: int, device: str) -> kdyn.TemplateState:
+    s = kdyn.TemplateState()
+    s.kind = wp.zeros((n, r), dtype=wp.int32, device=device)
+    s.label = wp.full((n, r), -1, dtype=wp.int32, device=device)
+    s.pos = wp.zeros((n, r), dtype=wp.vec2, device=device)
+    s.vel = wp.zeros((n, r), dtype=wp.vec2, device=device)
+    s.heading = wp.zeros((n, r), dtype=wp.float32, device=device)
+    s.dims = wp.zeros((n, r), dtype=wp.vec3, device=device)
+    s.age = wp.zeros((n, r), dtype=wp.float32, device=device)
+    s.logw = wp.zeros(n, dtype=wp.float32, device=device)
+    return s
+
+
+SLOT_STATE_BYTES = 2 * (4 + 4 + 8 + 8 + 4 + 12 + 4) + int(kraster.PIECES) * (int(kraster.HULL_MAX) * 8 + 4 + 8 + 4)
+"""Device bytes per object slot of a particle: two ping-pong state buffers and the piece hulls."""
+PARTICLE_BYTES = 2 * 4 + 4 + 4 + 4 + 8
+"""Device bytes per particle besides the slots: log-weights (2), penalty, complexity, ancestor, weight."""
+
+
+def particle_bytes(max_objects: int, scheme: str) -> int:
+    """Device memory per particle of the template tracker, bytes."""
+    return max_objects * SLOT_STATE_BYTES + PARTICLE_BYTES + resampler_bytes(scheme)
+
+
+class Hulls:
+    """Projected template pieces of a set of one- or multi-slot scenes (device arrays; see ``kernels.raster``)."""
+
+    def __init__(self, n: int, slots: int, device: str) -> None:
+        q = slots * int(kraster.PIECES)
+        self.pts = wp.zeros((n, q, int(kraster.HULL_MAX)), dtype=wp.vec2, device=device)
+        self.n = wp.zeros((n, q), dtype=wp.int32, device=device)
+        self.rows = wp.zeros((n, q), dtype=wp.vec2i, device=device)
+        self.depth = wp.zeros((n, q), dtype=wp.float32, device=device)
+
+    def launch(self, cam, plane, kind, pos, heading, dims, device: str) -> None:
+        wp.launch(
+            kraster.template_hulls_kernel,
+            dim=kind.shape,
+            inputs=[cam, plane, kind, pos, heading, dims],
+            outputs=[self.pts, self.n, self.rows, self.depth],
+            device=device,
+        )
+
+
+class Candidates:
+    """The fixed set of addition candidates (eq. 11): ground points under an image grid x class x orientation,
+    at the prior's mean size, with their image spans precomputed on the device."""
+
+    def __init__(self, camera: Camera, plane: GroundPlane, cam_struct, plane_struct, config: TemplateConfig, device):
+        step = int(config.candidate_step_px)
+        us = np.arange(step / 2.0, camera.width, step)
+        vs = np.arange(step / 2.0, camera.height, step)
+        grid = np.stack(np.meshgrid(us, vs), axis=-1).reshape(-1, 2)
+        ground, dist = ground_rays(camera, plane, grid)
+        keep = dist <= config.max_range
+        if not np.any(keep):
+            raise RigError(
+                f"camera '{camera.name}' does not see the ground plane (origin {plane.origin.tolist()}, normal "
+                f"{plane.normal.tolist()}) within {config.max_range} m: no image pixel's ray meets it in front of "
+                "the camera; check the rig's pose and its 'ground' entry"
+            )
+        ground = ground[keep]
+        kinds, pos, heading, dims = [], [], [], []
+        if "human" in config.classes:
+            kinds.append(np.full(len(ground), int(kraster.KIND_HUMAN)))
+            pos.append(ground)
+            heading.append(np.zeros(len(ground)))
+            dims.append(np.tile(config.human.dims_mean, (len(ground), 1)))
+        if "vehicle" in config.classes:
+            for k in range(config.vehicle.orientations):
+                kinds.append(np.full(len(ground), int(kraster.KIND_VEHICLE)))
+                pos.append(ground)
+                heading.append(np.full(len(ground), math.pi * k / config.vehicle.orientations))
+                dims.append(np.tile(config.vehicle.dims_mean, (len(ground), 1)))
+        self.kind_np = np.concatenate(kinds).astype(np.int32)
+        self.pos_np = np.concatenate(pos).astype(np.float32)
+        self.heading_np = np.concatenate(heading).astype(np.float32)
+        dims_np = np.concatenate(dims).astype(np.float32)
+        c = len(self.kind_np)
+        self.count = c
+        d = device
+        kind2 = wp.array(self.kind_np.reshape(c, 1), dtype=wp.int32, device=d)
+        pos2 = wp.array(self.pos_np.reshape(c, 1, 2), dtype=wp.vec2, device=d)
+        head2 = wp.array(self.heading_np.reshape(c, 1), dtype=wp.float32, device=d)
+        dims2 = wp.array(dims_np.reshape(c, 1, 3), dtype=wp.vec3, device=d)
+        self.hulls = Hulls(c, 1, d)
+        self.hulls.launch(cam_struct, plane_struct, kind2, pos2, head2, dims2, d)
+        rows = self.hulls.rows.numpy()
+        nverts = self.hulls.n.numpy()
+        lengths = np.where(nverts > 0, rows[..., 1] - rows[..., 0] + 1, 0).sum(axis=1)
+        offsets = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int32)
+        self.offsets = wp.array(offsets, dtype=wp.int32, device=d)
+        self.spans = wp.zeros(max(int(lengths.sum()), 1), dtype=wp.vec2i, device=d)
+        wp.launch(
+            kuoh.candidate_spans_kernel,
+            dim=c,
+            inputs=[self.hulls.pts, self.hulls.n, self.hulls.rows, self.offsets, int(kraster.PIECES), camera.width],
+            outputs=[self.spans],
+            device=d,
+        )
+        self.kind = wp.array(self.kind_np, dtype=wp.int32, device=d)
+        self.pos = wp.array(self.pos_np, dtype=wp.vec2, device=d)
+        self.heading = wp.array(self.heading_np, dtype=wp.float32, device=d)
+        self.score = wp.zeros(c, dtype=wp.float32, device=d)
+        self.area = wp.zeros(c, dtype=wp.int32, device=d)
+        self.blocks = min((c + BLOCK - 1) // BLOCK, MAX_BLOCKS)
+        self.chunk = (c + self.blocks - 1) // self.blocks
+        self.part_max = wp.zeros(self.blocks, dtype=wp.float32, device=d)
+        self.part_arg = wp.zeros(self.blocks, dtype=wp.int32, device=d)
+        self.est = wp.zeros(int(kreduce.EST_SIZE), dtype=wp.float64, device=d)
+        self.best = wp.zeros(1, dtype=wp.int32, device=d)
+        self.bytes = int(lengths.sum()) * 8 + c * (int(kraster.PIECES) * (int(kraster.HULL_MAX) * 8 + 16) + 32)
+
+
+def _dynamics_struct(config: TemplateConfig) -> kdyn.Dynamics:
+    h, v = config.human, config.vehicle
+    s = kdyn.Dynamics()
+    s.dt = 1.0 / float(config.fps)
+    s.sigma_pos = config.sigma_pos
+    s.sigma_speed = wp.vec3(0.0, h.sigma_speed, v.sigma_speed)
+    s.sigma_turn = v.sigma_turn
+    s.sigma_dims_human = wp.vec3(*h.sigma_dims)
+    s.sigma_dims_vehicle = wp.vec3(*v.sigma_dims)
+    s.dims_mean_human = wp.vec3(*h.dims_mean)
+    s.dims_mean_vehicle = wp.vec3(*v.dims_mean)
+    s.dims_sd_human = wp.vec3(*h.dims_sd)
+    s.dims_sd_vehicle = wp.vec3(*v.dims_sd)
+    s.dims_min_human = wp.vec3(*h.dims_min)
+    s.dims_max_human = wp.vec3(*h.dims_max)
+    s.dims_min_vehicle = wp.vec3(*v.dims_min)
+    s.dims_max_vehicle = wp.vec3(*v.dims_max)
+    s.init_speed_sd = wp.vec3(0.0, h.init_speed_sd, v.init_speed_sd)
+    s.init_heading_sd = v.init_heading_sd
+    s.speed_max = wp.vec3(1.0, h.speed_max, v.speed_max)
+    s.turn_max = v.turn_max
+    s.t_add = config.t_add
+    s.t_del = config.t_del
+    return s
+
+
+class TemplateTracker(FrameChain):
+    """The S3 template tracker on one device.
+
+    Args:
+        rig: calibrated rig; ``config.camera`` picks the camera, ``rig.ground_plane`` the ground.
+        config: tracker configuration.
+        device: Warp device (``"cpu"``, ``"cuda:0"``).
+        keep_virtual: read back the best particle's virtual scene every frame (reports, Fig. 5).
+        keep_uoh: read back the UOH image every frame (reports, Fig. 4).
+        use_graph: capture the frame chain as CUDA graphs (default: on CUDA).
+
+    Raises:
+        ConfigError: invalid configuration, or more particles than fit in the device's memory.
+        RigError: unknown camera, or a camera that does not see the ground plane.
+
+    Device state (N particles, R = max_objects slots): two ``kernels.dynamics.TemplateState`` buffers (see there
+    for fields, shapes and units), piece hulls (N, 2R, 16) vec2 pixels, penalties m (N,) int32 pixels, complexity c
+    (N,) float32 pixels, weights (N,) float64, ancestors (N,) int32; per slot (R,): label, kind, particle count.
+    """
+
+    def __init__(
+        self,
+        rig: Rig,
+        config: TemplateConfig | None = None,
+        device: str = "cpu",
+        keep_virtual: bool = False,
+        keep_uoh: bool = False,
+        use_graph: bool | None = None,
+    ) -> None:
+        self.config = config = config if config is not None else TemplateConfig()
+        if not isinstance(rig, Rig):
+            raise ConfigError(f"rig: expected a wptrack.rig.Rig, got {type(rig).__name__}")
+        self.rig = rig
+        self.camera = rig[config.camera]
+        self.plane = rig.ground_plane
+        dev = wp.get_device(device)
+        self.device = d = str(dev)
+        self.is_cuda = dev.is_cuda
+        self.use_graph = self.is_cuda if use_graph is None else (bool(use_graph) and self.is_cuda)
+        self.n = n = int(config.particles)
+        self.r = r = int(config.max_objects)
+        self.width, self.height = self.camera.width, self.camera.height
+        self.seed = _seed_words(config.seed)
+        self.cam = camera_struct(self.camera)
+        self.plane_struct = _plane_struct(self.plane)
+        self.dyn = _dynamics_struct(config)
+        self.keep_virtual = bool(keep_virtual)
+        self.keep_uoh = bool(keep_uoh)
+        h, w = self.height, self.width
+        image_bytes = h * (w + 1) * (4 + 4 + 8) + h * w * (1 + 4 + 1)
+        check_fits(n, particle_bytes(r, config.resampling), image_bytes, d, what="template tracker particles")
+        self.candidates = Candidates(self.camera, self.plane, self.cam, self.plane_struct, config, d)
+        log.info(
+            "template tracker: %d particles x %d slots, %d addition candidates, camera %s %dx%d on %s",
+            n,
+            r,
+            self.candidates.count,
+            self.camera.name,
+            w,
+            h,
+            d,
+        )
+        self.state = [_new_state(n, r, d), _new_state(n, r, d)]
+        self.hulls = Hulls(n, r, d)
+        self.q = wp.zeros((h, w), dtype=wp.uint8, device=d)
+        self.q_host = wp.zeros((h, w), dtype=wp.uint8, device="cpu", pinned=self.is_cuda)
+        self.qrow = wp.zeros((h, w + 1), dtype=wp.int32, device=d)
+        self.qtotal = wp.zeros(1, dtype=wp.int32, device=d)
+        self.cov_diff = wp.zeros((h, w + 1), dtype=wp.int32, device=d)
+        self.uoh = wp.zeros((h, w), dtype=wp.int32, device=d)
+        self.gain_rows = wp.zeros((h, w + 1), dtype=wp.float64, device=d)
+        self.virtual = wp.zeros((h, w), dtype=wp.uint8, device=d)
+        self.penalty = wp.zeros(n, dtype=wp.int32, device=d)
+        self.complexity = wp.zeros(n, dtype=wp.float32, device=d)
+        self.weights = wp.zeros(n, dtype=wp.float64, device=d)
+        self.ancestors = wp.array(np.arange(n, dtype=np.int32), device=d)
+        self.resampled = wp.ones(1, dtype=wp.int32, device=d)
+        self.frame = wp.zeros(1, dtype=wp.int32, device=d)
+        self.ess_threshold = wp.array([config.ess_threshold], dtype=wp.float32, device=d)
+        self.blocks = min((n + BLOCK - 1) // BLOCK, MAX_BLOCKS)
+        self.chunk = (n + self.blocks - 1) // self.blocks
+        self.part_max = wp.zeros(self.blocks, dtype=wp.float32, device=d)
+        self.part_arg = wp.zeros(self.blocks, dtype=wp.int32, device=d)
+        self.part = wp.zeros((self.blocks, r, int(kslots.NS)), dtype=wp.float64, device=d)
+        self.est = wp.zeros(int(kreduce.EST_SIZE), dtype=wp.float64, device=d)
+        self.best_index = wp.zeros(1, dtype=wp.int32, device=d)
+        self.slot_est = wp.zeros((r, int(kslots.NE)), dtype=wp.float64, device=d)
+        self.slot_count = wp.zeros(r, dtype=wp.float64, device=d)
+        self.slot_label = wp.full(r, -1, dtype=wp.int32, device=d)
+        self.slot_kind = wp.zeros(r, dtype=wp.int32, device=d)
+        self.next_label = wp.zeros(1, dtype=wp.int32, device=d)
+        self.add = wp.full(2, -1, dtype=wp.int32, device=d)
+        self.best_state = wp.zeros((r, 11), dtype=wp.float32, device=d)
+        self.resampler = Resampler(config.resampling, n, d)
+        self.cost_a = wp.vec3(0.0, config.human.cost_a, config.vehicle.cost_a)
+        self.cost_b = wp.vec3(0.0, config.human.cost_b, config.vehicle.cost_b)
+        self.score_scale = float(config.scale) / float(w * h)
+        pinned = self.is_cuda
+        self.host = {
+            "slot_est": wp.zeros((r, int(kslots.NE)), dtype=wp.float64, device="cpu", pinned=pinned),
+            "slot_label": wp.zeros(r, dtype=wp.int32, device="cpu", pinned=pinned),
+            "slot_kind": wp.zeros(r, dtype=wp.int32, device="cpu", pinned=pinned),
+            "best_state": wp.zeros((r, 11), dtype=wp.float32, device="cpu", pinned=pinned),
+            "add": wp.zeros(2, dtype=wp.int32, device="cpu", pinned=pinned),
+            "qtotal": wp.zeros(1, dtype=wp.int32, device="cpu", pinned=pinned),
+        }
+        if self.keep_virtual:
+            self.host["virtual"] = wp.zeros((h, w), dtype=wp.uint8, device="cpu", pinned=pinned)
+        if self.keep_uoh:
+            self.host["uoh"] = wp.zeros((h, w), dtype=wp.int32, device="cpu", pinned=pinned)
+        self.parity = 0
+        self.frames_done = 0
+        self._graphs: list = [None, None]
+        self._warm = [False, False]
+
+    # --- memory --------------------------------------------------------------------------------------------
+    @property
+    def bytes_per_particle(self) -> int:
+        """Device bytes per particle (state, hulls, weights, resampler)."""
+        return particle_bytes(self.r, self.config.resampling)
+
+    # --- observation ---------------------------------------------------------------------------------------
+    def upload(self, mask: np.ndarray) -> None:
+        """Copy one motion mask (H, W) (nonzero = foreground) to the device.
+
+        Raises:
+            FrameError: the mask's size differs from the camera's calibrated size, or it is not 2D.
+        """
+        m = np.asarray(mask)
+        if m.ndim == 3 and m.shape[2] in (1, 3):
+            m = m.max(axis=2)
+        if m.ndim != 2:
+            raise FrameError(f"mask: expected a 2D (H, W) motion image, got shape {m.shape}")
+        if m.shape != (self.height, self.width):
+            raise FrameError(
+                f"mask size {m.shape[1]}x{m.shape[0]} differs from camera '{self.camera.name}' calibration "
+                f"{self.width}x{self.height} in {self.rig.source}"
+            )
+        np.copyto(self.q_host.numpy(), m != 0, casting="unsafe")
+        wp.copy(self.q, self.q_host)
+
+    # --- the chain -----------------------------------------------------------------------------------------
+    def _observe(self) -> None:
+        d = self.device
+        wp.launch(kxor.mask_rows_kernel, dim=self.height, inputs=[self.q], outputs=[self.qrow], device=d)
+        wp.launch(kxor.mask_total_kernel, dim=1, inputs=[self.qrow], outputs=[self.qtotal], device=d)
+
+    def _raster(self, cur: int) -> None:
+        s = self.state[cur]
+        self.hulls.launch(self.cam, self.plane_struct, s.kind, s.pos, s.heading, s.dims, self.device)
+
+    def _score(self, cur: int) -> None:
+        s = self.state[cur]
+        wp.launch_tiled(
+            kxor.xor_score_kernel,
+            dim=[self.n],
+            inputs=[
+                self.hulls.pts,
+                self.hulls.n,
+                self.hulls.rows,
+                s.kind,
+                s.age,
+                self.qrow,
+                self.qtotal,
+                self.cost_a,
+                self.cost_b,
+                self.score_scale,
+            ],
+            outputs=[s.logw, self.penalty, self.complexity, self.cov_diff],
+            block_dim=SCORE_BLOCK,
+            device=self.device,
+        )
+
+    def _uoh(self) -> None:
+        d = self.device
+        c = self.candidates
+        cfg = self.config
+        wp.launch(
+            kuoh.coverage_uoh_kernel,
+            dim=self.height,
+            inputs=[self.q, self.n, float(cfg.add_beta)],
+            outputs=[self.cov_diff, self.uoh, self.gain_rows],
+            device=d,
+        )
+        wp.launch(
+            kuoh.candidate_score_kernel,
+            dim=c.count,
+            inputs=[
+                c.hulls.rows,
+                c.hulls.n,
+                c.offsets,
+                c.spans,
+                int(kraster.PIECES),
+                self.gain_rows,
+                self.n,
+                float(cfg.add_min_gain),
+                int(cfg.min_candidate_area),
+            ],
+            outputs=[c.score, c.area],
+            device=d,
+        )
+        self._argmax(c.score, c.count, c.blocks, c.chunk, c.part_max, c.part_arg, c.est, c.best)
+
+    def _argmax(self, values, n, blocks, chunk, part_max, part_arg, est, best) -> None:
+        wp.launch_tiled(
+            kreduce.block_max_kernel,
+            dim=[blocks],
+            inputs=[values, n, chunk],
+            outputs=[part_max, part_arg],
+            block_dim=BLOCK,
+            device=self.device,
+        )
+        wp.launch_tiled(
+            kreduce.final_max_kernel,
+            dim=[1],
+            inputs=[part_max, part_arg, blocks],
+            outputs=[est, best],
+            block_dim=BLOCK,
+            device=self.device,
+        )
+
+    def _estimate(self, cur: int) -> None:
+        d = self.device
+        s = self.state[cur]
+        self._argmax(s.logw, self.n, self.blocks, self.chunk, self.part_max, self.part_arg, self.est, self.best_index)
+        wp.launch_tiled(
+            kslots.block_slot_moments_kernel,
+            dim=[self.blocks, self.r],
+            inputs=[s, self.n, self.chunk, self.est],
+            outputs=[self.weights, self.part],
+            block_dim=BLOCK,
+            device=d,
+        )
+        wp.launch_tiled(
+            kslots.final_slot_moments_kernel,
+            dim=[self.r],
+            inputs=[self.part, self.blocks, self.n, self.est, self.ess_threshold],
+            outputs=[self.slot_est, self.slot_count, self.resampled],
+            block_dim=BLOCK,
+            device=d,
+        )
+        wp.launch(
+            kslots.gather_particle_kernel,
+            dim=self.r,
+            inputs=[s, self.best_index, self.penalty],
+            outputs=[self.best_state],
+            device=d,
+        )
+        if self.keep_virtual:
+            wp.launch(
+                kraster.render_labels_kernel,
+                dim=self.height,
+                inputs=[
+                    self.hulls.pts,
+                    self.hulls.n,
+                    self.hulls.rows,
+                    self.hulls.depth,
+                    self.r * int(kraster.PIECES),
+                    self.best_index,
+                ],
+                outputs=[self.virtual],
+                device=d,
+            )
+
+    def _predict(self, cur: int, nxt: int) -> None:
+        d = self.device
+        c = self.candidates
+        wp.launch(
+            kuoh.choose_addition_kernel,
+            dim=1,
+            inputs=[c.best, c.est, int(kreduce.EST_MAXLOGW), c.kind, self.slot_count, self.r],
+            outputs=[self.next_label, self.slot_label, self.slot_kind, self.add],
+            device=d,
+        )
+        self.resampler(self.weights, self.seed, self.frame, self.ancestors, enabled=self.resampled)
+        wp.launch(
+            kdyn.template_predict_kernel,
+            dim=(self.n, self.r),
+            inputs=[
+                self.dyn,
+                self.seed,
+                self.frame,
+                self.ancestors,
+                self.resampled,
+                self.add,
+                self.slot_label,
+                c.kind,
+                c.pos,
+                c.heading,
+                self.state[cur],
+            ],
+            outputs=[self.state[nxt]],
+            device=d,
+        )
+        wp.launch(kreduce.increment_kernel, dim=1, inputs=[self.frame], device=d)
+
+    def _readback(self) -> None:
+        h = self.host
+        wp.copy(h["slot_est"], self.slot_est)
+        wp.copy(h["slot_label"], self.slot_label)
+        wp.copy(h["slot_kind"], self.slot_kind)
+        wp.copy(h["best_state"], self.best_state)
+        wp.copy(h["add"], self.add)
+        wp.copy(h["qtotal"], self.qtotal)
+        if self.keep_virtual:
+            wp.copy(h["virtual"], self.virtual)
+        if self.keep_uoh:
+            wp.copy(h["uoh"], self.uoh)
+
+    def stages(self, src: int, dst: int) -> list[tuple[str, Callable[[], None]]]:
+        """The frame chain as named stages: observe, raster, score, uoh, estimate, resample_predict, readback.
+
+        ``src`` is the buffer holding the predicted particles of this frame; ``dst`` receives the prediction for
+        the next frame."""
+        return [
+            ("observe", self._observe),
+            ("raster", lambda: self._raster(src)),
+            ("score", lambda: self._score(src)),
+            ("uoh", self._uoh),
+            ("estimate", lambda: self._estimate(src)),
+            ("resample_predict", lambda: self._predict(src, dst)),
+            ("readback", self._readback),
+        ]
+
+    # --- frames --------------------------------------------------------------------------------------------
+    def step(self, mask: np.ndarray) -> TemplateEstimate:
+        """Track one frame: upload its motion mask (H, W) and run the chain."""
+        t0 = time.perf_counter()
+        self.upload(mask)
+        est = self.advance()
+        est.timings["step"] = time.perf_counter() - t0
+        return est
+
+    def advance(self) -> TemplateEstimate:
+        """Run one frame on the uploaded mask and return the estimate of that frame."""
+        t0 = time.perf_counter()
+        src, dst = self.parity, 1 - self.parity
+        self._run_chain(src, dst)
+        wp.synchronize_device(self.device)
+        self.parity = dst
+        est = self._estimate_from_host()
+        est.timings["filter"] = time.perf_counter() - t0
+        self.frames_done += 1
+        return est
+
+    def _object(self, label: int, kind: int, ground: np.ndarray, dims: np.ndarray, heading: float, speed: float):
+        return TrackedObject(
+            id=int(label),
+            cls=CLASSES[kind - 1],
+            position=self.plane.to_world(ground),
+            ground=np.asarray(ground, dtype=np.float64),
+            dims=np.asarray(dims, dtype=np.float64),
+            heading=float(heading),
+            speed=float(speed),
+        )
+
+    def _estimate_from_host(self) -> TemplateEstimate:
+        h = self.host
+        se = h["slot_est"].numpy()
+        labels = h["slot_label"].numpy()
+        kinds = h["slot_kind"].numpy()
+        objects = []
+        for s in range(self.r):
+            exist = float(se[s, kslots.SE_EXIST])
+            if exist >= self.config.min_existence and se[s, kslots.SE_COUNT] > 0 and kinds[s] > 0:
+                o = self._object(
+                    labels[s],
+                    int(kinds[s]),
+                    se[s, kslots.SE_X : kslots.SE_X + 2],
+                    se[s, kslots.SE_DIMS : kslots.SE_DIMS + 3],
+                    se[s, kslots.SE_HEADING],
+                    se[s, kslots.SE_SPEED],
+                )
+                o.existence = exist
+                o.std = se[s, kslots.SE_STD : kslots.SE_STD + 2].copy()
+                o.age = float(se[s, kslots.SE_AGE])
+                objects.append(o)
+        objects.sort(key=lambda o: o.id)
+        bs = h["best_state"].numpy()
+        best = []
+        for s in range(self.r):
+            k = int(bs[s, 0])
+            if k > 0:
+                v = bs[s, 5:7]
+                speed = float(np.hypot(*v)) if k == 1 else abs(float(v[0]))
+                heading = float(bs[s, 4]) + (math.pi if k == 2 and v[0] < 0 else 0.0)
+                best.append(self._object(int(bs[s, 1]), k, bs[s, 2:4], bs[s, 7:10], heading, speed))
+        add = h["add"].numpy()
+        added = None
+        if add[0] >= 0:
+            added = (int(labels[add[0]]), CLASSES[int(kinds[add[0]]) - 1])
+        est = TemplateEstimate(
+            frame=self.frames_done,
+            objects=objects,
+            best=best,
+            penalty=int(bs[0, 10]),
+            foreground=int(h["qtotal"].numpy()[0]),
+            ess=float(se[0, kslots.SE_ESS]),
+            loglik=float(se[0, kslots.SE_LOGLIK]),
+            added=added,
+        )
+        if self.keep_virtual:
+            est.virtual = h["virtual"].numpy().copy()
+        if self.keep_uoh:
+            est.uoh = h["uoh"].numpy().copy()
+        return est
+
+    # --- diagnostics ---------------------------------------------------------------------------------------
+    def render_virtual(self, particles: np.ndarray | None = None) -> np.ndarray:
+        """Binary virtual scenes v_i (K, H, W) uint8 of the current particles (as scored by the next frame; for
+        tests and reports; allocates, not for the frame loop)."""
+        idx = np.arange(self.n, dtype=np.int32) if particles is None else np.asarray(particles, dtype=np.int32)
+        self._raster(self.parity)
+        out = wp.zeros((len(idx), self.height, self.width), dtype=wp.uint8, device=self.device)
+        wp.launch(
+            kraster.render_virtual_kernel,
+            dim=(len(idx), self.height),
+            inputs=[
+                self.hulls.pts,
+                self.hulls.n,
+                self.hulls.rows,
+                self.r * int(kraster.PIECES),
+                wp.array(idx, dtype=wp.int32, device=self.device),
+            ],
+            outputs=[out],
+            device=self.device,
+        )
+        return out.numpy()
+
+    def particles(self) -> dict[str, np.ndarray]:
+        """The current (predicted) particle state as host arrays: kind, label, pos, vel, heading, dims, age (N, R,
+        ...), logw (N,)."""
+        s = self.state[self.parity]
+        return {
+            name: getattr(s, name).numpy() for name in ("kind", "label", "pos", "vel", "heading", "dims", "age")
+        } | {"logw": s.logw.numpy()}
+
+    def set_particles(self, **arrays: np.ndarray) -> None:
+        """Overwrite fields of the current particle state (tests, warm starts): kind, label, pos, vel, heading,
+        dims, age with shape (N, R, ...), logw (N,)."""
+        s = self.state[self.parity]
+        for name, value in arrays.items():
+            target = getattr(s, name)
+            target.assign(np.asarray(value).astype(target.numpy().dtype).reshape(target.numpy().shape))
+        self.ancestors.assign(np.arange(self.n, dtype=np.int32))
+        # one label and kind per slot, as the addition kernel keeps them
+        kind, label = s.kind.numpy(), s.label.numpy()
+        slot_label = np.full(self.r, -1, dtype=np.int32)
+        slot_kind = np.zeros(self.r, dtype=np.int32)
+        for slot in range(self.r):
+            alive = np.flatnonzero(kind[:, slot] > 0)
+            if len(alive):
+                slot_label[slot] = label[alive[0], slot]
+                slot_kind[slot] = kind[alive[0], slot]
+        self.slot_label.assign(slot_label)
+        self.slot_kind.assign(slot_kind)
+        self.next_label.fill_(int(max(label.max(initial=-1), slot_label.max(initial=-1)) + 1))
