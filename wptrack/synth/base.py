@@ -5,9 +5,14 @@ registered with :func:`register_scene`; :func:`render_scene` writes any register
 
     out_dir/rig.yaml            the calibrated rig (wptrack.rig format)
     out_dir/<camera>.avi        one lossless video per camera (FFV1, MJPG fallback)
-    out_dir/groundtruth.csv     frame,id,x,y,z (0-based frames, metres, world frame)
+    out_dir/<camera>_mask.avi   only for scenes with perfect foreground masks (:attr:`Scene.writes_masks`, e.g. the
+                                s3 scenes): binary silhouettes of the moving objects, 0/255, same size, lossless
+    out_dir/groundtruth.csv     frame,id,x,y,z (0-based frames, metres, world frame), followed by the scene's extra
+                                columns if it has any (:meth:`Scene.groundtruth_columns`; s3: class, length, width,
+                                height, orientation)
     out_dir/scene.json          scene name, seed, frames, fps, description, the tracker hints as top-level keys
-                                (s1: target, init, particles, sigma), per-camera visible fraction per frame
+                                (s1: target, init, particles, sigma; s3: tracker, ground, max_objects, classes),
+                                ``mask_videos`` when masks are written, per-camera visible fraction per frame
 
 Every file is written atomically (temporary file + rename), so an interrupted run leaves no partial file.
 """
@@ -18,7 +23,7 @@ import logging
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -44,6 +49,8 @@ class Scene(ABC):
     rig: Rig
     fps: float = 25.0
     default_frames: int = 100
+    writes_masks: bool = False
+    """True when :meth:`render_frame_masks` returns perfect foreground masks (written as ``<camera>_mask.avi``)."""
 
     @abstractmethod
     def trajectories(self, frames: int) -> dict[int, np.ndarray]:
@@ -68,6 +75,39 @@ class Scene(ABC):
             One (H, W, 3) uint8 BGR image per camera (rig order), and camera name -> visible fraction of the
             tracked object (1 = fully visible, 0 = hidden or out of view; NaN when it projects nowhere).
         """
+
+    def render_frame_masks(
+        self, index: int, positions: dict[int, np.ndarray], rngs: list[np.random.Generator]
+    ) -> tuple[list[np.ndarray], dict[str, float], list[np.ndarray] | None]:
+        """Render frame ``index`` and, for scenes with :attr:`writes_masks`, the perfect foreground masks.
+
+        The default calls :meth:`render_frame` and returns no masks; scenes that set :attr:`writes_masks` override
+        it.
+
+        Args:
+            index: 0-based frame index.
+            positions: Object id -> (3,) position this frame, metres.
+            rngs: One noise generator per camera (rig order).
+
+        Returns:
+            ``(images, visibility, masks)``: as :meth:`render_frame`, plus one (H, W) uint8 mask per camera (rig
+            order; 255 on the visible pixels of the moving objects, 0 elsewhere) or None.
+        """
+        images, vis = self.render_frame(index, positions, rngs)
+        return images, vis, None
+
+    def groundtruth_columns(self, frames: int) -> dict[str, dict[int, np.ndarray]] | None:
+        """Extra ground-truth columns written after ``frame,id,x,y,z`` (default: none).
+
+        Args:
+            frames: Number of frames (as given to :meth:`trajectories`).
+
+        Returns:
+            None, or column name -> object id -> (frames,) per-frame values (floats, written with 6 decimals, or
+            strings), in column order; every object of :meth:`trajectories` must appear in every column. Values are
+            written only on the rows of frames where the object is present (finite position).
+        """
+        return None
 
 
 @dataclass(frozen=True)
@@ -96,6 +136,7 @@ class SceneResult:
         groundtruth_path: ``out_dir/groundtruth.csv``.
         scene_json: ``out_dir/scene.json``.
         frames: Number of frames rendered.
+        mask_videos: One perfect-mask video per camera (rig order), empty for scenes without masks.
     """
 
     out_dir: Path
@@ -104,6 +145,7 @@ class SceneResult:
     groundtruth_path: Path
     scene_json: Path
     frames: int
+    mask_videos: list[Path] = field(default_factory=list)
 
 
 SCENES: dict[str, SceneSpec] = {}
@@ -148,14 +190,24 @@ def get_scene(name: str) -> SceneSpec:
     return SCENES[name]
 
 
-def _groundtruth_csv(trajectories: dict[int, np.ndarray]) -> str:
-    lines = ["frame,id,x,y,z"]
+def _csv_value(value: Any) -> str:
+    if isinstance(value, str):
+        return value
+    return f"{float(value):.6f}"
+
+
+def _groundtruth_csv(
+    trajectories: dict[int, np.ndarray], extra: dict[str, dict[int, np.ndarray]] | None = None
+) -> str:
+    extra = extra or {}
+    lines = [",".join(["frame", "id", "x", "y", "z", *extra])]
     frames = max(len(p) for p in trajectories.values())
     for f in range(frames):
         for oid in sorted(trajectories):
             p = trajectories[oid][f]
             if np.all(np.isfinite(p)):
-                lines.append(f"{f},{oid},{p[0]:.6f},{p[1]:.6f},{p[2]:.6f}")
+                cells = [_csv_value(column[oid][f]) for column in extra.values()]
+                lines.append(",".join([f"{f},{oid},{p[0]:.6f},{p[1]:.6f},{p[2]:.6f}", *cells]))
     return "\n".join(lines) + "\n"
 
 
@@ -193,20 +245,25 @@ def render_scene(
     out = ensure_writable_dir(out_dir)
 
     trajectories = scene.trajectories(n_frames)
+    extra_columns = scene.groundtruth_columns(n_frames)
     rngs = [np.random.default_rng([int(seed), k]) for k in range(len(scene.rig))]
     rig_path = out / "rig.yaml"
     videos = [out / f"{cam.name}.avi" for cam in scene.rig]
+    mask_videos = [out / f"{cam.name}_mask.avi" for cam in scene.rig] if scene.writes_masks else []
     visibility: dict[str, list[float]] = {cam.name: [] for cam in scene.rig}
 
     start = time.perf_counter()
-    writers = [
-        VideoWriter(path, fps=scene.fps, size=(cam.width, cam.height))
-        for path, cam in zip(videos, scene.rig, strict=True)
-    ]
+    sizes = [(cam.width, cam.height) for cam in scene.rig]
+    writers = [VideoWriter(path, fps=scene.fps, size=size) for path, size in zip(videos, sizes, strict=True)]
+    writers += [VideoWriter(path, fps=scene.fps, size=size) for path, size in zip(mask_videos, sizes, strict=False)]
     try:
         for f in tqdm(range(n_frames), desc=name, unit="frame", disable=not progress):
             positions = {oid: traj[f] for oid, traj in trajectories.items()}
-            images, vis = scene.render_frame(f, positions, rngs)
+            images, vis, masks = scene.render_frame_masks(f, positions, rngs)
+            if mask_videos:
+                if masks is None:
+                    raise RuntimeError(f"scene {name!r} sets writes_masks but returned no masks at frame {f}")
+                images = [*images, *masks]
             for writer, image in zip(writers, images, strict=True):
                 writer.write(image)
             for cam_name, value in vis.items():
@@ -221,7 +278,7 @@ def render_scene(
 
     scene.rig.save(rig_path)
     gt_path = out / "groundtruth.csv"
-    atomic_write_text(gt_path, _groundtruth_csv(trajectories))
+    atomic_write_text(gt_path, _groundtruth_csv(trajectories, extra_columns))
     scene_json = out / "scene.json"
     atomic_write_json(
         scene_json,
@@ -234,6 +291,7 @@ def render_scene(
             "cameras": scene.rig.names,
             "videos": [p.name for p in videos],
             **scene.hints(),
+            **({"mask_videos": [p.name for p in mask_videos]} if mask_videos else {}),
             "visibility": visibility,
         },
     )
@@ -245,4 +303,5 @@ def render_scene(
         groundtruth_path=gt_path,
         scene_json=scene_json,
         frames=n_frames,
+        mask_videos=mask_videos,
     )
