@@ -3,9 +3,9 @@
 A report is a folder (default ``RUN_DIR/report``) with PNG images, a movie and ``index.html``, one page that opens in
 a browser with no network access. What goes into it depends on the tracker that wrote the run (run.json
 ``tracker``): each tracker registers its section builders with :func:`register_reporter` (see
-:mod:`wptrack.report.model`); the S1 colour tracker's are in :mod:`wptrack.report.color`. 3D views are rendered
-off-screen with PyVista (EGL/OSMesa: no display, no GPU needed); PyVista, VTK and matplotlib are imported only when
-a report is built.
+:mod:`wptrack.report.model`); the S1 colour tracker's are in :mod:`wptrack.report.color`, the S3 template
+tracker's in :mod:`wptrack.report.templates`. 3D views are rendered off-screen with PyVista (EGL/OSMesa: no display,
+no GPU needed); PyVista, VTK and matplotlib are imported only when a report is built.
 
 Modules: :mod:`.data` (loading a run), :mod:`.vtkcam` (OpenCV -> VTK camera), :mod:`.scene3d` (3D stills, views
 from the rig cameras, movie frames), :mod:`.overlays` (particles on the real frames), :mod:`.plots` (2D plots),
@@ -24,7 +24,8 @@ import numpy as np
 from ..errors import ConfigError, OutputError
 from ..io import RUN_FILE, ensure_writable_dir
 from . import color as _color  # noqa: F401  (registers the colour tracker's report)
-from .data import RunData, find_sweep, load_run, load_sweep
+from . import templates as _templates  # noqa: F401  (registers the template tracker's report)
+from .data import GROUNDTRUTH_FILE, RunData, find_sweep, load_run, load_sweep, trajectories
 from .model import REPORTERS, Figure, ReportContext, ReporterSpec, ReportOptions, Section, register_reporter
 
 __all__ = [
@@ -37,6 +38,7 @@ __all__ = [
     "build_report",
     "choose_frames",
     "register_reporter",
+    "use_groundtruth",
 ]
 
 log = logging.getLogger(__name__)
@@ -55,6 +57,9 @@ _OWN_FILES = (
     "movie.mp4",
     "movie.webm",
     "movie.gif",
+    "calibration.png",
+    "fig5_*.png",
+    "objects_vs_frame.png",
 )
 
 
@@ -82,6 +87,27 @@ def choose_frames(data: RunData, requested: Sequence[int] | None, count: int = 4
     return [int(pool[i]) for i in idx]
 
 
+def use_groundtruth(data: RunData, path: str | Path) -> None:
+    """Compare the run with the ground truth in ``path`` (a ``frame,id,x,y,z,...`` CSV) instead of the one found
+    beside the run or the rig.
+
+    Raises:
+        ConfigError: The file is missing or unreadable.
+    """
+    from ..errors import WptrackError
+    from ..io import read_tracks
+
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"ground truth not found: {p}")
+    try:
+        data.groundtruth = trajectories(read_tracks(p), p)
+    except WptrackError as e:
+        raise ConfigError(f"cannot read ground truth {p}: {e}") from None
+    data.groundtruth_path = p
+    data.notes[:] = [n for n in data.notes if not n.startswith((f"no {GROUNDTRUTH_FILE}", "cannot read ground truth"))]
+
+
 def _clean(out_dir: Path) -> None:
     """Remove files of a previous report in ``out_dir`` (only the names this package writes)."""
     for pattern in _OWN_FILES:
@@ -105,7 +131,7 @@ def build_report(
         out_dir: Report folder (default ``run_dir/report``); created if needed.
         sweep: A sweep folder or ``errors.csv`` to add the sigma_m heatmap to a run's report.
         frames: Frames whose particle clouds and overlays are shown (default: a few evenly spaced).
-        options: Rendering settings (sizes, movie length...); ``frames`` overrides ``options.frames``.
+        options: Rendering settings (sizes, movie length, ground truth...); ``frames`` overrides ``options.frames``.
 
     Returns:
         Path of ``index.html``.
@@ -130,6 +156,8 @@ def build_report(
             sweep_data = load_sweep(run_dir)
     else:
         data = load_run(run_dir, known=list(REPORTERS))
+        if options.groundtruth is not None:
+            use_groundtruth(data, options.groundtruth)
         spec = REPORTERS[data.tracker]
     out = ensure_writable_dir(Path(out_dir) if out_dir is not None else run_dir / REPORT_DIR)
     if data is not None and out.resolve() == data.run_dir.resolve():

@@ -78,6 +78,8 @@ class ReportOptions:
         movie_fps: Movie frames per second.
         max_points: At most this many particles drawn per cloud in 3D (display subsample).
         overlay_scale: Overlays are drawn on frames upscaled by this factor (finer markers).
+        groundtruth: A ground-truth CSV (``frame,id,x,y,z,...``) to compare with; None looks for
+            ``groundtruth.csv`` in the run folder and beside the rig (template runs also in ``../scene``).
     """
 
     frames: tuple[int, ...] | None = None
@@ -89,6 +91,7 @@ class ReportOptions:
     movie_fps: float = 10.0
     max_points: int = 1000
     overlay_scale: int = 2
+    groundtruth: str | Path | None = None
 
 
 @dataclass

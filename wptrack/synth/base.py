@@ -196,9 +196,7 @@ def _csv_value(value: Any) -> str:
     return f"{float(value):.6f}"
 
 
-def _groundtruth_csv(
-    trajectories: dict[int, np.ndarray], extra: dict[str, dict[int, np.ndarray]] | None = None
-) -> str:
+def _groundtruth_csv(trajectories: dict[int, np.ndarray], extra: dict[str, dict[int, np.ndarray]] | None = None) -> str:
     extra = extra or {}
     lines = [",".join(["frame", "id", "x", "y", "z", *extra])]
     frames = max(len(p) for p in trajectories.values())
