@@ -6,5 +6,6 @@ from __future__ import annotations
 
 from .colour import ColourSuite
 from .endtoend import EndToEndSuite
+from .templates import TemplateSuite
 
-SUITES = {ColourSuite.name: ColourSuite, EndToEndSuite.name: EndToEndSuite}
+SUITES = {ColourSuite.name: ColourSuite, EndToEndSuite.name: EndToEndSuite, TemplateSuite.name: TemplateSuite}

@@ -75,7 +75,7 @@ def xor_score_kernel(
     slots = kind.shape[1]
     pieces = slots * PIECES
     width = qrow.shape[1] - 1
-    y0 = int(2147483647)
+    y0 = qrow.shape[0]  # empty row range unless a piece is visible (no overflow of y0 + lane)
     y1 = int(-1)
     for q in range(pieces):
         if hull_n[i, q] > 0:

@@ -66,3 +66,50 @@ def test_bench_end_to_end_tiny(tmp_path, capsys):
     (r,) = json.loads(out.read_text())["results"]
     assert r["frames"] == 5 and r["decode_s"] > 0 and r["total_s"] > 0
     assert "decode alone" in capsys.readouterr().out
+
+
+TEMPLATE_KEYS = {
+    "tracker",
+    "particles",
+    "objects",
+    "frame_ms",
+    "frames_per_s",
+    "step_ms",
+    "stages_ms",
+    "measure_ms",
+    "particles_per_s",
+    "bytes_per_particle",
+    "state_bytes_est",
+    "numpy_ms",
+    "penalty_mean",
+    "penalty_max_abs_diff",
+    "penalty_max_diff_rel_mean",
+    "penalty_median_rel_diff",
+    "penalty_frac_particles_diff",
+    "uoh_frac_pixels_diff",
+    "equivalent",
+    "equivalence_particles",
+}
+
+
+def test_bench_templates_tiny(tmp_path, capsys):
+    """The template suite on one tiny CPU case: N=100, one object, 2 frames; the Warp penalties, complexities,
+    log-weights and UOH agree with the NumPy reference on the same particles."""
+    out = tmp_path / "templates.json"
+    argv = ["bench", "-q", "--tracker", "templates", "--device", "cpu", "--particles", "100", "--objects", "1"]
+    code = main([*argv, "--frames", "2", "--out", str(out)])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    (r,) = json.loads(out.read_text())["results"]
+    assert TEMPLATE_KEYS <= set(r)
+    assert (r["tracker"], r["particles"], r["objects"], r["equivalence_particles"]) == ("templates", 100, 1, 100)
+    assert r["equivalent"] is True and r["penalty_median_rel_diff"] < 1e-3
+    assert r["penalty_mean"] > 0 and r["complexity_max_rel_diff"] < 1e-5 and r["uoh_frac_pixels_diff"] < 1e-3
+    assert r["frame_ms"] > 0 and r["numpy_ms"] > 0 and r["particles_per_s"] > 0
+    assert set(r["stages_ms"]) == {"observe", "raster", "score", "uoh", "estimate", "resample_predict", "readback"}
+    assert "fps" in text and "templates" in text
+
+
+def test_bench_templates_rejects_cameras(capsys):
+    assert main(["bench", "--tracker", "templates", "--device", "cpu", "--cameras", "2"]) == 2
+    assert "--objects" in capsys.readouterr().err

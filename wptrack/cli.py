@@ -393,17 +393,22 @@ def cmd_bench(args) -> int:
     import warp as wp
 
     suite = suites[args.tracker]
+    second = getattr(suite, "second", "cameras")  # the case's second field: cameras, or objects (templates)
+    for flag in ("cameras", "objects"):
+        if flag != second and getattr(args, flag):
+            raise ConfigError(f"--{flag}: the {args.tracker!r} suite's cases are particles x {second}; use --{second}")
     grid = suite.default_grid(wp.get_device(device).is_cuda)
-    if args.particles or args.cameras:  # the product of the given values, the suite's defaults for the others
+    if args.particles or getattr(args, second):  # the product of the given values, the suite's defaults for the others
         counts = [int(p) for p in args.particles] if args.particles else sorted({g.particles for g in grid})
-        cams = args.cameras or sorted({g.cameras for g in grid})
-        grid = [type(grid[0])(p, c) for c in cams for p in counts]
+        seconds = getattr(args, second) or sorted({getattr(g, second) for g in grid})
+        grid = [type(grid[0])(p, c) for c in seconds for p in counts]
     results = []
-    print(HEADER)
+    row = getattr(suite, "format_row", format_row)
+    print(getattr(suite, "HEADER", HEADER))
     for case in grid:
         r = suite.run_case(case, device, frames=args.frames, numpy_max=args.numpy_max)
         results.append(r)
-        print(format_row(r), flush=True)
+        print(row(r), flush=True)
         if args.out:
             atomic_write_json(args.out, {"device": device, "versions": versions(), "results": results})
     if args.out:
@@ -570,6 +575,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--tracker", default="color", help="suite name (default: color)")
     b.add_argument("--particles", type=float, nargs="+", help="particle counts (default: the suite's grid)")
     b.add_argument("--cameras", type=int, nargs="+", help="camera counts (default: the suite's grid)")
+    b.add_argument("--objects", type=int, nargs="+", help="object counts of the templates suite (default: its grid)")
     b.add_argument("--frames", type=_positive_int, default=50, help="timed frames per case")
     b.add_argument("--numpy-max", type=int, default=100_000, help="largest N also run by the NumPy reference")
     b.add_argument("--out", default=None, help="write the results as JSON here")
