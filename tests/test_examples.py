@@ -42,12 +42,20 @@ def test_drift_example(device):
     assert len(out["runs"]["further"]) == 12
 
 
+def test_track_templates_example(device, capsys):
+    pytest.importorskip("motmetrics")
+    out = load("track_templates").main(["--device", device, "--frames", "40", "--particles", "300"])
+    assert out["frames"] == 40 and out["rows"] > 0
+    assert out["evaluation"]["mota"] > 0.3  # people are found and followed on the perfect masks
+    assert "frame   20" in capsys.readouterr().out
+
+
 def test_every_example_is_tested():
-    tested = {"track_colour", "sigma_sweep", "drift"}
+    tested = {"track_colour", "sigma_sweep", "drift", "track_templates"}
     assert {p.stem for p in EXAMPLES.glob("*.py")} == tested, "add a test for the new example"
 
 
-@pytest.mark.parametrize("name", ["track_colour", "sigma_sweep", "drift"])
+@pytest.mark.parametrize("name", ["track_colour", "sigma_sweep", "drift", "track_templates"])
 def test_examples_have_device_and_frames_flags(name):
     text = (EXAMPLES / f"{name}.py").read_text()
     assert "--device" in text and "--frames" in text

@@ -1,0 +1,129 @@
+"""`wptrack track templates` and `wptrack evaluate` end to end, and their bad-input errors (one line, exit 2,
+no traceback, nothing written)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from wptrack.cli import main
+from wptrack.errors import ConfigError
+from wptrack.frames import write_video
+from wptrack.rig import Camera, Rig
+from wptrack.trackers.templates import HumanPrior, TemplateConfig, TemplateTracker
+
+
+def _rig(tmp_path, look_up: bool = False) -> str:
+    target = [0, 8, 12] if look_up else [0, 8, 0]
+    cam = Camera.look_at("cam0", 160, 120, position=[0, -6, 5], target=target, fx=130)
+    path = tmp_path / "rig.yaml"
+    Rig(cameras=(cam,)).save(path)
+    return str(path)
+
+
+def _masks(tmp_path, value: int, size=(160, 120), frames: int = 4) -> str:
+    path = tmp_path / f"masks{value}_{size[0]}.avi"
+    write_video(path, [np.full((size[1], size[0], 3), value, np.uint8) for _ in range(frames)], fps=10)
+    return str(path)
+
+
+def _run(args, capsys):
+    try:
+        code = main(args)
+    except SystemExit as e:  # argparse errors exit from the parser
+        code = e.code
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+@pytest.fixture
+def scene(tmp_path_factory):
+    """A tiny s3-people run on the perfect masks (CPU)."""
+    tmp = tmp_path_factory.mktemp("s3")
+    assert main(["synth", "s3-people", "--out", str(tmp / "scene"), "--frames", "12", "-q"]) == 0
+    return tmp
+
+
+def test_track_templates_writes_outputs_and_evaluates(scene, capsys):
+    pytest.importorskip("motmetrics")
+    out = scene / "run"
+    code, text, err = _run(
+        [
+            "track", "templates", "--rig", str(scene / "scene/rig.yaml"), "--masks", str(scene / "scene/cam0_mask.avi"),
+            "--out", str(out), "--device", "cpu", "--particles", "200", "-q",
+            "--groundtruth", str(scene / "scene/groundtruth.csv"),
+        ],
+        capsys,
+    )  # fmt: skip
+    assert code == 0, err
+    assert "accuracy" in text and "MOTA" in text
+    header = (out / "tracks.csv").read_text().splitlines()[0]
+    assert header.startswith("frame,id,x,y,z,class,length,width,height,orientation")
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "complete" and run["tracker"] == "templates" and run["summary"]["frames"] == 12
+    assert (out / "best.csv").exists() and (out / "virtual.avi").exists()
+    code, text, err = _run(["evaluate", str(out), "--groundtruth", str(scene / "scene/groundtruth.csv")], capsys)
+    assert code == 0 and "IDF1" in text
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--max-objects", "0"], "max_objects"),
+        (["--particles", "-3"], "positive integer"),
+        (["--t-add", "1.5"], "t_add"),
+        (["--classes", "dog"], "classes"),
+    ],
+)
+def test_bad_parameters(tmp_path, capsys, extra, message):
+    out = tmp_path / "out"
+    code, _, err = _run(
+        ["track", "templates", "--rig", _rig(tmp_path), "--masks", _masks(tmp_path, 0), "--out", str(out), *extra],
+        capsys,
+    )
+    assert code == 2 and message in err and "Traceback" not in err
+    assert not out.exists()
+
+
+def test_mask_size_differs_from_camera(tmp_path, capsys):
+    out = tmp_path / "out"
+    masks = _masks(tmp_path, 255, size=(100, 120))
+    code, _, err = _run(["track", "templates", "--rig", _rig(tmp_path), "--masks", masks, "--out", str(out)], capsys)
+    assert code == 2 and "100x120" in err and "160x120" in err and "cam0" in err
+    assert not out.exists()
+
+
+def test_camera_that_does_not_see_the_ground(tmp_path, capsys):
+    out = tmp_path / "out"
+    rig = _rig(tmp_path, look_up=True)
+    code, _, err = _run(["track", "templates", "--rig", rig, "--masks", _masks(tmp_path, 0), "--out", str(out)], capsys)
+    assert code == 2 and "does not see the ground plane" in err
+    assert not out.exists()
+
+
+def test_no_input(tmp_path, capsys):
+    code, _, err = _run(["track", "templates", "--rig", _rig(tmp_path), "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and "--video" in err
+
+
+def test_negative_template_priors():
+    with pytest.raises(ConfigError, match="human.dims_sd"):
+        HumanPrior(dims_sd=(-0.1, 0.01, 0.01))
+    with pytest.raises(ConfigError, match="max_objects"):
+        TemplateConfig(max_objects=17)
+
+
+def test_empty_and_full_foreground(tmp_path):
+    """An empty scene tracks nothing and adds nothing; an all-foreground frame stays finite."""
+    rig = Rig.load(_rig(tmp_path))
+    tracker = TemplateTracker(rig, TemplateConfig(particles=100, max_objects=4), device="cpu")
+    for _ in range(5):
+        est = tracker.step(np.zeros((120, 160), np.uint8))
+        assert est.objects == [] and est.added is None and est.penalty == 0
+    for _ in range(8):
+        est = tracker.step(np.ones((120, 160), np.uint8))
+        assert np.isfinite(est.ess) and np.isfinite(est.loglik)
+        assert all(np.all(np.isfinite(o.position)) for o in est.objects + est.best)
+    assert est.added is not None or est.best  # everything is foreground: objects get proposed
