@@ -824,8 +824,8 @@ class TemplateTracker(FrameChain):
             id=int(label),
             cls=CLASSES[kind - 1],
             position=self.plane.to_world(ground),
-            ground=np.asarray(ground, dtype=np.float64),
-            dims=np.asarray(dims, dtype=np.float64),
+            ground=np.array(ground, dtype=np.float64),  # copies: the host buffers are reused every frame
+            dims=np.array(dims, dtype=np.float64),
             heading=float(heading),
             speed=float(speed),
         )

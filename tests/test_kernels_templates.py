@@ -1,0 +1,1377 @@
+"""Kernels of the S3 template tracker (Juza et al., eqs. 4-13) against brute-force NumPy references, on every device.
+
+* ``raster``: template vertices re-derived in NumPy from the module docstring, projected with ``cv2.projectPoints``
+  (``rig.Camera.project``), convex hulls by a float64 monotone chain, pixel centres tested against the closed hulls;
+* ``xor``/``uoh``: per-pixel XOR, coverage counts, UOH and addition gains from materialised virtual images;
+* ``dynamics``: eqs. 8-9 in float64, gathering, deletion/addition rates and noise statistics in binomial / normal
+  4-sigma bands (sample sizes stated per test);
+* ``slots``: weighted per-slot moments at sizes that are not multiples of the block (a dropped partial sum fails);
+* the whole tracker on a rendered scene (two walkers and a car), on empty and saturated masks, and reproducibility.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import pytest
+import warp as wp
+from wptrack.kernels import dynamics as kdyn
+from wptrack.kernels import raster as kraster
+from wptrack.kernels import reduce as kreduce
+from wptrack.kernels import slots as kslots
+from wptrack.kernels import uoh as kuoh
+from wptrack.kernels import xor as kxor
+
+from wptrack.pf import BLOCK, _seed_words
+from wptrack.rig import Camera, GroundPlane, Rig
+from wptrack.trackers.templates import (
+    SCORE_BLOCK,
+    Candidates,
+    Hulls,
+    TemplateConfig,
+    TemplateTracker,
+    VehiclePrior,
+    _dynamics_struct,
+    _plane_struct,
+    ground_rays,
+)
+from wptrack.warpcams import camera_struct
+
+HUMAN, VEHICLE = 1, 2
+PIECES = int(kraster.PIECES)
+EDGE_EPS = 0.01
+"""Pixels whose centre lies within this distance (pixels) of a hull edge are not compared (float32 vs float64)."""
+NEG_INF32 = np.float32(-3.0e38)
+TILTED = GroundPlane(origin=(0.4, -0.7, 0.3), normal=(0.12, -0.2, 1.0), x_axis=(1.0, 0.3, 0.0))
+
+
+# ------------------------------------------------------------------------------------------- NumPy reference
+
+
+def template_vertices(kind: int, piece: int, dims, heading: float) -> np.ndarray:
+    """Vertices (n, 3) of one piece in the object's frame (along e1, along e2, height), metres, float64.
+
+    Re-derived from ``kernels.raster``'s docstring: human body = regular octagonal prism inscribed in a cylinder of
+    the body radius, from the ground to ``height - 2 head_r`` (at least 0.1 m); head = octahedron + cube vertices on
+    the head sphere centred at ``height - head_r``; vehicle = lower box (full length/width, 0.55 of the height) and a
+    cabin box (0.6 of the length, 0.9 of the width) up to the full height, rotated by the heading.
+    """
+    if kind == HUMAN:
+        height, body_r, head_r = (float(v) for v in dims)
+        if piece == 0:
+            a = np.arange(8) * (2.0 * np.pi / 8.0)
+            ring = np.stack([body_r * np.cos(a), body_r * np.sin(a)], axis=1)
+            top = max(height - 2.0 * head_r, 0.1)
+            return np.concatenate([np.c_[ring, np.zeros(8)], np.c_[ring, np.full(8, top)]])
+        centre = np.array([0.0, 0.0, height - head_r])
+        octa = np.concatenate([np.eye(3), -np.eye(3)]) * head_r
+        cube = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * head_r / np.sqrt(3)
+        return np.concatenate([octa, cube]) + centre
+    if kind == VEHICLE:
+        length, width, height = (float(v) for v in dims)
+        hl, hw, z0, z1 = 0.5 * length, 0.5 * width, 0.0, 0.55 * height
+        if piece == 1:
+            hl, hw, z0, z1 = hl * 0.6, hw * 0.9, z1, height
+        box = np.array([[sx * hl, sy * hw, z] for sx in (-1, 1) for sy in (-1, 1) for z in (z0, z1)])
+        c, s = math.cos(heading), math.sin(heading)
+        return np.c_[c * box[:, 0] - s * box[:, 1], s * box[:, 0] + c * box[:, 1], box[:, 2]]
+    return np.zeros((0, 3))
+
+
+def monotone_hull(pts: np.ndarray) -> np.ndarray:
+    """Convex hull (k, 2) of 2D points, counter-clockwise in (u, v) axes, collinear points dropped (float64)."""
+    p = sorted({(float(x), float(y)) for x, y in pts})
+    if len(p) < 3:
+        return np.array(p)
+
+    def cross(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    lower, upper = [], []
+    for q in p:
+        while len(lower) >= 2 and cross(lower[-2], lower[-1], q) <= 0:
+            lower.pop()
+        lower.append(q)
+    for q in reversed(p):
+        while len(upper) >= 2 and cross(upper[-2], upper[-1], q) <= 0:
+            upper.pop()
+        upper.append(q)
+    return np.array(lower[:-1] + upper[:-1])
+
+
+def polygon_area(poly: np.ndarray) -> float:
+    x, y = poly[:, 0], poly[:, 1]
+    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+
+
+def hull_pixels(hull: np.ndarray, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """(inside, near): pixel centres (H, W) in the closed CCW hull, and those within EDGE_EPS of its boundary."""
+    vs, us = np.mgrid[0:height, 0:width].astype(np.float64)
+    inside = np.ones((height, width), dtype=bool)
+    dist = np.full((height, width), np.inf)
+    k = len(hull)
+    for e in range(k):
+        a, b = hull[e], hull[(e + 1) % k]
+        d = b - a
+        inside &= d[0] * (vs - a[1]) - d[1] * (us - a[0]) >= 0.0
+        t = np.clip(((us - a[0]) * d[0] + (vs - a[1]) * d[1]) / float(d @ d), 0.0, 1.0)
+        dist = np.minimum(dist, np.hypot(us - a[0] - t * d[0], vs - a[1] - t * d[1]))
+    return inside, dist < EDGE_EPS
+
+
+def world_points(plane: GroundPlane, pos, verts: np.ndarray) -> np.ndarray:
+    return plane.to_world(np.asarray(pos, dtype=np.float64) + verts[:, :2], verts[:, 2])
+
+
+def camera_r2(cam: Camera, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(depth, squared normalised radius) of world points (float64)."""
+    xc = pts @ cam.R.T + cam.t
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r2 = (xc[:, 0] / xc[:, 2]) ** 2 + (xc[:, 1] / xc[:, 2]) ** 2
+    return xc[:, 2], r2
+
+
+def reference_piece(cam: Camera, r2_max: float, plane: GroundPlane, kind, pos, heading, dims, piece):
+    """NumPy reference of one piece: None when it does not exist or is not seen (a vertex behind the camera or beyond
+    the distortion fold radius), else a dict with the projected vertices ``uv`` and the float64 ``hull``."""
+    verts = template_vertices(kind, piece, dims, heading)
+    if len(verts) == 0:
+        return None
+    pts = world_points(plane, pos, verts)
+    depth, r2 = camera_r2(cam, pts)
+    if np.any(depth <= 1e-6) or np.any(r2 > r2_max):
+        return None
+    uv, _ = cam.project(pts)
+    return {"uv": uv, "hull": monotone_hull(uv)}
+
+
+def ambiguous_object(cam: Camera, r2_max: float, plane: GroundPlane, kind, pos, heading, dims) -> bool:
+    """True when float32 rounding could flip the kernel's visibility decision for a piece of the object."""
+    for piece in range(PIECES):
+        verts = template_vertices(kind, piece, dims, heading)
+        if len(verts) == 0:
+            continue
+        depth, r2 = camera_r2(cam, world_points(plane, pos, verts))
+        if np.any(np.abs(depth) < 1e-3) or np.any(np.abs(r2 - r2_max) < 1e-4 * r2_max):
+            return True
+    return False
+
+
+def reference_scene(cam: Camera, plane: GroundPlane, kind, pos, heading, dims):
+    """Virtual images of every particle in float64: ``(image (N, H, W) bool, near (N, H, W) bool, pieces)``;
+    ``pieces[i][q]`` is the reference of piece ``q = slot * PIECES + piece`` (None: nothing drawn) and ``near`` marks
+    the pixel centres within EDGE_EPS of a drawn hull's boundary."""
+    n, r = kind.shape
+    r2_max = camera_struct(cam).r2_max
+    image = np.zeros((n, cam.height, cam.width), dtype=bool)
+    near = np.zeros_like(image)
+    pieces = []
+    for i in range(n):
+        row = []
+        for s in range(r):
+            for piece in range(PIECES):
+                ref = reference_piece(cam, r2_max, plane, kind[i, s], pos[i, s], heading[i, s], dims[i, s], piece)
+                row.append(ref)
+                if ref is not None:
+                    assert len(ref["hull"]) >= 3
+                    inside, edge = hull_pixels(ref["hull"], cam.width, cam.height)
+                    image[i] |= inside
+                    near[i] |= edge
+        pieces.append(row)
+    return image, near, pieces
+
+
+# --------------------------------------------------------------------------------------------- scene builders
+
+
+def random_camera(
+    rng, width: int = 160, height: int = 120, plane: GroundPlane | None = None, above=(3.0, 9.0), away=(6.0, 14.0)
+) -> Camera:
+    """A camera ``above`` metres above the ground looking down at it from ``away`` metres, with OpenCV distortion
+    (k1 in [-0.1, 0.05], small k2, p1, p2)."""
+    plane = plane if plane is not None else GroundPlane()
+    target = plane.to_world(rng.uniform(-2.0, 2.0, 2))
+    az = rng.uniform(0.0, 2.0 * np.pi)
+    d = rng.uniform(*away)
+    up = plane.normal
+    position = target + d * (math.cos(az) * plane.x_axis + math.sin(az) * plane.y_axis) + rng.uniform(*above) * up
+    dist = [rng.uniform(-0.1, 0.05), rng.uniform(-0.01, 0.01), rng.uniform(-2e-3, 2e-3), rng.uniform(-2e-3, 2e-3), 0]
+    return Camera.look_at("cam", width, height, position, target, rng.uniform(0.8, 1.3) * width, up=up, dist=dist)
+
+
+def tall_human(cam: Camera, plane: GroundPlane, rows: int = 72):
+    """Ground position and dims of a 2 m human that covers more than ``rows`` image rows (searched down the
+    image's centre column and below it), or None."""
+    dims = np.array([2.0, 0.3, 0.13], np.float32)
+    r2_max = camera_struct(cam).r2_max
+    for v in np.linspace(0.5, 3.0, 51) * cam.height:
+        g, dist = ground_rays(cam, plane, np.array([[cam.width / 2, v]]))
+        if not np.isfinite(dist[0]):
+            continue
+        g = g[0].astype(np.float32)
+        refs = [reference_piece(cam, r2_max, plane, HUMAN, g, 0.0, dims, piece) for piece in range(PIECES)]
+        if any(ref is None for ref in refs) or ambiguous_object(cam, r2_max, plane, HUMAN, g, 0.0, dims):
+            continue
+        top = min(ref["hull"][:, 1].min() for ref in refs)
+        bottom = max(ref["hull"][:, 1].max() for ref in refs)
+        if min(bottom, cam.height - 1) - max(top, 0) > rows:
+            return g, dims
+    return None
+
+
+def random_object(rng, kind: int):
+    if kind == HUMAN:
+        return rng.uniform([1.3, 0.15, 0.08], [2.0, 0.35, 0.14]), rng.uniform(-np.pi, np.pi)
+    return rng.uniform([3.0, 1.5, 1.2], [6.0, 2.3, 2.0]), rng.uniform(-np.pi, np.pi)
+
+
+def random_scene(rng, cam: Camera, plane: GroundPlane, n: int, r: int, p_empty: float = 0.3, margin: float = 0.2):
+    """N particles x R slots of random humans and vehicles whose ground points lie under image points (some a little
+    outside the image, so objects are clipped), none of them on a float32 visibility tie."""
+    r2_max = camera_struct(cam).r2_max
+    kind = np.zeros((n, r), dtype=np.int32)
+    pos = np.zeros((n, r, 2), dtype=np.float32)
+    heading = np.zeros((n, r), dtype=np.float32)
+    dims = np.zeros((n, r, 3), dtype=np.float32)
+    for i in range(n):
+        for s in range(r):
+            if rng.uniform() < p_empty:
+                continue
+            k = HUMAN if rng.uniform() < 0.6 else VEHICLE
+            while True:
+                px = rng.uniform([-margin * cam.width, 0.25 * cam.height], [(1 + margin) * cam.width, cam.height * 1.1])
+                ground, dist = ground_rays(cam, plane, px[None])
+                if not dist[0] < 30.0:
+                    continue
+                d, a = random_object(rng, k)
+                g = ground[0].astype(np.float32)
+                if not ambiguous_object(cam, r2_max, plane, k, g, np.float32(a), d.astype(np.float32)):
+                    break
+            kind[i, s], pos[i, s], heading[i, s], dims[i, s] = k, g, a, d
+    return kind, pos, heading, dims
+
+
+def device_scene(device, kind, pos, heading, dims):
+    n, r = kind.shape
+    return (
+        wp.array(kind.astype(np.int32), dtype=wp.int32, device=device),
+        wp.array(np.asarray(pos, np.float32).reshape(n, r, 2), dtype=wp.vec2, device=device),
+        wp.array(np.asarray(heading, np.float32).reshape(n, r), dtype=wp.float32, device=device),
+        wp.array(np.asarray(dims, np.float32).reshape(n, r, 3), dtype=wp.vec3, device=device),
+    )
+
+
+def raster(device, cam: Camera, plane: GroundPlane, kind, pos, heading, dims) -> Hulls:
+    """``template_hulls_kernel`` over a scene, as the tracker launches it."""
+    n, r = kind.shape
+    hulls = Hulls(n, r, device)
+    hulls.launch(camera_struct(cam), _plane_struct(plane), *device_scene(device, kind, pos, heading, dims), device)
+    return hulls
+
+
+def render(device, hulls: Hulls, slots: int, width: int, height: int, particles) -> np.ndarray:
+    """``render_virtual_kernel``: binary virtual images (K, H, W) of the listed particles."""
+    idx = np.asarray(particles, dtype=np.int32)
+    out = wp.full((len(idx), height, width), 7, dtype=wp.uint8, device=device)  # 7: catches unwritten pixels
+    wp.launch(
+        kraster.render_virtual_kernel,
+        dim=(len(idx), height),
+        inputs=[hulls.pts, hulls.n, hulls.rows, slots * PIECES, wp.array(idx, dtype=wp.int32, device=device)],
+        outputs=[out],
+        device=device,
+    )
+    return out.numpy()
+
+
+def check_against_reference(cam, plane, kind, pos, heading, dims, hulls: Hulls, got: np.ndarray, order) -> int:
+    """Compare the kernels' hulls and virtual images (particles ``order``) with the NumPy reference; returns the
+    number of covered reference pixels (so callers can require a non-trivial scene)."""
+    ref, near, pieces = reference_scene(cam, plane, kind, pos, heading, dims)
+    hn, hp, hr, hd = hulls.n.numpy(), hulls.pts.numpy(), hulls.rows.numpy(), hulls.depth.numpy()
+    w, h = cam.width, cam.height
+    covered = 0
+    perimeter = 0.0
+    for k, i in enumerate(order):
+        assert set(np.unique(got[k])) <= {0, 1}
+        keep = ~near[i]
+        mismatch = np.argwhere((got[k] != ref[i]) & keep)
+        assert len(mismatch) == 0, f"particle {i}: {len(mismatch)} pixels differ, first (v, u) {mismatch[:5].tolist()}"
+        covered += int(ref[i].sum())
+        for q, piece in enumerate(pieces[i]):
+            if piece is None:
+                assert hn[i, q] == 0, f"particle {i} piece {q}: not seen, but has a hull of {hn[i, q]} vertices"
+                continue
+            hull = piece["hull"]
+            perimeter += float(np.sum(np.linalg.norm(hull - np.roll(hull, -1, axis=0), axis=1)))
+            lo, hi = hull.min(axis=0), hull.max(axis=0)
+            row0, row1 = max(math.ceil(lo[1]), 0), min(math.floor(hi[1]), h - 1)
+            ties = np.abs(np.r_[lo, hi] - np.round(np.r_[lo, hi])) < 1e-3
+            drawn = row0 <= row1 and hi[0] >= 0.0 and lo[0] <= w - 1
+            if np.any(ties):
+                continue  # a bound on a pixel centre: the float32 decision may go either way
+            assert (hn[i, q] > 0) == drawn, f"particle {i} piece {q}: hull_n {hn[i, q]}, reference drawn {drawn}"
+            if not drawn:
+                continue
+            assert tuple(hr[i, q]) == (row0, row1)
+            m = int(hn[i, q])
+            poly = hp[i, q, :m].astype(np.float64)
+            # every hull vertex is a projected template vertex; the hull has the reference's area
+            gap = np.min(np.linalg.norm(poly[:, None, :] - piece["uv"][None, :, :], axis=2), axis=1)
+            assert gap.max() < 5e-3, f"particle {i} piece {q}: hull vertex {gap.max():.2e} px from every vertex"
+            np.testing.assert_allclose(polygon_area(poly), polygon_area(hull), rtol=1e-4, atol=1e-3)
+            ground = plane.to_world(np.asarray(pos[i, q // PIECES], np.float64))[None]
+            np.testing.assert_allclose(hd[i, q], camera_r2(cam, ground)[0][0], rtol=1e-5)
+    excluded = int(sum(near[i].sum() for i in order))
+    # pixel centres within EDGE_EPS of an edge: about 2 EDGE_EPS per pixel of perimeter are expected
+    assert excluded <= 0.05 * perimeter + 5, f"{excluded} pixels near an edge for {perimeter:.0f} px of hull perimeter"
+    assert excluded <= 0.005 * len(order) * w * h
+    return covered
+
+
+# ------------------------------------------------------------------------------------------ 1. rasterization
+
+
+@pytest.mark.parametrize("tilted", [False, True], ids=["z0", "tilted"])
+def test_hulls_and_virtual_images_match_numpy(device, rng, tilted):
+    """template_hulls_kernel + render_virtual_kernel vs cv2 projections and float64 hulls: on random distorted
+    cameras (160x120) and random scenes of humans and vehicles (on z = 0, or on a tilted, offset ground plane), every
+    pixel agrees except those whose centre is within 0.01 px of a hull edge (a tiny set); hull vertex counts, rows,
+    vertices, areas and depths agree too. Particles are rendered in a permuted order (``particles`` indexing)."""
+    plane = TILTED if tilted else GroundPlane()
+    covered = 0
+    for _ in range(3):
+        cam = random_camera(rng, plane=plane)
+        n, r = 7, 4
+        kind, pos, heading, dims = random_scene(rng, cam, plane, n, r)
+        kind[0] = 0  # an empty particle
+        hulls = raster(device, cam, plane, kind, pos, heading, dims)
+        order = rng.permutation(n)
+        got = render(device, hulls, r, cam.width, cam.height, order)
+        covered += check_against_reference(cam, plane, kind, pos, heading, dims, hulls, got, order)
+        assert not got[list(order).index(0)].any()
+    assert covered > 3000, "the random scenes must cover a good part of the images"
+
+
+def test_kind_zero_draws_nothing(device):
+    """A slot of kind 0 draws nothing even when its position and dims describe a visible object; the other slot of
+    the same particle is drawn."""
+    cam = Camera.look_at("cam", 160, 120, (0, -8, 6), (0, 8, 0), 150.0, dist=[-0.05, 0, 0, 0, 0])
+    plane = GroundPlane()
+    kind = np.array([[0, HUMAN], [0, 0]], dtype=np.int32)
+    pos = np.array([[[0.0, 4.0], [1.0, 5.0]], [[0.0, 4.0], [0.0, 4.0]]], np.float32)
+    heading = np.zeros((2, 2), np.float32)
+    dims = np.tile(np.array([4.4, 1.8, 1.5], np.float32), (2, 2, 1))
+    dims[0, 1] = (1.75, 0.22, 0.11)
+    hulls = raster(device, cam, plane, kind, pos, heading, dims)
+    got = render(device, hulls, 2, cam.width, cam.height, [0, 1])
+    hn = hulls.n.numpy()
+    assert np.all(hn[0, :PIECES] == 0) and np.all(hn[1] == 0)
+    assert np.all(hn[0, PIECES:] > 0)
+    assert got[0].sum() > 50 and not got[1].any()
+    check_against_reference(cam, plane, kind, pos, heading, dims, hulls, got, [0, 1])
+
+
+def test_object_behind_camera_draws_nothing(device):
+    """An object behind the camera draws nothing (hull_n 0, empty image); a vehicle straddling the camera plane
+    (some vertices behind) is not drawn either, as documented: a piece with a vertex behind the camera is dropped."""
+    cam = Camera.look_at("cam", 160, 120, (0, -8, 6), (0, 8, 0), 150.0, dist=[-0.05, 0, 0, 0, 0])
+    plane = GroundPlane()
+    kind = np.array([[HUMAN], [VEHICLE], [VEHICLE]], dtype=np.int32)
+    pos = np.array([[[0.0, -14.0]], [[0.5, -16.0]], [[0.0, -10.25]]], np.float32)
+    heading = np.array([[0.0], [0.3], [np.pi / 2]], np.float32)
+    dims = np.array([[[1.75, 0.22, 0.11]], [[4.4, 1.8, 1.5]], [[4.4, 1.8, 1.5]]], np.float32)
+    depth, _ = camera_r2(cam, world_points(plane, pos[2, 0], template_vertices(VEHICLE, 0, dims[2, 0], np.pi / 2)))
+    assert depth.min() < 0 < depth.max(), "the third vehicle must straddle the camera plane"
+    hulls = raster(device, cam, plane, kind, pos, heading, dims)
+    got = render(device, hulls, 1, cam.width, cam.height, [0, 1, 2])
+    assert np.all(hulls.n.numpy() == 0)
+    assert np.all(hulls.rows.numpy()[..., 1] < hulls.rows.numpy()[..., 0])
+    assert not got.any()
+
+
+def test_object_partly_outside_image_is_clipped(device):
+    """Objects crossing the left, right, top and bottom image borders are clipped: the images agree with the
+    reference, hull rows lie in the image, and every span of the pieces (candidate_spans_kernel) lies in [0, W-1]."""
+    plane = GroundPlane()
+    down = Camera.look_at("down", 160, 120, (0, -8, 6), (0, 8, 0), 150.0, dist=[-0.08, 0, 0, 0, 0])
+    level = Camera.look_at("level", 160, 120, (0, -8, 1.2), (0, 0, 1.2), 150.0, dist=[0.04, 0, 0, 0, 0])
+    scenes = [
+        (down, [[-6.0, 70.0], [157.0, 60.0], [80.0, 123.0]], [VEHICLE, HUMAN, VEHICLE], [0.4, 0.0, 1.2]),
+        (level, [[70.0, 110.0]], [HUMAN], [0.0]),  # 2.2 m tall, 2.2 m away: crosses the top and the bottom
+    ]
+    touched = np.zeros(4, dtype=bool)  # left, right, top, bottom
+    for cam, pixels, kinds, headings in scenes:
+        r = len(kinds)
+        ground, _ = ground_rays(cam, plane, np.array(pixels))
+        if cam is level:
+            ground = np.array([[0.1, -5.8]])
+        kind = np.array([kinds], dtype=np.int32)
+        pos = ground[None].astype(np.float32)
+        heading = np.array([headings], np.float32)
+        dims = np.array([[[4.4, 1.8, 1.5] if k == VEHICLE else [2.2, 0.3, 0.12] for k in kinds]], np.float32)
+        hulls = raster(device, cam, plane, kind, pos, heading, dims)
+        got = render(device, hulls, r, cam.width, cam.height, [0])
+        check_against_reference(cam, plane, kind, pos, heading, dims, hulls, got, [0])
+        _, _, pieces = reference_scene(cam, plane, kind, pos, heading, dims)
+        assert all(p is not None for p in pieces[0])
+        for p in pieces[0]:
+            lo, hi = p["hull"].min(axis=0), p["hull"].max(axis=0)
+            assert lo[0] < 0 or hi[0] > cam.width - 1 or lo[1] < 0 or hi[1] > cam.height - 1 or cam is down
+        touched |= [got[0, :, 0].any(), got[0, :, -1].any(), got[0, 0, :].any(), got[0, -1, :].any()]
+        rows = hulls.rows.numpy()[0]
+        hn = hulls.n.numpy()[0]
+        drawn = hn > 0  # a head right of the image is dropped (its hull misses every column)
+        assert drawn.sum() >= len(drawn) - 1
+        assert np.all((rows[drawn, 0] >= 0) & (rows[drawn, 1] <= cam.height - 1) & (rows[drawn, 0] <= rows[drawn, 1]))
+        assert np.all(rows[~drawn, 1] < rows[~drawn, 0])
+        # spans of the pieces, each slot as a one-slot "candidate": within the image
+        pts = wp.array(hulls.pts.numpy().reshape(r, PIECES, -1, 2), dtype=wp.vec2, device=device)
+        hn1 = wp.array(hn.reshape(r, PIECES), dtype=wp.int32, device=device)
+        rows1 = wp.array(rows.reshape(r, PIECES, 2), dtype=wp.vec2i, device=device)
+        lengths = (rows[:, 1] - rows[:, 0] + 1).reshape(r, PIECES).sum(axis=1)
+        offsets = wp.array(np.r_[0, np.cumsum(lengths)[:-1]].astype(np.int32), dtype=wp.int32, device=device)
+        spans = wp.full(int(lengths.sum()), wp.vec2i(-99, -99), dtype=wp.vec2i, device=device)
+        wp.launch(
+            kuoh.candidate_spans_kernel,
+            dim=r,
+            inputs=[pts, hn1, rows1, offsets, PIECES, cam.width],
+            outputs=[spans],
+            device=device,
+        )
+        sp = spans.numpy()
+        full = sp[:, 0] <= sp[:, 1]
+        assert full.sum() > 0.9 * len(sp)
+        assert np.all(sp[full, 0] >= 0) and np.all(sp[full, 1] <= cam.width - 1)
+    assert touched.all(), f"borders reached (left, right, top, bottom): {touched.tolist()}"
+
+
+# ------------------------------------------------------------------------------------------ 2-3. XOR and UOH
+
+
+def random_mask(rng, width: int, height: int) -> np.ndarray:
+    """Ellipse blobs plus 3% salt-and-pepper noise; foreground values are 1 or 255 (any nonzero counts)."""
+    vs, us = np.mgrid[0:height, 0:width]
+    q = np.zeros((height, width), dtype=bool)
+    for _ in range(5):
+        cu, cv = rng.uniform(0, width), rng.uniform(0, height)
+        au, av = rng.uniform(5, 30), rng.uniform(8, 40)
+        q |= ((us - cu) / au) ** 2 + ((vs - cv) / av) ** 2 <= 1.0
+    q ^= rng.uniform(size=q.shape) < 0.03
+    return np.where(q, rng.choice([1, 255], size=q.shape), 0).astype(np.uint8)
+
+
+class XorCase:
+    """A random camera, mask and particle set, scored by mask_rows/mask_total/xor_score as the tracker does."""
+
+    def __init__(self, device, rng, n: int = 20, r: int = 4) -> None:
+        plane = GroundPlane()
+        for _ in range(20):  # a camera low and close enough for a human taller than a CUDA block has threads
+            cam = random_camera(rng, plane=plane, above=(2.0, 3.5), away=(5.0, 8.0))
+            tall = tall_human(cam, plane)
+            if tall is not None:
+                break
+        assert tall is not None, "no camera found for a tall human"
+        kind, pos, heading, dims = random_scene(rng, cam, plane, n, r, p_empty=0.35, margin=0.1)
+        kind[0] = 0  # an empty particle: m = |q|, c = 0
+        kind[1, 0], heading[1, 0] = HUMAN, 0.0
+        pos[1, 0], dims[1, 0] = tall
+        self.cam, self.plane, self.n, self.r = cam, plane, n, r
+        self.kind, self.age = kind, rng.uniform(0.0, 3.0, (n, r)).astype(np.float32)
+        self.q = random_mask(rng, cam.width, cam.height)
+        self.prior = rng.normal(-2.0, 1.0, n).astype(np.float32)
+        self.cost_a = np.array([1.0e6, 17.5, 43.25], np.float32)  # index 0 (empty slot) must never be used
+        self.cost_b = np.array([1.0e6, 61.0, 119.5], np.float32)
+        self.scale = 5000.0 / (cam.width * cam.height)
+        self.hulls = raster(device, cam, plane, kind, pos, heading, dims)
+        self.virtual = render(device, self.hulls, r, cam.width, cam.height, np.arange(n))
+        rows = self.hulls.rows.numpy()[1]
+        alive = self.hulls.n.numpy()[1] > 0
+        extent = rows[alive, 1].max() - rows[alive, 0].min() + 1  # the rows xor_score_kernel's lanes stride over
+        assert extent > 64, f"the tall human covers only {extent} rows"
+        h, w = cam.height, cam.width
+        self.device = device
+        self.qd = wp.array(self.q, dtype=wp.uint8, device=device)
+        self.qrow = wp.full((h, w + 1), -5, dtype=wp.int32, device=device)
+        self.qtotal = wp.full(1, -5, dtype=wp.int32, device=device)
+        self.cov_diff = wp.zeros((h, w + 1), dtype=wp.int32, device=device)
+        self.kind_d = wp.array(kind, dtype=wp.int32, device=device)
+        self.age_d = wp.array(self.age, dtype=wp.float32, device=device)
+
+    def score(self):
+        d = self.device
+        h = self.cam.height
+        wp.launch(kxor.mask_rows_kernel, dim=h, inputs=[self.qd], outputs=[self.qrow], device=d)
+        wp.launch(kxor.mask_total_kernel, dim=1, inputs=[self.qrow], outputs=[self.qtotal], device=d)
+        logw = wp.array(self.prior, dtype=wp.float32, device=d)
+        penalty = wp.full(self.n, -1, dtype=wp.int32, device=d)
+        complexity = wp.full(self.n, -1.0, dtype=wp.float32, device=d)
+        wp.launch_tiled(
+            kxor.xor_score_kernel,
+            dim=[self.n],
+            inputs=[
+                self.hulls.pts,
+                self.hulls.n,
+                self.hulls.rows,
+                self.kind_d,
+                self.age_d,
+                self.qrow,
+                self.qtotal,
+                wp.vec3(*self.cost_a),
+                wp.vec3(*self.cost_b),
+                self.scale,
+            ],
+            outputs=[logw, penalty, complexity, self.cov_diff],
+            block_dim=SCORE_BLOCK,
+            device=d,
+        )
+        return logw.numpy(), penalty.numpy(), complexity.numpy()
+
+
+def test_xor_penalty_complexity_logw_and_coverage_exact(device, rng):
+    """mask_rows/mask_total are exact prefix sums of q != 0; xor_score_kernel gives m_i = sum(q XOR v_i) exactly
+    (eq. 4) for N = 20 random particles (one empty, one taller than a CUDA block), c_i = sum over alive slots of
+    a[kind] + b[kind] exp(-age) (eq. 5; empty slots must not count, their cost is 1e6), logw = prior - (m + c) s
+    (eq. 6); the row cumulative sum of cov_diff is the per-pixel count of particles covering each pixel."""
+    case = XorCase(device, rng)
+    logw, penalty, complexity = case.score()
+    q = case.q != 0
+    qrow = np.zeros((q.shape[0], q.shape[1] + 1), dtype=np.int64)
+    qrow[:, 1:] = np.cumsum(q, axis=1)
+    np.testing.assert_array_equal(case.qrow.numpy(), qrow)
+    assert int(case.qtotal.numpy()[0]) == int(q.sum())
+    v = case.virtual.astype(bool)
+    m_ref = np.sum(q[None] ^ v, axis=(1, 2))
+    np.testing.assert_array_equal(penalty, m_ref)
+    alive = case.kind > 0
+    k = case.kind
+    c_ref = np.sum(np.where(alive, case.cost_a[k] + case.cost_b[k] * np.exp(-case.age.astype(np.float64)), 0), axis=1)
+    np.testing.assert_allclose(complexity, c_ref, rtol=1e-5)
+    assert complexity[0] == 0.0 and penalty[0] == q.sum()
+    logw_ref = case.prior.astype(np.float64) - (m_ref + c_ref) * np.float64(np.float32(case.scale))
+    np.testing.assert_allclose(logw, logw_ref, rtol=1e-6, atol=1e-5)
+    cov = case.cov_diff.numpy()
+    np.testing.assert_array_equal(np.cumsum(cov[:, :-1], axis=1), v.sum(axis=0))
+    np.testing.assert_array_equal(cov.sum(axis=1), 0)  # every +1 has its -1 (at column W for spans ending at W-1)
+    assert 0 < v.sum() and np.any(v.sum(axis=0) > 1), "particles must overlap somewhere"
+
+
+@pytest.mark.parametrize("beta", [0.0, 1.0, 0.37])
+def test_coverage_uoh_exact(device, rng, beta):
+    """coverage_uoh_kernel after xor_score_kernel: UOH = q (N - coverage) exactly (eq. 10); gain_rows equals the
+    float64 cumulative sum of (N - cov)(q - beta (1 - q)); cov_diff (column W included) is zeroed, so a second
+    frame on the same particles gives the same UOH."""
+    case = XorCase(device, rng)
+    q = (case.q != 0).astype(np.int64)
+    cov = case.virtual.astype(np.int64).sum(axis=0)
+    h, w = q.shape
+    b64 = np.float64(np.float32(beta))
+    free = (case.n - cov).astype(np.float64)
+    gain_ref = np.zeros((h, w + 1))
+    gain_ref[:, 1:] = np.cumsum(free * (q - b64 * (1 - q)), axis=1)
+    for _frame in range(2):
+        case.score()
+        uoh = wp.full((h, w), -7, dtype=wp.int32, device=device)
+        gain_rows = wp.full((h, w + 1), np.nan, dtype=wp.float64, device=device)
+        wp.launch(
+            kuoh.coverage_uoh_kernel,
+            dim=h,
+            inputs=[case.qd, case.n, beta],
+            outputs=[case.cov_diff, uoh, gain_rows],
+            device=device,
+        )
+        np.testing.assert_array_equal(uoh.numpy(), q * (case.n - cov))
+        np.testing.assert_allclose(gain_rows.numpy(), gain_ref, rtol=1e-12, atol=1e-9)
+        assert not case.cov_diff.numpy().any()
+    assert 0 < (q * (case.n - cov)).sum() < q.sum() * case.n
+
+
+# ------------------------------------------------------------------------------------------ 4-5. candidates
+
+
+def candidate_case(device, rng, min_gain: float, min_area: int, beta: float = 0.5):
+    cam = random_camera(rng)
+    plane = GroundPlane()
+    config = TemplateConfig(candidate_step_px=20, max_range=40.0, vehicle=VehiclePrior(orientations=2))
+    cands = Candidates(cam, plane, camera_struct(cam), _plane_struct(plane), config, device)
+    h, w, n = cam.height, cam.width, 37
+    q = random_mask(rng, w, h) != 0
+    cov = rng.integers(0, n + 1, (h, w))
+    cov[q] = rng.integers(0, 4, int(q.sum()))  # foreground mostly uncovered: candidates on it gain
+    gain_px = (n - cov) * (q - beta * (1 - q))
+    gain_rows = np.zeros((h, w + 1))
+    gain_rows[:, 1:] = np.cumsum(gain_px, axis=1)
+    score = wp.zeros(cands.count, dtype=wp.float32, device=device)
+    area = wp.full(cands.count, -1, dtype=wp.int32, device=device)
+    wp.launch(
+        kuoh.candidate_score_kernel,
+        dim=cands.count,
+        inputs=[
+            cands.hulls.rows,
+            cands.hulls.n,
+            cands.offsets,
+            cands.spans,
+            PIECES,
+            wp.array(gain_rows, dtype=wp.float64, device=device),
+            n,
+            min_gain,
+            min_area,
+        ],
+        outputs=[score, area],
+        device=device,
+    )
+    sil = render(device, cands.hulls, 1, w, h, np.arange(cands.count)).astype(bool)
+    area_ref = sil.sum(axis=(1, 2))
+    gain_ref = np.einsum("khw,hw->k", sil.astype(np.float64), gain_px) / n
+    return score.numpy(), area.numpy(), area_ref, gain_ref, cands
+
+
+def test_candidate_scores_match_union_silhouettes(device, rng):
+    """candidate_spans_kernel + candidate_score_kernel on the tracker's candidate set: area = pixel count of the
+    candidate's union silhouette (its one-slot virtual image; head/body and cabin/body overlaps count once) exactly;
+    score = (1/N) sum of the gain over the silhouette (rtol 1e-6) when eligible, else -3e38 (gain < min_gain x area
+    or area < min_area); both outcomes occur."""
+    min_gain, min_area = 0.3, 30
+    score, area, area_ref, gain_ref, cands = candidate_case(device, rng, min_gain, min_area)
+    np.testing.assert_array_equal(area, area_ref)
+    assert np.mean(area_ref > 0) > 0.9  # a few candidates near the horizon cover no pixel centre
+    # both pieces overlap on some rows for most candidates: the union is smaller than the sum of the pieces
+    eligible = (area_ref >= min_area) & (gain_ref >= min_gain * area_ref)
+    tie = (area_ref >= min_area) & (np.abs(gain_ref - min_gain * area_ref) <= 1e-6 * np.maximum(np.abs(gain_ref), 1.0))
+    assert tie.sum() <= 2
+    ok = ~tie
+    np.testing.assert_allclose(score[ok & eligible], gain_ref[ok & eligible], rtol=1e-6, atol=1e-6)
+    assert np.all(score[ok & ~eligible] == NEG_INF32)
+    assert (ok & eligible).sum() >= 3 and (ok & ~eligible).sum() >= 3, "both outcomes must be exercised"
+    assert set(np.unique(cands.kind_np)) == {HUMAN, VEHICLE}
+
+
+def test_candidate_min_area_rule(device):
+    """With min_gain far below every gain, eligibility is decided by area alone: candidates smaller than min_area
+    (a median candidate's area) get -3e38, the others (area == min_area included) their exact gain."""
+    score0, _, area_ref0, _, _ = candidate_case(device, np.random.default_rng(7), -1e9, 0)
+    min_area = int(np.sort(area_ref0)[len(area_ref0) // 2])
+    score, area, area_ref, gain_ref, _ = candidate_case(device, np.random.default_rng(7), -1e9, min_area)
+    np.testing.assert_array_equal(area, area_ref)
+    small = area_ref < min_area
+    assert 0 < small.sum() < len(small) and np.any(area_ref == min_area)
+    assert np.all(score[small] == NEG_INF32)
+    np.testing.assert_allclose(score[~small], gain_ref[~small], rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(score0, gain_ref, rtol=1e-6, atol=1e-6)
+
+
+def choose(device, best: int, best_score: float, slot_count, cand_kind=(1, 2, 2, 1), next_label=5):
+    r = len(slot_count)
+    est = np.zeros(int(kreduce.EST_SIZE))
+    est[int(kreduce.EST_MAXLOGW)] = best_score
+    arrays = {
+        "next_label": wp.array([next_label], dtype=wp.int32, device=device),
+        "slot_label": wp.array(np.arange(r, dtype=np.int32) + 100, dtype=wp.int32, device=device),
+        "slot_kind": wp.array(np.full(r, 9, np.int32), dtype=wp.int32, device=device),
+        "add": wp.array([42, 42], dtype=wp.int32, device=device),
+    }
+    wp.launch(
+        kuoh.choose_addition_kernel,
+        dim=1,
+        inputs=[
+            wp.array([best], dtype=wp.int32, device=device),
+            wp.array(est, dtype=wp.float64, device=device),
+            int(kreduce.EST_MAXLOGW),
+            wp.array(np.asarray(cand_kind, np.int32), dtype=wp.int32, device=device),
+            wp.array(np.asarray(slot_count, np.float64), dtype=wp.float64, device=device),
+            r,
+        ],
+        outputs=list(arrays.values()),
+        device=device,
+    )
+    return {k: v.numpy() for k, v in arrays.items()}
+
+
+def test_choose_addition_picks_lowest_empty_slot(device):
+    """An eligible best candidate goes to the lowest slot empty in every particle: that slot gets next_label (then
+    incremented) and the candidate's kind; add = (slot, candidate); the other slots are untouched."""
+    out = choose(device, best=2, best_score=12.5, slot_count=[300.0, 0.0, 5.0, 0.0])
+    assert out["add"].tolist() == [1, 2]
+    assert out["next_label"].tolist() == [6]
+    assert out["slot_label"].tolist() == [100, 5, 102, 103]
+    assert out["slot_kind"].tolist() == [9, 2, 9, 9]
+    out = choose(device, best=3, best_score=0.0, slot_count=[1.0, 2.0, 5.0, 0.0], next_label=0)
+    assert out["add"].tolist() == [3, 3]
+    assert out["slot_label"].tolist() == [100, 101, 102, 0] and out["slot_kind"].tolist() == [9, 9, 9, 1]
+    assert out["next_label"].tolist() == [1]
+
+
+@pytest.mark.parametrize(
+    "best,best_score,slot_count",
+    [
+        (1, float(NEG_INF32), [0.0, 0.0]),  # no eligible candidate (all scores -3e38)
+        (int(kreduce.NO_INDEX), float(NEG_INF32), [0.0, 0.0]),  # argmax found nothing
+        (-1, 10.0, [0.0, 0.0]),
+        (4, 10.0, [0.0, 0.0]),  # candidate index out of range
+        (1, 10.0, [1.0, 250.0]),  # no free slot
+    ],
+)
+def test_choose_addition_nothing_to_add(device, best, best_score, slot_count):
+    """No eligible candidate, an invalid candidate index, or no free slot: add[0] == -1 and nothing else changes."""
+    out = choose(device, best=best, best_score=best_score, slot_count=slot_count)
+    assert out["add"].tolist() == [-1, -1]
+    assert out["next_label"].tolist() == [5]
+    assert out["slot_label"].tolist() == [100, 101]
+    assert out["slot_kind"].tolist() == [9, 9]
+
+
+# ------------------------------------------------------------------------------------------ 6. prediction
+
+FIELDS = ("kind", "label", "pos", "vel", "heading", "dims", "age")
+WP_TYPES = {
+    "kind": wp.int32,
+    "label": wp.int32,
+    "pos": wp.vec2,
+    "vel": wp.vec2,
+    "heading": wp.float32,
+    "dims": wp.vec3,
+    "age": wp.float32,
+}
+
+
+def make_state(device, n: int, r: int, **arrays) -> kdyn.TemplateState:
+    s = kdyn.TemplateState()
+    defaults = {
+        "kind": np.zeros((n, r), np.int32),
+        "label": np.full((n, r), -1, np.int32),
+        "pos": np.zeros((n, r, 2), np.float32),
+        "vel": np.zeros((n, r, 2), np.float32),
+        "heading": np.zeros((n, r), np.float32),
+        "dims": np.zeros((n, r, 3), np.float32),
+        "age": np.zeros((n, r), np.float32),
+    }
+    for name, default in defaults.items():
+        value = np.asarray(arrays.get(name, default)).astype(default.dtype).reshape(default.shape)
+        setattr(s, name, wp.array(value, dtype=WP_TYPES[name], device=device))
+    s.logw = wp.array(np.asarray(arrays.get("logw", np.zeros(n)), np.float32), dtype=wp.float32, device=device)
+    return s
+
+
+def state_numpy(s: kdyn.TemplateState) -> dict[str, np.ndarray]:
+    return {name: getattr(s, name).numpy() for name in (*FIELDS, "logw")}
+
+
+def quiet_dynamics(**overrides):
+    """The tracker's Dynamics struct with every noise deviation, T_add and T_del set to 0, then ``overrides``."""
+    dyn = _dynamics_struct(TemplateConfig())
+    dyn.sigma_pos = 0.0
+    dyn.sigma_speed = wp.vec3(0.0, 0.0, 0.0)
+    dyn.sigma_turn = 0.0
+    dyn.sigma_dims_human = wp.vec3(0.0, 0.0, 0.0)
+    dyn.sigma_dims_vehicle = wp.vec3(0.0, 0.0, 0.0)
+    dyn.t_add = 0.0
+    dyn.t_del = 0.0
+    for k, v in overrides.items():
+        setattr(dyn, k, v)
+    return dyn
+
+
+CANDS = {
+    "kind": np.array([HUMAN, VEHICLE, HUMAN, VEHICLE], np.int32),
+    "pos": np.array([[1.0, 2.0], [-3.0, 7.5], [0.5, -1.5], [4.0, 4.0]], np.float32),
+    "heading": np.array([0.0, 0.7, 0.0, -2.0], np.float32),
+}
+
+
+def predict(
+    device,
+    dyn,
+    src: kdyn.TemplateState,
+    n: int,
+    r: int,
+    ancestors=None,
+    resampled: int = 1,
+    add=(-1, -1),
+    slot_label=None,
+    seed: int = 1234,
+    frame: int = 3,
+) -> dict[str, np.ndarray]:
+    dst = make_state(device, n, r, label=np.full((n, r), -99), logw=np.full(n, np.nan))
+    anc = np.arange(n) if ancestors is None else ancestors
+    sl = np.arange(r) + 10 if slot_label is None else slot_label
+    wp.launch(
+        kdyn.template_predict_kernel,
+        dim=(n, r),
+        inputs=[
+            dyn,
+            _seed_words(seed),
+            wp.array([frame], dtype=wp.int32, device=device),
+            wp.array(np.asarray(anc, np.int32), dtype=wp.int32, device=device),
+            wp.array([resampled], dtype=wp.int32, device=device),
+            wp.array(np.asarray(add, np.int32), dtype=wp.int32, device=device),
+            wp.array(np.asarray(sl, np.int32), dtype=wp.int32, device=device),
+            wp.array(CANDS["kind"], dtype=wp.int32, device=device),
+            wp.array(CANDS["pos"], dtype=wp.vec2, device=device),
+            wp.array(CANDS["heading"], dtype=wp.float32, device=device),
+            src,
+        ],
+        outputs=[dst],
+        device=device,
+    )
+    return state_numpy(dst)
+
+
+def random_population(rng, n: int, r: int, p_empty: float = 0.25):
+    """Random slots: humans (some slow, one too fast), vehicles (some reversing, one over speed and turn limits)."""
+    kind = rng.choice([0, HUMAN, VEHICLE], size=(n, r), p=[p_empty, (1 - p_empty) / 2, (1 - p_empty) / 2])
+    vel = np.where(
+        (kind == HUMAN)[..., None],
+        rng.uniform(-1.5, 1.5, (n, r, 2)),
+        np.stack([rng.uniform(-10, 10, (n, r)), rng.uniform(-0.8, 0.8, (n, r))], axis=-1),
+    )
+    slow = (kind == HUMAN) & (rng.uniform(size=(n, r)) < 0.2)
+    vel[slow] *= 0.1 / np.maximum(np.linalg.norm(vel[slow], axis=1, keepdims=True), 1e-3)  # |v| = 0.1 < 0.2
+    cfg = TemplateConfig()
+    mid_h = (np.array(cfg.human.dims_min) + np.array(cfg.human.dims_max)) / 2
+    mid_v = (np.array(cfg.vehicle.dims_min) + np.array(cfg.vehicle.dims_max)) / 2
+    spread_h = 0.2 * (np.array(cfg.human.dims_max) - np.array(cfg.human.dims_min))
+    spread_v = 0.2 * (np.array(cfg.vehicle.dims_max) - np.array(cfg.vehicle.dims_min))
+    dims = np.where(
+        (kind == HUMAN)[..., None],
+        mid_h + rng.uniform(-1, 1, (n, r, 3)) * spread_h,
+        mid_v + rng.uniform(-1, 1, (n, r, 3)) * spread_v,
+    )
+    arrays = {
+        "kind": kind.astype(np.int32),
+        "label": np.where(kind > 0, rng.integers(0, 50, (n, r)), -1),
+        "pos": rng.uniform(-10, 10, (n, r, 2)),
+        "vel": vel,
+        "heading": rng.uniform(-np.pi, np.pi, (n, r)),
+        "dims": dims,
+        "age": rng.uniform(0, 5, (n, r)),
+        "logw": rng.normal(-3, 2, n),
+    }
+    # limits: a human at 5 m/s (max 3), a vehicle at 25 m/s turning 1.5 rad/s (max 20 and 1), human dims over the max
+    arrays["kind"][0, :3] = (HUMAN, VEHICLE, HUMAN)
+    arrays["label"][0, :3] = (1, 2, 3)
+    arrays["vel"][0, 0] = (4.0, -3.0)
+    arrays["vel"][0, 1] = (25.0, 1.5)
+    arrays["dims"][0, :3] = (mid_h, mid_v, 1.2 * np.array(cfg.human.dims_max))
+    return {k: np.asarray(v).astype(np.float32) if k not in ("kind", "label") else v for k, v in arrays.items()}
+
+
+def drift_reference(src: dict, dyn, anc, resampled: int) -> dict[str, np.ndarray]:
+    """Eqs. 8-9 with zero noise in float64 (inputs are float32): gather, clamp, drift, age."""
+    g = {k: np.asarray(v)[anc].astype(np.float64) for k, v in src.items()}
+    kind = np.asarray(src["kind"])[anc]
+    dt = float(np.float32(dyn.dt))
+    out = {"kind": kind, "label": np.where(kind > 0, np.asarray(src["label"])[anc], -1)}
+    pos, vel, heading, dims = g["pos"].copy(), g["vel"].copy(), g["heading"].copy(), g["dims"].copy()
+    hum, veh = kind == HUMAN, kind == VEHICLE
+    # human (eq. 8): v_t = v (limited to speed_max), l_t = l + v_t dt, heading = direction of motion when moving
+    sp = np.linalg.norm(vel, axis=-1)
+    vmax_h = float(np.float32(dyn.speed_max[HUMAN]))
+    scale = np.where(sp > vmax_h, vmax_h / np.maximum(sp, 1e-30), 1.0)
+    vh = vel * scale[..., None]
+    moving = hum & (sp > 0.2)
+    heading = np.where(moving, np.arctan2(vh[..., 1], vh[..., 0]), heading)
+    lo_h, hi_h = np.array(dyn.dims_min_human, np.float64), np.array(dyn.dims_max_human, np.float64)
+    lo_v, hi_v = np.array(dyn.dims_min_vehicle, np.float64), np.array(dyn.dims_max_vehicle, np.float64)
+    # vehicle (eq. 9): alpha_t = alpha + theta_{t-1} dt; l_t = l + v_{t-1} dt (cos alpha_t, sin alpha_t)
+    alpha_t = heading + vel[..., 1] * dt
+    pos_v = pos + (vel[..., 0] * dt)[..., None] * np.stack([np.cos(alpha_t), np.sin(alpha_t)], axis=-1)
+    vmax_v, tmax = float(np.float32(dyn.speed_max[VEHICLE])), float(np.float32(dyn.turn_max))
+    vel_v = np.stack([np.clip(vel[..., 0], -vmax_v, vmax_v), np.clip(vel[..., 1], -tmax, tmax)], axis=-1)
+    out["pos"] = np.where(hum[..., None], pos + vh * dt, np.where(veh[..., None], pos_v, 0.0))
+    out["vel"] = np.where(hum[..., None], vh, np.where(veh[..., None], vel_v, 0.0))
+    out["heading"] = np.where(hum, heading, np.where(veh, alpha_t, 0.0))
+    out["dims"] = np.where(
+        hum[..., None], np.clip(dims, lo_h, hi_h), np.where(veh[..., None], np.clip(dims, lo_v, hi_v), dims)
+    )
+    out["age"] = np.where(kind > 0, g["age"] + dt, 0.0)
+    out["logw"] = np.zeros(len(anc)) if resampled else g["logw"]
+    return out
+
+
+@pytest.mark.parametrize("resampled", [1, 0])
+def test_predict_deterministic_drift_matches_eqs_8_9(device, rng, resampled):
+    """With every deviation, T_add and T_del at 0, template_predict_kernel gathers each particle from
+    ``ancestors[j]`` and applies eq. 8 (human: l += v dt, v limited to speed_max, heading = direction of motion above
+    0.2 m/s) and eq. 9 (vehicle: alpha += theta dt, then l += v dt (cos alpha_t, sin alpha_t), v and theta clamped
+    afterwards) exactly (rtol 1e-6); dims are clamped; age += dt; empty slots are cleared; logw is reset to 0 when
+    resampled, else copied from the parent."""
+    n, r = 64, 6
+    arrays = random_population(rng, n, r)
+    src = make_state(device, n, r, **arrays)
+    dyn = quiet_dynamics()
+    anc = rng.integers(0, n, n)
+    anc[:3] = 0  # particle 0 holds the limit cases
+    got = predict(device, dyn, src, n, r, ancestors=anc, resampled=resampled)
+    ref = drift_reference(arrays, dyn, anc, resampled)
+    np.testing.assert_array_equal(got["kind"], ref["kind"])
+    np.testing.assert_array_equal(got["label"], ref["label"])
+    for name in ("pos", "vel", "heading", "age", "logw"):
+        np.testing.assert_allclose(got[name], ref[name], rtol=1e-6, atol=1e-6, err_msg=name)
+    alive = ref["kind"] > 0
+    np.testing.assert_allclose(got["dims"][alive], ref["dims"][alive], rtol=1e-6, err_msg="dims")
+    # the limit cases of particle 0 (copied into particles 0-2)
+    np.testing.assert_allclose(np.linalg.norm(got["vel"][:3, 0], axis=-1), 3.0, rtol=1e-6)
+    np.testing.assert_allclose(got["vel"][:3, 1], [[20.0, 1.0]] * 3, rtol=1e-6)
+    np.testing.assert_allclose(got["dims"][:3, 2], [list(dyn.dims_max_human)] * 3, rtol=1e-6)
+    assert np.all(got["pos"][~alive] == 0) and np.all(got["age"][~alive] == 0)
+
+
+def test_predict_deletion_rate(device):
+    """T_del = 0.3 on N x R = 2000 x 8 = 16000 live objects: the deleted fraction is within 4 binomial sigmas of
+    0.3 (sigma = 0.0036); the fraction of particles losing at least one object is within 4 sigmas of 1 - 0.7^8
+    (draws independent across slots); deleted slots are cleared, surviving ones keep kind and label."""
+    n, r = 2000, 8
+    kind = np.full((n, r), HUMAN, np.int32)
+    label = np.tile(np.arange(r, dtype=np.int32) + 3, (n, 1))
+    dims = np.tile(np.array([1.7, 0.22, 0.11], np.float32), (n, r, 1))
+    src = make_state(device, n, r, kind=kind, label=label, dims=dims, pos=np.ones((n, r, 2)))
+    got = predict(device, quiet_dynamics(t_del=0.3), src, n, r)
+    deleted = got["kind"] == 0
+    p, count = 0.3, n * r
+    assert abs(deleted.mean() - p) < 4 * math.sqrt(p * (1 - p) / count)
+    p_any = 1 - 0.7**r
+    assert abs(deleted.any(axis=1).mean() - p_any) < 4 * math.sqrt(p_any * (1 - p_any) / n)
+    for s in range(r):  # every slot is hit at about the same rate
+        assert abs(deleted[:, s].mean() - p) < 4 * math.sqrt(p * (1 - p) / n)
+    assert np.all(got["label"][deleted] == -1) and np.all(got["pos"][deleted] == 0) and np.all(got["age"][deleted] == 0)
+    np.testing.assert_array_equal(got["kind"][~deleted], HUMAN)
+    np.testing.assert_array_equal(got["label"][~deleted], label[~deleted])
+
+
+@pytest.mark.parametrize("cand", [0, 1], ids=["human", "vehicle"])
+def test_predict_addition(device, cand):
+    """T_add = 0.4, add = (slot 2, candidate): among N = 4000 particles whose slot 2 is empty the fraction that
+    receives the candidate is within 4 binomial sigmas of 0.4 (sigma = 0.008); 10% of particles hold another object
+    in slot 2 and keep it; the added object has the candidate's kind, the slot's label, age dt after the step
+    (added with age 0, then aged), dims within [min, max] around the prior mean, the candidate's position moved by
+    one step of its initial velocity (sigma_pos = 0), initial velocity / heading deviations as configured; other
+    slots are untouched. add[0] = -1 adds nothing even with T_add = 1."""
+    n, r, slot = 4000, 4, 2
+    kind = np.zeros((n, r), np.int32)
+    label = np.full((n, r), -1, np.int32)
+    dims = np.zeros((n, r, 3), np.float32)
+    taken = np.arange(n) % 10 == 0
+    kind[taken, slot], label[taken, slot], dims[taken, slot] = HUMAN, 77, (1.7, 0.22, 0.11)
+    kind[:, 0], label[:, 0], dims[:, 0] = VEHICLE, 5, (4.4, 1.8, 1.5)
+    src = make_state(device, n, r, kind=kind, label=label, dims=dims)
+    dyn = quiet_dynamics(t_add=0.4)
+    slot_label = np.array([5, 6, 31, 8], np.int32)
+    got = predict(device, dyn, src, n, r, add=(slot, cand), slot_label=slot_label)
+    ck = int(CANDS["kind"][cand])
+    added = ~taken & (got["kind"][:, slot] != 0)
+    p, m = 0.4, int((~taken).sum())
+    assert abs(added.sum() / m - p) < 4 * math.sqrt(p * (1 - p) / m)
+    np.testing.assert_array_equal(got["kind"][taken, slot], HUMAN)
+    np.testing.assert_array_equal(got["label"][taken, slot], 77)
+    np.testing.assert_array_equal(got["kind"][added, slot], ck)
+    np.testing.assert_array_equal(got["label"][added, slot], 31)
+    np.testing.assert_array_equal(got["kind"][~taken & ~added, slot], 0)
+    np.testing.assert_array_equal(got["kind"][:, [1, 3]], 0)
+    np.testing.assert_array_equal(got["kind"][:, 0], VEHICLE)
+    dt = np.float32(dyn.dt)
+    np.testing.assert_array_equal(got["age"][added, slot], dt)
+    d = got["dims"][added, slot]
+    if ck == HUMAN:
+        lo, hi, mean, sd = dyn.dims_min_human, dyn.dims_max_human, dyn.dims_mean_human, dyn.dims_sd_human
+    else:
+        lo, hi, mean, sd = dyn.dims_min_vehicle, dyn.dims_max_vehicle, dyn.dims_mean_vehicle, dyn.dims_sd_vehicle
+    lo, hi, mean, sd = (np.array(v, np.float64) for v in (lo, hi, mean, sd))
+    assert np.all(d >= lo.astype(np.float32)) and np.all(d <= hi.astype(np.float32))
+    k = int(added.sum())
+    assert np.all(np.abs(d.mean(axis=0) - mean) < 4 * sd / math.sqrt(k))
+    assert np.all(np.abs(d.std(axis=0) / sd - 1) < 4 / math.sqrt(2 * k))
+    v = got["vel"][added, slot].astype(np.float64)
+    p0 = CANDS["pos"][cand].astype(np.float64)
+    pos = got["pos"][added, slot].astype(np.float64)
+    if ck == HUMAN:
+        sdv = float(dyn.init_speed_sd[HUMAN])
+        np.testing.assert_allclose(pos, p0 + v * float(dt), rtol=1e-6, atol=1e-6)
+        assert np.all(np.abs(v.mean(axis=0)) < 4 * sdv / math.sqrt(k))
+        assert np.all(np.abs(v.std(axis=0) / sdv - 1) < 4 / math.sqrt(2 * k))
+    else:
+        a = got["heading"][added, slot].astype(np.float64)  # alpha_t = alpha_0 (theta_0 = 0)
+        np.testing.assert_allclose(pos, p0 + (v[:, 0] * float(dt))[:, None] * np.c_[np.cos(a), np.sin(a)], atol=1e-5)
+        assert np.all(v[:, 1] == 0) and np.all(np.abs(v[:, 0]) < float(dyn.speed_max[VEHICLE]))
+        sdv, sda = float(dyn.init_speed_sd[VEHICLE]), float(dyn.init_heading_sd)
+        assert abs(v[:, 0].mean()) < 4 * sdv / math.sqrt(k) and abs(v[:, 0].std() / sdv - 1) < 4 / math.sqrt(2 * k)
+        da = a - float(CANDS["heading"][cand])
+        assert abs(da.mean()) < 4 * sda / math.sqrt(k) and abs(da.std() / sda - 1) < 4 / math.sqrt(2 * k)
+    # no addition decided: nothing is added even with T_add = 1
+    none = predict(device, quiet_dynamics(t_add=1.0), src, n, r, add=(-1, -1), slot_label=slot_label)
+    np.testing.assert_array_equal(none["kind"], kind)
+
+
+def test_predict_noise_statistics(device):
+    """Diffusion noise on N = 4000 particles (slot 0 human, slot 1 vehicle; limits far away): the changes of the
+    human velocity components, vehicle speed and turn rate, the position residual (l_t - l - drift) and the dims have
+    mean 0 within 4 sigma / sqrt(N) and standard deviation sigma within 4 / sqrt(2N) relative; the two human velocity
+    components and the two position components are uncorrelated (|r| < 4 / sqrt(N))."""
+    n, r = 4000, 2
+    kind = np.tile(np.array([HUMAN, VEHICLE], np.int32), (n, 1))
+    dims = np.tile(np.array([[1.7, 0.25, 0.11], [4.4, 1.8, 1.5]], np.float32), (n, 1, 1))
+    vel = np.tile(np.array([[0.5, -0.3], [5.0, 0.1]], np.float32), (n, 1, 1))
+    heading = np.zeros((n, r), np.float32)
+    src = make_state(device, n, r, kind=kind, dims=dims, vel=vel, heading=heading, label=np.zeros((n, r)))
+    sh, sv, st, sp = 0.25, 0.6, 0.15, 0.05
+    sdh, sdv = (0.01, 0.005, 0.002), (0.03, 0.01, 0.01)
+    dyn = quiet_dynamics(
+        sigma_pos=sp,
+        sigma_speed=wp.vec3(0.0, sh, sv),
+        sigma_turn=st,
+        sigma_dims_human=wp.vec3(*sdh),
+        sigma_dims_vehicle=wp.vec3(*sdv),
+        speed_max=wp.vec3(1.0, 1e6, 1e6),
+        turn_max=1e6,
+    )
+    got = predict(device, dyn, src, n, r)
+    dt = float(np.float32(dyn.dt))
+
+    def check(x, sigma, what):
+        x = np.asarray(x, np.float64)
+        assert abs(x.mean()) < 4 * sigma / math.sqrt(n), f"{what}: mean {x.mean():.4g}"
+        assert abs(x.std() / sigma - 1) < 4 / math.sqrt(2 * n), f"{what}: std {x.std():.4g} vs {sigma}"
+
+    dvh = got["vel"][:, 0] - vel[:, 0]
+    check(dvh[:, 0], sh, "human vx")
+    check(dvh[:, 1], sh, "human vy")
+    check(got["vel"][:, 1, 0] - 5.0, sv, "vehicle speed")
+    check(got["vel"][:, 1, 1] - 0.1, st, "vehicle turn")
+    res_h = got["pos"][:, 0] - got["vel"][:, 0] * dt  # human: l_t = l + v_t dt + noise
+    a = 0.1 * dt
+    res_v = got["pos"][:, 1] - 5.0 * dt * np.array([math.cos(a), math.sin(a)])
+    for comp in range(2):
+        check(res_h[:, comp], sp, f"human position {comp}")
+        check(res_v[:, comp], sp, f"vehicle position {comp}")
+        check(got["dims"][:, 0, comp] - dims[:, 0, comp], sdh[comp], f"human dims {comp}")
+        check(got["dims"][:, 1, comp] - dims[:, 1, comp], sdv[comp], f"vehicle dims {comp}")
+    for x, y in ((dvh[:, 0], dvh[:, 1]), (res_h[:, 0], res_h[:, 1]), (dvh[:, 0], res_h[:, 0])):
+        assert abs(np.corrcoef(x, y)[0, 1]) < 4 / math.sqrt(n)
+
+
+def test_predict_dims_clamped(device):
+    """Dims at the prior minimum with a large diffusion (0.05 m) stay within [min, max]; about half of each
+    component is clamped to exactly the minimum (4 binomial sigmas over N = 3000)."""
+    n = 3000
+    dyn = quiet_dynamics(sigma_dims_human=wp.vec3(0.05, 0.05, 0.05), sigma_dims_vehicle=wp.vec3(0.05, 0.05, 0.05))
+    lo_h, hi_h = np.array(dyn.dims_min_human, np.float32), np.array(dyn.dims_max_human, np.float32)
+    lo_v, hi_v = np.array(dyn.dims_min_vehicle, np.float32), np.array(dyn.dims_max_vehicle, np.float32)
+    kind = np.tile(np.array([HUMAN, VEHICLE], np.int32), (n, 1))
+    dims = np.stack([np.tile(lo_h, (n, 1)), np.tile(hi_v, (n, 1))], axis=1)
+    got = predict(device, dyn, make_state(device, n, 2, kind=kind, dims=dims), n, 2)["dims"]
+    assert np.all((got[:, 0] >= lo_h) & (got[:, 0] <= hi_h))
+    assert np.all((got[:, 1] >= lo_v) & (got[:, 1] <= hi_v))
+    band = 4 * math.sqrt(0.25 / n)
+    assert np.all(np.abs((got[:, 0] == lo_h).mean(axis=0) - 0.5) < band)
+    assert np.all(np.abs((got[:, 1] == hi_v).mean(axis=0) - 0.5) < band)
+
+
+def test_predict_reproducible_streams(device, rng):
+    """The same seed and frame give identical arrays; another frame or another seed gives different noise (deletions,
+    additions and every noisy field differ)."""
+    n, r = 500, 4
+    arrays = random_population(rng, n, r)
+    dyn = _dynamics_struct(TemplateConfig(t_del=0.2, t_add=0.5))
+    arrays["kind"][:, 3] = 0
+    src = make_state(device, n, r, **arrays)
+    kw = {"add": (3, 1), "ancestors": rng.integers(0, n, n), "resampled": 0}
+    a = predict(device, dyn, src, n, r, seed=99, frame=4, **kw)
+    b = predict(device, dyn, src, n, r, seed=99, frame=4, **kw)
+    for name in a:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    for other in (
+        predict(device, dyn, src, n, r, seed=99, frame=5, **kw),
+        predict(device, dyn, src, n, r, seed=100, frame=4, **kw),
+    ):
+        assert np.mean(other["kind"] != a["kind"]) > 0.05
+        both = (other["kind"] > 0) & (a["kind"] > 0)
+        for name in ("pos", "vel", "dims"):
+            assert np.mean(np.all(other[name][both] != a[name][both], axis=-1)) > 0.95, name
+
+
+# ------------------------------------------------------------------------------------------ 7. slot estimates
+
+
+def slot_moments(device, state: kdyn.TemplateState, n: int, r: int, chunk: int, threshold: float):
+    """block_max/final_max then block_slot_moments/final_slot_moments, as TemplateTracker._estimate launches them."""
+    blocks = (n + chunk - 1) // chunk
+    d = device
+    pm = wp.zeros(blocks, dtype=wp.float32, device=d)
+    pa = wp.zeros(blocks, dtype=wp.int32, device=d)
+    est = wp.zeros(int(kreduce.EST_SIZE), dtype=wp.float64, device=d)
+    best = wp.zeros(1, dtype=wp.int32, device=d)
+    weights = wp.full(n, np.nan, dtype=wp.float64, device=d)
+    part = wp.full((blocks, r, int(kslots.NS)), np.nan, dtype=wp.float64, device=d)
+    slot_est = wp.full((r, int(kslots.NE)), np.nan, dtype=wp.float64, device=d)
+    slot_count = wp.full(r, -1.0, dtype=wp.float64, device=d)
+    flag = wp.full(1, -1, dtype=wp.int32, device=d)
+    thr = wp.array([threshold], dtype=wp.float32, device=d)
+    wp.launch_tiled(
+        kreduce.block_max_kernel,
+        dim=[blocks],
+        inputs=[state.logw, n, chunk],
+        outputs=[pm, pa],
+        block_dim=BLOCK,
+        device=d,
+    )
+    wp.launch_tiled(
+        kreduce.final_max_kernel, dim=[1], inputs=[pm, pa, blocks], outputs=[est, best], block_dim=BLOCK, device=d
+    )
+    wp.launch_tiled(
+        kslots.block_slot_moments_kernel,
+        dim=[blocks, r],
+        inputs=[state, n, chunk, est],
+        outputs=[weights, part],
+        block_dim=BLOCK,
+        device=d,
+    )
+    wp.launch_tiled(
+        kslots.final_slot_moments_kernel,
+        dim=[r],
+        inputs=[part, blocks, n, est, thr],
+        outputs=[slot_est, slot_count, flag],
+        block_dim=BLOCK,
+        device=d,
+    )
+    return slot_est.numpy(), slot_count.numpy(), int(flag.numpy()[0]), weights.numpy()
+
+
+def slot_reference(a: dict, n: int, r: int) -> np.ndarray:
+    """Per-slot estimates in float64 (columns as kernels.slots.SE_*)."""
+    logw = a["logw"].astype(np.float64)
+    w = np.exp(logw - logw.max())
+    sw = w.sum()
+    ref = np.zeros((r, 14))
+    for s in range(r):
+        alive = a["kind"][:, s] > 0
+        wa = w * alive
+        ref[s, 0], ref[s, 1] = wa.sum() / sw, alive.sum()
+        ref[s, 12] = sw**2 / (w**2).sum()
+        ref[s, 13] = logw.max() + np.log(sw / n)
+        if not alive.any():
+            continue
+        x = a["pos"][:, s].astype(np.float64)
+        mean = (wa[:, None] * x).sum(0) / wa.sum()
+        ref[s, 2:4] = mean
+        ref[s, 4:6] = np.sqrt((wa[:, None] * (x - mean) ** 2).sum(0) / wa.sum())
+        v = a["vel"][:, s].astype(np.float64)
+        veh = a["kind"][:, s] == VEHICLE
+        speed = np.where(veh, np.abs(v[:, 0]), np.hypot(v[:, 0], v[:, 1]))
+        direction = a["heading"][:, s].astype(np.float64) + np.where(veh & (v[:, 0] < 0), np.pi, 0.0)
+        ref[s, 6] = (wa * speed).sum() / wa.sum()
+        ref[s, 7] = math.atan2((wa * np.sin(direction)).sum(), (wa * np.cos(direction)).sum())
+        ref[s, 8:11] = (wa[:, None] * a["dims"][:, s]).sum(0) / wa.sum()
+        ref[s, 11] = (wa * a["age"][:, s]).sum() / wa.sum()
+    return ref
+
+
+@pytest.mark.parametrize(
+    "n,chunk",
+    [(1000, 250), (1000, 256), (3, 3), (3, 1), (1001, 7), (20000, 16)],
+    ids=["tracker-1000", "1000-partial", "3", "3-blocks", "1001-143blocks", "20000-1250blocks"],
+)
+def test_slot_moments_match_numpy(device, n, chunk):
+    """block/final slot moments vs NumPy, including partial last blocks and more blocks than a CUDA block has
+    threads: existence, counts, weighted mean/std of positions, mean speed (vehicles |v|), circular mean heading
+    (vehicles reversing flipped by pi), mean dims and age, ESS, log mean weight, normalised weights (every one
+    written) and the resample flag (ESS <= threshold x N), with an always-empty slot (zeros)."""
+    rng = np.random.default_rng(n * 31 + chunk)
+    r = 4
+    kind = rng.choice([0, HUMAN, VEHICLE], size=(n, r), p=[0.3, 0.35, 0.35]).astype(np.int32)
+    kind[:, 3] = 0
+    kind[:, 2] = np.where(rng.uniform(size=n) < 0.2, 0, VEHICLE)
+    kind[0, 2] = VEHICLE
+    vel = rng.normal(0, 2, (n, r, 2)).astype(np.float32)
+    vel[:, 2, 0] = -np.abs(vel[:, 2, 0]) - 0.5  # slot 2: reversing vehicles around heading 0.3
+    heading = rng.normal(0, 1, (n, r)).astype(np.float32)
+    heading[:, 2] = rng.normal(0.3, 0.2, n)
+    a = {
+        "kind": kind,
+        "pos": (rng.normal(0, 1.5, (n, r, 2)) + [8.0, -3.0]).astype(np.float32),
+        "vel": vel,
+        "heading": heading,
+        "dims": rng.uniform(0.1, 5.0, (n, r, 3)).astype(np.float32),
+        "age": rng.uniform(0, 10, (n, r)).astype(np.float32),
+        "logw": (rng.normal(-40, 1.5, n)).astype(np.float32),
+    }
+    state = make_state(device, n, r, **a)
+    ref = slot_reference(a, n, r)
+    for threshold in (0.5, 1.0):
+        se, count, flag, weights = slot_moments(device, state, n, r, chunk, threshold)
+        l64 = a["logw"].astype(np.float64)
+        np.testing.assert_allclose(weights, np.exp(l64 - l64.max()), rtol=1e-12)
+        np.testing.assert_array_equal(count, ref[:, 1])
+        np.testing.assert_array_equal(se[:, 1], ref[:, 1])
+        np.testing.assert_allclose(se[:, 0], ref[:, 0], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(se[:, 2:4], ref[:, 2:4], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(se[:, 4:6], ref[:, 4:6], rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(se[:, 6], ref[:, 6], rtol=1e-6, atol=1e-7)
+        dh = np.angle(np.exp(1j * (se[:, 7] - ref[:, 7])))
+        assert np.all(np.abs(dh) < 1e-5), dh
+        np.testing.assert_allclose(se[:, 8:12], ref[:, 8:12], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(se[:, 12], ref[:, 12], rtol=1e-9)
+        np.testing.assert_allclose(se[:, 13], ref[:, 13], rtol=1e-9, atol=1e-9)
+        assert np.all(se[3, 2:12] == 0) and se[3, 0] == 0
+        assert abs(ref[2, 7] - (0.3 - np.pi)) < 0.2, "slot 2 tests the flip of reversing vehicles"
+        ess = ref[0, 12]
+        assert flag == int(ess <= threshold * n + 1e-9)
+    # uniform weights: ESS = N exactly at the threshold 1 (the paper's resample-every-frame setting)
+    a["logw"] = np.full(n, -7.0, np.float32)
+    state = make_state(device, n, r, **a)
+    se, _, flag, _ = slot_moments(device, state, n, r, chunk, 1.0)
+    assert se[0, 12] == pytest.approx(n, rel=1e-12) and flag == 1
+    if n > 1:
+        se, _, flag, _ = slot_moments(device, state, n, r, chunk, 0.5)
+        assert flag == 0
+
+
+@pytest.mark.parametrize("n", [1000, 3])
+def test_slot_moments_via_tracker_estimate(device, n):
+    """TemplateTracker._estimate on a set particle state (its own block layout: N = 1000 -> 4 blocks of 250, N = 3
+    -> one block): slot_est, slot_count, normalised weights, the resample flag (threshold 1: always) and the best
+    particle's row copy (gather_particle_kernel: kind, label, x, y, heading, velocity, dims) match NumPy."""
+    rng = np.random.default_rng(n)
+    r = 3
+    a = {k: v[:n] for k, v in random_population(rng, max(n, 8), r, p_empty=0.2).items()}
+    a["label"] = np.where(a["kind"] > 0, np.arange(r)[None, :] + 40, -1)  # one label per slot, as the tracker keeps
+    a["logw"] = rng.normal(-30.0, 2.0, n).astype(np.float32)
+    tr = TemplateTracker(e2e_rig(), TemplateConfig(particles=n, max_objects=r, seed=3), device=device)
+    tr.set_particles(**a)
+    tr._raster(tr.parity)
+    tr._estimate(tr.parity)
+    ref = slot_reference(a, n, r)
+    se = tr.slot_est.numpy()
+    np.testing.assert_array_equal(tr.slot_count.numpy(), ref[:, 1])
+    np.testing.assert_allclose(se[:, 0], ref[:, 0], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(se[:, 2:4], ref[:, 2:4], rtol=1e-9, atol=1e-9)
+    # std by the one-pass formula sqrt(E[x^2] - m^2): absolute error ~ sqrt(eps) |x| ~ 1e-7 m when the spread is 0
+    np.testing.assert_allclose(se[:, 4:6], ref[:, 4:6], rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(se[:, 6], ref[:, 6], rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(se[:, 8:14], ref[:, 8:14], rtol=1e-9, atol=1e-9)
+    l64 = a["logw"].astype(np.float64)
+    np.testing.assert_allclose(tr.weights.numpy(), np.exp(l64 - l64.max()), rtol=1e-12)
+    assert int(tr.resampled.numpy()[0]) == 1
+    best = int(np.argmax(a["logw"]))
+    assert int(tr.best_index.numpy()[0]) == best
+    row = tr.best_state.numpy()
+    np.testing.assert_array_equal(row[:, 0], a["kind"][best])
+    np.testing.assert_array_equal(row[:, 1], a["label"][best])
+    np.testing.assert_array_equal(row[:, 2:4], a["pos"][best])
+    np.testing.assert_array_equal(row[:, 4], a["heading"][best])
+    np.testing.assert_array_equal(row[:, 5:7], a["vel"][best])
+    np.testing.assert_array_equal(row[:, 7:10], a["dims"][best])
+
+
+# ------------------------------------------------------------------------------------------ 8. end to end
+
+TRUTH_CLASSES = ("human", "human", "vehicle")
+
+
+def truth_at(t: int) -> np.ndarray:
+    """Ground positions (3, 2) of two walkers and a car at frame t (metres)."""
+    return np.array([[-2 + 0.08 * t, 4.0], [3.0 - 0.06 * t, 8.0], [-9 + 0.3 * t, 14.0]], np.float64)
+
+
+def e2e_rig() -> Rig:
+    cam = Camera.look_at("cam0", 320, 240, position=[0, -4, 10], target=[0, 9, 0], fx=250.0, dist=[-0.05, 0, 0, 0, 0])
+    return Rig(cameras=(cam,))
+
+
+def rendered_masks(device, rig: Rig, frames: int) -> list[np.ndarray]:
+    """Motion masks of the known scene, rendered by a one-particle TemplateTracker."""
+    gt = TemplateTracker(rig, TemplateConfig(particles=1, max_objects=4), device=device)
+    masks = []
+    dims = np.array([[[1.75, 0.22, 0.11], [1.65, 0.2, 0.1], [4.4, 1.8, 1.5], [0, 0, 0]]], np.float32)
+    for t in range(frames):
+        pos = np.zeros((1, 4, 2), np.float32)
+        pos[0, :3] = truth_at(t)
+        gt.set_particles(
+            kind=np.array([[HUMAN, HUMAN, VEHICLE, 0]]),
+            label=np.array([[0, 1, 2, -1]]),
+            pos=pos,
+            dims=dims,
+            heading=np.zeros((1, 4)),
+        )
+        masks.append(gt.render_virtual()[0])
+    return masks
+
+
+def run_tracker(device, rig, masks, seed: int = 1, particles: int = 1000):
+    """Track ``masks``; returns the tracker and a deep copy of each frame's estimate (taken right after its step)."""
+    tr = TemplateTracker(rig, TemplateConfig(particles=particles, max_objects=8, seed=seed), device=device)
+    return tr, [copy.deepcopy(tr.step(m)) for m in masks]
+
+
+def test_tracker_follows_rendered_scene(device):
+    """TemplateTracker (1000 particles, 25 frames, 320x240) on masks rendered from two walking humans and a driving
+    car reports, at the last frame, exactly three objects, each within 0.5 m of one of them with the right class.
+    The same seed twice on one device gives identical estimates in every frame.
+
+    (With 300 particles the second walker's depth drifts past 0.5 m for about one seed in five: the joint
+    three-object state is too thin at that size, so the test would be a coin toss across devices.)"""
+    rig = e2e_rig()
+    frames = 25
+    masks = rendered_masks(device, rig, frames)
+    assert all(m.sum() > 500 for m in masks)
+    _, ests = run_tracker(device, rig, masks)
+    last = ests[-1]
+    truth = truth_at(frames - 1)
+    assert len(last.objects) == 3, [(o.cls, o.ground.round(2).tolist()) for o in last.objects]
+    for g, cls in zip(truth, TRUTH_CLASSES, strict=True):
+        dist = [np.linalg.norm(o.ground - g) for o in last.objects]
+        o = last.objects[int(np.argmin(dist))]
+        assert min(dist) < 0.5 and o.cls == cls, (
+            f"truth {cls} at {g}: nearest {o.cls} at {o.ground} ({min(dist):.2f} m)"
+        )
+    assert all(np.isfinite(e.ess) and e.ess > 0 for e in ests)
+    _, again = run_tracker(device, rig, masks)
+    for e1, e2 in zip(ests, again, strict=True):
+        assert [(o.id, o.cls) for o in e1.objects] == [(o.id, o.cls) for o in e2.objects]
+        for o1, o2 in zip(e1.objects + e1.best, e2.objects + e2.best, strict=True):
+            np.testing.assert_array_equal(o1.ground, o2.ground)
+            np.testing.assert_array_equal(o1.dims, o2.dims)
+            assert (o1.heading, o1.speed, o1.existence) == (o2.heading, o2.speed, o2.existence)
+        assert (e1.penalty, e1.added, e1.ess, e1.loglik) == (e2.penalty, e2.added, e2.ess, e2.loglik)
+
+
+def test_earlier_estimates_are_not_overwritten(device):
+    """The estimate returned for a frame keeps its values after later frames (callers may keep the list)."""
+    rig = e2e_rig()
+    tr = TemplateTracker(rig, TemplateConfig(particles=200, max_objects=4, seed=1), device=device)
+    kept, snapshots = [], []
+    for m in rendered_masks(device, rig, 10):
+        est = tr.step(m)
+        kept.append(est)
+        snapshots.append(copy.deepcopy(est))
+    assert sum(len(e.objects) for e in kept[:-1]) > 0
+    for est, snap in zip(kept, snapshots, strict=True):
+        for o, so in zip(est.objects, snap.objects, strict=True):
+            np.testing.assert_array_equal(o.ground, so.ground)
+            np.testing.assert_array_equal(o.dims, so.dims)
+
+
+def test_tracker_empty_masks_track_nothing(device):
+    """An all-zero mask sequence (10 frames) tracks nothing and adds nothing; the particles stay empty."""
+    rig = e2e_rig()
+    cam = rig.cameras[0]
+    tr, ests = run_tracker(device, rig, [np.zeros((cam.height, cam.width), np.uint8)] * 10, particles=300)
+    for e in ests:
+        assert e.objects == [] and e.added is None and e.best == []
+        assert e.penalty == 0 and e.foreground == 0 and np.isfinite(e.ess)
+    assert not tr.particles()["kind"].any()
+
+
+def test_tracker_full_masks_stay_finite(device):
+    """An all-ones mask sequence (10 frames) runs without NaN: ESS, log-likelihood, reported and particle positions,
+    log-weights all finite."""
+    rig = e2e_rig()
+    cam = rig.cameras[0]
+    tr, ests = run_tracker(device, rig, [np.ones((cam.height, cam.width), np.uint8)] * 10, particles=300)
+    for e in ests:
+        assert np.isfinite(e.ess) and e.ess >= 1 and np.isfinite(e.loglik)
+        assert e.foreground == cam.width * cam.height
+        for o in e.objects + e.best:
+            assert np.all(np.isfinite(o.ground)) and np.all(np.isfinite(o.dims)) and np.isfinite(o.heading)
+    p = tr.particles()
+    for name in ("pos", "vel", "heading", "dims", "age", "logw"):
+        assert np.all(np.isfinite(p[name])), name
