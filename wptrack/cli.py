@@ -345,7 +345,7 @@ def _report_after_tracking(run_dir) -> None:
 def cmd_report(args) -> int:
     from .report import ReportOptions, build_report
 
-    options = ReportOptions(movie=not args.no_movie, movie_frames=args.movie_frames)
+    options = ReportOptions(movie=not args.no_movie, movie_frames=args.movie_frames, groundtruth=args.groundtruth)
     path = build_report(args.run_dir, out_dir=args.out, sweep=args.sweep, frames=args.frames, options=options)
     print(f"report: {path}")
     return 0
@@ -569,6 +569,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--frames", type=int, nargs="+", default=None, help="frames whose particle clouds are shown")
     r.add_argument("--movie-frames", type=_positive_int, default=100, help="at most this many movie frames")
     r.add_argument("--no-movie", action="store_true", help="skip the movie")
+    r.add_argument("--groundtruth", default=None, help="groundtruth.csv drawn beside the tracks (template runs)")
     r.set_defaults(func=cmd_report)
 
     b = sub.add_parser("bench", parents=[common], help="benchmark suites (needs the benchmarks/ folder)")
