@@ -472,6 +472,22 @@ class Camera:
         )
         return np.asarray(uv, dtype=np.float64).reshape(-1, 2), depth
 
+    def pixel_rays(self, uv: Sequence[Sequence[float]] | np.ndarray) -> np.ndarray:
+        """World directions of the viewing rays through pixels (distortion removed, via ``cv2.undistortPoints``).
+
+        Args:
+            uv: (K, 2) pixel coordinates.
+
+        Returns:
+            (K, 3) float64 unit vectors in the world frame, pointing away from the camera centre.
+        """
+        import cv2
+
+        pts = np.asarray(uv, dtype=np.float64).reshape(-1, 1, 2)
+        norm = cv2.undistortPoints(pts, np.array(self.K), np.array(self.dist)).reshape(-1, 2)
+        rays = np.column_stack([norm, np.ones(len(norm))]) @ self.R  # R^T d per row
+        return rays / np.linalg.norm(rays, axis=1, keepdims=True)
+
     def scaled(self, width: int, height: int) -> Camera:
         """The same camera at another resolution.
 

@@ -172,3 +172,19 @@ def _write_gif(images: list[Any], path: Path, fps: float) -> Path:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()
     return path
+
+
+def add_movie_figures(sec: Any, files: MovieFiles, fps: float, total: int) -> None:
+    """Attach an encoded movie to a report section: its notes, a note when frames were skipped, and the web
+    video/animation (with the MP4 as an alternate) or the MP4 alone."""
+    from .model import Figure
+
+    sec.notes.extend(files.notes)
+    if files.frames < total:
+        sec.notes.append(f"{files.frames} of {total} frames shown (evenly spaced)")
+    alternates = (files.mp4.name,) if files.mp4 is not None else ()
+    if files.web is not None:
+        kind = "video" if files.web.suffix == ".webm" else "image"
+        sec.figures.append(Figure(files.web.name, f"{files.frames} frames at {fps:g} fps", kind, alternates))
+    elif files.mp4 is not None:
+        sec.figures.append(Figure(files.mp4.name, f"{files.frames} frames (MP4)", "video"))

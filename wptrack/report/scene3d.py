@@ -650,7 +650,7 @@ def shot(plotter: Any, path: Any = None, transparent: bool = False) -> np.ndarra
 
 def section_movie(ctx: ReportContext) -> Section | None:
     """The 3D view over time: ``movie.mp4`` plus ``movie.webm`` (or ``movie.gif``) for the page."""
-    from .movie import encode_movie
+    from .movie import add_movie_figures, encode_movie
 
     data = ctx.data
     if data is None:
@@ -666,16 +666,6 @@ def section_movie(ctx: ReportContext) -> Section | None:
         return sec
     with ctx.timed("movie"):
         files = encode_movie(iter_movie(ctx, data), ctx.out_dir, ctx.options.movie_fps)
-    sec.notes.extend(files.notes)
     n_total = len(data.particles.frames) if data.particles is not None else len(data.frames)
-    if files.frames < n_total:
-        sec.notes.append(f"{files.frames} of {n_total} frames shown (evenly spaced)")
-    alternates = (files.mp4.name,) if files.mp4 is not None else ()
-    if files.web is not None:
-        kind = "video" if files.web.suffix == ".webm" else "image"
-        sec.figures.append(
-            Figure(files.web.name, f"{files.frames} frames at {ctx.options.movie_fps:g} fps", kind, alternates)
-        )
-    elif files.mp4 is not None:
-        sec.figures.append(Figure(files.mp4.name, f"{files.frames} frames (MP4)", "video"))
+    add_movie_figures(sec, files, ctx.options.movie_fps, n_total)
     return sec

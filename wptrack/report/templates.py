@@ -242,16 +242,6 @@ def _legend(img: np.ndarray, lines: Sequence[tuple[str, Sequence[int]]], scale: 
         _text(img, t, (6, step * (k + 1) - 2), c, scale)
 
 
-def _pixel_rays(camera: Any, uv: np.ndarray) -> np.ndarray:
-    """World directions (K, 3) of the viewing rays of pixels (K, 2) (distortion removed)."""
-    import cv2
-
-    pts = np.asarray(uv, dtype=np.float64).reshape(-1, 1, 2)
-    norm = cv2.undistortPoints(pts, np.asarray(camera.K), np.asarray(camera.dist)).reshape(-1, 2)
-    rays = np.column_stack([norm, np.ones(len(norm))]) @ np.asarray(camera.R)  # R^T d per row
-    return rays / np.linalg.norm(rays, axis=1, keepdims=True)
-
-
 def _border_pixels(camera: Any, per_edge: int = 32) -> np.ndarray:
     """(4 per_edge, 2) pixels around the image border, clockwise from the top-left corner."""
     w, h = camera.width - 1.0, camera.height - 1.0
@@ -282,7 +272,7 @@ def ground_footprint(camera: Any, plane: Any, max_range: float = MAX_RANGE, per_
     Returns:
         (K, 2) ground coordinates, metres, in border order (K <= 4 per_edge; rays along the normal are dropped).
     """
-    rays = _pixel_rays(camera, _border_pixels(camera, per_edge))
+    rays = camera.pixel_rays(_border_pixels(camera, per_edge))
     n = np.asarray(plane.normal)
     c = camera.center
     hc = float((c - np.asarray(plane.origin)) @ n)
@@ -327,7 +317,7 @@ def _visible_samples(camera: Any, pts: np.ndarray, margin: float = 0.1) -> tuple
     with np.errstate(divide="ignore", invalid="ignore"):
         xn = cam_pts[:, 0] / cam_pts[:, 2]
         yn = cam_pts[:, 1] / cam_pts[:, 2]
-    border = _pixel_rays(camera, _border_pixels(camera, 16)) @ np.asarray(camera.R).T
+    border = camera.pixel_rays(_border_pixels(camera, 16)) @ np.asarray(camera.R).T
     bx, by = border[:, 0] / border[:, 2], border[:, 1] / border[:, 2]
     mx, my = margin * (bx.max() - bx.min()), margin * (by.max() - by.min())
     ok = (depth > 1e-3) & np.all(np.isfinite(uv), axis=1)
@@ -427,7 +417,7 @@ def calibration_check(
     uv0, ok0 = _visible_samples(camera, origin.reshape(1, 3), margin=0.0)
     where = "world origin"
     if not (ok0[0] and 0 <= uv0[0, 0] < w and 0 <= uv0[0, 1] < h):
-        centre = _pixel_rays(camera, np.array([[(w - 1) / 2.0, (h - 1) / 2.0]]))[0]
+        centre = camera.pixel_rays(np.array([[(w - 1) / 2.0, (h - 1) / 2.0]]))[0]
         n = np.asarray(plane.normal)
         hc = float((camera.center - np.asarray(plane.origin)) @ n)
         dn = float(centre @ n)
@@ -1281,7 +1271,7 @@ def iter_overlay_movie(ctx: ReportContext, run: TemplateRun, chunk: int = 16) ->
 
 def section_movie(ctx: ReportContext) -> Section | None:
     """The template overlays over time: ``movie.mp4`` and ``movie.webm`` (or ``movie.gif``)."""
-    from .movie import encode_movie
+    from .movie import add_movie_figures, encode_movie
 
     data = ctx.data
     if data is None:
@@ -1300,17 +1290,7 @@ def section_movie(ctx: ReportContext) -> Section | None:
         return sec
     with ctx.timed("movie"):
         files = encode_movie(iter_overlay_movie(ctx, run), ctx.out_dir, ctx.options.movie_fps)
-    sec.notes.extend(files.notes)
-    if files.frames < run.n_frames:
-        sec.notes.append(f"{files.frames} of {run.n_frames} frames shown (evenly spaced)")
-    alternates = (files.mp4.name,) if files.mp4 is not None else ()
-    if files.web is not None:
-        kind = "video" if files.web.suffix == ".webm" else "image"
-        sec.figures.append(
-            Figure(files.web.name, f"{files.frames} frames at {ctx.options.movie_fps:g} fps", kind, alternates)
-        )
-    elif files.mp4 is not None:
-        sec.figures.append(Figure(files.mp4.name, f"{files.frames} frames (MP4)", "video"))
+    add_movie_figures(sec, files, ctx.options.movie_fps, run.n_frames)
     return sec
 
 

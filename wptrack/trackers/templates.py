@@ -308,13 +308,7 @@ def ground_rays(camera: Camera, plane: GroundPlane, pixels: np.ndarray) -> tuple
         ``(ground, distance)``: (K, 2) ground coordinates (metres) and (K,) distance from the camera centre along
         the ray (metres; ``inf`` where the ray misses the plane or hits it behind the camera).
     """
-    import cv2
-
-    pts = np.asarray(pixels, dtype=np.float64).reshape(-1, 1, 2)
-    norm = cv2.undistortPoints(pts, np.asarray(camera.K), np.asarray(camera.dist)).reshape(-1, 2)
-    rays_cam = np.concatenate([norm, np.ones((norm.shape[0], 1))], axis=1)
-    rays = rays_cam @ np.asarray(camera.R)  # R^T d for each row
-    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+    rays = camera.pixel_rays(pixels)
     centre = camera.center
     denom = rays @ plane.normal
     with np.errstate(divide="ignore", invalid="ignore"):
