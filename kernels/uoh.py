@@ -17,10 +17,26 @@ them. The best candidate is proposed when gain(o) >= min_gain x area(o).
 import warp as wp
 
 from .raster import hull_span
+from .xor import row_segment
 
 wp.set_module_options({"enable_backward": False})
 
 NEG_INF = wp.constant(-3.0e38)
+
+
+@wp.func
+def block_exclusive_scan_i64(v: wp.int64):
+    """Exclusive prefix sum over the block's lanes of a non-negative int64 per lane, exactly.
+
+    Warp's tile scans take 32-bit values only: the low 16 and the high bits are scanned as two int32 tiles and
+    recombined. Exact while the block's total is below 2^47 and the block has at most 32768 lanes (the gain sums
+    of ``coverage_uoh_kernel`` stay below W x 2^31 < 2^41). Every lane of the block must call it.
+    """
+    lo = wp.int32(v & wp.int64(65535))
+    hi = wp.int32(v >> wp.int64(16))
+    slo = wp.untile(wp.tile_scan_exclusive(wp.tile(lo)))
+    shi = wp.untile(wp.tile_scan_exclusive(wp.tile(hi)))
+    return (wp.int64(shi) << wp.int64(16)) + wp.int64(slo)
 
 
 @wp.kernel
@@ -34,28 +50,53 @@ def coverage_uoh_kernel(
 ):
     """Coverage counts, UOH (eq. 10) and row prefix sums of the addition gain; clears ``cov_diff``.
 
-    Launch with ``dim=H``. ``q`` (H, W) motion mask; ``n`` particles; ``cov_diff`` (H, W+1) difference array
-    (read, then zeroed for the next frame); ``uoh`` (H, W) output; ``gain_rows`` (H, W+1) with
-    ``gain_rows[y, x] = sum_{x' < x} (N - cov) (q - beta (1 - q))``.
+    Launch with ``wp.launch_tiled(dim=[H], block_dim=B)``: block ``y`` is row ``y``, each lane owns one segment
+    of it (``xor.row_segment``; the whole row on the CPU backend). ``q`` (H, W) motion mask; ``n`` particles;
+    ``cov_diff`` (H, W+1) difference array (read, then zeroed for the next frame); ``uoh`` (H, W) output, pixels
+    x particles; ``gain_rows`` (H, W+1) with ``gain_rows[y, x] = A - beta B``, where ``A = sum_{x' < x} (N - cov) q``
+    and ``B = sum_{x' < x} (N - cov) (1 - q)`` are exact int64 sums (one rounding for ``beta B`` and one for the
+    difference: exact when beta has few binary digits, e.g. 0, 0.5, 1).
+
+    With several lanes, a first pass gives each lane the coverage count entering its segment (block scan of the
+    segments' difference sums) and its segment's A and B, a second block scan their prefixes; the last pass
+    writes the outputs.
     """
-    y = wp.tid()
-    width = q.shape[1]
-    cov = int(0)
-    g = wp.float64(0.0)
-    gain_rows[y, 0] = g
+    y, lane = wp.tid()
+    x0, x1 = row_segment(q.shape[1], lane)
+    cov0 = int(0)
+    a = wp.int64(0)
+    b = wp.int64(0)
+    if wp.block_dim() > 1:  # uniform over the block: every lane reaches the scans or none does
+        d = int(0)
+        for x in range(x0, x1):
+            d += cov_diff[y, x]
+        cov0 = wp.untile(wp.tile_scan_exclusive(wp.tile(d)))
+        cov = cov0
+        for x in range(x0, x1):
+            cov += cov_diff[y, x]
+            f = wp.int64(n - cov)
+            if q[y, x] != wp.uint8(0):
+                a += f
+            else:
+                b += f
+        a = block_exclusive_scan_i64(a)
+        b = block_exclusive_scan_i64(b)
     nb = wp.float64(beta)
-    for x in range(width):
+    if lane == 0:
+        gain_rows[y, 0] = wp.float64(0.0)
+        cov_diff[y, q.shape[1]] = 0
+    cov = cov0
+    for x in range(x0, x1):
         cov += cov_diff[y, x]
         cov_diff[y, x] = 0
         free = n - cov
         if q[y, x] != wp.uint8(0):
             uoh[y, x] = free
-            g += wp.float64(free)
+            a += wp.int64(free)
         else:
             uoh[y, x] = 0
-            g -= nb * wp.float64(free)
-        gain_rows[y, x + 1] = g
-    cov_diff[y, width] = 0
+            b += wp.int64(free)
+        gain_rows[y, x + 1] = wp.float64(a) - nb * wp.float64(b)
 
 
 @wp.kernel
@@ -99,14 +140,18 @@ def candidate_score_kernel(
     score: wp.array(dtype=wp.float32),
     area: wp.array(dtype=wp.int32),
 ):
-    """Addition gain of every candidate (eq. 11, see the module docstring); launch ``dim=C``.
+    """Addition gain of every candidate (eq. 11, see the module docstring).
+
+    Launch with ``wp.launch_tiled(dim=[C], block_dim=B)``: block ``c`` is candidate ``c`` and its lanes stride
+    over the rows of its pieces (one lane on the CPU backend); ``tile_sum`` combines the lanes' sums.
 
     Pixels covered by both pieces of a candidate count once (the head overlaps the body, the cabin the lower
     body): a row's second span contributes only its part outside the first. ``score[c]`` is the gain in pixels
     (a mean over particles) or -3e38 when the candidate is not eligible (gain < min_gain x area or area <
-    min_area pixels); ``area[c]`` its pixel count.
+    min_area pixels); ``area[c]`` its pixel count. The row sums are exact whenever ``gain_rows`` holds exactly
+    representable values (integers or halves: beta = 0, 0.5, 1), so the lane order does not change the score.
     """
-    c = wp.tid()
+    c, lane = wp.tid()
     o = offsets[c]
     g = wp.float64(0.0)
     px = int(0)
@@ -118,9 +163,8 @@ def candidate_score_kernel(
     for q in range(pieces):
         if hull_n[c, q] > 0:
             r = hull_rows[c, q]
-            for y in range(r[0], r[1] + 1):
-                s = spans[o]
-                o += 1
+            for y in range(r[0] + lane, r[1] + 1, wp.block_dim()):
+                s = spans[o + y - r[0]]
                 u0 = s[0]
                 u1 = s[1]
                 if u0 <= u1:
@@ -133,12 +177,16 @@ def candidate_score_kernel(
                         if a <= b:
                             g -= gain_rows[y, b + 1] - gain_rows[y, a]
                             px -= b - a + 1
-    gain = g / wp.float64(n)
-    area[c] = px
-    if px >= min_area and gain >= wp.float64(min_gain) * wp.float64(px):
-        score[c] = wp.float32(gain)
-    else:
-        score[c] = NEG_INF
+            o += r[1] - r[0] + 1
+    gt = wp.tile_sum(wp.tile(g))
+    pt = wp.tile_sum(wp.tile(px))
+    if lane == 0:
+        gain = gt[0] / wp.float64(n)
+        area[c] = pt[0]
+        if pt[0] >= min_area and gain >= wp.float64(min_gain) * wp.float64(pt[0]):
+            score[c] = wp.float32(gain)
+        else:
+            score[c] = NEG_INF
 
 
 @wp.kernel

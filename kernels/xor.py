@@ -15,13 +15,34 @@ from .raster import PIECES, row_intervals
 wp.set_module_options({"enable_backward": False})
 
 
+@wp.func
+def row_segment(width: int, lane: int):
+    """The columns ``[x0, x1)`` that lane ``lane`` of a row block owns: ``ceil(width / block_dim)`` contiguous
+    pixels each (the whole row on the CPU backend, where a block has one thread); empty for lanes past the row."""
+    seg = (width + wp.block_dim() - 1) // wp.block_dim()
+    x0 = wp.min(lane * seg, width)
+    return x0, wp.min(x0 + seg, width)
+
+
 @wp.kernel
 def mask_rows_kernel(q: wp.array2d(dtype=wp.uint8), qrow: wp.array2d(dtype=wp.int32)):
-    """Row prefix sums of the motion mask: ``qrow[y, x] = sum(q[y, :x] != 0)``; launch ``dim=H``; qrow (H, W+1)."""
-    y = wp.tid()
+    """Row prefix sums of the motion mask: ``qrow[y, x] = sum(q[y, :x] != 0)``; qrow (H, W+1) pixels.
+
+    Launch with ``wp.launch_tiled(dim=[H], block_dim=B)``: block ``y`` is row ``y``; each lane counts its
+    segment of the row (``row_segment``), a block-wide exclusive scan of the counts gives every lane its start,
+    then each lane writes its segment's prefix sums. Exact for any block size (one lane on the CPU backend).
+    """
+    y, lane = wp.tid()
+    x0, x1 = row_segment(q.shape[1], lane)
     acc = int(0)
-    qrow[y, 0] = 0
-    for x in range(q.shape[1]):
+    if wp.block_dim() > 1:  # uniform over the block: every lane reaches the scan or none does
+        for x in range(x0, x1):
+            if q[y, x] != wp.uint8(0):
+                acc += 1
+        acc = wp.untile(wp.tile_scan_exclusive(wp.tile(acc)))
+    if lane == 0:
+        qrow[y, 0] = 0
+    for x in range(x0, x1):
         if q[y, x] != wp.uint8(0):
             acc += 1
         qrow[y, x + 1] = acc
@@ -29,12 +50,19 @@ def mask_rows_kernel(q: wp.array2d(dtype=wp.uint8), qrow: wp.array2d(dtype=wp.in
 
 @wp.kernel
 def mask_total_kernel(qrow: wp.array2d(dtype=wp.int32), total: wp.array(dtype=wp.int32)):
-    """``total[0] = |q|`` from the row prefix sums (launch ``dim=1``)."""
-    acc = int(0)
+    """``total[0] = |q|`` (pixels) from the row prefix sums qrow (H, W+1).
+
+    Launch with ``wp.launch_tiled(dim=[1], block_dim=B)``: the lanes stride over the rows' totals
+    ``qrow[:, W]`` and one ``tile_sum`` combines them (no single-address atomics).
+    """
+    _b, lane = wp.tid()
     w = qrow.shape[1] - 1
-    for y in range(qrow.shape[0]):
+    acc = int(0)
+    for y in range(lane, qrow.shape[0], wp.block_dim()):
         acc += qrow[y, w]
-    total[0] = acc
+    t = wp.tile_sum(wp.tile(acc))
+    if lane == 0:
+        total[0] = t[0]
 
 
 @wp.kernel

@@ -27,6 +27,8 @@ from wptrack.kernels import xor as kxor
 from wptrack.pf import BLOCK, _seed_words
 from wptrack.rig import Camera, GroundPlane, Rig
 from wptrack.trackers.templates import (
+    CANDIDATE_BLOCK,
+    ROW_BLOCK,
     SCORE_BLOCK,
     Candidates,
     Hulls,
@@ -462,6 +464,46 @@ def random_mask(rng, width: int, height: int) -> np.ndarray:
     return np.where(q, rng.choice([1, 255], size=q.shape), 0).astype(np.uint8)
 
 
+@pytest.fixture(params=[False, True], ids=["lanes1", "cpu_blocks"])
+def cpu_blocks(request, device, monkeypatch) -> bool:
+    """``wp.config.enable_cpu_blocks`` off/on: on, the CPU backend runs a tiled launch with its full block_dim (as
+    fibers), so the multi-lane paths of the row-scan and candidate kernels (block scans, empty lane segments) are
+    checked on the CPU too; off, a CPU block is one thread (the tracker's setting). CUDA runs the ``lanes1`` case
+    only (its blocks always have block_dim threads)."""
+    if request.param and wp.get_device(device).is_cuda:
+        pytest.skip("CUDA blocks always have block_dim threads")
+    monkeypatch.setattr(wp.config, "enable_cpu_blocks", request.param)
+    return request.param
+
+
+def mask_rows(device, qd, qrow, qtotal, block_dim: int) -> None:
+    """mask_rows_kernel + mask_total_kernel as the tracker launches them (one block per row, one block for |q|)."""
+    h = qd.shape[0]
+    wp.launch_tiled(kxor.mask_rows_kernel, dim=[h], inputs=[qd], outputs=[qrow], block_dim=block_dim, device=device)
+    wp.launch_tiled(
+        kxor.mask_total_kernel, dim=[1], inputs=[qrow], outputs=[qtotal], block_dim=block_dim, device=device
+    )
+
+
+@pytest.mark.parametrize("block_dim", [ROW_BLOCK, 32, 7])
+@pytest.mark.parametrize("shape", [(480, 640), (5, 130), (3, 1), (1, 200)])
+def test_mask_rows_and_total_exact(device, rng, cpu_blocks, block_dim, shape):
+    """mask_rows_kernel gives qrow[y, x] = sum(q[y, :x] != 0) exactly and mask_total_kernel |q|, for block sizes that
+    do and do not divide the width (lanes with short or empty segments), rows shorter than the block, more rows than
+    the |q| block has threads; q holds 0, 1 and 255; qrow/|q| start as garbage (every entry must be written)."""
+    h, w = shape
+    q = rng.choice(np.array([0, 1, 255], np.uint8), size=shape, p=[0.55, 0.15, 0.3])
+    q[0, :] = 255  # a full row
+    qd = wp.array(q, dtype=wp.uint8, device=device)
+    qrow = wp.full((h, w + 1), -5, dtype=wp.int32, device=device)
+    qtotal = wp.full(1, -5, dtype=wp.int32, device=device)
+    mask_rows(device, qd, qrow, qtotal, block_dim)
+    ref = np.zeros((h, w + 1), dtype=np.int64)
+    ref[:, 1:] = np.cumsum(q != 0, axis=1)
+    np.testing.assert_array_equal(qrow.numpy(), ref)
+    assert int(qtotal.numpy()[0]) == int((q != 0).sum())
+
+
 class XorCase:
     """A random camera, mask and particle set, scored by mask_rows/mask_total/xor_score as the tracker does."""
 
@@ -501,9 +543,7 @@ class XorCase:
 
     def score(self):
         d = self.device
-        h = self.cam.height
-        wp.launch(kxor.mask_rows_kernel, dim=h, inputs=[self.qd], outputs=[self.qrow], device=d)
-        wp.launch(kxor.mask_total_kernel, dim=1, inputs=[self.qrow], outputs=[self.qtotal], device=d)
+        mask_rows(d, self.qd, self.qrow, self.qtotal, ROW_BLOCK)
         logw = wp.array(self.prior, dtype=wp.float32, device=d)
         penalty = wp.full(self.n, -1, dtype=wp.int32, device=d)
         complexity = wp.full(self.n, -1.0, dtype=wp.float32, device=d)
@@ -557,11 +597,28 @@ def test_xor_penalty_complexity_logw_and_coverage_exact(device, rng):
     assert 0 < v.sum() and np.any(v.sum(axis=0) > 1), "particles must overlap somewhere"
 
 
-@pytest.mark.parametrize("beta", [0.0, 1.0, 0.37])
-def test_coverage_uoh_exact(device, rng, beta):
+def coverage_uoh(device, q, n: int, beta: float, cov_diff, block_dim: int = ROW_BLOCK):
+    """coverage_uoh_kernel as the tracker launches it, into garbage-filled outputs: (uoh, gain_rows) device arrays."""
+    h, w = q.shape
+    uoh = wp.full((h, w), -7, dtype=wp.int32, device=device)
+    gain_rows = wp.full((h, w + 1), np.nan, dtype=wp.float64, device=device)
+    wp.launch_tiled(
+        kuoh.coverage_uoh_kernel,
+        dim=[h],
+        inputs=[q, n, beta],
+        outputs=[cov_diff, uoh, gain_rows],
+        block_dim=block_dim,
+        device=device,
+    )
+    return uoh, gain_rows
+
+
+@pytest.mark.parametrize("beta", [0.0, 1.0, 0.5, 0.37])
+def test_coverage_uoh_exact(device, rng, cpu_blocks, beta):
     """coverage_uoh_kernel after xor_score_kernel: UOH = q (N - coverage) exactly (eq. 10); gain_rows equals the
-    float64 cumulative sum of (N - cov)(q - beta (1 - q)); cov_diff (column W included) is zeroed, so a second
-    frame on the same particles gives the same UOH."""
+    cumulative sum of (N - cov)(q - beta (1 - q)) (exactly for beta = 0, 0.5, 1, whose terms are exact in float64;
+    to 1e-12 for beta = 0.37); cov_diff (column W included) is zeroed, so a second frame on the same particles
+    gives the same UOH."""
     case = XorCase(device, rng)
     q = (case.q != 0).astype(np.int64)
     cov = case.virtual.astype(np.int64).sum(axis=0)
@@ -572,25 +629,50 @@ def test_coverage_uoh_exact(device, rng, beta):
     gain_ref[:, 1:] = np.cumsum(free * (q - b64 * (1 - q)), axis=1)
     for _frame in range(2):
         case.score()
-        uoh = wp.full((h, w), -7, dtype=wp.int32, device=device)
-        gain_rows = wp.full((h, w + 1), np.nan, dtype=wp.float64, device=device)
-        wp.launch(
-            kuoh.coverage_uoh_kernel,
-            dim=h,
-            inputs=[case.qd, case.n, beta],
-            outputs=[case.cov_diff, uoh, gain_rows],
-            device=device,
-        )
+        uoh, gain_rows = coverage_uoh(device, case.qd, case.n, beta, case.cov_diff)
         np.testing.assert_array_equal(uoh.numpy(), q * (case.n - cov))
-        np.testing.assert_allclose(gain_rows.numpy(), gain_ref, rtol=1e-12, atol=1e-9)
+        if beta in (0.0, 0.5, 1.0):
+            np.testing.assert_array_equal(gain_rows.numpy(), gain_ref)
+        else:
+            np.testing.assert_allclose(gain_rows.numpy(), gain_ref, rtol=1e-12, atol=1e-9)
         assert not case.cov_diff.numpy().any()
     assert 0 < (q * (case.n - cov)).sum() < q.sum() * case.n
+
+
+@pytest.mark.parametrize("block_dim", [ROW_BLOCK, 32, 7])
+def test_coverage_uoh_at_particle_limit_exact(device, rng, cpu_blocks, block_dim):
+    """At N = 2^31 - 2 (the tracker's particle limit) the gain sums of a row reach W x 2^31 > 2^32: coverage_uoh_kernel
+    (block scans of int64 sums split into 32-bit parts) still gives UOH and gain_rows exactly (beta = 0.5), from a
+    difference array whose coverage counts span 0..N (spans ending at column W included), and zeroes it."""
+    n = 2**31 - 2
+    h, w = 6, 300
+    cov = rng.integers(0, n + 1, (h, w), dtype=np.int64)
+    cov[0] = 0  # an uncovered row: its sums are the largest
+    cov[1, :150] = n  # fully covered pixels
+    q = rng.uniform(size=(h, w)) < 0.6
+    q[0] = True
+    diff = np.zeros((h, w + 1), dtype=np.int64)
+    diff[:, 0] = cov[:, 0]
+    diff[:, 1:w] = np.diff(cov, axis=1)
+    diff[:, w] = -cov[:, -1]
+    cov_diff = wp.array(diff.astype(np.int32), dtype=wp.int32, device=device)
+    qd = wp.array(np.where(q, 255, 0).astype(np.uint8), dtype=wp.uint8, device=device)
+    uoh, gain_rows = coverage_uoh(device, qd, n, 0.5, cov_diff, block_dim)
+    free = n - cov
+    np.testing.assert_array_equal(uoh.numpy(), np.where(q, free, 0))
+    a = np.cumsum(np.where(q, free, 0), axis=1)  # int64, exact
+    b = np.cumsum(np.where(q, 0, free), axis=1)
+    gain_ref = np.zeros((h, w + 1))
+    gain_ref[:, 1:] = a.astype(np.float64) - 0.5 * b.astype(np.float64)  # a, b < 2^53 and b / 2 exact
+    assert a[0, -1] > 2**39  # far past int32 (and past 2^32)
+    np.testing.assert_array_equal(gain_rows.numpy(), gain_ref)
+    assert not cov_diff.numpy().any()
 
 
 # ------------------------------------------------------------------------------------------ 4-5. candidates
 
 
-def candidate_case(device, rng, min_gain: float, min_area: int, beta: float = 0.5):
+def candidate_case(device, rng, min_gain: float, min_area: int, beta: float = 0.5, block_dim: int = CANDIDATE_BLOCK):
     cam = random_camera(rng)
     plane = GroundPlane()
     config = TemplateConfig(candidate_step_px=20, max_range=40.0, vehicle=VehiclePrior(orientations=2))
@@ -604,9 +686,9 @@ def candidate_case(device, rng, min_gain: float, min_area: int, beta: float = 0.
     gain_rows[:, 1:] = np.cumsum(gain_px, axis=1)
     score = wp.zeros(cands.count, dtype=wp.float32, device=device)
     area = wp.full(cands.count, -1, dtype=wp.int32, device=device)
-    wp.launch(
+    wp.launch_tiled(
         kuoh.candidate_score_kernel,
-        dim=cands.count,
+        dim=[cands.count],
         inputs=[
             cands.hulls.rows,
             cands.hulls.n,
@@ -619,6 +701,7 @@ def candidate_case(device, rng, min_gain: float, min_area: int, beta: float = 0.
             min_area,
         ],
         outputs=[score, area],
+        block_dim=block_dim,
         device=device,
     )
     sil = render(device, cands.hulls, 1, w, h, np.arange(cands.count)).astype(bool)
@@ -627,13 +710,15 @@ def candidate_case(device, rng, min_gain: float, min_area: int, beta: float = 0.
     return score.numpy(), area.numpy(), area_ref, gain_ref, cands
 
 
-def test_candidate_scores_match_union_silhouettes(device, rng):
+@pytest.mark.parametrize("block_dim", [CANDIDATE_BLOCK, 7])
+def test_candidate_scores_match_union_silhouettes(device, rng, cpu_blocks, block_dim):
     """candidate_spans_kernel + candidate_score_kernel on the tracker's candidate set: area = pixel count of the
     candidate's union silhouette (its one-slot virtual image; head/body and cabin/body overlaps count once) exactly;
-    score = (1/N) sum of the gain over the silhouette (rtol 1e-6) when eligible, else -3e38 (gain < min_gain x area
-    or area < min_area); both outcomes occur."""
+    score = (1/N) sum of the gain over the silhouette when eligible (exactly: beta = 0.5 makes every term a half
+    integer, so the float64 sums are exact in any lane order), else -3e38 (gain < min_gain x area or area <
+    min_area); both outcomes occur; lanes striding over a candidate's rows (block sizes 32 and 7) change nothing."""
     min_gain, min_area = 0.3, 30
-    score, area, area_ref, gain_ref, cands = candidate_case(device, rng, min_gain, min_area)
+    score, area, area_ref, gain_ref, cands = candidate_case(device, rng, min_gain, min_area, block_dim=block_dim)
     np.testing.assert_array_equal(area, area_ref)
     assert np.mean(area_ref > 0) > 0.9  # a few candidates near the horizon cover no pixel centre
     # both pieces overlap on some rows for most candidates: the union is smaller than the sum of the pieces
@@ -641,7 +726,7 @@ def test_candidate_scores_match_union_silhouettes(device, rng):
     tie = (area_ref >= min_area) & (np.abs(gain_ref - min_gain * area_ref) <= 1e-6 * np.maximum(np.abs(gain_ref), 1.0))
     assert tie.sum() <= 2
     ok = ~tie
-    np.testing.assert_allclose(score[ok & eligible], gain_ref[ok & eligible], rtol=1e-6, atol=1e-6)
+    np.testing.assert_array_equal(score[ok & eligible], gain_ref[ok & eligible].astype(np.float32))
     assert np.all(score[ok & ~eligible] == NEG_INF32)
     assert (ok & eligible).sum() >= 3 and (ok & ~eligible).sum() >= 3, "both outcomes must be exercised"
     assert set(np.unique(cands.kind_np)) == {HUMAN, VEHICLE}

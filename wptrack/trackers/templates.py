@@ -51,6 +51,11 @@ CLASSES: tuple[str, ...] = ("human", "vehicle")
 """Object classes, in KIND order (KIND_HUMAN = 1, KIND_VEHICLE = 2)."""
 SCORE_BLOCK = 64
 """Threads per particle in the XOR scoring kernel (they stride over the particle's image rows)."""
+ROW_BLOCK = 128
+"""Threads per image row in the row-scan kernels (mask prefix sums, coverage/UOH/gain rows): each owns a segment of
+ceil(W / ROW_BLOCK) pixels."""
+CANDIDATE_BLOCK = 32
+"""Threads per addition candidate in the candidate scoring kernel (they stride over the candidate's rows)."""
 
 
 def _vec3(value: Any, name: str, positive: bool = True) -> tuple[float, float, float]:
@@ -612,8 +617,17 @@ class TemplateTracker(FrameChain):
     # --- the chain -----------------------------------------------------------------------------------------
     def _observe(self) -> None:
         d = self.device
-        wp.launch(kxor.mask_rows_kernel, dim=self.height, inputs=[self.q], outputs=[self.qrow], device=d)
-        wp.launch(kxor.mask_total_kernel, dim=1, inputs=[self.qrow], outputs=[self.qtotal], device=d)
+        wp.launch_tiled(
+            kxor.mask_rows_kernel,
+            dim=[self.height],
+            inputs=[self.q],
+            outputs=[self.qrow],
+            block_dim=ROW_BLOCK,
+            device=d,
+        )
+        wp.launch_tiled(
+            kxor.mask_total_kernel, dim=[1], inputs=[self.qrow], outputs=[self.qtotal], block_dim=ROW_BLOCK, device=d
+        )
 
     def _raster(self, cur: int) -> None:
         s = self.state[cur]
@@ -645,16 +659,17 @@ class TemplateTracker(FrameChain):
         d = self.device
         c = self.candidates
         cfg = self.config
-        wp.launch(
+        wp.launch_tiled(
             kuoh.coverage_uoh_kernel,
-            dim=self.height,
+            dim=[self.height],
             inputs=[self.q, self.n, float(cfg.add_beta)],
             outputs=[self.cov_diff, self.uoh, self.gain_rows],
+            block_dim=ROW_BLOCK,
             device=d,
         )
-        wp.launch(
+        wp.launch_tiled(
             kuoh.candidate_score_kernel,
-            dim=c.count,
+            dim=[c.count],
             inputs=[
                 c.hulls.rows,
                 c.hulls.n,
@@ -667,6 +682,7 @@ class TemplateTracker(FrameChain):
                 int(cfg.min_candidate_area),
             ],
             outputs=[c.score, c.area],
+            block_dim=CANDIDATE_BLOCK,
             device=d,
         )
         self._argmax(c.score, c.count, c.blocks, c.chunk, c.part_max, c.part_arg, c.est, c.best)
