@@ -1,5 +1,5 @@
-"""Reductions over the particle set without single-address atomics: max/argmax of log-weights, then
-normalised weights and weighted moments (MMSE mean, spread, ESS, likelihood).
+"""Reductions over the particle set without single-address atomics: max/argmax of log-weights and the weighted
+moments (MMSE mean, spread, ESS, likelihood) in one pass with the online ("running max") rescaling.
 
 Pattern (portable between CUDA and the CPU backend): ``wp.launch_tiled(dim=[blocks], block_dim=B)``; block
 ``b`` owns particles ``[b*chunk, (b+1)*chunk)`` and each of its threads strides through them by
@@ -87,70 +87,154 @@ def final_max_kernel(
         best_index[0] = a[0]
 
 
-@wp.kernel
-def block_moments_kernel(
-    logw: wp.array(dtype=wp.float32),
-    particles: wp.array(dtype=wp.vec3),
-    n: int,
-    chunk: int,
-    est: wp.array(dtype=wp.float64),
-    weights: wp.array(dtype=wp.float64),
+@wp.func
+def moments_push(
+    best: float,
+    arg: int,
+    sw: wp.float64,
+    sw2: wp.float64,
+    sx: wp.vec3d,
+    sxx: wp.vec3d,
+    v: float,
+    i: int,
+    x: wp.vec3,
+):
+    """Add particle ``i`` (log-weight ``v``, position ``x``) to one thread's running partials.
+
+    The partials are kept relative to the thread's running maximum ``best`` (the "online softmax" update):
+    ``sw = sum exp(logw - best)``, ``sw2 = sum exp(2 (logw - best))``, ``sx = sum w x``, ``sxx = sum w x^2``. A new
+    maximum rescales them by ``exp(best_old - v)``, so one pass over the particles yields the maximum, the MAP index
+    and the weighted moments together (no second read of the log-weights). Returns the updated partials.
+    """
+    if v > best:
+        r = wp.float64(0.0)
+        if best > NEG_INF:
+            r = wp.exp(wp.float64(best) - wp.float64(v))
+        sw = sw * r
+        sw2 = sw2 * r * r
+        sx = sx * r
+        sxx = sxx * r
+        best = v
+        arg = i
+    w = wp.float64(wp.exp(v - best))  # float32 exp (the log-weights are float32), float64 sums
+    xd = wp.vec3d(x)
+    return best, arg, sw + w, sw2 + w * w, sx + w * xd, sxx + w * wp.cw_mul(xd, xd)
+
+
+@wp.func
+def moments_store(
+    b: int,
+    lane: int,
+    best: float,
+    arg: int,
+    sw: wp.float64,
+    sw2: wp.float64,
+    sx: wp.vec3d,
+    sxx: wp.vec3d,
+    part_max: wp.array(dtype=wp.float32),
+    part_arg: wp.array(dtype=wp.int32),
     part: wp.array2d(dtype=wp.float64),
 ):
-    """w_i = exp(logw_i - max) (written to ``weights`` for resampling) and per-block sums of w, w^2, w x,
-    w x^2 into ``part`` (blocks, N_SUMS)."""
-    b, lane = wp.tid()
-    start = b * chunk
-    stop = wp.min(start + chunk, n)
-    mx = est[EST_MAXLOGW]
-    sw = wp.float64(0.0)
-    sw2 = wp.float64(0.0)
-    sx = wp.vec3d()
-    sxx = wp.vec3d()
-    for i in range(start + lane, stop, wp.block_dim()):
-        w = wp.exp(wp.float64(logw[i]) - mx)
-        weights[i] = w
-        x = wp.vec3d(particles[i])
-        sw += w
-        sw2 += w * w
-        sx += w * x
-        sxx += w * wp.cw_mul(x, x)
-    t0 = wp.tile_sum(wp.tile(sw))
-    t1 = wp.tile_sum(wp.tile(sw2))
+    """Combine the threads' running partials of block ``b`` (every thread of the block must call this) and write
+    them once: ``part_max[b]`` (block max log-weight), ``part_arg[b]`` (lowest index attaining it) and
+    ``part[b, :]`` = sums of w, w^2, w x (3), w x^2 (3) with w relative to the block max."""
+    m = wp.tile_max(wp.tile(best))
+    mv = m[0]
+    cand = int(NO_INDEX)
+    if best == mv:
+        cand = arg
+    a = wp.tile_min(wp.tile(cand))
+    r = wp.float64(0.0)
+    if best > NEG_INF:
+        r = wp.exp(wp.float64(best) - wp.float64(mv))
+    t0 = wp.tile_sum(wp.tile(sw * r))
+    t1 = wp.tile_sum(wp.tile(sw2 * r * r))
     for k in range(3):
-        tk = wp.tile_sum(wp.tile(sx[k]))
-        tkk = wp.tile_sum(wp.tile(sxx[k]))
+        tk = wp.tile_sum(wp.tile(sx[k] * r))
+        tkk = wp.tile_sum(wp.tile(sxx[k] * r))
         if lane == 0:
             part[b, 2 + k] = tk[0]
             part[b, 5 + k] = tkk[0]
     if lane == 0:
+        part_max[b] = mv
+        part_arg[b] = a[0]
         part[b, 0] = t0[0]
         part[b, 1] = t1[0]
 
 
 @wp.kernel
+def block_partials_kernel(
+    logw: wp.array(dtype=wp.float32),
+    particles: wp.array(dtype=wp.vec3),
+    n: int,
+    chunk: int,
+    part_max: wp.array(dtype=wp.float32),
+    part_arg: wp.array(dtype=wp.int32),
+    part: wp.array2d(dtype=wp.float64),
+):
+    """Per-block max, MAP index and weighted sums (see :func:`moments_store`) of existing particles, in one pass.
+
+    The trackers fuse the same accumulation into their predict + score kernels; this kernel serves filters whose
+    weights come from elsewhere, and the tests. Launch with ``wp.launch_tiled(dim=[blocks], block_dim=B)``.
+    """
+    b, lane = wp.tid()
+    start = b * chunk
+    stop = wp.min(start + chunk, n)
+    best = float(NEG_INF)
+    arg = int(NO_INDEX)
+    sw = wp.float64(0.0)
+    sw2 = wp.float64(0.0)
+    sx = wp.vec3d()
+    sxx = wp.vec3d()
+    for i in range(start + lane, stop, wp.block_dim()):
+        best, arg, sw, sw2, sx, sxx = moments_push(best, arg, sw, sw2, sx, sxx, logw[i], i, particles[i])
+    moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)
+
+
+@wp.kernel
 def final_moments_kernel(
+    part_max: wp.array(dtype=wp.float32),
+    part_arg: wp.array(dtype=wp.int32),
     part: wp.array2d(dtype=wp.float64),
     blocks: int,
     n: int,
     particles: wp.array(dtype=wp.vec3),
-    best_index: wp.array(dtype=wp.int32),
     ess_threshold: wp.array(dtype=wp.float32),
     est: wp.array(dtype=wp.float64),
+    best_index: wp.array(dtype=wp.int32),
     resample: wp.array(dtype=wp.int32),
 ):
-    """Combine the per-block sums (launch one block) into the estimate vector (layout ``EST_*``) and the
-    resampling decision: resample when ESS <= threshold * N (threshold 1 = every frame, CONDENSATION)."""
+    """Combine the per-block partials (launch one block) into the estimate vector (layout ``EST_*``), the MAP index
+    and the resampling decision: resample when ESS <= threshold * N (threshold 1 = every frame, CONDENSATION).
+
+    Block sums are rescaled from their block maximum to the global one M: ``sum w = sum_b exp(M_b - M) S_b``.
+    """
     _b, lane = wp.tid()
+    best = float(NEG_INF)
+    arg = int(NO_INDEX)
+    for j in range(lane, blocks, wp.block_dim()):
+        v = part_max[j]
+        if v > best or (v == best and part_arg[j] < arg):
+            best = v
+            arg = part_arg[j]
+    m = wp.tile_max(wp.tile(best))
+    mv = m[0]
+    cand = int(NO_INDEX)
+    if best == mv:
+        cand = arg
+    a = wp.tile_min(wp.tile(cand))
     sw = wp.float64(0.0)
     sw2 = wp.float64(0.0)
     sx = wp.vec3d()
     sxx = wp.vec3d()
     for j in range(lane, blocks, wp.block_dim()):
-        sw += part[j, 0]
-        sw2 += part[j, 1]
-        sx += wp.vec3d(part[j, 2], part[j, 3], part[j, 4])
-        sxx += wp.vec3d(part[j, 5], part[j, 6], part[j, 7])
+        pm = part_max[j]
+        if pm > NEG_INF:
+            r = wp.exp(wp.float64(pm) - wp.float64(mv))
+            sw += r * part[j, 0]
+            sw2 += r * r * part[j, 1]
+            sx += r * wp.vec3d(part[j, 2], part[j, 3], part[j, 4])
+            sxx += r * wp.vec3d(part[j, 5], part[j, 6], part[j, 7])
     t0 = wp.tile_sum(wp.tile(sw))
     t1 = wp.tile_sum(wp.tile(sw2))
     mean = wp.vec3d()
@@ -164,14 +248,17 @@ def final_moments_kernel(
         w = t0[0]
         mean = mean / w
         ex2 = ex2 / w
-        best = particles[best_index[0]]
+        bi = a[0]
+        best_index[0] = bi
+        bx = particles[bi]
+        est[EST_MAXLOGW] = wp.float64(mv)
         for k in range(3):
             est[EST_MEAN + k] = mean[k]
             est[EST_STD + k] = wp.sqrt(wp.max(ex2[k] - mean[k] * mean[k], wp.float64(0.0)))
-            est[EST_MAP + k] = wp.float64(best[k])
+            est[EST_MAP + k] = wp.float64(bx[k])
         ess = w * w / t1[0]
         est[EST_ESS] = ess
-        est[EST_LOGLIK] = est[EST_MAXLOGW] + wp.log(w / wp.float64(n))
+        est[EST_LOGLIK] = wp.float64(mv) + wp.log(w / wp.float64(n))
         flag = int(0)
         if ess <= wp.float64(ess_threshold[0]) * wp.float64(n) + wp.float64(1.0e-9):
             flag = 1
@@ -182,15 +269,17 @@ def final_moments_kernel(
 @wp.kernel
 def subsample_kernel(
     particles: wp.array(dtype=wp.vec3),
-    weights: wp.array(dtype=wp.float64),
+    logw: wp.array(dtype=wp.float32),
+    est: wp.array(dtype=wp.float64),
     stride: int,
     out_particles: wp.array(dtype=wp.vec3),
     out_weights: wp.array(dtype=wp.float32),
 ):
-    """Every ``stride``-th particle and its weight relative to the best (for reports; not for tracking)."""
+    """Every ``stride``-th particle and its weight relative to the best, ``exp(logw - max)`` (for reports; not for
+    tracking). ``est[EST_MAXLOGW]`` holds the frame's max log-weight."""
     k = wp.tid()
     out_particles[k] = particles[k * stride]
-    out_weights[k] = wp.float32(weights[k * stride])
+    out_weights[k] = wp.float32(wp.exp(wp.float64(logw[k * stride]) - est[EST_MAXLOGW]))
 
 
 @wp.kernel

@@ -274,3 +274,199 @@ def residual_draw_kernel(
         ancestors[placed + j] = ancestors[s]
     else:
         ancestors[j] = j  # invalid input (total weight 0): keep the particles
+
+
+# --- systematic resampling straight from log-weights, with an exact integer CDF ---------------------------------
+#
+# The weights w_i = exp(logw_i - max) are quantised to integers q_i = floor(w_i 2^k) (k chosen by the driver so that
+# sum q < 2^60) and the CDF is an exact int64 prefix sum: no rounding, no order dependence, and zero weights give
+# empty offspring ranges by construction. The block-level scans split each int64 into three 20-bit limbs scanned as
+# int32 tiles (Warp tiles scan 32-bit types only). That is exact: the two low limbs sum to at most
+# block_dim x (2^20 - 1) < 2^31 (block_dim <= 2048), the high limb to at most (sum q) / 2^40 < 2^20.
+
+LIMB_BITS = wp.constant(wp.int64(20))
+LIMB_MASK = wp.constant(wp.int64(0xFFFFF))
+ROUND = wp.constant(1024)  # particles per scan round of a block: block_dim lanes x ROUND / block_dim each
+
+
+@wp.func
+def quantised_weight(logw: wp.array(dtype=wp.float32), i: int, n: int, max_logw: wp.float64, scale: wp.float64):
+    """q_i = floor(exp(logw_i - max) * scale) as int64 (0 for ``i >= n``); ``scale`` = 2^k. The exponential is
+    float32 like the log-weights (``max_logw`` is a float32 value held in float64); the sums over q are exact."""
+    q = wp.int64(0)
+    if i < n:
+        q = wp.int64(wp.floor(wp.float64(wp.exp(logw[i] - wp.float32(max_logw))) * scale))
+    return q
+
+
+@wp.func
+def limbs_of(v: wp.int64):
+    """The three 20-bit limbs of a non-negative int64 below 2^60, as int32."""
+    return (
+        wp.int32(v & LIMB_MASK),
+        wp.int32((v >> LIMB_BITS) & LIMB_MASK),
+        wp.int32(v >> (LIMB_BITS + LIMB_BITS)),
+    )
+
+
+@wp.func
+def from_limbs(l0: wp.int32, l1: wp.int32, l2: wp.int32):
+    """Inverse of :func:`limbs_of` for limb sums (each may exceed 20 bits): l0 + l1 2^20 + l2 2^40."""
+    return wp.int64(l0) + (wp.int64(l1) << LIMB_BITS) + (wp.int64(l2) << (LIMB_BITS + LIMB_BITS))
+
+
+@wp.func
+def block_sum_exact(v: wp.int64):
+    """Exact sum over the block's threads of a non-negative int64 (< 2^60 in total); every thread gets it."""
+    l0, l1, l2 = limbs_of(v)
+    s0 = wp.tile_sum(wp.tile(l0))
+    s1 = wp.tile_sum(wp.tile(l1))
+    s2 = wp.tile_sum(wp.tile(l2))
+    return from_limbs(s0[0], s1[0], s2[0])
+
+
+@wp.kernel
+def quantised_totals_kernel(
+    logw: wp.array(dtype=wp.float32),
+    est: wp.array(dtype=wp.float64),
+    max_slot: int,
+    scale: wp.float64,
+    n: int,
+    chunk: int,
+    totals: wp.array(dtype=wp.int64),
+):
+    """Pass 1 of systematic resampling from log-weights: ``totals[b]`` = sum of q_i over block b's particles
+    ``[b chunk, (b+1) chunk)``. ``est[max_slot]`` holds the max log-weight. Launch ``wp.launch_tiled(dim=[blocks])``.
+    """
+    b, lane = wp.tid()
+    start = b * chunk
+    stop = wp.min(start + chunk, n)
+    mx = est[max_slot]
+    acc = wp.int64(0)
+    for i in range(start + lane, stop, wp.block_dim()):
+        acc += quantised_weight(logw, i, n, mx, scale)
+    t = block_sum_exact(acc)
+    if lane == 0:
+        totals[b] = t
+
+
+@wp.func
+def systematic_slot_exact(c: wp.int64, ratio: wp.float64, u: wp.float64, n: int):
+    """Output slot boundary ``floor(c n / T + U)`` of the exact cumulative weight ``c``, clamped to [0, n].
+
+    ``ratio`` = n / T. Every rounding step is monotone in ``c``, and both neighbours of a boundary evaluate it from
+    the same integer, so the offspring ranges tile [0, n) without gaps or overlaps."""
+    x = wp.floor(wp.float64(c) * ratio + u)
+    s = int(0)  # noqa: UP018 (dynamic variable)
+    if x >= wp.float64(n):
+        s = n
+    elif x > wp.float64(0.0):
+        s = int(x)
+    return s
+
+
+@wp.kernel
+def systematic_logw_kernel(
+    logw: wp.array(dtype=wp.float32),
+    est: wp.array(dtype=wp.float64),
+    max_slot: int,
+    scale: wp.float64,
+    totals: wp.array(dtype=wp.int64),
+    blocks: int,
+    seed: wp.vec2ui,
+    frame: wp.array(dtype=wp.int32),
+    enabled: wp.array(dtype=wp.int32),
+    n: int,
+    chunk: int,
+    ancestors: wp.array(dtype=wp.int32),
+):
+    """Pass 2 of systematic resampling from log-weights: exact scan and O(N) scatter, fused.
+
+    Block ``b`` owns particles ``[b chunk, (b+1) chunk)``. Its offset (the sum of the earlier blocks' ``totals``)
+    and the grand total T are summed exactly by the block itself; it then walks its particles in rounds of
+    ``block_dim x per_lane`` contiguous particles, scans the rounds' q_i exactly (three int32 limb scans) and
+    writes parent ``i`` to the slots ``[slot(C_{i-1}), slot(C_i))`` with ``slot(c) = floor(n c / T + U)`` and one
+    uniform U per frame (Philox counter ``(0, frame, STREAM_RESAMPLE)``, as :func:`systematic_kernel`). When
+    ``enabled[0] == 0`` it writes the identity. Launch ``wp.launch_tiled(dim=[blocks], block_dim=B)``.
+
+    Args:
+        logw: (n,) float32 log-weights.
+        est: the estimate vector; ``est[max_slot]`` is the max log-weight.
+        scale: 2^k of the quantisation (the same value as in :func:`quantised_totals_kernel`).
+        totals: (blocks,) int64 per-block sums of q from :func:`quantised_totals_kernel`.
+        blocks, chunk: the block partition of the particles.
+        seed, frame, enabled: as :func:`systematic_kernel`.
+        n: number of particles.
+        ancestors: (n,) int32 output parent indices.
+    """
+    b, lane = wp.tid()
+    bd = wp.block_dim()
+    start = b * chunk
+    stop = wp.min(start + chunk, n)
+    if enabled[0] == 0:
+        for i in range(start + lane, stop, bd):
+            ancestors[i] = i
+        return
+    below = wp.int64(0)
+    every = wp.int64(0)
+    for j in range(lane, blocks, bd):
+        t = totals[j]
+        every += t
+        if j < b:
+            below += t
+    offset = block_sum_exact(below)
+    total = block_sum_exact(every)
+    mx = est[max_slot]
+    u = word_to_unit64(random_words(seed, 0, frame[0], STREAM_RESAMPLE)[0])
+    ratio = wp.float64(n) / wp.float64(total)
+    per_lane = wp.max(ROUND // bd, 1)  # contiguous particles per lane and round
+    carry = offset
+    for base in range(start, stop, bd * per_lane):
+        first = base + lane * per_lane
+        own = wp.int64(0)
+        for k in range(per_lane):
+            own += quantised_weight(logw, first + k, stop, mx, scale)
+        l0, l1, l2 = limbs_of(own)
+        s0 = wp.tile_scan_inclusive(wp.tile(l0))
+        s1 = wp.tile_scan_inclusive(wp.tile(l1))
+        s2 = wp.tile_scan_inclusive(wp.tile(l2))
+        inclusive = from_limbs(wp.untile(s0), wp.untile(s1), wp.untile(s2))
+        c = carry + inclusive - own  # exact cumulative weight before this lane's first particle
+        lo = systematic_slot_exact(c, ratio, u, n)
+        for k in range(per_lane):
+            i = first + k
+            if i < stop:
+                c += quantised_weight(logw, i, stop, mx, scale)
+                hi = systematic_slot_exact(c, ratio, u, n)
+                if i == n - 1:
+                    hi = n
+                for s in range(lo, hi):
+                    ancestors[s] = i
+                lo = hi
+        last = wp.tile_from_thread(shape=1, value=inclusive, thread_idx=bd - 1)
+        carry += last[0]  # the round's total (the last lane's inclusive sum)
+
+
+@wp.kernel
+def weights_from_log_kernel(
+    logw: wp.array(dtype=wp.float32),
+    est: wp.array(dtype=wp.float64),
+    max_slot: int,
+    weights: wp.array(dtype=wp.float64),
+):
+    """``weights[i] = exp(logw[i] - est[max_slot])`` in float64 (the input of the search-based schemes)."""
+    i = wp.tid()
+    weights[i] = wp.exp(wp.float64(logw[i]) - est[max_slot])
+
+
+@wp.kernel
+def quantised_weights_kernel(
+    logw: wp.array(dtype=wp.float32),
+    est: wp.array(dtype=wp.float64),
+    max_slot: int,
+    scale: wp.float64,
+    q: wp.array(dtype=wp.int64),
+):
+    """The integer weights q_i of :func:`systematic_logw_kernel` (tests and diagnostics)."""
+    i = wp.tid()
+    q[i] = quantised_weight(logw, i, logw.shape[0], est[max_slot], scale)

@@ -17,6 +17,7 @@ import warp as wp
 from .camera import Camera, pixel_of, project
 from .colour import HALF_WINDOW, ColourTarget, pixel_matches, window_count_integral
 from .motion import gaussian_walk
+from .reduce import NEG_INF, NO_INDEX, moments_push, moments_store
 
 wp.set_module_options({"enable_backward": False})
 
@@ -130,22 +131,43 @@ def colour_predict_score_kernel(
     sigma: wp.array(dtype=wp.float32),
     seed: wp.vec2ui,
     frame: wp.array(dtype=wp.int32),
+    n: int,
+    chunk: int,
     particles_out: wp.array(dtype=wp.vec3),
     logw_out: wp.array(dtype=wp.float32),
+    part_max: wp.array(dtype=wp.float32),
+    part_arg: wp.array(dtype=wp.int32),
+    part: wp.array2d(dtype=wp.float64),
 ):
-    """One S1 iteration for particle i, fused: gather the resampled parent, gaussian walk (eqs. 1-3),
-    project into every camera and score (eqs. 5-7).
+    """One S1 iteration, fused: gather the resampled parent, gaussian walk (eqs. 1-3), project into every camera
+    and score (eqs. 5-7), and accumulate the block's max log-weight, MAP index and weighted sums
+    (``reduce.moments_push``), so the particles are read once per frame.
 
-    ``logw_out[i] = (resampled ? 0 : logw_prev[i]) + log-likelihood``: without resampling (ESS trigger not
-    fired, ``ancestors`` is the identity) the weights accumulate.
+    Launch ``wp.launch_tiled(dim=[blocks], block_dim=B)``; block ``b`` owns particles ``[b chunk, (b+1) chunk)``.
+    ``logw_out[i] = (resampled ? 0 : logw_prev[i]) + log-likelihood``: without resampling (ESS trigger not fired,
+    ``ancestors`` is the identity) the weights accumulate. Outputs ``part_*`` as ``reduce.moments_store``.
     """
-    i = wp.tid()
-    x = gaussian_walk(particles[ancestors[i]], sigma[0], seed, i, frame[0])
-    particles_out[i] = x
-    base = float(0.0)
-    if resampled[0] == 0:
-        base = logw_prev[i]
-    logw_out[i] = base + colour_log_likelihood(cams, target, bgr, integral, window, mode, x)
+    b, lane = wp.tid()
+    start = b * chunk
+    stop = wp.min(start + chunk, n)
+    s = sigma[0]
+    f = frame[0]
+    keep = resampled[0] == 0
+    best = float(NEG_INF)
+    arg = int(NO_INDEX)
+    sw = wp.float64(0.0)
+    sw2 = wp.float64(0.0)
+    sx = wp.vec3d()
+    sxx = wp.vec3d()
+    for i in range(start + lane, stop, wp.block_dim()):
+        x = gaussian_walk(particles[ancestors[i]], s, seed, i, f)
+        particles_out[i] = x
+        lw = colour_log_likelihood(cams, target, bgr, integral, window, mode, x)
+        if keep:
+            lw += logw_prev[i]
+        logw_out[i] = lw
+        best, arg, sw, sw2, sx, sxx = moments_push(best, arg, sw, sw2, sx, sxx, lw, i, x)
+    moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)
 
 
 @wp.kernel
@@ -159,17 +181,38 @@ def gaussian3d_predict_score_kernel(
     sigma: wp.array(dtype=wp.float32),
     seed: wp.vec2ui,
     frame: wp.array(dtype=wp.int32),
+    n: int,
+    chunk: int,
     particles_out: wp.array(dtype=wp.vec3),
     logw_out: wp.array(dtype=wp.float32),
+    part_max: wp.array(dtype=wp.float32),
+    part_arg: wp.array(dtype=wp.int32),
+    part: wp.array2d(dtype=wp.float64),
 ):
     """Section III.C of the extended paper: gaussian walk, then a 3D gaussian observation model
-    log p = -|x - obs|^2 / (2 sigma_obs^2) (constants dropped; they cancel in the normalisation)."""
-    i = wp.tid()
-    x = gaussian_walk(particles[ancestors[i]], sigma[0], seed, i, frame[0])
-    particles_out[i] = x
-    base = float(0.0)
-    if resampled[0] == 0:
-        base = logw_prev[i]
-    d = x - observation[0]
-    s = sigma_obs[0]
-    logw_out[i] = base - wp.dot(d, d) / (2.0 * s * s)
+    log p = -|x - obs|^2 / (2 sigma_obs^2) (constants dropped; they cancel in the normalisation). Launched and
+    fused with the block partials like :func:`colour_predict_score_kernel`."""
+    b, lane = wp.tid()
+    start = b * chunk
+    stop = wp.min(start + chunk, n)
+    s = sigma[0]
+    f = frame[0]
+    keep = resampled[0] == 0
+    obs = observation[0]
+    so = sigma_obs[0]
+    best = float(NEG_INF)
+    arg = int(NO_INDEX)
+    sw = wp.float64(0.0)
+    sw2 = wp.float64(0.0)
+    sx = wp.vec3d()
+    sxx = wp.vec3d()
+    for i in range(start + lane, stop, wp.block_dim()):
+        x = gaussian_walk(particles[ancestors[i]], s, seed, i, f)
+        particles_out[i] = x
+        d = x - obs
+        lw = -wp.dot(d, d) / (2.0 * so * so)
+        if keep:
+            lw += logw_prev[i]
+        logw_out[i] = lw
+        best, arg, sw, sw2, sx, sxx = moments_push(best, arg, sw, sw2, sx, sxx, lw, i, x)
+    moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)

@@ -70,9 +70,39 @@ def upload(frames, device):
 
 
 def mask_and_integral(drig: DeviceRig, target: HSITarget, bgr, device):
-    maps = ColourMaps(drig, device, window=True)
-    maps.launch(target.to_struct(), bgr)
-    return maps.mask, maps.integral, maps.window
+    """Mask and integral image (integral form), and the window map in both forms (per pixel and per row, whatever
+    the device picks for ColourMaps): returns mask, integral, window, window_by_rows."""
+    t = target.to_struct(device)
+    maps = ColourMaps(drig, device, window=False)
+    maps.launch(t, bgr)
+    win = ColourMaps(drig, device, window=True)
+    win.launch(t, bgr)
+    np.testing.assert_array_equal(win.mask.numpy(), maps.mask.numpy())
+    m = drig.num_cameras
+    per_pixel = wp.zeros(drig.total_pixels, dtype=wp.uint8, device=device)
+    wp.launch(
+        kcolour.window_from_mask_kernel,
+        dim=(m, drig.max_height, drig.max_width),
+        inputs=[drig.cams, maps.mask],
+        outputs=[per_pixel],
+        device=device,
+    )
+    mask2 = wp.zeros(drig.total_pixels, dtype=wp.uint8, device=device)
+    hsum = wp.zeros(drig.total_pixels, dtype=wp.uint8, device=device)
+    by_rows = wp.zeros(drig.total_pixels, dtype=wp.uint8, device=device)
+    wp.launch(
+        kcolour.mask_rows_kernel,
+        dim=(m, drig.max_height),
+        inputs=[drig.cams, t, bgr],
+        outputs=[mask2, hsum],
+        device=device,
+    )
+    wp.launch(
+        kcolour.window_cols_kernel, dim=(m, drig.max_width), inputs=[drig.cams, hsum], outputs=[by_rows], device=device
+    )
+    np.testing.assert_array_equal(mask2.numpy(), maps.mask.numpy())
+    np.testing.assert_array_equal(win.window.numpy(), per_pixel.numpy() if not win.by_rows else by_rows.numpy())
+    return maps.mask, maps.integral, per_pixel, by_rows
 
 
 @pytest.mark.parametrize("target", TARGETS)
@@ -80,7 +110,7 @@ def test_mask_matches_reference(device, rng, target):
     rig = make_rig(rng)
     frames = random_frames(rig, rng)
     drig = DeviceRig(rig, device)
-    mask, integral, window = mask_and_integral(drig, target, upload(frames, device), device)
+    mask, integral, window, by_rows = mask_and_integral(drig, target, upload(frames, device), device)
     m = mask.numpy()
     for c, f in enumerate(frames):
         got = m[drig.pixel_offsets[c] : drig.pixel_offsets[c + 1]].reshape(f.shape[:2]).astype(bool)
@@ -97,8 +127,9 @@ def test_mask_matches_reference(device, rng, target):
         # window map: 5x5 counts around every pixel, clipped at the borders
         padded = np.pad(got.astype(np.int64), 2)
         ref_win = sum(padded[dy : dy + f.shape[0], dx : dx + f.shape[1]] for dy in range(5) for dx in range(5))
-        win = window.numpy()[drig.pixel_offsets[c] : drig.pixel_offsets[c + 1]].reshape(f.shape[:2])
-        np.testing.assert_array_equal(win, ref_win)
+        for w in (window, by_rows):
+            win = w.numpy()[drig.pixel_offsets[c] : drig.pixel_offsets[c + 1]].reshape(f.shape[:2])
+            np.testing.assert_array_equal(win, ref_win)
 
 
 def test_hue_wraparound_and_intensity_limits(device):
@@ -111,7 +142,7 @@ def test_hue_wraparound_and_intensity_limits(device):
     wp.launch(
         kcolour.target_mask_kernel,
         dim=(1, 5),
-        inputs=[drig.cams, t.to_struct(), upload([px], device)],
+        inputs=[drig.cams, t.to_struct(device), upload([px], device)],
         outputs=[mask],
         device=device,
     )
@@ -141,7 +172,7 @@ def test_window_counts_direct_equals_integral_and_reference(device, rng):
     drig = DeviceRig(rig, device)
     target = TARGETS[0]
     bgr = upload(frames, device)
-    mask, integral, window = mask_and_integral(drig, target, bgr, device)
+    mask, integral, window, _ = mask_and_integral(drig, target, bgr, device)
     n = 3000
     pts = rng.uniform([0.0, 0.0, -0.1], [0.9, 0.9, 0.4], (n, 3))
     P = wp.array(pts, dtype=wp.vec3, device=device)
@@ -151,7 +182,7 @@ def test_window_counts_direct_equals_integral_and_reference(device, rng):
         wp.launch(
             kscoring.window_count_kernel,
             dim=(2, n),
-            inputs=[drig.cams, target.to_struct(), bgr, integral, window, mode, P],
+            inputs=[drig.cams, target.to_struct(device), bgr, integral, window, mode, P],
             outputs=[out],
             device=device,
         )
@@ -173,7 +204,7 @@ def test_window_counts_direct_equals_integral_and_reference(device, rng):
     wp.launch(
         kscoring.colour_score_kernel,
         dim=n,
-        inputs=[drig.cams, target.to_struct(), bgr, integral, window, kscoring.SCORE_DIRECT, P],
+        inputs=[drig.cams, target.to_struct(device), bgr, integral, window, kscoring.SCORE_DIRECT, P],
         outputs=[loglik],
         device=device,
     )

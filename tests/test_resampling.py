@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import warp as wp
 from wptrack.kernels import random as wrand
+from wptrack.kernels import resample as kres
 
 from wptrack.errors import ConfigError
 from wptrack.resampling import SCHEMES, Resampler, make_resampler, offspring_counts
@@ -290,3 +291,135 @@ def test_cuda_graph_capture(device, rng, scheme):
     flag.fill_(0)
     wp.capture_launch(capture.graph)
     np.testing.assert_array_equal(anc.numpy(), np.arange(n))
+
+
+# --- resampling from log-weights (the particle filters' path) -------------------------------------------------------
+
+MAX_SLOT = 11
+
+
+def _log_weights(rng: np.random.Generator, n: int) -> np.ndarray:
+    """float32 log-weights over ~40 nats with a block of -1e30 (weight exactly 0 after exp)."""
+    logw = (rng.normal(size=n) * 8.0).astype(np.float32)
+    logw[rng.random(n) < 0.15] = -1e30
+    logw[0] = -1e30
+    return logw
+
+
+def _run_log(r: Resampler, logw: np.ndarray, frame: int, device: str, enabled: int = 1):
+    n = len(logw)
+    est = np.zeros(16)
+    est[MAX_SLOT] = float(logw.max())
+    est_dev = wp.array(est, dtype=wp.float64, device=device)
+    logw_dev = wp.array(logw, dtype=wp.float32, device=device)
+    anc = wp.full(n, -1, dtype=wp.int32, device=device)
+    flag = wp.array([enabled], dtype=wp.int32, device=device)
+    r.from_log_weights(logw_dev, est_dev, MAX_SLOT, SEED, wp.array([frame], dtype=wp.int32, device=device), anc, flag)
+    q = wp.zeros(n, dtype=wp.int64, device=device)
+    wp.launch(
+        kres.quantised_weights_kernel, dim=n, inputs=[logw_dev, est_dev, MAX_SLOT, r.scale], outputs=[q], device=device
+    )
+    return anc.numpy(), q.numpy()
+
+
+def systematic_exact_reference(q: np.ndarray, frame: int, device: str) -> np.ndarray:
+    """NumPy systematic resampling on the exact integer CDF of the quantised weights q."""
+    n = len(q)
+    c = np.cumsum(q)
+    u = _uniforms(SEED, frame, wrand.STREAM_RESAMPLE, 1, device)[0]
+    bounds = np.clip(np.floor(c.astype(np.float64) * (n / float(c[-1])) + u), 0, n).astype(np.int64)
+    bounds[-1] = n
+    return np.repeat(np.arange(n), np.diff(np.concatenate([[0], bounds])))
+
+
+@pytest.mark.parametrize("n", [1, 255, 1000, 70_001])
+def test_log_weights_systematic_exact_cdf(device, rng, n):
+    """Quantised weights are floor(exp(logw - max) 2^k); the ancestors equal the NumPy reference on the same
+    integers exactly, whatever the block partition."""
+    logw = _log_weights(rng, n)
+    logw[n // 2] = 3.0 + max(float(logw.max()), 0.0)  # a live particle in every case
+    r = Resampler("systematic", n, device, log_weights=True)
+    assert r.cdf is None and r.weights is None  # no per-particle buffer on this path
+    for frame in (0, 1, 77):
+        anc, q = _run_log(r, logw, frame, device)
+        # float32 exponentials (to two float32 ulps: libm and NumPy may differ by one), exact integer sums
+        q_np = np.floor(np.exp(logw - logw.max()).astype(np.float64) * r.scale)
+        np.testing.assert_allclose(q, q_np, rtol=2.5e-7, atol=1.0)
+        assert q.sum() < 2**60 and q.max() <= r.scale
+        np.testing.assert_array_equal(anc, systematic_exact_reference(q, frame, device))
+
+
+def test_log_weights_systematic_offspring(device, rng):
+    """Every frame: offspring counts are floor or ceil of N q_i / T, sum to N, zero weights get none; over 200
+    frames the pooled counts are unbiased (chi-square at significance 1e-4) and the count variance is the exact
+    systematic one (within 5 %)."""
+    n, frames = 3000, 200
+    logw = _log_weights(rng, n)
+    r = Resampler("systematic", n, device, log_weights=True)
+    counts = np.empty((frames, n))
+    q = None
+    for k in range(frames):
+        a, q = _run_log(r, logw, k, device)
+        c = offspring_counts(a, n)
+        x = n * q / q.sum()
+        assert c.sum() == n
+        assert np.all((c == np.floor(x)) | (c == np.ceil(x)))
+        assert c[q == 0].sum() == 0
+        counts[k] = c
+    live = q > 0
+    expected = frames * (n * q / q.sum())[live]
+    chi2 = float(((counts.sum(axis=0)[live] - expected) ** 2 / expected).sum())
+    assert chi2 < _chi2_upper(int(live.sum()) - 1, 3.719), chi2
+    var_exact = _expected_count_variance("systematic", q.astype(np.float64)).sum()
+    assert abs(counts.var(axis=0, ddof=1).sum() / var_exact - 1.0) < 0.05
+
+
+@pytest.mark.parametrize("scheme", SCHEMES)
+def test_log_weights_enabled_flag_and_other_schemes(device, rng, scheme):
+    """enabled = 0 gives the identity; the search-based schemes from log-weights equal their weight path on
+    exp(logw - max)."""
+    n = 1500
+    logw = _log_weights(rng, n)
+    r = Resampler(scheme, n, device, log_weights=True)
+    np.testing.assert_array_equal(_run_log(r, logw, 5, device, enabled=0)[0], np.arange(n))
+    anc, _ = _run_log(r, logw, 5, device)
+    w = np.exp(logw.astype(np.float64) - logw.max())
+    assert np.all(w[anc] > 0)
+    if scheme != "systematic":
+        np.testing.assert_allclose(r.weights.numpy(), w, rtol=1e-12)
+        np.testing.assert_array_equal(anc, reference(scheme, r.weights.numpy(), r, 5, device))
+
+
+def test_log_weights_errors(device):
+    r = Resampler("systematic", 10, device, log_weights=True)
+    with pytest.raises(ValueError, match="from_log_weights"):
+        r(
+            wp.zeros(10, dtype=wp.float64, device=device),
+            SEED,
+            wp.zeros(1, dtype=wp.int32, device=device),
+            wp.zeros(10, dtype=wp.int32, device=device),
+        )
+    plain = Resampler("systematic", 10, device)
+    with pytest.raises(ValueError, match="log_weights=True"):
+        plain.from_log_weights(
+            wp.zeros(10, dtype=wp.float32, device=device),
+            wp.zeros(16, dtype=wp.float64, device=device),
+            MAX_SLOT,
+            SEED,
+            wp.zeros(1, dtype=wp.int32, device=device),
+            wp.zeros(10, dtype=wp.int32, device=device),
+        )
+
+
+def test_log_weights_systematic_large(device, rng):
+    """At N = 2e6 (many blocks, several rounds per block) the exact CDF keeps every count at floor/ceil."""
+    if wp.get_device(device).is_cpu:
+        pytest.skip("N = 2e6 is checked on CUDA devices only")
+    n = 2_000_000
+    logw = _log_weights(rng, n)
+    r = Resampler("systematic", n, device, log_weights=True)
+    anc, q = _run_log(r, logw, 1, device)
+    c = offspring_counts(anc, n)
+    x = n * q / q.sum()
+    assert c.sum() == n and np.all((c == np.floor(x)) | (c == np.ceil(x)))
+    np.testing.assert_array_equal(anc, systematic_exact_reference(q, 1, device))

@@ -186,7 +186,7 @@ def drift_study(
         images = next(frames)
     device = resolve_device(device)
     t = meta["target"]
-    target = HSITarget(hue=tuple(t["hue"]), sat=tuple(t["sat"]), intensity=tuple(t["intensity"])).to_struct()
+    target = HSITarget(hue=tuple(t["hue"]), sat=tuple(t["sat"]), intensity=tuple(t["intensity"])).to_struct(device)
     drig = DeviceRig(rig, device)
     bgr = wp.array(np.concatenate([im.reshape(-1) for im in images]), dtype=wp.uint8, device=device)
     dummy = wp.zeros(1, dtype=wp.int32, device=device)

@@ -3,11 +3,12 @@ extended paper's section III.C): particle state, estimates, resampling, CUDA gra
 
 A frame is a fixed chain of launches::
 
-    predict+score (tracker kernel: gather parents, motion, likelihood, log-weights)
-    -> block max / final max          (max log-weight and MAP index)
-    -> block moments / final moments  (weights for resampling, MMSE mean, spread, ESS, resample decision)
+    predict+score (tracker kernel: gather parents, motion, likelihood, log-weights, and per block of particles
+                   the max log-weight, MAP index and weighted sums, in the same pass)
+    -> final moments  (one block: MMSE mean, spread, ESS, likelihood, resample decision)
     -> optional subsample for reports
-    -> resample (float64 CDF, scheme by name) -> ancestors for the next frame
+    -> resample from the log-weights (scheme by name; systematic: exact integer CDF, two passes, no temporaries)
+       -> ancestors for the next frame
     -> frame counter += 1 (on device: it keys the random streams)
 
 Nothing in the chain reads back to the host or allocates; on CUDA the chain is captured once per ping-pong
@@ -30,7 +31,7 @@ import warp as wp
 from .errors import ConfigError
 from .kernels import motion as kmotion
 from .kernels import reduce as kreduce
-from .resampling import SCHEMES, Resampler
+from .resampling import SCHEMES, Resampler, bytes_per_particle
 
 log = logging.getLogger(__name__)
 
@@ -74,15 +75,15 @@ def _seed_words(seed: int) -> wp.vec2ui:
     return wp.vec2ui(seed & 0xFFFFFFFF, (seed >> 32) & 0xFFFFFFFF)
 
 
-POINT_STATE_BYTES = 2 * 12 + 2 * 4 + 4 + 8
+POINT_STATE_BYTES = 2 * 12 + 2 * 4 + 4
 """Device bytes per particle of the point-particle state: positions (2 x vec3 ping-pong), log-weights (2 x
-float32), ancestors (int32), normalised weights (float64)."""
+float32), ancestors (int32)."""
 
 
 def resampler_bytes(scheme: str) -> int:
-    """Device bytes per particle of a resampling scheme: the float64 CDF, plus (residual) counts, positions,
-    residuals and their CDF; plus up to 8 bytes of prefix-sum scratch."""
-    return 8 + 8 + (4 + 4 + 8 + 8 if scheme == "residual" else 0)
+    """Device bytes per particle of a point filter's resampler (from log-weights): 0 for systematic (exact integer
+    CDF, per-block totals only); float64 weights, CDF and scan scratch (+ residual buffers) for the others."""
+    return bytes_per_particle(scheme, log_weights=True)
 
 
 def available_bytes(device: str) -> int:
@@ -233,7 +234,9 @@ class ParticleFilter(FrameChain):
         logw: two (N,) float32 ping-pong buffers of log-weights (unnormalised).
         ancestors: (N,) int32 parent of each particle for the next prediction (identity after init).
         resampled: (1,) int32, 1 when the last frame resampled (next log-weights restart from 0).
-        weights: (N,) float64 exp(logw - max), the resampler's input.
+        part_max, part_arg, part: per block of particles (``blocks``,): max log-weight, its lowest index, and the
+            weighted sums (``blocks``, ``kernels.reduce.N_SUMS``) relative to the block max, written by the
+            tracker's predict + score kernel.
         est: (16,) float64 estimate vector (layout ``kernels.reduce.EST_*``).
         frame: (1,) int32 filter iteration, keys the random streams.
     """
@@ -269,7 +272,6 @@ class ParticleFilter(FrameChain):
         self.logw = [wp.zeros(n, dtype=wp.float32, device=d), wp.zeros(n, dtype=wp.float32, device=d)]
         self.ancestors = wp.array(np.arange(n, dtype=np.int32), device=d)
         self.resampled = wp.ones(1, dtype=wp.int32, device=d)
-        self.weights = wp.zeros(n, dtype=wp.float64, device=d)
         self.est = wp.zeros(kreduce.EST_SIZE, dtype=wp.float64, device=d)
         self.best_index = wp.zeros(1, dtype=wp.int32, device=d)
         self.part_max = wp.zeros(self.blocks, dtype=wp.float32, device=d)
@@ -278,7 +280,7 @@ class ParticleFilter(FrameChain):
         self.frame = wp.zeros(1, dtype=wp.int32, device=d)
         self.sigma = wp.array([sigma], dtype=wp.float32, device=d)
         self.ess_threshold = wp.array([ess_threshold], dtype=wp.float32, device=d)
-        self.resampler = Resampler(resampling, n, d)
+        self.resampler = Resampler(resampling, n, d, log_weights=True)
         self.keep = min(int(keep_particles), n)
         self.stride = max(1, n // self.keep) if self.keep else 1
         if self.keep:
@@ -349,6 +351,8 @@ class ParticleFilter(FrameChain):
 
     # --- the per-frame chain -----------------------------------------------------------------------
     def _launch_predict_score(self, src: int, dst: int) -> None:  # pragma: no cover - abstract
+        """Launch the tracker's fused kernel with ``wp.launch_tiled(dim=[self.blocks], block_dim=BLOCK)``: it writes
+        ``x[dst]``, ``logw[dst]`` and the per-block partials (``kernels.reduce.moments_push``/``moments_store``)."""
         raise NotImplementedError
 
     def _launch_observation(self) -> None:
@@ -358,34 +362,10 @@ class ParticleFilter(FrameChain):
         d = self.device
         x, logw = self.x[dst], self.logw[dst]
         wp.launch_tiled(
-            kreduce.block_max_kernel,
-            dim=[self.blocks],
-            inputs=[logw, self.n, self.chunk],
-            outputs=[self.part_max, self.part_arg],
-            block_dim=BLOCK,
-            device=d,
-        )
-        wp.launch_tiled(
-            kreduce.final_max_kernel,
-            dim=[1],
-            inputs=[self.part_max, self.part_arg, self.blocks],
-            outputs=[self.est, self.best_index],
-            block_dim=BLOCK,
-            device=d,
-        )
-        wp.launch_tiled(
-            kreduce.block_moments_kernel,
-            dim=[self.blocks],
-            inputs=[logw, x, self.n, self.chunk, self.est],
-            outputs=[self.weights, self.part],
-            block_dim=BLOCK,
-            device=d,
-        )
-        wp.launch_tiled(
             kreduce.final_moments_kernel,
             dim=[1],
-            inputs=[self.part, self.blocks, self.n, x, self.best_index, self.ess_threshold],
-            outputs=[self.est, self.resampled],
+            inputs=[self.part_max, self.part_arg, self.part, self.blocks, self.n, x, self.ess_threshold],
+            outputs=[self.est, self.best_index, self.resampled],
             block_dim=BLOCK,
             device=d,
         )
@@ -393,13 +373,21 @@ class ParticleFilter(FrameChain):
             wp.launch(
                 kreduce.subsample_kernel,
                 dim=self.keep,
-                inputs=[x, self.weights, self.stride],
+                inputs=[x, logw, self.est, self.stride],
                 outputs=[self.sub_x, self.sub_w],
                 device=d,
             )
 
-    def _resample(self) -> None:
-        self.resampler(self.weights, self.seed, self.frame, self.ancestors, enabled=self.resampled)
+    def _resample(self, dst: int) -> None:
+        self.resampler.from_log_weights(
+            self.logw[dst],
+            self.est,
+            int(kreduce.EST_MAXLOGW),
+            self.seed,
+            self.frame,
+            self.ancestors,
+            enabled=self.resampled,
+        )
         wp.launch(kreduce.increment_kernel, dim=1, inputs=[self.frame], device=self.device)
 
     def _readback(self) -> None:
@@ -415,7 +403,7 @@ class ParticleFilter(FrameChain):
             ("observe", self._launch_observation),
             ("predict_score", lambda: self._launch_predict_score(src, dst)),
             ("estimate", lambda: self._estimate(dst)),
-            ("resample", self._resample),
+            ("resample", lambda: self._resample(dst)),
             ("readback", self._readback),
         ]
 

@@ -21,6 +21,11 @@ from wptrack.kernels import resample as kres
 
 from .errors import ConfigError
 
+BLOCK = 256
+"""Threads per block of the fused systematic kernels (the CPU backend runs one lane per block)."""
+MAX_BLOCKS = 2048
+"""Upper bound on their blocks: each block sums the totals of the blocks before it (O(blocks^2) reads in all)."""
+
 SCHEMES: tuple[str, ...] = ("multinomial", "stratified", "systematic", "residual")
 
 _SEARCH_KERNELS = {
@@ -42,7 +47,7 @@ class Resampler:
         ConfigError: unknown scheme (the message lists the valid names) or a capacity below 1.
     """
 
-    def __init__(self, scheme: str, capacity: int, device: str) -> None:
+    def __init__(self, scheme: str, capacity: int, device: str, log_weights: bool = False) -> None:
         if scheme not in SCHEMES:
             raise ConfigError(f"resampling scheme {scheme!r}: expected one of {', '.join(SCHEMES)}")
         if int(capacity) < 1:
@@ -50,9 +55,19 @@ class Resampler:
         self.scheme = scheme
         self.capacity = int(capacity)
         self.device = wp.get_device(device)
+        self.log_weights = bool(log_weights)
         cap = self.capacity
-        self.cdf = wp.zeros(cap, dtype=wp.float64, device=self.device)
         self._always = wp.ones(1, dtype=wp.int32, device=self.device)
+        # systematic from log-weights: exact integer CDF, no per-particle buffer (see kernels.resample)
+        self.exact = self.log_weights and scheme == "systematic"
+        self.blocks = min((cap + BLOCK - 1) // BLOCK, MAX_BLOCKS)
+        self.chunk = (cap + self.blocks - 1) // self.blocks
+        self.scale = float(2 ** quantisation_bits(cap))
+        self.totals = wp.zeros(self.blocks, dtype=wp.int64, device=self.device) if self.exact else None
+        self.weights = (
+            wp.zeros(cap, dtype=wp.float64, device=self.device) if self.log_weights and not self.exact else None
+        )
+        self.cdf = None if self.exact else wp.zeros(cap, dtype=wp.float64, device=self.device)
         self.counts: wp.array | None = None
         self.positions: wp.array | None = None
         self.residuals: wp.array | None = None
@@ -99,6 +114,8 @@ class Resampler:
             ValueError: ``n`` exceeds the capacity or the arrays are too short, of the wrong dtype or on another
                 device.
         """
+        if self.exact:
+            raise ValueError("resampler built for log-weights (systematic, exact CDF): call from_log_weights()")
         if n is None:
             n = weights.shape[0]
         n = int(n)
@@ -148,6 +165,98 @@ class Resampler:
             outputs=[ancestors],
             device=self.device,
         )
+
+    def from_log_weights(
+        self,
+        logw: wp.array,
+        est: wp.array,
+        max_slot: int,
+        seed: wp.vec2ui,
+        frame: wp.array,
+        ancestors: wp.array,
+        enabled: wp.array | None = None,
+    ) -> None:
+        """Draw ``ancestors`` from log-weights (asynchronous: launches only, no host sync, no allocation).
+
+        Systematic resampling runs on an exact integer CDF without any per-particle temporary: the weights
+        ``exp(logw - max)`` are quantised to integers ``floor(w 2^k)`` with ``k = 60 - bitlen(capacity)`` (at most
+        52; k = 33 at 1e8 particles), summed per block, then scanned and scattered in one fused pass. A particle
+        whose weight is below ``2^-k`` of the best one gets no offspring. The other schemes write the float64
+        weights and run :meth:`__call__`.
+
+        Args:
+            logw: (capacity,) float32 log-weights.
+            est: float64 device vector whose entry ``max_slot`` holds ``max(logw)`` (e.g. ``kernels.reduce.EST_*``).
+            max_slot: index of the max log-weight in ``est``.
+            seed, frame, ancestors, enabled: as :meth:`__call__`.
+
+        Raises:
+            ValueError: the resampler was not built with ``log_weights=True``, or wrong lengths/dtypes/devices.
+        """
+        if not self.log_weights:
+            raise ValueError("resampler: build it with log_weights=True to call from_log_weights()")
+        n = self.capacity
+        if logw.dtype != wp.float32 or logw.shape[0] != n or ancestors.shape[0] != n or ancestors.dtype != wp.int32:
+            raise ValueError(f"resampler: logw (float32) and ancestors (int32) must have {n} entries")
+        for a in (logw, est, frame, ancestors, enabled):
+            if a is not None and a.device != self.device:
+                raise ValueError(f"resampler on {self.device}: got an array on {a.device}")
+        if enabled is None:
+            enabled = self._always
+        if not self.exact:
+            wp.launch(
+                kres.weights_from_log_kernel,
+                dim=n,
+                inputs=[logw, est, int(max_slot)],
+                outputs=[self.weights],
+                device=self.device,
+            )
+            self(self.weights, seed, frame, ancestors, enabled=enabled)
+            return
+        wp.launch_tiled(
+            kres.quantised_totals_kernel,
+            dim=[self.blocks],
+            inputs=[logw, est, int(max_slot), self.scale, n, self.chunk],
+            outputs=[self.totals],
+            block_dim=BLOCK,
+            device=self.device,
+        )
+        wp.launch_tiled(
+            kres.systematic_logw_kernel,
+            dim=[self.blocks],
+            inputs=[
+                logw,
+                est,
+                int(max_slot),
+                self.scale,
+                self.totals,
+                self.blocks,
+                seed,
+                frame,
+                enabled,
+                n,
+                self.chunk,
+            ],
+            outputs=[ancestors],
+            block_dim=BLOCK,
+            device=self.device,
+        )
+
+
+def quantisation_bits(capacity: int) -> int:
+    """Bits k of the integer weights ``floor(w 2^k)`` of the exact systematic CDF: the largest k <= 52 with
+    ``capacity x 2^k <= 2^60`` (so every sum fits the three 20-bit limbs of the block scans)."""
+    return min(52, 60 - int(capacity).bit_length())
+
+
+def bytes_per_particle(scheme: str, log_weights: bool = False) -> int:
+    """Device bytes per particle of a :class:`Resampler`: the float64 CDF, up to 8 bytes of prefix-sum scratch,
+    the residual scheme's counts, positions, residuals and their CDF, and (from log-weights) the float64 weights.
+    Systematic resampling from log-weights needs none (an int64 per block of particles)."""
+    if log_weights and scheme == "systematic":
+        return 0
+    extra = 4 + 4 + 8 + 8 if scheme == "residual" else 0
+    return 8 + 8 + extra + (8 if log_weights else 0)
 
 
 def make_resampler(scheme: str, capacity: int, device: str) -> Resampler:

@@ -95,14 +95,20 @@ class DeviceRig:
 
 
 class ColourMaps:
-    """Per-frame colour maps of a rig on a device, built by kernels from the uploaded BGR frames: the target mask,
-    its integral image per camera (four parallel segmented-scan passes) and, optionally, the 5x5 window-count
-    map (one byte per pixel).
+    """Per-frame colour maps of a rig on a device, built by kernels from the uploaded BGR frames.
+
+    Two forms, chosen at construction:
+    - ``window=False`` (integral scoring): the target mask and its integral image per camera (four parallel
+      segmented-scan passes).
+    - ``window=True`` (map scoring): the target mask and the 5x5 window-count map (one byte per pixel). On a GPU
+      two per-pixel launches (mask, then 25 cached mask reads per pixel); on the CPU, where a Warp kernel runs on one
+      core, two sliding-sum launches (mask and horizontal sums per row, then vertical sums per column).
 
     Buffers (flat over cameras, allocated once):
         mask: (sum W*H,) uint8, 1 where the pixel matches the target.
-        integral: (sum (W+1)*(H+1),) int32 integral images (row 0 and column 0 zero).
-        window: (sum W*H,) uint8 target pixels in the 5x5 window around each pixel (only with ``window=True``).
+        integral: (sum (W+1)*(H+1),) int32 integral images (row 0 and column 0 zero); integral form only.
+        window: (sum W*H,) uint8 target pixels in the 5x5 window around each pixel; window form only.
+        hsum: (sum W*H,) uint8 horizontal 5-pixel sums of the mask; window form on the CPU only.
     """
 
     def __init__(self, drig: DeviceRig, device: str, window: bool = False) -> None:
@@ -111,24 +117,47 @@ class ColourMaps:
         self.k = kcolour
         self.drig = drig
         self.device = device
+        self.has_window = window
+        self.by_rows = window and wp.get_device(device).is_cpu
         seg = int(kcolour.SEGMENT)
         m = drig.num_cameras
         self.mask = wp.zeros(drig.total_pixels, dtype=wp.uint8, device=device)
-        self.integral = wp.zeros(drig.total_integral, dtype=wp.int32, device=device)
         self.row_segments = (drig.max_width + seg - 1) // seg
         self.col_segments = (drig.max_height + seg - 1) // seg
-        self.row_seg = wp.zeros((m, drig.max_height, self.row_segments), dtype=wp.int32, device=device)
-        self.col_seg = wp.zeros((m, drig.max_width + 1, self.col_segments), dtype=wp.int32, device=device)
-        self.has_window = window
-        self.window = wp.zeros(drig.total_pixels if window else 1, dtype=wp.uint8, device=device)
+        if window:
+            self.integral = wp.zeros(1, dtype=wp.int32, device=device)
+            self.window = wp.zeros(drig.total_pixels, dtype=wp.uint8, device=device)
+        else:
+            self.integral = wp.zeros(drig.total_integral, dtype=wp.int32, device=device)
+            self.window = wp.zeros(1, dtype=wp.uint8, device=device)
+            self.row_seg = wp.zeros((m, drig.max_height, self.row_segments), dtype=wp.int32, device=device)
+            self.col_seg = wp.zeros((m, drig.max_width + 1, self.col_segments), dtype=wp.int32, device=device)
+        self.hsum = wp.zeros(drig.total_pixels if self.by_rows else 1, dtype=wp.uint8, device=device)
 
     def launch(self, target, bgr: wp.array) -> None:
         """Build the maps of the current frame (``target``: a ``kernels.colour.ColourTarget`` struct)."""
         k, dr, d = self.k, self.drig, self.device
         m = dr.num_cameras
+        if self.by_rows:
+            rows = (m, dr.max_height)
+            wp.launch(
+                k.mask_rows_kernel, dim=rows, inputs=[dr.cams, target, bgr], outputs=[self.mask, self.hsum], device=d
+            )
+            cols = (m, dr.max_width)
+            wp.launch(k.window_cols_kernel, dim=cols, inputs=[dr.cams, self.hsum], outputs=[self.window], device=d)
+            return
         wp.launch(
             k.target_mask_kernel, dim=(m, dr.max_pixels), inputs=[dr.cams, target, bgr], outputs=[self.mask], device=d
         )
+        if self.has_window:
+            wp.launch(
+                k.window_from_mask_kernel,
+                dim=(m, dr.max_height, dr.max_width),
+                inputs=[dr.cams, self.mask],
+                outputs=[self.window],
+                device=d,
+            )
+            return
         rows = (m, dr.max_height, self.row_segments)
         cols = (m, dr.max_width + 1, self.col_segments)
         wp.launch(k.row_segment_sums_kernel, dim=rows, inputs=[dr.cams, self.mask], outputs=[self.row_seg], device=d)
@@ -139,11 +168,3 @@ class ColourMaps:
             k.col_segment_sums_kernel, dim=cols, inputs=[dr.cams, self.integral], outputs=[self.col_seg], device=d
         )
         wp.launch(k.col_scan_kernel, dim=cols, inputs=[dr.cams, self.col_seg], outputs=[self.integral], device=d)
-        if self.has_window:
-            wp.launch(
-                k.window_map_kernel,
-                dim=(m, dr.max_height, dr.max_width),
-                inputs=[dr.cams, self.integral],
-                outputs=[self.window],
-                device=d,
-            )

@@ -30,7 +30,7 @@ from ..device import resolve_device
 from ..errors import ConfigError, FrameError
 from ..kernels import colour as kcolour
 from ..kernels import scoring as kscoring
-from ..pf import Estimate, ParticleFilter, check_particles
+from ..pf import BLOCK, Estimate, ParticleFilter, check_particles
 from ..resampling import SCHEMES
 from ..rig import Rig
 from ..warpcams import ColourMaps, DeviceRig
@@ -85,7 +85,8 @@ class HSITarget:
                 upper.append((math.cos(math.radians(360.0 - a2)), math.cos(math.radians(360.0 - b2))))
         return lower, upper
 
-    def to_struct(self) -> kcolour.ColourTarget:
+    def to_struct(self, device: str = "cpu") -> kcolour.ColourTarget:
+        """The target as a kernel struct on ``device``, with its colour table (2 MiB, built there once)."""
         s = kcolour.ColourTarget()
         s.h_min, s.h_max = self.hue
         s.s_min, s.s_max = self.sat
@@ -98,6 +99,10 @@ class HSITarget:
         eps = 1e-7
         s.lower = wp.vec4(lower[0][0] - eps, lower[0][1] + eps, lower[1][0] - eps, lower[1][1] + eps)
         s.upper = wp.vec4(upper[0][0] - eps, upper[0][1] + eps, upper[1][0] - eps, upper[1][1] + eps)
+        s.table = wp.zeros(int(kcolour.TABLE_WORDS), dtype=wp.uint32, device=device)
+        wp.launch(
+            kcolour.colour_table_kernel, dim=int(kcolour.TABLE_WORDS), inputs=[s], outputs=[s.table], device=device
+        )
         return s
 
 
@@ -219,7 +224,7 @@ class ColorTracker(ParticleFilter):
             "integral": kscoring.SCORE_INTEGRAL,
             "map": kscoring.SCORE_MAP,
         }[mode]
-        self._target = target.to_struct()
+        self._target = target.to_struct(self.device)
         d = self.device
         self.bgr = wp.zeros(3 * total_pixels, dtype=wp.uint8, device=d)
         self._staging = wp.zeros(3 * total_pixels, dtype=wp.uint8, device="cpu", pinned=self.is_cuda)
@@ -267,9 +272,9 @@ class ColorTracker(ParticleFilter):
             self.maps.launch(self._target, self.bgr)
 
     def _launch_predict_score(self, src: int, dst: int) -> None:
-        wp.launch(
+        wp.launch_tiled(
             kscoring.colour_predict_score_kernel,
-            dim=self.n,
+            dim=[self.blocks],
             inputs=[
                 self.drig.cams,
                 self._target,
@@ -284,8 +289,11 @@ class ColorTracker(ParticleFilter):
                 self.sigma,
                 self.seed,
                 self.frame,
+                self.n,
+                self.chunk,
             ],
-            outputs=[self.x[dst], self.logw[dst]],
+            outputs=[self.x[dst], self.logw[dst], self.part_max, self.part_arg, self.part],
+            block_dim=BLOCK,
             device=self.device,
         )
 

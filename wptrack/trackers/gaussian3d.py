@@ -15,7 +15,7 @@ import warp as wp
 from ..device import resolve_device
 from ..errors import ConfigError
 from ..kernels import scoring as kscoring
-from ..pf import Estimate, ParticleFilter
+from ..pf import BLOCK, Estimate, ParticleFilter
 
 
 class Gaussian3DTracker(ParticleFilter):
@@ -65,9 +65,9 @@ class Gaussian3DTracker(ParticleFilter):
             raise ConfigError("init: give a point or init_box")
 
     def _launch_predict_score(self, src: int, dst: int) -> None:
-        wp.launch(
+        wp.launch_tiled(
             kscoring.gaussian3d_predict_score_kernel,
-            dim=self.n,
+            dim=[self.blocks],
             inputs=[
                 self.observation,
                 self.sigma_obs,
@@ -78,8 +78,11 @@ class Gaussian3DTracker(ParticleFilter):
                 self.sigma,
                 self.seed,
                 self.frame,
+                self.n,
+                self.chunk,
             ],
-            outputs=[self.x[dst], self.logw[dst]],
+            outputs=[self.x[dst], self.logw[dst], self.part_max, self.part_arg, self.part],
+            block_dim=BLOCK,
             device=self.device,
         )
 
