@@ -83,7 +83,13 @@ class ColourSuite:
 
     @staticmethod
     def run_case(
-        case: Case, device: str, frames: int = 50, numpy_max: int = 100_000, numpy_frames: int = 30, seed: int = 0
+        case: Case,
+        device: str,
+        frames: int = 50,
+        numpy_max: int = 100_000,
+        numpy_frames: int = 30,
+        seed: int = 0,
+        offspring_at: tuple[int, ...] = (10**7,),
     ) -> dict:
         import warp as wp
 
@@ -166,7 +172,62 @@ class ColourSuite:
         result["particles_per_s"] = case.particles / float(np.median(dev_times))
         if dev.is_cuda:
             result["peak_mempool_bytes"] = int(wp.get_mempool_used_mem_high(dev))
+        if case.particles in offspring_at:
+            result["offspring"] = offspring_check(tracker)
         if "numpy_ms" in result:
             result["speedup_vs_numpy"] = result["numpy_ms"] / result["step_ms"]
         del tracker
         return result
+
+
+def offspring_check(tracker, replays: int = 32, groups: int = 1000) -> dict:
+    """Resampling at scale, on the tracker's own last frame (its log-weights, max and resampler, on its device).
+
+    Every one of ``replays`` draws (frame numbers = fresh uniforms) must give each particle floor or ceil of its
+    expected offspring N q_i / T (q: the device's quantised weights), N offspring in all and none to zero weights;
+    unbiasedness: the offspring of ``groups`` contiguous groups of particles, averaged over the replays, against
+    their expectation (z-scores with the systematic scheme's per-group standard deviation, at most 1/2 per draw).
+    """
+    import warp as wp
+    from wptrack.kernels import reduce as kreduce
+    from wptrack.kernels import resample as kres
+
+    r = tracker.resampler
+    if not r.exact:
+        return {"checked": False, "reason": f"scheme {r.scheme}"}
+    n, d = tracker.n, tracker.device
+    logw = tracker.logw[tracker.parity]
+    q_dev = wp.zeros(n, dtype=wp.int64, device=d)
+    wp.launch(
+        kres.quantised_weights_kernel,
+        dim=n,
+        inputs=[logw, tracker.est, int(kreduce.EST_MAXLOGW), r.scale],
+        outputs=[q_dev],
+        device=d,
+    )
+    q = q_dev.numpy()
+    del q_dev
+    x = n * q.astype(np.float64) / float(q.sum())
+    lo, hi = np.floor(x), np.ceil(x)
+    anc = wp.zeros(n, dtype=wp.int32, device=d)
+    frame = wp.zeros(1, dtype=wp.int32, device=d)
+    edges = np.linspace(0, n, groups + 1).astype(np.int64)
+    pooled = np.zeros(groups)
+    bounds_ok = True
+    for k in range(replays):
+        frame.fill_(1_000_000 + k)
+        r.from_log_weights(logw, tracker.est, int(kreduce.EST_MAXLOGW), tracker.seed, frame, anc)
+        c = np.bincount(anc.numpy(), minlength=n)
+        bounds_ok &= bool(c.sum() == n and np.all((c == lo) | (c == hi)) and c[q == 0].sum() == 0)
+        pooled += np.add.reduceat(c, edges[:-1])
+    expected = np.add.reduceat(x, edges[:-1])
+    z = (pooled / replays - expected) / (0.5 / np.sqrt(replays))
+    return {
+        "checked": True,
+        "particles": n,
+        "replays": replays,
+        "bounds_ok": bounds_ok,
+        "max_abs_z": float(np.abs(z).max()),
+        "ok": bool(bounds_ok and np.abs(z).max() < 5.0),
+        "ess": float(tracker.est.numpy()[kreduce.EST_ESS]),
+    }

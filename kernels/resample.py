@@ -286,7 +286,6 @@ def residual_draw_kernel(
 
 LIMB_BITS = wp.constant(wp.int64(20))
 LIMB_MASK = wp.constant(wp.int64(0xFFFFF))
-ROUND = wp.constant(1024)  # particles per scan round of a block: block_dim lanes x ROUND / block_dim each
 
 
 @wp.func
@@ -378,13 +377,15 @@ def systematic_logw_kernel(
     enabled: wp.array(dtype=wp.int32),
     n: int,
     chunk: int,
+    per_lane: int,
     ancestors: wp.array(dtype=wp.int32),
 ):
     """Pass 2 of systematic resampling from log-weights: exact scan and O(N) scatter, fused.
 
     Block ``b`` owns particles ``[b chunk, (b+1) chunk)``. Its offset (the sum of the earlier blocks' ``totals``)
     and the grand total T are summed exactly by the block itself; it then walks its particles in rounds of
-    ``block_dim x per_lane`` contiguous particles, scans the rounds' q_i exactly (three int32 limb scans) and
+    ``block_dim x per_lane`` particles (``per_lane`` contiguous ones per lane), scans the rounds' q_i exactly (three
+    int32 limb scans) and
     writes parent ``i`` to the slots ``[slot(C_{i-1}), slot(C_i))`` with ``slot(c) = floor(n c / T + U)`` and one
     uniform U per frame (Philox counter ``(0, frame, STREAM_RESAMPLE)``, as :func:`systematic_kernel`). When
     ``enabled[0] == 0`` it writes the identity. Launch ``wp.launch_tiled(dim=[blocks], block_dim=B)``.
@@ -395,6 +396,7 @@ def systematic_logw_kernel(
         scale: 2^k of the quantisation (the same value as in :func:`quantised_totals_kernel`).
         totals: (blocks,) int64 per-block sums of q from :func:`quantised_totals_kernel`.
         blocks, chunk: the block partition of the particles.
+        per_lane: contiguous particles per lane and scan round (any value >= 1 is exact).
         seed, frame, enabled: as :func:`systematic_kernel`.
         n: number of particles.
         ancestors: (n,) int32 output parent indices.
@@ -419,7 +421,6 @@ def systematic_logw_kernel(
     mx = est[max_slot]
     u = word_to_unit64(random_words(seed, 0, frame[0], STREAM_RESAMPLE)[0])
     ratio = wp.float64(n) / wp.float64(total)
-    per_lane = wp.max(ROUND // bd, 1)  # contiguous particles per lane and round
     carry = offset
     for base in range(start, stop, bd * per_lane):
         first = base + lane * per_lane

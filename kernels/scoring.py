@@ -19,7 +19,10 @@ from .colour import HALF_WINDOW, ColourTarget, pixel_matches, window_count_integ
 from .motion import gaussian_walk
 from .reduce import NEG_INF, NO_INDEX, moments_push, moments_store
 
-wp.set_module_options({"enable_backward": False})
+# fast_math (CUDA only): the particle kernel is compute-bound at 1e7+ particles (Philox, Box-Muller, one distorted
+# projection and a log per camera); the approximate transcendentals and divisions (errors ~1e-6 relative, far below
+# a pixel) took predict+score from 4.18 to 3.51 ms at 1e8 particles x 4 cameras on an H200.
+wp.set_module_options({"enable_backward": False, "fast_math": True})
 
 SCORE_DIRECT = wp.constant(0)
 SCORE_INTEGRAL = wp.constant(1)

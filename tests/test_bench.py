@@ -113,3 +113,35 @@ def test_bench_templates_tiny(tmp_path, capsys):
 def test_bench_templates_rejects_cameras(capsys):
     assert main(["bench", "--tracker", "templates", "--device", "cpu", "--cameras", "2"]) == 2
     assert "--objects" in capsys.readouterr().err
+
+
+def _small_tracker(device, n=20_000):
+    from benchmarks.colour import HUE, INTENSITY, SAT, bench_frames, bench_rig
+    from wptrack.trackers.colour import ColorTracker, HSITarget
+
+    rig = bench_rig(2)
+    frames, balls = bench_frames(rig, 3)
+    tr = ColorTracker(rig, HSITarget(HUE, SAT, INTENSITY), particles=n, sigma=0.01, init=balls[0], device=device)
+    for f in frames:
+        tr.step(f)
+    return tr
+
+
+def test_offspring_check_passes_and_catches_a_broken_resampler(device, monkeypatch):
+    from wptrack.bench import load_suites
+
+    load_suites()  # puts the source checkout's benchmarks package on the path
+    from benchmarks.colour import offspring_check
+
+    tr = _small_tracker(device)
+    res = offspring_check(tr, replays=8, groups=50)
+    assert res["checked"] and res["bounds_ok"] and res["ok"], res
+    # an identity "resampler" ignores the weights: the check must fail
+    import warp as wp
+
+    def identity(logw, est, slot, seed, frame, anc, enabled=None):
+        anc.assign(wp.array(range(anc.shape[0]), dtype=wp.int32, device="cpu"))
+
+    monkeypatch.setattr(tr.resampler, "from_log_weights", identity)
+    bad = offspring_check(tr, replays=4, groups=50)
+    assert not bad["ok"] and bad["max_abs_z"] > 5.0

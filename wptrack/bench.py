@@ -32,6 +32,9 @@ def format_row(r: dict) -> str:
     npy = f"{r['numpy_ms']:9.2f}" if "numpy_ms" in r else "        -"
     eq = {True: "yes", False: "NO"}.get(r.get("equivalent"), "-")
     st = " ".join(f"{k}={v:.3f}" for k, v in r["stages_ms"].items())
+    off = r.get("offspring")
+    if off and off.get("checked"):
+        st += f"  offspring@{off['particles']:.0e}: {'ok' if off['ok'] else 'FAILED'} (max |z| {off['max_abs_z']:.2f})"
     return (
         f"{r['tracker']:6s} {r['particles']:>10d} {r['cameras']:>4d} {r['score_mode']:8s} {r['frame_ms']:9.3f} "
         f"{r['step_ms']:9.3f} {npy} {r['particles_per_s']:10.3g} {eq:>4s}  {st}"

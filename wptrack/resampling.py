@@ -25,6 +25,10 @@ BLOCK = 256
 """Threads per block of the fused systematic kernels (the CPU backend runs one lane per block)."""
 MAX_BLOCKS = 2048
 """Upper bound on their blocks: each block sums the totals of the blocks before it (O(blocks^2) reads in all)."""
+PER_LANE_GPU = 8
+"""Contiguous particles per lane and scan round of the fused systematic pass on a GPU (H200, 1e8 particles: 2 ->
+2.19 ms, 8 -> 1.48 ms, 32 -> 2.28 ms)."""
+PER_LANE_CPU = 1024
 
 SCHEMES: tuple[str, ...] = ("multinomial", "stratified", "systematic", "residual")
 
@@ -63,6 +67,9 @@ class Resampler:
         self.blocks = min((cap + BLOCK - 1) // BLOCK, MAX_BLOCKS)
         self.chunk = (cap + self.blocks - 1) // self.blocks
         self.scale = float(2 ** quantisation_bits(cap))
+        # particles per lane and scan round: a few on a GPU (ILP, fewer block-wide scans), a long run on the CPU
+        # backend, where a block is one lane and the scans are sequential anyway
+        self.per_lane = PER_LANE_CPU if self.device.is_cpu else PER_LANE_GPU
         self.totals = wp.zeros(self.blocks, dtype=wp.int64, device=self.device) if self.exact else None
         self.weights = (
             wp.zeros(cap, dtype=wp.float64, device=self.device) if self.log_weights and not self.exact else None
@@ -236,6 +243,7 @@ class Resampler:
                 enabled,
                 n,
                 self.chunk,
+                self.per_lane,
             ],
             outputs=[ancestors],
             block_dim=BLOCK,
