@@ -289,16 +289,6 @@ LIMB_MASK = wp.constant(wp.int64(0xFFFFF))
 
 
 @wp.func
-def quantised_weight(logw: wp.array(dtype=wp.float32), i: int, n: int, max_logw: wp.float64, scale: wp.float64):
-    """q_i = floor(exp(logw_i - max) * scale) as int64 (0 for ``i >= n``); ``scale`` = 2^k. The exponential is
-    float32 like the log-weights (``max_logw`` is a float32 value held in float64); the sums over q are exact."""
-    q = wp.int64(0)
-    if i < n:
-        q = wp.int64(wp.floor(wp.float64(wp.exp(logw[i] - wp.float32(max_logw))) * scale))
-    return q
-
-
-@wp.func
 def limbs_of(v: wp.int64):
     """The three 20-bit limbs of a non-negative int64 below 2^60, as int32."""
     return (
@@ -324,6 +314,12 @@ def block_sum_exact(v: wp.int64):
     return from_limbs(s0[0], s1[0], s2[0])
 
 
+@wp.func
+def quantise(w: float, scale: wp.float64):
+    """q = floor(w * scale) as int64 for a float32 weight w in [0, 1]."""
+    return wp.int64(wp.floor(wp.float64(w) * scale))
+
+
 @wp.kernel
 def quantised_totals_kernel(
     logw: wp.array(dtype=wp.float32),
@@ -333,17 +329,21 @@ def quantised_totals_kernel(
     n: int,
     chunk: int,
     totals: wp.array(dtype=wp.int64),
+    weights: wp.array(dtype=wp.float32),
 ):
-    """Pass 1 of systematic resampling from log-weights: ``totals[b]`` = sum of q_i over block b's particles
-    ``[b chunk, (b+1) chunk)``. ``est[max_slot]`` holds the max log-weight. Launch ``wp.launch_tiled(dim=[blocks])``.
+    """Pass 1 of systematic resampling from log-weights: ``weights[i] = exp(logw_i - max)`` (float32) and
+    ``totals[b]`` = sum of q_i = floor(weights[i] scale) over block b's particles ``[b chunk, (b+1) chunk)``.
+    ``est[max_slot]`` holds the max log-weight. Launch ``wp.launch_tiled(dim=[blocks])``.
     """
     b, lane = wp.tid()
     start = b * chunk
     stop = wp.min(start + chunk, n)
-    mx = est[max_slot]
+    mx = wp.float32(est[max_slot])
     acc = wp.int64(0)
     for i in range(start + lane, stop, wp.block_dim()):
-        acc += quantised_weight(logw, i, n, mx, scale)
+        w = wp.exp(logw[i] - mx)
+        weights[i] = w
+        acc += quantise(w, scale)
     t = block_sum_exact(acc)
     if lane == 0:
         totals[b] = t
@@ -366,9 +366,7 @@ def systematic_slot_exact(c: wp.int64, ratio: wp.float64, u: wp.float64, n: int)
 
 @wp.kernel
 def systematic_logw_kernel(
-    logw: wp.array(dtype=wp.float32),
-    est: wp.array(dtype=wp.float64),
-    max_slot: int,
+    weights: wp.array(dtype=wp.float32),
     scale: wp.float64,
     totals: wp.array(dtype=wp.int64),
     blocks: int,
@@ -391,8 +389,7 @@ def systematic_logw_kernel(
     ``enabled[0] == 0`` it writes the identity. Launch ``wp.launch_tiled(dim=[blocks], block_dim=B)``.
 
     Args:
-        logw: (n,) float32 log-weights.
-        est: the estimate vector; ``est[max_slot]`` is the max log-weight.
+        weights: (n,) float32 weights exp(logw - max) from :func:`quantised_totals_kernel`.
         scale: 2^k of the quantisation (the same value as in :func:`quantised_totals_kernel`).
         totals: (blocks,) int64 per-block sums of q from :func:`quantised_totals_kernel`.
         blocks, chunk: the block partition of the particles.
@@ -418,7 +415,6 @@ def systematic_logw_kernel(
             below += t
     offset = block_sum_exact(below)
     total = block_sum_exact(every)
-    mx = est[max_slot]
     u = word_to_unit64(random_words(seed, 0, frame[0], STREAM_RESAMPLE)[0])
     ratio = wp.float64(n) / wp.float64(total)
     carry = offset
@@ -426,7 +422,8 @@ def systematic_logw_kernel(
         first = base + lane * per_lane
         own = wp.int64(0)
         for k in range(per_lane):
-            own += quantised_weight(logw, first + k, stop, mx, scale)
+            if first + k < stop:
+                own += quantise(weights[first + k], scale)
         l0, l1, l2 = limbs_of(own)
         s0 = wp.tile_scan_inclusive(wp.tile(l0))
         s1 = wp.tile_scan_inclusive(wp.tile(l1))
@@ -437,7 +434,7 @@ def systematic_logw_kernel(
         for k in range(per_lane):
             i = first + k
             if i < stop:
-                c += quantised_weight(logw, i, stop, mx, scale)
+                c += quantise(weights[i], scale)
                 hi = systematic_slot_exact(c, ratio, u, n)
                 if i == n - 1:
                     hi = n
@@ -468,6 +465,6 @@ def quantised_weights_kernel(
     scale: wp.float64,
     q: wp.array(dtype=wp.int64),
 ):
-    """The integer weights q_i of :func:`systematic_logw_kernel` (tests and diagnostics)."""
+    """The integer weights q_i = floor(exp(logw_i - max) scale) of the systematic passes (tests and diagnostics)."""
     i = wp.tid()
-    q[i] = quantised_weight(logw, i, logw.shape[0], est[max_slot], scale)
+    q[i] = quantise(wp.exp(logw[i] - wp.float32(est[max_slot])), scale)

@@ -55,3 +55,18 @@ def resolve_device(spec: str | None = "auto") -> str:
             raise DeviceError(f"device '{spec}': no such CUDA device (available: {', '.join(cuda)})")
         return spec
     raise DeviceError(f"device '{spec}': expected auto, cpu, cuda or cuda:N")
+
+
+CPU_CHUNK = 16384
+"""Particles per block on the CPU backend, where a block is one lane running its chunk serially: few blocks keep
+the per-block tile reductions and the final combination cheap (1e5 particles: 391 blocks of 256 made the fused
+systematic pass 3.4 ms, 7 blocks 1.8 ms)."""
+
+
+def block_partition(n: int, is_cpu: bool, block: int = 256, max_blocks: int = 2048) -> tuple[int, int]:
+    """``(blocks, chunk)``: block ``b`` of a tiled launch owns particles ``[b chunk, (b+1) chunk)``. On a GPU one
+    block per ``block`` particles, at most ``max_blocks`` (past ~2 blocks per SM more blocks only lengthen the final
+    one-block passes); on the CPU one block per ``CPU_CHUNK`` particles."""
+    per = CPU_CHUNK if is_cpu else block
+    blocks = max(1, min((n + per - 1) // per, max_blocks))
+    return blocks, (n + blocks - 1) // blocks

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
+from .device import block_partition
 from .errors import ConfigError
 from .kernels import motion as kmotion
 from .kernels import reduce as kreduce
@@ -265,8 +266,7 @@ class ParticleFilter(FrameChain):
         self.is_cuda = wp.get_device(device).is_cuda
         self.seed = _seed_words(seed)
         self.use_graph = self.is_cuda if use_graph is None else (bool(use_graph) and self.is_cuda)
-        self.blocks = min((n + BLOCK - 1) // BLOCK, MAX_BLOCKS)
-        self.chunk = (n + self.blocks - 1) // self.blocks
+        self.blocks, self.chunk = block_partition(n, not self.is_cuda, BLOCK, MAX_BLOCKS)
         d = self.device
         self.x = [wp.zeros(n, dtype=wp.vec3, device=d), wp.zeros(n, dtype=wp.vec3, device=d)]
         self.logw = [wp.zeros(n, dtype=wp.float32, device=d), wp.zeros(n, dtype=wp.float32, device=d)]
@@ -379,6 +379,7 @@ class ParticleFilter(FrameChain):
             )
 
     def _resample(self, dst: int) -> None:
+        # the other log-weight buffer is idle until the next prediction overwrites it: the resampler's scratch
         self.resampler.from_log_weights(
             self.logw[dst],
             self.est,
@@ -387,6 +388,7 @@ class ParticleFilter(FrameChain):
             self.frame,
             self.ancestors,
             enabled=self.resampled,
+            scratch=self.logw[1 - dst],
         )
         wp.launch(kreduce.increment_kernel, dim=1, inputs=[self.frame], device=self.device)
 

@@ -1,10 +1,16 @@
 """Particle resampling on device: multinomial, stratified, systematic and residual schemes chosen by name.
 
-A :class:`Resampler` owns every temporary (the float64 CDF and, for the residual scheme, the count and residual
-buffers) for up to ``capacity`` particles, so a call allocates nothing on the device, never synchronises with the
-host and can be captured in a CUDA graph: the frame number and the optional ESS trigger are read from device
-arrays inside the kernels. Prefix sums are float64 (``wp.utils.array_scan``); a float32 CDF loses whole particles
-at N ~ 1e6.
+A :class:`Resampler` owns every temporary for up to ``capacity`` particles, so a call allocates nothing on the
+device, never synchronises with the host and can be captured in a CUDA graph: the frame number and the optional ESS
+trigger are read from device arrays inside the kernels.
+
+Two inputs:
+- float64 weights (``__call__``): float64 prefix sums (``wp.utils.array_scan``; a float32 CDF loses whole particles
+  at N ~ 1e6), then a search or scatter kernel per scheme.
+- float32 log-weights (``from_log_weights``, the particle filters' path; build with ``log_weights=True``):
+  systematic resampling runs on an exact integer CDF (weights quantised to ``floor(exp(logw - max) 2^k)``, int64
+  prefix sums in 20-bit limbs) fused with the scatter, with no per-particle temporary; the other schemes write the
+  float64 weights first.
 
 Example::
 
@@ -19,6 +25,7 @@ import warp as wp
 
 from wptrack.kernels import resample as kres
 
+from .device import block_partition
 from .errors import ConfigError
 
 BLOCK = 256
@@ -64,13 +71,13 @@ class Resampler:
         self._always = wp.ones(1, dtype=wp.int32, device=self.device)
         # systematic from log-weights: exact integer CDF, no per-particle buffer (see kernels.resample)
         self.exact = self.log_weights and scheme == "systematic"
-        self.blocks = min((cap + BLOCK - 1) // BLOCK, MAX_BLOCKS)
-        self.chunk = (cap + self.blocks - 1) // self.blocks
+        self.blocks, self.chunk = block_partition(cap, self.device.is_cpu, BLOCK, MAX_BLOCKS)
         self.scale = float(2 ** quantisation_bits(cap))
         # particles per lane and scan round: a few on a GPU (ILP, fewer block-wide scans), a long run on the CPU
         # backend, where a block is one lane and the scans are sequential anyway
         self.per_lane = PER_LANE_CPU if self.device.is_cpu else PER_LANE_GPU
         self.totals = wp.zeros(self.blocks, dtype=wp.int64, device=self.device) if self.exact else None
+        self._scratch: wp.array | None = None
         self.weights = (
             wp.zeros(cap, dtype=wp.float64, device=self.device) if self.log_weights and not self.exact else None
         )
@@ -182,6 +189,7 @@ class Resampler:
         frame: wp.array,
         ancestors: wp.array,
         enabled: wp.array | None = None,
+        scratch: wp.array | None = None,
     ) -> None:
         """Draw ``ancestors`` from log-weights (asynchronous: launches only, no host sync, no allocation).
 
@@ -196,6 +204,9 @@ class Resampler:
             est: float64 device vector whose entry ``max_slot`` holds ``max(logw)`` (e.g. ``kernels.reduce.EST_*``).
             max_slot: index of the max log-weight in ``est``.
             seed, frame, ancestors, enabled: as :meth:`__call__`.
+            scratch: (capacity,) float32 buffer the systematic passes may overwrite with exp(logw - max) (a particle
+                filter passes its idle log-weight ping-pong buffer); without it the resampler allocates one on the
+                first call.
 
         Raises:
             ValueError: the resampler was not built with ``log_weights=True``, or wrong lengths/dtypes/devices.
@@ -220,11 +231,17 @@ class Resampler:
             )
             self(self.weights, seed, frame, ancestors, enabled=enabled)
             return
+        if scratch is None:
+            if self._scratch is None:
+                self._scratch = wp.zeros(n, dtype=wp.float32, device=self.device)
+            scratch = self._scratch
+        if scratch.dtype != wp.float32 or scratch.shape[0] != n or scratch.device != self.device:
+            raise ValueError(f"resampler: scratch must be a float32 array of {n} entries on {self.device}")
         wp.launch_tiled(
             kres.quantised_totals_kernel,
             dim=[self.blocks],
             inputs=[logw, est, int(max_slot), self.scale, n, self.chunk],
-            outputs=[self.totals],
+            outputs=[self.totals, scratch],
             block_dim=BLOCK,
             device=self.device,
         )
@@ -232,9 +249,7 @@ class Resampler:
             kres.systematic_logw_kernel,
             dim=[self.blocks],
             inputs=[
-                logw,
-                est,
-                int(max_slot),
+                scratch,
                 self.scale,
                 self.totals,
                 self.blocks,

@@ -119,7 +119,7 @@ class ColorConfig:
         resampling: scheme name: systematic, stratified, multinomial or residual.
         ess_threshold: resample when ESS <= threshold * N; 1.0 resamples every frame (CONDENSATION).
         score_mode: ``direct`` (25 reads of the frame per camera), ``integral`` (integral image of the
-            colour mask, 4 reads), ``map`` (a per-pixel window-count map made from the integral image, 1 read) or
+            colour mask, 4 reads), ``map`` (a per-pixel window-count map made from the mask once per frame, 1 read) or
             ``auto``: map when 25 N > total pixels (the paper's crossover), else direct. All give identical
             results.
         seed: seed of the counter-based random streams (same seed + device -> identical output).
@@ -215,8 +215,8 @@ class ColorTracker(ParticleFilter):
         mode = config.score_mode
         if mode == "auto":
             # Paper, section II.B: whole-image filtering costs W*H classifications per camera, the window
-            # model 25 N; past the crossover the integral image wins.
-            # The window-count map is the integral image's 4 reads done once per pixel instead of per particle.
+            # model 25 N; past the crossover a per-frame map wins: the window counts are computed once per pixel
+            # (box sums of the mask) instead of per particle.
             mode = "map" if 25 * config.particles > total_pixels else "direct"
         self.score_mode = mode
         self._mode_id = {

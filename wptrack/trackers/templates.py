@@ -40,8 +40,8 @@ from wptrack.kernels import reduce as kreduce
 from wptrack.kernels import slots as kslots
 from wptrack.kernels import uoh as kuoh
 from wptrack.kernels import xor as kxor
-from wptrack.pf import BLOCK, MAX_BLOCKS, FrameChain, _seed_words, check_fits, check_particles, resampler_bytes
-from wptrack.resampling import SCHEMES, Resampler
+from wptrack.pf import BLOCK, MAX_BLOCKS, FrameChain, _seed_words, check_fits, check_particles
+from wptrack.resampling import SCHEMES, Resampler, bytes_per_particle
 from wptrack.rig import Camera, GroundPlane, Rig
 from wptrack.warpcams import camera_struct
 
@@ -354,7 +354,7 @@ PARTICLE_BYTES = 2 * 4 + 4 + 4 + 4 + 8
 
 def particle_bytes(max_objects: int, scheme: str) -> int:
     """Device memory per particle of the template tracker, bytes."""
-    return max_objects * SLOT_STATE_BYTES + PARTICLE_BYTES + resampler_bytes(scheme)
+    return max_objects * SLOT_STATE_BYTES + PARTICLE_BYTES + bytes_per_particle(scheme)  # float64-weight input
 
 
 class Hulls:
