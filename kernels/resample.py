@@ -383,10 +383,10 @@ def systematic_logw_kernel(
     Block ``b`` owns particles ``[b chunk, (b+1) chunk)``. Its offset (the sum of the earlier blocks' ``totals``)
     and the grand total T are summed exactly by the block itself; it then walks its particles in rounds of
     ``block_dim x per_lane`` particles (``per_lane`` contiguous ones per lane), scans the rounds' q_i exactly (three
-    int32 limb scans) and
-    writes parent ``i`` to the slots ``[slot(C_{i-1}), slot(C_i))`` with ``slot(c) = floor(n c / T + U)`` and one
-    uniform U per frame (Philox counter ``(0, frame, STREAM_RESAMPLE)``, as :func:`systematic_kernel`). When
-    ``enabled[0] == 0`` it writes the identity. Launch ``wp.launch_tiled(dim=[blocks], block_dim=B)``.
+    int32 limb scans) and writes parent ``i`` to the slots ``[slot(C_{i-1}), slot(C_i))`` with
+    ``slot(c) = floor(n c / T + U)`` and one uniform U per frame (Philox counter ``(0, frame, STREAM_RESAMPLE)``,
+    as :func:`systematic_kernel`). When ``enabled[0] == 0`` it writes the identity. Launch
+    ``wp.launch_tiled(dim=[blocks], block_dim=B)``.
 
     Args:
         weights: (n,) float32 weights exp(logw - max) from :func:`quantised_totals_kernel`.
