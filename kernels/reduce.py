@@ -29,6 +29,38 @@ EST_SIZE = wp.constant(16)
 N_SUMS = wp.constant(8)  # sum w, sum w^2, sum w x (3), sum w x^2 (3)
 
 
+@wp.func
+def block_argmax(best: float, arg: int):
+    """The block's maximum of the threads' ``best`` and the lowest ``arg`` attaining it (every thread of the block
+    must call this; each gets both)."""
+    m = wp.tile_max(wp.tile(best))
+    mv = m[0]
+    cand = int(NO_INDEX)
+    if best == mv:
+        cand = arg
+    a = wp.tile_min(wp.tile(cand))
+    return mv, a[0]
+
+
+@wp.func
+def partials_argmax(part_max: wp.array(dtype=wp.float32), part_arg: wp.array(dtype=wp.int32), blocks: int, lane: int):
+    """Maximum of the per-block maxima and the lowest index attaining it, for a one-block combining launch."""
+    best = float(NEG_INF)
+    arg = int(NO_INDEX)
+    for j in range(lane, blocks, wp.block_dim()):
+        v = part_max[j]
+        if v > best or (v == best and part_arg[j] < arg):
+            best = v
+            arg = part_arg[j]
+    return block_argmax(best, arg)
+
+
+@wp.func
+def moments_zero():
+    """Empty running partials for :func:`moments_push`: best, arg, sw, sw2, sx, sxx."""
+    return float(NEG_INF), int(NO_INDEX), wp.float64(0.0), wp.float64(0.0), wp.vec3d(), wp.vec3d()
+
+
 @wp.kernel
 def block_max_kernel(
     logw: wp.array(dtype=wp.float32),
@@ -48,15 +80,10 @@ def block_max_kernel(
         if v > best:
             best = v
             arg = i
-    m = wp.tile_max(wp.tile(best))
-    mv = m[0]
-    cand = int(NO_INDEX)
-    if best == mv:
-        cand = arg
-    a = wp.tile_min(wp.tile(cand))
+    mv, a = block_argmax(best, arg)
     if lane == 0:
         part_max[b] = mv
-        part_arg[b] = a[0]
+        part_arg[b] = a
 
 
 @wp.kernel
@@ -69,22 +96,10 @@ def final_max_kernel(
 ):
     """Combine the per-block maxima (launch one block): writes ``est[EST_MAXLOGW]`` and ``best_index[0]``."""
     _b, lane = wp.tid()
-    best = float(NEG_INF)
-    arg = int(NO_INDEX)
-    for j in range(lane, blocks, wp.block_dim()):
-        v = part_max[j]
-        if v > best or (v == best and part_arg[j] < arg):
-            best = v
-            arg = part_arg[j]
-    m = wp.tile_max(wp.tile(best))
-    mv = m[0]
-    cand = int(NO_INDEX)
-    if best == mv:
-        cand = arg
-    a = wp.tile_min(wp.tile(cand))
+    mv, a = partials_argmax(part_max, part_arg, blocks, lane)
     if lane == 0:
         est[EST_MAXLOGW] = wp.float64(mv)
-        best_index[0] = a[0]
+        best_index[0] = a
 
 
 @wp.func
@@ -138,12 +153,7 @@ def moments_store(
     """Combine the threads' running partials of block ``b`` (every thread of the block must call this) and write
     them once: ``part_max[b]`` (block max log-weight), ``part_arg[b]`` (lowest index attaining it) and
     ``part[b, :]`` = sums of w, w^2, w x (3), w x^2 (3) with w relative to the block max."""
-    m = wp.tile_max(wp.tile(best))
-    mv = m[0]
-    cand = int(NO_INDEX)
-    if best == mv:
-        cand = arg
-    a = wp.tile_min(wp.tile(cand))
+    mv, a = block_argmax(best, arg)
     r = wp.float64(0.0)
     if best > NEG_INF:
         r = wp.exp(wp.float64(best) - wp.float64(mv))
@@ -157,7 +167,7 @@ def moments_store(
             part[b, 5 + k] = tkk[0]
     if lane == 0:
         part_max[b] = mv
-        part_arg[b] = a[0]
+        part_arg[b] = a
         part[b, 0] = t0[0]
         part[b, 1] = t1[0]
 
@@ -180,12 +190,7 @@ def block_partials_kernel(
     b, lane = wp.tid()
     start = b * chunk
     stop = wp.min(start + chunk, n)
-    best = float(NEG_INF)
-    arg = int(NO_INDEX)
-    sw = wp.float64(0.0)
-    sw2 = wp.float64(0.0)
-    sx = wp.vec3d()
-    sxx = wp.vec3d()
+    best, arg, sw, sw2, sx, sxx = moments_zero()
     for i in range(start + lane, stop, wp.block_dim()):
         best, arg, sw, sw2, sx, sxx = moments_push(best, arg, sw, sw2, sx, sxx, logw[i], i, particles[i])
     moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)
@@ -210,19 +215,7 @@ def final_moments_kernel(
     Block sums are rescaled from their block maximum to the global one M: ``sum w = sum_b exp(M_b - M) S_b``.
     """
     _b, lane = wp.tid()
-    best = float(NEG_INF)
-    arg = int(NO_INDEX)
-    for j in range(lane, blocks, wp.block_dim()):
-        v = part_max[j]
-        if v > best or (v == best and part_arg[j] < arg):
-            best = v
-            arg = part_arg[j]
-    m = wp.tile_max(wp.tile(best))
-    mv = m[0]
-    cand = int(NO_INDEX)
-    if best == mv:
-        cand = arg
-    a = wp.tile_min(wp.tile(cand))
+    mv, a = partials_argmax(part_max, part_arg, blocks, lane)
     sw = wp.float64(0.0)
     sw2 = wp.float64(0.0)
     sx = wp.vec3d()
@@ -248,7 +241,7 @@ def final_moments_kernel(
         w = t0[0]
         mean = mean / w
         ex2 = ex2 / w
-        bi = a[0]
+        bi = a
         best_index[0] = bi
         bx = particles[bi]
         est[EST_MAXLOGW] = wp.float64(mv)

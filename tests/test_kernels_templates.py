@@ -38,6 +38,7 @@ from wptrack.trackers.templates import (
     _dynamics_struct,
     _plane_struct,
     ground_rays,
+    launch_mask_rows,
 )
 from wptrack.warpcams import camera_struct
 
@@ -476,15 +477,6 @@ def cpu_blocks(request, device, monkeypatch) -> bool:
     return request.param
 
 
-def mask_rows(device, qd, qrow, qtotal, block_dim: int) -> None:
-    """mask_rows_kernel + mask_total_kernel as the tracker launches them (one block per row, one block for |q|)."""
-    h = qd.shape[0]
-    wp.launch_tiled(kxor.mask_rows_kernel, dim=[h], inputs=[qd], outputs=[qrow], block_dim=block_dim, device=device)
-    wp.launch_tiled(
-        kxor.mask_total_kernel, dim=[1], inputs=[qrow], outputs=[qtotal], block_dim=block_dim, device=device
-    )
-
-
 @pytest.mark.parametrize("block_dim", [ROW_BLOCK, 32, 7])
 @pytest.mark.parametrize("shape", [(480, 640), (5, 130), (3, 1), (1, 200)])
 def test_mask_rows_and_total_exact(device, rng, cpu_blocks, block_dim, shape):
@@ -497,7 +489,7 @@ def test_mask_rows_and_total_exact(device, rng, cpu_blocks, block_dim, shape):
     qd = wp.array(q, dtype=wp.uint8, device=device)
     qrow = wp.full((h, w + 1), -5, dtype=wp.int32, device=device)
     qtotal = wp.full(1, -5, dtype=wp.int32, device=device)
-    mask_rows(device, qd, qrow, qtotal, block_dim)
+    launch_mask_rows(qd, qrow, qtotal, device, block_dim)  # the tracker's own launcher
     ref = np.zeros((h, w + 1), dtype=np.int64)
     ref[:, 1:] = np.cumsum(q != 0, axis=1)
     np.testing.assert_array_equal(qrow.numpy(), ref)
@@ -543,7 +535,7 @@ class XorCase:
 
     def score(self):
         d = self.device
-        mask_rows(d, self.qd, self.qrow, self.qtotal, ROW_BLOCK)
+        launch_mask_rows(self.qd, self.qrow, self.qtotal, d)
         logw = wp.array(self.prior, dtype=wp.float32, device=d)
         penalty = wp.full(self.n, -1, dtype=wp.int32, device=d)
         complexity = wp.full(self.n, -1.0, dtype=wp.float32, device=d)

@@ -351,9 +351,33 @@ class ParticleFilter(FrameChain):
 
     # --- the per-frame chain -----------------------------------------------------------------------
     def _launch_predict_score(self, src: int, dst: int) -> None:  # pragma: no cover - abstract
-        """Launch the tracker's fused kernel with ``wp.launch_tiled(dim=[self.blocks], block_dim=BLOCK)``: it writes
-        ``x[dst]``, ``logw[dst]`` and the per-block partials (``kernels.reduce.moments_push``/``moments_store``)."""
+        """Launch the tracker's fused kernel (usually through :meth:`_launch_fused`)."""
         raise NotImplementedError
+
+    def _launch_fused(self, kernel, observation: list, src: int, dst: int) -> None:
+        """Launch a fused predict + score kernel whose arguments are the tracker's ``observation`` inputs followed by
+        the shared particle state: ``(particles, ancestors, logw_prev, resampled, sigma, seed, frame, n, chunk)`` in,
+        ``(particles_out, logw_out, part_max, part_arg, part)`` out (``kernels.reduce.moments_push``/
+        ``moments_store``), one block per ``chunk`` particles."""
+        wp.launch_tiled(
+            kernel,
+            dim=[self.blocks],
+            inputs=[
+                *observation,
+                self.x[src],
+                self.ancestors,
+                self.logw[src],
+                self.resampled,
+                self.sigma,
+                self.seed,
+                self.frame,
+                self.n,
+                self.chunk,
+            ],
+            outputs=[self.x[dst], self.logw[dst], self.part_max, self.part_arg, self.part],
+            block_dim=BLOCK,
+            device=self.device,
+        )
 
     def _launch_observation(self) -> None:
         """Per-frame observation preparation on the device (e.g. colour mask + integral image)."""

@@ -30,7 +30,7 @@ from ..device import resolve_device
 from ..errors import ConfigError, FrameError
 from ..kernels import colour as kcolour
 from ..kernels import scoring as kscoring
-from ..pf import BLOCK, Estimate, ParticleFilter, check_particles
+from ..pf import Estimate, ParticleFilter, check_particles
 from ..resampling import SCHEMES
 from ..rig import Rig
 from ..warpcams import ColourMaps, DeviceRig
@@ -272,30 +272,8 @@ class ColorTracker(ParticleFilter):
             self.maps.launch(self._target, self.bgr)
 
     def _launch_predict_score(self, src: int, dst: int) -> None:
-        wp.launch_tiled(
-            kscoring.colour_predict_score_kernel,
-            dim=[self.blocks],
-            inputs=[
-                self.drig.cams,
-                self._target,
-                self.bgr,
-                self._integral,
-                self._window,
-                self._mode_id,
-                self.x[src],
-                self.ancestors,
-                self.logw[src],
-                self.resampled,
-                self.sigma,
-                self.seed,
-                self.frame,
-                self.n,
-                self.chunk,
-            ],
-            outputs=[self.x[dst], self.logw[dst], self.part_max, self.part_arg, self.part],
-            block_dim=BLOCK,
-            device=self.device,
-        )
+        observation = [self.drig.cams, self._target, self.bgr, self._integral, self._window, self._mode_id]
+        self._launch_fused(kscoring.colour_predict_score_kernel, observation, src, dst)
 
     # --- public API -----------------------------------------------------------------------------------
     def step(self, images: Sequence[np.ndarray]) -> Estimate:

@@ -15,7 +15,7 @@ import warp as wp
 from ..device import resolve_device
 from ..errors import ConfigError
 from ..kernels import scoring as kscoring
-from ..pf import BLOCK, Estimate, ParticleFilter
+from ..pf import Estimate, ParticleFilter
 
 
 class Gaussian3DTracker(ParticleFilter):
@@ -65,26 +65,8 @@ class Gaussian3DTracker(ParticleFilter):
             raise ConfigError("init: give a point or init_box")
 
     def _launch_predict_score(self, src: int, dst: int) -> None:
-        wp.launch_tiled(
-            kscoring.gaussian3d_predict_score_kernel,
-            dim=[self.blocks],
-            inputs=[
-                self.observation,
-                self.sigma_obs,
-                self.x[src],
-                self.ancestors,
-                self.logw[src],
-                self.resampled,
-                self.sigma,
-                self.seed,
-                self.frame,
-                self.n,
-                self.chunk,
-            ],
-            outputs=[self.x[dst], self.logw[dst], self.part_max, self.part_arg, self.part],
-            block_dim=BLOCK,
-            device=self.device,
-        )
+        kernel = kscoring.gaussian3d_predict_score_kernel
+        self._launch_fused(kernel, [self.observation, self.sigma_obs], src, dst)
 
     def step(self, observation) -> Estimate:
         """One iteration with a 3D observation (3,) metres."""

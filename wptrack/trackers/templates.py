@@ -473,6 +473,16 @@ def _dynamics_struct(config: TemplateConfig) -> kdyn.Dynamics:
     return s
 
 
+def launch_mask_rows(q: wp.array, qrow: wp.array, qtotal: wp.array, device: str, block_dim: int = ROW_BLOCK) -> None:
+    """Row prefix sums ``qrow`` (H, W+1) and ``qtotal`` = |q| of the motion mask ``q`` (H, W): one block per row,
+    then one block over the row totals (``kernels.xor``)."""
+    h = q.shape[0]
+    wp.launch_tiled(kxor.mask_rows_kernel, dim=[h], inputs=[q], outputs=[qrow], block_dim=block_dim, device=device)
+    wp.launch_tiled(
+        kxor.mask_total_kernel, dim=[1], inputs=[qrow], outputs=[qtotal], block_dim=block_dim, device=device
+    )
+
+
 class TemplateTracker(FrameChain):
     """The S3 template tracker on one device.
 
@@ -616,18 +626,7 @@ class TemplateTracker(FrameChain):
 
     # --- the chain -----------------------------------------------------------------------------------------
     def _observe(self) -> None:
-        d = self.device
-        wp.launch_tiled(
-            kxor.mask_rows_kernel,
-            dim=[self.height],
-            inputs=[self.q],
-            outputs=[self.qrow],
-            block_dim=ROW_BLOCK,
-            device=d,
-        )
-        wp.launch_tiled(
-            kxor.mask_total_kernel, dim=[1], inputs=[self.qrow], outputs=[self.qtotal], block_dim=ROW_BLOCK, device=d
-        )
+        launch_mask_rows(self.q, self.qrow, self.qtotal, self.device)
 
     def _raster(self, cur: int) -> None:
         s = self.state[cur]
