@@ -20,7 +20,7 @@ from wptrack.device import quiet_warp, resolve_device
 from wptrack.evaluation import evaluate
 from wptrack.masks import open_masks
 from wptrack.rig import Rig
-from wptrack.run_templates import TEMPLATE_COLUMNS, object_row
+from wptrack.runs.templates import TEMPLATE_COLUMNS, object_row
 from wptrack.synth import render_scene
 from wptrack.trackers.templates import TemplateConfig, TemplateTracker
 

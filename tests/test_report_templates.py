@@ -185,7 +185,7 @@ def test_draw_templates_outline_and_truth_where_projected():
 @pytest.fixture(scope="module")
 def people_run(tmp_path_factory) -> dict:
     """s3-people, 8 frames, tracked on the CPU from the scene's perfect motion masks (100 particles)."""
-    from wptrack.run_templates import run_template_tracking
+    from wptrack.runs.templates import run_template_tracking
     from wptrack.synth import render_scene
     from wptrack.trackers.templates import TemplateConfig
 

@@ -10,19 +10,14 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
-import time
 from collections.abc import Sequence
-from dataclasses import asdict
 from pathlib import Path
-
-import numpy as np
 
 from . import __version__
 from .errors import ConfigError, WptrackError
+from .runs.colour import TRACK_COLUMNS, run_color_tracking  # noqa: F401  (re-exported API)
 
 log = logging.getLogger("wptrack")
-
-TRACK_COLUMNS = ["frame", "id", "x", "y", "z", "sx", "sy", "sz", "map_x", "map_y", "map_z", "ess", "loglik"]
 
 
 # --- argument helpers ---------------------------------------------------------------------------------
@@ -47,86 +42,7 @@ def _add_device(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default="auto", help="auto (CUDA when available), cpu, cuda or cuda:N")
 
 
-def _progress(total: int | None, desc: str, enabled: bool):
-    from tqdm import tqdm
-
-    return tqdm(total=total, desc=desc, unit="frame", disable=not enabled, leave=False, dynamic_ncols=True)
-
-
 # --- track color -----------------------------------------------------------------------------------------
-def run_color_tracking(
-    rig_path: str | Path,
-    videos: Sequence,
-    target,
-    out_dir: str | Path,
-    config,
-    device: str = "auto",
-    stop_at_shortest: bool = False,
-    max_frames: int | None = None,
-    groundtruth: str | Path | None = None,
-    progress: bool = False,
-) -> dict:
-    """Track a coloured object in synchronised videos and write ``tracks.csv``, ``run.json`` and
-    ``particles.npz`` into ``out_dir`` as the run goes. Returns the run summary (dict).
-
-    Everything the user gave is validated (rig, videos, camera count, frame sizes, device, parameters)
-    before the output directory is touched.
-    """
-    from .device import resolve_device
-    from .frames import open_frames, prefetch
-    from .io import RunWriter, ensure_writable_dir, read_tracks
-    from .metrics import summarize
-    from .rig import Rig
-    from .trackers.colour import ColorTracker
-
-    rig = Rig.load(rig_path)
-    if len(videos) != len(rig):
-        raise ConfigError(
-            f"{len(videos)} video(s) given for a rig of {len(rig)} camera(s) in {rig_path} ({', '.join(rig.names)})"
-        )
-    frames = open_frames(list(videos), stop_at_shortest=stop_at_shortest, max_frames=max_frames)
-    for i, (w, h) in enumerate(frames.sizes):
-        rig.check_frame_size(i, w, h, str(frames.names[i]))
-    device = resolve_device(device)
-    truth = None
-    if groundtruth is not None and Path(groundtruth).exists():
-        gt = read_tracks(groundtruth)
-        truth = np.column_stack([gt["x"], gt["y"], gt["z"]])
-    tracker = ColorTracker(rig, target, config=config, device=device)
-    out_dir = ensure_writable_dir(out_dir)
-    run_config = {
-        "rig": str(Path(rig_path).resolve()),
-        "videos": [str(v) for v in videos],
-        "target": {"hue": target.hue, "sat": target.sat, "intensity": target.intensity},
-        "tracker": {**asdict(tracker.config), "score_mode_resolved": tracker.score_mode},
-    }
-    errors: list[float] = []
-    with RunWriter(out_dir, "color", TRACK_COLUMNS, run_config, particles_max=max(1, config.keep_particles)) as out:
-        out.set_info(device=tracker.device, seed=config.seed)
-        bar = _progress(len(frames), "tracking", progress)
-        t_decode = time.perf_counter()
-        # frames are decoded by a background thread up to 4 ahead, overlapping with the device work;
-        # "decode_wait" is the time the tracker waited for the next frame
-        for k, images in enumerate(prefetch(frames, depth=4)):
-            out.add_timing("decode_wait", time.perf_counter() - t_decode)
-            est = tracker.step(images)
-            out.add_rows([[est.frame, 0, *est.mean, *est.std, *est.map, est.ess, est.loglik]])
-            if est.particles is not None:
-                out.add_particles(est.frame, est.particles, est.weights)
-            for stage, seconds in est.timings.items():
-                out.add_timing(stage, seconds)
-            if truth is not None and k < len(truth):
-                errors.append(float(np.linalg.norm(est.mean - truth[k])))
-            bar.update(1)
-            t_decode = time.perf_counter()
-        bar.close()
-        summary: dict = {"frames": tracker.frames_done, "device": tracker.device, "score_mode": tracker.score_mode}
-        if truth is not None and errors:
-            summary["error"] = summarize(np.asarray(errors)).as_dict()
-        out.close("complete", summary)
-    return summary
-
-
 def _target_from_args(args):
     from .trackers.colour import HSITarget
 
@@ -232,7 +148,7 @@ def _mask_config_from_args(args):
 
 def cmd_track_templates(args) -> int:
     from .frames import open_source
-    from .run_templates import run_template_tracking
+    from .runs.templates import run_template_tracking
 
     fps = None
     if args.video is not None and args.fps is None:
@@ -600,9 +516,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except WptrackError as e:
         print(f"wptrack: error: {e}", file=sys.stderr)
         return e.exit_code
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM during a run (RunInterrupted)
         print("wptrack: interrupted; partial results were kept", file=sys.stderr)
-        return 130
+        return int(getattr(e, "exit_code", 130))
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -271,7 +271,7 @@ def template_accuracy(
     import json as _json
 
     from .evaluation import average, evaluate
-    from .run_templates import run_template_tracking
+    from .runs.templates import run_template_tracking
     from .synth import render_scene
     from .trackers.templates import TemplateConfig
 

@@ -8,7 +8,7 @@ half-written file.
 Files of a run directory (see :class:`RunWriter`):
 
 * ``run.json``: tracker, status (``running`` / ``complete`` / ``interrupted`` / ``failed``), config, versions,
-  start/finish times, frames written, per-stage timings, summary.
+  start/finish times, frames written and the last frame written (``last_frame``), per-stage timings, summary.
 * ``tracks.csv``: one line per (frame, target): ``frame,id,x,y,z`` then tracker-specific columns.
 * ``particles.npz``: subsampled particle clouds of some frames.
 """
@@ -281,6 +281,7 @@ class RunWriter:
         self.status = "running"
         self.rows_written = 0
         self._frames: set[int] = set()
+        self._last_frame: int | None = None
         self._particles: list[tuple[int, np.ndarray, np.ndarray]] = []
         self._particles_dirty = False
         self._timings: dict[str, list[float]] = {}
@@ -294,6 +295,7 @@ class RunWriter:
             "finished": None,
             "elapsed_s": None,
             "frames": 0,
+            "last_frame": None,
             "rows": 0,
             "config": _jsonable(config),
             "versions": versions(),
@@ -360,6 +362,7 @@ class RunWriter:
         for f in frames:
             with contextlib.suppress(TypeError, ValueError):
                 self._frames.add(int(f))
+                self._last_frame = int(f) if self._last_frame is None else max(self._last_frame, int(f))
         self._maybe_flush()
 
     def add_particles(self, frame: int, positions: np.ndarray, weights: np.ndarray | None = None) -> None:
@@ -395,6 +398,10 @@ class RunWriter:
         self._particles.append((int(frame), pos.astype(np.float32, copy=True), w.astype(np.float32, copy=True)))
         self._particles_dirty = True
         self._maybe_flush()
+
+    def frame_done(self, frame: int) -> None:
+        """Mark ``frame`` as processed (also when it wrote no rows): run.json's ``last_frame``."""
+        self._last_frame = int(frame) if self._last_frame is None else max(self._last_frame, int(frame))
 
     def add_timing(self, stage: str, seconds: float) -> None:
         """Add one duration sample (seconds) to a stage; run.json reports total, count, mean and median."""
@@ -497,6 +504,7 @@ class RunWriter:
     def _write_run_json(self) -> None:
         self._run["elapsed_s"] = round(time.monotonic() - self._t0, 3)
         self._run["frames"] = self.frames_written
+        self._run["last_frame"] = self._last_frame
         self._run["rows"] = self.rows_written
         self._run["timings"] = self.timings()
         atomic_write_json(self.run_path, self._run)

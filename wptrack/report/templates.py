@@ -179,7 +179,7 @@ def template_outlines(
 
 def id_bgr(obj: int) -> tuple[int, int, int]:
     """The colour of object ``obj`` (BGR), the same as its colour in ``virtual.avi``."""
-    from ..run_templates import label_colours
+    from ..runs.templates import label_colours
 
     c = label_colours(np.array([max(int(obj), 0)]))[0]
     return (int(c[0]), int(c[1]), int(c[2]))

@@ -1,0 +1,271 @@
+"""Running the S3 template tracker on a video or on given motion masks, writing the run folder as it goes.
+
+Outputs (all written incrementally or atomically, so an interrupted run leaves valid partial results)::
+
+    out_dir/tracks.csv     frame,id,x,y,z,class,length,width,height,orientation,speed,existence,gx,gy,sx,sy
+                           (objects with existence >= min_existence; x,y,z the ground-contact point in the world
+                           frame and gx,gy on the ground plane, metres; orientation radians; speed m/s)
+    out_dir/best.csv       the same columns for the objects of the best particle (its whole scene hypothesis)
+    out_dir/virtual.avi    the best particle's virtual scene per frame (paper Fig. 5), one colour per object id
+    out_dir/masks.avi      the motion masks used (only with save_masks)
+    out_dir/run.json       configuration, inputs, device, versions, timings, summary
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import ConfigError, FrameError, OutputError
+from .loop import TrackerRun, run_tracker
+
+log = logging.getLogger(__name__)
+
+TEMPLATE_COLUMNS = [
+    "frame",
+    "id",
+    "x",
+    "y",
+    "z",
+    "class",
+    "length",
+    "width",
+    "height",
+    "orientation",
+    "speed",
+    "existence",
+    "gx",
+    "gy",
+    "sx",
+    "sy",
+]
+
+
+def object_row(frame: int, o) -> list[Any]:
+    """One tracks.csv row of a ``TrackedObject``."""
+    length, width, height = o.size
+    return [
+        frame,
+        o.id,
+        *[float(v) for v in o.position],
+        o.cls,
+        length,
+        width,
+        height,
+        float(math.remainder(o.heading, 2 * math.pi)),
+        o.speed,
+        o.existence,
+        float(o.ground[0]),
+        float(o.ground[1]),
+        float(o.std[0]),
+        float(o.std[1]),
+    ]
+
+
+def label_colours(labels: np.ndarray) -> np.ndarray:
+    """A distinct BGR colour (uint8) per object label (golden-angle hues, stable across frames)."""
+    import cv2
+
+    hue = (np.asarray(labels, dtype=np.int64) * 137.508) % 180.0
+    hsv = np.stack([hue, np.full_like(hue, 200), np.full_like(hue, 255)], axis=-1).astype(np.uint8)
+    return cv2.cvtColor(hsv.reshape(-1, 1, 3), cv2.COLOR_HSV2BGR).reshape(-1, 3)
+
+
+def colour_virtual(virtual: np.ndarray, slot_labels: np.ndarray) -> np.ndarray:
+    """Colour a virtual scene (H, W) uint8 of ``1 + slot`` values by the slots' labels -> (H, W, 3) BGR."""
+    lut = np.zeros((256, 3), dtype=np.uint8)
+    n = len(slot_labels)
+    lut[1 : n + 1] = label_colours(np.maximum(slot_labels, 0))
+    return lut[virtual]
+
+
+class _CsvAppender:
+    """A CSV file written line by line and flushed every frame (a partial file is always valid)."""
+
+    def __init__(self, path: Path, columns: list[str]) -> None:
+        try:
+            self.fh = open(path, "w", encoding="utf-8", newline="")
+        except OSError as e:
+            raise OutputError(f"cannot write {path}: {e.strerror or e}") from None
+        self.fh.write(",".join(columns) + "\n")
+
+    def add(self, rows: list[list[Any]]) -> None:
+        for row in rows:
+            self.fh.write(",".join(f"{v:.6g}" if isinstance(v, float) else str(v) for v in row) + "\n")
+        self.fh.flush()
+
+    def close(self) -> None:
+        self.fh.flush()
+        os.fsync(self.fh.fileno())
+        self.fh.close()
+
+
+def _camera_for_size(camera, width: int, height: int, source: str, rig_source: str):
+    """The camera at the video's resolution: the same camera when sizes agree, a scaled K when the video is a
+    resized copy (same aspect ratio), an error otherwise."""
+    if (width, height) == (camera.width, camera.height):
+        return camera
+    if abs(width / height - camera.width / camera.height) <= 0.01 * camera.width / camera.height:
+        log.info("scaling camera %s from %dx%d to %dx%d", camera.name, camera.width, camera.height, width, height)
+        return camera.scaled(width, height)
+    raise FrameError(
+        f"{source}: frame size {width}x{height} differs from camera '{camera.name}' calibration "
+        f"{camera.width}x{camera.height} in {rig_source} (and is not a resized copy of the same aspect ratio)"
+    )
+
+
+class TemplateRun(TrackerRun):
+    """The template tracker as a run-loop job. Everything the user gave is validated here (rig, video or masks,
+    sizes, parameters, device), before the run loop touches the output folder.
+
+    Args:
+        rig_path: rig file (YAML/JSON); its ``ground`` entry (default z = 0) is the ground plane.
+        config: ``TemplateConfig``.
+        video: the camera's video (motion masks by background subtraction, ``mask_config``), or None.
+        masks: binary motion masks (video or image folder) instead of background subtraction; with ``video``
+            as well, the masks are used and the video only sets the frame size check.
+        mask_config: ``wptrack.masks.MaskConfig`` (background subtraction parameters).
+        device: ``auto``, ``cpu``, ``cuda`` or ``cuda:N``.
+        max_frames: stop after this many frames.
+        save_masks: also write the masks used to ``masks.avi``.
+        virtual: write the best particle's virtual scenes to ``virtual.avi``.
+
+    Raises:
+        WptrackError subclasses for bad input (rig, sizes, parameters, device).
+    """
+
+    name = "templates"
+    columns = TEMPLATE_COLUMNS
+
+    def __init__(
+        self,
+        rig_path: str | Path,
+        config: Any,
+        video: str | Path | None = None,
+        masks: str | Path | None = None,
+        mask_config: Any = None,
+        device: str = "auto",
+        max_frames: int | None = None,
+        save_masks: bool = False,
+        virtual: bool = True,
+    ) -> None:
+        from dataclasses import asdict, replace
+
+        from ..device import resolve_device
+        from ..frames import open_source
+        from ..masks import MaskConfig, open_masks
+        from ..rig import Rig
+        from ..trackers.templates import TemplateTracker
+
+        if video is None and masks is None:
+            raise ConfigError("give --video (background subtraction) or --masks (binary motion masks)")
+        rig = Rig.load(rig_path)
+        camera = rig[config.camera]
+        mask_config = mask_config if mask_config is not None else MaskConfig()
+        if video is not None:
+            src = open_source(video)
+            width, height = src.size
+            camera = _camera_for_size(camera, width, height, str(video), rig.source)
+        if masks is not None:
+            mask_config = replace(mask_config, method="given")
+            stream = open_masks(masks=masks, config=mask_config, camera=camera, rig_source=rig.source)
+        else:
+            stream = open_masks(video=video, config=mask_config, camera=camera, rig_source=rig.source)
+        if camera is not rig[config.camera]:
+            cams = tuple(camera if c.name == camera.name else c for c in rig.cameras)
+            rig = Rig(cameras=cams, volume=rig.volume, source=rig.source, ground=rig.ground)
+        device = resolve_device(device)
+        self.tracker = TemplateTracker(rig, config, device=device, keep_virtual=virtual)
+        self._stream = stream
+        self._fps = config.fps
+        self._virtual = virtual
+        self._save_masks = save_masks
+        self.total = len(stream) if max_frames is None else min(len(stream), max_frames)
+        self.config = {
+            "rig": str(Path(rig_path).resolve()),
+            "camera": camera.name,
+            "frame_size": [camera.width, camera.height],
+            "video": str(video) if video is not None else None,
+            "masks": str(masks) if masks is not None else None,
+            "mask": asdict(mask_config),
+            "tracker": config.to_dict(),
+        }
+        self._seen: dict[int, str] = {}
+        self._penalties: list[int] = []
+        self._best_csv: _CsvAppender | None = None
+        self._vwriter: Any = None
+        self._mwriter: Any = None
+
+    def info(self) -> dict[str, Any]:
+        tr = self.tracker
+        return {"device": tr.device, "seed": tr.config.seed, "candidates": tr.candidates.count}
+
+    def frames(self) -> Any:
+        return self._stream
+
+    def start(self, out_dir: Path) -> None:
+        from ..frames import VideoWriter
+
+        self._best_csv = _CsvAppender(out_dir / "best.csv", TEMPLATE_COLUMNS)
+        self._vwriter = VideoWriter(out_dir / "virtual.avi", fps=self._fps) if self._virtual else None
+        self._mwriter = VideoWriter(out_dir / "masks.avi", fps=self._fps) if self._save_masks else None
+
+    def step(self, item: Any) -> Any:
+        self._mask = item
+        return self.tracker.step(item)
+
+    def record(self, est: Any, out: Any) -> None:
+        out.add_rows([object_row(est.frame, o) for o in est.objects])
+        self._best_csv.add([object_row(est.frame, o) for o in est.best])
+        for o in est.objects:
+            self._seen.setdefault(o.id, o.cls)
+        self._penalties.append(est.penalty)
+        if self._vwriter is not None and est.virtual is not None:
+            self._vwriter.write(colour_virtual(est.virtual, self.tracker.host["slot_label"].numpy()))
+        if self._mwriter is not None:
+            self._mwriter.write(np.repeat((self._mask * 255).astype(np.uint8)[..., None], 3, axis=2))
+
+    def finish(self) -> None:
+        if self._best_csv is not None:
+            self._best_csv.close()
+        for writer in (self._vwriter, self._mwriter):
+            if writer is not None:
+                writer.close()
+
+    def summary(self) -> dict[str, Any]:
+        seen = self._seen
+        return {
+            "frames": self.tracker.frames_done,
+            "device": self.tracker.device,
+            "objects": len(seen),
+            "classes": {c: sum(1 for v in seen.values() if v == c) for c in ("human", "vehicle")},
+            "mean_penalty": float(np.mean(self._penalties)) if self._penalties else None,
+        }
+
+
+def run_template_tracking(
+    rig_path: str | Path,
+    out_dir: str | Path,
+    config: Any,
+    video: str | Path | None = None,
+    masks: str | Path | None = None,
+    mask_config: Any = None,
+    device: str = "auto",
+    max_frames: int | None = None,
+    save_masks: bool = False,
+    virtual: bool = True,
+    progress: bool = False,
+) -> dict[str, Any]:
+    """Track objects with the template tracker and write the run folder (see the module docstring and
+    :class:`TemplateRun` for the arguments).
+
+    Returns:
+        The run summary (also in run.json).
+    """
+    job = TemplateRun(rig_path, config, video, masks, mask_config, device, max_frames, save_masks, virtual)
+    return run_tracker(job, out_dir, progress=progress, max_frames=max_frames)
