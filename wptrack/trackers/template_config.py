@@ -1,0 +1,267 @@
+"""Configuration and results of the S3 template tracker (Juza et al.): the human and vehicle priors, the frozen
+``TemplateConfig`` (validated, with units and the paper's symbols), and the per-frame ``TemplateEstimate`` with its
+``TrackedObject`` list. The device driver is :mod:`wptrack.trackers.templates`, which re-exports these names."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from wptrack.errors import ConfigError
+from wptrack.kernels import raster as kraster
+from wptrack.pf import _seed_words, check_particles
+from wptrack.resampling import SCHEMES
+
+CLASSES: tuple[str, ...] = ("human", "vehicle")
+"""Object classes, in KIND order (KIND_HUMAN = 1, KIND_VEHICLE = 2)."""
+
+
+def _vec3(value: Any, name: str, positive: bool = True) -> tuple[float, float, float]:
+    try:
+        arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name}: expected 3 numbers, got {value!r}") from None
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise ConfigError(f"{name}: expected 3 finite numbers, got {value!r}")
+    if positive and np.any(arr < 0):
+        raise ConfigError(f"{name}: expected values >= 0 (metres), got {arr.tolist()}")
+    return (float(arr[0]), float(arr[1]), float(arr[2]))
+
+
+def _nonneg(value: Any, name: str, unit: str, upper: float | None = None, strict: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+        raise ConfigError(f"{name}: expected a number ({unit}), got {value!r}")
+    v = float(value)
+    if not math.isfinite(v) or v < 0 or (strict and v == 0) or (upper is not None and v > upper):
+        rng = f"in [0, {upper}]" if upper is not None else ("> 0" if strict else ">= 0")
+        raise ConfigError(f"{name}: expected a value {rng} ({unit}), got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class HumanPrior:
+    """Human template (body prism + head), its prior and its dynamics (eq. 8).
+
+    dims = (height, body radius, head radius), metres. Deviations are per frame.
+    """
+
+    dims_mean: tuple[float, float, float] = (1.72, 0.18, 0.10)
+    """Prior mean of an added human (and the size of the addition candidates), m."""
+    dims_sd: tuple[float, float, float] = (0.08, 0.03, 0.01)
+    """Prior deviation of an added human's dims, m."""
+    dims_min: tuple[float, float, float] = (1.2, 0.10, 0.07)
+    dims_max: tuple[float, float, float] = (2.1, 0.32, 0.15)
+    sigma_dims: tuple[float, float, float] = (0.01, 0.005, 0.002)
+    """sigma_d of eq. 8, m per frame."""
+    sigma_speed: float = 0.25
+    """sigma_v of eq. 8 (each velocity component), m/s per frame."""
+    init_speed_sd: float = 0.5
+    """Velocity deviation of an added human, m/s."""
+    speed_max: float = 3.0
+    """Velocity magnitude limit, m/s."""
+    cost_a: float = 20.0
+    """a_r of eq. 5, pixels."""
+    cost_b: float = 60.0
+    """b_r of eq. 5, pixels."""
+
+    def __post_init__(self) -> None:
+        for name in ("dims_mean", "dims_sd", "dims_min", "dims_max", "sigma_dims"):
+            object.__setattr__(self, name, _vec3(getattr(self, name), f"human.{name}"))
+        for name, unit in (("sigma_speed", "m/s"), ("init_speed_sd", "m/s"), ("cost_a", "px"), ("cost_b", "px")):
+            object.__setattr__(self, name, _nonneg(getattr(self, name), f"human.{name}", unit))
+        object.__setattr__(self, "speed_max", _nonneg(self.speed_max, "human.speed_max", "m/s", strict=True))
+        _check_dims("human", self.dims_mean, self.dims_min, self.dims_max)
+
+
+@dataclass(frozen=True)
+class VehiclePrior:
+    """Vehicle template (lower body + cabin boxes), its prior and its dynamics (eq. 9).
+
+    dims = (length, width, height), metres. Deviations are per frame.
+    """
+
+    dims_mean: tuple[float, float, float] = (4.4, 1.8, 1.5)
+    dims_sd: tuple[float, float, float] = (0.3, 0.08, 0.08)
+    dims_min: tuple[float, float, float] = (3.0, 1.4, 1.1)
+    dims_max: tuple[float, float, float] = (6.5, 2.5, 2.4)
+    sigma_dims: tuple[float, float, float] = (0.03, 0.01, 0.01)
+    sigma_speed: float = 0.6
+    """sigma_v of eq. 9, m/s per frame."""
+    sigma_turn: float = 0.15
+    """sigma_theta of eq. 9, rad/s per frame."""
+    init_speed_sd: float = 3.0
+    init_heading_sd: float = 0.2
+    """Heading deviation of an added vehicle around the candidate's orientation, rad."""
+    speed_max: float = 20.0
+    turn_max: float = 1.0
+    """|theta| limit, rad/s."""
+    orientations: int = 4
+    """Candidate orientations in [0, pi) (a box is symmetric under a half turn)."""
+    cost_a: float = 40.0
+    cost_b: float = 120.0
+
+    def __post_init__(self) -> None:
+        for name in ("dims_mean", "dims_sd", "dims_min", "dims_max", "sigma_dims"):
+            object.__setattr__(self, name, _vec3(getattr(self, name), f"vehicle.{name}"))
+        for name, unit in (
+            ("sigma_speed", "m/s"),
+            ("sigma_turn", "rad/s"),
+            ("init_speed_sd", "m/s"),
+            ("init_heading_sd", "rad"),
+            ("cost_a", "px"),
+            ("cost_b", "px"),
+        ):
+            object.__setattr__(self, name, _nonneg(getattr(self, name), f"vehicle.{name}", unit))
+        object.__setattr__(self, "speed_max", _nonneg(self.speed_max, "vehicle.speed_max", "m/s", strict=True))
+        object.__setattr__(self, "turn_max", _nonneg(self.turn_max, "vehicle.turn_max", "rad/s", strict=True))
+        if isinstance(self.orientations, bool) or not isinstance(self.orientations, int) or self.orientations < 1:
+            raise ConfigError(f"vehicle.orientations: expected an integer >= 1, got {self.orientations!r}")
+        _check_dims("vehicle", self.dims_mean, self.dims_min, self.dims_max)
+
+
+def _check_dims(kind: str, mean, lo, hi) -> None:
+    if not all(0 < a <= b for a, b in zip(lo, hi, strict=True)):
+        raise ConfigError(f"{kind}.dims_min/dims_max: expected 0 < min <= max per dimension, got {lo} and {hi}")
+    if not all(a <= m <= b for a, m, b in zip(lo, mean, hi, strict=True)):
+        raise ConfigError(f"{kind}.dims_mean: {mean} must lie within dims_min {lo} and dims_max {hi}")
+
+
+@dataclass(frozen=True)
+class TemplateConfig:
+    """Configuration of the template tracker (defaults suit 640x480 surveillance video at 10-25 fps)."""
+
+    particles: int = 1000
+    """N, particles (each a whole scene)."""
+    max_objects: int = 8
+    """R_max, objects per particle (at most 16)."""
+    camera: str | int = 0
+    """The rig camera that sees the scene (name or index)."""
+    fps: float = 15.0
+    """Frame rate of the sequence, frames per second (Delta t = 1 / fps in eqs. 8-9)."""
+    scale: float = 5000.0
+    """s of eq. 6: log w_i = -(m_i + c_i) s / (W H)."""
+    t_add: float = 0.3
+    """T_add of eq. 12: fraction of particles that receive the frame's proposed object."""
+    t_del: float = 0.02
+    """T_del of eq. 13: per-frame deletion probability of each object in each particle."""
+    sigma_pos: float = 0.03
+    """Position diffusion added to eqs. 8-9, m per frame (helps new objects settle)."""
+    human: HumanPrior = field(default_factory=HumanPrior)
+    vehicle: VehiclePrior = field(default_factory=VehiclePrior)
+    classes: tuple[str, ...] = CLASSES
+    """Object classes the tracker may add."""
+    candidate_step_px: int = 8
+    """Addition candidates: ground points under an image grid of this pitch, pixels."""
+    max_range: float = 60.0
+    """Addition candidates farther from the camera than this are dropped, m."""
+    add_min_gain: float = 0.2
+    """A candidate is proposed when its gain (eq. 11 score) is at least this fraction of its area."""
+    add_beta: float = 0.5
+    """Weight of uncovered background in the addition gain (0: eq. 11 exactly; see ``kernels.uoh``)."""
+    min_candidate_area: int = 30
+    """Smallest candidate silhouette, pixels."""
+    min_existence: float = 0.5
+    """Objects are reported when the weight of the particles holding them reaches this fraction."""
+    resampling: str = "systematic"
+    ess_threshold: float = 1.0
+    """Resample when ESS <= threshold x N (1: every frame, as in the paper)."""
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        check_particles(self.particles)
+        if isinstance(self.max_objects, bool) or not isinstance(self.max_objects, (int, np.integer)):
+            raise ConfigError(f"max_objects: expected an integer R_max in [1, 16], got {self.max_objects!r}")
+        if not 1 <= int(self.max_objects) <= int(kraster.MAX_SLOTS):
+            raise ConfigError(f"max_objects: R_max must be in [1, {int(kraster.MAX_SLOTS)}], got {self.max_objects}")
+        _nonneg(self.fps, "fps", "frames/s", strict=True)
+        _nonneg(self.scale, "scale", "s of eq. 6", strict=True)
+        _nonneg(self.t_add, "t_add", "probability", upper=1.0)
+        _nonneg(self.t_del, "t_del", "probability", upper=1.0)
+        _nonneg(self.sigma_pos, "sigma_pos", "m")
+        _nonneg(self.max_range, "max_range", "m", strict=True)
+        _nonneg(self.add_min_gain, "add_min_gain", "fraction")
+        _nonneg(self.add_beta, "add_beta", "weight")
+        _nonneg(self.min_existence, "min_existence", "fraction", upper=1.0)
+        if not isinstance(self.human, HumanPrior):
+            raise ConfigError("human: expected a HumanPrior")
+        if not isinstance(self.vehicle, VehiclePrior):
+            raise ConfigError("vehicle: expected a VehiclePrior")
+        classes = tuple(self.classes)
+        if not classes or any(c not in CLASSES for c in classes) or len(set(classes)) != len(classes):
+            raise ConfigError(f"classes: expected a non-empty subset of {list(CLASSES)}, got {list(classes)}")
+        object.__setattr__(self, "classes", classes)
+        for name in ("candidate_step_px", "min_candidate_area"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise ConfigError(f"{name}: expected an integer >= 1 (pixels), got {v!r}")
+        if self.resampling not in SCHEMES:
+            raise ConfigError(f"resampling: unknown scheme {self.resampling!r}; expected one of {', '.join(SCHEMES)}")
+        if not (isinstance(self.ess_threshold, (int, float)) and 0.0 < self.ess_threshold <= 1.0):
+            raise ConfigError(f"ess_threshold: expected a fraction in (0, 1], got {self.ess_threshold!r}")
+        _seed_words(self.seed)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-Python form (run.json)."""
+        d = asdict(self)
+        d["classes"] = list(self.classes)
+        return d
+
+
+@dataclass
+class TrackedObject:
+    """One object of the estimate (world frame and ground-plane coordinates; metres, radians, seconds)."""
+
+    id: int
+    """Persistent label."""
+    cls: str
+    """``"human"`` or ``"vehicle"``."""
+    position: np.ndarray
+    """(3,) ground-contact point in world coordinates, metres."""
+    ground: np.ndarray
+    """(2,) ground-plane coordinates, metres."""
+    dims: np.ndarray
+    """(3,) human (height, body radius, head radius) or vehicle (length, width, height), metres."""
+    heading: float
+    """Direction of motion (vehicle: orientation towards its motion) in the ground plane, radians."""
+    speed: float
+    """m/s."""
+    existence: float = 1.0
+    """Weight of the particles that hold the object (1 for the best particle's objects)."""
+    std: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    """(2,) spread of the ground position over the particles, metres."""
+    age: float = 0.0
+    """Mean time the object has been tracked, seconds."""
+
+    @property
+    def size(self) -> tuple[float, float, float]:
+        """(length, width, height) in metres (a human's length and width are the body diameter)."""
+        if self.cls == "human":
+            return (2 * float(self.dims[1]), 2 * float(self.dims[1]), float(self.dims[0]))
+        return (float(self.dims[0]), float(self.dims[1]), float(self.dims[2]))
+
+
+@dataclass
+class TemplateEstimate:
+    """The tracker's output for one frame."""
+
+    frame: int
+    objects: list[TrackedObject]
+    """Objects whose existence >= min_existence, by id."""
+    best: list[TrackedObject]
+    """The objects of the best (MAP) particle."""
+    penalty: int
+    """XOR matching penalty m of the best particle, pixels (eq. 4)."""
+    foreground: int
+    """|q|: foreground pixels of the motion mask."""
+    ess: float
+    loglik: float
+    added: tuple[int, str] | None
+    """(label, class) of the object proposed to the particles after this frame, if any."""
+    virtual: np.ndarray | None = None
+    """(H, W) uint8 virtual scene of the best particle: 0 background, 1 + slot of the nearest object."""
+    uoh: np.ndarray | None = None
+    """(H, W) int32 Uncovered Object Histogram (eq. 10), when requested."""
+    timings: dict[str, float] = field(default_factory=dict)
