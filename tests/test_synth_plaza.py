@@ -12,7 +12,7 @@ import pytest
 
 from wptrack.frames import open_frames
 from wptrack.rig import Rig
-from wptrack.synth import SCENES, SceneResult, render_scene
+from wptrack.synth import SCENES, SceneResult, plaza_background, render_scene
 from wptrack.synth import plaza as P
 from wptrack.synth.render import Box, Cylinder
 
@@ -169,7 +169,7 @@ def _footprint_circles(actor: P.PlazaActor, xy: np.ndarray, heading: np.ndarray)
 
 
 def test_objects_avoid_each_other_and_the_clutter() -> None:
-    obstacles = [o for o in P._static_objects()[2:] if (o.lo[2] if isinstance(o, Box) else o.z0) < 1.0]
+    obstacles = [o for o in plaza_background._static_objects()[2:] if (o.lo[2] if isinstance(o, Box) else o.z0) < 1.0]
     for name in S3:
         scene = SCENES[name].build()
         st = scene.states(scene.default_frames)
