@@ -12,6 +12,7 @@ import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from wptrack.io import read_tracks
@@ -45,7 +46,7 @@ class _Job(TrackerRun):
     def frames(self):
         return iter(self.values)
 
-    def start(self, out_dir):
+    def start(self, out_dir, resume_after=None):
         self.started = True
         (out_dir / "extra.txt").write_text("")
 
@@ -62,6 +63,12 @@ class _Job(TrackerRun):
 
     def finish(self):
         self.finished = True
+
+    def state_dict(self):
+        return {"job.k": np.int64(self.k)}
+
+    def load_state_dict(self, state):
+        self.k = int(state["job.k"])
 
     def summary(self):
         return {"frames": self.k}

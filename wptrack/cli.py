@@ -38,6 +38,21 @@ def _positive_int(text: str) -> int:
     return v
 
 
+def _add_run_control(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the interrupted run in --out from its checkpoint (same inputs and options)",
+    )
+    p.add_argument(
+        "--checkpoint-every",
+        type=float,
+        default=60.0,
+        metavar="SECONDS",
+        help="save the tracker state for --resume at most this often (default 60; 0: only when interrupted)",
+    )
+
+
 def _add_device(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default="auto", help="auto (CUDA when available), cpu, cuda or cuda:N")
 
@@ -86,6 +101,8 @@ def cmd_track_color(args) -> int:
         max_frames=args.max_frames,
         groundtruth=args.groundtruth,
         progress=not args.quiet,
+        resume=args.resume,
+        checkpoint_seconds=args.checkpoint_every,
     )
     _print_summary(summary, args.out)
     if args.report:
@@ -166,6 +183,8 @@ def cmd_track_templates(args) -> int:
         save_masks=args.save_masks,
         virtual=not args.no_virtual,
         progress=not args.quiet,
+        resume=args.resume,
+        checkpoint_seconds=args.checkpoint_every,
     )
     print(
         f"tracked {summary['frames']} frames on {summary['device']}: {summary['objects']} objects "
@@ -410,6 +429,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument(
         "--report", action=argparse.BooleanOptionalAction, default=False, help="render OUT/report (default: off)"
     )
+    _add_run_control(c)
     c.set_defaults(func=cmd_track_color)
 
     tt = tsub.add_parser(
@@ -449,6 +469,7 @@ def build_parser() -> argparse.ArgumentParser:
     tt.add_argument("--out", required=True, help="output folder")
     tt.add_argument("--report", action="store_true", help="render the HTML report afterwards")
     _add_device(tt)
+    _add_run_control(tt)
     tt.set_defaults(func=cmd_track_templates)
 
     e = sub.add_parser(

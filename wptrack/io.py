@@ -134,6 +134,34 @@ def atomic_save_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
         np.savez(f, **arrays)
 
 
+def truncate_csv_after(path: str | os.PathLike, frame: int) -> int:
+    """Keep the header and the rows of ``frame`` and earlier (first column) of a CSV file, atomically.
+
+    Used to resume a run from a checkpoint: rows written after the checkpoint's frame (and an incomplete last line
+    of a killed run) are dropped. A missing file is left missing.
+
+    Returns:
+        The number of rows kept.
+    """
+    p = Path(path)
+    if not p.exists():
+        return 0
+    lines = p.read_text(encoding="utf-8").splitlines(keepends=True)
+    kept = lines[:1]
+    for line in lines[1:]:
+        if not line.endswith("\n"):
+            break  # the incomplete last line of a killed run
+        head = line.split(",", 1)[0].strip()
+        try:
+            if int(head) > frame:
+                break
+        except ValueError:
+            break
+        kept.append(line)
+    atomic_write_text(p, "".join(kept))
+    return len(kept) - 1
+
+
 def ensure_writable_dir(path: str | os.PathLike) -> Path:
     """Create an output folder (with parents) and check that files can be written into it.
 
@@ -241,6 +269,9 @@ class RunWriter:
         particles_every: Keep the particles of frames whose number is a multiple of this; 0 keeps none.
         particles_max: At most this many particles per frame (deterministic evenly-strided subsample).
         flush_seconds: Minimum interval between periodic rewrites of run.json/particles.npz (and CSV fsyncs).
+        resume_from: Continue the run already in ``out_dir`` after this frame: its tracks.csv rows and particle
+            frames up to this frame are kept (later ones dropped) and appended to; run.json keeps its start time and
+            records the resumption under ``resumed``.
 
     Raises:
         OutputError: The folder cannot be written.
@@ -256,6 +287,7 @@ class RunWriter:
         particles_every: int = 1,
         particles_max: int = 2000,
         flush_seconds: float = 2.0,
+        resume_from: int | None = None,
     ) -> None:
         columns = [str(c) for c in columns]
         if tuple(columns[: len(BASE_COLUMNS)]) != BASE_COLUMNS:
@@ -304,12 +336,18 @@ class RunWriter:
             "timings": {},
             "summary": None,
         }
+        self._run["resumed"] = []
         self._reserved = set(self._run)
+        if resume_from is not None:
+            self._resume(int(resume_from))
         try:
-            self._csv_file = open(self.tracks_path, "w", encoding="utf-8", newline="")
+            self._csv_file = open(
+                self.tracks_path, "a" if resume_from is not None else "w", encoding="utf-8", newline=""
+            )
         except OSError as e:
             raise OutputError(f"cannot write {self.tracks_path}: {e.strerror or e}") from None
-        self._csv_file.write(",".join(columns) + "\n")
+        if resume_from is None:
+            self._csv_file.write(",".join(columns) + "\n")
         self._csv_file.flush()
         self._write_run_json()
         log.info("writing run outputs to %s", self.out_dir)
@@ -479,6 +517,29 @@ class RunWriter:
         return False
 
     # ------------------------------------------------------------------ internals
+
+    def _resume(self, frame: int) -> None:
+        """Take over the outputs of the interrupted run in ``out_dir`` up to ``frame`` (see ``resume_from``)."""
+        try:
+            previous = json.loads(self.run_path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as e:
+            raise OutputError(f"cannot resume: {self.run_path} is missing or unreadable ({e})") from None
+        if previous.get("columns") != self.columns:
+            raise OutputError(f"cannot resume: {self.tracks_path} has columns {previous.get('columns')}")
+        self.rows_written = truncate_csv_after(self.tracks_path, frame)
+        if self.rows_written:
+            frames = read_tracks(self.tracks_path)["frame"]
+            self._frames = {int(f) for f in frames}
+        self._last_frame = frame
+        self._run["started"] = previous.get("started", self._run["started"])
+        self._run["resumed"] = [*previous.get("resumed", []), {"after_frame": frame, "at": _now()}]
+        if self.particles_path.exists():
+            with np.load(self.particles_path) as z:
+                keep = z["frames"] <= frame
+                for f, pos, w in zip(z["frames"][keep], z["positions"][keep], z["weights"][keep], strict=True):
+                    ok = ~np.isnan(w)
+                    self._particles.append((int(f), pos[ok], w[ok]))
+            self._particles_dirty = True
 
     def _check_open(self) -> None:
         if self._closed:

@@ -123,6 +123,39 @@ def check_particles(n: int) -> int:
     return int(n)
 
 
+def _dtype_tail(arr: wp.array) -> tuple[int, ...]:
+    """The trailing NumPy dimensions of a Warp array's dtype (3 for vec3, (3, 3) for mat33, none for scalars)."""
+    return tuple(getattr(arr.dtype, "_shape_", ()))
+
+
+def _device_arrays(obj, prefix: str = "", seen: set[int] | None = None) -> Iterator[tuple[str, wp.array]]:
+    """Every ``wp.array`` reachable from ``obj``'s attributes: directly, in lists/tuples/dicts, in ``@wp.struct``
+    instances, and in wptrack helper objects (recursively), as ``(dotted.name, array)`` in a stable order.
+
+    Buffers created lazily or cached views appear only once used, so a fresh filter lists a subset of the names of
+    one that has run: :meth:`FrameChain.load_state_dict` restores the names the fresh filter has."""
+    if isinstance(obj, wp.array):  # an array reachable by two names (a cached view) is listed under both
+        yield prefix, obj
+        return
+    seen = set() if seen is None else seen
+    if id(obj) in seen:
+        return
+    seen.add(id(obj))
+    if isinstance(obj, (list, tuple)):
+        for i, v in enumerate(obj):
+            yield from _device_arrays(v, f"{prefix}.{i}", seen)
+    elif isinstance(obj, dict):
+        for k in sorted(obj, key=str):
+            yield from _device_arrays(obj[k], f"{prefix}.{k}", seen)
+    elif hasattr(obj, "_cls") and hasattr(obj._cls, "vars"):  # a @wp.struct instance
+        for k in obj._cls.vars:
+            yield from _device_arrays(getattr(obj, k), f"{prefix}.{k}", seen)
+    elif type(obj).__module__.startswith("wptrack") and hasattr(obj, "__dict__"):
+        for k in sorted(vars(obj)):
+            if not k.startswith("__"):
+                yield from _device_arrays(getattr(obj, k), f"{prefix}.{k}" if prefix else k, seen)
+
+
 class FrameChain:
     """A filter whose frame is a fixed chain of device launches over ping-pong buffers (parity 0/1).
 
@@ -214,6 +247,41 @@ class FrameChain:
         self.parity = dst
         self.frames_done += 1
         return times
+
+    # --- checkpoints -------------------------------------------------------------------------------
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """A copy of the filter's whole state after the last frame, for :meth:`load_state_dict`.
+
+        Every Warp array the filter holds (directly, in lists/dicts, in ``@wp.struct`` instances or in its helper
+        objects such as the resampler) is copied to the host, with ``parity`` and ``frames_done``: restoring it
+        into a filter built with the same configuration continues exactly as the original would have (the random
+        streams are counter-based, keyed by the frame). Scratch buffers are included (they are overwritten each
+        frame anyway), so the size is the filter's device memory. Syncs with the device: not for the frame loop.
+        """
+        state = {name: arr.numpy().copy() for name, arr in _device_arrays(self)}
+        state["__parity__"] = np.array(self.parity, dtype=np.int64)
+        state["__frames_done__"] = np.array(self.frames_done, dtype=np.int64)
+        return state
+
+    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
+        """Restore a :meth:`state_dict` into this filter (built with the same configuration).
+
+        Raises:
+            ConfigError: the state does not match this filter (missing arrays, other shapes or types).
+        """
+        arrays = dict(_device_arrays(self))
+        missing = sorted(set(arrays) - set(state))
+        if missing:
+            raise ConfigError(f"checkpoint: arrays {missing[:5]} missing (a checkpoint of another configuration?)")
+        for name, arr in arrays.items():
+            value = np.asarray(state[name])
+            if value.shape != tuple(arr.shape) + _dtype_tail(arr):
+                raise ConfigError(f"checkpoint: array {name} has shape {value.shape}, the filter's is {arr.shape}")
+        for name, arr in arrays.items():
+            arr.assign(np.asarray(state[name]))
+        self.parity = int(state["__parity__"])
+        self.frames_done = int(state["__frames_done__"])
+        wp.synchronize_device(self.device)
 
     def track(self, observations: Iterable, max_frames: int | None = None) -> Iterator:
         """Iterate over observations (e.g. ``wptrack.frames.open_frames`` for image trackers), yielding one

@@ -100,6 +100,15 @@ class ColourRun(TrackerRun):
             self._errors.append(float(np.linalg.norm(est.mean - self._truth[self._k])))
         self._k += 1
 
+    def state_dict(self) -> dict[str, Any]:
+        errors = np.asarray(self._errors, dtype=np.float64)
+        return {**self.tracker.state_dict(), "job.errors": errors, "job.k": np.int64(self._k)}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        super().load_state_dict(state)
+        self._errors = [float(e) for e in state["job.errors"]]
+        self._k = int(state["job.k"])
+
     def summary(self) -> dict[str, Any]:
         from ..metrics import summarize
 
@@ -121,12 +130,16 @@ def run_color_tracking(
     max_frames: int | None = None,
     groundtruth: str | Path | None = None,
     progress: bool = False,
+    resume: bool = False,
+    checkpoint_seconds: float = 60.0,
 ) -> dict[str, Any]:
     """Track a coloured object in synchronised videos and write ``tracks.csv``, ``run.json`` and
     ``particles.npz`` into ``out_dir`` as the run goes (see :class:`ColourRun` for the arguments).
+
+    ``resume`` and ``checkpoint_seconds``: see :func:`wptrack.runs.run_tracker`.
 
     Returns:
         The run summary (also in run.json).
     """
     job = ColourRun(rig_path, videos, target, config, device, stop_at_shortest, max_frames, groundtruth)
-    return run_tracker(job, out_dir, progress=progress)
+    return run_tracker(job, out_dir, progress=progress, resume=resume, checkpoint_seconds=checkpoint_seconds)

@@ -10,8 +10,12 @@ is built (rig, videos, sizes, parameters, device), and the loop then owns what a
 * frames decoded ahead by a background thread (:class:`wptrack.frames.prefetch`), the time the tracker waited
   for them recorded as the ``decode_wait`` stage, and the tracker's own per-stage timings,
 * a tqdm progress bar,
-* interruption: Ctrl-C (SIGINT) and SIGTERM end the run with ``run.json`` status ``interrupted`` and the last
-  frame written (``last_frame``); the outputs written so far stay valid.
+* interruption: Ctrl-C (SIGINT) and SIGTERM stop the run after the frame in progress, with ``run.json`` status
+  ``interrupted`` and the last frame written (``last_frame``); the outputs written so far stay valid,
+* checkpoints: ``checkpoint.npz`` (the tracker's whole state after a frame and the job's summary inputs) every
+  ``checkpoint_seconds`` and when interrupted, so ``resume=True`` (``--resume``) continues an interrupted or
+  crashed run and gives the same outputs as an uninterrupted run (the random streams are counter-based, keyed by
+  the frame).
 """
 
 from __future__ import annotations
@@ -25,7 +29,12 @@ from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 log = logging.getLogger(__name__)
+
+CHECKPOINT_FILE = "checkpoint.npz"
+"""The state to resume an interrupted run from (``--resume``), in the run folder."""
 
 
 class RunInterrupted(KeyboardInterrupt):
@@ -37,24 +46,38 @@ class RunInterrupted(KeyboardInterrupt):
         self.exit_code = 128 + int(signum)
 
 
-@contextlib.contextmanager
-def interruptible() -> Iterator[None]:
-    """Turn SIGTERM into :class:`RunInterrupted` while the block runs (SIGINT already raises KeyboardInterrupt).
+class _Stop:
+    """The signal that asked the run to stop (0: none); set by the handlers of :func:`interruptible`."""
 
-    Only the main thread can install signal handlers; elsewhere the block runs unchanged.
+    signum = 0
+
+
+@contextlib.contextmanager
+def interruptible() -> Iterator[_Stop]:
+    """Stop runs between frames on SIGINT (Ctrl-C) and SIGTERM.
+
+    The first signal only sets the returned flag: the run loop finishes the frame in progress, writes a checkpoint
+    and raises :class:`RunInterrupted`, so the outputs and the checkpoint describe the same last frame. A second
+    signal raises :class:`RunInterrupted` at once. Only the main thread can install signal handlers; elsewhere the
+    flag is never set and Ctrl-C raises KeyboardInterrupt wherever it lands.
     """
+    stop = _Stop()
     if threading.current_thread() is not threading.main_thread():
-        yield
+        yield stop
         return
 
     def handler(signum: int, _frame: Any) -> None:
-        raise RunInterrupted(signum)
+        if stop.signum:
+            raise RunInterrupted(signum)
+        stop.signum = signum
+        log.warning("signal %d: stopping after the current frame (again to stop at once)", signum)
 
-    previous = signal.signal(signal.SIGTERM, handler)
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        yield
+        yield stop
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for sig, h in previous.items():
+            signal.signal(sig, h)
 
 
 class TrackerRun:
@@ -85,8 +108,9 @@ class TrackerRun:
         """The per-frame observations, in order (decoded lazily: the loop prefetches them)."""
         raise NotImplementedError
 
-    def start(self, out_dir: Path) -> None:
-        """Open the job's extra outputs in ``out_dir`` (called once the RunWriter exists)."""
+    def start(self, out_dir: Path, resume_after: int | None = None) -> None:
+        """Open the job's extra outputs in ``out_dir`` (called once the RunWriter exists). When resuming, keep
+        what they hold up to frame ``resume_after`` and append to it."""
 
     def step(self, item: Any) -> Any:
         """Run the tracker on one observation and return its estimate (with a ``timings`` dict)."""
@@ -96,12 +120,24 @@ class TrackerRun:
         """Write one frame's estimate: ``out.add_rows``, ``out.add_particles``, the job's extra files."""
         raise NotImplementedError
 
+    def flush(self) -> None:
+        """Make the job's extra outputs durable up to the last recorded frame (before a checkpoint)."""
+
     def finish(self) -> None:
         """Close the job's extra outputs (always called, also when the run is interrupted or fails)."""
 
     def summary(self) -> dict[str, Any]:
         """The run summary recorded in run.json and returned by :func:`run_tracker`."""
         return {}
+
+    def state_dict(self) -> dict[str, Any]:
+        """Everything needed to continue after the last frame: the tracker's state (``self.tracker.state_dict()``)
+        and the job's own accumulators (summary inputs) as NumPy arrays, keys prefixed ``job.``."""
+        return self.tracker.state_dict()
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore :meth:`state_dict` (into a job built with the same inputs and configuration)."""
+        self.tracker.load_state_dict({k: v for k, v in state.items() if not k.startswith("job.")})
 
 
 def _progress(total: int | None, enabled: bool) -> Any:
@@ -110,12 +146,56 @@ def _progress(total: int | None, enabled: bool) -> Any:
     return tqdm(total=total, desc="tracking", unit="frame", disable=not enabled, leave=False, dynamic_ncols=True)
 
 
+def _check_resumable(job: TrackerRun, out_dir: Path) -> tuple[int, dict[str, Any]]:
+    """The last frame and the state of the checkpoint in ``out_dir``, if ``job`` may resume that run."""
+    import json
+
+    from ..errors import ConfigError
+    from ..io import RUN_FILE, _jsonable
+
+    run_path = out_dir / RUN_FILE
+    try:
+        previous = json.loads(run_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        raise ConfigError(f"--resume: {run_path} is missing or unreadable: nothing to resume") from None
+    if previous.get("status") == "complete":
+        raise ConfigError(f"--resume: the run in {out_dir} is already complete")
+    if previous.get("tracker") != job.name:
+        raise ConfigError(f"--resume: {run_path} is a {previous.get('tracker')!r} run, not {job.name!r}")
+    now = _jsonable(job.config)
+    before = previous.get("config", {})
+    changed = sorted(k for k in set(now) | set(before) if now.get(k) != before.get(k))
+    if changed:
+        raise ConfigError(
+            f"--resume: the configuration differs from the interrupted run in {out_dir} ({', '.join(changed)}); "
+            "resume with the same inputs and options"
+        )
+    ckpt = out_dir / CHECKPOINT_FILE
+    if not ckpt.exists():
+        raise ConfigError(f"--resume: {ckpt} not found (the run stopped before its first checkpoint); start again")
+    with np.load(ckpt) as z:
+        state = {k: z[k] for k in z.files}
+    return int(state.pop("__run_frame__")), state
+
+
+def _write_checkpoint(job: TrackerRun, out: Any, frame: int) -> None:
+    """Flush the outputs up to ``frame`` and save the state to continue after it (atomically)."""
+    from ..io import atomic_save_npz
+
+    out.flush()
+    job.flush()
+    atomic_save_npz(out.out_dir / CHECKPOINT_FILE, __run_frame__=np.int64(frame), **job.state_dict())
+    log.info("checkpoint after frame %d", frame)
+
+
 def run_tracker(
     job: TrackerRun,
     out_dir: str | Path,
     progress: bool = False,
     max_frames: int | None = None,
     prefetch_depth: int = 4,
+    resume: bool = False,
+    checkpoint_seconds: float = 60.0,
 ) -> dict[str, Any]:
     """Run ``job`` over its frames and write the run folder as it goes.
 
@@ -125,21 +205,46 @@ def run_tracker(
         progress: show a progress bar.
         max_frames: stop after this many frames (None: the whole source).
         prefetch_depth: frames decoded ahead by a background thread.
+        resume: continue the interrupted run in ``out_dir`` from its checkpoint (same inputs and configuration):
+            the frames up to the checkpoint are skipped, its later rows dropped, and the result is the same as
+            an uninterrupted run's.
+        checkpoint_seconds: write ``checkpoint.npz`` (the tracker's whole state, see ``FrameChain.state_dict``)
+            at most this often while running, and always when interrupted; 0 only when interrupted. It is
+            removed when the run completes.
 
     Returns:
         The job's summary (also in run.json).
 
     Raises:
         OutputError: the folder cannot be written (before anything is written).
-        RunInterrupted / KeyboardInterrupt: SIGTERM / Ctrl-C; run.json then says ``interrupted``.
+        RunInterrupted: SIGINT / SIGTERM (after a checkpoint); run.json then says ``interrupted``.
+        ConfigError: ``resume`` without a resumable run of the same configuration in ``out_dir``.
     """
+    import itertools
+    import math
+
+    from ..errors import ConfigError
     from ..frames import prefetch
     from ..io import RunWriter, ensure_writable_dir
 
+    if (
+        not (isinstance(checkpoint_seconds, (int, float)) and math.isfinite(checkpoint_seconds))
+        or checkpoint_seconds < 0
+    ):
+        raise ConfigError(
+            f"checkpoint interval: expected seconds >= 0 (0: only when interrupted), got {checkpoint_seconds!r}"
+        )
+
     out_dir = ensure_writable_dir(out_dir)
+    after = None
+    if resume:
+        after, state = _check_resumable(job, out_dir)
+        job.load_state_dict(state)
+        log.info("resuming %s after frame %d", out_dir, after)
+    start = 0 if after is None else after + 1
     total = job.total if max_frames is None or job.total is None else min(job.total, max_frames)
     with (
-        interruptible(),
+        interruptible() as stop,
         RunWriter(
             out_dir,
             job.name,
@@ -147,17 +252,19 @@ def run_tracker(
             job.config,
             particles_every=job.particles_every,
             particles_max=job.particles_max,
+            resume_from=after,
         ) as out,
     ):
         out.set_info(**job.info())
-        job.start(out.out_dir)
+        job.start(out.out_dir, after)
         bar = _progress(total, progress)
+        bar.update(start)
+        last_checkpoint = time.monotonic()
         try:
+            frames = itertools.islice(job.frames(), start, max_frames)  # decoded and skipped when resuming
             t_wait = time.perf_counter()
             # "decode_wait": the time the tracker waited for the next decoded frame
-            for k, item in enumerate(prefetch(job.frames(), depth=prefetch_depth)):
-                if max_frames is not None and k >= max_frames:
-                    break
+            for item in prefetch(frames, depth=prefetch_depth):
                 out.add_timing("decode_wait", time.perf_counter() - t_wait)
                 est = job.step(item)
                 job.record(est, out)
@@ -165,10 +272,17 @@ def run_tracker(
                 for stage, seconds in est.timings.items():
                     out.add_timing(stage, seconds)
                 bar.update(1)
+                if stop.signum:
+                    _write_checkpoint(job, out, est.frame)
+                    raise RunInterrupted(stop.signum)
+                if checkpoint_seconds > 0 and time.monotonic() - last_checkpoint >= checkpoint_seconds:
+                    _write_checkpoint(job, out, est.frame)
+                    last_checkpoint = time.monotonic()
                 t_wait = time.perf_counter()
         finally:
             bar.close()
             job.finish()
         summary = job.summary()
         out.close("complete", summary)
+    (out_dir / CHECKPOINT_FILE).unlink(missing_ok=True)
     return summary

@@ -87,21 +87,25 @@ def colour_virtual(virtual: np.ndarray, slot_labels: np.ndarray) -> np.ndarray:
 class _CsvAppender:
     """A CSV file written line by line and flushed every frame (a partial file is always valid)."""
 
-    def __init__(self, path: Path, columns: list[str]) -> None:
+    def __init__(self, path: Path, columns: list[str], append: bool = False) -> None:
         try:
-            self.fh = open(path, "w", encoding="utf-8", newline="")
+            self.fh = open(path, "a" if append else "w", encoding="utf-8", newline="")
         except OSError as e:
             raise OutputError(f"cannot write {path}: {e.strerror or e}") from None
-        self.fh.write(",".join(columns) + "\n")
+        if not append:
+            self.fh.write(",".join(columns) + "\n")
 
     def add(self, rows: list[list[Any]]) -> None:
         for row in rows:
             self.fh.write(",".join(f"{v:.6g}" if isinstance(v, float) else str(v) for v in row) + "\n")
         self.fh.flush()
 
-    def close(self) -> None:
+    def sync(self) -> None:
         self.fh.flush()
         os.fsync(self.fh.fileno())
+
+    def close(self) -> None:
+        self.sync()
         self.fh.close()
 
 
@@ -208,12 +212,18 @@ class TemplateRun(TrackerRun):
     def frames(self) -> Any:
         return self._stream
 
-    def start(self, out_dir: Path) -> None:
+    def start(self, out_dir: Path, resume_after: int | None = None) -> None:
         from ..frames import VideoWriter
+        from ..io import truncate_csv_after
 
-        self._best_csv = _CsvAppender(out_dir / "best.csv", TEMPLATE_COLUMNS)
-        self._vwriter = VideoWriter(out_dir / "virtual.avi", fps=self._fps) if self._virtual else None
-        self._mwriter = VideoWriter(out_dir / "masks.avi", fps=self._fps) if self._save_masks else None
+        best = out_dir / "best.csv"
+        if resume_after is not None:
+            truncate_csv_after(best, resume_after)
+        self._best_csv = _CsvAppender(best, TEMPLATE_COLUMNS, append=resume_after is not None and best.exists())
+        # a resumed run writes its videos from the next frame on into new files: virtual.from<F>.avi
+        suffix = "" if resume_after is None else f".from{resume_after + 1}"
+        self._vwriter = VideoWriter(out_dir / f"virtual{suffix}.avi", fps=self._fps) if self._virtual else None
+        self._mwriter = VideoWriter(out_dir / f"masks{suffix}.avi", fps=self._fps) if self._save_masks else None
 
     def step(self, item: Any) -> Any:
         self._mask = item
@@ -229,6 +239,24 @@ class TemplateRun(TrackerRun):
             self._vwriter.write(colour_virtual(est.virtual, self.tracker.host["slot_label"].numpy()))
         if self._mwriter is not None:
             self._mwriter.write(np.repeat((self._mask * 255).astype(np.uint8)[..., None], 3, axis=2))
+
+    def flush(self) -> None:
+        if self._best_csv is not None:
+            self._best_csv.sync()
+
+    def state_dict(self) -> dict[str, Any]:
+        ids = sorted(self._seen)
+        return {
+            **self.tracker.state_dict(),
+            "job.seen_ids": np.asarray(ids, dtype=np.int64),
+            "job.seen_classes": np.asarray([self._seen[i] for i in ids], dtype=str),
+            "job.penalties": np.asarray(self._penalties, dtype=np.int64),
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        super().load_state_dict(state)
+        self._seen = {int(i): str(c) for i, c in zip(state["job.seen_ids"], state["job.seen_classes"], strict=True)}
+        self._penalties = [int(v) for v in state["job.penalties"]]
 
     def finish(self) -> None:
         if self._best_csv is not None:
@@ -260,12 +288,18 @@ def run_template_tracking(
     save_masks: bool = False,
     virtual: bool = True,
     progress: bool = False,
+    resume: bool = False,
+    checkpoint_seconds: float = 60.0,
 ) -> dict[str, Any]:
     """Track objects with the template tracker and write the run folder (see the module docstring and
     :class:`TemplateRun` for the arguments).
+
+    ``resume`` and ``checkpoint_seconds``: see :func:`wptrack.runs.run_tracker`.
 
     Returns:
         The run summary (also in run.json).
     """
     job = TemplateRun(rig_path, config, video, masks, mask_config, device, max_frames, save_masks, virtual)
-    return run_tracker(job, out_dir, progress=progress, max_frames=max_frames)
+    return run_tracker(
+        job, out_dir, progress=progress, max_frames=max_frames, resume=resume, checkpoint_seconds=checkpoint_seconds
+    )

@@ -1,0 +1,121 @@
+"""Interrupt a run (SIGTERM between frames), resume it with --resume, and get what an uninterrupted run gives:
+tracks.csv byte for byte and the same summary, for the colour and the template tracker."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+
+import pytest
+
+from wptrack.cli import main
+from wptrack.errors import ConfigError
+from wptrack.runs import RunInterrupted, run_tracker
+from wptrack.runs.colour import ColourRun
+from wptrack.runs.loop import CHECKPOINT_FILE
+from wptrack.runs.templates import TemplateRun
+from wptrack.synth import render_scene
+from wptrack.trackers.colour import ColorConfig, HSITarget
+from wptrack.trackers.templates import TemplateConfig
+
+pytestmark = pytest.mark.skipif(not hasattr(signal, "SIGTERM") or os.name == "nt", reason="POSIX signals")
+
+TARGET = HSITarget(hue=(312, 348), sat=(0.3, 0.8), intensity=(20, 240))
+
+
+def _interrupting(job_cls, at: int):
+    """A job class that sends itself SIGTERM while tracking frame ``at`` (the loop stops after that frame)."""
+
+    class Interrupting(job_cls):
+        def step(self, item):
+            est = super().step(item)
+            if est.frame == at:
+                os.kill(os.getpid(), signal.SIGTERM)
+            return est
+
+    return Interrupting
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory):
+    return render_scene("s1-lab", tmp_path_factory.mktemp("lab"), frames=12, seed=0)
+
+
+@pytest.fixture(scope="module")
+def plaza(tmp_path_factory):
+    return render_scene("s3-people", tmp_path_factory.mktemp("plaza"), frames=14, seed=1)
+
+
+def _colour_args(lab):
+    cfg = ColorConfig(particles=400, sigma=0.03, init=(0.4, 0.1, 0.2), seed=5, keep_particles=50)
+    return (lab.rig_path, lab.videos, TARGET, cfg), {"device": "cpu", "groundtruth": lab.groundtruth_path}
+
+
+def _template_args(plaza):
+    cfg = TemplateConfig(particles=200, max_objects=4, seed=2, fps=15.0)
+    masks = os.path.join(plaza.out_dir, "cam0_mask.avi")
+    return (plaza.rig_path, cfg), {"masks": masks, "device": "cpu"}
+
+
+@pytest.mark.parametrize("tracker", ["color", "templates"])
+def test_resume_equals_uninterrupted_run(tmp_path, lab, plaza, tracker):
+    if tracker == "color":
+        job_cls, (args, kw) = ColourRun, _colour_args(lab)
+    else:
+        job_cls, (args, kw) = TemplateRun, _template_args(plaza)
+    full = run_tracker(job_cls(*args, **kw), tmp_path / "full", checkpoint_seconds=0)
+
+    out = tmp_path / "cut"
+    with pytest.raises(RunInterrupted):
+        run_tracker(_interrupting(job_cls, 5)(*args, **kw), out, checkpoint_seconds=0)
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "interrupted" and run["last_frame"] == 5
+    assert (out / CHECKPOINT_FILE).exists()
+
+    resumed = run_tracker(job_cls(*args, **kw), out, resume=True)
+    assert resumed == full
+    assert (out / "tracks.csv").read_bytes() == (tmp_path / "full" / "tracks.csv").read_bytes()
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "complete" and run["resumed"][0]["after_frame"] == 5
+    assert not (out / CHECKPOINT_FILE).exists()
+    if tracker == "templates":
+        assert (out / "best.csv").read_bytes() == (tmp_path / "full" / "best.csv").read_bytes()
+
+
+def test_rows_after_the_checkpoint_are_dropped_on_resume(tmp_path, lab):
+    """A crash after the last checkpoint leaves later rows (and a torn line) behind: resume replaces them."""
+    args, kw = _colour_args(lab)
+    full = tmp_path / "full"
+    run_tracker(ColourRun(*args, **kw), full, checkpoint_seconds=0)
+    out = tmp_path / "cut"
+    with pytest.raises(RunInterrupted):
+        run_tracker(_interrupting(ColourRun, 3)(*args, **kw), out, checkpoint_seconds=0)
+    lines = (full / "tracks.csv").read_text().splitlines(keepends=True)
+    with open(out / "tracks.csv", "a") as f:  # rows of frames 4-6 written after the checkpoint, then a torn line
+        f.write("".join(lines[5:8]) + lines[8][:10])
+    run_tracker(ColourRun(*args, **kw), out, resume=True)
+    assert (out / "tracks.csv").read_bytes() == (full / "tracks.csv").read_bytes()
+
+
+def test_resume_refuses_other_config_or_finished_run(tmp_path, lab):
+    args, kw = _colour_args(lab)
+    with pytest.raises(RunInterrupted):
+        run_tracker(_interrupting(ColourRun, 2)(*args, **kw), tmp_path, checkpoint_seconds=0)
+    other = ColorConfig(particles=400, sigma=0.03, init=(0.4, 0.1, 0.2), seed=6, keep_particles=50)
+    with pytest.raises(ConfigError, match="configuration differs"):
+        run_tracker(ColourRun(args[0], args[1], TARGET, other, **kw), tmp_path, resume=True)
+    run_tracker(ColourRun(*args, **kw), tmp_path, resume=True)
+    with pytest.raises(ConfigError, match="already complete"):
+        run_tracker(ColourRun(*args, **kw), tmp_path, resume=True)
+    with pytest.raises(ConfigError, match="nothing to resume"):
+        run_tracker(ColourRun(*args, **kw), tmp_path / "empty", resume=True)
+
+
+def test_cli_resume_errors_are_one_line(tmp_path, lab, capsys):
+    base = ["track", "color", "--rig", str(lab.rig_path), "--video", str(lab.videos[0]), "--video", str(lab.videos[1])]
+    base += ["--hue", "312", "348", "--sat", "0.3", "0.8", "--init", "0.4", "0.1", "0.2", "--device", "cpu", "-q"]
+    assert main([*base, "--out", str(tmp_path / "none"), "--resume"]) == 2
+    assert "nothing to resume" in capsys.readouterr().err
+    assert main([*base, "--out", str(tmp_path / "x"), "--checkpoint-every", "-1"]) == 2
+    assert not (tmp_path / "x" / "run.json").exists()
