@@ -236,6 +236,63 @@ def hist_add(out: wp.array2d(dtype=wp.float32), i: int, base: int, x: float, nb:
     out[i, base + k1] = out[i, base + k1] + w * w1
 
 
+@wp.func
+def descriptor_at(
+    cams: wp.array(dtype=Camera),
+    h: wp.array(dtype=wp.float32),
+    s: wp.array(dtype=wp.float32),
+    v: wp.array(dtype=wp.float32),
+    bgr: wp.array(dtype=wp.uint8),
+    x: wp.vec3,
+    r_n: float,
+    n_bins: int,
+    r_min: float,
+    r_max: float,
+    desc: wp.array2d(dtype=wp.float32),
+    i: int,
+):
+    """D(x) (eqs. 19-21) into row ``i`` of ``desc``; returns (mass, mean colour). See :func:`descriptor_kernel`."""
+    nb = n_bins
+    for k in range(3 * nb):
+        desc[i, k] = 0.0
+    total = float(0.0)
+    crgb = wp.vec3()
+    for c in range(cams.shape[0]):
+        cam = cams[c]
+        uvz = project(cam, x)
+        if uvz[2] <= 0.0:
+            continue
+        r = disc_radius(cam, uvz[2], r_n, r_min, r_max)
+        u = uvz[0]
+        vv = uvz[1]
+        x0 = wp.max(int(wp.ceil(u - r)), 0)
+        x1 = wp.min(int(wp.floor(u + r)), cam.width - 1)
+        y0 = wp.max(int(wp.ceil(vv - r)), 0)
+        y1 = wp.min(int(wp.floor(vv + r)), cam.height - 1)
+        r2 = r * r
+        norm = INV_2PI / r2
+        for py in range(y0, y1 + 1):
+            dy = float(py) - vv
+            for px in range(x0, x1 + 1):
+                dx = float(px) - u
+                d2 = dx * dx + dy * dy
+                if d2 <= r2:
+                    w = norm * wp.exp(-0.5 * d2 / r2)  # G of eq. 20, sigma = r_i
+                    q = cam.pixel_offset + py * cam.width + px
+                    hist_add(desc, i, 0, h[q], nb, 1, w)
+                    hist_add(desc, i, nb, s[q], nb, 0, w)
+                    hist_add(desc, i, 2 * nb, v[q], nb, 0, w)
+                    total += w
+                    o = 3 * q
+                    crgb += w * wp.vec3(float(bgr[o + 2]), float(bgr[o + 1]), float(bgr[o])) * (1.0 / 255.0)
+    if total > 0.0:
+        inv = 1.0 / total  # eq. 20's denominator
+        for k in range(3 * nb):
+            desc[i, k] = desc[i, k] * inv
+        crgb = crgb * inv
+    return total, crgb
+
+
 @wp.kernel
 def descriptor_kernel(
     cams: wp.array(dtype=Camera),
@@ -267,51 +324,13 @@ def descriptor_kernel(
         mass: (N,) out: total Gaussian weight (eq. 20's denominator); 0 when no camera sees the neighbourhood.
         mean_rgb: (N,) out: Gaussian-weighted mean colour (R, G, B) in [0, 1] (the patch means of section 3.1).
 
-    Cost: sum over cameras of ~pi r_i^2 pixels per particle (r_max = 12 px: up to ~450 reads per camera).
+    Cost: sum over cameras of ~pi r_i^2 pixels per particle (r_max = 12 px: up to ~450 reads per camera), each
+    doing 6 read-modify-writes of the thread's own histogram row.
     """
     i = wp.tid()
-    nb = n_bins
-    for k in range(3 * nb):
-        desc[i, k] = 0.0
-    x = points[i]
-    total = float(0.0)
-    crgb = wp.vec3()
-    for c in range(cams.shape[0]):
-        cam = cams[c]
-        uvz = project(cam, x)
-        if uvz[2] <= 0.0:
-            continue
-        r = disc_radius(cam, uvz[2], r_n, r_min, r_max)
-        u = uvz[0]
-        vv = uvz[1]
-        x0 = wp.max(int(wp.ceil(u - r)), 0)
-        x1 = wp.min(int(wp.floor(u + r)), cam.width - 1)
-        y0 = wp.max(int(wp.ceil(vv - r)), 0)
-        y1 = wp.min(int(wp.floor(vv + r)), cam.height - 1)
-        r2 = r * r
-        norm = INV_2PI / r2
-        for py in range(y0, y1 + 1):
-            dy = float(py) - vv
-            for px in range(x0, x1 + 1):
-                dx = float(px) - u
-                d2 = dx * dx + dy * dy
-                if d2 <= r2:
-                    w = norm * wp.exp(-0.5 * d2 / r2)  # G of eq. 20, sigma = r_i
-                    q = cam.pixel_offset + py * cam.width + px
-                    hist_add(desc, i, 0, h[q], nb, 1, w)
-                    hist_add(desc, i, nb, s[q], nb, 0, w)
-                    hist_add(desc, i, 2 * nb, v[q], nb, 0, w)
-                    total += w
-                    o = 3 * q
-                    crgb += w * wp.vec3(float(bgr[o + 2]), float(bgr[o + 1]), float(bgr[o])) * (1.0 / 255.0)
-    mass[i] = total
-    if total > 0.0:
-        inv = 1.0 / total
-        for k in range(3 * nb):
-            desc[i, k] = desc[i, k] * inv
-        mean_rgb[i] = crgb * inv
-    else:
-        mean_rgb[i] = wp.vec3()
+    m, rgb = descriptor_at(cams, h, s, v, bgr, points[i], r_n, n_bins, r_min, r_max, desc, i)
+    mass[i] = m
+    mean_rgb[i] = rgb
 
 
 # ------------------------------------------------------------------------------- appearance (eqs. 23-26)

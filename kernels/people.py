@@ -15,6 +15,8 @@ Map to the paper:
   log(p_B) to read "off the image" as "no motion observed" (eq. 10 literally: m(v) = 1 only for pixels of R), or 0
   for a neutral factor (the camera says nothing). The choice is the driver's.
 - :func:`observation_kernel`: eq. 11, log p(z_t | x_t) = log p(M_t | x_t) + log p(A_t | x_t).
+- :func:`step_kernel`: one frame fused (gather, eqs. 5-6, descriptor eqs. 19-22 at the new P_t, eq. 11, and the
+  block partials of ``kernels.reduce``), so each particle's state is read once per frame.
 
 State layout (struct-of-arrays, N particles): ``pos``, ``vel`` (N,) vec3; appearance C as a (N, 3 N_b) float32
 array (H bins, S bins, V bins; each block sums to 1).
@@ -23,8 +25,9 @@ array (H bins, S bins, V bins; each block sums to 1).
 import warp as wp
 
 from .camera import Camera, pixel_of, project
-from .descriptor import appearance_log_prob
+from .descriptor import appearance_log_prob, descriptor_at
 from .random import STREAM_MOTION, STREAM_PEOPLE_VELOCITY, normal4
+from .reduce import moments_push, moments_store, moments_zero
 
 wp.set_module_options({"enable_backward": False})
 
@@ -39,6 +42,26 @@ def constant_velocity(
     p = pos + vel + sigma_pos * wp.vec3(zp[0], zp[1], zp[2])
     v = vel + sigma_vel * wp.vec3(zv[0], zv[1], zv[2])
     return p, v
+
+
+@wp.func
+def appearance_update(
+    model: wp.array2d(dtype=wp.float32),
+    desc: wp.array2d(dtype=wp.float32),
+    mass: wp.array(dtype=wp.float32),
+    a: int,
+    alpha: float,
+    model_out: wp.array2d(dtype=wp.float32),
+    i: int,
+):
+    """Eq. 6 for parent ``a`` into row ``i``: C_t = alpha A_{t-1} + (1 - alpha) C_{t-1} (C_{t-1} if A unseen)."""
+    ncols = model.shape[1]
+    if mass[a] > 0.0:
+        for k in range(ncols):
+            model_out[i, k] = alpha * desc[a, k] + (1.0 - alpha) * model[a, k]
+    else:
+        for k in range(ncols):
+            model_out[i, k] = model[a, k]
 
 
 @wp.kernel
@@ -75,13 +98,7 @@ def predict_kernel(
     p, v = constant_velocity(pos[a], vel[a], sigma_pos[0], sigma_vel[0], seed, i, frame[0])
     pos_out[i] = p
     vel_out[i] = v
-    ncols = model.shape[1]
-    if mass[a] > 0.0:
-        for k in range(ncols):
-            model_out[i, k] = alpha * desc[a, k] + (1.0 - alpha) * model[a, k]  # eq. 6
-    else:
-        for k in range(ncols):
-            model_out[i, k] = model[a, k]
+    appearance_update(model, desc, mass, a, alpha, model_out, i)  # eq. 6
 
 
 @wp.func
@@ -146,3 +163,81 @@ def observation_kernel(
     lm = motion_log_likelihood(cams, mask, p_b, log_outside, points[i])
     la = appearance_log_prob(model, i, desc, i, mass[i], mean_rgb[i], n_bins, sigma_n[0], sigma_p)
     loglik[i] = lm + la
+
+
+@wp.kernel
+def step_kernel(
+    cams: wp.array(dtype=Camera),
+    mask: wp.array(dtype=wp.uint8),
+    p_b: float,
+    log_outside: float,
+    h: wp.array(dtype=wp.float32),
+    s: wp.array(dtype=wp.float32),
+    v: wp.array(dtype=wp.float32),
+    bgr: wp.array(dtype=wp.uint8),
+    r_n: float,
+    n_bins: int,
+    r_min: float,
+    r_max: float,
+    pos: wp.array(dtype=wp.vec3),
+    vel: wp.array(dtype=wp.vec3),
+    model: wp.array2d(dtype=wp.float32),
+    desc: wp.array2d(dtype=wp.float32),
+    mass: wp.array(dtype=wp.float32),
+    ancestors: wp.array(dtype=wp.int32),
+    logw_prev: wp.array(dtype=wp.float32),
+    resampled: wp.array(dtype=wp.int32),
+    sigma_pos: wp.array(dtype=wp.float32),
+    sigma_vel: wp.array(dtype=wp.float32),
+    alpha: float,
+    sigma_n: wp.array(dtype=wp.float32),
+    sigma_p: float,
+    seed: wp.vec2ui,
+    frame: wp.array(dtype=wp.int32),
+    n: int,
+    chunk: int,
+    pos_out: wp.array(dtype=wp.vec3),
+    vel_out: wp.array(dtype=wp.vec3),
+    model_out: wp.array2d(dtype=wp.float32),
+    desc_out: wp.array2d(dtype=wp.float32),
+    mass_out: wp.array(dtype=wp.float32),
+    rgb_out: wp.array(dtype=wp.vec3),
+    logw_out: wp.array(dtype=wp.float32),
+    part_max: wp.array(dtype=wp.float32),
+    part_arg: wp.array(dtype=wp.int32),
+    part: wp.array2d(dtype=wp.float64),
+):
+    """One S2 frame for one target's particle set, fused: for particle i with parent a = ancestors[i]: eq. 5 on
+    (pos, vel)[a], eq. 6 on (model, desc, mass)[a], the descriptor A_t = D(P_t) (eq. 22) into ``desc_out[i]``,
+    log p(z_t | x_t) = motion + appearance (eq. 11) added to ``logw_prev[i]`` unless ``resampled[0]``, and the
+    block's max / MAP / weighted sums (``reduce.moments_push``, outputs as ``reduce.moments_store``).
+
+    Same arguments as :func:`predict_kernel`, :func:`motion_kernel` and ``descriptor.descriptor_kernel``; every
+    ``*_out`` is the other half of a ping-pong pair. Launch ``wp.launch_tiled(dim=[blocks], block_dim=B)``; block
+    ``b`` owns particles ``[b chunk, (b+1) chunk)``. Same values as the separate kernels (tested).
+    """
+    b, lane = wp.tid()
+    start = b * chunk
+    stop = wp.min(start + chunk, n)
+    sp = sigma_pos[0]
+    sv = sigma_vel[0]
+    sn = sigma_n[0]
+    f = frame[0]
+    keep = resampled[0] == 0
+    best, arg, sw, sw2, sx, sxx = moments_zero()
+    for i in range(start + lane, stop, wp.block_dim()):
+        a = ancestors[i]
+        x, u = constant_velocity(pos[a], vel[a], sp, sv, seed, i, f)  # eq. 5
+        pos_out[i] = x
+        vel_out[i] = u
+        appearance_update(model, desc, mass, a, alpha, model_out, i)  # eq. 6
+        m, rgb = descriptor_at(cams, h, s, v, bgr, x, r_n, n_bins, r_min, r_max, desc_out, i)  # eqs. 19-22
+        mass_out[i] = m
+        rgb_out[i] = rgb
+        lw = motion_log_likelihood(cams, mask, p_b, log_outside, x)  # eqs. 9-10
+        lw += appearance_log_prob(model_out, i, desc_out, i, m, rgb, n_bins, sn, sigma_p)  # eqs. 23-26, eq. 11
+        if keep:
+            lw += logw_prev[i]
+        logw_out[i] = lw
+        best, arg, sw, sw2, sx, sxx = moments_push(best, arg, sw, sw2, sx, sxx, lw, i, x)
+    moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)

@@ -551,3 +551,94 @@ def test_occupancy_matches_brute_force_and_integrates(device, rng):
     for cut, mass in ((6.0, 1.0), (3.0, 0.970709)):
         g = run_occupancy(device, pts, logw, sigma, cut, big["origin"], big["voxel"], big["shape"])
         assert g.sum() * big["voxel"] ** 3 == pytest.approx(mass, abs=2e-3)
+
+
+@pytest.mark.parametrize("resampled", [0, 1])
+def test_step_kernel_equals_separate_kernels(device, rng, resampled):
+    """The fused frame gives the same state, descriptor, log-weights and block partials as predict -> descriptor
+    -> observation -> reduce.block_partials_kernel launched one after another."""
+    from wptrack.kernels import reduce as kred
+
+    rig = make_rig()
+    drig = DeviceRig(rig, device)
+    n, chunk, block = 300, 64, 32
+    nbk = (n + chunk - 1) // chunk
+    bgr = random_frames(rig, rng)
+    planes = hsv_planes(bgr, device)
+    B = wp.array(bgr, dtype=wp.uint8, device=device)
+    mask = wp.array(motion_masks(rig, rng), dtype=wp.uint8, device=device)
+    pos = wp.array(random_points(rng, n), dtype=wp.vec3, device=device)
+    vel = wp.array(rng.normal(0, 0.02, (n, 3)).astype(np.float32), dtype=wp.vec3, device=device)
+    model = wp.array(random_histograms(rng, n), device=device)
+    desc = wp.array(random_histograms(rng, n), device=device)
+    m0 = rng.uniform(0.5, 1, n).astype(np.float32)
+    m0[::9] = 0
+    mass = wp.array(m0, device=device)
+    anc = wp.array(rng.integers(0, n, n).astype(np.int32), device=device)
+    logw_prev = wp.array(rng.normal(0, 1, n).astype(np.float32), device=device)
+    flag = wp.array([resampled], dtype=wp.int32, device=device)
+    sp, sv, sn = (wp.array([x], dtype=wp.float32, device=device) for x in (0.02, 0.004, 0.01))
+    seed, frame = wp.vec2ui(3, 4), wp.array([7], dtype=wp.int32, device=device)
+    p_b, alpha, sigma_p = 0.1, 0.05, 0.3
+
+    def zeros(shape, dtype=wp.float32):
+        return wp.zeros(shape, dtype=dtype, device=device)
+
+    fused = dict(
+        pos=zeros(n, wp.vec3),
+        vel=zeros(n, wp.vec3),
+        model=zeros((n, 3 * NB)),
+        desc=zeros((n, 3 * NB)),
+        mass=zeros(n),
+        rgb=zeros(n, wp.vec3),
+        logw=zeros(n),
+        pmax=zeros(nbk),
+        parg=zeros(nbk, wp.int32),
+        part=zeros((nbk, kred.N_SUMS), wp.float64),
+    )
+    wp.launch_tiled(
+        kpeople.step_kernel,
+        dim=[nbk],
+        inputs=[drig.cams, mask, p_b, 0.0, *planes, B, R_N, NB, R_MIN, R_MAX, pos, vel, model, desc, mass, anc]
+        + [logw_prev, flag, sp, sv, alpha, sn, sigma_p, seed, frame, n, chunk],
+        outputs=list(fused.values()),
+        block_dim=block,
+        device=device,
+    )
+    sep = {k: zeros(v.shape, v.dtype) for k, v in fused.items()}
+    wp.launch(
+        kpeople.predict_kernel,
+        dim=n,
+        inputs=[pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, frame],
+        outputs=[sep["pos"], sep["vel"], sep["model"]],
+        device=device,
+    )
+    wp.launch(
+        kdesc.descriptor_kernel,
+        dim=n,
+        inputs=[drig.cams, *planes, B, sep["pos"], R_N, NB, R_MIN, R_MAX],
+        outputs=[sep["desc"], sep["mass"], sep["rgb"]],
+        device=device,
+    )
+    wp.launch(
+        kpeople.observation_kernel,
+        dim=n,
+        inputs=[drig.cams, mask, p_b, 0.0, sep["pos"], sep["model"], sep["desc"], sep["mass"], sep["rgb"], NB, sn]
+        + [sigma_p],
+        outputs=[sep["logw"]],
+        device=device,
+    )
+    logw = sep["logw"].numpy() + (0 if resampled else logw_prev.numpy())
+    wp.launch_tiled(
+        kred.block_partials_kernel,
+        dim=[nbk],
+        inputs=[wp.array(logw, device=device), sep["pos"], n, chunk],
+        outputs=[sep["pmax"], sep["parg"], sep["part"]],
+        block_dim=block,
+        device=device,
+    )
+    for k in ("pos", "vel", "model", "desc", "mass", "rgb", "pmax", "parg"):
+        np.testing.assert_array_equal(fused[k].numpy(), sep[k].numpy(), err_msg=k)
+    np.testing.assert_allclose(fused["logw"].numpy(), logw, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(fused["part"].numpy(), sep["part"].numpy(), rtol=1e-6)
+    assert (fused["mass"].numpy() == 0).sum() >= 3 and (fused["mass"].numpy() > 0).sum() >= 200
