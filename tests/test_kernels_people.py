@@ -642,3 +642,28 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     np.testing.assert_allclose(fused["logw"].numpy(), logw, rtol=1e-6, atol=1e-6)
     np.testing.assert_allclose(fused["part"].numpy(), sep["part"].numpy(), rtol=1e-6)
     assert (fused["mass"].numpy() == 0).sum() >= 3 and (fused["mass"].numpy() > 0).sum() >= 200
+
+
+def test_occupancy_hashgrid_equals_brute_force(device, rng):
+    n = 500
+    pts = rng.uniform(0, 1, (n, 3)).astype(np.float32)
+    logw = (rng.normal(size=n) * 2).astype(np.float32)
+    sigma, cutoff, origin, voxel, shape = 0.08, 3.0, (-0.2, -0.2, -0.2), 0.06, (24, 24, 24)
+    ref = run_occupancy(device, pts, logw, sigma, cutoff, origin, voxel, shape)
+    l64 = logw.astype(np.float64)
+    log_norm = l64.max() + np.log(np.exp(l64 - l64.max()).sum())
+    P = wp.array(pts, dtype=wp.vec3, device=device)
+    hg = wp.HashGrid(16, 16, 16, device=device)
+    hg.build(P, cutoff * sigma)
+    grid = wp.zeros(shape, dtype=wp.float32, device=device)
+    args = [hg.id, P, wp.array(logw, device=device), wp.array([log_norm], dtype=wp.float64, device=device)]
+    wp.launch(
+        kocc.occupancy_hashgrid_kernel,
+        dim=shape,
+        inputs=[*args, sigma, cutoff, wp.vec3(*origin), voxel],
+        outputs=[grid],
+        device=device,
+    )
+    got = grid.numpy()
+    np.testing.assert_allclose(got, ref, rtol=1e-5, atol=1e-6 * ref.max())
+    assert (ref > 0).mean() > 0.3
