@@ -19,7 +19,9 @@ Map to the paper:
   block partials of ``kernels.reduce``), so each particle's state is read once per frame.
 
 State layout (struct-of-arrays, N particles): ``pos``, ``vel`` (N,) vec3; appearance C as a (N, 3 N_b) float32
-array (H bins, S bins, V bins; each block sums to 1).
+array (H bins, S bins, V bins; each block sums to 1). At initialisation C_0 is the descriptor at P_0
+(``descriptor_kernel`` into the model buffer). Several people: one particle set per person, each with its own
+``seed`` word (e.g. ``wp.vec2ui(run_seed, person_id)``) so that their noise streams differ.
 """
 
 import warp as wp
