@@ -7,7 +7,7 @@ Map to the paper:
 - :func:`noise_partials_kernel` + :func:`noise_sigma_kernel`: sigma_n of eq. 18 from two consecutive frames.
 - :func:`var_s`, :func:`var_h`, :func:`alpha_s`, :func:`alpha_h`: the noise propagation of eqs. 15-16 and the
   equalisation weights of eq. 17.
-- :func:`descriptor_kernel`: the descriptor D(P) of eqs. 19-21 for every particle (A_t of eq. 22).
+- :func:`descriptor_at`, :func:`descriptor_kernel`: D(P) of eqs. 19-21 for every particle (A_t, eq. 22).
 - :func:`appearance_log_prob`, :func:`appearance_kernel`: eqs. 23-26.
 
 Choices where the paper is silent or ambiguous (all documented at the function):
