@@ -31,6 +31,7 @@ STREAM_TEMPLATE_NOISE = wp.constant(8)  # S3: diffusion noise, first 4 normals p
 STREAM_TEMPLATE_NOISE2 = wp.constant(9)  # S3: diffusion noise, next 4 normals per object
 STREAM_TEMPLATE_INIT = wp.constant(10)  # S3: prior draws of an added object (dims, heading)
 STREAM_TEMPLATE_INIT2 = wp.constant(11)  # S3: prior draws of an added object (velocity)
+STREAM_PEOPLE_VELOCITY = wp.constant(12)  # S2: velocity noise (position noise uses STREAM_MOTION)
 
 
 @wp.func

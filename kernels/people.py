@@ -1,0 +1,245 @@
+"""S2 people tracker (Lopez-Cifuentes et al.): particle dynamics and the motion observation model.
+
+Map to the paper:
+- :func:`constant_velocity`: eq. 5, P_t = P_{t-1} + Pdot_{t-1} + n_P, Pdot_t = Pdot_{t-1} + n_V (velocity in metres
+  per frame: the paper's uniform frame rate makes it a position difference). n_t (6 x 1) has independent
+  components, deviation ``sigma_pos`` on the position and ``sigma_vel`` on the velocity (the paper gives no
+  covariance). Noise: Philox streams ``(seed, particle, frame, STREAM_MOTION)`` for the position and
+  ``STREAM_PEOPLE_VELOCITY`` for the velocity.
+- :func:`predict_kernel`: resampled gather + eq. 5 + the appearance update of eq. 6,
+  C_t = alpha A_{t-1} + (1 - alpha) C_{t-1}, where A_{t-1} is the descriptor observed at P_{t-1}
+  (``kernels.descriptor.descriptor_kernel``). A particle whose A_{t-1} was unseen (mass 0) keeps C_{t-1}.
+- :func:`motion_log_likelihood`, :func:`motion_kernel`: eqs. 7-10, log p(M_t | x_t) = sum over cameras of
+  log(1 - p_B) where the projection falls on a motion pixel, log(p_B) otherwise (eq. 9 as a sum of logs).
+  A camera that does not see P (behind it, or the projection off the image) contributes ``log_outside``: pass
+  log(p_B) to read "off the image" as "no motion observed" (eq. 10 literally: m(v) = 1 only for pixels of R), or 0
+  for a neutral factor (the camera says nothing). The choice is the driver's.
+- :func:`observation_kernel`: eq. 11, log p(z_t | x_t) = log p(M_t | x_t) + log p(A_t | x_t).
+- :func:`step_kernel`: one frame fused (gather, eqs. 5-6, descriptor eqs. 19-22 at the new P_t, eq. 11, and the
+  block partials of ``kernels.reduce``), so each particle's state is read once per frame.
+
+State layout (struct-of-arrays, N particles): ``pos``, ``vel`` (N,) vec3; appearance C as a (N, 3 N_b) float32
+array (H bins, S bins, V bins; each block sums to 1). At initialisation C_0 is the descriptor at P_0
+(``descriptor_kernel`` into the model buffer). Several people: one particle set per person, each with its own
+``seed`` word (e.g. ``wp.vec2ui(run_seed, person_id)``) so that their noise streams differ.
+"""
+
+import warp as wp
+
+from .camera import Camera, pixel_of, project
+from .descriptor import appearance_log_prob, descriptor_at
+from .random import STREAM_MOTION, STREAM_PEOPLE_VELOCITY, normal4
+from .reduce import moments_push, moments_store, moments_zero
+
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.func
+def constant_velocity(
+    pos: wp.vec3, vel: wp.vec3, sigma_pos: float, sigma_vel: float, seed: wp.vec2ui, index: int, frame: int
+):
+    """Eq. 5: returns (P_t, Pdot_t) = (P + Pdot + n_P, Pdot + n_V); metres and metres per frame."""
+    zp = normal4(seed, index, frame, STREAM_MOTION)
+    zv = normal4(seed, index, frame, STREAM_PEOPLE_VELOCITY)
+    p = pos + vel + sigma_pos * wp.vec3(zp[0], zp[1], zp[2])
+    v = vel + sigma_vel * wp.vec3(zv[0], zv[1], zv[2])
+    return p, v
+
+
+@wp.func
+def appearance_update(
+    model: wp.array2d(dtype=wp.float32),
+    desc: wp.array2d(dtype=wp.float32),
+    mass: wp.array(dtype=wp.float32),
+    a: int,
+    alpha: float,
+    model_out: wp.array2d(dtype=wp.float32),
+    i: int,
+):
+    """Eq. 6 for parent ``a`` into row ``i``: C_t = alpha A_{t-1} + (1 - alpha) C_{t-1} (C_{t-1} if A unseen)."""
+    ncols = model.shape[1]
+    if mass[a] > 0.0:
+        for k in range(ncols):
+            model_out[i, k] = alpha * desc[a, k] + (1.0 - alpha) * model[a, k]
+    else:
+        for k in range(ncols):
+            model_out[i, k] = model[a, k]
+
+
+@wp.kernel
+def predict_kernel(
+    pos: wp.array(dtype=wp.vec3),
+    vel: wp.array(dtype=wp.vec3),
+    model: wp.array2d(dtype=wp.float32),
+    desc: wp.array2d(dtype=wp.float32),
+    mass: wp.array(dtype=wp.float32),
+    ancestors: wp.array(dtype=wp.int32),
+    sigma_pos: wp.array(dtype=wp.float32),
+    sigma_vel: wp.array(dtype=wp.float32),
+    alpha: float,
+    seed: wp.vec2ui,
+    frame: wp.array(dtype=wp.int32),
+    pos_out: wp.array(dtype=wp.vec3),
+    vel_out: wp.array(dtype=wp.vec3),
+    model_out: wp.array2d(dtype=wp.float32),
+):
+    """One prediction per particle: gather the parent ``a = ancestors[i]``, eq. 5 on (pos, vel) and eq. 6 on the
+    appearance: ``model_out[i] = alpha desc[a] + (1 - alpha) model[a]`` (``model[a]`` unchanged when
+    ``mass[a] == 0``).
+
+    Args:
+        pos, vel: (N,) P_{t-1} (metres), Pdot_{t-1} (metres/frame). model: (N, 3 N_b) C_{t-1}.
+        desc, mass: (N, 3 N_b), (N,) A_{t-1} and its mass from ``descriptor.descriptor_kernel`` at P_{t-1}.
+        ancestors: (N,) resampled parents (identity without resampling). sigma_pos, sigma_vel: [0] noise deviations
+            (metres, metres/frame), device arrays so that CUDA graphs see updates. alpha: forgetting factor of eq. 6.
+        seed: 64-bit run seed. frame: [0] frame number (the noise counter).
+        pos_out, vel_out, model_out: the predicted state (must not alias the inputs).
+    """
+    i = wp.tid()
+    a = ancestors[i]
+    p, v = constant_velocity(pos[a], vel[a], sigma_pos[0], sigma_vel[0], seed, i, frame[0])
+    pos_out[i] = p
+    vel_out[i] = v
+    appearance_update(model, desc, mass, a, alpha, model_out, i)  # eq. 6
+
+
+@wp.func
+def motion_log_likelihood(
+    cams: wp.array(dtype=Camera), mask: wp.array(dtype=wp.uint8), p_b: float, log_outside: float, x: wp.vec3
+):
+    """log p(M_t | x_t) (eqs. 9-10): per camera log(1 - p_B) if the pixel nearest to the projection of ``x`` is a
+    motion pixel (mask != 0), log(p_B) if not, ``log_outside`` if the camera does not see ``x``.
+
+    ``mask``: flat uint8 motion masks of all cameras (``Camera.pixel_offset``), one byte per pixel."""
+    lin = wp.log(1.0 - p_b)
+    lout = wp.log(p_b)
+    total = float(0.0)
+    for c in range(cams.shape[0]):
+        cam = cams[c]
+        uvz = project(cam, x)
+        term = log_outside
+        if uvz[2] > 0.0:
+            px = pixel_of(uvz[0])
+            py = pixel_of(uvz[1])
+            if px >= 0 and py >= 0 and px < cam.width and py < cam.height:
+                term = lout
+                if mask[cam.pixel_offset + py * cam.width + px] != wp.uint8(0):
+                    term = lin
+        total += term
+    return total
+
+
+@wp.kernel
+def motion_kernel(
+    cams: wp.array(dtype=Camera),
+    mask: wp.array(dtype=wp.uint8),
+    p_b: float,
+    log_outside: float,
+    points: wp.array(dtype=wp.vec3),
+    loglik: wp.array(dtype=wp.float32),
+):
+    """log p(M_t | x_t) of every point (eqs. 7-10); see :func:`motion_log_likelihood`. ``loglik`` (N,) out."""
+    i = wp.tid()
+    loglik[i] = motion_log_likelihood(cams, mask, p_b, log_outside, points[i])
+
+
+@wp.kernel
+def observation_kernel(
+    cams: wp.array(dtype=Camera),
+    mask: wp.array(dtype=wp.uint8),
+    p_b: float,
+    log_outside: float,
+    points: wp.array(dtype=wp.vec3),
+    model: wp.array2d(dtype=wp.float32),
+    desc: wp.array2d(dtype=wp.float32),
+    mass: wp.array(dtype=wp.float32),
+    mean_rgb: wp.array(dtype=wp.vec3),
+    n_bins: int,
+    sigma_n: wp.array(dtype=wp.float32),
+    sigma_p: float,
+    loglik: wp.array(dtype=wp.float32),
+):
+    """log p(z_t | x_t) = log p(M_t | x_t) + log p(A_t | x_t) (eq. 11) of every particle; the descriptor
+    (``desc``, ``mass``, ``mean_rgb``) must have been computed at ``points`` by ``descriptor.descriptor_kernel``."""
+    i = wp.tid()
+    lm = motion_log_likelihood(cams, mask, p_b, log_outside, points[i])
+    la = appearance_log_prob(model, i, desc, i, mass[i], mean_rgb[i], n_bins, sigma_n[0], sigma_p)
+    loglik[i] = lm + la
+
+
+@wp.kernel
+def step_kernel(
+    cams: wp.array(dtype=Camera),
+    mask: wp.array(dtype=wp.uint8),
+    p_b: float,
+    log_outside: float,
+    h: wp.array(dtype=wp.float32),
+    s: wp.array(dtype=wp.float32),
+    v: wp.array(dtype=wp.float32),
+    bgr: wp.array(dtype=wp.uint8),
+    r_n: float,
+    n_bins: int,
+    r_min: float,
+    r_max: float,
+    pos: wp.array(dtype=wp.vec3),
+    vel: wp.array(dtype=wp.vec3),
+    model: wp.array2d(dtype=wp.float32),
+    desc: wp.array2d(dtype=wp.float32),
+    mass: wp.array(dtype=wp.float32),
+    ancestors: wp.array(dtype=wp.int32),
+    logw_prev: wp.array(dtype=wp.float32),
+    resampled: wp.array(dtype=wp.int32),
+    sigma_pos: wp.array(dtype=wp.float32),
+    sigma_vel: wp.array(dtype=wp.float32),
+    alpha: float,
+    sigma_n: wp.array(dtype=wp.float32),
+    sigma_p: float,
+    seed: wp.vec2ui,
+    frame: wp.array(dtype=wp.int32),
+    n: int,
+    chunk: int,
+    pos_out: wp.array(dtype=wp.vec3),
+    vel_out: wp.array(dtype=wp.vec3),
+    model_out: wp.array2d(dtype=wp.float32),
+    desc_out: wp.array2d(dtype=wp.float32),
+    mass_out: wp.array(dtype=wp.float32),
+    rgb_out: wp.array(dtype=wp.vec3),
+    logw_out: wp.array(dtype=wp.float32),
+    part_max: wp.array(dtype=wp.float32),
+    part_arg: wp.array(dtype=wp.int32),
+    part: wp.array2d(dtype=wp.float64),
+):
+    """One S2 frame for one target's particle set, fused: for particle i with parent a = ancestors[i]: eq. 5 on
+    (pos, vel)[a], eq. 6 on (model, desc, mass)[a], the descriptor A_t = D(P_t) (eq. 22) into ``desc_out[i]``,
+    log p(z_t | x_t) = motion + appearance (eq. 11) added to ``logw_prev[i]`` unless ``resampled[0]``, and the
+    block's max / MAP / weighted sums (``reduce.moments_push``, outputs as ``reduce.moments_store``).
+
+    Same arguments as :func:`predict_kernel`, :func:`motion_kernel` and ``descriptor.descriptor_kernel``; every
+    ``*_out`` is the other half of a ping-pong pair. Launch ``wp.launch_tiled(dim=[blocks], block_dim=B)``; block
+    ``b`` owns particles ``[b chunk, (b+1) chunk)``. Same values as the separate kernels (tested).
+    """
+    b, lane = wp.tid()
+    start = b * chunk
+    stop = wp.min(start + chunk, n)
+    sp = sigma_pos[0]
+    sv = sigma_vel[0]
+    sn = sigma_n[0]
+    f = frame[0]
+    keep = resampled[0] == 0
+    best, arg, sw, sw2, sx, sxx = moments_zero()
+    for i in range(start + lane, stop, wp.block_dim()):
+        a = ancestors[i]
+        x, u = constant_velocity(pos[a], vel[a], sp, sv, seed, i, f)  # eq. 5
+        pos_out[i] = x
+        vel_out[i] = u
+        appearance_update(model, desc, mass, a, alpha, model_out, i)  # eq. 6
+        m, rgb = descriptor_at(cams, h, s, v, bgr, x, r_n, n_bins, r_min, r_max, desc_out, i)  # eqs. 19-22
+        mass_out[i] = m
+        rgb_out[i] = rgb
+        lw = motion_log_likelihood(cams, mask, p_b, log_outside, x)  # eqs. 9-10
+        lw += appearance_log_prob(model_out, i, desc_out, i, m, rgb, n_bins, sn, sigma_p)  # eqs. 23-26, eq. 11
+        if keep:
+            lw += logw_prev[i]
+        logw_out[i] = lw
+        best, arg, sw, sw2, sx, sxx = moments_push(best, arg, sw, sw2, sx, sxx, lw, i, x)
+    moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)

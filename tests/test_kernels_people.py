@@ -1,0 +1,669 @@
+"""S2 people-tracker kernels (Lopez-Cifuentes et al.) against NumPy references on every device: HSV planes
+(eqs. 12-14), sigma_n (eq. 18), alpha weights (eqs. 15-17), the 3D colour descriptor (eqs. 19-21), the appearance
+probability (eqs. 23-26), the motion likelihood (eqs. 7-10), eq. 11, the constant-velocity predict with the
+appearance update (eqs. 5-6) and the occupancy grid."""
+
+from __future__ import annotations
+
+import colorsys
+
+import numpy as np
+import pytest
+import warp as wp
+from wptrack.kernels import camera as kcam
+from wptrack.kernels import descriptor as kdesc
+from wptrack.kernels import occupancy as kocc
+from wptrack.kernels import people as kpeople
+
+from wptrack.rig import Camera, Rig
+from wptrack.warpcams import DeviceRig
+
+NB = 8
+R_N = 0.12
+R_MIN, R_MAX = 1.0, 9.0
+
+
+def make_rig() -> Rig:
+    """Three 64x48 cameras around the box [0, 1]^2 x [0, 1] (z up)."""
+    cams = (
+        Camera.look_at("a", 64, 48, (-1.5, 0.5, 1.5), (0.5, 0.5, 0.5), 50.0),
+        Camera.look_at("b", 64, 48, (2.5, -0.5, 1.8), (0.5, 0.5, 0.5), 55.0, dist=[-0.03, 0, 0, 0, 0]),
+        Camera.look_at("c", 64, 48, (0.5, 2.8, 1.2), (0.5, 0.5, 0.4), 45.0, roll_deg=10),
+    )
+    return Rig(cams)
+
+
+def random_frames(rig: Rig, rng) -> np.ndarray:
+    """Flat BGR buffer of random images with coloured blocks (so that histograms are not flat)."""
+    out = []
+    for cam in rig.cameras:
+        img = rng.integers(0, 256, (cam.height, cam.width, 3), dtype=np.uint8)
+        for _ in range(8):
+            y, x = rng.integers(0, cam.height), rng.integers(0, cam.width)
+            img[max(0, y - 6) : y + 6, max(0, x - 6) : x + 6] = rng.integers(0, 256, 3)
+        out.append(img.reshape(-1))
+    return np.concatenate(out)
+
+
+def hsv_ref(bgr_flat: np.ndarray) -> np.ndarray:
+    """(P, 3) H [0, 1), S, V by colorsys (an independent implementation of the hexcone model)."""
+    px = bgr_flat.reshape(-1, 3).astype(np.float64) / 255.0
+    return np.array([colorsys.rgb_to_hsv(p[2], p[1], p[0]) for p in px])
+
+
+def hsv_planes(bgr: np.ndarray, device):
+    n = len(bgr) // 3
+    planes = [wp.zeros(n, dtype=wp.float32, device=device) for _ in range(3)]
+    wp.launch(
+        kdesc.hsv_planes_kernel,
+        dim=n,
+        inputs=[wp.array(bgr, dtype=wp.uint8, device=device)],
+        outputs=planes,
+        device=device,
+    )
+    return planes
+
+
+def project_all(drig: DeviceRig, pts: np.ndarray, device) -> np.ndarray:
+    """(M, N, 3) (u, v, depth) from the tested projection (test_kernels_camera checks it against OpenCV)."""
+    out = wp.zeros((drig.num_cameras, len(pts)), dtype=wp.vec3, device=device)
+    wp.launch(
+        kcam.project_kernel,
+        dim=(drig.num_cameras, len(pts)),
+        inputs=[drig.cams, wp.array(pts, dtype=wp.vec3, device=device)],
+        outputs=[out],
+        device=device,
+    )
+    return out.numpy().astype(np.float64)
+
+
+def random_points(rng, n: int) -> np.ndarray:
+    """Points mostly in the common view, some near the image borders and a few behind every camera / far away."""
+    pts = rng.uniform([0.0, 0.0, 0.0], [1.0, 1.0, 1.0], (n, 3))
+    pts[: n // 10] = rng.uniform([-1.0, -1.0, -0.5], [2.0, 2.0, 2.0], (n // 10, 3))
+    pts[n // 10 : n // 10 + 3] = [[50.0, 50.0, -40.0], [-30.0, 60.0, 10.0], [0.5, 0.5, 80.0]]
+    return pts.astype(np.float32)
+
+
+def test_hsv_planes_match_colorsys(device, rng):
+    rig = make_rig()
+    bgr = random_frames(rig, rng)
+    # corner cases: black, white, greys, pure primaries, hue just below 1 (wrap)
+    bgr[:30] = np.array(
+        [0, 0, 0, 255, 255, 255, 90, 90, 90, 0, 0, 255, 0, 255, 0, 255, 0, 0, 8, 0, 255, 255, 0, 255, 1, 2, 3, 0, 1, 0]
+    )
+    h, s, v = (a.numpy() for a in hsv_planes(bgr, device))
+    ref = hsv_ref(bgr)
+    np.testing.assert_allclose(s, ref[:, 1], atol=2e-7)
+    np.testing.assert_allclose(v, ref[:, 2], atol=1e-7)
+    dh = np.abs(h - ref[:, 0])
+    dh = np.minimum(dh, 1 - dh)  # 0.9999999 vs 0.0 are neighbours on the circle
+    assert dh.max() < 1e-6
+    assert np.all((h >= 0) & (h < 1))
+    assert h[2] == 0.0 and s[2] == 0.0  # grey: hue 0 by convention
+    assert h[3] == 0.0 and h[4] == pytest.approx(1 / 3) and h[5] == pytest.approx(2 / 3)  # red, green, blue
+    assert h[6] == pytest.approx(1 - 8 / 255 / 6, abs=1e-6)  # (8, 0, 255) BGR: red with a little blue
+
+
+def test_noise_sigma(device, rng):
+    """Eq. 18 against NumPy on sizes that are not multiples of the block, and its expectation on pure noise:
+    two independent noisy copies of a scene differ with variance 2 sigma^2 (the paper's formula gives sqrt 2 sigma)."""
+    for n_pix, chunk in [(1, 256), (1000, 256), (3 * 64 * 48, 1024)]:
+        a = rng.integers(0, 256, 3 * n_pix).astype(np.uint8)
+        b = rng.integers(0, 256, 3 * n_pix).astype(np.uint8)
+        got = run_noise(a, b, chunk, device)
+        ref = np.sqrt(np.mean(((a.astype(np.float64) - b) / 255) ** 2))
+        assert got == pytest.approx(ref, rel=1e-6)
+    scene = rng.uniform(40, 210, 3 * 64 * 48 * 3)
+    sigma = 4.0
+    a = np.clip(np.rint(scene + rng.normal(0, sigma, scene.shape)), 0, 255).astype(np.uint8)
+    b = np.clip(np.rint(scene + rng.normal(0, sigma, scene.shape)), 0, 255).astype(np.uint8)
+    got = run_noise(a, b, 4096, device)
+    # rounding to integers adds 1/12 per frame; 27648 values: the estimate's relative sd is ~0.4 %
+    assert got == pytest.approx(np.sqrt(2 * (sigma**2 + 1 / 12)) / 255, rel=0.02)
+
+
+def run_noise(a, b, chunk, device) -> float:
+    n = len(a)
+    nb = (n + chunk - 1) // chunk
+    part = wp.zeros(nb, dtype=wp.float64, device=device)
+    sig = wp.zeros(1, dtype=wp.float32, device=device)
+    A = wp.array(a, dtype=wp.uint8, device=device)
+    B = wp.array(b, dtype=wp.uint8, device=device)
+    wp.launch_tiled(
+        kdesc.noise_partials_kernel, dim=[nb], inputs=[A, B, n, chunk], outputs=[part], block_dim=256, device=device
+    )
+    wp.launch_tiled(
+        kdesc.noise_sigma_kernel, dim=[1], inputs=[part, nb, n], outputs=[sig], block_dim=256, device=device
+    )
+    return float(sig.numpy()[0])
+
+
+def alpha_ref(rgb: np.ndarray, sigma_n: float) -> np.ndarray:
+    """(alpha_S, alpha_H) of eq. 17 with the delta-method variances (see kernels/descriptor.py)."""
+    s = np.sort(rgb, axis=1)[:, ::-1]
+    mx, mid, mn = s[:, 0], s[:, 1], s[:, 2]
+    vv = sigma_n**2
+    m2 = np.maximum(mx * mx, 1e-12)
+    vs = vv * (1 / m2 + mn**2 / m2**2)
+    d2 = np.maximum((mx - mn) ** 2, 1e-12)
+    vh = vv * (1 / d2 + ((mid - mx) ** 2 + (mid - mn) ** 2) / d2**2) / 36
+    return np.column_stack([(vv / np.maximum(vs, 1e-12)) ** 2, (vv / np.maximum(vh, 1e-12)) ** 2])
+
+
+def test_alpha_weights_and_noise_propagation(device, rng):
+    """The kernel's alpha_S, alpha_H equal the reference, and the propagated var(S_n), var(H_n) (eq. 16) agree with a
+    Monte Carlo simulation of eq. 15 through the kernel's own HSV conversion."""
+    sigma_n = 0.004
+    rgb = rng.uniform(0.05, 1.0, (300, 3)).astype(np.float32)
+    rgb[0] = [0.5, 0.5, 0.5]  # grey: hue meaningless -> alpha_H ~ 0
+    out = wp.zeros(len(rgb), dtype=wp.vec2, device=device)
+    wp.launch(
+        kdesc.alpha_kernel,
+        dim=len(rgb),
+        inputs=[wp.array(rgb, dtype=wp.vec3, device=device), sigma_n],
+        outputs=[out],
+        device=device,
+    )
+    got = out.numpy()
+    np.testing.assert_allclose(got, alpha_ref(rgb.astype(np.float64), sigma_n), rtol=1e-4)
+    assert got[0, 1] < 1e-12
+    # Monte Carlo: colours away from sextant edges and grey
+    for mu in ([0.8, 0.5, 0.2], [0.3, 0.35, 0.9], [0.6, 0.2, 0.45]):
+        noisy = np.clip(np.array(mu) + rng.normal(0, sigma_n, (20000, 3)), 0, 1)
+        hsv = np.array([colorsys.rgb_to_hsv(*p) for p in noisy])
+        a_s, a_h = alpha_ref(np.array([mu]), sigma_n)[0]
+        # alpha = (sigma^2 / var)^2  ->  var = sigma^2 / sqrt(alpha); sample variance of 20000 draws: sd ~1 %
+        assert np.var(hsv[:, 1]) == pytest.approx(sigma_n**2 / np.sqrt(a_s), rel=0.05)
+        assert np.var(hsv[:, 0]) == pytest.approx(sigma_n**2 / np.sqrt(a_h), rel=0.05)
+
+
+def bin_split_ref(x: np.ndarray, nb: int, wrap: bool) -> np.ndarray:
+    """(len(x), nb) linear-interpolation weights (bin centres at (k + 1/2) / nb)."""
+    t = x * nb - 0.5
+    k0 = np.floor(t).astype(int)
+    w1 = t - k0
+    out = np.zeros((len(x), nb))
+    rows = np.arange(len(x))
+    if wrap:
+        np.add.at(out, (rows, k0 % nb), 1 - w1)
+        np.add.at(out, (rows, (k0 + 1) % nb), w1)
+    else:
+        lo, hi = k0 < 0, k0 + 1 > nb - 1
+        w1 = np.where(lo | hi, 0.0, w1)
+        np.add.at(out, (rows, np.clip(k0, 0, nb - 1)), 1 - w1)
+        np.add.at(out, (rows, np.clip(k0 + 1, 0, nb - 1)), w1)
+    return out
+
+
+def descriptor_ref(rig: Rig, uvz: np.ndarray, hsv: np.ndarray, bgr: np.ndarray, offsets, i: int):
+    """D(P) of one point (eqs. 19-21) in float64 from the kernel's projections. Returns (desc, mass, rgb, ambiguous):
+    ``ambiguous`` when a pixel lies within float32 rounding of a disc's rim (then the two may differ by that pixel)."""
+    desc = np.zeros(3 * NB)
+    mass = 0.0
+    rgb = np.zeros(3)
+    ambiguous = False
+    for c, cam in enumerate(rig.cameras):
+        u, v, z = uvz[c, i]
+        if z <= 0:
+            continue
+        r = np.clip(0.5 * (cam.fx + cam.fy) * R_N / z, R_MIN, R_MAX)
+        ys, xs = np.mgrid[0 : cam.height, 0 : cam.width]
+        d2 = (xs - u) ** 2 + (ys - v) ** 2
+        ambiguous |= bool(np.any(np.abs(d2 - r * r) < 2e-5 * r * r))
+        sel = d2 <= r * r
+        w = np.exp(-0.5 * d2[sel] / r**2) / (2 * np.pi * r * r)
+        q = offsets[c] + ys[sel] * cam.width + xs[sel]
+        for k, wrap in enumerate((True, False, False)):
+            desc[k * NB : (k + 1) * NB] += (w[:, None] * bin_split_ref(hsv[q, k], NB, wrap)).sum(0)
+        mass += w.sum()
+        px = bgr.reshape(-1, 3)[q][:, ::-1] / 255.0
+        rgb += (w[:, None] * px).sum(0)
+    if mass > 0:
+        desc /= mass
+        rgb /= mass
+    return desc, mass, rgb, ambiguous
+
+
+def run_descriptor(drig, planes, bgr, pts, device):
+    n = len(pts)
+    desc = wp.zeros((n, 3 * NB), dtype=wp.float32, device=device)
+    mass = wp.zeros(n, dtype=wp.float32, device=device)
+    rgb = wp.zeros(n, dtype=wp.vec3, device=device)
+    wp.launch(
+        kdesc.descriptor_kernel,
+        dim=n,
+        inputs=[
+            drig.cams,
+            *planes,
+            wp.array(bgr, dtype=wp.uint8, device=device),
+            wp.array(pts, dtype=wp.vec3, device=device),
+            R_N,
+            NB,
+            R_MIN,
+            R_MAX,
+        ],
+        outputs=[desc, mass, rgb],
+        device=device,
+    )
+    return desc, mass, rgb
+
+
+def test_descriptor_matches_numpy(device, rng):
+    rig = make_rig()
+    drig = DeviceRig(rig, device)
+    bgr = random_frames(rig, rng)
+    planes = hsv_planes(bgr, device)
+    hsv = np.column_stack([p.numpy().astype(np.float64) for p in planes])
+    pts = random_points(rng, 200)
+    uvz = project_all(drig, pts, device)
+    desc, mass, rgb = (a.numpy() for a in run_descriptor(drig, planes, bgr, pts, device))
+    compared = unseen = clipped = 0
+    for i in range(len(pts)):
+        d_ref, m_ref, rgb_ref, ambiguous = descriptor_ref(rig, uvz, hsv, bgr, drig.pixel_offsets, i)
+        if ambiguous:
+            continue
+        compared += 1
+        np.testing.assert_allclose(mass[i], m_ref, rtol=1e-4, atol=1e-9)
+        np.testing.assert_allclose(desc[i], d_ref, rtol=1e-4, atol=2e-6)
+        np.testing.assert_allclose(rgb[i], rgb_ref, rtol=1e-4, atol=2e-6)
+        if m_ref == 0:
+            unseen += 1
+            assert not desc[i].any()
+        else:
+            np.testing.assert_allclose(desc[i].reshape(3, NB).sum(1), 1.0, rtol=1e-5)
+        seen = uvz[:, i, 2] > 0
+        clipped += int(
+            np.any(
+                seen
+                & (
+                    (uvz[:, i, 0] < R_MAX)
+                    | (uvz[:, i, 0] > 63 - R_MAX)
+                    | (uvz[:, i, 1] < R_MAX)
+                    | (uvz[:, i, 1] > 47 - R_MAX)
+                )
+            )
+        )
+    assert compared >= 190
+    assert unseen >= 3  # the far points
+    assert clipped >= 10  # discs crossing the image border were exercised
+
+
+def test_descriptor_hue_wraps(device):
+    """A uniform colour of hue just below 1 splits between the last and the first hue bin."""
+    rig = make_rig()
+    drig = DeviceRig(rig, device)
+    bgr = np.tile(np.array([8, 0, 255], dtype=np.uint8), drig.total_pixels)  # BGR: red with a little blue
+    planes = hsv_planes(bgr, device)
+    pts = np.array([[0.5, 0.5, 0.5]], dtype=np.float32)
+    desc, mass, rgb = (a.numpy() for a in run_descriptor(drig, planes, bgr, pts, device))
+    hue = 1 - 8 / 255 / 6
+    t = hue * NB - 0.5  # between the centres of bins NB - 1 and NB (= 0)
+    w1 = t - np.floor(t)
+    assert mass[0] > 0
+    np.testing.assert_allclose(desc[0, NB - 1], 1 - w1, atol=1e-5)
+    np.testing.assert_allclose(desc[0, 0], w1, atol=1e-5)
+    assert desc[0, 1 : NB - 1].sum() == 0
+    np.testing.assert_allclose(rgb[0], [1.0, 0.0, 8 / 255], atol=1e-6)
+    # saturation 1 and value 1: beyond the last centre, wholly in the last bin
+    assert desc[0, 2 * NB - 1] == pytest.approx(1.0) and desc[0, 3 * NB - 1] == pytest.approx(1.0)
+
+
+def appearance_ref(model, desc, mass, rgb, sigma_n, sigma_p):
+    al = alpha_ref(rgb.astype(np.float64), sigma_n)
+    a_s, a_h = al[:, 0], al[:, 1]
+    e = [
+        np.linalg.norm(model[:, k * NB : (k + 1) * NB] - desc[:, k * NB : (k + 1) * NB], axis=1) / np.sqrt(2)
+        for k in range(3)
+    ]
+    d_h, d_s, d_v = e[0] * a_h, e[1] * a_s, e[2]  # eq. 23
+    beta = np.exp(-(d_v**2) / (2 * sigma_n**2)) / (np.sqrt(2 * np.pi) * sigma_n)  # eq. 25
+    m = (d_h + d_s + beta * d_v) / (a_h + a_s + beta)  # eq. 24
+    m = np.where(mass > 0, m, 1.0)
+    return -(m**2) / (2 * sigma_p**2) - np.log(np.sqrt(2 * np.pi) * sigma_p)  # eq. 26
+
+
+def random_histograms(rng, n):
+    h = rng.gamma(0.5, size=(n, 3, NB))
+    return (h / h.sum(2, keepdims=True)).reshape(n, 3 * NB).astype(np.float32)
+
+
+def test_appearance_matches_numpy(device, rng):
+    n = 200
+    model = random_histograms(rng, n)
+    desc = random_histograms(rng, n)
+    desc[:20] = model[:20]  # perfect matches: M = 0
+    desc[20:40] = (0.9 * model[20:40] + 0.1 * desc[20:40]).astype(np.float32)
+    mass = rng.uniform(0.5, 2, n).astype(np.float32)
+    mass[-5:] = 0
+    rgb = rng.uniform(0.05, 1, (n, 3)).astype(np.float32)
+    sigma_n, sigma_p = 0.02, 0.3
+    out = wp.zeros(n, dtype=wp.float32, device=device)
+    wp.launch(
+        kdesc.appearance_kernel,
+        dim=n,
+        inputs=[
+            wp.array(model, device=device),
+            wp.array(desc, device=device),
+            wp.array(mass, device=device),
+            wp.array(rgb, dtype=wp.vec3, device=device),
+            NB,
+            wp.array([sigma_n], dtype=wp.float32, device=device),
+            sigma_p,
+        ],
+        outputs=[out],
+        device=device,
+    )
+    got = out.numpy()
+    ref = appearance_ref(model.astype(np.float64), desc.astype(np.float64), mass, rgb, sigma_n, sigma_p)
+    np.testing.assert_allclose(got, ref, rtol=1e-4, atol=1e-5)
+    best = -np.log(np.sqrt(2 * np.pi) * sigma_p)
+    np.testing.assert_allclose(got[:20], best, atol=1e-6)
+    assert np.all(got[20:40] > np.median(got[40:-5]))  # near matches score above random pairs
+    np.testing.assert_allclose(got[-5:], best - 1 / (2 * sigma_p**2), rtol=1e-6)
+
+
+def motion_masks(rig: Rig, rng) -> np.ndarray:
+    out = []
+    for cam in rig.cameras:
+        m = np.zeros((cam.height, cam.width), np.uint8)
+        for _ in range(5):
+            y, x = rng.integers(0, cam.height), rng.integers(0, cam.width)
+            m[max(0, y - 8) : y + 8, max(0, x - 10) : x + 10] = 255
+        out.append(m.reshape(-1))
+    return np.concatenate(out)
+
+
+def motion_ref(rig, uvz, mask, offsets, p_b, log_outside):
+    m, n = uvz.shape[:2]
+    total = np.zeros(n)
+    for c, cam in enumerate(rig.cameras):
+        u, v, z = uvz[c].T
+        px, py = np.floor(u + 0.5).astype(int), np.floor(v + 0.5).astype(int)
+        inside = (z > 0) & (px >= 0) & (py >= 0) & (px < cam.width) & (py < cam.height)
+        q = offsets[c] + np.clip(py, 0, cam.height - 1) * cam.width + np.clip(px, 0, cam.width - 1)
+        on = inside & (mask[q] != 0)
+        total += np.where(inside, np.where(on, np.log(1 - p_b), np.log(p_b)), log_outside)
+    return total
+
+
+@pytest.mark.parametrize("neutral", [False, True])
+def test_motion_likelihood(device, rng, neutral):
+    rig = make_rig()
+    drig = DeviceRig(rig, device)
+    mask = motion_masks(rig, rng)
+    pts = random_points(rng, 300)
+    uvz = project_all(drig, pts, device)
+    p_b = 0.05
+    log_outside = 0.0 if neutral else float(np.log(p_b))
+    out = wp.zeros(len(pts), dtype=wp.float32, device=device)
+    wp.launch(
+        kpeople.motion_kernel,
+        dim=len(pts),
+        inputs=[
+            drig.cams,
+            wp.array(mask, dtype=wp.uint8, device=device),
+            p_b,
+            log_outside,
+            wp.array(pts, dtype=wp.vec3, device=device),
+        ],
+        outputs=[out],
+        device=device,
+    )
+    ref = motion_ref(rig, uvz, mask, drig.pixel_offsets, p_b, log_outside)
+    np.testing.assert_allclose(out.numpy(), ref, rtol=1e-6, atol=1e-6)
+    # every case was exercised: all on motion, none, and points off some image
+    assert np.isclose(ref, 3 * np.log(1 - p_b)).any() and np.isclose(ref, 3 * np.log(p_b)).any()
+    assert len(np.unique(np.round(ref, 5))) >= 4
+
+
+def test_observation_is_motion_plus_appearance(device, rng):
+    rig = make_rig()
+    drig = DeviceRig(rig, device)
+    bgr = random_frames(rig, rng)
+    planes = hsv_planes(bgr, device)
+    mask = wp.array(motion_masks(rig, rng), dtype=wp.uint8, device=device)
+    pts = random_points(rng, 100)
+    P = wp.array(pts, dtype=wp.vec3, device=device)
+    desc, mass, rgb = run_descriptor(drig, planes, bgr, pts, device)
+    model = wp.array(random_histograms(rng, len(pts)), device=device)
+    sn = wp.array([0.01], dtype=wp.float32, device=device)
+    lm, la, lo = (wp.zeros(len(pts), dtype=wp.float32, device=device) for _ in range(3))
+    p_b = 0.1
+    wp.launch(kpeople.motion_kernel, dim=len(pts), inputs=[drig.cams, mask, p_b, 0.0, P], outputs=[lm], device=device)
+    wp.launch(
+        kdesc.appearance_kernel,
+        dim=len(pts),
+        inputs=[model, desc, mass, rgb, NB, sn, 0.25],
+        outputs=[la],
+        device=device,
+    )
+    wp.launch(
+        kpeople.observation_kernel,
+        dim=len(pts),
+        inputs=[drig.cams, mask, p_b, 0.0, P, model, desc, mass, rgb, NB, sn, 0.25],
+        outputs=[lo],
+        device=device,
+    )
+    np.testing.assert_allclose(lo.numpy(), lm.numpy() + la.numpy(), rtol=1e-6, atol=1e-6)
+
+
+def run_predict(device, pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, frame):
+    n = len(pos)
+    outs = [
+        wp.zeros(n, dtype=wp.vec3, device=device),
+        wp.zeros(n, dtype=wp.vec3, device=device),
+        wp.zeros(model.shape, dtype=wp.float32, device=device),
+    ]
+    wp.launch(
+        kpeople.predict_kernel,
+        dim=n,
+        inputs=[
+            wp.array(pos, dtype=wp.vec3, device=device),
+            wp.array(vel, dtype=wp.vec3, device=device),
+            wp.array(model, device=device),
+            wp.array(desc, device=device),
+            wp.array(mass, device=device),
+            wp.array(anc, device=device),
+            wp.array([sp], dtype=wp.float32, device=device),
+            wp.array([sv], dtype=wp.float32, device=device),
+            alpha,
+            wp.vec2ui(seed, 0),
+            wp.array([frame], dtype=wp.int32, device=device),
+        ],
+        outputs=outs,
+        device=device,
+    )
+    return [o.numpy() for o in outs]
+
+
+def test_predict_statistics_and_appearance_update(device, rng):
+    n = 20_000
+    pos = rng.uniform(-1, 1, (n, 3)).astype(np.float32)
+    vel = rng.normal(0, 0.05, (n, 3)).astype(np.float32)
+    model = random_histograms(rng, n)
+    desc = random_histograms(rng, n)
+    mass = np.ones(n, np.float32)
+    mass[::7] = 0  # unseen parents keep their appearance
+    anc = rng.integers(0, n, n).astype(np.int32)
+    sp, sv, alpha = 0.02, 0.005, 0.1
+    p, v, c = run_predict(device, pos, vel, model, desc, mass, anc, sp, sv, alpha, 11, 5)
+    npos = p.astype(np.float64) - pos[anc] - vel[anc]  # eq. 5: position noise
+    nvel = v.astype(np.float64) - vel[anc]  # velocity noise
+    for noise, s in ((npos, sp), (nvel, sv)):
+        assert np.all(np.abs(noise.mean(0)) < 5 * s / np.sqrt(n))
+        np.testing.assert_allclose(noise.std(0), s, rtol=0.03)  # sd of the sd estimate: 0.5 %
+    # the 6 components are uncorrelated (|r| < 0.03 is ~4 standard errors at n = 20000)
+    r = np.corrcoef(np.hstack([npos, nvel]).T)
+    assert np.abs(r - np.eye(6)).max() < 0.03
+    ref = np.where(mass[anc, None] > 0, alpha * desc[anc] + (1 - alpha) * model[anc], model[anc])  # eq. 6
+    np.testing.assert_allclose(c, ref, rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(c.reshape(n, 3, NB).sum(2), 1.0, rtol=1e-5)
+    # the same seed and frame give identical output; another frame or seed gives other noise
+    again = run_predict(device, pos, vel, model, desc, mass, anc, sp, sv, alpha, 11, 5)
+    for a, b in zip(again, (p, v, c), strict=True):
+        np.testing.assert_array_equal(a, b)
+    p2, v2, _ = run_predict(device, pos, vel, model, desc, mass, anc, sp, sv, alpha, 11, 6)
+    p3, _, _ = run_predict(device, pos, vel, model, desc, mass, anc, sp, sv, alpha, 12, 5)
+    assert not np.any(np.all(p2 == p, axis=1)) and not np.any(np.all(v2 == v, axis=1))
+    assert not np.any(np.all(p3 == p, axis=1))
+
+
+def run_occupancy(device, pts, logw, sigma, cutoff, origin, voxel, shape):
+    grid = wp.zeros(shape, dtype=wp.float32, device=device)
+    l64 = logw.astype(np.float64)
+    log_norm = l64.max() + np.log(np.exp(l64 - l64.max()).sum())
+    wp.launch(
+        kocc.occupancy_kernel,
+        dim=shape,
+        inputs=[
+            wp.array(pts, dtype=wp.vec3, device=device),
+            wp.array(logw, dtype=wp.float32, device=device),
+            wp.array([log_norm], dtype=wp.float64, device=device),
+            sigma,
+            cutoff,
+            wp.vec3(*origin),
+            voxel,
+        ],
+        outputs=[grid],
+        device=device,
+    )
+    return grid.numpy()
+
+
+def test_occupancy_matches_brute_force_and_integrates(device, rng):
+    n = 200
+    pts = rng.uniform(0, 1, (n, 3)).astype(np.float32)
+    logw = (rng.normal(size=n) * 2 - 30).astype(np.float32)
+    sigma, cutoff, origin, voxel, shape = 0.1, 3.0, (-0.1, 0.05, -0.2), 0.07, (18, 14, 20)
+    got = run_occupancy(device, pts, logw, sigma, cutoff, origin, voxel, shape)
+    w = np.exp(logw.astype(np.float64) - logw.max())
+    w /= w.sum()
+    idx = np.stack(np.meshgrid(*[np.arange(s) for s in shape], indexing="ij"), -1)
+    centres = np.array(origin) + (idx + 0.5) * voxel
+    d2 = ((centres[..., None, :] - pts.astype(np.float64)) ** 2).sum(-1)
+    k = np.where(d2 <= (cutoff * sigma) ** 2, np.exp(-d2 / (2 * sigma**2)), 0.0) / (2 * np.pi * sigma**2) ** 1.5
+    ref = (k * w).sum(-1)
+    np.testing.assert_allclose(got, ref, rtol=2e-5, atol=1e-6 * ref.max())
+    np.testing.assert_array_equal(got, run_occupancy(device, pts, logw, sigma, cutoff, origin, voxel, shape))
+    # a grid covering every kernel: the mass is 1 (cutoff 6 sigma) or P(chi2_3 <= 9) = 0.97071 (cutoff 3 sigma)
+    big = dict(origin=(-0.7, -0.7, -0.7), voxel=0.05, shape=(48, 48, 48))
+    for cut, mass in ((6.0, 1.0), (3.0, 0.970709)):
+        g = run_occupancy(device, pts, logw, sigma, cut, big["origin"], big["voxel"], big["shape"])
+        assert g.sum() * big["voxel"] ** 3 == pytest.approx(mass, abs=2e-3)
+
+
+@pytest.mark.parametrize("resampled", [0, 1])
+def test_step_kernel_equals_separate_kernels(device, rng, resampled):
+    """The fused frame gives the same state, descriptor, log-weights and block partials as predict -> descriptor
+    -> observation -> reduce.block_partials_kernel launched one after another."""
+    from wptrack.kernels import reduce as kred
+
+    rig = make_rig()
+    drig = DeviceRig(rig, device)
+    n, chunk, block = 300, 64, 32
+    nbk = (n + chunk - 1) // chunk
+    bgr = random_frames(rig, rng)
+    planes = hsv_planes(bgr, device)
+    B = wp.array(bgr, dtype=wp.uint8, device=device)
+    mask = wp.array(motion_masks(rig, rng), dtype=wp.uint8, device=device)
+    pos = wp.array(random_points(rng, n), dtype=wp.vec3, device=device)
+    vel = wp.array(rng.normal(0, 0.02, (n, 3)).astype(np.float32), dtype=wp.vec3, device=device)
+    model = wp.array(random_histograms(rng, n), device=device)
+    desc = wp.array(random_histograms(rng, n), device=device)
+    m0 = rng.uniform(0.5, 1, n).astype(np.float32)
+    m0[::9] = 0
+    mass = wp.array(m0, device=device)
+    anc = wp.array(rng.integers(0, n, n).astype(np.int32), device=device)
+    logw_prev = wp.array(rng.normal(0, 1, n).astype(np.float32), device=device)
+    flag = wp.array([resampled], dtype=wp.int32, device=device)
+    sp, sv, sn = (wp.array([x], dtype=wp.float32, device=device) for x in (0.02, 0.004, 0.01))
+    seed, frame = wp.vec2ui(3, 4), wp.array([7], dtype=wp.int32, device=device)
+    p_b, alpha, sigma_p = 0.1, 0.05, 0.3
+
+    def zeros(shape, dtype=wp.float32):
+        return wp.zeros(shape, dtype=dtype, device=device)
+
+    fused = dict(
+        pos=zeros(n, wp.vec3),
+        vel=zeros(n, wp.vec3),
+        model=zeros((n, 3 * NB)),
+        desc=zeros((n, 3 * NB)),
+        mass=zeros(n),
+        rgb=zeros(n, wp.vec3),
+        logw=zeros(n),
+        pmax=zeros(nbk),
+        parg=zeros(nbk, wp.int32),
+        part=zeros((nbk, kred.N_SUMS), wp.float64),
+    )
+    wp.launch_tiled(
+        kpeople.step_kernel,
+        dim=[nbk],
+        inputs=[drig.cams, mask, p_b, 0.0, *planes, B, R_N, NB, R_MIN, R_MAX, pos, vel, model, desc, mass, anc]
+        + [logw_prev, flag, sp, sv, alpha, sn, sigma_p, seed, frame, n, chunk],
+        outputs=list(fused.values()),
+        block_dim=block,
+        device=device,
+    )
+    sep = {k: zeros(v.shape, v.dtype) for k, v in fused.items()}
+    wp.launch(
+        kpeople.predict_kernel,
+        dim=n,
+        inputs=[pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, frame],
+        outputs=[sep["pos"], sep["vel"], sep["model"]],
+        device=device,
+    )
+    wp.launch(
+        kdesc.descriptor_kernel,
+        dim=n,
+        inputs=[drig.cams, *planes, B, sep["pos"], R_N, NB, R_MIN, R_MAX],
+        outputs=[sep["desc"], sep["mass"], sep["rgb"]],
+        device=device,
+    )
+    wp.launch(
+        kpeople.observation_kernel,
+        dim=n,
+        inputs=[drig.cams, mask, p_b, 0.0, sep["pos"], sep["model"], sep["desc"], sep["mass"], sep["rgb"], NB, sn]
+        + [sigma_p],
+        outputs=[sep["logw"]],
+        device=device,
+    )
+    logw = sep["logw"].numpy() + (0 if resampled else logw_prev.numpy())
+    wp.launch_tiled(
+        kred.block_partials_kernel,
+        dim=[nbk],
+        inputs=[wp.array(logw, device=device), sep["pos"], n, chunk],
+        outputs=[sep["pmax"], sep["parg"], sep["part"]],
+        block_dim=block,
+        device=device,
+    )
+    for k in ("pos", "vel", "model", "desc", "mass", "rgb", "pmax", "parg"):
+        np.testing.assert_array_equal(fused[k].numpy(), sep[k].numpy(), err_msg=k)
+    np.testing.assert_allclose(fused["logw"].numpy(), logw, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(fused["part"].numpy(), sep["part"].numpy(), rtol=1e-6)
+    assert (fused["mass"].numpy() == 0).sum() >= 3 and (fused["mass"].numpy() > 0).sum() >= 200
+
+
+def test_occupancy_hashgrid_equals_brute_force(device, rng):
+    n = 500
+    pts = rng.uniform(0, 1, (n, 3)).astype(np.float32)
+    logw = (rng.normal(size=n) * 2).astype(np.float32)
+    sigma, cutoff, origin, voxel, shape = 0.08, 3.0, (-0.2, -0.2, -0.2), 0.06, (24, 24, 24)
+    ref = run_occupancy(device, pts, logw, sigma, cutoff, origin, voxel, shape)
+    l64 = logw.astype(np.float64)
+    log_norm = l64.max() + np.log(np.exp(l64 - l64.max()).sum())
+    P = wp.array(pts, dtype=wp.vec3, device=device)
+    hg = wp.HashGrid(16, 16, 16, device=device)
+    hg.build(P, cutoff * sigma)
+    grid = wp.zeros(shape, dtype=wp.float32, device=device)
+    args = [hg.id, P, wp.array(logw, device=device), wp.array([log_norm], dtype=wp.float64, device=device)]
+    wp.launch(
+        kocc.occupancy_hashgrid_kernel,
+        dim=shape,
+        inputs=[*args, sigma, cutoff, wp.vec3(*origin), voxel],
+        outputs=[grid],
+        device=device,
+    )
+    got = grid.numpy()
+    np.testing.assert_allclose(got, ref, rtol=1e-5, atol=1e-6 * ref.max())
+    assert (ref > 0).mean() > 0.3

@@ -1,0 +1,179 @@
+"""Configuration of the S2 multi-camera people tracker (Lopez-Cifuentes et al., "multi-camera 3D particle filters
+with motion and colour"): frozen dataclasses, validated on construction, with the paper's symbols and units.
+
+The paper fixes few numbers: N_S = 500 particles per target, P_H = 0.95, alpha "close to zero", p_B "a positive
+value close to 0". Every other default here is this project's choice (marked "ours"), not the paper's.
+The kernels these parameters feed are in ``kernels/people.py``, ``kernels/descriptor.py`` and ``kernels/occupancy.py``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from ..errors import ConfigError
+
+OUTSIDE_MODES = ("background", "neutral")
+
+
+def _number(value: object, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(f"{name}: expected a finite number, got {value!r}")
+    return float(value)
+
+
+def _positive(value: object, name: str, what: str) -> None:
+    if _number(value, name) <= 0:
+        raise ConfigError(f"{name}: expected {what} > 0, got {value!r}")
+
+
+def _non_negative(value: object, name: str, what: str) -> None:
+    if _number(value, name) < 0:
+        raise ConfigError(f"{name}: expected {what} >= 0, got {value!r}")
+
+
+def _open_fraction(value: object, name: str, what: str) -> None:
+    v = _number(value, name)
+    if not (0.0 < v < 1.0):
+        raise ConfigError(f"{name}: expected {what} in (0, 1), got {value!r}")
+
+
+def _int_at_least(value: object, name: str, lo: int, what: str) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < lo:
+        raise ConfigError(f"{name}: expected {what}, an integer >= {lo}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class DynamicsConfig:
+    """Particle dynamics (section 2.1).
+
+    Attributes:
+        sigma_pos: deviation of the position noise n_P per axis (eq. 5), metres per frame. Ours: 0.03.
+        sigma_vel: deviation of the velocity noise n_V per axis (eq. 5), metres per frame per frame. Ours: 0.01.
+        alpha: forgetting factor of the appearance update C_t = alpha A_{t-1} + (1 - alpha) C_{t-1} (eq. 6);
+            the paper asks for a value close to zero. Ours: 0.05. Must lie in [0, 1).
+    """
+
+    sigma_pos: float = 0.03
+    sigma_vel: float = 0.01
+    alpha: float = 0.05
+
+    def __post_init__(self) -> None:
+        _positive(self.sigma_pos, "dynamics.sigma_pos", "a position noise deviation in metres")
+        _non_negative(self.sigma_vel, "dynamics.sigma_vel", "a velocity noise deviation in metres/frame")
+        a = _number(self.alpha, "dynamics.alpha")
+        if not (0.0 <= a < 1.0):
+            raise ConfigError(f"dynamics.alpha: expected a forgetting factor in [0, 1), got {self.alpha!r}")
+
+
+@dataclass(frozen=True)
+class MotionConfig:
+    """Motion-segmentation observation (section 2.2).
+
+    Attributes:
+        p_b: background probability p_B (eq. 10): the likelihood factor of a camera whose mask shows no motion at the
+            projection (1 - p_B where it does). Ours: 0.05.
+        outside: what a camera that does not see the particle contributes: ``background`` = p_B (eq. 10 literally:
+            no motion was observed there), ``neutral`` = 1 (the camera says nothing).
+    """
+
+    p_b: float = 0.05
+    outside: str = "background"
+
+    def __post_init__(self) -> None:
+        v = _number(self.p_b, "motion.p_b")
+        if not (0.0 < v < 0.5):
+            raise ConfigError(f"motion.p_b: expected a background probability in (0, 0.5), got {self.p_b!r}")
+        if self.outside not in OUTSIDE_MODES:
+            raise ConfigError(f"motion.outside: expected one of {', '.join(OUTSIDE_MODES)}, got {self.outside!r}")
+
+    @property
+    def log_outside(self) -> float:
+        """The ``log_outside`` argument of ``kernels.people.motion_kernel``."""
+        return math.log(self.p_b) if self.outside == "background" else 0.0
+
+
+@dataclass(frozen=True)
+class DescriptorConfig:
+    """3D colour descriptor (section 3.2) and appearance probability (section 3.3).
+
+    Attributes:
+        r_n: radius r_N of the spherical neighbourhood N_P (eq. 19), metres. Ours: 0.10.
+        n_bins: bins N_b of each of the H, S and V histograms (eq. 20). Ours: 8.
+        r_min: smallest projected disc radius r_i, pixels (a far sphere still covers the nearest pixels). Ours: 1.
+        r_max: largest projected disc radius r_i, pixels (bounds the cost: ~pi r_max^2 pixels per camera and
+            particle). Ours: 12.
+        sigma_p: deviation sigma_p of the appearance probability (eq. 26), dimensionless (M lies in [0, 1]).
+            Ours: 0.2.
+    """
+
+    r_n: float = 0.10
+    n_bins: int = 8
+    r_min: float = 1.0
+    r_max: float = 12.0
+    sigma_p: float = 0.2
+
+    def __post_init__(self) -> None:
+        _positive(self.r_n, "descriptor.r_n", "a neighbourhood radius in metres")
+        _int_at_least(self.n_bins, "descriptor.n_bins", 2, "a bin count")
+        _positive(self.r_min, "descriptor.r_min", "a disc radius in pixels")
+        _positive(self.r_max, "descriptor.r_max", "a disc radius in pixels")
+        if self.r_max < self.r_min:
+            raise ConfigError(f"descriptor.r_max: expected >= r_min ({self.r_min!r}), got {self.r_max!r}")
+        _positive(self.sigma_p, "descriptor.sigma_p", "an appearance deviation")
+
+
+@dataclass(frozen=True)
+class OccupancyConfig:
+    """Volumetric occupancy pdf (eqs. 2-3; the 3D Gaussian kernel of Figs. 6 and 8) and the bounding volume.
+
+    Attributes:
+        sigma: deviation of the 3D Gaussian kernel per particle, metres. Ours: 0.10.
+        cutoff: truncation radius of the kernel, in units of sigma. Ours: 3.
+        voxel: edge of the output voxels, metres. Ours: 0.05.
+        p_h: probability P_H that the bounding volume V_k must contain (section 4: 0.95).
+    """
+
+    sigma: float = 0.10
+    cutoff: float = 3.0
+    voxel: float = 0.05
+    p_h: float = 0.95
+
+    def __post_init__(self) -> None:
+        _positive(self.sigma, "occupancy.sigma", "a kernel deviation in metres")
+        _positive(self.cutoff, "occupancy.cutoff", "a cutoff in kernel deviations")
+        _positive(self.voxel, "occupancy.voxel", "a voxel edge in metres")
+        _open_fraction(self.p_h, "occupancy.p_h", "a probability")
+
+
+@dataclass(frozen=True)
+class PeopleConfig:
+    """The S2 tracker's parameters.
+
+    Attributes:
+        particles: particles per tracked person [N_S] (section 4: 500).
+        seed: seed of the counter-based random streams (same seed + device -> identical output).
+        dynamics, motion, descriptor, occupancy: the sections above.
+
+    Resampling runs every frame (section 2.1: "particle resampling should be performed at each time step").
+    """
+
+    particles: int = 500
+    seed: int = 0
+    dynamics: DynamicsConfig = field(default_factory=DynamicsConfig)
+    motion: MotionConfig = field(default_factory=MotionConfig)
+    descriptor: DescriptorConfig = field(default_factory=DescriptorConfig)
+    occupancy: OccupancyConfig = field(default_factory=OccupancyConfig)
+
+    def __post_init__(self) -> None:
+        _int_at_least(self.particles, "particles", 1, "a particle count")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not (0 <= self.seed < 2**64):
+            raise ConfigError(f"seed: expected an integer in [0, 2^64), got {self.seed!r}")
+        for name, cls in (
+            ("dynamics", DynamicsConfig),
+            ("motion", MotionConfig),
+            ("descriptor", DescriptorConfig),
+            ("occupancy", OccupancyConfig),
+        ):
+            if not isinstance(getattr(self, name), cls):
+                raise ConfigError(f"{name}: expected a {cls.__name__}, got {type(getattr(self, name)).__name__}")
