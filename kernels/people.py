@@ -28,7 +28,7 @@ import warp as wp
 
 from .camera import Camera, pixel_of, project
 from .descriptor import appearance_log_prob, descriptor_at
-from .random import STREAM_MOTION, STREAM_PEOPLE_VELOCITY, normal4
+from .random import STREAM_MOTION, STREAM_PEOPLE_VELOCITY, normal4, uniform4
 from .reduce import moments_push, moments_store, moments_zero
 
 wp.set_module_options({"enable_backward": False})
@@ -243,3 +243,72 @@ def step_kernel(
         logw_out[i] = lw
         best, arg, sw, sw2, sx, sxx = moments_push(best, arg, sw, sw2, sx, sxx, lw, i, x)
     moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)
+
+
+@wp.kernel
+def ground_votes_kernel(
+    cams: wp.array(dtype=Camera),
+    mask: wp.array(dtype=wp.uint8),
+    heights: wp.array(dtype=wp.float32),
+    origin: wp.vec2,
+    cell: float,
+    nx: int,
+    min_fraction: float,
+    votes: wp.array(dtype=wp.int32),
+    seen: wp.array(dtype=wp.int32),
+):
+    """Multi-view motion evidence on a ground grid (ours, for adding people; the paper does not say how targets
+    appear): for the vertical column over the centre of cell (ix, iy) (z = ``heights``), each camera that sees at
+    least one of its points votes when at least ``min_fraction`` of the points it sees fall on its motion mask.
+
+    Launch one thread per cell (nx * ny). Outputs (nx * ny,): ``votes`` = cameras voting, ``seen`` = cameras seeing
+    the column. Cell (ix, iy) has centre ``origin + cell (ix + 1/2, iy + 1/2)`` on the world plane z = 0, metres.
+    Furniture that hides a person's legs in one camera removes some of its points, not its vote, as long as the
+    fraction of the visible points on motion stays above ``min_fraction``."""
+    t = wp.tid()
+    ix = t % nx
+    iy = t / nx
+    cx = origin[0] + cell * (float(ix) + 0.5)
+    cy = origin[1] + cell * (float(iy) + 0.5)
+    v = int(0)
+    sn = int(0)
+    for c in range(cams.shape[0]):
+        cam = cams[c]
+        vis = int(0)
+        hit = int(0)
+        for k in range(heights.shape[0]):
+            uvz = project(cam, wp.vec3(cx, cy, heights[k]))
+            if uvz[2] > 0.0:
+                px = pixel_of(uvz[0])
+                py = pixel_of(uvz[1])
+                if px >= 0 and py >= 0 and px < cam.width and py < cam.height:
+                    vis += 1
+                    if mask[cam.pixel_offset + py * cam.width + px] != wp.uint8(0):
+                        hit += 1
+        if vis > 0:
+            sn += 1
+            if float(hit) >= min_fraction * float(vis):
+                v += 1
+    votes[t] = v
+    seen[t] = sn
+
+
+@wp.kernel
+def init_cylinder_kernel(
+    centre: wp.vec3,
+    radius: float,
+    z_lo: float,
+    z_hi: float,
+    seed: wp.vec2ui,
+    frame: int,
+    pos: wp.array(dtype=wp.vec3),
+    vel: wp.array(dtype=wp.vec3),
+):
+    """A new person's particles: uniform in the vertical cylinder of ``radius`` around ``centre`` (x, y) between
+    heights ``z_lo`` and ``z_hi`` (metres), at rest. The draw is keyed by (seed, particle, frame, STREAM_MOTION)."""
+    i = wp.tid()
+    u = uniform4(seed, i, frame, STREAM_MOTION)
+    r = radius * wp.sqrt(u[0])
+    a = 6.283185307179586 * u[1]
+    pos[i] = wp.vec3(centre[0] + r * wp.cos(a), centre[1] + r * wp.sin(a), z_lo + (z_hi - z_lo) * u[2])
+    vel[i] = wp.vec3(0.0, 0.0, 0.0)

@@ -147,13 +147,73 @@ class OccupancyConfig:
 
 
 @dataclass(frozen=True)
+class BirthConfig:
+    """How people appear and leave (ours: the paper tracks a known set of people and does not say).
+
+    A person is added where the motion masks of several cameras agree on a column over the ground that no tracked
+    person explains, for several frames in a row (in the spirit of S3's uncovered-object histogram); a person whose
+    column loses that multi-view support for several frames, or who leaves the working volume, is removed. Ids are
+    never reused.
+
+    Attributes:
+        cell: ground grid pitch of the evidence map, metres. Ours: 0.1.
+        heights: heights of the points tested over each cell, metres (a person's legs to head). Ours: 0.3 .. 1.5.
+        min_fraction: fraction of a camera's visible points that must be on its motion mask for its vote. Ours: 0.6.
+        min_cameras: cameras that must vote (at least 2, and at most the rig's cameras). Ours: 2.
+        exclusion: no birth within this distance of a tracked person (ground plane), metres. Ours: 0.7.
+        min_area: connected cells with enough votes needed for a birth, cells. Ours: 4.
+        frames_to_add: consecutive frames of unexplained evidence near the same place before adding. Ours: 3.
+        frames_to_remove: consecutive frames without evidence within ``support_radius`` before removing. Ours: 5.
+        support_radius: radius around a person's ground position searched for its evidence, metres. Ours: 0.4.
+        init_radius: radius of the cylinder a new person's particles start in, metres. Ours: 0.25.
+        init_z: heights of that cylinder, metres. Ours: (0.3, 1.6).
+        merge_distance: two people whose ground positions stay closer than this for ``frames_to_remove`` frames
+            follow one person: the younger is removed, metres. Ours: 0.3 (people shaking hands stand ~0.6 m apart).
+        max_people: people tracked at once (a pool of filters allocated once). Ours: 8.
+    """
+
+    cell: float = 0.1
+    heights: tuple[float, ...] = (0.3, 0.6, 0.9, 1.2, 1.5)
+    min_fraction: float = 0.6
+    min_cameras: int = 2
+    exclusion: float = 0.7
+    min_area: int = 4
+    frames_to_add: int = 3
+    frames_to_remove: int = 5
+    support_radius: float = 0.4
+    init_radius: float = 0.25
+    init_z: tuple[float, float] = (0.3, 1.6)
+    merge_distance: float = 0.3
+    max_people: int = 8
+
+    def __post_init__(self) -> None:
+        _positive(self.cell, "birth.cell", "a grid pitch in metres")
+        if not self.heights or any(_number(h, "birth.heights") < 0 for h in self.heights):
+            raise ConfigError(f"birth.heights: expected heights >= 0 metres, got {self.heights!r}")
+        _open_fraction(self.min_fraction, "birth.min_fraction", "a fraction")
+        _int_at_least(self.min_cameras, "birth.min_cameras", 1, "a camera count")
+        _positive(self.exclusion, "birth.exclusion", "a distance in metres")
+        _int_at_least(self.min_area, "birth.min_area", 1, "a cell count")
+        _int_at_least(self.frames_to_add, "birth.frames_to_add", 1, "a frame count")
+        _int_at_least(self.frames_to_remove, "birth.frames_to_remove", 1, "a frame count")
+        _positive(self.support_radius, "birth.support_radius", "a distance in metres")
+        _positive(self.init_radius, "birth.init_radius", "a radius in metres")
+        if len(self.init_z) != 2 or not (
+            0 <= _number(self.init_z[0], "birth.init_z") < _number(self.init_z[1], "birth.init_z")
+        ):
+            raise ConfigError(f"birth.init_z: expected (low, high) heights in metres, low < high, got {self.init_z!r}")
+        _non_negative(self.merge_distance, "birth.merge_distance", "a distance in metres")
+        _int_at_least(self.max_people, "birth.max_people", 1, "a number of people")
+
+
+@dataclass(frozen=True)
 class PeopleConfig:
     """The S2 tracker's parameters.
 
     Attributes:
         particles: particles per tracked person [N_S] (section 4: 500).
         seed: seed of the counter-based random streams (same seed + device -> identical output).
-        dynamics, motion, descriptor, occupancy: the sections above.
+        dynamics, motion, descriptor, occupancy, birth: the sections above.
 
     Resampling runs every frame (section 2.1: "particle resampling should be performed at each time step").
     """
@@ -164,6 +224,7 @@ class PeopleConfig:
     motion: MotionConfig = field(default_factory=MotionConfig)
     descriptor: DescriptorConfig = field(default_factory=DescriptorConfig)
     occupancy: OccupancyConfig = field(default_factory=OccupancyConfig)
+    birth: BirthConfig = field(default_factory=BirthConfig)
 
     def __post_init__(self) -> None:
         _int_at_least(self.particles, "particles", 1, "a particle count")
@@ -174,6 +235,7 @@ class PeopleConfig:
             ("motion", MotionConfig),
             ("descriptor", DescriptorConfig),
             ("occupancy", OccupancyConfig),
+            ("birth", BirthConfig),
         ):
             if not isinstance(getattr(self, name), cls):
                 raise ConfigError(f"{name}: expected a {cls.__name__}, got {type(getattr(self, name)).__name__}")

@@ -1,0 +1,580 @@
+"""S2: multi-camera 3D people tracker (Lopez-Cifuentes et al., multi-camera 3D particle filters with motion and
+colour). Several people are tracked directly in 3D from two or more calibrated cameras with overlapping views; each
+person has its own particle filter whose particles are 3D points inside the person, weighted by the motion masks of
+all cameras and a multi-view HSV colour descriptor.
+
+One frame::
+
+    BGR frames + motion masks of every camera  -> device (one copy each)
+    -> HSV planes (eqs. 12-14), sigma_n from the previous frame (eq. 18)
+    -> per person (one CUDA graph each on GPUs): gather + constant velocity (eq. 5) + appearance update (eq. 6)
+       + descriptor (eqs. 19-22) + motion x appearance likelihood (eqs. 7-11, 23-26) + block moments (fused),
+       estimate, systematic resampling (every frame, section 2.1)
+    -> ground evidence map (ours): cameras whose masks agree on a column over each ground cell
+    -> host: estimates; people added where the evidence is unexplained, removed where it is gone (ours)
+
+Units: metres (world frame, z up for the ground evidence map: the rig's ground is z = 0), pixels, frames.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import warp as wp
+
+from wptrack.device import block_partition, resolve_device
+from wptrack.errors import ConfigError, FrameError
+from wptrack.kernels import descriptor as kdesc
+from wptrack.kernels import occupancy as kocc
+from wptrack.kernels import people as kpeople
+from wptrack.kernels import reduce as kreduce
+from wptrack.pf import BLOCK, MAX_BLOCKS, ParticleFilter, _device_arrays
+from wptrack.rig import Rig
+from wptrack.warpcams import DeviceRig
+
+from .people_model import PeopleConfig
+
+log = logging.getLogger(__name__)
+
+_GOLDEN = 0x9E3779B97F4A7C15
+
+
+def person_seed(seed: int, slot: int) -> int:
+    """The 64-bit seed of pool slot ``slot``: the run seed mixed with the slot (splitmix64), so that the people's
+    random streams differ and the same run seed gives the same streams."""
+    z = (int(seed) + _GOLDEN * (slot + 1)) & 0xFFFFFFFFFFFFFFFF
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & 0xFFFFFFFFFFFFFFFF
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & 0xFFFFFFFFFFFFFFFF
+    return z ^ (z >> 31)
+
+
+@dataclass
+class PersonEstimate:
+    """One tracked person in one frame.
+
+    Attributes:
+        id: persistent id (never reused in a run).
+        mean: (3,) weighted mean of the particles (the person's 3D centroid), metres.
+        std: (3,) weighted standard deviation per axis, metres.
+        map: (3,) best particle, metres.
+        ess: effective sample size of the frame's weights.
+        loglik: log of the mean weight (eq. 11 averaged over the particles).
+        age: frames since the person was added.
+        particles: (K, 3) subsample of the particles (before resampling), metres, or None.
+        weights: (K,) their weights relative to the best particle, or None.
+    """
+
+    id: int
+    mean: np.ndarray
+    std: np.ndarray
+    map: np.ndarray
+    ess: float
+    loglik: float
+    age: int
+    particles: np.ndarray | None = None
+    weights: np.ndarray | None = None
+
+
+@dataclass
+class PeopleEstimate:
+    """The tracker's output for one frame.
+
+    Attributes:
+        frame: 0-based frame number.
+        people: the tracked people (added this frame: from the next frame on).
+        sigma_n: image noise sigma_n of eq. 18 (V units, [0, 1]).
+        added, removed: ids added / removed after this frame.
+        timings: seconds per stage.
+    """
+
+    frame: int
+    people: list[PersonEstimate]
+    sigma_n: float
+    added: list[int] = field(default_factory=list)
+    removed: list[int] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+class PersonFilter(ParticleFilter):
+    """One person's particle set (a slot of the tracker's pool): positions and log-weights from
+    :class:`ParticleFilter`, plus, as (N, ...) ping-pong pairs: ``vel`` (metres/frame), ``model`` (appearance C,
+    (N, 3 N_b)), ``desc`` (descriptor A at the particle, (N, 3 N_b)), ``mass`` (its total weight); ``rgb`` (N,)
+    the patch's mean colour (eq. 17)."""
+
+    def __init__(self, tracker: PeopleTracker, slot: int) -> None:
+        cfg = tracker.config
+        super().__init__(
+            cfg.particles,
+            cfg.dynamics.sigma_pos,
+            tracker.device,
+            seed=person_seed(cfg.seed, slot),
+            resampling="systematic",
+            ess_threshold=1.0,  # section 2.1: resample every frame
+            keep_particles=tracker.keep_particles,
+            use_graph=tracker.use_graph,
+        )
+        n, cols, d = self.n, 3 * cfg.descriptor.n_bins, self.device
+        self.tracker = tracker
+        self.slot = slot
+        self.vel = [wp.zeros(n, dtype=wp.vec3, device=d) for _ in range(2)]
+        self.model = [wp.zeros((n, cols), dtype=wp.float32, device=d) for _ in range(2)]
+        self.desc = [wp.zeros((n, cols), dtype=wp.float32, device=d) for _ in range(2)]
+        self.mass = [wp.zeros(n, dtype=wp.float32, device=d) for _ in range(2)]
+        self.rgb = wp.zeros(n, dtype=wp.vec3, device=d)
+        self.sigma_vel = wp.array([cfg.dynamics.sigma_vel], dtype=wp.float32, device=d)
+
+    def spawn(self, xy: np.ndarray, frame: int) -> None:
+        """Start the filter on a new person standing at ``xy`` (ground, metres): particles uniform in the
+        configured cylinder, at rest, each with the descriptor at its position as appearance model C_0."""
+        tr, b = self.tracker, self.tracker.config.birth
+        cur, d = self.parity, self.device
+        wp.launch(
+            kpeople.init_cylinder_kernel,
+            dim=self.n,
+            inputs=[
+                wp.vec3(float(xy[0]), float(xy[1]), 0.0),
+                b.init_radius,
+                b.init_z[0],
+                b.init_z[1],
+                self.seed,
+                frame,
+            ],
+            outputs=[self.x[cur], self.vel[cur]],
+            device=d,
+        )
+        dc = tr.config.descriptor
+        wp.launch(
+            kdesc.descriptor_kernel,
+            dim=self.n,
+            inputs=[tr.drig.cams, tr.h, tr.s, tr.v, tr.bgr, self.x[cur], dc.r_n, dc.n_bins, dc.r_min, dc.r_max],
+            outputs=[self.desc[cur], self.mass[cur], self.rgb],
+            device=d,
+        )
+        wp.copy(self.model[cur], self.desc[cur])  # C_0 = A_0
+        self._reset_weights()
+
+    def _launch_predict_score(self, src: int, dst: int) -> None:
+        tr, cfg = self.tracker, self.tracker.config
+        dc = cfg.descriptor
+        wp.launch_tiled(
+            kpeople.step_kernel,
+            dim=[self.blocks],
+            inputs=[
+                tr.drig.cams,
+                tr.mask,
+                cfg.motion.p_b,
+                cfg.motion.log_outside,
+                tr.h,
+                tr.s,
+                tr.v,
+                tr.bgr,
+                dc.r_n,
+                dc.n_bins,
+                dc.r_min,
+                dc.r_max,
+                self.x[src],
+                self.vel[src],
+                self.model[src],
+                self.desc[src],
+                self.mass[src],
+                self.ancestors,
+                self.logw[src],
+                self.resampled,
+                self.sigma,
+                self.sigma_vel,
+                cfg.dynamics.alpha,
+                tr.sigma_n,
+                dc.sigma_p,
+                self.seed,
+                self.frame,
+                self.n,
+                self.chunk,
+            ],
+            outputs=[
+                self.x[dst],
+                self.vel[dst],
+                self.model[dst],
+                self.desc[dst],
+                self.mass[dst],
+                self.rgb,
+                self.logw[dst],
+                self.part_max,
+                self.part_arg,
+                self.part,
+            ],
+            block_dim=BLOCK,
+            device=self.device,
+        )
+
+    def estimate_from_host(self, person_id: int, age: int) -> PersonEstimate:
+        """The estimate of the last frame from the host copies (after the device synchronised)."""
+        e = self.est_host.numpy()
+        est = PersonEstimate(
+            id=person_id,
+            mean=e[kreduce.EST_MEAN : kreduce.EST_MEAN + 3].copy(),
+            std=e[kreduce.EST_STD : kreduce.EST_STD + 3].copy(),
+            map=e[kreduce.EST_MAP : kreduce.EST_MAP + 3].copy(),
+            ess=float(e[kreduce.EST_ESS]),
+            loglik=float(e[kreduce.EST_LOGLIK]),
+            age=age,
+        )
+        if self.keep:
+            est.particles = self.sub_x_host.numpy().copy()
+            est.weights = self.sub_w_host.numpy().copy()
+        return est
+
+
+class PeopleTracker:
+    """S2 people tracker on a rig of two or more cameras.
+
+    Args:
+        rig: calibrated cameras with overlapping views (ground plane z = 0; ``rig.volume`` bounds the evidence map).
+        config: :class:`wptrack.trackers.people_model.PeopleConfig`.
+        device: ``auto``, ``cpu``, ``cuda`` or ``cuda:N``.
+        use_graph: capture each person's frame chain as a CUDA graph (default: on CUDA).
+        keep_particles: particles per person and frame returned for reports and hulls (0: none).
+
+    Device buffers (P = pixels of all cameras):
+        bgr, bgr_prev: (3 P,) uint8 this and the previous frame. mask: (P,) uint8 motion masks (nonzero = motion).
+        h, s, v: (P,) float32 HSV planes. sigma_n: (1,) float32 image noise (eq. 18).
+        votes, seen: (nx * ny,) int32 ground evidence map (cameras voting / seeing each cell).
+
+    Raises:
+        ConfigError: fewer than two cameras, a bad configuration or a pool that does not fit the device.
+    """
+
+    def __init__(
+        self,
+        rig: Rig,
+        config: PeopleConfig | None = None,
+        device: str | None = "auto",
+        use_graph: bool | None = None,
+        keep_particles: int = 200,
+    ) -> None:
+        config = config if config is not None else PeopleConfig()
+        if not isinstance(config, PeopleConfig):
+            raise ConfigError(f"config: expected a PeopleConfig, got {type(config).__name__}")
+        if len(rig) < 2:
+            raise ConfigError(
+                f"the people tracker needs two or more calibrated cameras with overlapping views; "
+                f"{rig.source} has {len(rig)}"
+            )
+        if keep_particles < 0:
+            raise ConfigError(f"keep_particles: expected >= 0, got {keep_particles}")
+        self.config = config
+        self.rig = rig
+        dev = wp.get_device(resolve_device(device))
+        self.device = d = str(dev)
+        self.is_cuda = dev.is_cuda
+        self.use_graph = self.is_cuda if use_graph is None else (bool(use_graph) and self.is_cuda)
+        self.keep_particles = min(int(keep_particles), config.particles)
+        self.drig = DeviceRig(rig, d)
+        npx = self.drig.total_pixels
+        self.bgr = wp.zeros(3 * npx, dtype=wp.uint8, device=d)
+        self.bgr_prev = wp.zeros(3 * npx, dtype=wp.uint8, device=d)
+        self.mask = wp.zeros(npx, dtype=wp.uint8, device=d)
+        self.h = wp.zeros(npx, dtype=wp.float32, device=d)
+        self.s = wp.zeros(npx, dtype=wp.float32, device=d)
+        self.v = wp.zeros(npx, dtype=wp.float32, device=d)
+        self.sigma_n = wp.zeros(1, dtype=wp.float32, device=d)
+        self.noise_blocks, self.noise_chunk = block_partition(3 * npx, not self.is_cuda, BLOCK, MAX_BLOCKS)
+        self.noise_part = wp.zeros(self.noise_blocks, dtype=wp.float64, device=d)
+        pinned = self.is_cuda
+        self._bgr_host = wp.zeros(3 * npx, dtype=wp.uint8, device="cpu", pinned=pinned)
+        self._mask_host = wp.zeros(npx, dtype=wp.uint8, device="cpu", pinned=pinned)
+        self._sigma_host = wp.zeros(1, dtype=wp.float32, device="cpu", pinned=pinned)
+        # ground evidence map over the rig's working volume
+        b = config.birth
+        lo, hi = rig.bounds()
+        self.grid_origin = np.array([lo[0], lo[1]], dtype=np.float64)
+        self.nx = max(1, int(math.ceil((hi[0] - lo[0]) / b.cell)))
+        self.ny = max(1, int(math.ceil((hi[1] - lo[1]) / b.cell)))
+        self.volume = (np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))
+        self.heights = wp.array(np.asarray(b.heights, dtype=np.float32), dtype=wp.float32, device=d)
+        self.votes = wp.zeros(self.nx * self.ny, dtype=wp.int32, device=d)
+        self.seen = wp.zeros(self.nx * self.ny, dtype=wp.int32, device=d)
+        self._votes_host = wp.zeros(self.nx * self.ny, dtype=wp.int32, device="cpu", pinned=pinned)
+        self.min_votes = min(b.min_cameras, len(rig))
+        # the pool of person filters, allocated once
+        self.pool = [PersonFilter(self, k) for k in range(b.max_people)]
+        self.slot_id = np.full(b.max_people, -1, dtype=np.int64)  # person id per slot, -1 = free
+        self.slot_age = np.zeros(b.max_people, dtype=np.int64)
+        self.slot_miss = np.zeros(b.max_people, dtype=np.int64)
+        self.slot_close = np.zeros(b.max_people, dtype=np.int64)
+        self.pending = np.zeros((0, 3), dtype=np.float64)  # x, y, consecutive frames of unexplained evidence
+        self.next_id = 0
+        self.frames_done = 0
+        log.info(
+            "people tracker: %d particles per person, up to %d people, %d cameras, evidence map %dx%d, device %s",
+            config.particles,
+            b.max_people,
+            len(rig),
+            self.nx,
+            self.ny,
+            self.device,
+        )
+
+    # --- observation ---------------------------------------------------------------------------------
+    def upload(self, images: Sequence[np.ndarray], masks: Sequence[np.ndarray]) -> None:
+        """Validate one BGR image and one motion mask per camera and copy them to the device.
+
+        Raises:
+            FrameError: wrong count, type or size (the message names the camera).
+        """
+        cams = self.rig.cameras
+        if len(images) != len(cams) or len(masks) != len(cams):
+            raise FrameError(f"got {len(images)} images and {len(masks)} masks for a rig of {len(cams)} cameras")
+        offs = self.drig.pixel_offsets
+        bgr, msk = self._bgr_host.numpy(), self._mask_host.numpy()
+        for c, (img, m, cam) in enumerate(zip(images, masks, cams, strict=True)):
+            if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 3:
+                raise FrameError(
+                    f"camera '{cam.name}': expected an (H, W, 3) uint8 BGR image, got {img.dtype} {img.shape}"
+                )
+            m = np.asarray(m)
+            if m.ndim == 3:
+                m = m.max(axis=2)
+            for what, shape in (("frame", img.shape[:2]), ("mask", m.shape)):
+                if tuple(shape) != (cam.height, cam.width):
+                    raise FrameError(
+                        f"camera '{cam.name}': {what} size {shape[1]}x{shape[0]} differs from the calibration "
+                        f"{cam.width}x{cam.height}"
+                    )
+            bgr[3 * offs[c] : 3 * offs[c + 1]] = img.reshape(-1)
+            np.not_equal(m.reshape(-1), 0, out=msk[offs[c] : offs[c + 1]].view(bool))
+        wp.copy(self.bgr, self._bgr_host)
+        wp.copy(self.mask, self._mask_host)
+
+    def _observe(self) -> None:
+        d = self.device
+        npx = self.drig.total_pixels
+        if self.frames_done == 0:
+            wp.copy(self.bgr_prev, self.bgr)  # no previous frame: sigma_n = 0 (the floor of eqs. 15-17)
+        wp.launch(kdesc.hsv_planes_kernel, dim=npx, inputs=[self.bgr], outputs=[self.h, self.s, self.v], device=d)
+        wp.launch_tiled(
+            kdesc.noise_partials_kernel,
+            dim=[self.noise_blocks],
+            inputs=[self.bgr_prev, self.bgr, 3 * npx, self.noise_chunk],
+            outputs=[self.noise_part],
+            block_dim=BLOCK,
+            device=d,
+        )
+        wp.launch_tiled(
+            kdesc.noise_sigma_kernel,
+            dim=[1],
+            inputs=[self.noise_part, self.noise_blocks, 3 * npx],
+            outputs=[self.sigma_n],
+            block_dim=BLOCK,
+            device=d,
+        )
+        wp.copy(self.bgr_prev, self.bgr)
+        b = self.config.birth
+        wp.launch(
+            kpeople.ground_votes_kernel,
+            dim=self.nx * self.ny,
+            inputs=[
+                self.drig.cams,
+                self.mask,
+                self.heights,
+                wp.vec2(*self.grid_origin),
+                b.cell,
+                self.nx,
+                b.min_fraction,
+            ],
+            outputs=[self.votes, self.seen],
+            device=d,
+        )
+
+    # --- the frame --------------------------------------------------------------------------------------
+    def step(self, images: Sequence[np.ndarray], masks: Sequence[np.ndarray]) -> PeopleEstimate:
+        """Track one synchronised set of frames: one (H, W, 3) uint8 BGR image and one (H, W) motion mask
+        (nonzero = motion) per camera, in rig order."""
+        t0 = time.perf_counter()
+        self.upload(images, masks)
+        t1 = time.perf_counter()
+        self._observe()
+        active = [k for k in range(len(self.pool)) if self.slot_id[k] >= 0]
+        for k in active:
+            p = self.pool[k]
+            src, dst = p.parity, 1 - p.parity
+            p._run_chain(src, dst)
+            p.parity = dst
+            p.frames_done += 1
+        wp.copy(self._votes_host, self.votes)
+        wp.copy(self._sigma_host, self.sigma_n)
+        wp.synchronize_device(self.device)
+        t2 = time.perf_counter()
+        people = []
+        for k in active:
+            self.slot_age[k] += 1
+            people.append(self.pool[k].estimate_from_host(int(self.slot_id[k]), int(self.slot_age[k])))
+        est = PeopleEstimate(frame=self.frames_done, people=people, sigma_n=float(self._sigma_host.numpy()[0]))
+        self._update_population(est, active)
+        self.frames_done += 1
+        est.timings.update(upload=t1 - t0, filter=t2 - t1, population=time.perf_counter() - t2)
+        return est
+
+    # --- who is there (ours) ---------------------------------------------------------------------------------
+    def _cell_centres(self) -> tuple[np.ndarray, np.ndarray]:
+        c = self.config.birth.cell
+        xs = self.grid_origin[0] + c * (np.arange(self.nx) + 0.5)
+        ys = self.grid_origin[1] + c * (np.arange(self.ny) + 0.5)
+        return np.meshgrid(xs, ys)  # (ny, nx) each
+
+    def _update_population(self, est: PeopleEstimate, active: list[int]) -> None:
+        """Remove people without multi-view support, duplicates and people who left; add people where the
+        evidence is unexplained for several frames. Host code on the small evidence map."""
+        b = self.config.birth
+        votes = self._votes_host.numpy().reshape(self.ny, self.nx)
+        support = votes >= self.min_votes
+        gx, gy = self._cell_centres()
+        lo, hi = self.volume
+        margin = 0.5
+        by_slot = {k: e for k, e in zip(active, est.people, strict=True)}
+        for k, e in by_slot.items():
+            x, y = e.mean[0], e.mean[1]
+            near = (gx - x) ** 2 + (gy - y) ** 2 <= b.support_radius**2
+            self.slot_miss[k] = 0 if np.any(support & near) else self.slot_miss[k] + 1
+            outside = np.any(e.mean[:2] < lo[:2] - margin) or np.any(e.mean[:2] > hi[:2] + margin)
+            if self.slot_miss[k] >= b.frames_to_remove or outside or not np.all(np.isfinite(e.mean)):
+                self._remove(k, est)
+        # duplicates: two filters on one person
+        alive = [k for k in active if self.slot_id[k] >= 0]
+        for i, k in enumerate(alive):
+            close = any(
+                np.hypot(*(by_slot[k].mean[:2] - by_slot[j].mean[:2])) < b.merge_distance
+                for j in alive
+                if j != k and self.slot_id[j] >= 0
+            )
+            self.slot_close[k] = self.slot_close[k] + 1 if close else 0
+        for k in sorted(alive, key=lambda s: -self.slot_id[s]):  # the younger of a pair goes
+            if self.slot_id[k] >= 0 and self.slot_close[k] >= b.frames_to_remove:
+                self._remove(k, est)
+                for j in alive:
+                    self.slot_close[j] = 0
+        # unexplained evidence -> candidates
+        free = support.copy()
+        for k in range(len(self.pool)):
+            if self.slot_id[k] >= 0:
+                e = by_slot.get(k)
+                if e is not None:
+                    free &= (gx - e.mean[0]) ** 2 + (gy - e.mean[1]) ** 2 > b.exclusion**2
+        candidates = self._blobs(free, votes, gx, gy)
+        pending = []
+        for cx, cy in candidates:
+            count = 1.0
+            if len(self.pending):
+                dist = np.hypot(self.pending[:, 0] - cx, self.pending[:, 1] - cy)
+                j = int(np.argmin(dist))
+                if dist[j] < 0.5:
+                    count = self.pending[j, 2] + 1
+            if count >= b.frames_to_add:
+                self._add(np.array([cx, cy]), est)
+            else:
+                pending.append((cx, cy, count))
+        self.pending = np.asarray(pending, dtype=np.float64).reshape(-1, 3)
+
+    def _blobs(self, free: np.ndarray, votes: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> list[tuple[float, float]]:
+        """Vote-weighted centroids of the connected regions of ``free`` cells with at least ``min_area`` cells."""
+        if not free.any():
+            return []
+        import cv2
+
+        count, labels, stats, _ = cv2.connectedComponentsWithStats(free.astype(np.uint8), connectivity=8)
+        out = []
+        for lab in range(1, count):
+            if stats[lab, cv2.CC_STAT_AREA] < self.config.birth.min_area:
+                continue
+            sel = labels == lab
+            w = votes[sel].astype(np.float64)
+            out.append((float(np.sum(gx[sel] * w) / w.sum()), float(np.sum(gy[sel] * w) / w.sum())))
+        return out
+
+    def _add(self, xy: np.ndarray, est: PeopleEstimate) -> None:
+        free = np.nonzero(self.slot_id < 0)[0]
+        if not free.size:
+            log.warning("frame %d: no free slot for a new person at %s (max_people reached)", est.frame, xy.round(2))
+            return
+        k = int(free[0])
+        self.pool[k].spawn(xy, self.frames_done)
+        self.slot_id[k] = self.next_id
+        self.slot_age[k] = 0
+        self.slot_miss[k] = 0
+        self.slot_close[k] = 0
+        est.added.append(self.next_id)
+        log.info("frame %d: person %d added at (%.2f, %.2f)", est.frame, self.next_id, xy[0], xy[1])
+        self.next_id += 1
+
+    def _remove(self, k: int, est: PeopleEstimate) -> None:
+        est.removed.append(int(self.slot_id[k]))
+        log.info("frame %d: person %d removed", est.frame, self.slot_id[k])
+        self.slot_id[k] = -1
+
+    # --- outputs beyond the estimate ------------------------------------------------------------------------
+    def occupancy(self, person_id: int, size: Sequence[float] = (1.2, 1.2, 2.0)) -> tuple[np.ndarray, np.ndarray]:
+        """The occupancy pdf (3D Gaussian kernel over the particles, Figs. 6 and 8) of a tracked person on a voxel
+        grid of the given size (metres) around its estimate, after the last frame.
+
+        Returns:
+            ``(origin (3,), grid (nx, ny, nz) float32)``: the corner of voxel (0, 0, 0), metres, and the density
+            per cubic metre (voxel edge ``config.occupancy.voxel``).
+        """
+        slots = np.nonzero(self.slot_id == person_id)[0]
+        if not slots.size:
+            raise ConfigError(f"person {person_id} is not tracked")
+        p = self.pool[int(slots[0])]
+        oc = self.config.occupancy
+        e = p.est_host.numpy()
+        centre = e[kreduce.EST_MEAN : kreduce.EST_MEAN + 3]
+        dims = np.maximum(np.round(np.asarray(size, dtype=np.float64) / oc.voxel), 1).astype(int)
+        origin = np.floor((centre - 0.5 * dims * oc.voxel) / oc.voxel) * oc.voxel
+        grid = wp.zeros(tuple(int(v) for v in dims), dtype=wp.float32, device=self.device)
+        log_norm = wp.array([e[kreduce.EST_LOGLIK] + math.log(p.n)], dtype=wp.float64, device=self.device)
+        cur = p.parity
+        wp.launch(
+            kocc.occupancy_kernel,
+            dim=tuple(int(v) for v in dims),
+            inputs=[p.x[cur], p.logw[cur], log_norm, oc.sigma, oc.cutoff, wp.vec3(*origin), oc.voxel],
+            outputs=[grid],
+            device=self.device,
+        )
+        return origin, grid.numpy()
+
+    @property
+    def tracked_ids(self) -> list[int]:
+        """Ids of the people tracked now."""
+        return [int(i) for i in self.slot_id if i >= 0]
+
+    # --- checkpoints -----------------------------------------------------------------------------------------
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """The whole state after the last frame (device arrays of the tracker and its pool, and the population
+        bookkeeping), for :meth:`load_state_dict`."""
+        state = {name: arr.numpy().copy() for name, arr in _device_arrays(self)}
+        for name in ("slot_id", "slot_age", "slot_miss", "slot_close", "pending"):
+            state[f"__{name}__"] = getattr(self, name).copy()
+        state["__next_id__"] = np.int64(self.next_id)
+        state["__frames_done__"] = np.int64(self.frames_done)
+        state["__parity__"] = np.array([p.parity for p in self.pool], dtype=np.int64)
+        state["__person_frames__"] = np.array([p.frames_done for p in self.pool], dtype=np.int64)
+        return state
+
+    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
+        """Restore a :meth:`state_dict` into a tracker built with the same rig and configuration."""
+        arrays = dict(_device_arrays(self))
+        missing = sorted(set(arrays) - set(state))
+        if missing:
+            raise ConfigError(f"checkpoint: arrays {missing[:5]} missing (a checkpoint of another configuration?)")
+        for name, arr in arrays.items():
+            arr.assign(np.asarray(state[name]))
+        for name in ("slot_id", "slot_age", "slot_miss", "slot_close", "pending"):
+            setattr(self, name, np.array(state[f"__{name}__"]))
+        self.next_id = int(state["__next_id__"])
+        self.frames_done = int(state["__frames_done__"])
+        for p, parity, frames in zip(self.pool, state["__parity__"], state["__person_frames__"], strict=True):
+            p.parity, p.frames_done = int(parity), int(frames)
+        wp.synchronize_device(self.device)
