@@ -24,7 +24,7 @@ People (reusing :class:`wptrack.synth.plaza.Person`: legs, pelvis, chest, arms a
 enters through the west door, person 1 through the east door; they walk to the middle of the aisle (0.68-0.80 m
 apart, facing each other), stop, raise their right arms until the hands meet between them, shake (a small vertical
 oscillation), lower the arms and leave through the opposite doors, passing each other in the aisle. With the
-default 290 frames at 25 fps both have left the room before the end. In ``s2-office-twocolour`` person 0 wears a
+default 300 frames at 25 fps both have left the room before the end. In ``s2-office-twocolour`` person 0 wears a
 red front and a blue back (torso and arms split by the plane through the body's vertical axis, across the walking
 direction): at the meeting, the west camera ``cam1`` sees mostly the back, the east cameras mostly the front, as in
 the paper's Fig. 9.
@@ -138,7 +138,7 @@ class OfficeConfig:
     seed: int = 0
     width: int = 640
     height: int = 480
-    frames: int = 290
+    frames: int = 300
     fps: float = 25.0
     noise_sigma: float = 2.5
     light_ramp: tuple[int, int] = (120, 150)
@@ -334,7 +334,8 @@ def office_walkers(seed: int = 0, two_colour: bool = False) -> list[Walker]:
             hair=(0.3, 0.2, 0.1),
         ),
     ]
-    backs: list[_Rgb | None] = [_jitter((0.12, 0.2, 0.58), rng) if two_colour else None, None]
+    back = _jitter((0.12, 0.2, 0.58), rng)  # drawn in both variants: the same seed gives the same paths
+    backs: list[_Rgb | None] = [back if two_colour else None, None]
     enter_pts = [
         wobble([(-0.9, west_y), (0.6, west_y + 0.05), (1.3, 2.05), (2.0, cy - 0.1), meet_a]),
         wobble([(lx + 0.9, east_y), (5.4, east_y - 0.05), (4.6, 3.1), (3.9, cy + 0.08), meet_b]),
@@ -347,7 +348,7 @@ def office_walkers(seed: int = 0, two_colour: bool = False) -> list[Walker]:
     for pts, v in zip(enter_pts, speeds, strict=True):
         sp = (v, v, v, 0.75 * v, 0.3)
         enters.append(Path(pts, sp, 0.0, smooth_m=0.8))
-    t_meet = 4.4 + rng.uniform(-0.3, 0.3)
+    t_meet = 4.0 + rng.uniform(-0.3, 0.3)
     late = rng.uniform(0.1, 0.6)
     arrive = (t_meet, t_meet + late)
     enters = [Path(p.waypoints, p.speeds, float(t - p.end), smooth_m=0.8) for p, t in zip(enters, arrive, strict=True)]
@@ -358,7 +359,7 @@ def office_walkers(seed: int = 0, two_colour: bool = False) -> list[Walker]:
     for k in range(2):
         start = shake[1] + 0.1 + rng.uniform(0.0, 0.3) + 0.2 * k
         v = float(speeds[k])
-        leave = Path(leave_pts[k], (0.3, 0.75 * v, v, v, v, v), float(start), smooth_m=0.8)
+        leave = Path(leave_pts[k], (0.5, 0.9 * v, v, v, v, v), float(start), smooth_m=0.8)
         meet, partner = (meet_a, meet_b) if k == 0 else (meet_b, meet_a)
         out.append(Walker(k, looks[k], backs[k], enters[k], leave, meet, partner, hand, shake))
     return out
