@@ -34,11 +34,11 @@ boxes of their body parts (z-buffered against the furniture), Lambert + ambient 
 soft shadow on the floor under each person (a darkened ellipse, stretched away from the room's central light, soft
 edged), Gaussian sensor noise (sigma 2.5 DN) and an illumination change (global gain falling by 18 % over frames
 120-150, a bank of lights switched off). The tracker is meant to make its motion masks from the videos with the
-default motion pipeline; the perfect masks ``cam*_mask.avi`` (visible pixels of the people) are for debugging only. With the default
-:class:`wptrack.masks.MaskConfig` (MOG2, shadows as background) on seed 0, after 30 frames of learning, the motion
-masks cover about half of the people's visible pixels (mean IoU with the perfect masks 0.48 / 0.54 / 0.67 for
-cam1 / cam2 / cam3 on the frames with people, no foreground on the empty frames): incomplete and fragmented, as the
-paper's Fig. 4.
+default motion pipeline; the perfect masks ``cam*_mask.avi`` (visible pixels of the people) are for debugging
+only. With the default :class:`wptrack.masks.MaskConfig` (MOG2, shadows as background) on seed 0, after 30 frames
+of learning, the motion masks cover about half of the people's visible pixels (mean IoU with the perfect masks
+0.48 / 0.54 / 0.67 for cam1 / cam2 / cam3 on the frames with people, no foreground on the empty frames):
+incomplete and fragmented, as the paper's Fig. 4.
 
 The ``seed`` of :func:`~wptrack.synth.base.render_scene` changes the sensor noise and, slightly, the people: their
 paths (waypoints +-0.08 m, meeting point +-0.15 m), speeds (1.0-1.3 m/s), timing, heights, builds and clothing
