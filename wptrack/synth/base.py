@@ -117,12 +117,15 @@ class SceneSpec:
     Attributes:
         name: Registry name, e.g. ``"s1-lab"``.
         description: One line shown by ``wptrack synth --list`` and written to scene.json.
-        build: Function returning a fresh :class:`Scene`.
+        build: Function returning a fresh :class:`Scene` (called with the seed when ``seeded``).
+        seeded: True when the scene's layout (paths, clothing) depends on the seed of :func:`render_scene`: ``build``
+            is then called as ``build(seed)``; otherwise the seed only changes the sensor noise.
     """
 
     name: str
     description: str
-    build: Callable[[], Scene]
+    build: Callable[..., Scene]
+    seeded: bool = False
 
 
 @dataclass(frozen=True)
@@ -152,7 +155,9 @@ SCENES: dict[str, SceneSpec] = {}
 """Registry of scenes by name (filled by :func:`register_scene`)."""
 
 
-def register_scene(name: str, description: str) -> Callable[[Callable[[], Scene]], Callable[[], Scene]]:
+def register_scene(
+    name: str, description: str, seeded: bool = False
+) -> Callable[[Callable[..., Scene]], Callable[..., Scene]]:
     """Decorator registering a scene-building function under ``name``.
 
     Example::
@@ -161,14 +166,18 @@ def register_scene(name: str, description: str) -> Callable[[Callable[[], Scene]
         def _demo() -> Scene:
             return MyScene(...)
 
+        @register_scene("s9-seeded", "a scene whose paths depend on the seed", seeded=True)
+        def _seeded(seed: int) -> Scene:
+            return MyScene(seed=seed)
+
     Raises:
         ValueError: ``name`` is already registered.
     """
 
-    def decorate(build: Callable[[], Scene]) -> Callable[[], Scene]:
+    def decorate(build: Callable[..., Scene]) -> Callable[..., Scene]:
         if name in SCENES:
             raise ValueError(f"scene {name!r} is already registered")
-        SCENES[name] = SceneSpec(name=name, description=description, build=build)
+        SCENES[name] = SceneSpec(name=name, description=description, build=build, seeded=bool(seeded))
         return build
 
     return decorate
@@ -218,7 +227,8 @@ def render_scene(
         name: Registered scene name (:func:`scene_names`).
         out_dir: Output folder (created with parents; existing files of the same names are replaced).
         frames: Number of frames (default: the scene's own).
-        seed: Seed of the sensor noise (the scene layout does not depend on it).
+        seed: Seed of the sensor noise; for scenes registered with ``seeded=True`` also of the layout (paths,
+            clothing), for the others the layout does not depend on it.
         progress: Show a tqdm progress bar.
 
     Returns:
@@ -238,7 +248,7 @@ def render_scene(
         raise ConfigError(f"frames must be a positive integer, got {frames!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ConfigError(f"seed must be a non-negative integer, got {seed!r}")
-    scene = spec.build()
+    scene = spec.build(int(seed)) if spec.seeded else spec.build()
     n_frames = int(frames if frames is not None else scene.default_frames)
     out = ensure_writable_dir(out_dir)
 
