@@ -20,7 +20,7 @@ island (1.75 < x < 4.6, 1.3 < y < 1.95) with a 1.3 m partition on its north edge
 panels. The two people meet in the 1.25 m wide aisle between the partitions, which hide their legs and waists from
 the cameras on the far side (cam1 and cam3 look over the south partition, cam2 over the north one).
 
-People (reusing :class:`wptrack.synth.plaza.Person`: legs, pelvis, chest, arms and head as ellipsoids): person 0
+People (reusing :class:`wptrack.synth.actors.Person`: legs, pelvis, chest, arms and head as ellipsoids): person 0
 enters through the west door, person 1 through the east door; they walk to the middle of the aisle (0.68-0.80 m
 apart, facing each other), stop, raise their right arms until the hands meet between them, shake (a small vertical
 oscillation), lower the arms and leave through the opposite doors, passing each other in the aisle. With the
@@ -74,7 +74,8 @@ import numpy as np
 from wptrack.errors import ConfigError
 from wptrack.rig import Camera, Rig
 from wptrack.synth.base import Scene, register_scene
-from wptrack.synth.plaza import Path, Person, _image_box, _Prim
+from wptrack.synth.actors import Path, Person, _Prim
+from wptrack.synth.plaza import _image_box
 from wptrack.synth.render import Box, Cylinder, Light, StaticView, noisy, posters, render_static, solid, wood
 
 __all__ = [

@@ -445,7 +445,7 @@ class PeopleTracker:
                 self._remove(k, est)
         # duplicates: two filters on one person
         alive = [k for k in active if self.slot_id[k] >= 0]
-        for i, k in enumerate(alive):
+        for k in alive:
             close = any(
                 np.hypot(*(by_slot[k].mean[:2] - by_slot[j].mean[:2])) < b.merge_distance
                 for j in alive
