@@ -218,7 +218,22 @@ def cmd_evaluate(args) -> int:
     tracks = Path(args.tracks)
     if tracks.is_dir():
         tracks = tracks / "tracks.csv"
-    _print_evaluation(args.groundtruth, tracks, args.threshold, args.out)
+    groundtruth = args.groundtruth
+    if str(groundtruth).lower().endswith(".xml"):  # image boxes (PETS/Milan): feet back-projected with the rig
+        from .groundtruth import read_box_groundtruth
+
+        if args.rig is None:
+            raise ConfigError(f"--groundtruth {groundtruth}: box annotations need --rig to back-project the feet")
+        size = None
+        if args.box_size is not None:
+            try:
+                w, h = (int(x) for x in args.box_size.lower().split("x"))
+            except ValueError:
+                raise ConfigError(f"--box-size: expected WIDTHxHEIGHT, e.g. 768x576, got {args.box_size!r}") from None
+            size = (w, h)
+        camera = int(args.camera) if str(args.camera).lstrip("-").isdigit() else args.camera
+        groundtruth = read_box_groundtruth(groundtruth, args.rig, camera=camera, box_size=size)
+    _print_evaluation(groundtruth, tracks, args.threshold, args.out)
     return 0
 
 
@@ -476,7 +491,12 @@ def build_parser() -> argparse.ArgumentParser:
         "evaluate", parents=[common], help="accuracy, MOTA and IDF1 of tracks against ground truth (ground plane)"
     )
     e.add_argument("tracks", help="tracks.csv or a run folder")
-    e.add_argument("--groundtruth", required=True, help="groundtruth.csv (wptrack synth writes one)")
+    e.add_argument(
+        "--groundtruth", required=True, help="groundtruth.csv (wptrack synth writes one) or a PETS box .xml (--rig)"
+    )
+    e.add_argument("--rig", default=None, help="rig to back-project .xml box feet onto the ground")
+    e.add_argument("--camera", default=0, help="annotated camera of the rig (name or index; default 0)")
+    e.add_argument("--box-size", default=None, help="WIDTHxHEIGHT of the boxes' image if not the camera's size")
     e.add_argument("--threshold", type=float, default=1.0, help="match distance on the ground plane, metres")
     e.add_argument("--out", default=None, help="write the evaluation as JSON here")
     e.set_defaults(func=cmd_evaluate)

@@ -19,6 +19,11 @@ Rig files are YAML (``.yaml``/``.yml``) or JSON (``.json``) with the same keys::
         t: [tx, ty, tz]                # metres
       - name: cam1                     # optional for an opencv: entry (default: the file stem)
         opencv: cam1.yml               # cv2.FileStorage file, relative to the rig file
+      - name: cam2                     # optional for a tsai: entry (default: the file stem)
+        tsai: View_001.xml             # Tsai calibration XML (PETS), relative to the rig file; see wptrack.tsai
+        units: mm                      # optional: the file's world units, mm (default) or m
+        width: 480                     # optional: image size to scale the calibration to
+        height: 360
 
 An ``opencv:`` entry reads ``camera_matrix``, ``distortion_coefficients``, ``rvec`` or ``R``, ``tvec`` or ``T``,
 ``image_width`` and ``image_height``; keys written beside ``opencv:`` override the file's values.
@@ -541,6 +546,10 @@ class Camera:
         """
         if not isinstance(d, Mapping):
             raise RigError(f"{source}: cameras[{index}]: expected a mapping of camera fields, got {_fmt(d)}")
+        if "tsai" in d:
+            from .tsai import camera_from_entry
+
+            return camera_from_entry(d, source, index, base_dir)
         raw_name = d.get("name")
         entry: dict[str, Any] = {}
         cv_path: Path | None = None
