@@ -73,8 +73,8 @@ import numpy as np
 
 from wptrack.errors import ConfigError
 from wptrack.rig import Camera, Rig
-from wptrack.synth.base import Scene, register_scene
 from wptrack.synth.actors import Path, Person, _Prim
+from wptrack.synth.base import Scene, register_scene
 from wptrack.synth.plaza import _image_box
 from wptrack.synth.render import Box, Cylinder, Light, StaticView, noisy, posters, render_static, solid, wood
 
