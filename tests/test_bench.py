@@ -165,3 +165,15 @@ def test_offspring_check_passes_and_catches_a_broken_resampler(device, monkeypat
     monkeypatch.setattr(tr.resampler, "from_log_weights", identity)
     bad = offspring_check(tr, replays=4, groups=50)
     assert not bad["ok"] and bad["max_abs_z"] > 5.0
+
+
+def test_cpu_threads_harness_runs_workers():
+    """The multi-core measurement harness (python -m wptrack.bench.cpu_threads) on tiny cases: threads with the
+    tracker's untiled observation stage, and the NumPy reference filter."""
+    from wptrack.bench.cpu_threads import run_workers
+
+    r = run_workers("threads", "warp-observe", 2, 20_000, 1, 2)
+    assert (r["workers"], r["frames"], len(r["worker_s"])) == (2, 2, 2)
+    assert r["wall_s"] >= max(r["worker_s"]) > 0 and r["frames_per_s"] == 4 / r["wall_s"]
+    r = run_workers("threads", "numpy", 1, 1000, 1, 2)
+    assert r["impl"] == "numpy" and r["wall_s"] > 0
