@@ -176,4 +176,4 @@ def test_cpu_threads_harness_runs_workers():
     assert (r["workers"], r["frames"], len(r["worker_s"])) == (2, 2, 2)
     assert r["wall_s"] >= max(r["worker_s"]) > 0 and r["frames_per_s"] == 4 / r["wall_s"]
     r = run_workers("threads", "numpy", 1, 1000, 1, 2)
-    assert r["impl"] == "numpy" and r["wall_s"] > 0
+    assert r["impl"] == "numpy" and r["wall_s"] > 0 and r["cpu_s"] > 0 and r["cpu_ms_per_frame"] > 0

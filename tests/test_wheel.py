@@ -19,11 +19,15 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-# build outputs and caches of a working checkout stay out of the copy the wheel is built from (a stale build/lib
-# would otherwise leak removed modules into the wheel)
-IGNORE = shutil.ignore_patterns(
-    ".git", "build", "dist", "*.egg-info", "__pycache__", ".warpcache", ".pytest_cache", ".ruff_cache", "*.whl"
-)
+# build outputs, caches and run folders of a working checkout stay out of the copy the wheel is built from (a stale
+# build/lib would otherwise leak removed modules into the wheel)
+TOP_IGNORE = {".git", "build", "dist", "out", "runs", ".gpu", ".whl", ".warpcache", ".venv", "venv"}
+ANY_IGNORE = shutil.ignore_patterns("__pycache__", "*.egg-info", ".pytest_cache", ".ruff_cache", "*.whl")
+
+
+def _ignore(folder: str, names: list[str]) -> set[str]:
+    top = TOP_IGNORE & set(names) if Path(folder).resolve() == REPO else set()
+    return top | set(ANY_IGNORE(folder, names))
 
 
 def _env() -> dict[str, str]:
@@ -43,7 +47,7 @@ def _run(cmd: list[str], cwd: Path, timeout: float = 120) -> subprocess.Complete
 @pytest.mark.slow
 def test_wheel_installs_and_runs_bench(tmp_path):
     src, wheels, venv, work = (tmp_path / d for d in ("src", "wheels", "venv", "work"))
-    shutil.copytree(REPO, src, ignore=IGNORE, symlinks=True)
+    shutil.copytree(REPO, src, ignore=_ignore, symlinks=True)
     work.mkdir()
     _run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "-w", str(wheels), "."], src)
     (wheel,) = wheels.glob("wptrack-*.whl")

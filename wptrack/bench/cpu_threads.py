@@ -62,11 +62,12 @@ def _make(impl: str, particles: int, cameras: int, seed: int):
     return step, images
 
 
-def _loop(step, images, frames: int) -> tuple[float, float]:
-    t0 = time.perf_counter()
+def _loop(step, images, frames: int) -> tuple[float, float, float]:
+    """(start, end, CPU seconds of this process) of ``frames`` steps."""
+    t0, c0 = time.perf_counter(), time.process_time()
     for k in range(frames):
         step(images[k % len(images)])
-    return t0, time.perf_counter()
+    return t0, time.perf_counter(), time.process_time() - c0
 
 
 def _process_worker(impl, particles, cameras, seed, frames, barrier, queue) -> None:
@@ -80,12 +81,14 @@ def run_workers(mode: str, impl: str, workers: int, particles: int, cameras: int
 
     Returns:
         dict with ``wall_s`` (common start to last end), ``frames_per_s`` (all workers), ``ms_per_frame`` (wall per
-        frame of one worker) and the per-worker times.
+        frame of one worker), the per-worker times, ``cpu_s`` (CPU seconds of all workers; on a shared box the
+        per-frame CPU time ``cpu_ms_per_frame`` is the load-independent cost) and ``cpu_per_wall`` (above 1: the
+        workers did run at the same time).
     """
     if mode == "threads":
         made = [_make(impl, particles, cameras, seed) for seed in range(workers)]
         barrier = threading.Barrier(workers + 1)
-        spans: list[tuple[float, float]] = [(0.0, 0.0)] * workers
+        spans: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)] * workers
 
         def work(i: int) -> None:
             barrier.wait()
@@ -94,9 +97,11 @@ def run_workers(mode: str, impl: str, workers: int, particles: int, cameras: int
         threads = [threading.Thread(target=work, args=(i,)) for i in range(workers)]
         for t in threads:
             t.start()
+        c0 = time.process_time()
         barrier.wait()
         for t in threads:
             t.join()
+        cpu = time.process_time() - c0  # all threads of this process
     else:
         ctx = mp.get_context("spawn")
         barrier, queue = ctx.Barrier(workers), ctx.Queue()
@@ -109,7 +114,8 @@ def run_workers(mode: str, impl: str, workers: int, particles: int, cameras: int
         spans = [queue.get() for _ in procs]
         for p in procs:
             p.join()
-    wall = max(e for _, e in spans) - min(s for s, _ in spans)
+        cpu = sum(c for _, _, c in spans)
+    wall = max(e for _, e, _ in spans) - min(s for s, _, _ in spans)
     return {
         "mode": mode,
         "impl": impl,
@@ -120,7 +126,10 @@ def run_workers(mode: str, impl: str, workers: int, particles: int, cameras: int
         "wall_s": wall,
         "frames_per_s": workers * frames / wall,
         "ms_per_frame": 1e3 * wall / frames,
-        "worker_s": [e - s for s, e in spans],
+        "worker_s": [e - s for s, e, _ in spans],
+        "cpu_s": cpu,
+        "cpu_ms_per_frame": 1e3 * cpu / (workers * frames),
+        "cpu_per_wall": cpu / wall,
     }
 
 
@@ -148,7 +157,11 @@ def main(argv: list[str] | None = None) -> int:
         for mode in args.mode:
             for w in args.workers:
                 r = run_workers(mode, args.impl, w, int(args.particles), args.cameras, args.frames)
-                print(f"  repeat {rep}: {mode} workers {w}: {r['wall_s']:.3f} s wall", flush=True)
+                print(
+                    f"  repeat {rep}: {mode} workers {w}: {r['wall_s']:.3f} s wall, CPU {r['cpu_s']:.3f} s "
+                    f"({r['cpu_ms_per_frame']:.1f} ms per frame, CPU/wall {r['cpu_per_wall']:.2f})",
+                    flush=True,
+                )
                 if (mode, w) not in best or r["wall_s"] < best[mode, w]["wall_s"]:
                     best[mode, w] = r
     rows = []
@@ -161,7 +174,8 @@ def main(argv: list[str] | None = None) -> int:
             print(
                 f"{args.impl:5s} {mode:9s} workers {w}: {r['wall_s']:.3f} s wall, {r['ms_per_frame']:.1f} ms per "
                 f"frame per worker, {r['frames_per_s']:.2f} frames/s in all, {r['speedup']:.2f}x "
-                f"{args.workers[0]} worker(s) (best of {args.repeats})",
+                f"{args.workers[0]} worker(s), CPU {r['cpu_ms_per_frame']:.1f} ms per frame, CPU/wall "
+                f"{r['cpu_per_wall']:.2f} (best wall of {args.repeats})",
                 flush=True,
             )
     print(f"load average after: {os.getloadavg()[0]:.2f}")
