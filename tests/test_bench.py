@@ -42,6 +42,29 @@ def test_bench_unknown_suite(capsys):
     assert "unknown suite" in capsys.readouterr().err
 
 
+def test_suite_registry_names_match():
+    """Every registered suite imports from the package and carries the name it is registered under."""
+    from wptrack.bench import SUITES, load_suite
+
+    assert {"color", "color-e2e", "templates"} <= set(SUITES)
+    for name in SUITES:
+        assert load_suite(name).name == name
+
+
+def test_numpy_references_are_independent_of_the_kernels():
+    """The NumPy references check the kernels: importing them must load neither Warp nor wptrack.kernels."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, wptrack.bench.numpy_colour, wptrack.bench.numpy_templates; "
+        "bad = sorted(m for m in sys.modules if m == 'warp' or m.startswith(('warp.', 'wptrack.kernels'))); "
+        "print(bad); sys.exit(1 if bad else 0)"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
 def test_bench_end_to_end_tiny(tmp_path, capsys):
     out = tmp_path / "e2e.json"
     assert (
@@ -116,7 +139,7 @@ def test_bench_templates_rejects_cameras(capsys):
 
 
 def _small_tracker(device, n=20_000):
-    from benchmarks.colour import HUE, INTENSITY, SAT, bench_frames, bench_rig
+    from wptrack.bench.colour import HUE, INTENSITY, SAT, bench_frames, bench_rig
     from wptrack.trackers.colour import ColorTracker, HSITarget
 
     rig = bench_rig(2)
@@ -128,10 +151,7 @@ def _small_tracker(device, n=20_000):
 
 
 def test_offspring_check_passes_and_catches_a_broken_resampler(device, monkeypatch):
-    from wptrack.bench import load_suites
-
-    load_suites()  # puts the source checkout's benchmarks package on the path
-    from benchmarks.colour import offspring_check
+    from wptrack.bench.colour import offspring_check
 
     tr = _small_tracker(device)
     res = offspring_check(tr, replays=8, groups=50)
@@ -145,3 +165,15 @@ def test_offspring_check_passes_and_catches_a_broken_resampler(device, monkeypat
     monkeypatch.setattr(tr.resampler, "from_log_weights", identity)
     bad = offspring_check(tr, replays=4, groups=50)
     assert not bad["ok"] and bad["max_abs_z"] > 5.0
+
+
+def test_cpu_threads_harness_runs_workers():
+    """The multi-core measurement harness (python -m wptrack.bench.cpu_threads) on tiny cases: threads with the
+    tracker's untiled observation stage, and the NumPy reference filter."""
+    from wptrack.bench.cpu_threads import run_workers
+
+    r = run_workers("threads", "warp-observe", 2, 20_000, 1, 2)
+    assert (r["workers"], r["frames"], len(r["worker_s"])) == (2, 2, 2)
+    assert r["wall_s"] >= max(r["worker_s"]) > 0 and r["frames_per_s"] == 4 / r["wall_s"]
+    r = run_workers("threads", "numpy", 1, 1000, 1, 2)
+    assert r["impl"] == "numpy" and r["wall_s"] > 0 and r["cpu_s"] > 0 and r["cpu_ms_per_frame"] > 0

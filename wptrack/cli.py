@@ -332,17 +332,14 @@ def cmd_convergence(args) -> int:
 
 # --- bench ---------------------------------------------------------------------------------------------------
 def cmd_bench(args) -> int:
-    from .bench import HEADER, format_row, load_suites
+    from .bench import HEADER, format_row, load_suite
     from .device import resolve_device
     from .io import atomic_write_json, versions
 
-    suites = load_suites()
-    if args.tracker not in suites:
-        raise ConfigError(f"--tracker: unknown suite {args.tracker!r}; expected one of {', '.join(suites)}")
+    suite = load_suite(args.tracker)
     device = resolve_device(args.device)
     import warp as wp
 
-    suite = suites[args.tracker]
     second = getattr(suite, "second", "cameras")  # the case's second field: cameras, or objects (templates)
     for flag in ("cameras", "objects"):
         if flag != second and getattr(args, flag):
@@ -529,7 +526,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--groundtruth", default=None, help="groundtruth.csv drawn beside the tracks (template runs)")
     r.set_defaults(func=cmd_report)
 
-    b = sub.add_parser("bench", parents=[common], help="benchmark suites (needs the benchmarks/ folder)")
+    b = sub.add_parser("bench", parents=[common], help="benchmark suites: stage times, NumPy baseline, equivalence")
     b.add_argument("--tracker", default="color", help="suite name (default: color)")
     b.add_argument("--particles", type=float, nargs="+", help="particle counts (default: the suite's grid)")
     b.add_argument("--cameras", type=int, nargs="+", help="camera counts (default: the suite's grid)")

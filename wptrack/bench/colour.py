@@ -189,6 +189,7 @@ def offspring_check(tracker, replays: int = 32, groups: int = 1000) -> dict:
     their expectation (z-scores with the systematic scheme's per-group standard deviation, at most 1/2 per draw).
     """
     import warp as wp
+
     from wptrack.kernels import reduce as kreduce
     from wptrack.kernels import resample as kres
 

@@ -1,5 +1,5 @@
 """Plain NumPy reference of the S3 template tracker's per-frame measurement (Juza et al., eqs. 4-6 and 10): the
-baseline "NumPy on CPU" of ``benchmarks/templates.py``.
+baseline "NumPy on CPU" of ``wptrack/bench/templates.py``.
 
 Given the particle state (kind, ground position, heading, dims, age per slot; shapes (N, R, ...)), a calibrated
 camera and the ground plane, it

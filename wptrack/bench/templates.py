@@ -1,6 +1,6 @@
 """Benchmark of the S3 template tracker (Juza et al.): per-stage and per-frame device time, frames and particles per
 second, device memory, and the equivalence of the per-particle XOR penalties m_i (eq. 4), complexities (eq. 5),
-log-weights (eq. 6) and the UOH (eq. 10) with the NumPy reference (``benchmarks/numpy_templates.py``) on the same
+log-weights (eq. 6) and the UOH (eq. 10) with the NumPy reference (``wptrack/bench/numpy_templates.py``) on the same
 particle state, whose time per frame is measured in the same run.
 
 The scene: one 640x480 camera 7 m above the ground, 8 m behind the scene, looking down at a point 15 m ahead
