@@ -228,7 +228,7 @@ def test_cli_evaluate_xml(tmp_path):
 
 @pytest.mark.skipif(not SHARED.is_dir(), reason="PETS 2009 development clip not present in ../shared/data")
 def test_real_video_frames(tmp_path):
-    from wptrack.run_templates import _camera_for_size
+    from wptrack.runs.templates import _camera_for_size
 
     cv2 = pytest.importorskip("cv2")
     rig_file = tmp_path / "rig.yaml"

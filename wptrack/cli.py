@@ -198,6 +198,58 @@ def cmd_track_templates(args) -> int:
     return 0
 
 
+# --- track people -------------------------------------------------------------------------------------------
+def _people_config_from_args(args):
+    from dataclasses import replace
+
+    from .trackers.people_model import PeopleConfig
+
+    cfg = PeopleConfig(particles=args.particles, seed=args.seed)
+    dyn = {
+        k: v
+        for k, v in (("sigma_pos", args.sigma_pos), ("sigma_vel", args.sigma_vel), ("alpha", args.alpha))
+        if v is not None
+    }
+    mot = {"p_b": args.p_b} if args.p_b is not None else {}
+    desc = {k: v for k, v in (("r_n", args.r_n), ("n_bins", args.bins)) if v is not None}
+    birth = {"max_people": args.max_people} if args.max_people is not None else {}
+    return replace(
+        cfg,
+        dynamics=replace(cfg.dynamics, **dyn),
+        motion=replace(cfg.motion, **mot),
+        descriptor=replace(cfg.descriptor, **desc),
+        birth=replace(cfg.birth, **birth),
+    )
+
+
+def cmd_track_people(args) -> int:
+    from .runs.people import run_people_tracking
+
+    summary = run_people_tracking(
+        args.rig,
+        args.video,
+        args.out,
+        _people_config_from_args(args),
+        mask_config=_mask_config_from_args(args),
+        masks=args.masks,
+        device=args.device,
+        stop_at_shortest=args.stop_at_shortest,
+        max_frames=args.max_frames,
+        occupancy_every=args.occupancy_every,
+        save_masks=args.save_masks,
+        progress=not args.quiet,
+        resume=args.resume,
+        checkpoint_seconds=args.checkpoint_every,
+    )
+    print(f"tracked {summary['frames']} frames on {summary['device']}: {summary['people']} people")
+    print(f"outputs: {args.out}/tracks.csv, hulls.npz, occupancy.npz, run.json")
+    if args.groundtruth:
+        _print_evaluation(args.groundtruth, Path(args.out) / "tracks.csv", 0.5)
+    if args.report:
+        _report_after_tracking(args.out)
+    return 0
+
+
 # --- evaluate ------------------------------------------------------------------------------------------------
 def _print_evaluation(groundtruth, tracks, threshold: float, out: str | None = None) -> None:
     from .evaluation import evaluate
@@ -483,6 +535,44 @@ def build_parser() -> argparse.ArgumentParser:
     _add_device(tt)
     _add_run_control(tt)
     tt.set_defaults(func=cmd_track_templates)
+
+    tp = tsub.add_parser(
+        "people",
+        parents=[common],
+        help="people in 3D from two or more overlapping cameras (S2: motion + multi-view colour)",
+        description="One particle filter per person, particles are 3D points inside the person, weighted by the "
+        "motion masks of every camera and a multi-view HSV colour descriptor; people are added where several "
+        "cameras agree on unexplained motion.",
+    )
+    tp.add_argument("--rig", required=True, help="rig file (YAML/JSON) with two or more cameras")
+    tp.add_argument("--video", action="append", required=True, help="video per camera, in rig order")
+    tp.add_argument("--masks", action="append", default=None, help="given motion masks per camera (rig order)")
+    tp.add_argument("--particles", type=_positive_int, default=500, help="particles per person N_S (default 500)")
+    tp.add_argument("--max-people", type=_positive_int, default=None, help="people tracked at once (default 8)")
+    tp.add_argument("--sigma-pos", type=float, default=None, help="position noise, metres/frame (default 0.03)")
+    tp.add_argument("--sigma-vel", type=float, default=None, help="velocity noise, metres/frame^2 (default 0.01)")
+    tp.add_argument("--alpha", type=float, default=None, help="appearance forgetting factor of eq. 6 (default 0.05)")
+    tp.add_argument("--p-b", type=float, default=None, help="background probability p_B of eq. 10 (default 0.05)")
+    tp.add_argument("--r-n", type=float, default=None, help="descriptor neighbourhood radius r_N, metres (0.1)")
+    tp.add_argument("--bins", type=int, default=None, help="histogram bins N_b (default 8)")
+    tp.add_argument("--occupancy-every", type=int, default=10, help="occupancy grids every N frames (0: none)")
+    tp.add_argument("--mask-method", default="mog2", choices=["mog2", "knn"], help="background subtraction")
+    tp.add_argument("--mask-history", type=_positive_int, default=200, help="background model history, frames")
+    tp.add_argument("--mask-threshold", type=float, default=None, help="MOG2 varThreshold / KNN dist2Threshold")
+    tp.add_argument("--keep-shadows", action="store_true", help="count shadow pixels as foreground")
+    tp.add_argument("--open-px", type=int, default=3, help="morphological opening, pixels (0: off)")
+    tp.add_argument("--close-px", type=int, default=5, help="morphological closing, pixels (0: off)")
+    tp.add_argument("--min-area", type=int, default=0, help="drop foreground blobs smaller than this, pixels")
+    tp.add_argument("--save-masks", action="store_true", help="write the masks used to masks_<camera>.avi")
+    tp.add_argument("--seed", type=int, default=0)
+    tp.add_argument("--max-frames", type=_positive_int, default=None)
+    tp.add_argument("--stop-at-shortest", action="store_true", help="track the common part of unequal videos")
+    tp.add_argument("--groundtruth", default=None, help="groundtruth.csv: print MOTA and IDF1 at 0.5 m")
+    tp.add_argument("--out", required=True, help="output folder")
+    tp.add_argument("--report", action="store_true", help="render the HTML report afterwards")
+    _add_device(tp)
+    _add_run_control(tp)
+    tp.set_defaults(func=cmd_track_people)
 
     e = sub.add_parser(
         "evaluate", parents=[common], help="accuracy, MOTA and IDF1 of tracks against ground truth (ground plane)"

@@ -100,6 +100,12 @@ class PeopleEstimate:
     timings: dict[str, float] = field(default_factory=dict)
 
 
+def _all_pixel_rays(cam) -> np.ndarray:
+    """(H W, 3) world directions of the viewing rays of every pixel of ``cam`` (row-major), distortion removed."""
+    u, v = np.meshgrid(np.arange(cam.width, dtype=np.float64), np.arange(cam.height, dtype=np.float64))
+    return cam.pixel_rays(np.column_stack([u.ravel(), v.ravel()]))
+
+
 class PersonFilter(ParticleFilter):
     """One person's particle set (a slot of the tracker's pool): positions and log-weights from
     :class:`ParticleFilter`, plus, as (N, ...) ping-pong pairs: ``vel`` (metres/frame), ``model`` (appearance C,
@@ -242,7 +248,9 @@ class PeopleTracker:
     Device buffers (P = pixels of all cameras):
         bgr, bgr_prev: (3 P,) uint8 this and the previous frame. mask: (P,) uint8 motion masks (nonzero = motion).
         h, s, v: (P,) float32 HSV planes. sigma_n: (1,) float32 image noise (eq. 18).
-        votes, seen: (nx * ny,) int32 ground evidence map (cameras voting / seeing each cell).
+        rays: (P,) vec3 world direction of every pixel's viewing ray.
+        votes, free_votes: (nx * ny,) int32 ground evidence map: cameras voting for each cell, with all motion /
+            with the motion not explained by a tracked person.
 
     Raises:
         ConfigError: fewer than two cameras, a bad configuration or a pool that does not fit the device.
@@ -297,8 +305,15 @@ class PeopleTracker:
         self.volume = (np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))
         self.heights = wp.array(np.asarray(b.heights, dtype=np.float32), dtype=wp.float32, device=d)
         self.votes = wp.zeros(self.nx * self.ny, dtype=wp.int32, device=d)
-        self.seen = wp.zeros(self.nx * self.ny, dtype=wp.int32, device=d)
+        self.free_votes = wp.zeros(self.nx * self.ny, dtype=wp.int32, device=d)
         self._votes_host = wp.zeros(self.nx * self.ny, dtype=wp.int32, device="cpu", pinned=pinned)
+        self._free_host = wp.zeros(self.nx * self.ny, dtype=wp.int32, device="cpu", pinned=pinned)
+        rays = np.concatenate([_all_pixel_rays(cam) for cam in rig.cameras]).astype(np.float32)
+        self.rays = wp.array(rays, dtype=wp.vec3, device=d)  # (P,) world direction of every pixel's viewing ray
+        self.people_xy = wp.zeros(b.max_people, dtype=wp.vec2, device=d)
+        self.n_people = wp.zeros(1, dtype=wp.int32, device=d)
+        self._people_host = wp.zeros(b.max_people, dtype=wp.vec2, device="cpu", pinned=pinned)
+        self._n_people_host = wp.zeros(1, dtype=wp.int32, device="cpu", pinned=pinned)
         self.min_votes = min(b.min_cameras, len(rig))
         # the pool of person filters, allocated once
         self.pool = [PersonFilter(self, k) for k in range(b.max_people)]
@@ -373,22 +388,42 @@ class PeopleTracker:
             device=d,
         )
         wp.copy(self.bgr_prev, self.bgr)
+
+    def _evidence(self) -> None:
+        """The ground evidence map, with the motion of the people tracked after this frame's prediction
+        explained (their estimated ground positions, uploaded: a few floats)."""
         b = self.config.birth
+        xy, n = self._people_host.numpy(), 0
+        for k in range(len(self.pool)):
+            if self.slot_id[k] >= 0:
+                e = self.pool[k].est_host.numpy()
+                xy[n] = (e[kreduce.EST_MEAN], e[kreduce.EST_MEAN + 1])
+                n += 1
+        self._n_people_host.numpy()[0] = n
+        wp.copy(self.people_xy, self._people_host)
+        wp.copy(self.n_people, self._n_people_host)
         wp.launch(
             kpeople.ground_votes_kernel,
             dim=self.nx * self.ny,
             inputs=[
                 self.drig.cams,
                 self.mask,
+                self.rays,
                 self.heights,
+                self.people_xy,
+                self.n_people,
+                b.person_radius,
+                b.person_height,
                 wp.vec2(*self.grid_origin),
                 b.cell,
                 self.nx,
                 b.min_fraction,
             ],
-            outputs=[self.votes, self.seen],
-            device=d,
+            outputs=[self.votes, self.free_votes],
+            device=self.device,
         )
+        wp.copy(self._votes_host, self.votes)
+        wp.copy(self._free_host, self.free_votes)
 
     # --- the frame --------------------------------------------------------------------------------------
     def step(self, images: Sequence[np.ndarray], masks: Sequence[np.ndarray]) -> PeopleEstimate:
@@ -405,8 +440,9 @@ class PeopleTracker:
             p._run_chain(src, dst)
             p.parity = dst
             p.frames_done += 1
-        wp.copy(self._votes_host, self.votes)
         wp.copy(self._sigma_host, self.sigma_n)
+        wp.synchronize_device(self.device)  # the people's estimates are on the host now
+        self._evidence()
         wp.synchronize_device(self.device)
         t2 = time.perf_counter()
         people = []
@@ -431,6 +467,7 @@ class PeopleTracker:
         evidence is unexplained for several frames. Host code on the small evidence map."""
         b = self.config.birth
         votes = self._votes_host.numpy().reshape(self.ny, self.nx)
+        free_votes = self._free_host.numpy().reshape(self.ny, self.nx)
         support = votes >= self.min_votes
         gx, gy = self._cell_centres()
         lo, hi = self.volume
@@ -457,30 +494,33 @@ class PeopleTracker:
                 self._remove(k, est)
                 for j in alive:
                     self.slot_close[j] = 0
-        # unexplained evidence -> candidates
-        free = support.copy()
-        for k in range(len(self.pool)):
-            if self.slot_id[k] >= 0:
-                e = by_slot.get(k)
-                if e is not None:
-                    free &= (gx - e.mean[0]) ** 2 + (gy - e.mean[1]) ** 2 > b.exclusion**2
-        candidates = self._blobs(free, votes, gx, gy)
-        pending = []
-        for cx, cy in candidates:
+        # unexplained evidence -> candidates; at most one person added per frame, the strongest (see BirthConfig)
+        free = free_votes >= self.min_votes
+        for k in range(len(self.pool)):  # people added or kept this frame explain their surroundings
+            if self.slot_id[k] >= 0 and k in by_slot:
+                e = by_slot[k]
+                free &= (gx - e.mean[0]) ** 2 + (gy - e.mean[1]) ** 2 > b.exclusion**2
+        candidates = self._blobs(free, free_votes, gx, gy)
+        pending, added = [], False
+        for cx, cy, _strength in sorted(candidates, key=lambda c: -c[2]):
             count = 1.0
             if len(self.pending):
                 dist = np.hypot(self.pending[:, 0] - cx, self.pending[:, 1] - cy)
                 j = int(np.argmin(dist))
                 if dist[j] < 0.5:
                     count = self.pending[j, 2] + 1
-            if count >= b.frames_to_add:
+            if count >= b.frames_to_add and not added:
                 self._add(np.array([cx, cy]), est)
+                added = True
             else:
-                pending.append((cx, cy, count))
+                pending.append((cx, cy, min(count, b.frames_to_add)))
         self.pending = np.asarray(pending, dtype=np.float64).reshape(-1, 3)
 
-    def _blobs(self, free: np.ndarray, votes: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> list[tuple[float, float]]:
-        """Vote-weighted centroids of the connected regions of ``free`` cells with at least ``min_area`` cells."""
+    def _blobs(
+        self, free: np.ndarray, votes: np.ndarray, gx: np.ndarray, gy: np.ndarray
+    ) -> list[tuple[float, float, float]]:
+        """Vote-weighted centroids and total votes of the connected regions of ``free`` cells with at least
+        ``min_area`` cells."""
         if not free.any():
             return []
         import cv2
@@ -492,7 +532,7 @@ class PeopleTracker:
                 continue
             sel = labels == lab
             w = votes[sel].astype(np.float64)
-            out.append((float(np.sum(gx[sel] * w) / w.sum()), float(np.sum(gy[sel] * w) / w.sum())))
+            out.append((float(np.sum(gx[sel] * w) / w.sum()), float(np.sum(gy[sel] * w) / w.sum()), float(w.sum())))
         return out
 
     def _add(self, xy: np.ndarray, est: PeopleEstimate) -> None:

@@ -169,7 +169,14 @@ class BirthConfig:
         init_z: heights of that cylinder, metres. Ours: (0.3, 1.6).
         merge_distance: two people whose ground positions stay closer than this for ``frames_to_remove`` frames
             follow one person: the younger is removed, metres. Ours: 0.3 (people shaking hands stand ~0.6 m apart).
+        person_radius: motion whose viewing ray passes within this distance of a tracked person's vertical axis
+            is explained by that person (no birth from it), metres. Ours: 0.4.
+        person_height: height of that axis, metres. Ours: 2.0.
         max_people: people tracked at once (a pool of filters allocated once). Ours: 8.
+
+    At most one person is added per frame (the strongest unexplained region): the motion the new person explains
+    is discounted from the next frame on, so the ghosts that two real people's silhouettes make where other
+    cameras' rays cross are not added as people.
     """
 
     cell: float = 0.1
@@ -184,6 +191,8 @@ class BirthConfig:
     init_radius: float = 0.25
     init_z: tuple[float, float] = (0.3, 1.6)
     merge_distance: float = 0.3
+    person_radius: float = 0.4
+    person_height: float = 2.0
     max_people: int = 8
 
     def __post_init__(self) -> None:
@@ -203,6 +212,8 @@ class BirthConfig:
         ):
             raise ConfigError(f"birth.init_z: expected (low, high) heights in metres, low < high, got {self.init_z!r}")
         _non_negative(self.merge_distance, "birth.merge_distance", "a distance in metres")
+        _positive(self.person_radius, "birth.person_radius", "a radius in metres")
+        _positive(self.person_height, "birth.person_height", "a height in metres")
         _int_at_least(self.max_people, "birth.max_people", 1, "a number of people")
 
 
