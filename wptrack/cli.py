@@ -23,6 +23,9 @@ from .errors import ConfigError, WptrackError
 log = logging.getLogger("wptrack")
 
 TRACK_COLUMNS = ["frame", "id", "x", "y", "z", "sx", "sy", "sz", "map_x", "map_y", "map_z", "ess", "loglik"]
+COLOR_TRACK_COLUMNS = [*TRACK_COLUMNS, "detection"]
+"""``detection``: 1 when the mixture proposal found target pixels this frame, 0 = no detection (the frame was
+tracked with the motion prior alone), -1 with ``--proposal prior`` (no detector)."""
 
 
 # --- argument helpers ---------------------------------------------------------------------------------
@@ -101,7 +104,9 @@ def run_color_tracking(
         "tracker": {**asdict(tracker.config), "score_mode_resolved": tracker.score_mode},
     }
     errors: list[float] = []
-    with RunWriter(out_dir, "color", TRACK_COLUMNS, run_config, particles_max=max(1, config.keep_particles)) as out:
+    with RunWriter(
+        out_dir, "color", COLOR_TRACK_COLUMNS, run_config, particles_max=max(1, config.keep_particles)
+    ) as out:
         out.set_info(device=tracker.device, seed=config.seed)
         bar = _progress(len(frames), "tracking", progress)
         t_decode = time.perf_counter()
@@ -110,7 +115,8 @@ def run_color_tracking(
         for k, images in enumerate(prefetch(frames, depth=4)):
             out.add_timing("decode_wait", time.perf_counter() - t_decode)
             est = tracker.step(images)
-            out.add_rows([[est.frame, 0, *est.mean, *est.std, *est.map, est.ess, est.loglik]])
+            detection = -1 if est.detection < 0 else int(est.detection > 0)
+            out.add_rows([[est.frame, 0, *est.mean, *est.std, *est.map, est.ess, est.loglik, detection]])
             if est.particles is not None:
                 out.add_particles(est.frame, est.particles, est.weights)
             for stage, seconds in est.timings.items():
@@ -154,6 +160,8 @@ def _color_config_from_args(args):
         score_mode=args.score_mode,
         seed=args.seed,
         keep_particles=args.keep_particles,
+        proposal=args.proposal,
+        mixture=args.mixture,
     )
 
 
@@ -485,6 +493,13 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--ess-threshold", type=float, default=1.0, help="resample when ESS <= this * N (1 = always)")
     c.add_argument("--score-mode", default="auto", help="auto, direct or integral")
     c.add_argument("--seed", type=int, default=0)
+    c.add_argument(
+        "--proposal",
+        choices=("mixture", "prior"),
+        default="mixture",
+        help="mixture: motion prior + detection proposal from the colour masks (default); prior: the paper's filter",
+    )
+    c.add_argument("--mixture", type=float, default=0.25, help="fraction of particles from the detection proposal")
     c.add_argument("--keep-particles", type=int, default=1000, help="particles per frame saved for reports")
     c.add_argument("--max-frames", type=_positive_int, default=None)
     c.add_argument("--stop-at-shortest", action="store_true", help="track the common part of unequal videos")
