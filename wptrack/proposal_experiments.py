@@ -146,20 +146,42 @@ def reacquisition(
     return out
 
 
+def static_drift(
+    scene_name: str = "s1-lab", seeds: int = 5, frames: int = 300, particles: int = 1000, device: str = "cpu"
+) -> dict:
+    """The paper's initialisation (the scene's ``init`` hint) and a ball at rest for ``frames`` frames: the largest
+    error over the last ``frames - 20`` frames per tracker seed, for both proposals (drift along optical axes)."""
+    scene = get_scene(scene_name).build()
+    rest = scene.trajectories(1)[0][0]
+    init = tuple(scene.hints()["init"])
+    scene, images, truth = render_frames(scene_name, frames, positions=np.repeat(rest[None], frames, 0))
+    out = {"scene": scene_name, "frames": frames, "particles": particles, "init": list(init)}
+    for proposal in ("mixture", "prior"):
+        errs = run_seeds(scene, images, truth, range(seeds), device, particles=particles, init=init, proposal=proposal)
+        out[proposal] = {
+            "max_error_after_20_frames_m": errs[:, 20:].max(1).tolist(),
+            "last_error_m": errs[:, -1].tolist(),
+        }
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m wptrack.proposal_experiments")
-    p.add_argument("experiment", choices=("convergence", "reacquisition"))
+    p.add_argument("experiment", choices=("convergence", "reacquisition", "static"))
     p.add_argument("--scene", default="s1-lab")
     p.add_argument("--seeds", type=int, default=40)
     p.add_argument("--frames", type=int, default=10)
     p.add_argument("--particles", type=int, default=1000)
     p.add_argument("--proposal", default="mixture")
     p.add_argument("--device", default="cpu")
+    p.add_argument("--jump", type=float, nargs=3, default=(0.0, -1.0, 0.0), help="re-appearance offset, metres")
     a = p.parse_args(argv)
     if a.experiment == "convergence":
         r = convergence(a.scene, a.seeds, a.frames, a.particles, a.proposal, a.device)
+    elif a.experiment == "static":
+        r = static_drift(a.scene, a.seeds, a.frames, a.particles, a.device)
     else:
-        r = reacquisition(a.scene, a.seeds, particles=a.particles, device=a.device)
+        r = reacquisition(a.scene, a.seeds, jump=a.jump, particles=a.particles, device=a.device)
     print(json.dumps(r))
     return 0
 
