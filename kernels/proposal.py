@@ -178,10 +178,10 @@ def detection_components_kernel(
     if pa < 0:
         return
     oa = camera_centre(ca)
-    da = pixel_ray_direction(ca, float(pa % ca.width), float(pa / ca.width))
+    da = pixel_ray_direction(ca, float(pa % ca.width), float(pa // ca.width))
     if pb >= 0:
         ob = camera_centre(cb)
-        db = pixel_ray_direction(cb, float(pb % cb.width), float(pb / cb.width))
+        db = pixel_ray_direction(cb, float(pb % cb.width), float(pb // cb.width))
         mid = ray_pair_midpoint(oa, da, ob, db)
         if mid[3] >= 0.0 and mid[3] <= max_gap:
             centres[k] = wp.vec3(mid[0], mid[1], mid[2])

@@ -229,7 +229,7 @@ def frames():
     for _ in range(8):
         imgs = frames_for(rig, BALL, rng)
         for img in imgs:
-            bg = np.all(img != np.array([180, 60, 230], np.uint8), axis=2)
+            bg = np.any(img != np.array([180, 60, 230], np.uint8), axis=2)
             img[bg] = 60 + (img[bg] - 60) // 2
         out.append(imgs)
     return out
@@ -265,3 +265,42 @@ def test_no_detection_frames_are_flagged_without_nan(device, frames):
     for e in out:
         assert e.detection == 0
         assert np.all(np.isfinite(e.mean)) and np.all(np.isfinite(e.std)) and np.isfinite(e.ess)
+
+
+def test_detection_components_from_target_pixels(device, frames):
+    """Components triangulated from the ball's pixels lie on the ball (within its radius + a pixel); a frame with
+    the ball in camera 0 only gives points along camera-0 rays through the ball; no target pixel: none valid."""
+    rig = small_rig()
+    drig = DeviceRig(rig, device)
+    target = TARGET.to_struct(device)
+    k = 64
+    centres = wp.zeros(k, dtype=wp.vec3, device=device)
+    valid = wp.zeros(k, dtype=wp.int32, device=device)
+    frame = wp.zeros(1, dtype=wp.int32, device=device)
+
+    def launch(images):
+        bgr = wp.array(np.concatenate([im.reshape(-1) for im in images]), dtype=wp.uint8, device=device)
+        wp.launch(
+            kproposal.detection_components_kernel,
+            dim=k,
+            inputs=[drig.cams, target, bgr, wp.vec2ui(1, 2), frame, 1024, 0.1, 0.1, 3.0],
+            outputs=[centres, valid],
+            device=device,
+        )
+        return centres.numpy(), valid.numpy()
+
+    c, v = launch(frames[0])
+    # the test discs are drawn ~12 px in radius (~6 cm at the ball's depth): rays through opposite edges of the two
+    # discs can pass more than max_gap = 0.1 m apart, and those pairs fall back to a point along ray a
+    assert np.all(v > 0) and np.mean(v == 1) > 0.6
+    dist = np.linalg.norm(c[v == 1] - BALL, axis=1)
+    assert np.median(dist) < 0.04 and np.all(dist < 0.3), dist  # edge pairs meet at grazing angles, further out
+    blank = [np.full_like(im, 70) for im in frames[0]]
+    c, v = launch([frames[0][0], blank[1]])
+    assert set(np.unique(v)) <= {0, 2} and np.sum(v == 2) > k // 4  # camera a = 0 half of the time, else no pixel
+    cam0 = rig.cameras[0]
+    uv, _ = cam0.project(c[v == 2])
+    uv_ball, _ = cam0.project(BALL[None])
+    assert np.all(np.linalg.norm(uv - uv_ball, axis=1) < 0.033 * cam0.K[0, 0] / 0.4 + 2)
+    c, v = launch(blank)
+    assert np.all(v == 0)
