@@ -304,3 +304,33 @@ def test_detection_components_from_target_pixels(device, frames):
     assert np.all(np.linalg.norm(uv - uv_ball, axis=1) < 0.033 * cam0.K[0, 0] / 0.4 + 2)
     c, v = launch(blank)
     assert np.all(v == 0)
+
+
+@pytest.mark.parametrize("cameras", [3, 1])
+def test_mixture_on_three_cameras_and_one(device, cameras):
+    """Any number of cameras: 3 converge from random initialisation; with 1 the detection proposal puts its
+    components along the camera's rays (no triangulation) and stays finite."""
+    import cv2
+
+    rig = Rig(rig3().cameras[:cameras])
+    rng = np.random.default_rng(2)
+    frames = []
+    for _ in range(6):
+        imgs = []
+        for cam in rig.cameras:
+            img = rng.integers(60, 90, (cam.height, cam.width, 3)).astype(np.uint8)
+            uv, depth = cam.project(BALL[None])
+            r = max(2, int(round(0.033 * cam.K[0, 0] / depth[0])))
+            cv2.circle(img, (int(round(uv[0, 0])), int(round(uv[0, 1]))), r, (180, 60, 230), -1)
+            imgs.append(img)
+        frames.append(imgs)
+    tr = ColorTracker(
+        rig, TARGET, particles=500, sigma=0.02, init="random", init_box=BOX, proposal="mixture", device=device
+    )
+    out = [tr.step(f) for f in frames]
+    assert all(e.detection > 0 and np.all(np.isfinite(e.mean)) for e in out)
+    if cameras == 3:
+        assert np.linalg.norm(out[-1].mean - BALL) < 0.03
+        assert np.all(tr.det_valid.numpy() == 1)
+    else:
+        assert np.all(tr.det_valid.numpy() == 2)
