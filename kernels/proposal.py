@@ -210,13 +210,19 @@ def log_detection_density(
     """log d(x) = log (1/K_valid) sum_k N(x; c_k, sigma_d^2 I) over the valid components (LOG_ZERO if none)."""
     if count == 0:
         return LOG_ZERO
-    acc = float(LOG_ZERO)
     inv = 1.0 / (2.0 * sigma_d * sigma_d)
+    # two passes (max, then sum of exp relative to it): K exp and one log per particle
+    m = float(LOG_ZERO)
     for k in range(centres.shape[0]):
         if valid[k] != 0:
             r = x - centres[k]
-            acc = log_add(acc, -wp.dot(r, r) * inv)
-    return acc - 3.0 * wp.log(sigma_d) - LOG_2PI_3_2 - wp.log(float(count))
+            m = wp.max(m, -wp.dot(r, r) * inv)
+    acc = float(0.0)
+    for k in range(centres.shape[0]):
+        if valid[k] != 0:
+            r = x - centres[k]
+            acc += wp.exp(-wp.dot(r, r) * inv - m)
+    return m + wp.log(acc) - 3.0 * wp.log(sigma_d) - LOG_2PI_3_2 - wp.log(float(count))
 
 
 @wp.func
