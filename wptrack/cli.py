@@ -85,6 +85,8 @@ def _color_config_from_args(args):
         score_mode=args.score_mode,
         seed=args.seed,
         keep_particles=args.keep_particles,
+        proposal=args.proposal,
+        mixture=args.mixture,
     )
 
 
@@ -484,6 +486,13 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--ess-threshold", type=float, default=1.0, help="resample when ESS <= this * N (1 = always)")
     c.add_argument("--score-mode", default="auto", help="auto, direct or integral")
     c.add_argument("--seed", type=int, default=0)
+    c.add_argument(
+        "--proposal",
+        choices=("mixture", "prior"),
+        default="mixture",
+        help="mixture: motion prior + detection proposal from the colour masks (default); prior: the paper's filter",
+    )
+    c.add_argument("--mixture", type=float, default=0.25, help="fraction of particles from the detection proposal")
     c.add_argument("--keep-particles", type=int, default=1000, help="particles per frame saved for reports")
     c.add_argument("--max-frames", type=_positive_int, default=None)
     c.add_argument("--stop-at-shortest", action="store_true", help="track the common part of unequal videos")

@@ -67,6 +67,9 @@ class Estimate:
     """(K,) float32 weights of that subsample relative to the best particle."""
     timings: dict[str, float] = field(default_factory=dict)
     """Seconds spent per stage for this frame (host wall clock; see ParticleFilter.step)."""
+    detection: int = -1
+    """Trackers with a detection-driven proposal: detection components found this frame (0 = no detection);
+    -1 when the tracker has none."""
 
 
 def _seed_words(seed: int) -> wp.vec2ui:

@@ -2,7 +2,7 @@
 
 Outputs::
 
-    out_dir/tracks.csv     frame,id,x,y,z,sx,sy,sz,map_x,map_y,map_z,ess,loglik (metres, world frame)
+    out_dir/tracks.csv     frame,id,x,y,z,sx,sy,sz,map_x,map_y,map_z,ess,loglik,detection (metres, world frame)
     out_dir/particles.npz  a subsample of each frame's weighted particle cloud
     out_dir/run.json       configuration, inputs, device, versions, timings, summary (error vs ground truth)
 """
@@ -20,6 +20,9 @@ from ..errors import ConfigError
 from .loop import TrackerRun, run_tracker
 
 TRACK_COLUMNS = ["frame", "id", "x", "y", "z", "sx", "sy", "sz", "map_x", "map_y", "map_z", "ess", "loglik"]
+COLOR_TRACK_COLUMNS = [*TRACK_COLUMNS, "detection"]
+"""``detection``: 1 when the mixture proposal found target pixels this frame, 0 = no detection (the frame was
+tracked with the motion prior alone), -1 with ``--proposal prior`` (no detector)."""
 
 
 class ColourRun(TrackerRun):
@@ -38,7 +41,7 @@ class ColourRun(TrackerRun):
     """
 
     name = "color"
-    columns = TRACK_COLUMNS
+    columns = COLOR_TRACK_COLUMNS
 
     def __init__(
         self,
@@ -93,7 +96,8 @@ class ColourRun(TrackerRun):
         return self.tracker.step(item)
 
     def record(self, est: Any, out: Any) -> None:
-        out.add_rows([[est.frame, 0, *est.mean, *est.std, *est.map, est.ess, est.loglik]])
+        detection = -1 if est.detection < 0 else int(est.detection > 0)
+        out.add_rows([[est.frame, 0, *est.mean, *est.std, *est.map, est.ess, est.loglik, detection]])
         if est.particles is not None:
             out.add_particles(est.frame, est.particles, est.weights)
         if self._truth is not None and self._k < len(self._truth):

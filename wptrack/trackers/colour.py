@@ -29,6 +29,7 @@ import warp as wp
 from ..device import resolve_device
 from ..errors import ConfigError, FrameError
 from ..kernels import colour as kcolour
+from ..kernels import proposal as kproposal
 from ..kernels import scoring as kscoring
 from ..pf import Estimate, ParticleFilter, check_particles
 from ..resampling import SCHEMES
@@ -38,6 +39,9 @@ from ..warpcams import ColourMaps, DeviceRig
 log = logging.getLogger(__name__)
 
 SCORE_MODES = ("auto", "direct", "integral", "map")
+PROPOSALS = ("prior", "mixture")
+"""``prior``: the paper's filter (particles drawn from the gaussian walk only); ``mixture``: the detection-driven
+mixture proposal of ``wptrack.kernels.proposal`` (converges from anywhere, re-acquires a lost object)."""
 
 
 @dataclass(frozen=True)
@@ -124,6 +128,16 @@ class ColorConfig:
             results.
         seed: seed of the counter-based random streams (same seed + device -> identical output).
         keep_particles: particles per frame copied back for reports (0 = none).
+        proposal: ``prior`` (the paper's filter, bit-identical to earlier versions) or ``mixture``: draw each
+            particle from (1 - mixture) x motion prior + mixture x detection proposal, importance-weighted
+            (``wptrack.kernels.proposal``).
+        mixture: fraction eps of particles drawn from the detection proposal, in [0, 1) (mixture only).
+        reset_rate: probability alpha per frame that the object jumps uniformly into the working volume (the
+            motion model's kidnap term, which makes re-acquisition possible), in [0, 1) (mixture only).
+        detection_sigma: deviation sigma_d of each detection component, metres (mixture only).
+        detection_components: number K of gaussian components of the detection proposal (mixture only).
+        detection_tries: rejection-sampling draws per component and camera to find a target pixel (mixture only).
+        max_gap: largest distance between two back-projected rays accepted as a triangulation, metres.
     """
 
     particles: int = 200
@@ -135,9 +149,30 @@ class ColorConfig:
     score_mode: str = "auto"
     seed: int = 0
     keep_particles: int = 0
+    proposal: str = "prior"
+    mixture: float = 0.25
+    reset_rate: float = 0.05
+    detection_sigma: float = 0.04
+    detection_components: int = 32
+    detection_tries: int = 1024
+    max_gap: float = 0.1
 
     def __post_init__(self) -> None:
         check_particles(self.particles)
+        if self.proposal not in PROPOSALS:
+            raise ConfigError(f"proposal: expected one of {', '.join(PROPOSALS)}, got {self.proposal!r}")
+        for name, lo, hi in (("mixture", 0.0, 1.0), ("reset_rate", 0.0, 1.0)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo <= v < hi):
+                raise ConfigError(f"{name}: expected a fraction in [{lo:g}, {hi:g}), got {v!r}")
+        for name in ("detection_sigma", "max_gap"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+                raise ConfigError(f"{name}: expected a positive length in metres, got {v!r}")
+        for name, hi in (("detection_components", 4096), ("detection_tries", 1 << 20)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not (1 <= v <= hi):
+                raise ConfigError(f"{name}: expected an integer in [1, {hi}], got {v!r}")
         if (
             isinstance(self.sigma, bool)
             or not isinstance(self.sigma, (int, float))
@@ -235,6 +270,13 @@ class ColorTracker(ParticleFilter):
         if config.init is None and config.init_box is None:
             config = replace(config, init_box=tuple(tuple(float(c) for c in v) for v in rig.bounds()))
             self.config = config
+        self.volume = tuple(tuple(float(c) for c in v) for v in (config.init_box or rig.bounds()))
+        k = config.detection_components
+        self.det_centres = wp.zeros(k, dtype=wp.vec3, device=d)
+        self.det_valid = wp.zeros(k, dtype=wp.int32, device=d)
+        self.det_count = wp.zeros(1, dtype=wp.int32, device=d)
+        self.det_count_host = wp.zeros(1, dtype=wp.int32, device="cpu", pinned=self.is_cuda)
+        self.uniform_frame = wp.array([-1], dtype=wp.int32, device=d)
         if config.init is not None:
             self.init_point(config.init)
         else:
@@ -246,6 +288,19 @@ class ColorTracker(ParticleFilter):
             mode,
             self.device,
         )
+
+    def init_box(self, lo, hi) -> None:
+        """Particles uniform in the box [lo, hi] (metres); with the mixture proposal the next frame's prior is this
+        uniform distribution (alpha = 1 for that frame, ``kernels.proposal``)."""
+        super().init_box(lo, hi)
+        if hasattr(self, "uniform_frame"):
+            self.uniform_frame.fill_(self.frames_done)
+
+    def init_point(self, point) -> None:
+        """Put every particle at ``point`` (3,) metres (the paper's initialisation)."""
+        super().init_point(point)
+        if hasattr(self, "uniform_frame"):
+            self.uniform_frame.fill_(-1)
 
     # --- observation --------------------------------------------------------------------------------
     def upload(self, images: Sequence[np.ndarray]) -> None:
@@ -273,7 +328,38 @@ class ColorTracker(ParticleFilter):
 
     def _launch_predict_score(self, src: int, dst: int) -> None:
         observation = [self.drig.cams, self._target, self.bgr, self._integral, self._window, self._mode_id]
-        self._launch_fused(kscoring.colour_predict_score_kernel, observation, src, dst)
+        cfg = self.config
+        if cfg.proposal == "prior":
+            self._launch_fused(kscoring.colour_predict_score_kernel, observation, src, dst)
+            return
+        d = self.device
+        k = cfg.detection_components
+        lo, hi = (np.asarray(v, dtype=np.float64) for v in self.volume)
+        depth_hi = float(np.linalg.norm(hi - lo))
+        wp.launch(
+            kproposal.detection_components_kernel,
+            dim=k,
+            inputs=[self.drig.cams, self._target, self.bgr, self.seed, self.frame, cfg.detection_tries]
+            + [cfg.max_gap, 0.1, depth_hi],
+            outputs=[self.det_centres, self.det_valid],
+            device=d,
+        )
+        wp.launch(kproposal.detection_count_kernel, dim=1, inputs=[self.det_valid], outputs=[self.det_count], device=d)
+        observation += [self.det_centres, self.det_valid, self.det_count, cfg.detection_sigma, cfg.mixture]
+        observation += [cfg.reset_rate, self.uniform_frame, wp.vec3(*lo), wp.vec3(*hi)]
+        self._launch_fused(kproposal.colour_mixture_predict_score_kernel, observation, src, dst)
+
+    def _readback(self) -> None:
+        super()._readback()
+        if self.config.proposal != "prior":
+            wp.copy(self.det_count_host, self.det_count)
+
+    def advance(self) -> Estimate:
+        """One frame on the uploaded images; ``Estimate.detection`` is the number of valid detection components
+        (0 = no target pixel in any camera; the proposal fell back to the prior) or -1 with ``proposal='prior'``."""
+        est = super().advance()
+        est.detection = int(self.det_count_host.numpy()[0]) if self.config.proposal != "prior" else -1
+        return est
 
     # --- public API -----------------------------------------------------------------------------------
     def step(self, images: Sequence[np.ndarray]) -> Estimate:
