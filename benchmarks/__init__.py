@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from .colour import ColourSuite
 from .endtoend import EndToEndSuite
+from .masks import MasksSuite
 from .templates import TemplateSuite
 
 SUITES = {ColourSuite.name: ColourSuite, EndToEndSuite.name: EndToEndSuite, TemplateSuite.name: TemplateSuite}
+SUITES[MasksSuite.name] = MasksSuite
