@@ -37,7 +37,16 @@ from .errors import ConfigError, FrameError
 from .frames import FrameSource, open_source, prefetch
 from .rig import Camera
 
-__all__ = ["DEFAULT_METHOD", "METHODS", "SHADOW_VALUE", "MaskConfig", "MotionMasks", "clean_mask", "open_masks"]
+__all__ = [
+    "DEFAULT_METHOD",
+    "METHODS",
+    "SHADOW_VALUE",
+    "MaskConfig",
+    "MotionMasks",
+    "clean_mask",
+    "open_masks",
+    "write_masks",
+]
 
 #: Mask methods: offline background model, OpenCV (online) background subtractors, or masks given as files/arrays.
 METHODS = ("offline", "mog2", "knn", "given")
@@ -369,10 +378,92 @@ def open_masks(
     if (video is None) == (masks is None):
         raise ConfigError("give exactly one of video (camera frames) or masks (given motion masks)")
     if video is not None and config.method == "given":
-        raise ConfigError("MaskConfig.method 'given' expects masks=..., not video=... (or use 'offline', 'mog2' or 'knn')")
+        raise ConfigError(
+            "MaskConfig.method 'given' expects masks=..., not video=... (or use 'offline', 'mog2' or 'knn')"
+        )
     if masks is not None and config.method != "given":
         config = dataclasses.replace(config, method="given")
     spec = video if video is not None else masks
     assert spec is not None
     source = open_source(spec, name=name)
     return MotionMasks(source, config=config, camera=camera, rig_source=rig_source)
+
+
+def write_masks(
+    video: str | os.PathLike | np.ndarray,
+    out_dir: str | os.PathLike,
+    config: MaskConfig = MaskConfig(),
+    probability: bool = False,
+    max_frames: int | None = None,
+) -> dict[str, Any]:
+    """Make a video's motion masks and write them (``wptrack masks``).
+
+    Outputs in ``out_dir``: ``masks.avi`` (masks as 0/255 grey frames, lossless FFV1 where OpenCV has it),
+    ``probability.avi`` (with ``probability``: the foreground probability times 255), ``background.png`` (offline
+    method: the first window's background) and ``masks.json`` (inputs, config, frame count, codec, timing). Videos
+    are written atomically: an error leaves no half-written video.
+
+    Args:
+        video: Camera frames (any :func:`wptrack.frames.open_source` spec).
+        out_dir: Output folder (created).
+        config: Mask settings (``method`` ``"given"`` is refused: there is nothing to make).
+        probability: Also write ``probability.avi``.
+        max_frames: Stop after this many frames (``None``: all).
+
+    Returns:
+        The summary written to ``masks.json``.
+
+    Raises:
+        ConfigError: ``method="given"``.
+        FrameError: The video cannot be read.
+        OutputError: ``out_dir`` or a file in it cannot be written.
+    """
+    import time
+
+    from .frames import VideoWriter
+    from .io import atomic_write_bytes, atomic_write_json, ensure_writable_dir
+
+    masks = open_masks(video=video, config=config)
+    out = ensure_writable_dir(out_dir)
+    fps = masks.source.fps or 25.0
+    t0 = time.perf_counter()
+    frames = 0
+    with VideoWriter(out / "masks.avi", fps=fps, size=masks.size) as mw:
+        pw = VideoWriter(out / "probability.avi", fps=fps, size=masks.size) if probability else None
+        try:
+            for mask, prob in masks.evidence():
+                if max_frames is not None and frames >= max_frames:
+                    break
+                mw.write(mask * np.uint8(255))
+                if pw is not None:
+                    pw.write(np.round(prob * 255.0).astype(np.uint8))
+                frames += 1
+        except BaseException:
+            if pw is not None:
+                pw.abort()
+            raise
+        if pw is not None:
+            pw.close()
+    elapsed = time.perf_counter() - t0
+    summary: dict[str, Any] = {
+        "video": video if not isinstance(video, np.ndarray) else "array",
+        "frames": frames,
+        "size": list(masks.size),
+        "fps": fps,
+        "codec": mw.codec,
+        "seconds": elapsed,
+        "config": dataclasses.asdict(config),
+        "outputs": ["masks.avi"] + (["probability.avi"] if probability else []),
+    }
+    background = masks.background()
+    if background is not None:
+        import cv2
+
+        ok, png = cv2.imencode(".png", background)
+        if ok:
+            atomic_write_bytes(out / "background.png", png.tobytes())
+            summary["outputs"].append("background.png")
+        summary["windows"] = [list(w.samples) for w in masks.model.windows]
+    summary["outputs"].append("masks.json")
+    atomic_write_json(out / "masks.json", summary)
+    return summary
