@@ -5,7 +5,8 @@ estimated from frames before *and after* it: an object standing still at the sta
 as long as it stands still, and leaves no ghost once it moves (an online model such as MOG2 has learnt it into
 the background by then, and marks the uncovered road as foreground for a while). The condition: a pixel's
 background is what it shows in most of its window's samples, so an object is left out of it when it stands on
-that pixel for less than about half of the window (choose ``window`` longer than twice the longest stand that must stay foreground).
+that pixel for less than about half of the window (choose ``window`` longer than twice the longest stand that
+must stay foreground).
 
 Design (kernels and formulas: :mod:`wptrack.kernels.background`):
 
