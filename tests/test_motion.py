@@ -37,6 +37,9 @@ def test_median_mad_kernel_matches_numpy(device, rng, k):
     stack = rng.integers(0, 256, (k, 3 * 500), dtype=np.uint8)
     stack[:, :30] = stack[0, :30]  # ties: constant columns
     stack[:, 30:60] = rng.choice([0, 255], (k, 30)).astype(np.uint8)  # extremes
+    stack[:, 60:300] = rng.integers(100, 121, (k, 240))  # narrow ranges (the selection skips common high bits)
+    stack[:, 300:400] = rng.integers(250, 256, (k, 100))
+    stack[:, 400:500] = rng.integers(0, 4, (k, 100))
     median = wp.zeros(stack.shape[1], dtype=wp.uint8, device=device)
     mad = wp.zeros(stack.shape[1], dtype=wp.uint8, device=device)
     wp.launch(
