@@ -264,3 +264,17 @@ def test_cli_masks_bad_input(tmp_path, rng, capsys, argv, message):
     err = capsys.readouterr().err
     assert code == 2 and err.startswith("wptrack: error: ") and message in err and err.count("\n") == 1
     assert not (out / "masks.avi").exists()
+
+
+def test_sampler_seeks_read_the_sampled_frames(tmp_path, rng):
+    frames = 64
+    video = _noisy(rng, _texture(rng), frames, noise=20.0)  # every frame differs
+    path = tmp_path / "v.avi"
+    write_video(path, video)
+    decoded = np.stack(list(open_source(path)))
+    config = MaskConfig(window=frames, samples=5, device="cpu")  # samples 12.8 frames apart: seeks
+    masks = open_masks(video=path, config=config)
+    samples = masks.model.windows[0].samples
+    assert min(np.diff(samples)) >= 8
+    expected, _ = numpy_masks.median_mad(decoded[list(samples)])
+    np.testing.assert_array_equal(masks.background(), expected)
