@@ -143,8 +143,11 @@ def foreground_kernel(
     ii = float(0.0)
     for c in range(3):
         j = 3 * p + c
-        b = (1.0 - w) * float(bg0[j]) + w * float(bg1[j])
-        m = (1.0 - w) * float(mad0[j]) + w * float(mad1[j])
+        b = float(bg0[j])
+        m = float(mad0[j])
+        if w > 0.0:  # between two windows (w = 0: one window, half the reads)
+            b = (1.0 - w) * b + w * float(bg1[j])
+            m = (1.0 - w) * m + w * float(mad1[j])
         x = float(frame[j])
         dd += (x - b) * (x - b)
         mm += m * m
