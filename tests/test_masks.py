@@ -104,9 +104,9 @@ def test_opening_removes_isolated_pixels(rng):
     dots = np.zeros((H, W), bool)
     dots[5::10, 5::10] = True
     video[-1][dots] = 255
-    raw = list(open_masks(video=video, config=MaskConfig(open_px=0, close_px=0)))[-1]
+    raw = list(open_masks(video=video, config=MaskConfig(method="mog2", open_px=0, close_px=0)))[-1]
     assert raw[dots].mean() > 0.9
-    opened = list(open_masks(video=video, config=MaskConfig(open_px=3, close_px=5)))[-1]
+    opened = list(open_masks(video=video, config=MaskConfig(method="mog2", open_px=3, close_px=5)))[-1]
     assert not opened.any()
 
 
@@ -114,10 +114,10 @@ def test_min_area_removes_small_blobs(rng):
     video, _ = _static(rng, WARM + 1)
     video[-1, 10:13, 10:13] = 255  # 9 px
     video[-1, 40:52, 60:72] = 255  # 144 px
-    config = MaskConfig(open_px=0, close_px=0)
+    config = MaskConfig(method="mog2", open_px=0, close_px=0)
     kept = list(open_masks(video=video, config=config))[-1]
     assert kept[10:13, 10:13].all() and kept[40:52, 60:72].all()
-    filtered = list(open_masks(video=video, config=MaskConfig(open_px=0, close_px=0, min_area=20)))[-1]
+    filtered = list(open_masks(video=video, config=MaskConfig(method="mog2", open_px=0, close_px=0, min_area=20)))[-1]
     assert not filtered[10:13, 10:13].any()
     assert filtered[40:52, 60:72].all()
     assert filtered.sum() == 144
@@ -289,7 +289,8 @@ def test_bad_config_names_field(kwargs, field):
 
 def test_config_defaults_and_edge_values():
     c = MaskConfig()
-    assert (c.method, c.history, c.var_threshold, c.dist2_threshold, c.detect_shadows) == ("mog2", 200, 16, 400, True)
+    assert (c.method, c.history, c.var_threshold, c.dist2_threshold) == ("offline", 200, 16, 400)
+    assert c.detect_shadows is True
     assert (c.learning_rate, c.open_px, c.close_px, c.min_area, c.threshold) == (-1, 3, 5, 0, 127)
     MaskConfig(learning_rate=0.0, open_px=0, close_px=0, threshold=0)
     MaskConfig(learning_rate=1, threshold=254)

@@ -162,6 +162,7 @@ def _mask_config_from_args(args):
         open_px=args.open_px,
         close_px=args.close_px,
         min_area=args.min_area,
+        device=args.device,
     )
 
 
@@ -384,6 +385,23 @@ def cmd_convergence(args) -> int:
     return 0
 
 
+# --- masks ---------------------------------------------------------------------------------------------------
+def cmd_masks(args) -> int:
+    from .masks import MaskConfig, write_masks
+
+    kw = {"method": args.method, "device": args.device, "detect_shadows": not args.keep_shadows}
+    for name in ("window", "samples", "fg_threshold", "noise_floor", "shadow_lo", "shadow_hi", "shadow_chroma",
+                 "soft_scale", "history", "open_px", "close_px", "min_area"):  # fmt: skip
+        if getattr(args, name) is not None:
+            kw[name] = getattr(args, name)
+    summary = write_masks(
+        args.video, args.out, MaskConfig(**kw), probability=args.probability, max_frames=args.max_frames
+    )
+    print(f"{summary['frames']} masks ({args.method}) in {summary['seconds']:.1f} s: " + ", ".join(
+        f"{args.out}/{name}" for name in summary["outputs"]))  # fmt: skip
+    return 0
+
+
 # --- bench ---------------------------------------------------------------------------------------------------
 def cmd_bench(args) -> int:
     from .bench import HEADER, format_row, load_suite
@@ -527,7 +545,12 @@ def build_parser() -> argparse.ArgumentParser:
     tt.add_argument("--min-existence", type=float, default=None, help="report objects above this (default 0.5)")
     tt.add_argument("--candidate-step-px", type=int, default=None, help="addition grid pitch, pixels (default 8)")
     tt.add_argument("--resampling", default="systematic", help="systematic, stratified, multinomial or residual")
-    tt.add_argument("--mask-method", default="mog2", choices=["mog2", "knn"], help="background subtraction")
+    tt.add_argument(
+        "--mask-method",
+        default="offline",
+        choices=["offline", "mog2", "knn"],
+        help="background model: offline (whole-recording median, default), mog2 or knn (online)",
+    )
     tt.add_argument("--mask-history", type=_positive_int, default=200, help="background model history, frames")
     tt.add_argument("--mask-threshold", type=float, default=None, help="MOG2 varThreshold / KNN dist2Threshold")
     tt.add_argument("--keep-shadows", action="store_true", help="count shadow pixels as foreground")
@@ -565,7 +588,9 @@ def build_parser() -> argparse.ArgumentParser:
     tp.add_argument("--r-n", type=float, default=None, help="descriptor neighbourhood radius r_N, metres (0.1)")
     tp.add_argument("--bins", type=int, default=None, help="histogram bins N_b (default 8)")
     tp.add_argument("--occupancy-every", type=int, default=10, help="occupancy grids every N frames (0: none)")
-    tp.add_argument("--mask-method", default="mog2", choices=["mog2", "knn"], help="background subtraction")
+    tp.add_argument(
+        "--mask-method", default="offline", choices=["offline", "mog2", "knn"], help="motion masks (default: offline)"
+    )
     tp.add_argument("--mask-history", type=_positive_int, default=200, help="background model history, frames")
     tp.add_argument("--mask-threshold", type=float, default=None, help="MOG2 varThreshold / KNN dist2Threshold")
     tp.add_argument("--keep-shadows", action="store_true", help="count shadow pixels as foreground")
@@ -624,6 +649,32 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-movie", action="store_true", help="skip the movie")
     r.add_argument("--groundtruth", default=None, help="groundtruth.csv drawn beside the tracks (template runs)")
     r.set_defaults(func=cmd_report)
+
+    mk = sub.add_parser(
+        "masks",
+        parents=[common],
+        help="motion masks of a video (offline background model, MOG2 or KNN) written as a video",
+    )
+    mk.add_argument("--video", required=True, help="the camera's video or image folder")
+    mk.add_argument("--out", required=True, help="output folder (masks.avi, background.png, masks.json)")
+    mk.add_argument("--method", default="offline", choices=["offline", "mog2", "knn"], help="default: offline")
+    mk.add_argument("--window", type=int, default=None, help="offline: background window, frames (default 300)")
+    mk.add_argument("--samples", type=int, default=None, help="offline: frames sampled per window (default 25)")
+    mk.add_argument("--threshold", dest="fg_threshold", type=float, default=None, help="offline: robust sigmas (4)")
+    mk.add_argument("--noise-floor", type=float, default=None, help="offline: noise floor, 8-bit units (4)")
+    mk.add_argument("--shadow-lo", type=float, default=None, help="offline: shadow brightness ratio min (0.4)")
+    mk.add_argument("--shadow-hi", type=float, default=None, help="offline: shadow brightness ratio max (0.95)")
+    mk.add_argument("--shadow-chroma", type=float, default=None, help="offline: shadow chromaticity bound (0.1)")
+    mk.add_argument("--soft-scale", type=float, default=None, help="offline: probability scale, sigmas (1)")
+    mk.add_argument("--history", type=int, default=None, help="mog2/knn: history, frames (200)")
+    mk.add_argument("--keep-shadows", action="store_true", help="count shadow pixels as foreground")
+    mk.add_argument("--open-px", type=int, default=None, help="morphological opening, pixels (3; 0: off)")
+    mk.add_argument("--close-px", type=int, default=None, help="morphological closing, pixels (5; 0: off)")
+    mk.add_argument("--min-area", type=int, default=None, help="drop foreground blobs smaller than this, pixels")
+    mk.add_argument("--probability", action="store_true", help="also write probability.avi (P x 255)")
+    mk.add_argument("--max-frames", type=_positive_int, default=None)
+    _add_device(mk)
+    mk.set_defaults(func=cmd_masks)
 
     b = sub.add_parser("bench", parents=[common], help="benchmark suites: stage times, NumPy baseline, equivalence")
     b.add_argument("--tracker", default="color", help="suite name (default: color)")

@@ -20,6 +20,7 @@ SUITES: dict[str, str] = {
     "color": "wptrack.bench.colour:ColourSuite",
     "color-e2e": "wptrack.bench.endtoend:EndToEndSuite",
     "templates": "wptrack.bench.templates:TemplateSuite",
+    "masks": "wptrack.bench.masks:MasksSuite",
 }
 """Suite name (``wptrack bench --tracker NAME``) -> ``"module:Class"`` of its suite class."""
 

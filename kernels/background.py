@@ -1,0 +1,174 @@
+"""Offline background model: per-pixel temporal median and MAD over sampled frames, and per-frame foreground.
+
+Frames are flat ``uint8`` buffers of interleaved BGR pixels (``3 * H * W`` bytes, channel ``c`` of pixel ``p`` at
+``3 p + c``). A background window holds ``K`` sampled frames as a ``(K, 3 H W)`` ``uint8`` array.
+
+Background statistics (:func:`median_mad_kernel`, one thread per channel value): the lower median
+``B = x_(m)``, ``m = (K - 1) // 2`` (0-based order statistic) and the median absolute deviation
+``MAD = median_k |x_k - B|`` (same order statistic). Both are found by bitwise selection on the 8-bit values:
+the answer is built from the most significant bit down, each of the 8 steps counting the ``K`` values below a
+candidate, so the cost is at most ``8 K`` compares per selection (fewer: bits common to the smallest and largest
+value are skipped), on a per-thread copy of the ``K`` values, with no histogram (a 256-bin histogram per thread
+does not fit GPU registers) and no sort (an insertion sort costs ``K^2 / 4`` compares, more from K ~ 32).
+
+Per frame (:func:`foreground_kernel`, one thread per pixel), with the background ``B`` and the per-channel MADs
+linearly interpolated between the two nearest windows (weight ``w`` of the second):
+
+* noise scale ``s = sqrt(s0^2 + (1.4826^2 / 3) sum_c MAD_c^2)`` (8-bit units; ``1.4826 MAD`` estimates a gaussian
+  standard deviation, ``s0`` is the noise floor),
+* robust distance ``z = sqrt(sum_c (I_c - B_c)^2 / 3) / s`` (RMS colour difference in robust standard deviations),
+* shadow test (cast shadows keep the background's chromaticity and darken it by a bounded ratio): brightness
+  ratio ``a = (I . B) / (B . B)`` (Horprasert et al.'s brightness distortion) and chromaticity distortion
+  ``cd = |I - a B| / |B|``; a pixel is shadow when ``lo <= a <= hi`` and ``cd <= chroma_max`` (only where
+  ``|B| >= 1``, and only when the test is enabled),
+* soft foreground probability ``P = 1 / (1 + exp(-(z - T) / k))`` (``T`` the threshold, ``k`` the soft scale, both
+  in robust standard deviations); shadow pixels get ``P = 0``,
+* binary mask ``M = 1`` iff ``z > T`` and not shadow (equivalently ``P > 1/2``).
+"""
+
+import warp as wp
+
+wp.set_module_options({"enable_backward": False})
+
+#: Most frames one background window may sample (the selection loops are unbounded, this bounds the cost).
+MAX_SAMPLES = wp.constant(64)
+
+#: 1 / Phi^-1(3/4): MAD -> standard deviation of a gaussian.
+MAD_TO_SIGMA = wp.constant(1.4826)
+
+
+#: Per-thread copy of one channel value's K samples (read once from the strided stack, then scanned 16 times).
+samples_vec = wp.types.vector(length=MAX_SAMPLES, dtype=wp.int32)
+
+
+@wp.func
+def select_rank(values: samples_vec, count: int, rank: int, lo: int, hi: int):
+    """The ``rank``-th smallest (0-based) of ``values[:count]``, all in ``[lo, hi]`` (within 0..255).
+
+    Bitwise selection from the most significant bit down, one counting pass per bit; the bits above the highest
+    bit where ``lo`` and ``hi`` differ are common to all values and skipped (noisy backgrounds span a few tens of
+    levels: about 5 passes instead of 8).
+    """
+    spread = lo ^ hi
+    bits = int(0)
+    while spread > 0:
+        spread = spread >> 1
+        bits += 1
+    answer = lo & ~((1 << bits) - 1)
+    for step in range(bits):
+        candidate = answer | (1 << (bits - 1 - step))
+        below = int(0)  # values < candidate
+        for k in range(count):
+            if values[k] < candidate:
+                below += 1
+        if below <= rank:  # the rank-th value is >= candidate: set the bit
+            answer = candidate
+    return answer
+
+
+@wp.kernel
+def median_mad_kernel(
+    stack: wp.array2d(dtype=wp.uint8),
+    median: wp.array(dtype=wp.uint8),
+    mad: wp.array(dtype=wp.uint8),
+):
+    """Per channel value ``j``: lower median of ``stack[:, j]`` and its MAD (lower median of absolute deviations).
+
+    Args:
+        stack: ``(K, 3 H W)`` sampled frames, ``1 <= K <= MAX_SAMPLES``.
+        median: ``(3 H W,)`` output background.
+        mad: ``(3 H W,)`` output median absolute deviation (8-bit units).
+    """
+    j = wp.tid()
+    count = wp.min(stack.shape[0], MAX_SAMPLES)
+    rank = (count - 1) // 2
+    values = samples_vec()
+    lo = int(255)
+    hi = int(0)
+    for k in range(count):
+        v = int(stack[k, j])
+        values[k] = v
+        lo = wp.min(lo, v)
+        hi = wp.max(hi, v)
+    b = select_rank(values, count, rank, lo, hi)
+    hi = wp.max(hi - b, b - lo)  # the deviations lie in [0, max deviation]
+    for k in range(count):
+        values[k] = wp.abs(values[k] - b)
+    median[j] = wp.uint8(b)
+    mad[j] = wp.uint8(select_rank(values, count, rank, 0, hi))
+
+
+@wp.struct
+class ForegroundParams:
+    """Per-frame test parameters (units: robust standard deviations unless stated)."""
+
+    threshold: float  # T: foreground when z > T
+    soft_scale: float  # k of the logistic P = 1 / (1 + exp(-(z - T) / k))
+    noise_floor: float  # s0, 8-bit units
+    shadow: int  # 1: shadow test on
+    shadow_lo: float  # brightness ratio bounds (dimensionless)
+    shadow_hi: float
+    chroma_max: float  # chromaticity distortion bound (dimensionless, |I - a B| / |B|)
+
+
+@wp.kernel
+def foreground_kernel(
+    frame: wp.array(dtype=wp.uint8),
+    bg0: wp.array(dtype=wp.uint8),
+    mad0: wp.array(dtype=wp.uint8),
+    bg1: wp.array(dtype=wp.uint8),
+    mad1: wp.array(dtype=wp.uint8),
+    w: float,
+    params: ForegroundParams,
+    mask: wp.array(dtype=wp.uint8),
+    prob: wp.array(dtype=wp.float32),
+    shadow: wp.array(dtype=wp.uint8),
+):
+    """Foreground mask, probability and shadow flag of one frame (see the module docstring for the formulas).
+
+    Args:
+        frame: ``(3 H W,)`` BGR frame.
+        bg0, mad0: ``(3 H W,)`` background and MAD of the earlier window; ``bg1``, ``mad1`` of the later one.
+        w: Interpolation weight of the later window in ``[0, 1]``.
+        params: Thresholds.
+        mask: ``(H W,)`` output, 1 = foreground.
+        prob: ``(H W,)`` output foreground probability in ``[0, 1]``.
+        shadow: ``(H W,)`` output, 1 = cast shadow (counted as background).
+    """
+    p = wp.tid()
+    dd = float(0.0)
+    mm = float(0.0)
+    ib = float(0.0)
+    bb = float(0.0)
+    ii = float(0.0)
+    for c in range(3):
+        j = 3 * p + c
+        b = float(bg0[j])
+        m = float(mad0[j])
+        if w > 0.0:  # between two windows (w = 0: one window, half the reads)
+            b = (1.0 - w) * b + w * float(bg1[j])
+            m = (1.0 - w) * m + w * float(mad1[j])
+        x = float(frame[j])
+        dd += (x - b) * (x - b)
+        mm += m * m
+        ib += x * b
+        bb += b * b
+        ii += x * x
+    s = wp.sqrt(params.noise_floor * params.noise_floor + MAD_TO_SIGMA * MAD_TO_SIGMA * mm / 3.0)
+    z = wp.sqrt(dd / 3.0) / s
+    is_shadow = int(0)
+    if params.shadow != 0 and bb >= 1.0 and z > params.threshold:
+        a = ib / bb
+        # |I - a B|^2 = I.I - 2 a I.B + a^2 B.B = I.I - a I.B  (a = I.B / B.B)
+        cd = wp.sqrt(wp.max(ii - a * ib, 0.0) / bb)
+        if a >= params.shadow_lo and a <= params.shadow_hi and cd <= params.chroma_max:
+            is_shadow = 1
+    fg = int(0)
+    pr = float(0.0)
+    if is_shadow == 0:
+        pr = 1.0 / (1.0 + wp.exp(-(z - params.threshold) / params.soft_scale))
+        if z > params.threshold:
+            fg = 1
+    mask[p] = wp.uint8(fg)
+    prob[p] = pr
+    shadow[p] = wp.uint8(is_shadow)

@@ -1,0 +1,280 @@
+"""Offline background model (wptrack.background, wptrack.kernels.background, MaskConfig(method="offline")):
+kernels vs the NumPy reference on every device, no ghost of an object that stands still at the start (where MOG2
+leaves one), cast shadows vs dark objects, short recordings, bad input, and ``wptrack masks``."""
+
+from __future__ import annotations
+
+import json
+import logging
+
+import cv2
+import numpy as np
+import pytest
+import warp as wp
+from benchmarks import numpy_masks
+from wptrack.kernels import background as kbg
+
+from wptrack.background import bracket, plan_windows
+from wptrack.cli import main
+from wptrack.errors import ConfigError, FrameError
+from wptrack.frames import open_source, write_video
+from wptrack.masks import MaskConfig, open_masks
+
+H, W = 72, 96
+
+
+def _texture(rng: np.random.Generator, lo: float = 60, hi: float = 200) -> np.ndarray:
+    base = rng.uniform(lo, hi, size=(H // 8, W // 8, 3)).astype(np.float32)
+    return cv2.resize(base, (W, H), interpolation=cv2.INTER_LINEAR)
+
+
+def _noisy(rng: np.random.Generator, bg: np.ndarray, frames: int, noise: float = 3.0) -> np.ndarray:
+    return np.clip(bg + rng.normal(0.0, noise, size=(frames, *bg.shape)), 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("k", [1, 2, 7, 25, 64])
+def test_median_mad_kernel_matches_numpy(device, rng, k):
+    stack = rng.integers(0, 256, (k, 3 * 500), dtype=np.uint8)
+    stack[:, :30] = stack[0, :30]  # ties: constant columns
+    stack[:, 30:60] = rng.choice([0, 255], (k, 30)).astype(np.uint8)  # extremes
+    stack[:, 60:300] = rng.integers(100, 121, (k, 240))  # narrow ranges (the selection skips common high bits)
+    stack[:, 300:400] = rng.integers(250, 256, (k, 100))
+    stack[:, 400:500] = rng.integers(0, 4, (k, 100))
+    median = wp.zeros(stack.shape[1], dtype=wp.uint8, device=device)
+    mad = wp.zeros(stack.shape[1], dtype=wp.uint8, device=device)
+    wp.launch(
+        kbg.median_mad_kernel,
+        dim=stack.shape[1],
+        inputs=[wp.array(stack, dtype=wp.uint8, device=device)],
+        outputs=[median, mad],
+        device=device,
+    )
+    ref_median, ref_mad = numpy_masks.median_mad(stack)
+    np.testing.assert_array_equal(median.numpy(), ref_median)
+    np.testing.assert_array_equal(mad.numpy(), ref_mad)
+    if k % 2:  # odd K: the lower median is np.median
+        np.testing.assert_array_equal(ref_median, np.median(stack, axis=0).astype(np.uint8))
+
+
+@pytest.mark.parametrize("shadow", [True, False])
+def test_foreground_kernel_matches_numpy(device, rng, shadow):
+    n = 4000
+    bg0 = rng.integers(0, 256, (n, 3), dtype=np.uint8)
+    bg1 = np.clip(bg0.astype(int) + rng.integers(-20, 21, (n, 3)), 0, 255).astype(np.uint8)
+    mad0 = rng.integers(0, 12, (n, 3), dtype=np.uint8)
+    mad1 = rng.integers(0, 12, (n, 3), dtype=np.uint8)
+    frame = rng.integers(0, 256, (n, 3), dtype=np.uint8)
+    frame[: n // 4] = np.clip(bg0[: n // 4] * rng.uniform(0.3, 1.0, (n // 4, 1)), 0, 255).astype(np.uint8)  # shadows
+    frame[n // 4 : n // 2] = bg0[n // 4 : n // 2]  # background
+    frame[0] = 0
+    bg0[1] = bg1[1] = 0  # black background: no shadow test
+    w = 0.3
+    p = kbg.ForegroundParams()
+    p.threshold, p.soft_scale, p.noise_floor, p.shadow = 4.0, 1.5, 3.0, int(shadow)
+    p.shadow_lo, p.shadow_hi, p.chroma_max = 0.4, 0.95, 0.1
+    dev = [wp.array(a.reshape(-1), dtype=wp.uint8, device=device) for a in (frame, bg0, mad0, bg1, mad1)]
+    mask = wp.zeros(n, dtype=wp.uint8, device=device)
+    prob = wp.zeros(n, dtype=wp.float32, device=device)
+    shad = wp.zeros(n, dtype=wp.uint8, device=device)
+    wp.launch(kbg.foreground_kernel, dim=n, inputs=[*dev, w, p], outputs=[mask, prob, shad], device=device)
+    ref = numpy_masks.foreground(frame, bg0, mad0, bg1, mad1, w, 4.0, 1.5, 3.0, shadow, 0.4, 0.95, 0.1)
+    near = (
+        (np.abs(ref["z"] - 4.0) < 1e-4)
+        | (np.abs(ref["a"] - 0.4) < 1e-5)
+        | (np.abs(ref["a"] - 0.95) < 1e-5)
+        | (np.abs(ref["cd"] - 0.1) < 1e-5)
+    )
+    assert near.sum() < 5
+    ok = ~near
+    np.testing.assert_array_equal(mask.numpy()[ok], ref["mask"][ok])
+    np.testing.assert_array_equal(shad.numpy()[ok].astype(bool), ref["shadow"][ok])
+    np.testing.assert_allclose(prob.numpy()[ok], ref["prob"][ok], atol=1e-5)
+    assert ref["mask"].sum() > n // 10 and (ref["shadow"].sum() > n // 20) == shadow  # the test sees all cases
+    assert not ref["mask"][n // 4 : n // 2].any()
+
+
+def test_plan_windows_and_bracket(caplog):
+    windows = plan_windows(1000, 300, 25)
+    assert windows[0].samples[0] < 12 and windows[-1].samples[-1] >= 988
+    assert all(len(w.samples) == 25 for w in windows)
+    starts = [w.samples[0] for w in windows]
+    assert len(windows) == 6 and max(np.diff(starts)) <= 150  # half overlap
+    centres = [w.centre for w in windows]
+    assert bracket(centres, 0) == (0, 0, 0.0) and bracket(centres, 999) == (5, 5, 0.0)
+    i, j, w = bracket(centres, int(np.ceil(centres[2])))
+    assert (i, j) == (2, 3) and 0 <= w < 1
+    with caplog.at_level(logging.WARNING):
+        short = plan_windows(10, 300, 25, name="clip.avi")
+    assert len(short) == 1 and short[0].samples == tuple(range(10))
+    assert "clip.avi: 10 frames, shorter than the background window" in caplog.text
+
+
+def _stand_then_move(rng: np.random.Generator, frames: int = 60, still: int = 20):
+    """A green box standing at x = 10..22 for ``still`` frames, then moving right 3 px per frame."""
+    video = _noisy(rng, _texture(rng), frames)
+    for t in range(frames):
+        x = 10 + 3 * max(t - still, 0)
+        video[t, 26:46, x : x + 12] = (40, 200, 40)
+    return video
+
+
+def test_offline_leaves_no_ghost_where_mog2_does(rng):
+    still, frames = 40, 100  # the box stands for 40 % of the window: the median sees the road there
+    video = _stand_then_move(rng, frames=frames, still=still)
+    start = np.zeros((H, W), bool)
+    start[26:46, 10:22] = True  # where the box stood, all uncovered from frame still + 4 on
+    offline = np.stack(list(open_masks(video=video, config=MaskConfig(window=frames, device="cpu"))))
+    mog2 = np.stack(list(open_masks(video=video, config=MaskConfig(method="mog2"))))
+    assert offline[still + 4 :][:, start].mean() < 0.01  # no ghost
+    assert mog2[still + 4 : still + 10][:, start].mean() > 0.5  # MOG2 learnt the standing box: a ghost
+    for t in range(still + 4, still + 20):  # the moving box itself is found by both
+        x = 10 + 3 * (t - still)
+        assert offline[t, 28:44, x + 2 : x + 10].mean() > 0.95
+        assert mog2[t, 28:44, x + 2 : x + 10].mean() > 0.95
+    # the standing box is foreground from frame 0 on (the online model cannot know it yet)
+    assert offline[:still][:, start].mean() > 0.95
+    assert mog2[1:still][:, start].mean() < 0.05
+
+
+def test_shadow_is_background_dark_object_is_not(rng):
+    grey = np.full((H, W, 3), 130.0, np.float32)
+    frames = 30
+    video = _noisy(rng, grey, frames, noise=2.0)
+    t = frames - 1
+    last = grey.copy()
+    last[10:40, 10:40] *= 0.6  # cast shadow: same chromaticity, darkened by 0.6
+    last[10:40, 56:86] = (40, 55, 100)  # dark red car: brightness ratio ~0.5, different chromaticity
+    video[t] = np.clip(last + rng.normal(0, 2.0, last.shape), 0, 255).astype(np.uint8)
+    config = MaskConfig(window=frames, device="cpu", open_px=0, close_px=0)
+    masks = open_masks(video=video, config=config)
+    mask, prob = list(masks.evidence())[t]
+    assert mask[12:38, 12:38].mean() < 0.01 and prob[12:38, 12:38].max() == 0.0
+    assert mask[12:38, 58:84].mean() > 0.99 and prob[12:38, 58:84].min() > 0.99
+    assert mask[50:, :].sum() == 0 and prob[50:, :].max() < 0.5
+    no_shadows = list(open_masks(video=video, config=MaskConfig(window=frames, device="cpu", detect_shadows=False)))
+    assert no_shadows[t][12:38, 12:38].mean() > 0.99  # the test is what removes the shadow
+
+
+def test_empty_scene_and_background(rng):
+    bg = _texture(rng)
+    video = _noisy(rng, bg, 12)
+    masks = open_masks(video=video, config=MaskConfig(window=12, device="cpu"))
+    out = list(masks.evidence())
+    assert all(m.sum() == 0 for m, _ in out) and max(float(p.max()) for _, p in out) < 0.5
+    assert np.abs(masks.background().astype(float) - bg).mean() < 2.0
+    assert masks.background().shape == (H, W, 3)
+    assert open_masks(video=video, config=MaskConfig(method="mog2")).background() is None
+
+
+def test_short_recording_falls_back_with_warning(rng, caplog):
+    video = _stand_then_move(rng, frames=6, still=0)
+    with caplog.at_level(logging.WARNING):
+        out = list(open_masks(video=video, config=MaskConfig(device="cpu")))  # default window: 300 frames
+    assert len(out) == 6 and "shorter than the background window of 300 frames" in caplog.text
+    assert out[5][28:44, 27:35].mean() > 0.9
+    with caplog.at_level(logging.WARNING):
+        one = list(open_masks(video=video[:1], config=MaskConfig(device="cpu")))
+    assert len(one) == 1 and one[0].sum() == 0 and "background from 1 frame(s)" in caplog.text
+
+
+def test_windows_follow_illumination_drift(rng):
+    bg = _texture(rng)
+    frames = 120
+    gain = np.linspace(0.7, 1.3, frames)[:, None, None, None]  # 60 % brighter over the recording
+    video = np.clip(bg * gain + rng.normal(0, 2.0, (frames, H, W, 3)), 0, 255).astype(np.uint8)
+    t = 60
+    video[t, 20:40, 30:50] = np.clip(video[t, 20:40, 30:50] + np.array([40, -40, 40]), 0, 255)  # a faint object
+    drift = np.stack(list(open_masks(video=video, config=MaskConfig(window=20, samples=9, device="cpu"))))
+    single = np.stack(list(open_masks(video=video, config=MaskConfig(window=frames, device="cpu"))))
+    assert np.delete(drift, t, axis=0).mean() < 0.001  # the drift is followed: no false foreground
+    assert drift[t, 20:40, 30:50].mean() > 0.95
+    assert single[t, 20:40, 30:50].mean() < 0.2  # one window: the drift inflates the MAD and hides the object
+
+
+def test_video_file_offline_default_matches_array(tmp_path, rng):
+    video = _stand_then_move(rng, frames=40)
+    path = tmp_path / "v.avi"
+    write_video(path, video)
+    assert MaskConfig().method == "offline"
+    from_file = np.stack(list(open_masks(video=path, config=MaskConfig(window=40, device="cpu"))))
+    decoded = np.stack(list(open_source(path)))
+    from_array = np.stack(list(open_masks(video=decoded, config=MaskConfig(window=40, device="cpu"))))
+    np.testing.assert_array_equal(from_file, from_array)  # the sampler's seeks read the same frames
+
+
+def test_given_masks_of_wrong_size(tmp_path):
+    from wptrack.rig import Camera
+
+    cam = Camera.look_at("cam0", 80, 60, (0, -5, 3), (0, 0, 0), 60.0)
+    with pytest.raises(FrameError, match=r"mask size 96x72 differs from camera 'cam0' calibration 80x60"):
+        open_masks(masks=np.zeros((2, H, W), np.uint8), camera=cam)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"window": 0}, "window"),
+        ({"samples": 65}, "samples"),
+        ({"fg_threshold": 0}, "fg_threshold"),
+        ({"noise_floor": float("nan")}, "noise_floor"),
+        ({"soft_scale": -1}, "soft_scale"),
+        ({"shadow_lo": 0}, "shadow_lo"),
+        ({"shadow_lo": 0.5, "shadow_hi": 0.5}, "shadow_hi"),
+        ({"shadow_chroma": -0.1}, "shadow_chroma"),
+        ({"device": "gpu"}, "device"),
+    ],
+)
+def test_bad_offline_config_names_field(kwargs, field):
+    with pytest.raises(ConfigError, match=rf"^MaskConfig\.{field}: must be .*, got "):
+        MaskConfig(**kwargs)
+
+
+def test_cli_masks_happy_path(tmp_path, rng, capsys):
+    video = _stand_then_move(rng, frames=30)
+    path = tmp_path / "v.avi"
+    write_video(path, video)
+    out = tmp_path / "out"
+    code = main(
+        ["masks", "--video", str(path), "--out", str(out), "--window", "30", "--device", "cpu", "--probability"]
+    )
+    assert code == 0, capsys.readouterr().err
+    masks = np.stack(list(open_source(out / "masks.avi")))[..., 0]
+    expected = np.stack(list(open_masks(video=path, config=MaskConfig(window=30, device="cpu"))))
+    np.testing.assert_array_equal(masks > 127, expected.astype(bool))  # lossless
+    assert len(list(open_source(out / "probability.avi"))) == 30
+    assert cv2.imread(str(out / "background.png")).shape == (H, W, 3)
+    info = json.loads((out / "masks.json").read_text())
+    assert info["config"]["method"] == "offline" and info["frames"] == 30 and info["config"]["window"] == 30
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--video", "{tmp}/missing.avi"], "video file not found"),
+        (["--video", "{video}", "--window", "0"], "MaskConfig.window"),
+        (["--video", "{video}", "--shadow-lo", "0.9", "--shadow-hi", "0.5"], "MaskConfig.shadow_hi"),
+    ],
+)
+def test_cli_masks_bad_input(tmp_path, rng, capsys, argv, message):
+    video = tmp_path / "v.avi"
+    write_video(video, _noisy(rng, _texture(rng), 3))
+    out = tmp_path / "out"
+    argv = [a.format(tmp=tmp_path, video=video) for a in argv]
+    code = main(["masks", *argv, "--out", str(out), "--device", "cpu"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("wptrack: error: ") and message in err and err.count("\n") == 1
+    assert not (out / "masks.avi").exists()
+
+
+def test_sampler_seeks_read_the_sampled_frames(tmp_path, rng):
+    frames = 64
+    video = _noisy(rng, _texture(rng), frames, noise=20.0)  # every frame differs
+    path = tmp_path / "v.avi"
+    write_video(path, video)
+    decoded = np.stack(list(open_source(path)))
+    config = MaskConfig(window=frames, samples=5, device="cpu")  # samples 12.8 frames apart: seeks
+    masks = open_masks(video=path, config=config)
+    samples = masks.model.windows[0].samples
+    assert min(np.diff(samples)) >= 8
+    expected, _ = numpy_masks.median_mad(decoded[list(samples)])
+    np.testing.assert_array_equal(masks.background(), expected)

@@ -1,0 +1,270 @@
+"""Offline background model of a whole recording (``MaskConfig.method == "offline"``), on Warp kernels.
+
+Offline processing may look at the whole recording before making any mask, so the background of frame ``t`` is
+estimated from frames before *and after* it: an object standing still at the start is in the background only for
+as long as it stands still, and leaves no ghost once it moves (an online model such as MOG2 has learnt it into
+the background by then, and marks the uncovered road as foreground for a while). The condition: a pixel's
+background is what it shows in most of its window's samples, so an object is left out of it when it stands on
+that pixel for less than about half of the window (choose ``window`` longer than twice the longest stand that
+must stay foreground).
+
+Design (kernels and formulas: :mod:`wptrack.kernels.background`):
+
+* **Windows.** The recording of ``T`` frames is covered by windows of ``L = window`` frames whose starts are spaced
+  evenly, about ``L / 2`` apart (half overlap), the first starting at frame 0 and the last ending at frame ``T``.
+  Window ``i`` samples ``K = min(samples, L)`` frames evenly inside itself and its background is the per-pixel
+  temporal median of those ``K`` frames, with the per-channel MAD as its noise estimate. Its centre is the mean
+  of its sample indices. A recording shorter than ``L`` gets one window over all of it (a log warning says so);
+  with fewer than 3 frames the median cannot reject anything that stands still (another warning).
+* **Drift.** Frame ``t`` uses the background and MAD interpolated linearly between the two windows whose centres
+  bracket it (before the first centre / after the last: that window alone), so slow illumination changes are
+  followed with a lag of at most a window, without steps at window boundaries.
+* **Passes.** Windows are built lazily while the frames are streamed (the mask pass): a second reader fetches the
+  ``K`` sampled frames of the next window when frame ``t`` first needs it (seeking when samples are far apart,
+  grabbing otherwise), so only two windows' backgrounds are held and a long recording costs about
+  ``K / (L / 2)`` extra decoded frames per frame (25 / 150 with the defaults). The exact frame a seek lands on
+  does not matter: the median is robust to a sample being a frame off.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .errors import FrameError
+from .frames import ArraySource, FrameSource, ImageSequenceSource, VideoSource, _read_image, _to_bgr
+
+log = logging.getLogger(__name__)
+
+#: Sample gap (frames) from which the sampler seeks instead of grabbing the frames in between.
+SEEK_GAP = 8
+
+
+@dataclass(frozen=True)
+class Window:
+    """One background window: its sampled frame indices and their mean (the window's centre, frames)."""
+
+    samples: tuple[int, ...]
+
+    @property
+    def centre(self) -> float:
+        return float(np.mean(self.samples))
+
+
+def plan_windows(frames: int, window: int, samples: int, name: str = "recording") -> list[Window]:
+    """Background windows covering ``frames`` frames (see the module docstring).
+
+    Args:
+        frames: Number of frames ``T`` (>= 1).
+        window: Window length ``L`` in frames (>= 1).
+        samples: Sampled frames per window (>= 1).
+        name: Source label for the warnings.
+
+    Returns:
+        The windows in time order (centres strictly increasing).
+    """
+    if frames < 1:
+        raise FrameError(f"{name}: no frames to build a background from")
+    if frames < window:
+        log.warning(
+            "%s: %d frames, shorter than the background window of %d frames; using one window over all of them",
+            name,
+            frames,
+            window,
+        )
+        window = frames
+    if frames < 3:
+        log.warning("%s: background from %d frame(s); whatever stands in them is background", name, frames)
+    k = min(samples, window)
+    count = 1 if frames == window else math.ceil((frames - window) / max(window // 2, 1)) + 1
+    starts = np.round(np.linspace(0, frames - window, count)).astype(int)
+    out = []
+    for s in starts:
+        idx = s + np.floor((np.arange(k) + 0.5) * window / k).astype(int)
+        out.append(Window(tuple(int(i) for i in np.unique(np.clip(idx, s, s + window - 1)))))
+    return out
+
+
+def bracket(centres: list[float], t: int) -> tuple[int, int, float]:
+    """``(i, j, w)``: frame ``t`` uses ``(1 - w) * window_i + w * window_j`` (linear in the centres, clamped)."""
+    if t <= centres[0] or len(centres) == 1:
+        return 0, 0, 0.0
+    if t >= centres[-1]:
+        n = len(centres) - 1
+        return n, n, 0.0
+    j = int(np.searchsorted(centres, t, side="right"))
+    i = j - 1
+    return i, j, float((t - centres[i]) / (centres[j] - centres[i]))
+
+
+class _Sampler:
+    """Reads given frame indices of a source (increasing within a call), for the window backgrounds."""
+
+    def __init__(self, source: FrameSource) -> None:
+        self.source = source
+        self.cap: Any = None
+        self.pos = 0  # index of the frame the next read() returns
+
+    def read(self, indices: tuple[int, ...]) -> list[np.ndarray]:
+        s = self.source
+        if isinstance(s, ArraySource):
+            return [_to_bgr(np.ascontiguousarray(s.frames[i])) for i in indices]
+        if isinstance(s, ImageSequenceSource):
+            out = [_read_image(s.files[i]) for i in indices]
+            return [f for f in out if f is not None and f.shape[:2] == (s.height, s.width)]
+        if isinstance(s, VideoSource):
+            return self._read_video(indices)
+        return [f for i, f in enumerate(s) if i in set(indices)]  # any other source: one decoding pass
+
+    def _read_video(self, indices: tuple[int, ...]) -> list[np.ndarray]:
+        import cv2
+
+        if self.cap is None:
+            self.cap = self.source._open()  # type: ignore[attr-defined]
+            self.pos = 0
+        out = []
+        for i in indices:
+            if i < self.pos or i - self.pos >= SEEK_GAP:
+                self.cap.set(cv2.CAP_PROP_POS_FRAMES, float(i))
+                self.pos = i
+            ok = True
+            while ok and self.pos < i:
+                ok = self.cap.grab()
+                self.pos += 1
+            ok, frame = self.cap.read() if ok else (False, None)
+            if not ok or frame is None:
+                log.warning("%s: cannot read frame %d for the background; skipped", self.source.name, i)
+                break  # the video ends earlier than it reported
+            self.pos += 1
+            if frame.ndim == 3 and frame.shape[2] == 3 and frame.shape[:2] == (self.source.height, self.source.width):
+                out.append(frame)
+        return out
+
+    def close(self) -> None:
+        if self.cap is not None:
+            self.cap.release()
+            self.cap = None
+
+
+class OfflineBackground:
+    """Windowed median/MAD background of one source and the per-frame foreground evidence.
+
+    Args:
+        source: The camera's frames.
+        config: A ``MaskConfig`` (fields ``window``, ``samples``, ``fg_threshold``, ``soft_scale``,
+            ``noise_floor``, ``detect_shadows``, ``shadow_lo``, ``shadow_hi``, ``shadow_chroma``).
+        device: Warp device alias.
+
+    Attributes:
+        windows: The background windows (:func:`plan_windows`).
+        centres: Their centres, frames.
+
+    Use :meth:`evidence` frame by frame in time order (a restart at frame 0 is allowed); windows are built when
+    first needed and dropped when no later frame needs them.
+    """
+
+    def __init__(self, source: FrameSource, config: Any, device: str) -> None:
+        import warp as wp
+
+        from .kernels import background as kbg
+
+        self.source = source
+        self.config = config
+        self.device = device
+        self.windows = plan_windows(len(source), config.window, config.samples, source.name)
+        self.centres = [w.centre for w in self.windows]
+        self.pixels = source.width * source.height
+        n3 = 3 * self.pixels
+        self._frame = wp.zeros(n3, dtype=wp.uint8, device=device)
+        self._mask = wp.zeros(self.pixels, dtype=wp.uint8, device=device)
+        self._prob = wp.zeros(self.pixels, dtype=wp.float32, device=device)
+        self._shadow = wp.zeros(self.pixels, dtype=wp.uint8, device=device)
+        self._built: dict[int, tuple[Any, Any]] = {}
+        self._stacks: dict[int, Any] = {}
+        self._sampler = _Sampler(source)
+        p = kbg.ForegroundParams()
+        p.threshold = float(config.fg_threshold)
+        p.soft_scale = float(config.soft_scale)
+        p.noise_floor = float(config.noise_floor)
+        p.shadow = int(bool(config.detect_shadows))
+        p.shadow_lo = float(config.shadow_lo)
+        p.shadow_hi = float(config.shadow_hi)
+        p.chroma_max = float(config.shadow_chroma)
+        self.params = p
+
+    def _window(self, i: int) -> tuple[Any, Any]:
+        """``(median, mad)`` device arrays of window ``i`` (built on first use)."""
+        import warp as wp
+
+        from .kernels import background as kbg
+
+        if i in self._built:
+            return self._built[i]
+        frames = self._sampler.read(self.windows[i].samples)
+        if not frames:
+            if self._built:
+                log.warning("%s: no frame of background window %d could be read; reusing another", self.source.name, i)
+                return self._built[max(self._built)]
+            raise FrameError(f"{self.source.name}: no frame of background window {i} could be read")
+        k = len(frames)
+        stack = self._stacks.get(k)
+        if stack is None:
+            stack = self._stacks[k] = wp.zeros((k, 3 * self.pixels), dtype=wp.uint8, device=self.device)
+        host = np.stack([np.ascontiguousarray(f).reshape(-1) for f in frames])
+        wp.copy(stack, wp.array(host, dtype=wp.uint8, device="cpu", copy=False))
+        median = wp.zeros(3 * self.pixels, dtype=wp.uint8, device=self.device)
+        mad = wp.zeros(3 * self.pixels, dtype=wp.uint8, device=self.device)
+        wp.launch(kbg.median_mad_kernel, dim=3 * self.pixels, inputs=[stack], outputs=[median, mad], device=self.device)
+        self._built[i] = (median, mad)
+        log.debug("%s: background window %d from %d frames", self.source.name, i, k)
+        return median, mad
+
+    def background(self, i: int = 0) -> np.ndarray:
+        """``(H, W, 3)`` uint8 BGR background of window ``i`` (builds it if needed)."""
+        median, _ = self._window(i)
+        return median.numpy().reshape(self.source.height, self.source.width, 3).copy()
+
+    def spread(self, i: int = 0) -> np.ndarray:
+        """``(H, W, 3)`` uint8 per-channel MAD of window ``i`` (8-bit units)."""
+        _, mad = self._window(i)
+        return mad.numpy().reshape(self.source.height, self.source.width, 3).copy()
+
+    def evidence(self, t: int, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Foreground of frame ``t``.
+
+        Args:
+            t: Frame index.
+            frame: ``(H, W, 3)`` uint8 BGR.
+
+        Returns:
+            ``(mask, prob)``: ``(H, W)`` uint8 mask (1 = foreground, shadows excluded, not cleaned) and ``(H, W)``
+            float32 foreground probability.
+        """
+        import warp as wp
+
+        from .kernels import background as kbg
+
+        i, j, w = bracket(self.centres, t)
+        for old in [k for k in self._built if k < i]:
+            del self._built[old]
+        b0, m0 = self._window(i)
+        b1, m1 = self._window(j)
+        flat = np.ascontiguousarray(frame).reshape(-1)
+        wp.copy(self._frame, wp.array(flat, dtype=wp.uint8, device="cpu", copy=False))
+        wp.launch(
+            kbg.foreground_kernel,
+            dim=self.pixels,
+            inputs=[self._frame, b0, m0, b1, m1, w, self.params],
+            outputs=[self._mask, self._prob, self._shadow],
+            device=self.device,
+        )
+        shape = (self.source.height, self.source.width)
+        return self._mask.numpy().reshape(shape).copy(), self._prob.numpy().reshape(shape).copy()
+
+    def close(self) -> None:
+        """Release the sampler's video reader."""
+        self._sampler.close()

@@ -1,0 +1,160 @@
+"""Benchmark of the offline background model (``MaskConfig(method="offline")``) against decoding the same video.
+
+Per case (frame size), ``frames`` synthetic frames (smooth colour texture, gaussian noise of 3 levels, a few
+moving rectangles) are encoded to a temporary FFV1 ``.avi`` (the project's lossless writer). Measured:
+
+* ``decode``: reading the video with :class:`wptrack.frames.VideoSource`, per frame (median of 3 passes);
+* ``sample+build``: one background window (the sampler's seeks/reads of its ``samples`` frames, the upload and the
+  median/MAD kernel), amortised over the ``window // 2`` frames between window starts (the steady state of a long
+  recording; a window is built every ``window // 2`` frames);
+* ``kernel``: the per-frame step (upload, foreground kernel, mask and probability back), per frame;
+* ``clean``: the host morphology (cv2 opening + closing) per frame;
+* ``model``: sample+build + kernel (what the offline model adds to decoding), and ``model / decode``;
+* ``numpy``: the NumPy reference of the per-frame step (:mod:`benchmarks.numpy_masks`), per frame.
+
+``equivalent``: the Warp masks equal the NumPy reference's on all timed frames except pixels within 1e-3 robust
+standard deviations of a threshold (float32 vs float64), and probabilities agree to 1e-4.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Case:
+    """One frame size, pixels."""
+
+    width: int
+    height: int
+
+
+def bench_video(width: int, height: int, frames: int, seed: int = 0) -> np.ndarray:
+    """``(frames, height, width, 3)`` uint8 frames: smooth texture + noise, 4 rectangles moving 4 px per frame."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    base = cv2.resize(rng.uniform(40, 200, (height // 16, width // 16, 3)).astype(np.float32), (width, height))
+    out = np.empty((frames, height, width, 3), np.uint8)
+    size = (width // 10, height // 8)
+    starts = rng.integers(0, [width - size[0], height - size[1]], (4, 2))
+    colours = rng.integers(0, 255, (4, 3))
+    for t in range(frames):
+        img = np.clip(base + rng.normal(0, 3, base.shape), 0, 255).astype(np.uint8)
+        for (x, y), col in zip(starts, colours, strict=True):
+            x = int((x + 4 * t) % (width - size[0]))
+            img[y : y + size[1], x : x + size[0]] = col
+        out[t] = img
+    return out
+
+
+class MasksSuite:
+    """Offline background model vs decoding, at 640x480 and 1920x1080."""
+
+    name = "masks"
+    HEADER = (
+        f"{'suite':6s} {'size':>10s} {'frames':>6s} {'decode':>8s} {'smp+bld':>8s} {'kernel':>8s} {'clean':>8s} "
+        f"{'model':>8s} {'numpy':>8s} {'eq':>4s}  (ms per frame; model = smp+bld + kernel)"
+    )
+
+    @staticmethod
+    def default_grid(is_cuda: bool) -> list[Case]:
+        return [Case(640, 480), Case(1920, 1080)]
+
+    @staticmethod
+    def format_row(r: dict) -> str:
+        eq = {True: "yes", False: "NO"}.get(r.get("equivalent"), "-")
+        return (
+            f"{r['tracker']:6s} {r['width']:>5d}x{r['height']:<4d} {r['frames']:>6d} {r['decode_ms']:8.2f} "
+            f"{r['build_ms']:8.2f} {r['kernel_ms']:8.2f} {r['clean_ms']:8.2f} {r['model_ms']:8.2f} "
+            f"{r['numpy_ms']:8.2f} {eq:>4s}  model/decode {r['model_vs_decode']:.2f}"
+        )
+
+    @staticmethod
+    def run_case(case: Case, device: str, frames: int = 50, numpy_max: int = 0, seed: int = 0) -> dict:
+        import cv2
+
+        from wptrack.background import OfflineBackground
+        from wptrack.frames import open_source, write_video
+        from wptrack.masks import MaskConfig
+
+        from . import numpy_masks
+
+        config = MaskConfig(method="offline", device=device)
+        video = bench_video(case.width, case.height, frames, seed)
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "bench.avi"
+            write_video(path, video, fps=25)
+            source = open_source(path)
+            decode = []
+            for _ in range(3):
+                t0 = time.perf_counter()
+                for _f in source:
+                    pass
+                decode.append(time.perf_counter() - t0)
+            decoded = list(source)
+            # a window over the whole recording when it is shorter than config.window: the same K samples
+            model = OfflineBackground(source, config, device)
+            model.evidence(0, decoded[0])  # compile the kernels, outside the timing
+            builds = []
+            for _ in range(3):
+                model._built.clear()
+                model._sampler.close()
+                t0 = time.perf_counter()
+                model._window(0)
+                builds.append(time.perf_counter() - t0)
+            median, mad = (a.numpy().reshape(case.height, case.width, 3) for a in model._window(0))
+            kernel, masks, probs = [], [], []
+            for t, f in enumerate(decoded):
+                t0 = time.perf_counter()
+                m, p = model.evidence(min(t, 0), f)  # window 0 only: time the step, not window builds
+                kernel.append(time.perf_counter() - t0)
+                masks.append(m)
+                probs.append(p)
+            model.close()
+        k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
+        k5 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
+        clean = []
+        for m in masks:
+            t0 = time.perf_counter()
+            cv2.morphologyEx(cv2.morphologyEx(m, cv2.MORPH_OPEN, k), cv2.MORPH_CLOSE, k5)
+            clean.append(time.perf_counter() - t0)
+        c = config
+        ref_t, equivalent = [], True
+        for t, f in enumerate(decoded[: min(frames, 10)]):
+            t0 = time.perf_counter()
+            ref = numpy_masks.foreground(
+                f, median, mad, median, mad, 0.0, c.fg_threshold, c.soft_scale, c.noise_floor, c.detect_shadows,
+                c.shadow_lo, c.shadow_hi, c.shadow_chroma,
+            )  # fmt: skip
+            ref_t.append(time.perf_counter() - t0)
+            near = np.abs(ref["z"] - c.fg_threshold) < 1e-3
+            equivalent &= bool(np.all((masks[t] == ref["mask"]) | near))
+            equivalent &= bool(np.allclose(probs[t], ref["prob"], atol=1e-4) or near.any())
+        stride = max(c.window // 2, 1)
+        decode_ms = 1e3 * float(np.median(decode)) / frames
+        build_ms = 1e3 * float(np.median(builds)) / stride
+        kernel_ms = 1e3 * float(np.median(kernel))
+        return {
+            "tracker": "masks",
+            "width": case.width,
+            "height": case.height,
+            "frames": frames,
+            "device": device,
+            "samples": len(model.windows[0].samples),
+            "window": c.window,
+            "decode_ms": decode_ms,
+            "build_window_s": float(np.median(builds)),
+            "build_ms": build_ms,
+            "kernel_ms": kernel_ms,
+            "clean_ms": 1e3 * float(np.median(clean)),
+            "model_ms": build_ms + kernel_ms,
+            "model_vs_decode": (build_ms + kernel_ms) / decode_ms,
+            "numpy_ms": 1e3 * float(np.median(ref_t)),
+            "equivalent": equivalent,
+        }

@@ -1,0 +1,48 @@
+"""NumPy reference of the offline background model's kernels (:mod:`wptrack.kernels.background`), for the tests
+and the ``masks`` benchmark: same formulas, float64 instead of float32."""
+
+from __future__ import annotations
+
+import numpy as np
+
+MAD_TO_SIGMA = 1.4826
+
+
+def median_mad(stack: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lower median and MAD over axis 0 of a ``(K, ...)`` uint8 stack (0-based order statistic ``(K - 1) // 2``)."""
+    rank = (stack.shape[0] - 1) // 2
+    median = np.partition(stack, rank, axis=0)[rank]
+    dev = np.abs(stack.astype(np.int16) - median.astype(np.int16)).astype(np.uint8)
+    return median, np.partition(dev, rank, axis=0)[rank]
+
+
+def foreground(
+    frame: np.ndarray,
+    bg0: np.ndarray,
+    mad0: np.ndarray,
+    bg1: np.ndarray,
+    mad1: np.ndarray,
+    w: float,
+    threshold: float,
+    soft_scale: float,
+    noise_floor: float,
+    shadow: bool,
+    shadow_lo: float,
+    shadow_hi: float,
+    chroma_max: float,
+) -> dict[str, np.ndarray]:
+    """Per-pixel ``z``, shadow flag, probability and mask of ``(H, W, 3)`` uint8 images (module formulas)."""
+    b = (1.0 - w) * bg0.astype(np.float64) + w * bg1.astype(np.float64)
+    m = (1.0 - w) * mad0.astype(np.float64) + w * mad1.astype(np.float64)
+    x = frame.astype(np.float64)
+    s = np.sqrt(noise_floor**2 + MAD_TO_SIGMA**2 * (m * m).sum(-1) / 3.0)
+    z = np.sqrt(((x - b) ** 2).sum(-1) / 3.0) / s
+    bb = (b * b).sum(-1)
+    ib = (x * b).sum(-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.where(bb >= 1.0, ib / np.maximum(bb, 1.0), 0.0)
+        cd = np.linalg.norm(x - a[..., None] * b, axis=-1) / np.sqrt(np.maximum(bb, 1.0))
+    is_shadow = shadow & (bb >= 1.0) & (z > threshold) & (a >= shadow_lo) & (a <= shadow_hi) & (cd <= chroma_max)
+    prob = np.where(is_shadow, 0.0, 1.0 / (1.0 + np.exp(-(z - threshold) / soft_scale)))
+    mask = (z > threshold) & ~is_shadow
+    return {"z": z, "a": a, "cd": cd, "shadow": is_shadow, "prob": prob, "mask": mask}
