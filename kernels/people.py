@@ -105,15 +105,26 @@ def predict_kernel(
 
 @wp.func
 def motion_log_likelihood(
-    cams: wp.array(dtype=Camera), mask: wp.array(dtype=wp.uint8), p_b: float, log_outside: float, x: wp.vec3
+    cams: wp.array(dtype=Camera),
+    mask: wp.array(dtype=wp.uint8),
+    p_b: float,
+    log_outside: float,
+    drop_worst: int,
+    x: wp.vec3,
 ):
     """log p(M_t | x_t) (eqs. 9-10): per camera log(1 - p_B) if the pixel nearest to the projection of ``x`` is a
     motion pixel (mask != 0), log(p_B) if not, ``log_outside`` if the camera does not see ``x``.
+
+    ``drop_worst`` = 1 (ours, beyond the paper) leaves out the least supporting camera's term when there are three or
+    more cameras: a point of a person hidden by furniture in one camera (its projection falls on the static
+    occluder, no motion) keeps the support of the others, so the particles fill the whole person rather than only
+    what every camera sees. 0 is eq. 9 as printed (the product over all cameras).
 
     ``mask``: flat uint8 motion masks of all cameras (``Camera.pixel_offset``), one byte per pixel."""
     lin = wp.log(1.0 - p_b)
     lout = wp.log(p_b)
     total = float(0.0)
+    worst = float(0.0)
     for c in range(cams.shape[0]):
         cam = cams[c]
         uvz = project(cam, x)
@@ -126,6 +137,10 @@ def motion_log_likelihood(
                 if mask[cam.pixel_offset + py * cam.width + px] != wp.uint8(0):
                     term = lin
         total += term
+        if c == 0 or term < worst:
+            worst = term
+    if drop_worst != 0 and cams.shape[0] >= 3:
+        total -= worst
     return total
 
 
@@ -135,12 +150,13 @@ def motion_kernel(
     mask: wp.array(dtype=wp.uint8),
     p_b: float,
     log_outside: float,
+    drop_worst: int,
     points: wp.array(dtype=wp.vec3),
     loglik: wp.array(dtype=wp.float32),
 ):
     """log p(M_t | x_t) of every point (eqs. 7-10); see :func:`motion_log_likelihood`. ``loglik`` (N,) out."""
     i = wp.tid()
-    loglik[i] = motion_log_likelihood(cams, mask, p_b, log_outside, points[i])
+    loglik[i] = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, points[i])
 
 
 @wp.kernel
@@ -149,6 +165,7 @@ def observation_kernel(
     mask: wp.array(dtype=wp.uint8),
     p_b: float,
     log_outside: float,
+    drop_worst: int,
     points: wp.array(dtype=wp.vec3),
     model: wp.array2d(dtype=wp.float32),
     desc: wp.array2d(dtype=wp.float32),
@@ -162,7 +179,7 @@ def observation_kernel(
     """log p(z_t | x_t) = log p(M_t | x_t) + log p(A_t | x_t) (eq. 11) of every particle; the descriptor
     (``desc``, ``mass``, ``mean_rgb``) must have been computed at ``points`` by ``descriptor.descriptor_kernel``."""
     i = wp.tid()
-    lm = motion_log_likelihood(cams, mask, p_b, log_outside, points[i])
+    lm = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, points[i])
     la = appearance_log_prob(model, i, desc, i, mass[i], mean_rgb[i], n_bins, sigma_n[0], sigma_p)
     loglik[i] = lm + la
 
@@ -173,6 +190,7 @@ def step_kernel(
     mask: wp.array(dtype=wp.uint8),
     p_b: float,
     log_outside: float,
+    drop_worst: int,
     h: wp.array(dtype=wp.float32),
     s: wp.array(dtype=wp.float32),
     v: wp.array(dtype=wp.float32),
@@ -236,7 +254,7 @@ def step_kernel(
         m, rgb = descriptor_at(cams, h, s, v, bgr, x, r_n, n_bins, r_min, r_max, desc_out, i)  # eqs. 19-22
         mass_out[i] = m
         rgb_out[i] = rgb
-        lw = motion_log_likelihood(cams, mask, p_b, log_outside, x)  # eqs. 9-10
+        lw = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, x)  # eqs. 9-10
         lw += appearance_log_prob(model_out, i, desc_out, i, m, rgb, n_bins, sn, sigma_p)  # eqs. 23-26, eq. 11
         if keep:
             lw += logw_prev[i]
@@ -356,3 +374,49 @@ def init_cylinder_kernel(
     a = 6.283185307179586 * u[1]
     pos[i] = wp.vec3(centre[0] + r * wp.cos(a), centre[1] + r * wp.sin(a), z_lo + (z_hi - z_lo) * u[2])
     vel[i] = wp.vec3(0.0, 0.0, 0.0)
+
+
+@wp.kernel
+def column_top_kernel(
+    cams: wp.array(dtype=Camera),
+    mask: wp.array(dtype=wp.uint8),
+    people: wp.array(dtype=wp.vec2),
+    z_lo: float,
+    dz: float,
+    nz: int,
+    min_cameras: int,
+    max_gap: int,
+    top: wp.array(dtype=wp.float32),
+):
+    """The top of each person's silhouette column (ours, for the standing-person centroid): walking up the vertical
+    axis at ``people[i]`` (ground x, y) from ``z_lo`` in steps of ``dz`` metres (``nz`` steps), the highest point
+    whose projection falls on the motion mask of at least ``min_cameras`` cameras, in one run from the first such
+    point with gaps of at most ``max_gap`` steps (holes in a mask; a hand raised apart from the body does not
+    count).
+    ``top[i]`` = that height, metres, or -1 when no point qualifies. Launch one thread per person."""
+    i = wp.tid()
+    axis = people[i]
+    best = float(-1.0)
+    started = int(0)
+    gap = int(0)
+    for k in range(nz):
+        z = z_lo + dz * float(k)
+        n = int(0)
+        for c in range(cams.shape[0]):
+            cam = cams[c]
+            uvz = project(cam, wp.vec3(axis[0], axis[1], z))
+            if uvz[2] > 0.0:
+                px = pixel_of(uvz[0])
+                py = pixel_of(uvz[1])
+                if px >= 0 and py >= 0 and px < cam.width and py < cam.height:
+                    if mask[cam.pixel_offset + py * cam.width + px] != wp.uint8(0):
+                        n += 1
+        if n >= min_cameras:
+            best = z
+            started = 1
+            gap = 0
+        elif started == 1:
+            gap += 1
+            if gap > max_gap:
+                break
+    top[i] = best

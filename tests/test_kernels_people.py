@@ -374,21 +374,26 @@ def motion_masks(rig: Rig, rng) -> np.ndarray:
     return np.concatenate(out)
 
 
-def motion_ref(rig, uvz, mask, offsets, p_b, log_outside):
+def motion_ref(rig, uvz, mask, offsets, p_b, log_outside, drop_worst=0):
     m, n = uvz.shape[:2]
-    total = np.zeros(n)
+    terms = []
     for c, cam in enumerate(rig.cameras):
         u, v, z = uvz[c].T
         px, py = np.floor(u + 0.5).astype(int), np.floor(v + 0.5).astype(int)
         inside = (z > 0) & (px >= 0) & (py >= 0) & (px < cam.width) & (py < cam.height)
         q = offsets[c] + np.clip(py, 0, cam.height - 1) * cam.width + np.clip(px, 0, cam.width - 1)
         on = inside & (mask[q] != 0)
-        total += np.where(inside, np.where(on, np.log(1 - p_b), np.log(p_b)), log_outside)
+        terms.append(np.where(inside, np.where(on, np.log(1 - p_b), np.log(p_b)), log_outside))
+    terms = np.array(terms)
+    total = terms.sum(axis=0)
+    if drop_worst and len(terms) >= 3:
+        total -= terms.min(axis=0)
     return total
 
 
-@pytest.mark.parametrize("neutral", [False, True])
-def test_motion_likelihood(device, rng, neutral):
+@pytest.mark.parametrize(("neutral", "drop_worst"), [(False, 0), (True, 0), (False, 1)])
+def test_motion_likelihood(device, neutral, drop_worst):
+    rng = np.random.default_rng(1)  # one scene for every case (it has points on motion in all cameras and in none)
     rig = make_rig()
     drig = DeviceRig(rig, device)
     mask = motion_masks(rig, rng)
@@ -405,16 +410,19 @@ def test_motion_likelihood(device, rng, neutral):
             wp.array(mask, dtype=wp.uint8, device=device),
             p_b,
             log_outside,
+            drop_worst,
             wp.array(pts, dtype=wp.vec3, device=device),
         ],
         outputs=[out],
         device=device,
     )
-    ref = motion_ref(rig, uvz, mask, drig.pixel_offsets, p_b, log_outside)
+    ref = motion_ref(rig, uvz, mask, drig.pixel_offsets, p_b, log_outside, drop_worst)
     np.testing.assert_allclose(out.numpy(), ref, rtol=1e-6, atol=1e-6)
-    # every case was exercised: all on motion, none, and points off some image
-    assert np.isclose(ref, 3 * np.log(1 - p_b)).any() and np.isclose(ref, 3 * np.log(p_b)).any()
-    assert len(np.unique(np.round(ref, 5))) >= 4
+    # every case was exercised: all on motion, none, and points off some image (and the worst camera dropped)
+    full = motion_ref(rig, uvz, mask, drig.pixel_offsets, p_b, log_outside, 0)
+    assert np.isclose(full, 3 * np.log(1 - p_b)).any() and np.isclose(full, 3 * np.log(p_b)).any()
+    assert (not drop_worst) or (np.abs(ref - full) > 1e-3).any()
+    assert len(np.unique(np.round(full, 5))) >= 4
 
 
 def test_observation_is_motion_plus_appearance(device, rng):
@@ -430,7 +438,9 @@ def test_observation_is_motion_plus_appearance(device, rng):
     sn = wp.array([0.01], dtype=wp.float32, device=device)
     lm, la, lo = (wp.zeros(len(pts), dtype=wp.float32, device=device) for _ in range(3))
     p_b = 0.1
-    wp.launch(kpeople.motion_kernel, dim=len(pts), inputs=[drig.cams, mask, p_b, 0.0, P], outputs=[lm], device=device)
+    wp.launch(
+        kpeople.motion_kernel, dim=len(pts), inputs=[drig.cams, mask, p_b, 0.0, 0, P], outputs=[lm], device=device
+    )
     wp.launch(
         kdesc.appearance_kernel,
         dim=len(pts),
@@ -441,7 +451,7 @@ def test_observation_is_motion_plus_appearance(device, rng):
     wp.launch(
         kpeople.observation_kernel,
         dim=len(pts),
-        inputs=[drig.cams, mask, p_b, 0.0, P, model, desc, mass, rgb, NB, sn, 0.25],
+        inputs=[drig.cams, mask, p_b, 0.0, 0, P, model, desc, mass, rgb, NB, sn, 0.25],
         outputs=[lo],
         device=device,
     )
@@ -599,7 +609,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     wp.launch_tiled(
         kpeople.step_kernel,
         dim=[nbk],
-        inputs=[drig.cams, mask, p_b, 0.0, *planes, B, R_N, NB, R_MIN, R_MAX, pos, vel, model, desc, mass, anc]
+        inputs=[drig.cams, mask, p_b, 0.0, 1, *planes, B, R_N, NB, R_MIN, R_MAX, pos, vel, model, desc, mass, anc]
         + [logw_prev, flag, sp, sv, alpha, sn, sigma_p, seed, frame, n, chunk],
         outputs=list(fused.values()),
         block_dim=block,
@@ -623,7 +633,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     wp.launch(
         kpeople.observation_kernel,
         dim=n,
-        inputs=[drig.cams, mask, p_b, 0.0, sep["pos"], sep["model"], sep["desc"], sep["mass"], sep["rgb"], NB, sn]
+        inputs=[drig.cams, mask, p_b, 0.0, 1, sep["pos"], sep["model"], sep["desc"], sep["mass"], sep["rgb"], NB, sn]
         + [sigma_p],
         outputs=[sep["logw"]],
         device=device,

@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 import warp as wp
-from benchmarks import numpy_masks
+from wptrack.bench import numpy_masks
 from wptrack.kernels import background as kbg
 
 from wptrack.background import bracket, plan_windows

@@ -2,7 +2,9 @@
 
 Outputs::
 
-    out_dir/tracks.csv     frame,id,x,y,z,sx,sy,sz,map_x,map_y,map_z,ess,loglik,age (3D centroids, metres)
+    out_dir/tracks.csv     frame,id,x,y,z,sx,sy,sz,map_x,map_y,map_z,ess,loglik,age,cloud_z,top: x, y, z the person's
+                           3D centroid (BodyConfig), cloud_z the particles' mean height (the paper's estimate),
+                           top the top of the person's silhouette column (metres; empty when not found)
     out_dir/hulls.npz      per (frame, person) the convex hull of the smallest particle set holding P_H of the
                            weight (section 4): rows (frame, id, start, count) into one (V, 3) vertex array, metres
     out_dir/occupancy.npz  every ``occupancy_every`` frames, each person's occupancy pdf on a voxel grid (float16,
@@ -23,7 +25,24 @@ import numpy as np
 from ..errors import ConfigError
 from .loop import TrackerRun, run_tracker
 
-PEOPLE_COLUMNS = ["frame", "id", "x", "y", "z", "sx", "sy", "sz", "map_x", "map_y", "map_z", "ess", "loglik", "age"]
+PEOPLE_COLUMNS = [
+    "frame",
+    "id",
+    "x",
+    "y",
+    "z",
+    "sx",
+    "sy",
+    "sz",
+    "map_x",
+    "map_y",
+    "map_z",
+    "ess",
+    "loglik",
+    "age",
+    "cloud_z",
+    "top",
+]
 HULLS_FILE = "hulls.npz"
 OCCUPANCY_FILE = "occupancy.npz"
 
@@ -184,7 +203,8 @@ class PeopleRun(TrackerRun):
         rows = []
         for person in est.people:
             rows.append(
-                [est.frame, person.id, *person.mean, *person.std, *person.map, person.ess, person.loglik, person.age]
+                [est.frame, person.id, *person.centroid, *person.std, *person.map, person.ess, person.loglik]
+                + [person.age, person.mean[2], person.top if np.isfinite(person.top) else None]
             )
             self._ids[person.id] = self._ids.get(person.id, 0) + 1
             if person.particles is not None:
@@ -218,12 +238,11 @@ class PeopleRun(TrackerRun):
                 origins.append(origin)
                 grids.append(grid.astype(np.float16))
         voxel = self.tracker.config.occupancy.voxel
-        shape = grids[0].shape if grids else (0, 0, 0)
         atomic_save_npz(
             self._out_dir / OCCUPANCY_FILE,
             index=np.asarray(rows, dtype=np.int64).reshape(-1, 2),
             origin=np.asarray(origins, dtype=np.float64).reshape(-1, 3),
-            grid=np.asarray(grids, dtype=np.float16).reshape(-1, *shape),
+            grid=np.stack(grids) if grids else np.zeros((0, 1, 1, 1), dtype=np.float16),
             voxel=np.float64(voxel),
         )
 

@@ -59,7 +59,10 @@ class PersonEstimate:
 
     Attributes:
         id: persistent id (never reused in a run).
-        mean: (3,) weighted mean of the particles (the person's 3D centroid), metres.
+        centroid: (3,) the person's 3D centroid, metres: the particles' mean, its height from the standing-person
+            model unless ``BodyConfig.centroid == "particles"`` (see :class:`~.people_model.BodyConfig`).
+        top: top of the person's silhouette column, metres (NaN when not found).
+        mean: (3,) weighted mean of the particles (the paper's estimate), metres.
         std: (3,) weighted standard deviation per axis, metres.
         map: (3,) best particle, metres.
         ess: effective sample size of the frame's weights.
@@ -70,6 +73,8 @@ class PersonEstimate:
     """
 
     id: int
+    centroid: np.ndarray
+    top: float
     mean: np.ndarray
     std: np.ndarray
     map: np.ndarray
@@ -175,6 +180,7 @@ class PersonFilter(ParticleFilter):
                 tr.mask,
                 cfg.motion.p_b,
                 cfg.motion.log_outside,
+                int(cfg.motion.drop_worst),
                 tr.h,
                 tr.s,
                 tr.v,
@@ -220,9 +226,12 @@ class PersonFilter(ParticleFilter):
     def estimate_from_host(self, person_id: int, age: int) -> PersonEstimate:
         """The estimate of the last frame from the host copies (after the device synchronised)."""
         e = self.est_host.numpy()
+        mean = e[kreduce.EST_MEAN : kreduce.EST_MEAN + 3].copy()
         est = PersonEstimate(
             id=person_id,
-            mean=e[kreduce.EST_MEAN : kreduce.EST_MEAN + 3].copy(),
+            centroid=mean.copy(),
+            top=float("nan"),
+            mean=mean,
             std=e[kreduce.EST_STD : kreduce.EST_STD + 3].copy(),
             map=e[kreduce.EST_MAP : kreduce.EST_MAP + 3].copy(),
             ess=float(e[kreduce.EST_ESS]),
@@ -314,6 +323,8 @@ class PeopleTracker:
         self.n_people = wp.zeros(1, dtype=wp.int32, device=d)
         self._people_host = wp.zeros(b.max_people, dtype=wp.vec2, device="cpu", pinned=pinned)
         self._n_people_host = wp.zeros(1, dtype=wp.int32, device="cpu", pinned=pinned)
+        self.top = wp.zeros(b.max_people, dtype=wp.float32, device=d)
+        self._top_host = wp.zeros(b.max_people, dtype=wp.float32, device="cpu", pinned=pinned)
         self.min_votes = min(b.min_cameras, len(rig))
         # the pool of person filters, allocated once
         self.pool = [PersonFilter(self, k) for k in range(b.max_people)]
@@ -424,6 +435,26 @@ class PeopleTracker:
         )
         wp.copy(self._votes_host, self.votes)
         wp.copy(self._free_host, self.free_votes)
+        if n:
+            body = self.config.body
+            z_lo, z_hi = 0.05, float(self.volume[1][2])
+            wp.launch(
+                kpeople.column_top_kernel,
+                dim=n,
+                inputs=[
+                    self.drig.cams,
+                    self.mask,
+                    self.people_xy,
+                    z_lo,
+                    body.step,
+                    int((z_hi - z_lo) / body.step) + 1,
+                    min(body.min_cameras, len(self.rig)),
+                    int(round(body.max_gap / body.step)),
+                ],
+                outputs=[self.top],
+                device=self.device,
+            )
+            wp.copy(self._top_host, self.top)
 
     # --- the frame --------------------------------------------------------------------------------------
     def step(self, images: Sequence[np.ndarray], masks: Sequence[np.ndarray]) -> PeopleEstimate:
@@ -446,9 +477,16 @@ class PeopleTracker:
         wp.synchronize_device(self.device)
         t2 = time.perf_counter()
         people = []
-        for k in active:
+        tops = self._top_host.numpy()
+        body = self.config.body
+        for j, k in enumerate(active):
             self.slot_age[k] += 1
-            people.append(self.pool[k].estimate_from_host(int(self.slot_id[k]), int(self.slot_age[k])))
+            person = self.pool[k].estimate_from_host(int(self.slot_id[k]), int(self.slot_age[k]))
+            if tops[j] > 0:
+                person.top = float(tops[j])
+                if body.centroid == "standing":
+                    person.centroid[2] = body.ratio * person.top  # standing-person model (BodyConfig)
+            people.append(person)
         est = PeopleEstimate(frame=self.frames_done, people=people, sigma_n=float(self._sigma_host.numpy()[0]))
         self._update_population(est, active)
         self.frames_done += 1

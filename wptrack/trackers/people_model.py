@@ -75,10 +75,14 @@ class MotionConfig:
             projection (1 - p_B where it does). Ours: 0.05.
         outside: what a camera that does not see the particle contributes: ``background`` = p_B (eq. 10 literally:
             no motion was observed there), ``neutral`` = 1 (the camera says nothing).
+        drop_worst: with three or more cameras, leave out the least supporting camera's factor (ours, beyond eq. 9:
+            a person's legs hidden by furniture in one camera keep the other cameras' support, so the particles fill
+            the whole person and the centroid is not pushed up to what every camera sees). False: eq. 9 as printed.
     """
 
     p_b: float = 0.05
     outside: str = "background"
+    drop_worst: bool = True
 
     def __post_init__(self) -> None:
         v = _number(self.p_b, "motion.p_b")
@@ -217,6 +221,44 @@ class BirthConfig:
         _int_at_least(self.max_people, "birth.max_people", 1, "a number of people")
 
 
+CENTROID_MODES = ("standing", "particles")
+
+
+@dataclass(frozen=True)
+class BodyConfig:
+    """The person's 3D centroid (ours, beyond the paper).
+
+    The paper's estimate is the mean of the particles, which fill the part of the person that the cameras see
+    moving: when furniture hides the legs in every camera, that mean rises towards the chest. With ``standing``, the
+    centroid keeps the particles' ground position (x, y) and takes its height from a standing-person model: the top
+    of the person's silhouette column (the highest point on the person's axis seen moving by ``min_cameras``
+    cameras, from the masks) times ``ratio``, the height of the centre of mass of a standing adult as a fraction of
+    stature (about 0.55: D. A. Winter, *Biomechanics and Motor Control of Human Movement*, anthropometric tables).
+    ``particles`` is the paper's estimate. tracks.csv carries both (``z`` and ``cloud_z``) and the top (``top``).
+
+    Attributes:
+        centroid: ``standing`` or ``particles``.
+        ratio: centre-of-mass height / stature. Ours: 0.55 (Winter).
+        step: vertical step of the column search, metres. Ours: 0.02.
+        max_gap: holes in the masks bridged on the way up, metres. Ours: 0.1.
+        min_cameras: cameras that must see a column point moving (at most the rig's cameras). Ours: 2.
+    """
+
+    centroid: str = "standing"
+    ratio: float = 0.55
+    step: float = 0.02
+    max_gap: float = 0.1
+    min_cameras: int = 2
+
+    def __post_init__(self) -> None:
+        if self.centroid not in CENTROID_MODES:
+            raise ConfigError(f"body.centroid: expected one of {', '.join(CENTROID_MODES)}, got {self.centroid!r}")
+        _open_fraction(self.ratio, "body.ratio", "a fraction of the stature")
+        _positive(self.step, "body.step", "a step in metres")
+        _non_negative(self.max_gap, "body.max_gap", "a gap in metres")
+        _int_at_least(self.min_cameras, "body.min_cameras", 1, "a camera count")
+
+
 @dataclass(frozen=True)
 class PeopleConfig:
     """The S2 tracker's parameters.
@@ -224,7 +266,7 @@ class PeopleConfig:
     Attributes:
         particles: particles per tracked person [N_S] (section 4: 500).
         seed: seed of the counter-based random streams (same seed + device -> identical output).
-        dynamics, motion, descriptor, occupancy, birth: the sections above.
+        dynamics, motion, descriptor, occupancy, birth, body: the sections above.
 
     Resampling runs every frame (section 2.1: "particle resampling should be performed at each time step").
     """
@@ -236,6 +278,7 @@ class PeopleConfig:
     descriptor: DescriptorConfig = field(default_factory=DescriptorConfig)
     occupancy: OccupancyConfig = field(default_factory=OccupancyConfig)
     birth: BirthConfig = field(default_factory=BirthConfig)
+    body: BodyConfig = field(default_factory=BodyConfig)
 
     def __post_init__(self) -> None:
         _int_at_least(self.particles, "particles", 1, "a particle count")
@@ -247,6 +290,7 @@ class PeopleConfig:
             ("descriptor", DescriptorConfig),
             ("occupancy", OccupancyConfig),
             ("birth", BirthConfig),
+            ("body", BodyConfig),
         ):
             if not isinstance(getattr(self, name), cls):
                 raise ConfigError(f"{name}: expected a {cls.__name__}, got {type(getattr(self, name)).__name__}")
