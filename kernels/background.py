@@ -14,6 +14,9 @@ does not fit GPU registers) and no sort (an insertion sort costs ``K^2 / 4`` com
 Per frame (:func:`foreground_kernel`, one thread per pixel), with the background ``B`` and the per-channel MADs
 linearly interpolated between the two nearest windows (weight ``w`` of the second):
 
+* global illumination: every frame (and every sample of a window) is first divided by its global gain per
+  channel, the median over a pixel subsample of its ratio to the background (computed by the driver), so a light
+  dimming or a camera's auto-exposure neither hides people in the MAD nor floods the masks,
 * noise scale ``s = sqrt(s0^2 + (1.4826^2 / 3) sum_c MAD_c^2)`` (8-bit units; ``1.4826 MAD`` estimates a gaussian
   standard deviation, ``s0`` is the noise floor),
 * robust distance ``z = sqrt(sum_c (I_c - B_c)^2 / 3) / s`` (RMS colour difference in robust standard deviations),
@@ -66,27 +69,38 @@ def select_rank(values: samples_vec, count: int, rank: int, lo: int, hi: int):
     return answer
 
 
+@wp.func
+def unlit(x: float, g: float):
+    """An 8-bit value divided by a global gain (illumination compensation), rounded and clamped to 0..255."""
+    return wp.clamp(int(wp.floor(x / g + 0.5)), 0, 255)
+
+
 @wp.kernel
 def median_mad_kernel(
     stack: wp.array2d(dtype=wp.uint8),
+    gains: wp.array(dtype=wp.vec3),
     median: wp.array(dtype=wp.uint8),
     mad: wp.array(dtype=wp.uint8),
 ):
-    """Per channel value ``j``: lower median of ``stack[:, j]`` and its MAD (lower median of absolute deviations).
+    """Per channel value ``j``: lower median of ``stack[:, j] / gains[:, j % 3]`` and its MAD (lower median of
+    absolute deviations).
 
     Args:
         stack: ``(K, 3 H W)`` sampled frames, ``1 <= K <= MAX_SAMPLES``.
+        gains: ``(K,)`` global gain of each sample per channel (B, G, R) relative to the window (1: none): the
+            samples are compensated for global illumination changes before the statistics.
         median: ``(3 H W,)`` output background.
         mad: ``(3 H W,)`` output median absolute deviation (8-bit units).
     """
     j = wp.tid()
+    c = j % 3
     count = wp.min(stack.shape[0], MAX_SAMPLES)
     rank = (count - 1) // 2
     values = samples_vec()
     lo = int(255)
     hi = int(0)
     for k in range(count):
-        v = int(stack[k, j])
+        v = unlit(float(stack[k, j]), gains[k][c])
         values[k] = v
         lo = wp.min(lo, v)
         hi = wp.max(hi, v)
@@ -119,6 +133,7 @@ def foreground_kernel(
     bg1: wp.array(dtype=wp.uint8),
     mad1: wp.array(dtype=wp.uint8),
     w: float,
+    gain: wp.vec3,
     params: ForegroundParams,
     mask: wp.array(dtype=wp.uint8),
     prob: wp.array(dtype=wp.float32),
@@ -130,6 +145,8 @@ def foreground_kernel(
         frame: ``(3 H W,)`` BGR frame.
         bg0, mad0: ``(3 H W,)`` background and MAD of the earlier window; ``bg1``, ``mad1`` of the later one.
         w: Interpolation weight of the later window in ``[0, 1]``.
+        gain: The frame's global gain per channel (B, G, R) relative to the background (illumination change):
+            the frame is divided by it before the tests (1: none).
         params: Thresholds.
         mask: ``(H W,)`` output, 1 = foreground.
         prob: ``(H W,)`` output foreground probability in ``[0, 1]``.
@@ -148,7 +165,7 @@ def foreground_kernel(
         if w > 0.0:  # between two windows (w = 0: one window, half the reads)
             b = (1.0 - w) * b + w * float(bg1[j])
             m = (1.0 - w) * m + w * float(mad1[j])
-        x = float(frame[j])
+        x = float(frame[j]) / gain[c]
         dd += (x - b) * (x - b)
         mm += m * m
         ib += x * b

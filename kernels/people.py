@@ -376,26 +376,18 @@ def init_cylinder_kernel(
     vel[i] = wp.vec3(0.0, 0.0, 0.0)
 
 
-@wp.kernel
-def column_top_kernel(
+@wp.func
+def column_top(
     cams: wp.array(dtype=Camera),
     mask: wp.array(dtype=wp.uint8),
-    people: wp.array(dtype=wp.vec2),
+    axis: wp.vec2,
     z_lo: float,
     dz: float,
     nz: int,
     min_cameras: int,
     max_gap: int,
-    top: wp.array(dtype=wp.float32),
 ):
-    """The top of each person's silhouette column (ours, for the standing-person centroid): walking up the vertical
-    axis at ``people[i]`` (ground x, y) from ``z_lo`` in steps of ``dz`` metres (``nz`` steps), the highest point
-    whose projection falls on the motion mask of at least ``min_cameras`` cameras, in one run from the first such
-    point with gaps of at most ``max_gap`` steps (holes in a mask; a hand raised apart from the body does not
-    count).
-    ``top[i]`` = that height, metres, or -1 when no point qualifies. Launch one thread per person."""
-    i = wp.tid()
-    axis = people[i]
+    """Top of the silhouette column at ``axis`` (see :func:`column_top_kernel`); -1 when no point qualifies."""
     best = float(-1.0)
     started = int(0)
     gap = int(0)
@@ -419,4 +411,33 @@ def column_top_kernel(
             gap += 1
             if gap > max_gap:
                 break
+    return best
+
+
+@wp.kernel
+def column_top_kernel(
+    cams: wp.array(dtype=Camera),
+    mask: wp.array(dtype=wp.uint8),
+    people: wp.array(dtype=wp.vec2),
+    z_lo: float,
+    dz: float,
+    nz: int,
+    min_cameras: int,
+    max_gap: int,
+    search: float,
+    top: wp.array(dtype=wp.float32),
+):
+    """The top of each person's silhouette column (ours, for the standing-person centroid): walking up a vertical
+    axis from ``z_lo`` in steps of ``dz`` metres (``nz`` steps), the highest point whose projection falls on the
+    motion mask of at least ``min_cameras`` cameras, in one run from the first such point with gaps of at most
+    ``max_gap`` steps (holes in a mask; a hand raised apart from the body does not count). The axes tried are the
+    person's estimated ground position ``people[i]`` and the 8 around it at ``search`` metres (the head is narrow
+    and a walking person's estimate lags a little); ``top[i]`` = the highest of their tops, metres, or -1 when no
+    point qualifies. Launch one thread per person."""
+    i = wp.tid()
+    best = float(-1.0)
+    for a in range(3):
+        for b in range(3):
+            axis = people[i] + search * wp.vec2(float(a - 1), float(b - 1))
+            best = wp.max(best, column_top(cams, mask, axis, z_lo, dz, nz, min_cameras, max_gap))
     top[i] = best

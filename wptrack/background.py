@@ -150,6 +150,46 @@ class _Sampler:
             self.cap = None
 
 
+MIN_GAIN_LEVEL = 16.0
+"""Background values below this (8-bit) are left out of gain estimates (dark pixels carry no ratio)."""
+
+
+def frame_gain(values: np.ndarray, background: np.ndarray) -> np.ndarray:
+    """Global gain per channel of a frame relative to a background: the median over pixels of their ratio.
+
+    Args:
+        values: ``(P, 3)`` a pixel subsample of the frame (8-bit). background: ``(P, 3)`` the same pixels of the
+            background (float, 8-bit units).
+
+    Returns:
+        ``(3,)`` gains (1 where no pixel is bright enough). The median ignores a minority of changed pixels
+        (the people); a light dimming by 20 % gives 0.8.
+    """
+    out = np.ones(3)
+    for c in range(3):
+        ok = background[:, c] >= MIN_GAIN_LEVEL
+        if ok.sum() >= 16:
+            out[c] = float(np.median(values[ok, c] / background[ok, c]))
+    return np.clip(out, 0.05, 20.0)
+
+
+def sample_gains(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Gains of a window's samples relative to their median, and that (compensated) median, on a pixel subsample.
+
+    Args:
+        samples: ``(K, P, 3)`` uint8 channel values of K samples at P subsampled pixels.
+
+    Returns:
+        ``(gains (K, 3) float32, background (P, 3) float64)``: each sample's gain against the per-pixel median of the
+        samples (normalised so that their median gain is 1), and the median of the compensated samples.
+    """
+    x = samples.astype(np.float64)
+    ref = np.median(x, axis=0)
+    gains = np.stack([frame_gain(xk, ref) for xk in x])
+    gains /= np.median(gains, axis=0, keepdims=True)
+    return gains.astype(np.float32), np.median(x / gains[:, None, :], axis=0)
+
+
 class OfflineBackground:
     """Windowed median/MAD background of one source and the per-frame foreground evidence.
 
@@ -184,6 +224,10 @@ class OfflineBackground:
         self._prob = wp.zeros(self.pixels, dtype=wp.float32, device=device)
         self._shadow = wp.zeros(self.pixels, dtype=wp.uint8, device=device)
         self._built: dict[int, tuple[Any, Any]] = {}
+        # channel values of a pixel subsample (every 13th pixel) for the global gains (illumination changes)
+        self._sub = (3 * np.arange(0, self.pixels, 13)[:, None] + np.arange(3)[None, :]).reshape(-1)
+        self._bg_sub: dict[int, np.ndarray] = {}
+        self.last_gain = np.ones(3)  # the global gain of the last frame given to evidence() (B, G, R)
         self._stacks: dict[int, Any] = {}
         self._sampler = _Sampler(source)
         p = kbg.ForegroundParams()
@@ -216,9 +260,13 @@ class OfflineBackground:
             stack = self._stacks[k] = wp.zeros((k, 3 * self.pixels), dtype=wp.uint8, device=self.device)
         host = np.stack([np.ascontiguousarray(f).reshape(-1) for f in frames])
         wp.copy(stack, wp.array(host, dtype=wp.uint8, device="cpu", copy=False))
+        gains, self._bg_sub[i] = sample_gains(host[:, self._sub].reshape(k, -1, 3))
         median = wp.zeros(3 * self.pixels, dtype=wp.uint8, device=self.device)
         mad = wp.zeros(3 * self.pixels, dtype=wp.uint8, device=self.device)
-        wp.launch(kbg.median_mad_kernel, dim=3 * self.pixels, inputs=[stack], outputs=[median, mad], device=self.device)
+        g = wp.array(gains, dtype=wp.vec3, device=self.device)
+        wp.launch(
+            kbg.median_mad_kernel, dim=3 * self.pixels, inputs=[stack, g], outputs=[median, mad], device=self.device
+        )
         self._built[i] = (median, mad)
         log.debug("%s: background window %d from %d frames", self.source.name, i, k)
         return median, mad
@@ -254,11 +302,14 @@ class OfflineBackground:
         b0, m0 = self._window(i)
         b1, m1 = self._window(j)
         flat = np.ascontiguousarray(frame).reshape(-1)
+        bg_sub = (1.0 - w) * self._bg_sub[i] + w * self._bg_sub[j]
+        gain = frame_gain(flat[self._sub].reshape(-1, 3), bg_sub)
+        self.last_gain = gain
         wp.copy(self._frame, wp.array(flat, dtype=wp.uint8, device="cpu", copy=False))
         wp.launch(
             kbg.foreground_kernel,
             dim=self.pixels,
-            inputs=[self._frame, b0, m0, b1, m1, w, self.params],
+            inputs=[self._frame, b0, m0, b1, m1, w, wp.vec3(*gain), self.params],
             outputs=[self._mask, self._prob, self._shadow],
             device=self.device,
         )

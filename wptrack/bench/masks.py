@@ -109,13 +109,14 @@ class MasksSuite:
                 model._window(0)
                 builds.append(time.perf_counter() - t0)
             median, mad = (a.numpy().reshape(case.height, case.width, 3) for a in model._window(0))
-            kernel, masks, probs = [], [], []
+            kernel, masks, probs, gains = [], [], [], []
             for t, f in enumerate(decoded):
                 t0 = time.perf_counter()
                 m, p = model.evidence(min(t, 0), f)  # window 0 only: time the step, not window builds
                 kernel.append(time.perf_counter() - t0)
                 masks.append(m)
                 probs.append(p)
+                gains.append(model.last_gain.copy())
             model.close()
         k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
         k5 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
@@ -130,7 +131,7 @@ class MasksSuite:
             t0 = time.perf_counter()
             ref = numpy_masks.foreground(
                 f, median, mad, median, mad, 0.0, c.fg_threshold, c.soft_scale, c.noise_floor, c.detect_shadows,
-                c.shadow_lo, c.shadow_hi, c.shadow_chroma,
+                c.shadow_lo, c.shadow_hi, c.shadow_chroma, gains[t],
             )  # fmt: skip
             ref_t.append(time.perf_counter() - t0)
             near = np.abs(ref["z"] - c.fg_threshold) < 1e-3

@@ -8,9 +8,14 @@ import numpy as np
 MAD_TO_SIGMA = 1.4826
 
 
-def median_mad(stack: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Lower median and MAD over axis 0 of a ``(K, ...)`` uint8 stack (0-based order statistic ``(K - 1) // 2``)."""
+def median_mad(stack: np.ndarray, gains: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Lower median and MAD over axis 0 of a ``(K, 3 P)`` uint8 stack (0-based order statistic ``(K - 1) // 2``),
+    each sample first divided by its ``(K, 3)`` channel gains (rounded half up, clamped to 0..255)."""
     rank = (stack.shape[0] - 1) // 2
+    if gains is not None:
+        k = stack.shape[0]
+        g = np.asarray(gains, dtype=np.float64)[:, None, :]
+        stack = np.clip(np.floor(stack.reshape(k, -1, 3) / g + 0.5), 0, 255).astype(np.uint8).reshape(k, -1)
     median = np.partition(stack, rank, axis=0)[rank]
     dev = np.abs(stack.astype(np.int16) - median.astype(np.int16)).astype(np.uint8)
     return median, np.partition(dev, rank, axis=0)[rank]
@@ -30,11 +35,13 @@ def foreground(
     shadow_lo: float,
     shadow_hi: float,
     chroma_max: float,
+    gain: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
-    """Per-pixel ``z``, shadow flag, probability and mask of ``(H, W, 3)`` uint8 images (module formulas)."""
+    """Per-pixel ``z``, shadow flag, probability and mask of ``(H, W, 3)`` uint8 images (module formulas), the
+    frame divided by its ``(3,)`` channel ``gain`` first."""
     b = (1.0 - w) * bg0.astype(np.float64) + w * bg1.astype(np.float64)
     m = (1.0 - w) * mad0.astype(np.float64) + w * mad1.astype(np.float64)
-    x = frame.astype(np.float64)
+    x = frame.astype(np.float64) / (1.0 if gain is None else np.asarray(gain, dtype=np.float64))
     s = np.sqrt(noise_floor**2 + MAD_TO_SIGMA**2 * (m * m).sum(-1) / 3.0)
     z = np.sqrt(((x - b) ** 2).sum(-1) / 3.0) / s
     bb = (b * b).sum(-1)

@@ -450,6 +450,7 @@ class PeopleTracker:
                     int((z_hi - z_lo) / body.step) + 1,
                     min(body.min_cameras, len(self.rig)),
                     int(round(body.max_gap / body.step)),
+                    body.search,
                 ],
                 outputs=[self.top],
                 device=self.device,

@@ -242,6 +242,8 @@ class BodyConfig:
         step: vertical step of the column search, metres. Ours: 0.02.
         max_gap: holes in the masks bridged on the way up, metres. Ours: 0.1.
         min_cameras: cameras that must see a column point moving (at most the rig's cameras). Ours: 2.
+        search: the column is also searched this far around the estimated ground position (a 3 x 3 grid of axes,
+            the highest top wins), metres. Ours: 0.08.
     """
 
     centroid: str = "standing"
@@ -249,6 +251,7 @@ class BodyConfig:
     step: float = 0.02
     max_gap: float = 0.1
     min_cameras: int = 2
+    search: float = 0.08
 
     def __post_init__(self) -> None:
         if self.centroid not in CENTROID_MODES:
@@ -257,6 +260,7 @@ class BodyConfig:
         _positive(self.step, "body.step", "a step in metres")
         _non_negative(self.max_gap, "body.max_gap", "a gap in metres")
         _int_at_least(self.min_cameras, "body.min_cameras", 1, "a camera count")
+        _non_negative(self.search, "body.search", "a distance in metres")
 
 
 @dataclass(frozen=True)
