@@ -17,8 +17,10 @@ linearly interpolated between the two nearest windows (weight ``w`` of the secon
 * global illumination: every frame (and every sample of a window) is first divided by its global gain per
   channel, the median over a pixel subsample of its ratio to the background (computed by the driver), so a light
   dimming or a camera's auto-exposure neither hides people in the MAD nor floods the masks,
-* noise scale ``s = sqrt(s0^2 + (1.4826^2 / 3) sum_c MAD_c^2)`` (8-bit units; ``1.4826 MAD`` estimates a gaussian
-  standard deviation, ``s0`` is the noise floor),
+* noise scale ``s = max(s0, 1.4826 sqrt(sum_c MAD_c^2 / 3))`` (8-bit units; ``1.4826 MAD`` estimates a gaussian
+  standard deviation, ``s0`` is the noise floor: the smallest scale allowed, for compressed or clipped pixels whose
+  samples barely vary); for gaussian noise ``3 z^2`` is chi-square with 3 degrees of freedom, so ``T = 4`` marks a
+  static pixel as foreground with probability about 2e-10 (``T = 3``: 6e-6),
 * robust distance ``z = sqrt(sum_c (I_c - B_c)^2 / 3) / s`` (RMS colour difference in robust standard deviations),
 * shadow test (cast shadows keep the background's chromaticity and darken it by a bounded ratio): brightness
   ratio ``a = (I . B) / (B . B)`` (Horprasert et al.'s brightness distortion) and chromaticity distortion
@@ -171,7 +173,7 @@ def foreground_kernel(
         ib += x * b
         bb += b * b
         ii += x * x
-    s = wp.sqrt(params.noise_floor * params.noise_floor + MAD_TO_SIGMA * MAD_TO_SIGMA * mm / 3.0)
+    s = wp.max(params.noise_floor, MAD_TO_SIGMA * wp.sqrt(mm / 3.0))
     z = wp.sqrt(dd / 3.0) / s
     is_shadow = int(0)
     if params.shadow != 0 and bb >= 1.0 and z > params.threshold:

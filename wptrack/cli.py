@@ -661,7 +661,7 @@ def build_parser() -> argparse.ArgumentParser:
     mk.add_argument("--window", type=int, default=None, help="offline: background window, frames (default 300)")
     mk.add_argument("--samples", type=int, default=None, help="offline: frames sampled per window (default 25)")
     mk.add_argument("--threshold", dest="fg_threshold", type=float, default=None, help="offline: robust sigmas (4)")
-    mk.add_argument("--noise-floor", type=float, default=None, help="offline: noise floor, 8-bit units (4)")
+    mk.add_argument("--noise-floor", type=float, default=None, help="offline: noise floor, 8-bit units (3)")
     mk.add_argument("--shadow-lo", type=float, default=None, help="offline: shadow brightness ratio min (0.4)")
     mk.add_argument("--shadow-hi", type=float, default=None, help="offline: shadow brightness ratio max (0.95)")
     mk.add_argument("--shadow-chroma", type=float, default=None, help="offline: shadow chromaticity bound (0.1)")

@@ -117,7 +117,7 @@ class MaskConfig:
     window: int = 300
     samples: int = 25
     fg_threshold: float = 4.0
-    noise_floor: float = 4.0
+    noise_floor: float = 3.0
     shadow_lo: float = 0.4
     shadow_hi: float = 0.95
     shadow_chroma: float = 0.1

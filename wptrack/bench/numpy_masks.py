@@ -42,7 +42,7 @@ def foreground(
     b = (1.0 - w) * bg0.astype(np.float64) + w * bg1.astype(np.float64)
     m = (1.0 - w) * mad0.astype(np.float64) + w * mad1.astype(np.float64)
     x = frame.astype(np.float64) / (1.0 if gain is None else np.asarray(gain, dtype=np.float64))
-    s = np.sqrt(noise_floor**2 + MAD_TO_SIGMA**2 * (m * m).sum(-1) / 3.0)
+    s = np.maximum(noise_floor, MAD_TO_SIGMA * np.sqrt((m * m).sum(-1) / 3.0))
     z = np.sqrt(((x - b) ** 2).sum(-1) / 3.0) / s
     bb = (b * b).sum(-1)
     ib = (x * b).sum(-1)
