@@ -489,7 +489,7 @@ class PeopleTracker:
                     person.centroid[2] = body.ratio * person.top  # standing-person model (BodyConfig)
             people.append(person)
         est = PeopleEstimate(frame=self.frames_done, people=people, sigma_n=float(self._sigma_host.numpy()[0]))
-        self._update_population(est, active)
+        self._update_population(est, active, tops[: len(active)] > 0)
         self.frames_done += 1
         est.timings.update(upload=t1 - t0, filter=t2 - t1, population=time.perf_counter() - t2)
         return est
@@ -501,9 +501,13 @@ class PeopleTracker:
         ys = self.grid_origin[1] + c * (np.arange(self.ny) + 0.5)
         return np.meshgrid(xs, ys)  # (ny, nx) each
 
-    def _update_population(self, est: PeopleEstimate, active: list[int]) -> None:
+    def _update_population(self, est: PeopleEstimate, active: list[int], column: np.ndarray) -> None:
         """Remove people without multi-view support, duplicates and people who left; add people where the
-        evidence is unexplained for several frames. Host code on the small evidence map."""
+        evidence is unexplained for several frames. Host code on the small evidence map.
+
+        A person is supported while motion seen by several cameras is found either on its silhouette column
+        (``column[j]``: the column-top search found a point, which stays true when furniture hides everything
+        but the head and shoulders) or in a cell of the evidence map within ``support_radius``."""
         b = self.config.birth
         votes = self._votes_host.numpy().reshape(self.ny, self.nx)
         free_votes = self._free_host.numpy().reshape(self.ny, self.nx)
@@ -512,10 +516,10 @@ class PeopleTracker:
         lo, hi = self.volume
         margin = 0.5
         by_slot = {k: e for k, e in zip(active, est.people, strict=True)}
-        for k, e in by_slot.items():
+        for j, (k, e) in enumerate(by_slot.items()):
             x, y = e.mean[0], e.mean[1]
             near = (gx - x) ** 2 + (gy - y) ** 2 <= b.support_radius**2
-            self.slot_miss[k] = 0 if np.any(support & near) else self.slot_miss[k] + 1
+            self.slot_miss[k] = 0 if column[j] or np.any(support & near) else self.slot_miss[k] + 1
             outside = np.any(e.mean[:2] < lo[:2] - margin) or np.any(e.mean[:2] > hi[:2] + margin)
             if self.slot_miss[k] >= b.frames_to_remove or outside or not np.all(np.isfinite(e.mean)):
                 self._remove(k, est)
