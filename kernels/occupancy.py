@@ -87,3 +87,10 @@ def occupancy_hashgrid_kernel(
         if d2 <= r2max:
             acc += wp.float32(wp.exp(wp.float64(logw[i]) - ln)) * wp.exp(-d2 * inv2s2)
     grid[ix, iy, iz] = acc * INV_SQRT_2PI_CUBED / (sigma * sigma * sigma)
+
+
+@wp.kernel
+def log_norm_kernel(est: wp.array(dtype=wp.float64), loglik_slot: int, n: int, out: wp.array(dtype=wp.float64)):
+    """``out[0] = est[loglik_slot] + log(n)``: log sum_i exp(logw_i) from a filter's estimate vector (its log mean
+    weight, ``kernels.reduce.EST_LOGLIK``), for :func:`occupancy_kernel` without a host round trip. Launch dim 1."""
+    out[0] = est[loglik_slot] + wp.log(wp.float64(n))

@@ -11,7 +11,7 @@ from wptrack.errors import ConfigError, FrameError
 from wptrack.rig import Camera, Rig
 from wptrack.runs.people import hull_points
 from wptrack.trackers.people import PeopleTracker
-from wptrack.trackers.people_model import PeopleConfig
+from wptrack.trackers.people_model import OccupancyConfig, PeopleConfig
 
 W, H = 160, 120
 COLOURS = ((40, 40, 200), (200, 80, 30))  # BGR: a red and a blue person
@@ -149,8 +149,8 @@ def test_checkpoint_continues_identically(device, scene):
 
 
 def test_occupancy_integrates_to_one(device, scene):
-    tr, _ = run(device, scene)
-    origin, grid = tr.occupancy(tr.tracked_ids[0], size=(1.6, 1.6, 2.4))
+    tr, _ = run(device, scene, occupancy=OccupancyConfig(extent=(2.0, 2.0, 3.0)))
+    origin, grid = tr.occupancy(tr.tracked_ids[0])
     voxel = tr.config.occupancy.voxel
     assert grid.dtype == np.float32 and np.all(grid >= 0)
     assert abs(grid.sum() * voxel**3 - 1.0) < 0.05  # the 3 sigma cutoff and the grid edges lose a little

@@ -138,6 +138,10 @@ class PersonFilter(ParticleFilter):
         self.mass = [wp.zeros(n, dtype=wp.float32, device=d) for _ in range(2)]
         self.rgb = wp.zeros(n, dtype=wp.vec3, device=d)
         self.sigma_vel = wp.array([cfg.dynamics.sigma_vel], dtype=wp.float32, device=d)
+        oc = cfg.occupancy
+        self.grid_dims = tuple(int(v) for v in np.maximum(np.round(np.asarray(oc.extent) / oc.voxel), 1))
+        self.grid = wp.zeros(self.grid_dims, dtype=wp.float32, device=d)  # occupancy pdf around the person, 1/m^3
+        self.log_norm = wp.zeros(1, dtype=wp.float64, device=d)
 
     def spawn(self, xy: np.ndarray, frame: int) -> None:
         """Start the filter on a new person standing at ``xy`` (ground, metres): particles uniform in the
@@ -599,34 +603,51 @@ class PeopleTracker:
         self.slot_id[k] = -1
 
     # --- outputs beyond the estimate ------------------------------------------------------------------------
-    def occupancy(self, person_id: int, size: Sequence[float] = (1.2, 1.2, 2.0)) -> tuple[np.ndarray, np.ndarray]:
+    def occupancy(self, person_id: int) -> tuple[np.ndarray, np.ndarray]:
         """The occupancy pdf (3D Gaussian kernel over the particles, Figs. 6 and 8) of a tracked person on a voxel
-        grid of the given size (metres) around its estimate, after the last frame.
+        grid of ``config.occupancy.extent`` around its estimate, after the last frame (a launch into the person's
+        grid, allocated once, and a copy back).
 
         Returns:
             ``(origin (3,), grid (nx, ny, nz) float32)``: the corner of voxel (0, 0, 0), metres, and the density
             per cubic metre (voxel edge ``config.occupancy.voxel``).
+
+        Raises:
+            ConfigError: ``person_id`` is not tracked.
         """
         slots = np.nonzero(self.slot_id == person_id)[0]
         if not slots.size:
             raise ConfigError(f"person {person_id} is not tracked")
         p = self.pool[int(slots[0])]
         oc = self.config.occupancy
-        e = p.est_host.numpy()
-        centre = e[kreduce.EST_MEAN : kreduce.EST_MEAN + 3]
-        dims = np.maximum(np.round(np.asarray(size, dtype=np.float64) / oc.voxel), 1).astype(int)
-        origin = np.floor((centre - 0.5 * dims * oc.voxel) / oc.voxel) * oc.voxel
-        grid = wp.zeros(tuple(int(v) for v in dims), dtype=wp.float32, device=self.device)
-        log_norm = wp.array([e[kreduce.EST_LOGLIK] + math.log(p.n)], dtype=wp.float64, device=self.device)
-        cur = p.parity
+        centre = p.est_host.numpy()[kreduce.EST_MEAN : kreduce.EST_MEAN + 3]
+        dims = np.asarray(p.grid_dims)
+        origin = np.floor((centre - 0.5 * dims * oc.voxel) / oc.voxel) * oc.voxel  # on the voxel lattice
+        d, cur = self.device, p.parity
+        wp.launch(
+            kocc.log_norm_kernel, dim=1, inputs=[p.est, int(kreduce.EST_LOGLIK), p.n], outputs=[p.log_norm], device=d
+        )
         wp.launch(
             kocc.occupancy_kernel,
-            dim=tuple(int(v) for v in dims),
-            inputs=[p.x[cur], p.logw[cur], log_norm, oc.sigma, oc.cutoff, wp.vec3(*origin), oc.voxel],
-            outputs=[grid],
-            device=self.device,
+            dim=p.grid_dims,
+            inputs=[p.x[cur], p.logw[cur], p.log_norm, oc.sigma, oc.cutoff, wp.vec3(*origin), oc.voxel],
+            outputs=[p.grid],
+            device=d,
         )
-        return origin, grid.numpy()
+        return origin, p.grid.numpy().copy()
+
+    def add_person(self, xy: Sequence[float]) -> int:
+        """Start tracking a person standing at ``xy`` (ground x, y, metres) now, as if added by the evidence (e.g.
+        known initial positions). Returns its id.
+
+        Raises:
+            ConfigError: every slot of the pool is taken (``BirthConfig.max_people``).
+        """
+        if not np.any(self.slot_id < 0):
+            raise ConfigError(f"max_people ({len(self.pool)}) people are tracked already")
+        est = PeopleEstimate(frame=self.frames_done, people=[], sigma_n=0.0)
+        self._add(np.asarray(xy, dtype=np.float64)[:2], est)
+        return est.added[0]
 
     @property
     def tracked_ids(self) -> list[int]:

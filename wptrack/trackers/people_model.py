@@ -135,18 +135,24 @@ class OccupancyConfig:
         sigma: deviation of the 3D Gaussian kernel per particle, metres. Ours: 0.10.
         cutoff: truncation radius of the kernel, in units of sigma. Ours: 3.
         voxel: edge of the output voxels, metres. Ours: 0.05.
+        extent: size of the grid around each person (x, y, z), metres. Ours: 1.2 x 1.2 x 2.2.
         p_h: probability P_H that the bounding volume V_k must contain (section 4: 0.95).
     """
 
     sigma: float = 0.10
     cutoff: float = 3.0
     voxel: float = 0.05
+    extent: tuple[float, float, float] = (1.2, 1.2, 2.2)
     p_h: float = 0.95
 
     def __post_init__(self) -> None:
         _positive(self.sigma, "occupancy.sigma", "a kernel deviation in metres")
         _positive(self.cutoff, "occupancy.cutoff", "a cutoff in kernel deviations")
         _positive(self.voxel, "occupancy.voxel", "a voxel edge in metres")
+        if len(self.extent) != 3:
+            raise ConfigError(f"occupancy.extent: expected (x, y, z) metres, got {self.extent!r}")
+        for v in self.extent:
+            _positive(v, "occupancy.extent", "a size in metres")
         _open_fraction(self.p_h, "occupancy.p_h", "a probability")
 
 
