@@ -3,10 +3,24 @@
 from __future__ import annotations
 
 import logging
+import os
+import sys
+import tempfile
 
 from .errors import DeviceError
 
 log = logging.getLogger(__name__)
+
+_NO_DRIVER = "Could not find or load the NVIDIA CUDA driver"
+_driver_missing: bool | None = None  # set by init_warp when it saw Warp's "no CUDA driver" message
+_said: set[str] = set()
+
+
+def _say_once(message: str) -> None:
+    """Log the device choice once per process (trackers resolve the already resolved alias again)."""
+    if message not in _said:
+        _said.add(message)
+        log.info(message)
 
 
 def quiet_warp(quiet: bool = True) -> None:
@@ -18,10 +32,46 @@ def quiet_warp(quiet: bool = True) -> None:
 
 
 def init_warp() -> None:
-    """Initialise Warp (idempotent)."""
-    import warp as wp
+    """Initialise Warp (idempotent), without its "no CUDA driver" noise on machines without a GPU.
 
-    wp.init()
+    Warp's native library prints ``Warp CUDA warning: Could not find or load the NVIDIA CUDA driver`` from C
+    straight to file descriptor 2 when ``libcuda`` cannot be loaded, whatever the device asked for. The first
+    call captures descriptor 2 while Warp starts, drops that one line (it is logged at DEBUG level instead: a
+    run says which device it used and why via :func:`resolve_device`) and writes everything else back to stderr.
+    """
+    global _driver_missing
+    import warp as wp
+    from warp._src import context
+
+    if context.runtime is not None:
+        return
+    try:
+        sys.stderr.flush()
+        fd = sys.stderr.fileno() if hasattr(sys.stderr, "fileno") else 2
+    except (OSError, ValueError):  # stderr replaced by an object without a descriptor (e.g. pytest capture)
+        fd = 2
+    with tempfile.TemporaryFile() as tmp:
+        saved = os.dup(fd)
+        try:
+            os.dup2(tmp.fileno(), fd)
+            try:
+                wp.init()
+            finally:
+                os.dup2(saved, fd)
+        finally:
+            os.close(saved)
+        tmp.seek(0)
+        text = tmp.read().decode("utf-8", "replace")
+    kept = []
+    for line in text.splitlines(keepends=True):
+        if _NO_DRIVER in line:
+            _driver_missing = True
+            log.debug("Warp: %s", line.strip())
+        else:
+            kept.append(line)
+    if kept:
+        sys.stderr.write("".join(kept))
+        sys.stderr.flush()
 
 
 def resolve_device(spec: str | None = "auto") -> str:
@@ -43,8 +93,14 @@ def resolve_device(spec: str | None = "auto") -> str:
     spec = (spec or "auto").strip().lower()
     cuda = [d.alias for d in wp.get_cuda_devices()]
     if spec == "auto":
-        return cuda[0] if cuda else "cpu"
+        if cuda:
+            _say_once(f"device {cuda[0]} (auto: first CUDA device)")
+            return cuda[0]
+        why = "no NVIDIA CUDA driver" if _driver_missing else "no CUDA device"
+        _say_once(f"device cpu (auto: {why})")
+        return "cpu"
     if spec == "cpu":
+        _say_once("device cpu (asked for)")
         return "cpu"
     if spec == "cuda" or spec.startswith("cuda:"):
         if not cuda:

@@ -62,6 +62,17 @@ def _fsync_dir(directory: Path) -> None:
         os.close(fd)
 
 
+def default_file_mode() -> int:
+    """The mode a plain ``open(path, "w")`` would give a new file: ``0o666`` less the process umask.
+
+    ``tempfile.mkstemp`` creates its files ``0o600``; an atomic write renames such a file into place, so it sets
+    this mode first, or a report would be unreadable by a web server or a colleague.
+    """
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 @contextlib.contextmanager
 def _atomic_file(path: str | os.PathLike) -> Any:
     """Yield a binary file object on a temporary file next to ``path``; on success fsync and rename it to ``path``.
@@ -72,6 +83,7 @@ def _atomic_file(path: str | os.PathLike) -> Any:
     fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as f:
+            os.fchmod(f.fileno(), default_file_mode())  # mkstemp's 0600 -> the umask's usual mode
             yield f
             f.flush()
             os.fsync(f.fileno())

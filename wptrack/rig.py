@@ -43,6 +43,7 @@ import numpy as np
 import yaml
 
 from wptrack.errors import OutputError, RigError
+from wptrack.io import default_file_mode
 
 __all__ = ["Camera", "Rig", "save_opencv"]
 
@@ -726,6 +727,7 @@ class Rig:
                 "w", encoding="utf-8", dir=path.parent, prefix=f".{path.name}.", suffix=".tmp", delete=False
             ) as fh:
                 tmp_name = fh.name
+                os.fchmod(fh.fileno(), default_file_mode())  # NamedTemporaryFile's 0600 -> the umask's mode
                 fh.write(text)
                 fh.flush()
                 os.fsync(fh.fileno())
