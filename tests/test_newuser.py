@@ -1,0 +1,71 @@
+"""Seen when tried as a new user would: no CUDA noise on a CPU run, readable report files (umask mode, not
+mkstemp's 0600), tracebacks only with --debug."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import warp as wp
+
+from wptrack.io import atomic_save_npz, atomic_write_json, atomic_write_text, default_file_mode
+from wptrack.rig import Camera, Rig
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _env() -> dict:
+    return {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+
+
+@pytest.mark.parametrize("spec", ["cpu", "auto"])
+def test_no_cuda_noise_on_a_cpu_run(spec):
+    """Warp's native 'Could not find or load the NVIDIA CUDA driver' line is kept off stderr; the device choice is
+    logged (with -v) once, with the reason."""
+    code = (
+        "import logging, sys;"
+        "logging.basicConfig(level=logging.INFO, stream=sys.stdout, format='%(levelname)s %(name)s: %(message)s');"
+        "from wptrack.device import resolve_device;"
+        f"print('RESOLVED', resolve_device({spec!r})); resolve_device({spec!r})"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=_env())
+    assert r.returncode == 0, r.stderr
+    assert "CUDA" not in r.stderr and "Could not find" not in r.stderr, r.stderr
+    resolved = r.stdout.split("RESOLVED ")[1].split()[0]
+    if spec == "cpu" or not wp.get_cuda_devices():
+        assert resolved == "cpu"
+    assert r.stdout.count("INFO wptrack.device: device ") == 1, r.stdout  # said once, with why: "(...)"
+    assert "(" in r.stdout.split("INFO wptrack.device: device ")[1]
+
+
+def test_atomic_writes_use_the_umask_mode(tmp_path):
+    old = os.umask(0o022)
+    try:
+        assert default_file_mode() == 0o644
+        atomic_write_text(tmp_path / "index.html", "<html></html>")
+        atomic_write_json(tmp_path / "run.json", {"a": 1})
+        atomic_save_npz(tmp_path / "p.npz", a=[1, 2])
+        Rig((Camera.look_at("c", 32, 24, (1, 0, 1), (0, 0, 0), 60.0),)).save(tmp_path / "rig.yaml")
+        for name in ("index.html", "run.json", "p.npz", "rig.yaml"):
+            assert (tmp_path / name).stat().st_mode & 0o777 == 0o644, name
+        os.umask(0o077)
+        atomic_write_text(tmp_path / "private.txt", "x")
+        assert (tmp_path / "private.txt").stat().st_mode & 0o777 == 0o600
+    finally:
+        os.umask(old)
+
+
+@pytest.mark.parametrize("where", ["before", "after"])
+def test_debug_shows_the_traceback(tmp_path, where):
+    args = ["track", "color", "--rig", str(tmp_path / "nope.yaml"), "--video", "x", "--hue", "1", "2", "--sat", "0",
+            "1", "--init", "0", "0", "0", "--out", str(tmp_path / "out")]  # fmt: skip
+    plain = subprocess.run([sys.executable, "-m", "wptrack.cli", *args], capture_output=True, text=True, env=_env())
+    assert plain.returncode == 2 and "Traceback" not in plain.stderr
+    assert plain.stderr.strip().splitlines() == [f"wptrack: error: {tmp_path / 'nope.yaml'}: rig file not found"]
+    dbg = ["--debug", *args] if where == "before" else [*args[:2], "--debug", *args[2:]]
+    debug = subprocess.run([sys.executable, "-m", "wptrack.cli", *dbg], capture_output=True, text=True, env=_env())
+    assert debug.returncode == 2 and "Traceback" in debug.stderr and "RigError" in debug.stderr
+    assert debug.stderr.strip().splitlines()[-1].startswith("wptrack: error:")
