@@ -69,3 +69,36 @@ def test_debug_shows_the_traceback(tmp_path, where):
     debug = subprocess.run([sys.executable, "-m", "wptrack.cli", *dbg], capture_output=True, text=True, env=_env())
     assert debug.returncode == 2 and "Traceback" in debug.stderr and "RigError" in debug.stderr
     assert debug.stderr.strip().splitlines()[-1].startswith("wptrack: error:")
+
+
+KERNEL_MODULE = """
+import warp as wp
+
+
+@wp.kernel
+def twice(a: wp.array(dtype=float), b: wp.array(dtype=float)):
+    i = wp.tid()
+    b[i] = 2.0 * a[i]
+"""
+
+
+def test_warm_up_says_compiling_only_on_a_cache_miss(tmp_path):
+    """The first run compiles (and says so, naming the cache), the second finds the cache and says nothing; the
+    kernels then launch without compiling again."""
+    (tmp_path / "tinykern.py").write_text(KERNEL_MODULE)
+    code = (
+        "import sys, numpy as np, warp as wp, tinykern;"
+        "from wptrack.device import warm_up;"
+        "print('MISSING', warm_up([tinykern], 'cpu', say=lambda m: print('SAY', m)));"
+        "a = wp.array(np.arange(3, dtype=np.float32)); b = wp.zeros(3);"
+        "wp.launch(tinykern.twice, dim=3, inputs=[a], outputs=[b]); print('OUT', b.numpy().tolist())"
+    )
+    env = {**_env(), "WARP_CACHE_PATH": str(tmp_path / "cache")}
+    env["PYTHONPATH"] = str(tmp_path) + os.pathsep + env["PYTHONPATH"]
+    runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env) for _ in range(2)]
+    for r in runs:
+        assert r.returncode == 0, r.stderr
+        assert "OUT [0.0, 2.0, 4.0]" in r.stdout
+    assert "MISSING ['tinykern']" in runs[0].stdout
+    assert f"SAY compiling kernels (first run only; cache: {tmp_path / 'cache'}" in runs[0].stdout
+    assert "MISSING []" in runs[1].stdout and "SAY" not in runs[1].stdout

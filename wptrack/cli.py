@@ -72,7 +72,7 @@ def run_color_tracking(
     Everything the user gave is validated (rig, videos, camera count, frame sizes, device, parameters)
     before the output directory is touched.
     """
-    from .device import resolve_device
+    from .device import resolve_device, warm_up
     from .frames import open_frames, prefetch
     from .io import RunWriter, ensure_writable_dir, read_tracks
     from .metrics import summarize
@@ -93,6 +93,7 @@ def run_color_tracking(
         gt = read_tracks(groundtruth)
         truth = np.column_stack([gt["x"], gt["y"], gt["z"]])
     tracker = ColorTracker(rig, target, config=config, device=device)
+    warm_up(tracker.kernel_modules, tracker.device, say=lambda m: print(m, file=sys.stderr) if progress else None)
     out_dir = ensure_writable_dir(out_dir)
     run_config = {
         "rig": str(Path(rig_path).resolve()),

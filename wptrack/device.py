@@ -6,6 +6,8 @@ import logging
 import os
 import sys
 import tempfile
+import time
+from collections.abc import Callable, Sequence
 
 from .errors import DeviceError
 
@@ -126,3 +128,67 @@ def block_partition(n: int, is_cpu: bool, block: int = 256, max_blocks: int = 20
     per = CPU_CHUNK if is_cpu else block
     blocks = max(1, min((n + per - 1) // per, max_blocks))
     return blocks, (n + blocks - 1) // blocks
+
+
+def kernel_cache_dir() -> str:
+    """Warp's kernel cache folder (``$WARP_CACHE_PATH`` when set, else ``~/.cache/warp/<version>``)."""
+    import warp as wp
+
+    init_warp()
+    return str(wp.config.kernel_cache_dir)
+
+
+def _module_cached(module, device, block_dim: int) -> bool:
+    """Whether Warp's cache holds ``module``'s binary for ``device`` (private Warp API; False when unknown)."""
+    import warp as wp
+    from warp._src import context as ctx
+
+    try:
+        dim = ctx._resolve_launch_block_dim(device, block_dim)
+        ident = module.get_module_identifier(dim)
+        name = module._get_compile_output_name(device, block_dim=dim)
+        return os.path.exists(os.path.join(wp.config.kernel_cache_dir, ident, name))
+    except Exception:  # noqa: BLE001 - another Warp version: treat as not cached (we only say more)
+        return False
+
+
+def warm_up(
+    modules: Sequence | None = None,
+    device: str = "cpu",
+    block_dim: int = 256,
+    say: Callable[[str], None] | None = None,
+) -> list[str]:
+    """Load the Warp kernel modules before the first frame, compiling those missing from the kernel cache.
+
+    Warp compiles a module on its first launch (seconds per module on the CPU), which would otherwise land in the
+    first frame's time and make a progress bar show seconds per frame. When a module is not in the cache this says
+    ``compiling kernels (first run only; cache: DIR) ...`` through ``say`` (default: ``log.info``) before compiling.
+    The cache folder is ``$WARP_CACHE_PATH`` when set.
+
+    Args:
+        modules: Python modules (or names) holding Warp kernels; None: every ``wptrack.kernels.*`` module
+            imported so far (those a tracker built by then uses).
+        device: Warp device alias.
+        block_dim: the launches' block size (``wp.launch_tiled`` uses 256 on CUDA; the CPU resolves to 1).
+        say: called once with the message when something must be compiled.
+
+    Returns:
+        The names of the modules that were not in the cache (compiled now).
+    """
+    import warp as wp
+    from warp._src import context as ctx
+
+    init_warp()
+    if modules is None:
+        modules = sorted(m for m in sys.modules if m.startswith(__package__ + ".kernels."))
+    names = [m if isinstance(m, str) else m.__name__ for m in modules]
+    mods = [ctx.get_module(n) for n in names]
+    d = wp.get_device(device)
+    missing = [n for n, m in zip(names, mods, strict=True) if not _module_cached(m, d, block_dim)]
+    if missing:
+        (say or log.info)(f"compiling kernels (first run only; cache: {wp.config.kernel_cache_dir}) ...")
+    t0 = time.perf_counter()
+    for m in mods:
+        wp.load_module(m, device=d, block_dim=block_dim)
+    log.debug("kernels loaded on %s in %.2f s (compiled: %s)", d, time.perf_counter() - t0, ", ".join(missing) or "-")
+    return missing

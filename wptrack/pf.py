@@ -246,6 +246,9 @@ class ParticleFilter(FrameChain):
         frame: (1,) int32 filter iteration, keys the random streams.
     """
 
+    kernel_modules: tuple[str, ...] = ("wptrack.kernels.motion", "wptrack.kernels.reduce", "wptrack.kernels.resample")
+    """Warp modules the frame chain launches (loaded before the first frame by :func:`wptrack.device.warm_up`)."""
+
     def __init__(
         self,
         particles: int,
