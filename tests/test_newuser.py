@@ -8,10 +8,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import cv2
+import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.io import atomic_save_npz, atomic_write_json, atomic_write_text, default_file_mode
+from wptrack.io import atomic_imwrite, atomic_save_npz, atomic_write_json, atomic_write_text, default_file_mode
 from wptrack.rig import Camera, Rig
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -48,8 +50,11 @@ def test_atomic_writes_use_the_umask_mode(tmp_path):
         atomic_write_text(tmp_path / "index.html", "<html></html>")
         atomic_write_json(tmp_path / "run.json", {"a": 1})
         atomic_save_npz(tmp_path / "p.npz", a=[1, 2])
+        atomic_imwrite(tmp_path / "fig.png", np.full((4, 5, 3), 9, np.uint8))
         Rig((Camera.look_at("c", 32, 24, (1, 0, 1), (0, 0, 0), 60.0),)).save(tmp_path / "rig.yaml")
-        for name in ("index.html", "run.json", "p.npz", "rig.yaml"):
+        assert cv2.imread(str(tmp_path / "fig.png")).shape == (4, 5, 3)
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["fig.png", "index.html", "p.npz", "rig.yaml", "run.json"]
+        for name in ("index.html", "run.json", "p.npz", "rig.yaml", "fig.png"):
             assert (tmp_path / name).stat().st_mode & 0o777 == 0o644, name
         os.umask(0o077)
         atomic_write_text(tmp_path / "private.txt", "x")

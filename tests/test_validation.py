@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tests.test_cli import track_args
+from tests.test_cli import _replace, track_args
 from tests.test_frames import _frames, _write_avi
 from tests.test_tracker_colour import TARGET, small_rig
 from wptrack.cli import main
@@ -109,10 +109,18 @@ def scene(tmp_path_factory):
     return make.__wrapped__(tmp_path_factory)
 
 
-@pytest.mark.parametrize(("extra", "needle"), [(["--seed", "-1"], "seed"), (["--intensity", "0", "300"], "intensity")])
-def test_cli_parameter_errors(scene, tmp_path, capsys, extra, needle):
+CLI_CASES = {
+    "seed negative": (lambda s: ["--seed", "-1"], "seed"),
+    "intensity above 255": (lambda s: ["--intensity", "0", "300"], "intensity"),
+    "frame size differs from the rig": (lambda s: ["--video", s["videos"][1], "--video", s["videos"][0]], "differs"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CLI_CASES))
+def test_cli_parameter_errors(scene, tmp_path, capsys, case):
+    make, needle = CLI_CASES[case]
     out = tmp_path / "out"
-    code = main([*track_args(scene, out), *extra])
+    code = main(_replace(track_args(scene, out), make(scene)))
     err = capsys.readouterr().err
     assert code == 2 and "Traceback" not in err
     assert err.strip().splitlines()[-1].startswith("wptrack: error:") and needle in err

@@ -101,6 +101,21 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
         f.write(data)
 
 
+def atomic_imwrite(path: str | os.PathLike, image: np.ndarray) -> None:
+    """Write an image (format from the suffix, e.g. ``.png``; BGR as OpenCV) atomically: a crash never leaves a
+    half-written picture that a browser would show broken.
+
+    Raises:
+        OutputError: OpenCV cannot encode the image in that format.
+    """
+    import cv2
+
+    ok, buf = cv2.imencode(Path(path).suffix or ".png", image)
+    if not ok:
+        raise OutputError(f"{path}: cannot encode the image as {Path(path).suffix or '.png'}")
+    atomic_write_bytes(path, buf.tobytes())
+
+
 def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> None:
     """Replace ``path`` with ``text`` atomically (no newline translation)."""
     atomic_write_bytes(path, text.encode(encoding))
