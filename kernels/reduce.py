@@ -94,7 +94,7 @@ def block_max_kernel(
     best = float(NEG_INF)
     arg = int(NO_INDEX)
     for i in range(start + lane, stop, wp.block_dim()):
-        v = finite_logw(logw[i])
+        v = logw[i]
         if v > best:
             best = v
             arg = i
