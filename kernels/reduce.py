@@ -16,6 +16,8 @@ wp.set_module_options({"enable_backward": False})
 
 NO_INDEX = wp.constant(2147483647)
 NEG_INF = wp.constant(-3.0e38)
+LOGW_FLOOR = wp.constant(-1.0e30)
+"""Lowest log-weight kept: -inf, NaN and anything below become this (see :func:`finite_logw`)."""
 
 # Layout of the per-frame estimate vector (float64), shared with the host driver.
 EST_MEAN = wp.constant(0)  # 0..2: weighted mean (MMSE), metres
@@ -25,8 +27,24 @@ EST_ESS = wp.constant(9)  # effective sample size (sum w)^2 / sum w^2
 EST_LOGLIK = wp.constant(10)  # log of the mean weight: log p(obs_t | obs_1..t-1) when resampled each frame
 EST_MAXLOGW = wp.constant(11)  # max log-weight
 EST_RESAMPLED = wp.constant(12)  # 1 if the particles are resampled after this frame
+EST_DEGENERATE = wp.constant(13)  # 1 if every log-weight was -inf/NaN (<= LOGW_FLOOR): the weights were uniform
 EST_SIZE = wp.constant(16)
 N_SUMS = wp.constant(8)  # sum w, sum w^2, sum w x (3), sum w x^2 (3)
+
+
+@wp.func
+def finite_logw(v: float):
+    """``v``, or :data:`LOGW_FLOOR` when ``v`` is -inf, NaN or below it (every particle out of view or of zero
+    likelihood).
+
+    A floored particle weighs ``exp(LOGW_FLOOR - M) = 0`` next to any particle with a real log-weight M, so the
+    floor changes nothing while one particle is alive; when all are floored they weigh exp(0) = 1 each: the
+    documented recovery "keep the prior" (the predicted cloud with uniform weights, flagged by
+    ``EST_DEGENERATE``), with finite moments and no host round trip. Kernels apply it before storing a log-weight.
+    """
+    if v >= LOGW_FLOOR:  # false for NaN
+        return v
+    return float(LOGW_FLOOR)
 
 
 @wp.func
@@ -119,8 +137,10 @@ def moments_push(
     The partials are kept relative to the thread's running maximum ``best`` (the "online softmax" update):
     ``sw = sum exp(logw - best)``, ``sw2 = sum exp(2 (logw - best))``, ``sx = sum w x``, ``sxx = sum w x^2``. A new
     maximum rescales them by ``exp(best_old - v)``, so one pass over the particles yields the maximum, the MAP index
-    and the weighted moments together (no second read of the log-weights). Returns the updated partials.
+    and the weighted moments together (no second read of the log-weights). ``v`` goes through
+    :func:`finite_logw` (-inf/NaN count as the floor). Returns the updated partials.
     """
+    v = finite_logw(v)
     if v > best:
         r = wp.float64(0.0)
         if best > NEG_INF:
@@ -257,6 +277,10 @@ def final_moments_kernel(
             flag = 1
         est[EST_RESAMPLED] = wp.float64(flag)
         resample[0] = flag
+        degenerate = wp.float64(0.0)
+        if mv <= LOGW_FLOOR:
+            degenerate = wp.float64(1.0)
+        est[EST_DEGENERATE] = degenerate
 
 
 @wp.kernel

@@ -17,7 +17,7 @@ import warp as wp
 from .camera import Camera, pixel_of, project
 from .colour import HALF_WINDOW, ColourTarget, pixel_matches, window_count_integral
 from .motion import gaussian_walk
-from .reduce import moments_push, moments_store, moments_zero
+from .reduce import finite_logw, moments_push, moments_store, moments_zero
 
 # fast_math (CUDA only): the particle kernel is compute-bound at 1e7+ particles (Philox, Box-Muller, one distorted
 # projection and a log per camera); the approximate transcendentals and divisions (a few ulp; the CUDA tests against
@@ -163,6 +163,7 @@ def colour_predict_score_kernel(
         lw = colour_log_likelihood(cams, target, bgr, integral, window, mode, x)
         if keep:
             lw += logw_prev[i]
+        lw = finite_logw(lw)  # -inf/NaN -> the floor, as the estimate and the resampler read it
         logw_out[i] = lw
         best, arg, sw, sw2, sx, sxx = moments_push(best, arg, sw, sw2, sx, sxx, lw, i, x)
     moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)
@@ -206,6 +207,7 @@ def gaussian3d_predict_score_kernel(
         lw = -wp.dot(d, d) / (2.0 * so * so)
         if keep:
             lw += logw_prev[i]
+        lw = finite_logw(lw)  # -inf/NaN -> the floor, as the estimate and the resampler read it
         logw_out[i] = lw
         best, arg, sw, sw2, sx, sxx = moments_push(best, arg, sw, sw2, sx, sxx, lw, i, x)
     moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)

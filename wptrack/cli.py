@@ -443,7 +443,9 @@ def cmd_bench(args) -> int:
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="wptrack", description="Particle-filter 3D object tracking from calibrated cameras (Warp).")
     p.add_argument("--version", action="version", version=f"wptrack {__version__}")
+    p.add_argument("--debug", action="store_true", help="debug logging; show the traceback of errors")
     common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
     common.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     common.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -693,15 +695,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``wptrack`` console script."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(
-        level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
-    )
+    debug = bool(getattr(args, "debug", False))
+    level = logging.DEBUG if debug else logging.INFO if args.verbose else logging.WARNING
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     from .device import quiet_warp
 
-    quiet_warp(not args.verbose)  # Warp's banner and kernel-cache messages only with --verbose
+    quiet_warp(not (args.verbose or debug))  # Warp's banner and kernel-cache messages only with --verbose
     try:
         return int(args.func(args) or 0)
     except WptrackError as e:
+        if debug:  # a user mistake is one line; --debug adds where it was raised
+            import traceback
+
+            traceback.print_exc(file=sys.stderr)
         print(f"wptrack: error: {e}", file=sys.stderr)
         return e.exit_code
     except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM during a run (RunInterrupted)

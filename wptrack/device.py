@@ -3,10 +3,26 @@
 from __future__ import annotations
 
 import logging
+import os
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Sequence
 
 from .errors import DeviceError
 
 log = logging.getLogger(__name__)
+
+_NO_DRIVER = "Could not find or load the NVIDIA CUDA driver"
+_driver_missing: bool | None = None  # set by init_warp when it saw Warp's "no CUDA driver" message
+_said: set[str] = set()
+
+
+def _say_once(message: str) -> None:
+    """Log the device choice once per process (trackers resolve the already resolved alias again)."""
+    if message not in _said:
+        _said.add(message)
+        log.info(message)
 
 
 def quiet_warp(quiet: bool = True) -> None:
@@ -18,10 +34,46 @@ def quiet_warp(quiet: bool = True) -> None:
 
 
 def init_warp() -> None:
-    """Initialise Warp (idempotent)."""
-    import warp as wp
+    """Initialise Warp (idempotent), without its "no CUDA driver" noise on machines without a GPU.
 
-    wp.init()
+    Warp's native library prints ``Warp CUDA warning: Could not find or load the NVIDIA CUDA driver`` from C
+    straight to file descriptor 2 when ``libcuda`` cannot be loaded, whatever the device asked for. The first
+    call captures descriptor 2 while Warp starts, drops that one line (it is logged at DEBUG level instead: a
+    run says which device it used and why via :func:`resolve_device`) and writes everything else back to stderr.
+    """
+    global _driver_missing
+    import warp as wp
+    from warp._src import context
+
+    if context.runtime is not None:
+        return
+    try:
+        sys.stderr.flush()
+        fd = sys.stderr.fileno() if hasattr(sys.stderr, "fileno") else 2
+    except (OSError, ValueError):  # stderr replaced by an object without a descriptor (e.g. pytest capture)
+        fd = 2
+    with tempfile.TemporaryFile() as tmp:
+        saved = os.dup(fd)
+        try:
+            os.dup2(tmp.fileno(), fd)
+            try:
+                wp.init()
+            finally:
+                os.dup2(saved, fd)
+        finally:
+            os.close(saved)
+        tmp.seek(0)
+        text = tmp.read().decode("utf-8", "replace")
+    kept = []
+    for line in text.splitlines(keepends=True):
+        if _NO_DRIVER in line:
+            _driver_missing = True
+            log.debug("Warp: %s", line.strip())
+        else:
+            kept.append(line)
+    if kept:
+        sys.stderr.write("".join(kept))
+        sys.stderr.flush()
 
 
 def resolve_device(spec: str | None = "auto") -> str:
@@ -43,8 +95,14 @@ def resolve_device(spec: str | None = "auto") -> str:
     spec = (spec or "auto").strip().lower()
     cuda = [d.alias for d in wp.get_cuda_devices()]
     if spec == "auto":
-        return cuda[0] if cuda else "cpu"
+        if cuda:
+            _say_once(f"device {cuda[0]} (auto: first CUDA device)")
+            return cuda[0]
+        why = "no NVIDIA CUDA driver" if _driver_missing else "no CUDA device"
+        _say_once(f"device cpu (auto: {why})")
+        return "cpu"
     if spec == "cpu":
+        _say_once("device cpu (asked for)")
         return "cpu"
     if spec == "cuda" or spec.startswith("cuda:"):
         if not cuda:
@@ -70,3 +128,67 @@ def block_partition(n: int, is_cpu: bool, block: int = 256, max_blocks: int = 20
     per = CPU_CHUNK if is_cpu else block
     blocks = max(1, min((n + per - 1) // per, max_blocks))
     return blocks, (n + blocks - 1) // blocks
+
+
+def kernel_cache_dir() -> str:
+    """Warp's kernel cache folder (``$WARP_CACHE_PATH`` when set, else ``~/.cache/warp/<version>``)."""
+    import warp as wp
+
+    init_warp()
+    return str(wp.config.kernel_cache_dir)
+
+
+def _module_cached(module, device, block_dim: int) -> bool:
+    """Whether Warp's cache holds ``module``'s binary for ``device`` (private Warp API; False when unknown)."""
+    import warp as wp
+    from warp._src import context as ctx
+
+    try:
+        dim = ctx._resolve_launch_block_dim(device, block_dim)
+        ident = module.get_module_identifier(dim)
+        name = module._get_compile_output_name(device, block_dim=dim)
+        return os.path.exists(os.path.join(wp.config.kernel_cache_dir, ident, name))
+    except Exception:  # noqa: BLE001 - another Warp version: treat as not cached (we only say more)
+        return False
+
+
+def warm_up(
+    modules: Sequence | None = None,
+    device: str = "cpu",
+    block_dim: int = 256,
+    say: Callable[[str], None] | None = None,
+) -> list[str]:
+    """Load the Warp kernel modules before the first frame, compiling those missing from the kernel cache.
+
+    Warp compiles a module on its first launch (seconds per module on the CPU), which would otherwise land in the
+    first frame's time and make a progress bar show seconds per frame. When a module is not in the cache this says
+    ``compiling kernels (first run only; cache: DIR) ...`` through ``say`` (default: ``log.info``) before compiling.
+    The cache folder is ``$WARP_CACHE_PATH`` when set.
+
+    Args:
+        modules: Python modules (or names) holding Warp kernels; None: every ``wptrack.kernels.*`` module
+            imported so far (those a tracker built by then uses).
+        device: Warp device alias.
+        block_dim: the launches' block size (``wp.launch_tiled`` uses 256 on CUDA; the CPU resolves to 1).
+        say: called once with the message when something must be compiled.
+
+    Returns:
+        The names of the modules that were not in the cache (compiled now).
+    """
+    import warp as wp
+    from warp._src import context as ctx
+
+    init_warp()
+    if modules is None:
+        modules = sorted(m for m in sys.modules if m.startswith(__package__ + ".kernels."))
+    names = [m if isinstance(m, str) else m.__name__ for m in modules]
+    mods = [ctx.get_module(n) for n in names]
+    d = wp.get_device(device)
+    missing = [n for n, m in zip(names, mods, strict=True) if not _module_cached(m, d, block_dim)]
+    if missing:
+        (say or log.info)(f"compiling kernels (first run only; cache: {wp.config.kernel_cache_dir}) ...")
+    t0 = time.perf_counter()
+    for m in mods:
+        wp.load_module(m, device=d, block_dim=block_dim)
+    log.debug("kernels loaded on %s in %.2f s (compiled: %s)", d, time.perf_counter() - t0, ", ".join(missing) or "-")
+    return missing

@@ -352,6 +352,11 @@ class SyncedFrames:
             raise FrameError(f"videos have different frame counts: {listing} {_STOP_HINT}")
         if len(set(counts)) > 1:
             log.info("frame counts differ (%s); using the first %d frames", counts, shortest)
+        rates = [getattr(s, "fps", None) for s in self.sources]
+        known = [r for r in rates if r]
+        if known and max(known) > 1.01 * min(known):
+            listing = ", ".join(f"{s.name} {r:g} fps" for s, r in zip(self.sources, rates, strict=True) if r)
+            log.warning("frame rates differ (%s): frames are paired by index, check the videos are in sync", listing)
         self._len = shortest if max_frames is None else min(shortest, max_frames)
 
     @property

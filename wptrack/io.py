@@ -62,6 +62,17 @@ def _fsync_dir(directory: Path) -> None:
         os.close(fd)
 
 
+def default_file_mode() -> int:
+    """The mode a plain ``open(path, "w")`` would give a new file: ``0o666`` less the process umask.
+
+    ``tempfile.mkstemp`` creates its files ``0o600``; an atomic write renames such a file into place, so it sets
+    this mode first, or a report would be unreadable by a web server or a colleague.
+    """
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 @contextlib.contextmanager
 def _atomic_file(path: str | os.PathLike) -> Any:
     """Yield a binary file object on a temporary file next to ``path``; on success fsync and rename it to ``path``.
@@ -72,6 +83,7 @@ def _atomic_file(path: str | os.PathLike) -> Any:
     fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as f:
+            os.fchmod(f.fileno(), default_file_mode())  # mkstemp's 0600 -> the umask's usual mode
             yield f
             f.flush()
             os.fsync(f.fileno())
@@ -87,6 +99,21 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     """Replace ``path`` with ``data`` atomically (temporary file in the same folder, fsync, ``os.replace``)."""
     with _atomic_file(path) as f:
         f.write(data)
+
+
+def atomic_imwrite(path: str | os.PathLike, image: np.ndarray) -> None:
+    """Write an image (format from the suffix, e.g. ``.png``; BGR as OpenCV) atomically: a crash never leaves a
+    half-written picture that a browser would show broken.
+
+    Raises:
+        OutputError: OpenCV cannot encode the image in that format.
+    """
+    import cv2
+
+    ok, buf = cv2.imencode(Path(path).suffix or ".png", image)
+    if not ok:
+        raise OutputError(f"{path}: cannot encode the image as {Path(path).suffix or '.png'}")
+    atomic_write_bytes(path, buf.tobytes())
 
 
 def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> None:

@@ -61,6 +61,10 @@ class Estimate:
     """log of the mean particle weight: the frame's log-likelihood estimate (when resampled every frame)."""
     resampled: bool
     """Whether the particles were resampled after this frame (ESS trigger)."""
+    degenerate: bool = False
+    """Every log-weight was -inf or NaN (every particle out of view or of zero likelihood): the frame's weights
+    were taken as uniform, i.e. the predicted cloud was kept as it is ("keep the prior"); the estimate is then the
+    prediction's mean, finite, and ``loglik`` is ``kernels.reduce.LOGW_FLOOR``."""
     particles: np.ndarray | None = None
     """(K, 3) float32 subsample of the weighted particle cloud (only when requested), metres."""
     weights: np.ndarray | None = None
@@ -313,6 +317,9 @@ class ParticleFilter(FrameChain):
         frame: (1,) int32 filter iteration, keys the random streams.
     """
 
+    kernel_modules: tuple[str, ...] = ("wptrack.kernels.motion", "wptrack.kernels.reduce", "wptrack.kernels.resample")
+    """Warp modules the frame chain launches (loaded before the first frame by :func:`wptrack.device.warm_up`)."""
+
     def __init__(
         self,
         particles: int,
@@ -524,6 +531,7 @@ class ParticleFilter(FrameChain):
             ess=float(e[kreduce.EST_ESS]),
             loglik=float(e[kreduce.EST_LOGLIK]),
             resampled=bool(e[kreduce.EST_RESAMPLED]),
+            degenerate=bool(e[kreduce.EST_DEGENERATE]),
         )
         if self.keep:
             est.particles = self.sub_x_host.numpy().copy()

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import math
 import os
 import tempfile
@@ -48,8 +49,11 @@ import numpy as np
 import yaml
 
 from wptrack.errors import OutputError, RigError
+from wptrack.io import default_file_mode
 
 __all__ = ["Camera", "Rig", "save_opencv"]
+
+log = logging.getLogger(__name__)
 
 ROTATION_TOL = 1e-6
 """Tolerance on ``max |R^T R - I|``, on ``|det R - 1|`` and on the R/rvec agreement (max abs difference)."""
@@ -648,6 +652,14 @@ class Rig:
         object.__setattr__(self, "cameras", cameras)
         if self.volume is not None:
             object.__setattr__(self, "volume", _parse_volume(self.volume, source))
+            for name in self.blind_cameras():
+                log.warning(
+                    "%s: camera '%s' sees nothing of the working volume %s..%s m (check its pose: R/rvec, t)",
+                    source,
+                    name,
+                    list(self.volume[0]),
+                    list(self.volume[1]),
+                )
         if self.ground is not None and not isinstance(self.ground, GroundPlane):
             object.__setattr__(self, "ground", GroundPlane.from_dict(self.ground, source))
 
@@ -735,6 +747,7 @@ class Rig:
                 "w", encoding="utf-8", dir=path.parent, prefix=f".{path.name}.", suffix=".tmp", delete=False
             ) as fh:
                 tmp_name = fh.name
+                os.fchmod(fh.fileno(), default_file_mode())  # NamedTemporaryFile's 0600 -> the umask's mode
                 fh.write(text)
                 fh.flush()
                 os.fsync(fh.fileno())
@@ -800,6 +813,25 @@ class Rig:
             return np.array(self.volume[0]), np.array(self.volume[1])
         centres = np.stack([cam.center for cam in self.cameras])
         return centres.min(axis=0) - BOUNDS_PAD_M, centres.max(axis=0) + BOUNDS_PAD_M
+
+    def blind_cameras(self, samples: int = 9) -> list[str]:
+        """Names of the cameras that see no point of the working volume (:meth:`bounds`).
+
+        A ``samples``^3 grid over the volume (corners included) is projected into each camera; a camera is blind
+        when no grid point lies in front of it and inside its image. Such a camera only adds the constant
+        "outside" likelihood to every particle - usually a pose given in the wrong convention.
+        """
+        lo, hi = self.bounds()
+        axes = [np.linspace(lo[k], hi[k], samples) for k in range(3)]
+        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        blind = []
+        for cam in self.cameras:
+            with np.errstate(all="ignore"):
+                uv, depth = cam.project(grid)
+            ok = (depth > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] >= 0) & (uv[:, 1] < cam.height)
+            if not np.any(ok):
+                blind.append(cam.name)
+        return blind
 
     def check_frame_size(self, index: int, width: int, height: int, source: str) -> None:
         """Check that a frame from ``source`` matches camera ``index``'s calibrated size.

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from ..io import atomic_imwrite
 from .data import RunData
 from .model import Figure, ReportContext, Section
 from .scene3d import TRUTH_RGB, estimate_rgb, frames_for
@@ -158,7 +159,6 @@ def section_overlays(ctx: ReportContext) -> Section | None:
 
 def render_overlays(ctx: ReportContext, data: RunData) -> list[Figure]:
     """Write ``overlay_frameNNNNN.png`` for each chosen frame; returns the figures."""
-    import cv2
 
     frames = frames_for(ctx, data)
     figs = []
@@ -178,6 +178,6 @@ def render_overlays(ctx: ReportContext, data: RunData) -> list[Figure]:
         labels = [f"{cam.name}  frame {f}" for cam in data.rig.cameras][: len(drawn)]
         canvas, _ = compose(drawn, labels)
         path = ctx.out_dir / f"overlay_frame{f:05d}.png"
-        cv2.imwrite(str(path), canvas)
+        atomic_imwrite(path, canvas)
         figs.append(Figure(path.name, f"Frame {f}: particles projected into each camera", wide=True))
     return figs

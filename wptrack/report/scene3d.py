@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from ..io import atomic_imwrite
 from .data import RunData
 from .model import Figure, ReportContext, Section
 from .offscreen import import_pyvista, new_plotter, renderer_info
@@ -522,7 +523,7 @@ def render_camera_views(ctx: ReportContext, data: RunData) -> list[Figure]:
                 und = cv2.resize(und, (cam.width, cam.height), interpolation=cv2.INTER_LINEAR)
             out = composite(und, rgba)
             path = ctx.out_dir / f"camview_{_safe(cam.name)}.png"
-            cv2.imwrite(str(path), out)
+            atomic_imwrite(path, out)
             figs.append(
                 Figure(
                     path.name,

@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError
+from ..io import atomic_imwrite
 from . import plots, scene3d
 from .calibration import (
     GRID_ALPHA,
@@ -202,10 +203,9 @@ def section_calibration(ctx: ReportContext) -> Section | None:
         if image is None:
             image = np.full((cam.height, cam.width, 3), 96, np.uint8)
         out = calibration_check(data.rig, cam, image)
-        import cv2
 
         path = ctx.out_dir / "calibration.png"
-        cv2.imwrite(str(path), out)
+        atomic_imwrite(path, out)
     what = "first video frame" if run.video else ("first motion mask" if run.masks else "blank image")
     sec.figures.append(Figure(path.name, f"Ground grid and world axes on the {what} ({cam.name})"))
     return sec
@@ -237,7 +237,6 @@ def section_overlays(ctx: ReportContext) -> Section | None:
         sec.notes.append("no video: the templates are drawn on the motion masks")
     if run.truth is None:
         sec.notes.append("no ground truth found (give ReportOptions.groundtruth): ground-truth markers left out")
-    import cv2
 
     with ctx.timed("overlays"):
         images = _read(ctx, source, ctx.frames)
@@ -248,7 +247,7 @@ def section_overlays(ctx: ReportContext) -> Section | None:
             out = draw_templates(images[f], run.camera, run.plane, objs, run.truth_at(f), ctx.options.overlay_scale)
             _legend(out, [(f"frame {f}: {len(objs)} objects", (255, 255, 255))], 0.5)
             path = ctx.out_dir / f"overlay_frame{f:05d}.png"
-            cv2.imwrite(str(path), out)
+            atomic_imwrite(path, out)
             ids = ", ".join(f"{o.id} ({o.cls})" for o in objs) or "none"
             sec.figures.append(Figure(path.name, f"Frame {f}: tracked objects {ids}"))
     missing = [f for f in ctx.frames if f not in images]
@@ -284,7 +283,6 @@ def section_fig5(ctx: ReportContext) -> Section | None:
         sec.notes.append("no virtual.avi in the run (tracked with --no-virtual): the virtual scene is left out")
     if run.masks is None and run.virtual is None:
         return sec
-    import cv2
 
     with ctx.timed("fig5"):
         video = _read(ctx, run.video, ctx.frames)
@@ -314,7 +312,7 @@ def section_fig5(ctx: ReportContext) -> Section | None:
                 continue
             canvas, _ = compose(panels, labels)
             path = ctx.out_dir / f"fig5_frame{f:05d}.png"
-            cv2.imwrite(str(path), canvas)
+            atomic_imwrite(path, canvas)
             sec.figures.append(Figure(path.name, f"Frame {f}: " + ", ".join(labels[1:]), wide=True))
     return sec
 

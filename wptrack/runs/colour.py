@@ -2,7 +2,7 @@
 
 Outputs::
 
-    out_dir/tracks.csv     frame,id,x,y,z,sx,sy,sz,map_x,map_y,map_z,ess,loglik,detection (metres, world frame)
+    out_dir/tracks.csv     frame,id,x,y,z,sx,sy,sz,map_x,map_y,map_z,ess,loglik,detection,degenerate (metres)
     out_dir/particles.npz  a subsample of each frame's weighted particle cloud
     out_dir/run.json       configuration, inputs, device, versions, timings, summary (error vs ground truth)
 """
@@ -20,9 +20,10 @@ from ..errors import ConfigError
 from .loop import TrackerRun, run_tracker
 
 TRACK_COLUMNS = ["frame", "id", "x", "y", "z", "sx", "sy", "sz", "map_x", "map_y", "map_z", "ess", "loglik"]
-COLOR_TRACK_COLUMNS = [*TRACK_COLUMNS, "detection"]
+COLOR_TRACK_COLUMNS = [*TRACK_COLUMNS, "detection", "degenerate"]
 """``detection``: 1 when the mixture proposal found target pixels this frame, 0 = no detection (the frame was
-tracked with the motion prior alone), -1 with ``--proposal prior`` (no detector)."""
+tracked with the motion prior alone), -1 with ``--proposal prior`` (no detector). ``degenerate``: 1 when every
+particle had zero likelihood (all log-weights -inf: the predicted cloud is kept with uniform weights, the prior)."""
 
 
 class ColourRun(TrackerRun):
@@ -97,7 +98,8 @@ class ColourRun(TrackerRun):
 
     def record(self, est: Any, out: Any) -> None:
         detection = -1 if est.detection < 0 else int(est.detection > 0)
-        out.add_rows([[est.frame, 0, *est.mean, *est.std, *est.map, est.ess, est.loglik, detection]])
+        row = [est.frame, 0, *est.mean, *est.std, *est.map, est.ess, est.loglik, detection, int(est.degenerate)]
+        out.add_rows([row])
         if est.particles is not None:
             out.add_particles(est.frame, est.particles, est.weights)
         if self._truth is not None and self._k < len(self._truth):

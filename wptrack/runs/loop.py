@@ -255,8 +255,17 @@ def run_tracker(
             resume_from=after,
         ) as out,
     ):
-        out.set_info(**job.info())
+        info = job.info()
+        out.set_info(**info)
         job.start(out.out_dir, after)
+        tracker = getattr(job, "tracker", None)
+        if tracker is not None:  # compile the kernels missing from the cache now, not in the first frame's time
+            import sys
+
+            from ..device import warm_up
+
+            say = (lambda m: print(m, file=sys.stderr)) if progress else None
+            warm_up(getattr(tracker, "kernel_modules", None), tracker.device, say=say)
         bar = _progress(total, progress)
         bar.update(start)
         last_checkpoint = time.monotonic()

@@ -206,6 +206,8 @@ class ColorTracker(ParticleFilter):
         maps: :class:`wptrack.warpcams.ColourMaps` (mask, integral images, window map) in integral/map mode.
     """
 
+    kernel_modules = (*ParticleFilter.kernel_modules, "wptrack.kernels.colour", "wptrack.kernels.scoring")
+
     def __init__(
         self,
         rig: Rig,

@@ -1,0 +1,109 @@
+"""Seen when tried as a new user would: no CUDA noise on a CPU run, readable report files (umask mode, not
+mkstemp's 0600), tracebacks only with --debug."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import warp as wp
+
+from wptrack.io import atomic_imwrite, atomic_save_npz, atomic_write_json, atomic_write_text, default_file_mode
+from wptrack.rig import Camera, Rig
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _env() -> dict:
+    return {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+
+
+@pytest.mark.parametrize("spec", ["cpu", "auto"])
+def test_no_cuda_noise_on_a_cpu_run(spec):
+    """Warp's native 'Could not find or load the NVIDIA CUDA driver' line is kept off stderr; the device choice is
+    logged (with -v) once, with the reason."""
+    code = (
+        "import logging, sys;"
+        "logging.basicConfig(level=logging.INFO, stream=sys.stdout, format='%(levelname)s %(name)s: %(message)s');"
+        "from wptrack.device import resolve_device;"
+        f"print('RESOLVED', resolve_device({spec!r})); resolve_device({spec!r})"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=_env())
+    assert r.returncode == 0, r.stderr
+    assert "CUDA" not in r.stderr and "Could not find" not in r.stderr, r.stderr
+    resolved = r.stdout.split("RESOLVED ")[1].split()[0]
+    if spec == "cpu" or not wp.get_cuda_devices():
+        assert resolved == "cpu"
+    assert r.stdout.count("INFO wptrack.device: device ") == 1, r.stdout  # said once, with why: "(...)"
+    assert "(" in r.stdout.split("INFO wptrack.device: device ")[1]
+
+
+def test_atomic_writes_use_the_umask_mode(tmp_path):
+    old = os.umask(0o022)
+    try:
+        assert default_file_mode() == 0o644
+        atomic_write_text(tmp_path / "index.html", "<html></html>")
+        atomic_write_json(tmp_path / "run.json", {"a": 1})
+        atomic_save_npz(tmp_path / "p.npz", a=[1, 2])
+        atomic_imwrite(tmp_path / "fig.png", np.full((4, 5, 3), 9, np.uint8))
+        Rig((Camera.look_at("c", 32, 24, (1, 0, 1), (0, 0, 0), 60.0),)).save(tmp_path / "rig.yaml")
+        assert cv2.imread(str(tmp_path / "fig.png")).shape == (4, 5, 3)
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["fig.png", "index.html", "p.npz", "rig.yaml", "run.json"]
+        for name in ("index.html", "run.json", "p.npz", "rig.yaml", "fig.png"):
+            assert (tmp_path / name).stat().st_mode & 0o777 == 0o644, name
+        os.umask(0o077)
+        atomic_write_text(tmp_path / "private.txt", "x")
+        assert (tmp_path / "private.txt").stat().st_mode & 0o777 == 0o600
+    finally:
+        os.umask(old)
+
+
+@pytest.mark.parametrize("where", ["before", "after"])
+def test_debug_shows_the_traceback(tmp_path, where):
+    args = ["track", "color", "--rig", str(tmp_path / "nope.yaml"), "--video", "x", "--hue", "1", "2", "--sat", "0",
+            "1", "--init", "0", "0", "0", "--out", str(tmp_path / "out")]  # fmt: skip
+    plain = subprocess.run([sys.executable, "-m", "wptrack.cli", *args], capture_output=True, text=True, env=_env())
+    assert plain.returncode == 2 and "Traceback" not in plain.stderr
+    assert plain.stderr.strip().splitlines() == [f"wptrack: error: {tmp_path / 'nope.yaml'}: rig file not found"]
+    dbg = ["--debug", *args] if where == "before" else [*args[:2], "--debug", *args[2:]]
+    debug = subprocess.run([sys.executable, "-m", "wptrack.cli", *dbg], capture_output=True, text=True, env=_env())
+    assert debug.returncode == 2 and "Traceback" in debug.stderr and "RigError" in debug.stderr
+    assert debug.stderr.strip().splitlines()[-1].startswith("wptrack: error:")
+
+
+KERNEL_MODULE = """
+import warp as wp
+
+
+@wp.kernel
+def twice(a: wp.array(dtype=float), b: wp.array(dtype=float)):
+    i = wp.tid()
+    b[i] = 2.0 * a[i]
+"""
+
+
+def test_warm_up_says_compiling_only_on_a_cache_miss(tmp_path):
+    """The first run compiles (and says so, naming the cache), the second finds the cache and says nothing; the
+    kernels then launch without compiling again."""
+    (tmp_path / "tinykern.py").write_text(KERNEL_MODULE)
+    code = (
+        "import sys, numpy as np, warp as wp, tinykern;"
+        "from wptrack.device import warm_up;"
+        "print('MISSING', warm_up([tinykern], 'cpu', say=lambda m: print('SAY', m)));"
+        "a = wp.array(np.arange(3, dtype=np.float32)); b = wp.zeros(3);"
+        "wp.launch(tinykern.twice, dim=3, inputs=[a], outputs=[b]); print('OUT', b.numpy().tolist())"
+    )
+    env = {**_env(), "WARP_CACHE_PATH": str(tmp_path / "cache")}
+    env["PYTHONPATH"] = str(tmp_path) + os.pathsep + env["PYTHONPATH"]
+    runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env) for _ in range(2)]
+    for r in runs:
+        assert r.returncode == 0, r.stderr
+        assert "OUT [0.0, 2.0, 4.0]" in r.stdout
+    assert "MISSING ['tinykern']" in runs[0].stdout
+    assert f"SAY compiling kernels (first run only; cache: {tmp_path / 'cache'}" in runs[0].stdout
+    assert "MISSING []" in runs[1].stdout and "SAY" not in runs[1].stdout
