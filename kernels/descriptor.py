@@ -105,19 +105,23 @@ def noise_partials_kernel(
     prev: wp.array(dtype=wp.uint8),
     cur: wp.array(dtype=wp.uint8),
     n: int,
+    stride: int,
     chunk: int,
     part: wp.array(dtype=wp.float64),
 ):
     """Eq. 18, pass 1: per-block sums of squared differences of two consecutive frames, in V units (/255).
 
-    ``prev``, ``cur``: flat BGR buffers (n = 3 x total pixels bytes). Launch ``wp.launch_tiled(dim=[blocks],
-    block_dim=B)``; block ``b`` owns bytes ``[b chunk, (b+1) chunk)`` and writes ``part[b]`` once (no shared
-    address between blocks)."""
+    ``prev``, ``cur``: flat BGR buffers. The sum runs over the ``n`` channel values of every ``stride``-th pixel
+    (value j is channel j % 3 of pixel stride (j / 3); stride 1: all 3 Npix values, the paper's sum; a larger
+    stride estimates the same mean square from a pixel subsample, at 1 / stride of the cost). Launch
+    ``wp.launch_tiled(dim=[blocks], block_dim=B)``; block ``b`` owns values ``[b chunk, (b+1) chunk)`` and writes
+    ``part[b]`` once (no shared address between blocks)."""
     b, lane = wp.tid()
     start = b * chunk
     stop = wp.min(start + chunk, n)
     acc = wp.float64(0.0)
-    for i in range(start + lane, stop, wp.block_dim()):
+    for j in range(start + lane, stop, wp.block_dim()):
+        i = 3 * stride * (j / 3) + j % 3
         d = wp.float64(int(prev[i]) - int(cur[i])) * wp.float64(1.0 / 255.0)
         acc += d * d
     t = wp.tile_sum(wp.tile(acc))
@@ -132,8 +136,8 @@ def noise_sigma_kernel(
     n: int,
     sigma_n: wp.array(dtype=wp.float32),
 ):
-    """Eq. 18, pass 2 (launch one block): ``sigma_n[0] = sqrt(sum (I_{t-1} - I_t)^2 / (3 Npix))`` with the sum over
-    all n = 3 Npix channel values (V units). Stays on the device (no host sync)."""
+    """Eq. 18, pass 2 (launch one block): ``sigma_n[0] = sqrt(sum (I_{t-1} - I_t)^2 / n)`` with the sum over the
+    n channel values of pass 1 (3 Npix with stride 1; V units). Stays on the device (no host sync)."""
     _b, lane = wp.tid()
     acc = wp.float64(0.0)
     for j in range(lane, blocks, wp.block_dim()):
@@ -239,15 +243,13 @@ def hist_add(out: wp.array2d(dtype=wp.float32), i: int, base: int, x: float, nb:
 @wp.func
 def descriptor_at(
     cams: wp.array(dtype=Camera),
-    h: wp.array(dtype=wp.float32),
-    s: wp.array(dtype=wp.float32),
-    v: wp.array(dtype=wp.float32),
     bgr: wp.array(dtype=wp.uint8),
     x: wp.vec3,
     r_n: float,
     n_bins: int,
     r_min: float,
     r_max: float,
+    step: int,
     desc: wp.array2d(dtype=wp.float32),
     i: int,
 ):
@@ -270,21 +272,22 @@ def descriptor_at(
         y0 = wp.max(int(wp.ceil(vv - r)), 0)
         y1 = wp.min(int(wp.floor(vv + r)), cam.height - 1)
         r2 = r * r
-        norm = INV_2PI / r2
-        for py in range(y0, y1 + 1):
+        norm = INV_2PI * float(step * step) / r2  # each sample stands for step x step pixels
+        for py in range(y0, y1 + 1, step):
             dy = float(py) - vv
-            for px in range(x0, x1 + 1):
+            for px in range(x0, x1 + 1, step):
                 dx = float(px) - u
                 d2 = dx * dx + dy * dy
                 if d2 <= r2:
                     w = norm * wp.exp(-0.5 * d2 / r2)  # G of eq. 20, sigma = r_i
-                    q = cam.pixel_offset + py * cam.width + px
-                    hist_add(desc, i, 0, h[q], nb, 1, w)
-                    hist_add(desc, i, nb, s[q], nb, 0, w)
-                    hist_add(desc, i, 2 * nb, v[q], nb, 0, w)
+                    o = 3 * (cam.pixel_offset + py * cam.width + px)
+                    rgb = wp.vec3(float(bgr[o + 2]), float(bgr[o + 1]), float(bgr[o])) * (1.0 / 255.0)
+                    hsv = rgb_to_hsv(rgb[0], rgb[1], rgb[2])  # eqs. 12-14, only for the pixels the discs cover
+                    hist_add(desc, i, 0, hsv[0], nb, 1, w)
+                    hist_add(desc, i, nb, hsv[1], nb, 0, w)
+                    hist_add(desc, i, 2 * nb, hsv[2], nb, 0, w)
                     total += w
-                    o = 3 * q
-                    crgb += w * wp.vec3(float(bgr[o + 2]), float(bgr[o + 1]), float(bgr[o])) * (1.0 / 255.0)
+                    crgb += w * rgb
     if total > 0.0:
         inv = 1.0 / total  # eq. 20's denominator
         for k in range(3 * nb):
@@ -296,15 +299,13 @@ def descriptor_at(
 @wp.kernel
 def descriptor_kernel(
     cams: wp.array(dtype=Camera),
-    h: wp.array(dtype=wp.float32),
-    s: wp.array(dtype=wp.float32),
-    v: wp.array(dtype=wp.float32),
     bgr: wp.array(dtype=wp.uint8),
     points: wp.array(dtype=wp.vec3),
     r_n: float,
     n_bins: int,
     r_min: float,
     r_max: float,
+    step: int,
     desc: wp.array2d(dtype=wp.float32),
     mass: wp.array(dtype=wp.float32),
     mean_rgb: wp.array(dtype=wp.vec3),
@@ -317,18 +318,21 @@ def descriptor_kernel(
     divided by the total weight (eq. 20's denominator), so each sums to 1.
 
     Args:
-        cams: (M,) cameras; ``h``, ``s``, ``v``: (P,) HSV planes (:func:`hsv_planes_kernel`); ``bgr``: (3 P,) frames.
+        cams: (M,) cameras; ``bgr``: (3 P,) frames (the HSV of each disc pixel is computed here, :func:`rgb_to_hsv`:
+            the discs cover fewer pixels than the images have).
         points: (N,) positions P, metres. r_n: neighbourhood radius r_N, metres (eq. 19). n_bins: N_b.
         r_min, r_max: clamp of the disc radius, pixels.
+        step: pixel stride of the disc's samples in x and y (1: every pixel, eq. 20 exactly; 2: a quarter of them,
+            each weighted for step x step pixels, a quadrature of the same Gaussian-weighted histogram).
         desc: (N, 3 N_b) out: H bins, then S bins, then V bins (each normalised; all zero when unseen).
         mass: (N,) out: total Gaussian weight (eq. 20's denominator); 0 when no camera sees the neighbourhood.
         mean_rgb: (N,) out: Gaussian-weighted mean colour (R, G, B) in [0, 1] (the patch means of section 3.1).
 
-    Cost: sum over cameras of ~pi r_i^2 pixels per particle (r_max = 12 px: up to ~450 reads per camera), each
-    doing 6 read-modify-writes of the thread's own histogram row.
+    Cost: sum over cameras of ~pi r_i^2 / step^2 pixels per particle (r_max = 12 px, step 1: up to ~450 reads per
+    camera), each doing 6 read-modify-writes of the thread's own histogram row.
     """
     i = wp.tid()
-    m, rgb = descriptor_at(cams, h, s, v, bgr, points[i], r_n, n_bins, r_min, r_max, desc, i)
+    m, rgb = descriptor_at(cams, bgr, points[i], r_n, n_bins, r_min, r_max, step, desc, i)
     mass[i] = m
     mean_rgb[i] = rgb
 

@@ -191,14 +191,12 @@ def step_kernel(
     p_b: float,
     log_outside: float,
     drop_worst: int,
-    h: wp.array(dtype=wp.float32),
-    s: wp.array(dtype=wp.float32),
-    v: wp.array(dtype=wp.float32),
     bgr: wp.array(dtype=wp.uint8),
     r_n: float,
     n_bins: int,
     r_min: float,
     r_max: float,
+    step: int,
     pos: wp.array(dtype=wp.vec3),
     vel: wp.array(dtype=wp.vec3),
     model: wp.array2d(dtype=wp.float32),
@@ -251,7 +249,7 @@ def step_kernel(
         pos_out[i] = x
         vel_out[i] = u
         appearance_update(model, desc, mass, a, alpha, model_out, i)  # eq. 6
-        m, rgb = descriptor_at(cams, h, s, v, bgr, x, r_n, n_bins, r_min, r_max, desc_out, i)  # eqs. 19-22
+        m, rgb = descriptor_at(cams, bgr, x, r_n, n_bins, r_min, r_max, step, desc_out, i)  # eqs. 19-22
         mass_out[i] = m
         rgb_out[i] = rgb
         lw = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, x)  # eqs. 9-10

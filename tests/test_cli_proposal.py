@@ -20,7 +20,7 @@ def _replace(args, flag, values):
 def test_detection_column_and_prior_flag(scene, tmp_path):  # noqa: F811
     assert main(track_args(scene, tmp_path / "mix", "--mixture", "0.3")) == 0
     t = read_tracks(tmp_path / "mix" / "tracks.csv")
-    assert list(t)[-1] == "detection" and list(t)[:13][-2:] == ["ess", "loglik"]
+    assert list(t)[-2:] == ["detection", "degenerate"] and list(t)[:13][-2:] == ["ess", "loglik"]
     assert np.all(t["detection"] == 1)
     run = json.loads((tmp_path / "mix" / "run.json").read_text())
     assert run["config"]["tracker"]["proposal"] == "mixture" and run["config"]["tracker"]["mixture"] == 0.3

@@ -108,11 +108,12 @@ def test_hsv_planes_match_colorsys(device, rng):
 def test_noise_sigma(device, rng):
     """Eq. 18 against NumPy on sizes that are not multiples of the block, and its expectation on pure noise:
     two independent noisy copies of a scene differ with variance 2 sigma^2 (the paper's formula gives sqrt 2 sigma)."""
-    for n_pix, chunk in [(1, 256), (1000, 256), (3 * 64 * 48, 1024)]:
+    for n_pix, chunk, stride in [(1, 256, 1), (1000, 256, 1), (3 * 64 * 48, 1024, 1), (1001, 64, 4), (999, 64, 3)]:
         a = rng.integers(0, 256, 3 * n_pix).astype(np.uint8)
         b = rng.integers(0, 256, 3 * n_pix).astype(np.uint8)
-        got = run_noise(a, b, chunk, device)
-        ref = np.sqrt(np.mean(((a.astype(np.float64) - b) / 255) ** 2))
+        got = run_noise(a, b, chunk, device, stride)
+        pa, pb = a.reshape(-1, 3)[::stride], b.reshape(-1, 3)[::stride]  # every stride-th pixel, its 3 values
+        ref = np.sqrt(np.mean(((pa.astype(np.float64) - pb) / 255) ** 2))
         assert got == pytest.approx(ref, rel=1e-6)
     scene = rng.uniform(40, 210, 3 * 64 * 48 * 3)
     sigma = 4.0
@@ -123,15 +124,20 @@ def test_noise_sigma(device, rng):
     assert got == pytest.approx(np.sqrt(2 * (sigma**2 + 1 / 12)) / 255, rel=0.02)
 
 
-def run_noise(a, b, chunk, device) -> float:
-    n = len(a)
+def run_noise(a, b, chunk, device, stride=1) -> float:
+    n = 3 * len(range(0, len(a) // 3, stride))  # the values summed
     nb = (n + chunk - 1) // chunk
     part = wp.zeros(nb, dtype=wp.float64, device=device)
     sig = wp.zeros(1, dtype=wp.float32, device=device)
     A = wp.array(a, dtype=wp.uint8, device=device)
     B = wp.array(b, dtype=wp.uint8, device=device)
     wp.launch_tiled(
-        kdesc.noise_partials_kernel, dim=[nb], inputs=[A, B, n, chunk], outputs=[part], block_dim=256, device=device
+        kdesc.noise_partials_kernel,
+        dim=[nb],
+        inputs=[A, B, n, stride, chunk],
+        outputs=[part],
+        block_dim=256,
+        device=device,
     )
     wp.launch_tiled(
         kdesc.noise_sigma_kernel, dim=[1], inputs=[part, nb, n], outputs=[sig], block_dim=256, device=device
@@ -196,7 +202,7 @@ def bin_split_ref(x: np.ndarray, nb: int, wrap: bool) -> np.ndarray:
     return out
 
 
-def descriptor_ref(rig: Rig, uvz: np.ndarray, hsv: np.ndarray, bgr: np.ndarray, offsets, i: int):
+def descriptor_ref(rig: Rig, uvz: np.ndarray, hsv: np.ndarray, bgr: np.ndarray, offsets, i: int, step: int = 1):
     """D(P) of one point (eqs. 19-21) in float64 from the kernel's projections. Returns (desc, mass, rgb, ambiguous):
     ``ambiguous`` when a pixel lies within float32 rounding of a disc's rim (then the two may differ by that pixel)."""
     desc = np.zeros(3 * NB)
@@ -209,10 +215,13 @@ def descriptor_ref(rig: Rig, uvz: np.ndarray, hsv: np.ndarray, bgr: np.ndarray, 
             continue
         r = np.clip(0.5 * (cam.fx + cam.fy) * R_N / z, R_MIN, R_MAX)
         ys, xs = np.mgrid[0 : cam.height, 0 : cam.width]
+        x0, y0 = max(int(np.ceil(u - r)), 0), max(int(np.ceil(v - r)), 0)
+        on_grid = ((xs - x0) % step == 0) & ((ys - y0) % step == 0)  # every step-th pixel from the disc's corner
         d2 = (xs - u) ** 2 + (ys - v) ** 2
         ambiguous |= bool(np.any(np.abs(d2 - r * r) < 2e-5 * r * r))
-        sel = d2 <= r * r
-        w = np.exp(-0.5 * d2[sel] / r**2) / (2 * np.pi * r * r)
+        ambiguous |= bool(np.any(np.abs(np.array([u - r, v - r]) - np.round(np.array([u - r, v - r]))) < 1e-4))
+        sel = (d2 <= r * r) & on_grid & (xs >= x0) & (ys >= y0)
+        w = step * step * np.exp(-0.5 * d2[sel] / r**2) / (2 * np.pi * r * r)
         q = offsets[c] + ys[sel] * cam.width + xs[sel]
         for k, wrap in enumerate((True, False, False)):
             desc[k * NB : (k + 1) * NB] += (w[:, None] * bin_split_ref(hsv[q, k], NB, wrap)).sum(0)
@@ -225,7 +234,7 @@ def descriptor_ref(rig: Rig, uvz: np.ndarray, hsv: np.ndarray, bgr: np.ndarray, 
     return desc, mass, rgb, ambiguous
 
 
-def run_descriptor(drig, planes, bgr, pts, device):
+def run_descriptor(drig, bgr, pts, device, step=1):
     n = len(pts)
     desc = wp.zeros((n, 3 * NB), dtype=wp.float32, device=device)
     mass = wp.zeros(n, dtype=wp.float32, device=device)
@@ -235,13 +244,13 @@ def run_descriptor(drig, planes, bgr, pts, device):
         dim=n,
         inputs=[
             drig.cams,
-            *planes,
             wp.array(bgr, dtype=wp.uint8, device=device),
             wp.array(pts, dtype=wp.vec3, device=device),
             R_N,
             NB,
             R_MIN,
             R_MAX,
+            step,
         ],
         outputs=[desc, mass, rgb],
         device=device,
@@ -249,18 +258,18 @@ def run_descriptor(drig, planes, bgr, pts, device):
     return desc, mass, rgb
 
 
-def test_descriptor_matches_numpy(device, rng):
+@pytest.mark.parametrize("step", [1, 2])
+def test_descriptor_matches_numpy(device, rng, step):
     rig = make_rig()
     drig = DeviceRig(rig, device)
     bgr = random_frames(rig, rng)
-    planes = hsv_planes(bgr, device)
-    hsv = np.column_stack([p.numpy().astype(np.float64) for p in planes])
+    hsv = np.column_stack([p.numpy().astype(np.float64) for p in hsv_planes(bgr, device)])
     pts = random_points(rng, 200)
     uvz = project_all(drig, pts, device)
-    desc, mass, rgb = (a.numpy() for a in run_descriptor(drig, planes, bgr, pts, device))
+    desc, mass, rgb = (a.numpy() for a in run_descriptor(drig, bgr, pts, device, step))
     compared = unseen = clipped = 0
     for i in range(len(pts)):
-        d_ref, m_ref, rgb_ref, ambiguous = descriptor_ref(rig, uvz, hsv, bgr, drig.pixel_offsets, i)
+        d_ref, m_ref, rgb_ref, ambiguous = descriptor_ref(rig, uvz, hsv, bgr, drig.pixel_offsets, i, step)
         if ambiguous:
             continue
         compared += 1
@@ -294,9 +303,8 @@ def test_descriptor_hue_wraps(device):
     rig = make_rig()
     drig = DeviceRig(rig, device)
     bgr = np.tile(np.array([8, 0, 255], dtype=np.uint8), drig.total_pixels)  # BGR: red with a little blue
-    planes = hsv_planes(bgr, device)
     pts = np.array([[0.5, 0.5, 0.5]], dtype=np.float32)
-    desc, mass, rgb = (a.numpy() for a in run_descriptor(drig, planes, bgr, pts, device))
+    desc, mass, rgb = (a.numpy() for a in run_descriptor(drig, bgr, pts, device))
     hue = 1 - 8 / 255 / 6
     t = hue * NB - 0.5  # between the centres of bins NB - 1 and NB (= 0)
     w1 = t - np.floor(t)
@@ -429,11 +437,10 @@ def test_observation_is_motion_plus_appearance(device, rng):
     rig = make_rig()
     drig = DeviceRig(rig, device)
     bgr = random_frames(rig, rng)
-    planes = hsv_planes(bgr, device)
     mask = wp.array(motion_masks(rig, rng), dtype=wp.uint8, device=device)
     pts = random_points(rng, 100)
     P = wp.array(pts, dtype=wp.vec3, device=device)
-    desc, mass, rgb = run_descriptor(drig, planes, bgr, pts, device)
+    desc, mass, rgb = run_descriptor(drig, bgr, pts, device)
     model = wp.array(random_histograms(rng, len(pts)), device=device)
     sn = wp.array([0.01], dtype=wp.float32, device=device)
     lm, la, lo = (wp.zeros(len(pts), dtype=wp.float32, device=device) for _ in range(3))
@@ -574,7 +581,6 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     n, chunk, block = 300, 64, 32
     nbk = (n + chunk - 1) // chunk
     bgr = random_frames(rig, rng)
-    planes = hsv_planes(bgr, device)
     B = wp.array(bgr, dtype=wp.uint8, device=device)
     mask = wp.array(motion_masks(rig, rng), dtype=wp.uint8, device=device)
     pos = wp.array(random_points(rng, n), dtype=wp.vec3, device=device)
@@ -609,7 +615,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     wp.launch_tiled(
         kpeople.step_kernel,
         dim=[nbk],
-        inputs=[drig.cams, mask, p_b, 0.0, 1, *planes, B, R_N, NB, R_MIN, R_MAX, pos, vel, model, desc, mass, anc]
+        inputs=[drig.cams, mask, p_b, 0.0, 1, B, R_N, NB, R_MIN, R_MAX, 2, pos, vel, model, desc, mass, anc]
         + [logw_prev, flag, sp, sv, alpha, sn, sigma_p, seed, frame, n, chunk],
         outputs=list(fused.values()),
         block_dim=block,
@@ -626,7 +632,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     wp.launch(
         kdesc.descriptor_kernel,
         dim=n,
-        inputs=[drig.cams, *planes, B, sep["pos"], R_N, NB, R_MIN, R_MAX],
+        inputs=[drig.cams, B, sep["pos"], R_N, NB, R_MIN, R_MAX, 2],
         outputs=[sep["desc"], sep["mass"], sep["rgb"]],
         device=device,
     )

@@ -21,6 +21,7 @@ SUITES: dict[str, str] = {
     "color-e2e": "wptrack.bench.endtoend:EndToEndSuite",
     "templates": "wptrack.bench.templates:TemplateSuite",
     "masks": "wptrack.bench.masks:MasksSuite",
+    "people": "wptrack.bench.people:PeopleSuite",
 }
 """Suite name (``wptrack bench --tracker NAME``) -> ``"module:Class"`` of its suite class."""
 

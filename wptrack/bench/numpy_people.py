@@ -43,7 +43,14 @@ def _bins(x: np.ndarray, nb: int, wrap: bool) -> np.ndarray:
 
 
 def descriptor(
-    cameras: list, images: list[np.ndarray], points: np.ndarray, r_n: float, nb: int, r_min: float, r_max: float
+    cameras: list,
+    images: list[np.ndarray],
+    points: np.ndarray,
+    r_n: float,
+    nb: int,
+    r_min: float,
+    r_max: float,
+    step: int = 1,
 ) -> tuple[np.ndarray, np.ndarray]:
     """D(P) of every point: ``(desc (N, 3 nb), mass (N,))`` over all cameras together (eqs. 19-21).
 
@@ -67,16 +74,16 @@ def descriptor(
                 continue
             r = float(np.clip(f * r_n / depth[i], r_min, r_max))
             u, v = uv[i]
-            x0, x1 = max(int(np.floor(u - r)), 0), min(int(np.ceil(u + r)), cam.width - 1)
-            y0, y1 = max(int(np.floor(v - r)), 0), min(int(np.ceil(v + r)), cam.height - 1)
+            x0, x1 = max(int(np.ceil(u - r)), 0), min(int(np.floor(u + r)), cam.width - 1)
+            y0, y1 = max(int(np.ceil(v - r)), 0), min(int(np.floor(v + r)), cam.height - 1)
             if x1 < x0 or y1 < y0:
                 continue
-            ys, xs = np.mgrid[y0 : y1 + 1, x0 : x1 + 1]
+            ys, xs = np.mgrid[y0 : y1 + 1 : step, x0 : x1 + 1 : step]  # every step-th pixel from the disc's corner
             d2 = (xs - u) ** 2 + (ys - v) ** 2
             sel = d2 <= r * r
             if not sel.any():
                 continue
-            w = np.exp(-0.5 * d2[sel] / (r * r)) / (2 * np.pi * r * r)
+            w = step * step * np.exp(-0.5 * d2[sel] / (r * r)) / (2 * np.pi * r * r)
             px = planes[ys[sel], xs[sel]]
             for k, wrap in enumerate((True, False, False)):
                 desc[i, k * nb : (k + 1) * nb] += (w[:, None] * _bins(px[:, k], nb, wrap)).sum(0)

@@ -6,10 +6,10 @@ all cameras and a multi-view HSV colour descriptor.
 One frame::
 
     BGR frames + motion masks of every camera  -> device (one copy each)
-    -> HSV planes (eqs. 12-14), sigma_n from the previous frame (eq. 18)
+    -> sigma_n from the previous frame (eq. 18)
     -> per person (one CUDA graph each on GPUs): gather + constant velocity (eq. 5) + appearance update (eq. 6)
-       + descriptor (eqs. 19-22) + motion x appearance likelihood (eqs. 7-11, 23-26) + block moments (fused),
-       estimate, systematic resampling (every frame, section 2.1)
+       + descriptor (eqs. 19-22; HSV of eqs. 12-14 for the disc pixels) + motion x appearance likelihood
+       (eqs. 7-11, 23-26) + block moments (fused), estimate, systematic resampling (every frame, section 2.1)
     -> ground evidence map (ours): cameras whose masks agree on a column over each ground cell
     -> host: estimates; people added where the evidence is unexplained, removed where it is gone (ours)
 
@@ -42,6 +42,8 @@ from .people_model import PeopleConfig
 log = logging.getLogger(__name__)
 
 _GOLDEN = 0x9E3779B97F4A7C15
+NOISE_STRIDE = 4
+"""Pixels between the samples of the image-noise estimate (eq. 18)."""
 
 
 def person_seed(seed: int, slot: int) -> int:
@@ -166,7 +168,16 @@ class PersonFilter(ParticleFilter):
         wp.launch(
             kdesc.descriptor_kernel,
             dim=self.n,
-            inputs=[tr.drig.cams, tr.h, tr.s, tr.v, tr.bgr, self.x[cur], dc.r_n, dc.n_bins, dc.r_min, dc.r_max],
+            inputs=[
+                tr.drig.cams,
+                tr.bgr,
+                self.x[cur],
+                dc.r_n,
+                dc.n_bins,
+                dc.r_min,
+                dc.r_max,
+                dc.step,
+            ],
             outputs=[self.desc[cur], self.mass[cur], self.rgb],
             device=d,
         )
@@ -185,14 +196,12 @@ class PersonFilter(ParticleFilter):
                 cfg.motion.p_b,
                 cfg.motion.log_outside,
                 int(cfg.motion.drop_worst),
-                tr.h,
-                tr.s,
-                tr.v,
                 tr.bgr,
                 dc.r_n,
                 dc.n_bins,
                 dc.r_min,
                 dc.r_max,
+                dc.step,
                 self.x[src],
                 self.vel[src],
                 self.model[src],
@@ -260,7 +269,7 @@ class PeopleTracker:
 
     Device buffers (P = pixels of all cameras):
         bgr, bgr_prev: (3 P,) uint8 this and the previous frame. mask: (P,) uint8 motion masks (nonzero = motion).
-        h, s, v: (P,) float32 HSV planes. sigma_n: (1,) float32 image noise (eq. 18).
+        sigma_n: (1,) float32 image noise (eq. 18, from every ``NOISE_STRIDE``-th pixel).
         rays: (P,) vec3 world direction of every pixel's viewing ray.
         votes, free_votes: (nx * ny,) int32 ground evidence map: cameras voting for each cell, with all motion /
             with the motion not explained by a tracked person.
@@ -299,11 +308,10 @@ class PeopleTracker:
         self.bgr = wp.zeros(3 * npx, dtype=wp.uint8, device=d)
         self.bgr_prev = wp.zeros(3 * npx, dtype=wp.uint8, device=d)
         self.mask = wp.zeros(npx, dtype=wp.uint8, device=d)
-        self.h = wp.zeros(npx, dtype=wp.float32, device=d)
-        self.s = wp.zeros(npx, dtype=wp.float32, device=d)
-        self.v = wp.zeros(npx, dtype=wp.float32, device=d)
         self.sigma_n = wp.zeros(1, dtype=wp.float32, device=d)
-        self.noise_blocks, self.noise_chunk = block_partition(3 * npx, not self.is_cuda, BLOCK, MAX_BLOCKS)
+        # eq. 18 over every NOISE_STRIDE-th pixel (a mean square estimated from ~1e5 values is as good as from all)
+        self.noise_values = 3 * len(range(0, npx, NOISE_STRIDE))
+        self.noise_blocks, self.noise_chunk = block_partition(self.noise_values, not self.is_cuda, BLOCK, MAX_BLOCKS)
         self.noise_part = wp.zeros(self.noise_blocks, dtype=wp.float64, device=d)
         pinned = self.is_cuda
         self._bgr_host = wp.zeros(3 * npx, dtype=wp.uint8, device="cpu", pinned=pinned)
@@ -382,14 +390,12 @@ class PeopleTracker:
 
     def _observe(self) -> None:
         d = self.device
-        npx = self.drig.total_pixels
         if self.frames_done == 0:
             wp.copy(self.bgr_prev, self.bgr)  # no previous frame: sigma_n = 0 (the floor of eqs. 15-17)
-        wp.launch(kdesc.hsv_planes_kernel, dim=npx, inputs=[self.bgr], outputs=[self.h, self.s, self.v], device=d)
         wp.launch_tiled(
             kdesc.noise_partials_kernel,
             dim=[self.noise_blocks],
-            inputs=[self.bgr_prev, self.bgr, 3 * npx, self.noise_chunk],
+            inputs=[self.bgr_prev, self.bgr, self.noise_values, NOISE_STRIDE, self.noise_chunk],
             outputs=[self.noise_part],
             block_dim=BLOCK,
             device=d,
@@ -397,7 +403,7 @@ class PeopleTracker:
         wp.launch_tiled(
             kdesc.noise_sigma_kernel,
             dim=[1],
-            inputs=[self.noise_part, self.noise_blocks, 3 * npx],
+            inputs=[self.noise_part, self.noise_blocks, self.noise_values],
             outputs=[self.sigma_n],
             block_dim=BLOCK,
             device=d,
