@@ -50,12 +50,20 @@ def test_track_templates_example(device, capsys):
     assert "frame   20" in capsys.readouterr().out
 
 
+def test_track_people_example(device, capsys):
+    pytest.importorskip("motmetrics")
+    out = load("track_people").main(["--device", device, "--frames", "90", "--size", "160", "120"])
+    assert out["frames"] == 90 and out["rows"] > 0
+    assert out["evaluation"]["mota"] > 0.8 and out["mean_error"] < 0.2  # both people found on the video's masks
+    assert "frame   60: 2 people" in capsys.readouterr().out
+
+
 def test_every_example_is_tested():
-    tested = {"track_colour", "sigma_sweep", "drift", "track_templates"}
+    tested = {"track_colour", "sigma_sweep", "drift", "track_templates", "track_people"}
     assert {p.stem for p in EXAMPLES.glob("*.py")} == tested, "add a test for the new example"
 
 
-@pytest.mark.parametrize("name", ["track_colour", "sigma_sweep", "drift", "track_templates"])
+@pytest.mark.parametrize("name", ["track_colour", "sigma_sweep", "drift", "track_templates", "track_people"])
 def test_examples_have_device_and_frames_flags(name):
     text = (EXAMPLES / f"{name}.py").read_text()
     assert "--device" in text and "--frames" in text
