@@ -24,6 +24,7 @@ import numpy as np
 from ..errors import ConfigError, OutputError
 from ..io import RUN_FILE, ensure_writable_dir
 from . import color as _color  # noqa: F401  (registers the colour tracker's report)
+from . import people as _people  # noqa: F401  (registers the people tracker's report)
 from . import templates as _templates  # noqa: F401  (registers the template tracker's report)
 from .data import GROUNDTRUTH_FILE, RunData, find_sweep, load_run, load_sweep, trajectories
 from .model import REPORTERS, Figure, ReportContext, ReporterSpec, ReportOptions, Section, register_reporter
