@@ -294,7 +294,7 @@ def ground_votes_kernel(
     rays: wp.array(dtype=wp.vec3),
     heights: wp.array(dtype=wp.float32),
     people: wp.array(dtype=wp.vec2),
-    n_people: wp.array(dtype=wp.int32),
+    n_people: int,
     person_radius: float,
     person_height: float,
     origin: wp.vec2,
@@ -309,7 +309,7 @@ def ground_votes_kernel(
     sees at least one of its points votes when at least ``min_fraction`` of the points it sees fall on its motion
     mask. ``free_votes`` counts only motion not explained by a tracked person: a motion pixel whose viewing ray
     (``rays``: world direction per pixel) passes within ``person_radius`` of a tracked person's vertical axis
-    (``people[:n_people[0]]``, ground x, y; up to ``person_height``) is explained. Furniture that hides a person's
+    (``people[:n_people]``, ground x, y; up to ``person_height``) is explained. Furniture that hides a person's
     legs in one camera removes some of its points, not its vote, while the fraction stays above ``min_fraction``.
 
     Launch one thread per cell (nx * ny). Outputs (nx * ny,): ``votes`` (all motion), ``free_votes`` (unexplained
@@ -319,7 +319,7 @@ def ground_votes_kernel(
     iy = t / nx
     cx = origin[0] + cell * (float(ix) + 0.5)
     cy = origin[1] + cell * (float(iy) + 0.5)
-    npeople = n_people[0]
+    npeople = n_people
     v = int(0)
     vf = int(0)
     for c in range(cams.shape[0]):
@@ -439,3 +439,56 @@ def column_top_kernel(
             axis = people[i] + search * wp.vec2(float(a - 1), float(b - 1))
             best = wp.max(best, column_top(cams, mask, axis, z_lo, dz, nz, min_cameras, max_gap))
     top[i] = best
+
+
+@wp.kernel
+def score_moments_kernel(
+    cams: wp.array(dtype=Camera),
+    mask: wp.array(dtype=wp.uint8),
+    p_b: float,
+    log_outside: float,
+    drop_worst: int,
+    pos: wp.array(dtype=wp.vec3),
+    model: wp.array2d(dtype=wp.float32),
+    desc: wp.array2d(dtype=wp.float32),
+    mass: wp.array(dtype=wp.float32),
+    rgb: wp.array(dtype=wp.vec3),
+    n_bins: int,
+    logw_prev: wp.array(dtype=wp.float32),
+    resampled: wp.array(dtype=wp.int32),
+    sigma_n: wp.array(dtype=wp.float32),
+    sigma_p: float,
+    n: int,
+    chunk: int,
+    logw_out: wp.array(dtype=wp.float32),
+    part_max: wp.array(dtype=wp.float32),
+    part_arg: wp.array(dtype=wp.int32),
+    part: wp.array2d(dtype=wp.float64),
+):
+    """The second half of :func:`step_kernel` for the GPU chain predict -> descriptor (one block per particle) ->
+    this: log p(z_t | x_t) = motion + appearance (eq. 11) of the predicted particles ``pos`` with their appearance
+    ``model`` and descriptor ``desc``/``mass``/``rgb``, added to ``logw_prev`` unless ``resampled[0]``, and the block
+    partials (``reduce.moments_push``/``moments_store``). Launch like :func:`step_kernel`."""
+    b, lane = wp.tid()
+    start = b * chunk
+    stop = wp.min(start + chunk, n)
+    sn = sigma_n[0]
+    keep = resampled[0] == 0
+    best, arg, sw, sw2, sx, sxx = moments_zero()
+    for i in range(start + lane, stop, wp.block_dim()):
+        x = pos[i]
+        lw = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, x)  # eqs. 9-10
+        lw += appearance_log_prob(model, i, desc, i, mass[i], rgb[i], n_bins, sn, sigma_p)  # eqs. 23-26, eq. 11
+        if keep:
+            lw += logw_prev[i]
+        logw_out[i] = lw
+        best, arg, sw, sw2, sx, sxx = moments_push(best, arg, sw, sw2, sx, sxx, lw, i, x)
+    moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)
+
+
+@wp.kernel
+def person_xy_kernel(est: wp.array(dtype=wp.float64), mean_slot: int, j: int, people: wp.array(dtype=wp.vec2)):
+    """``people[j]`` = the (x, y) of a filter's estimate vector (``est[mean_slot]``, ``est[mean_slot + 1]``, e.g.
+    ``kernels.reduce.EST_MEAN``): the tracked people's ground positions for :func:`ground_votes_kernel` and
+    :func:`column_top_kernel` without a round trip through the host. Launch dim 1."""
+    people[j] = wp.vec2(wp.float32(est[mean_slot]), wp.float32(est[mean_slot + 1]))

@@ -659,6 +659,38 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     np.testing.assert_allclose(fused["part"].numpy(), sep["part"].numpy(), rtol=1e-6)
     assert (fused["mass"].numpy() == 0).sum() >= 3 and (fused["mass"].numpy() > 0).sum() >= 200
 
+    # the GPU chain of the tracker: predict -> descriptor (one block per particle) -> score + block moments
+    gpu = {k: zeros(v.shape, v.dtype) for k, v in fused.items()}
+    wp.launch(
+        kpeople.predict_kernel,
+        dim=n,
+        inputs=[pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, frame],
+        outputs=[gpu["pos"], gpu["vel"], gpu["model"]],
+        device=device,
+    )
+    wp.launch_tiled(
+        kdesc.descriptor_block_kernel,
+        dim=[n],
+        inputs=[drig.cams, B, gpu["pos"], R_N, NB, R_MIN, R_MAX, 2],
+        outputs=[gpu["desc"], gpu["mass"], gpu["rgb"]],
+        block_dim=64,
+        device=device,
+    )
+    wp.launch_tiled(
+        kpeople.score_moments_kernel,
+        dim=[nbk],
+        inputs=[drig.cams, mask, p_b, 0.0, 1, gpu["pos"], gpu["model"], gpu["desc"], gpu["mass"], gpu["rgb"], NB]
+        + [logw_prev, flag, sn, sigma_p, n, chunk],
+        outputs=[gpu["logw"], gpu["pmax"], gpu["parg"], gpu["part"]],
+        block_dim=block,
+        device=device,
+    )
+    for k in ("pos", "vel", "model"):
+        np.testing.assert_array_equal(gpu[k].numpy(), fused[k].numpy(), err_msg=k)
+    for k in ("desc", "mass", "rgb", "logw", "pmax"):  # the block sums the disc pixels in another order
+        np.testing.assert_allclose(gpu[k].numpy(), fused[k].numpy(), rtol=1e-4, atol=1e-5, err_msg=k)
+    np.testing.assert_allclose(gpu["part"].numpy(), fused["part"].numpy(), rtol=1e-4, atol=1e-9)
+
 
 def test_occupancy_hashgrid_equals_brute_force(device, rng):
     n = 500

@@ -151,15 +151,13 @@ class PeopleSuite:
         ids = tracker.tracked_ids
         for _ in range(2):  # load the modules, capture the graphs
             tracker.step(images, masks)
-            for i in ids:
-                tracker.occupancy(i)
+            tracker.occupancies(ids)
         times, occ, stages = [], [], {"upload": [], "filter": [], "population": []}
         for _ in range(frames):
             t0 = time.perf_counter()
             est = tracker.step(images, masks)
             t1 = time.perf_counter()
-            for i in ids:
-                tracker.occupancy(i)
+            tracker.occupancies(ids)
             t2 = time.perf_counter()
             times.append(t2 - t0)
             occ.append(t2 - t1)

@@ -211,7 +211,8 @@ class PeopleRun(TrackerRun):
                 self._hulls.append((est.frame, person.id, hull_points(person.particles, person.weights, p_h)))
         out.add_rows(rows)
         if self._occupancy_every and est.frame % self._occupancy_every == 0:
-            grids = [(p.id, *self.tracker.occupancy(p.id)) for p in est.people]
+            occ = self.tracker.occupancies([p.id for p in est.people])
+            grids = [(pid, origin, grid) for pid, (origin, grid) in occ.items()]
             self._occupancy.add(est.frame, grids)
         for writer, m in zip(self._mask_writers, self._frame_masks, strict=False):
             writer.write(np.repeat(((np.asarray(m) != 0) * 255).astype(np.uint8)[..., None], 3, axis=2))

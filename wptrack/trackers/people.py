@@ -42,6 +42,8 @@ from .people_model import PeopleConfig
 log = logging.getLogger(__name__)
 
 _GOLDEN = 0x9E3779B97F4A7C15
+DESCRIPTOR_BLOCK = 64
+"""Lanes per particle of the GPU descriptor (they share the disc pixels)."""
 NOISE_STRIDE = 4
 """Pixels between the samples of the image-noise estimate (eq. 18)."""
 
@@ -185,55 +187,115 @@ class PersonFilter(ParticleFilter):
         self._reset_weights()
 
     def _launch_predict_score(self, src: int, dst: int) -> None:
+        """One frame's particle work. CPU: the fused ``step_kernel`` (one pass per particle). CUDA: the same in three
+        launches (predict, descriptor with one block per particle, score + block moments): the descriptor's ~300 disc
+        pixels per particle are shared by a block's lanes instead of looping in one thread (a few thousand threads
+        leave a GPU idle)."""
         tr, cfg = self.tracker, self.tracker.config
-        dc = cfg.descriptor
-        wp.launch_tiled(
-            kpeople.step_kernel,
-            dim=[self.blocks],
+        dc, mo = cfg.descriptor, cfg.motion
+        d = self.device
+        if not self.is_cuda:
+            wp.launch_tiled(
+                kpeople.step_kernel,
+                dim=[self.blocks],
+                inputs=[
+                    tr.drig.cams,
+                    tr.mask,
+                    mo.p_b,
+                    mo.log_outside,
+                    int(mo.drop_worst),
+                    tr.bgr,
+                    dc.r_n,
+                    dc.n_bins,
+                    dc.r_min,
+                    dc.r_max,
+                    dc.step,
+                    self.x[src],
+                    self.vel[src],
+                    self.model[src],
+                    self.desc[src],
+                    self.mass[src],
+                    self.ancestors,
+                    self.logw[src],
+                    self.resampled,
+                    self.sigma,
+                    self.sigma_vel,
+                    cfg.dynamics.alpha,
+                    tr.sigma_n,
+                    dc.sigma_p,
+                    self.seed,
+                    self.frame,
+                    self.n,
+                    self.chunk,
+                ],
+                outputs=[
+                    self.x[dst],
+                    self.vel[dst],
+                    self.model[dst],
+                    self.desc[dst],
+                    self.mass[dst],
+                    self.rgb,
+                    self.logw[dst],
+                    self.part_max,
+                    self.part_arg,
+                    self.part,
+                ],
+                block_dim=BLOCK,
+                device=d,
+            )
+            return
+        wp.launch(
+            kpeople.predict_kernel,
+            dim=self.n,
             inputs=[
-                tr.drig.cams,
-                tr.mask,
-                cfg.motion.p_b,
-                cfg.motion.log_outside,
-                int(cfg.motion.drop_worst),
-                tr.bgr,
-                dc.r_n,
-                dc.n_bins,
-                dc.r_min,
-                dc.r_max,
-                dc.step,
                 self.x[src],
                 self.vel[src],
                 self.model[src],
                 self.desc[src],
                 self.mass[src],
                 self.ancestors,
-                self.logw[src],
-                self.resampled,
                 self.sigma,
                 self.sigma_vel,
                 cfg.dynamics.alpha,
-                tr.sigma_n,
-                dc.sigma_p,
                 self.seed,
                 self.frame,
-                self.n,
-                self.chunk,
             ],
-            outputs=[
+            outputs=[self.x[dst], self.vel[dst], self.model[dst]],
+            device=d,
+        )
+        wp.launch_tiled(
+            kdesc.descriptor_block_kernel,
+            dim=[self.n],
+            inputs=[tr.drig.cams, tr.bgr, self.x[dst], dc.r_n, dc.n_bins, dc.r_min, dc.r_max, dc.step],
+            outputs=[self.desc[dst], self.mass[dst], self.rgb],
+            block_dim=DESCRIPTOR_BLOCK,
+            device=d,
+        )
+        wp.launch_tiled(
+            kpeople.score_moments_kernel,
+            dim=[self.blocks],
+            inputs=[
+                tr.drig.cams,
+                tr.mask,
+                mo.p_b,
+                mo.log_outside,
+                int(mo.drop_worst),
                 self.x[dst],
-                self.vel[dst],
                 self.model[dst],
                 self.desc[dst],
                 self.mass[dst],
                 self.rgb,
-                self.logw[dst],
-                self.part_max,
-                self.part_arg,
-                self.part,
+                dc.n_bins,
+                self.logw[src],
+                self.resampled,
+                tr.sigma_n,
+                dc.sigma_p,
+                self.n,
+                self.chunk,
             ],
+            outputs=[self.logw[dst], self.part_max, self.part_arg, self.part],
             block_dim=BLOCK,
-            device=self.device,
+            device=d,
         )
 
     def estimate_from_host(self, person_id: int, age: int) -> PersonEstimate:
@@ -331,10 +393,7 @@ class PeopleTracker:
         self._free_host = wp.zeros(self.nx * self.ny, dtype=wp.int32, device="cpu", pinned=pinned)
         rays = np.concatenate([_all_pixel_rays(cam) for cam in rig.cameras]).astype(np.float32)
         self.rays = wp.array(rays, dtype=wp.vec3, device=d)  # (P,) world direction of every pixel's viewing ray
-        self.people_xy = wp.zeros(b.max_people, dtype=wp.vec2, device=d)
-        self.n_people = wp.zeros(1, dtype=wp.int32, device=d)
-        self._people_host = wp.zeros(b.max_people, dtype=wp.vec2, device="cpu", pinned=pinned)
-        self._n_people_host = wp.zeros(1, dtype=wp.int32, device="cpu", pinned=pinned)
+        self.people_xy = wp.zeros(b.max_people, dtype=wp.vec2, device=d)  # the tracked people's ground positions
         self.top = wp.zeros(b.max_people, dtype=wp.float32, device=d)
         self._top_host = wp.zeros(b.max_people, dtype=wp.float32, device="cpu", pinned=pinned)
         self.min_votes = min(b.min_cameras, len(rig))
@@ -410,19 +469,11 @@ class PeopleTracker:
         )
         wp.copy(self.bgr_prev, self.bgr)
 
-    def _evidence(self) -> None:
-        """The ground evidence map, with the motion of the people tracked after this frame's prediction
-        explained (their estimated ground positions, uploaded: a few floats)."""
+    def _evidence(self, n: int) -> None:
+        """The ground evidence map and the column tops, with the motion of the ``n`` people tracked after this
+        frame's prediction explained (``people_xy[:n]``, filled on the device from their estimates); the results are
+        copied to the host asynchronously (the frame's one synchronisation follows)."""
         b = self.config.birth
-        xy, n = self._people_host.numpy(), 0
-        for k in range(len(self.pool)):
-            if self.slot_id[k] >= 0:
-                e = self.pool[k].est_host.numpy()
-                xy[n] = (e[kreduce.EST_MEAN], e[kreduce.EST_MEAN + 1])
-                n += 1
-        self._n_people_host.numpy()[0] = n
-        wp.copy(self.people_xy, self._people_host)
-        wp.copy(self.n_people, self._n_people_host)
         wp.launch(
             kpeople.ground_votes_kernel,
             dim=self.nx * self.ny,
@@ -432,7 +483,7 @@ class PeopleTracker:
                 self.rays,
                 self.heights,
                 self.people_xy,
-                self.n_people,
+                n,
                 b.person_radius,
                 b.person_height,
                 wp.vec2(*self.grid_origin),
@@ -476,16 +527,22 @@ class PeopleTracker:
         t1 = time.perf_counter()
         self._observe()
         active = [k for k in range(len(self.pool)) if self.slot_id[k] >= 0]
-        for k in active:
+        for j, k in enumerate(active):
             p = self.pool[k]
             src, dst = p.parity, 1 - p.parity
             p._run_chain(src, dst)
             p.parity = dst
             p.frames_done += 1
+            wp.launch(
+                kpeople.person_xy_kernel,
+                dim=1,
+                inputs=[p.est, int(kreduce.EST_MEAN), j],
+                outputs=[self.people_xy],
+                device=self.device,
+            )
+        self._evidence(len(active))
         wp.copy(self._sigma_host, self.sigma_n)
-        wp.synchronize_device(self.device)  # the people's estimates are on the host now
-        self._evidence()
-        wp.synchronize_device(self.device)
+        wp.synchronize_device(self.device)  # the frame's one synchronisation: estimates, evidence, tops on the host
         t2 = time.perf_counter()
         people = []
         tops = self._top_host.numpy()
@@ -611,8 +668,7 @@ class PeopleTracker:
     # --- outputs beyond the estimate ------------------------------------------------------------------------
     def occupancy(self, person_id: int) -> tuple[np.ndarray, np.ndarray]:
         """The occupancy pdf (3D Gaussian kernel over the particles, Figs. 6 and 8) of a tracked person on a voxel
-        grid of ``config.occupancy.extent`` around its estimate, after the last frame (a launch into the person's
-        grid, allocated once, and a copy back).
+        grid of ``config.occupancy.extent`` around its estimate, after the last frame.
 
         Returns:
             ``(origin (3,), grid (nx, ny, nz) float32)``: the corner of voxel (0, 0, 0), metres, and the density
@@ -621,26 +677,40 @@ class PeopleTracker:
         Raises:
             ConfigError: ``person_id`` is not tracked.
         """
-        slots = np.nonzero(self.slot_id == person_id)[0]
-        if not slots.size:
-            raise ConfigError(f"person {person_id} is not tracked")
-        p = self.pool[int(slots[0])]
+        return self.occupancies([person_id])[person_id]
+
+    def occupancies(self, person_ids: Sequence[int] | None = None) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """:meth:`occupancy` of several people (default: everybody tracked): every grid is launched into the
+        person's buffer (allocated once), then one synchronisation and the copies back."""
+        ids = self.tracked_ids if person_ids is None else [int(i) for i in person_ids]
         oc = self.config.occupancy
-        centre = p.est_host.numpy()[kreduce.EST_MEAN : kreduce.EST_MEAN + 3]
-        dims = np.asarray(p.grid_dims)
-        origin = np.floor((centre - 0.5 * dims * oc.voxel) / oc.voxel) * oc.voxel  # on the voxel lattice
-        d, cur = self.device, p.parity
-        wp.launch(
-            kocc.log_norm_kernel, dim=1, inputs=[p.est, int(kreduce.EST_LOGLIK), p.n], outputs=[p.log_norm], device=d
-        )
-        wp.launch(
-            kocc.occupancy_kernel,
-            dim=p.grid_dims,
-            inputs=[p.x[cur], p.logw[cur], p.log_norm, oc.sigma, oc.cutoff, wp.vec3(*origin), oc.voxel],
-            outputs=[p.grid],
-            device=d,
-        )
-        return origin, p.grid.numpy().copy()
+        launched = {}
+        for pid in ids:
+            slots = np.nonzero(self.slot_id == pid)[0]
+            if not slots.size:
+                raise ConfigError(f"person {pid} is not tracked")
+            p = self.pool[int(slots[0])]
+            centre = p.est_host.numpy()[kreduce.EST_MEAN : kreduce.EST_MEAN + 3]
+            dims = np.asarray(p.grid_dims)
+            origin = np.floor((centre - 0.5 * dims * oc.voxel) / oc.voxel) * oc.voxel  # on the voxel lattice
+            cur = p.parity
+            wp.launch(
+                kocc.log_norm_kernel,
+                dim=1,
+                inputs=[p.est, int(kreduce.EST_LOGLIK), p.n],
+                outputs=[p.log_norm],
+                device=self.device,
+            )
+            wp.launch(
+                kocc.occupancy_kernel,
+                dim=p.grid_dims,
+                inputs=[p.x[cur], p.logw[cur], p.log_norm, oc.sigma, oc.cutoff, wp.vec3(*origin), oc.voxel],
+                outputs=[p.grid],
+                device=self.device,
+            )
+            launched[pid] = (origin, p)
+        wp.synchronize_device(self.device)
+        return {pid: (origin, p.grid.numpy().copy()) for pid, (origin, p) in launched.items()}
 
     def add_person(self, xy: Sequence[float]) -> int:
         """Start tracking a person standing at ``xy`` (ground x, y, metres) now, as if added by the evidence (e.g.

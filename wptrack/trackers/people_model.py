@@ -124,6 +124,8 @@ class DescriptorConfig:
     def __post_init__(self) -> None:
         _positive(self.r_n, "descriptor.r_n", "a neighbourhood radius in metres")
         _int_at_least(self.n_bins, "descriptor.n_bins", 2, "a bin count")
+        if self.n_bins > 16:
+            raise ConfigError(f"descriptor.n_bins: at most 16 bins per histogram, got {self.n_bins}")
         _positive(self.r_min, "descriptor.r_min", "a disc radius in pixels")
         _positive(self.r_max, "descriptor.r_max", "a disc radius in pixels")
         if self.r_max < self.r_min:
