@@ -346,11 +346,11 @@ def test_not_a_run_directory(tmp_path):
 def test_unknown_tracker_and_empty_tracks(lab_run, tmp_path):
     from wptrack.report import build_report
 
-    run = _copy_run(lab_run["run"], tmp_path / "people")
+    run = _copy_run(lab_run["run"], tmp_path / "unknown")
     meta = json.loads((run / "run.json").read_text())
-    meta["tracker"] = "people"
+    meta["tracker"] = "kalman"
     (run / "run.json").write_text(json.dumps(meta))
-    with pytest.raises(ConfigError, match="no report for tracker 'people'"):
+    with pytest.raises(ConfigError, match="no report for tracker 'kalman'"):
         build_report(run)
     empty = _copy_run(lab_run["run"], tmp_path / "empty")
     (empty / "tracks.csv").write_text("frame,id,x,y,z\n")
