@@ -374,71 +374,73 @@ def init_cylinder_kernel(
     vel[i] = wp.vec3(0.0, 0.0, 0.0)
 
 
-@wp.func
-def column_top(
+COLUMN_AXES = 9
+"""Vertical axes tried per person by :func:`column_seen_kernel`: the estimate and the 8 around it."""
+
+
+@wp.kernel
+def column_seen_kernel(
     cams: wp.array(dtype=Camera),
     mask: wp.array(dtype=wp.uint8),
-    axis: wp.vec2,
+    people: wp.array(dtype=wp.vec2),
+    z_lo: float,
+    dz: float,
+    search: float,
+    seen: wp.array3d(dtype=wp.uint8),
+):
+    """How many cameras see motion at each point of each person's silhouette columns (ours, for the
+    standing-person centroid; :func:`column_top_kernel` walks the result).
+
+    ``seen[i, a, k]`` = the number of cameras whose motion mask is set at the projection of the point at height
+    ``z_lo + k * dz`` metres on axis ``a`` of person ``i``: axis 0..8 is the person's estimated ground position
+    ``people[i]`` moved by ``search`` metres times ``(a // 3 - 1, a % 3 - 1)`` (the head is narrow and a walking
+    person's estimate lags a little). Points behind a camera or outside its image count for nothing. Launch dim
+    ``(n, COLUMN_AXES, nz)``: one thread per point, so the mask reads of a column run in parallel."""
+    i, a, k = wp.tid()
+    axis = people[i] + search * wp.vec2(float(a // 3 - 1), float(a % 3 - 1))
+    x = wp.vec3(axis[0], axis[1], z_lo + dz * float(k))
+    n = int(0)
+    for c in range(cams.shape[0]):
+        cam = cams[c]
+        uvz = project(cam, x)
+        if uvz[2] > 0.0:
+            px = pixel_of(uvz[0])
+            py = pixel_of(uvz[1])
+            if px >= 0 and py >= 0 and px < cam.width and py < cam.height:
+                if mask[cam.pixel_offset + py * cam.width + px] != wp.uint8(0):
+                    n += 1
+    seen[i, a, k] = wp.uint8(n)
+
+
+@wp.kernel
+def column_top_kernel(
+    seen: wp.array3d(dtype=wp.uint8),
     z_lo: float,
     dz: float,
     nz: int,
     min_cameras: int,
     max_gap: int,
+    top: wp.array2d(dtype=wp.float32),
 ):
-    """Top of the silhouette column at ``axis`` (see :func:`column_top_kernel`); -1 when no point qualifies."""
+    """The top of each silhouette column of :func:`column_seen_kernel` (ours): walking up from ``z_lo``, the highest
+    point seen moving by at least ``min_cameras`` cameras, in one run from the first such point with gaps of at
+    most ``max_gap`` steps (holes in a mask; a hand raised apart from the body does not count). ``top[i, a]`` =
+    that height of axis ``a`` of person ``i``, metres, or -1 when no point qualifies; a person's top is the highest
+    over its axes (taken by the caller). Launch dim ``(n, COLUMN_AXES)``."""
+    i, a = wp.tid()
     best = float(-1.0)
     started = int(0)
     gap = int(0)
     for k in range(nz):
-        z = z_lo + dz * float(k)
-        n = int(0)
-        for c in range(cams.shape[0]):
-            cam = cams[c]
-            uvz = project(cam, wp.vec3(axis[0], axis[1], z))
-            if uvz[2] > 0.0:
-                px = pixel_of(uvz[0])
-                py = pixel_of(uvz[1])
-                if px >= 0 and py >= 0 and px < cam.width and py < cam.height:
-                    if mask[cam.pixel_offset + py * cam.width + px] != wp.uint8(0):
-                        n += 1
-        if n >= min_cameras:
-            best = z
+        if int(seen[i, a, k]) >= min_cameras:
+            best = z_lo + dz * float(k)
             started = 1
             gap = 0
         elif started == 1:
             gap += 1
             if gap > max_gap:
                 break
-    return best
-
-
-@wp.kernel
-def column_top_kernel(
-    cams: wp.array(dtype=Camera),
-    mask: wp.array(dtype=wp.uint8),
-    people: wp.array(dtype=wp.vec2),
-    z_lo: float,
-    dz: float,
-    nz: int,
-    min_cameras: int,
-    max_gap: int,
-    search: float,
-    top: wp.array(dtype=wp.float32),
-):
-    """The top of each person's silhouette column (ours, for the standing-person centroid): walking up a vertical
-    axis from ``z_lo`` in steps of ``dz`` metres (``nz`` steps), the highest point whose projection falls on the
-    motion mask of at least ``min_cameras`` cameras, in one run from the first such point with gaps of at most
-    ``max_gap`` steps (holes in a mask; a hand raised apart from the body does not count). The axes tried are the
-    person's estimated ground position ``people[i]`` and the 8 around it at ``search`` metres (the head is narrow
-    and a walking person's estimate lags a little); ``top[i]`` = the highest of their tops, metres, or -1 when no
-    point qualifies. Launch one thread per person."""
-    i = wp.tid()
-    best = float(-1.0)
-    for a in range(3):
-        for b in range(3):
-            axis = people[i] + search * wp.vec2(float(a - 1), float(b - 1))
-            best = wp.max(best, column_top(cams, mask, axis, z_lo, dz, nz, min_cameras, max_gap))
-    top[i] = best
+    top[i, a] = best
 
 
 @wp.kernel

@@ -715,3 +715,87 @@ def test_occupancy_hashgrid_equals_brute_force(device, rng):
     got = grid.numpy()
     np.testing.assert_allclose(got, ref, rtol=1e-5, atol=1e-6 * ref.max())
     assert (ref > 0).mean() > 0.3
+
+
+def column_walk_ref(seen, min_cameras, max_gap, z_lo, dz):
+    """The top of every (person, axis) column of camera counts ``seen`` (P, 9, nz) by the walk of
+    ``column_top_kernel``, written as plain loops."""
+    top = np.full(seen.shape[:2], -1.0)
+    for i, a in np.ndindex(*top.shape):
+        started, gap = False, 0
+        for k in range(seen.shape[2]):
+            if seen[i, a, k] >= min_cameras:
+                top[i, a], started, gap = z_lo + dz * k, True, 0
+            elif started:
+                gap += 1
+                if gap > max_gap:
+                    break
+    return top
+
+
+def test_column_seen_counts(device, rng):
+    rig = make_rig()
+    drig = DeviceRig(rig, device)
+    mask = motion_masks(rig, rng)
+    people = np.concatenate([rng.uniform(0.0, 1.0, (5, 2)), [[9.0, 9.0]]]).astype(np.float32)  # one out of view
+    z_lo, dz, nz, search = 0.05, 0.03, 40, 0.04
+    grid = np.array(
+        [
+            (*(p + search * np.array([a // 3 - 1, a % 3 - 1])), z_lo + dz * k)
+            for p in people
+            for a in range(9)
+            for k in range(nz)
+        ],
+        dtype=np.float32,
+    )
+    uvz = project_all(drig, grid, device)
+    ref = np.zeros(len(grid), dtype=np.int64)
+    for c, cam in enumerate(rig.cameras):
+        u, v, z = uvz[c].T
+        px, py = np.floor(u + 0.5).astype(int), np.floor(v + 0.5).astype(int)
+        inside = (z > 0) & (px >= 0) & (py >= 0) & (px < cam.width) & (py < cam.height)
+        q = drig.pixel_offsets[c] + np.clip(py, 0, cam.height - 1) * cam.width + np.clip(px, 0, cam.width - 1)
+        ref += inside & (mask[q] != 0)
+    seen = wp.zeros((len(people), kpeople.COLUMN_AXES, nz), dtype=wp.uint8, device=device)
+    wp.launch(
+        kpeople.column_seen_kernel,
+        dim=seen.shape,
+        inputs=[
+            drig.cams,
+            wp.array(mask, dtype=wp.uint8, device=device),
+            wp.array(people, dtype=wp.vec2, device=device),
+            z_lo,
+            dz,
+            search,
+        ],
+        outputs=[seen],
+        device=device,
+    )
+    got = seen.numpy().reshape(-1)
+    np.testing.assert_array_equal(got, ref)
+    assert len(np.unique(got)) >= 3 and not got[-9 * nz :].any()  # 0, 1, 2+ cameras; nothing seen out of view
+
+
+@pytest.mark.parametrize(("min_cameras", "max_gap"), [(2, 2), (1, 0), (3, 3), (2, 10)])
+def test_column_top_walk(device, rng, min_cameras, max_gap):
+    # runs of support broken by holes of 0 to 6 steps, noise below and above
+    nz = 60
+    shape = (7, kpeople.COLUMN_AXES, nz)
+    seen = (rng.integers(0, 4, shape) * (rng.random(shape) < 0.1)).astype(np.uint8)
+    for i, a in np.ndindex(7, kpeople.COLUMN_AXES):
+        lo, hole, hi = sorted(rng.integers(0, nz, 3))
+        seen[i, a, lo:hi] = 3
+        seen[i, a, hole : hole + rng.integers(0, 7)] = 0
+    seen[0, 0] = 0  # an empty column
+    z_lo, dz = 0.05, 0.03
+    ref = column_walk_ref(seen.astype(np.int64), min_cameras, max_gap, z_lo, dz)
+    top = wp.zeros(seen.shape[:2], dtype=wp.float32, device=device)
+    wp.launch(
+        kpeople.column_top_kernel,
+        dim=top.shape,
+        inputs=[wp.array(seen, dtype=wp.uint8, device=device), z_lo, dz, nz, min_cameras, max_gap],
+        outputs=[top],
+        device=device,
+    )
+    np.testing.assert_allclose(top.numpy(), ref, atol=1e-6)
+    assert ref[0, 0] == -1.0 and len(np.unique(ref)) > 10 and (ref < 0).sum() == 1

@@ -145,6 +145,7 @@ class PersonFilter(ParticleFilter):
         oc = cfg.occupancy
         self.grid_dims = tuple(int(v) for v in np.maximum(np.round(np.asarray(oc.extent) / oc.voxel), 1))
         self.grid = wp.zeros(self.grid_dims, dtype=wp.float32, device=d)  # occupancy pdf around the person, 1/m^3
+        self.grid_host = wp.zeros(self.grid_dims, dtype=wp.float32, device="cpu", pinned=tracker.is_cuda)
         self.log_norm = wp.zeros(1, dtype=wp.float64, device=d)
 
     def spawn(self, xy: np.ndarray, frame: int) -> None:
@@ -394,8 +395,13 @@ class PeopleTracker:
         rays = np.concatenate([_all_pixel_rays(cam) for cam in rig.cameras]).astype(np.float32)
         self.rays = wp.array(rays, dtype=wp.vec3, device=d)  # (P,) world direction of every pixel's viewing ray
         self.people_xy = wp.zeros(b.max_people, dtype=wp.vec2, device=d)  # the tracked people's ground positions
-        self.top = wp.zeros(b.max_people, dtype=wp.float32, device=d)
-        self._top_host = wp.zeros(b.max_people, dtype=wp.float32, device="cpu", pinned=pinned)
+        body = config.body
+        self.column_z_lo = 0.05
+        self.column_nz = int((float(self.volume[1][2]) - self.column_z_lo) / body.step) + 1
+        axes = kpeople.COLUMN_AXES
+        self.column_seen = wp.zeros((b.max_people, axes, self.column_nz), dtype=wp.uint8, device=d)
+        self.top = wp.zeros((b.max_people, axes), dtype=wp.float32, device=d)  # per person and axis
+        self._top_host = wp.zeros((b.max_people, axes), dtype=wp.float32, device="cpu", pinned=pinned)
         self.min_votes = min(b.min_cameras, len(rig))
         # the pool of person filters, allocated once
         self.pool = [PersonFilter(self, k) for k in range(b.max_people)]
@@ -498,20 +504,24 @@ class PeopleTracker:
         wp.copy(self._free_host, self.free_votes)
         if n:
             body = self.config.body
-            z_lo, z_hi = 0.05, float(self.volume[1][2])
+            axes = kpeople.COLUMN_AXES
+            wp.launch(
+                kpeople.column_seen_kernel,
+                dim=(n, axes, self.column_nz),
+                inputs=[self.drig.cams, self.mask, self.people_xy, self.column_z_lo, body.step, body.search],
+                outputs=[self.column_seen],
+                device=self.device,
+            )
             wp.launch(
                 kpeople.column_top_kernel,
-                dim=n,
+                dim=(n, axes),
                 inputs=[
-                    self.drig.cams,
-                    self.mask,
-                    self.people_xy,
-                    z_lo,
+                    self.column_seen,
+                    self.column_z_lo,
                     body.step,
-                    int((z_hi - z_lo) / body.step) + 1,
+                    self.column_nz,
                     min(body.min_cameras, len(self.rig)),
                     int(round(body.max_gap / body.step)),
-                    body.search,
                 ],
                 outputs=[self.top],
                 device=self.device,
@@ -545,7 +555,7 @@ class PeopleTracker:
         wp.synchronize_device(self.device)  # the frame's one synchronisation: estimates, evidence, tops on the host
         t2 = time.perf_counter()
         people = []
-        tops = self._top_host.numpy()
+        tops = self._top_host.numpy().max(axis=1)  # the highest of each person's axes
         body = self.config.body
         for j, k in enumerate(active):
             self.slot_age[k] += 1
@@ -708,9 +718,10 @@ class PeopleTracker:
                 outputs=[p.grid],
                 device=self.device,
             )
+            wp.copy(p.grid_host, p.grid)  # asynchronous on CUDA (pinned)
             launched[pid] = (origin, p)
         wp.synchronize_device(self.device)
-        return {pid: (origin, p.grid.numpy().copy()) for pid, (origin, p) in launched.items()}
+        return {pid: (origin, p.grid_host.numpy().copy()) for pid, (origin, p) in launched.items()}
 
     def add_person(self, xy: Sequence[float]) -> int:
         """Start tracking a person standing at ``xy`` (ground x, y, metres) now, as if added by the evidence (e.g.
