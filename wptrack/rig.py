@@ -5,28 +5,10 @@ right, y down, z forward; ``X_cam = R @ X_world + t``; world units are metres, i
 lie at integer coordinates) plus an optional working volume and an optional ground plane (default: z = 0, the
 plane the S3 template tracker's objects stand on; ``x_axis`` defaults to world x projected onto the plane).
 
-Rig files are YAML (``.yaml``/``.yml``) or JSON (``.json``) with the same keys::
-
-    volume: {min: [x, y, z], max: [x, y, z]}   # optional, metres
-    ground: {origin: [x, y, z], normal: [nx, ny, nz], x_axis: [ax, ay, az]}   # optional plane objects move on
-    cameras:
-      - name: cam0
-        width: 320                     # pixels
-        height: 240
-        K: [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]
-        dist: [k1, k2, p1, p2, k3]     # optional (zeros if absent; 4 or 5 entries)
-        R: [[...], [...], [...]]       # world-to-camera rotation, or  rvec: [rx, ry, rz]
-        t: [tx, ty, tz]                # metres
-      - name: cam1                     # optional for an opencv: entry (default: the file stem)
-        opencv: cam1.yml               # cv2.FileStorage file, relative to the rig file
-      - name: cam2                     # optional for a tsai: entry (default: the file stem)
-        tsai: View_001.xml             # Tsai calibration XML (PETS), relative to the rig file; see wptrack.tsai
-        units: mm                      # optional: the file's world units, mm (default) or m
-        width: 480                     # optional: image size to scale the calibration to
-        height: 360
-
-An ``opencv:`` entry reads ``camera_matrix``, ``distortion_coefficients``, ``rvec`` or ``R``, ``tvec`` or ``T``,
-``image_width`` and ``image_height``; keys written beside ``opencv:`` override the file's values.
+This module holds the model and its geometry (projection, viewing rays, scaling, ground coordinates, blind cameras).
+Rig files (YAML/JSON layout, ``opencv:`` and ``tsai:`` camera entries, writing) are :mod:`wptrack.rig_file`, which
+``Rig.load``, ``Rig.save``, ``Rig.from_dict`` and ``Camera.from_dict`` call; the value checks and the wording of
+error messages are :mod:`wptrack.rig_checks`. ``save_opencv`` and ``ROTATION_TOL`` are re-exported here.
 
 Every problem raises :class:`~wptrack.errors.RigError` with a one-line message naming the file, the camera (index and
 name) and the field, e.g. ``rig.yaml: cameras[1] 'cam1': K: focal length fx must be > 0, got -3.0``.
@@ -34,269 +16,35 @@ name) and the field, e.g. ``rig.yaml: cameras[1] 'cam1': K: focal length fx must
 
 from __future__ import annotations
 
-import contextlib
-import json
 import logging
 import math
 import os
-import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
-from wptrack.errors import OutputError, RigError
-from wptrack.io import default_file_mode
+from wptrack.errors import RigError
+from wptrack.rig_checks import (  # noqa: F401  (ROTATION_TOL: re-exported)
+    ROTATION_TOL,
+    _array,
+    _camera_where,
+    _fmt,
+    _parse_volume,
+    _positive_int,
+    _readonly,
+    _validated_fields,
+)
+from wptrack.rig_file import camera_from_dict, load_rig, rig_from_dict, save_opencv, save_rig
 
 __all__ = ["Camera", "Rig", "save_opencv"]
 
 log = logging.getLogger(__name__)
 
-ROTATION_TOL = 1e-6
-"""Tolerance on ``max |R^T R - I|``, on ``|det R - 1|`` and on the R/rvec agreement (max abs difference)."""
-
 BOUNDS_PAD_M = 0.25
 """Padding (metres) around the camera centres used by :meth:`Rig.bounds` when no volume is set."""
-
-_CAMERA_KEYS = ("name", "width", "height", "K", "dist", "R", "rvec", "t", "opencv")
-_RIG_KEYS = ("cameras", "volume", "ground")
-_FIELD_HELP = {
-    "width": "image width in pixels",
-    "height": "image height in pixels",
-    "K": "3x3 intrinsic matrix [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]",
-    "t": "world-to-camera translation [tx, ty, tz] in metres",
-}
-_SUFFIXES = (".yaml", ".yml", ".json")
-_OPENCV_KEYS = {  # rig-entry field -> OpenCV FileStorage key(s), first found wins
-    "width": ("image_width",),
-    "height": ("image_height",),
-    "K": ("camera_matrix",),
-    "dist": ("distortion_coefficients",),
-    "t": ("tvec", "T"),
-}
-
-
-# ----------------------------------------------------------------------------------------------------- helpers
-
-
-def _fmt(value: Any) -> str:
-    """Short one-line rendering of a user value for error messages."""
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, np.ndarray):
-        text = np.array2string(value, precision=6, separator=", ", threshold=20).replace("\n", "")
-    else:
-        text = repr(value)
-    text = " ".join(text.split())
-    return text if len(text) <= 120 else text[:117] + "..."
-
-
-def _array(value: Any, shape: tuple[int, ...], what: str, where: str, field: str) -> np.ndarray:
-    """Coerce ``value`` to a finite float64 array of ``shape``.
-
-    Vectors (``shape == (n,)``) also accept ``(n, 1)`` and ``(1, n)`` input, as OpenCV writes them.
-
-    Raises:
-        RigError: not numeric, wrong shape or non-finite.
-    """
-    if isinstance(value, (str, bytes, Mapping)) or value is None:
-        raise RigError(f"{where}: {field}: expected {what}, got {_fmt(value)}")
-    try:
-        arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise RigError(f"{where}: {field}: expected {what}, got {_fmt(value)}") from None
-    if len(shape) == 1 and arr.ndim == 2 and 1 in arr.shape and arr.size == shape[0]:
-        arr = arr.reshape(shape)
-    if arr.shape != shape:
-        raise RigError(f"{where}: {field}: expected {what}, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise RigError(f"{where}: {field}: values must be finite, got {_fmt(arr)}")
-    return arr
-
-
-def _readonly(arr: np.ndarray) -> np.ndarray:
-    out = np.ascontiguousarray(arr, dtype=np.float64).copy()
-    out.setflags(write=False)
-    return out
-
-
-def _positive_int(value: Any, where: str, field: str) -> int:
-    """A positive integer (integral floats such as ``320.0`` accepted, booleans refused)."""
-    unit = "pixels" if field in ("width", "height") else "count"
-    ok = False
-    if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)):
-        ok = value > 0
-    elif isinstance(value, (float, np.floating)):
-        ok = math.isfinite(value) and value > 0 and float(value).is_integer()
-    if not ok:
-        raise RigError(f"{where}: {field}: must be a positive integer ({unit}), got {_fmt(value)}")
-    return int(value)
-
-
-def _check_rotation(R: np.ndarray, where: str, field: str = "R") -> None:
-    err = float(np.max(np.abs(R.T @ R - np.eye(3))))
-    if err > ROTATION_TOL:
-        raise RigError(
-            f"{where}: {field}: not a rotation matrix, max |R^T R - I| = {err:.3g} > {ROTATION_TOL:g} "
-            "(rows must be orthonormal)"
-        )
-    det = float(np.linalg.det(R))
-    if abs(det - 1.0) > ROTATION_TOL:
-        raise RigError(f"{where}: {field}: determinant must be +1 (a rotation, not a reflection), got {det:.6g}")
-
-
-def _rodrigues_to_matrix(rvec: np.ndarray) -> np.ndarray:
-    import cv2
-
-    R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
-    return np.asarray(R, dtype=np.float64)
-
-
-def _validated_fields(
-    name: Any, width: Any, height: Any, K: Any, dist: Any, R: Any, t: Any, where: str
-) -> tuple[str, int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Validate and coerce camera fields; ``where`` prefixes every error message."""
-    if not isinstance(name, str) or not name.strip():
-        raise RigError(f"{where}: name: must be a non-empty string, got {_fmt(name)}")
-    width = _positive_int(width, where, "width")
-    height = _positive_int(height, where, "height")
-
-    K = _array(K, (3, 3), "a 3x3 matrix [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]", where, "K")
-    for label, value in (("fx", K[0, 0]), ("fy", K[1, 1])):
-        if not value > 0:
-            raise RigError(f"{where}: K: focal length {label} must be > 0, got {float(value)!r}")
-    if K[0, 1] != 0.0:
-        raise RigError(f"{where}: K: skew K[0][1] must be 0 (not supported), got {float(K[0, 1])!r}")
-    if K[1, 0] != 0.0 or not np.array_equal(K[2], [0.0, 0.0, 1.0]):
-        raise RigError(f"{where}: K: expected the form [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], got {_fmt(K.tolist())}")
-
-    if dist is None:
-        dist = np.zeros(5)
-    else:
-        if isinstance(dist, (str, bytes, Mapping)):
-            raise RigError(f"{where}: dist: expected 4 or 5 coefficients [k1, k2, p1, p2, k3], got {_fmt(dist)}")
-        try:
-            d = np.array(dist, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise RigError(
-                f"{where}: dist: expected 4 or 5 coefficients [k1, k2, p1, p2, k3], got {_fmt(dist)}"
-            ) from None
-        if d.ndim > 2 or (d.ndim == 2 and 1 not in d.shape):
-            raise RigError(f"{where}: dist: expected 4 or 5 coefficients [k1, k2, p1, p2, k3], got shape {d.shape}")
-        d = d.reshape(-1)
-        if not np.all(np.isfinite(d)):
-            raise RigError(f"{where}: dist: values must be finite, got {_fmt(d)}")
-        if d.size > 5 and np.all(d[5:] == 0.0):
-            d = d[:5]  # e.g. an 8/12/14-coefficient OpenCV model whose higher terms are unused
-        if d.size not in (4, 5):
-            raise RigError(
-                f"{where}: dist: expected 4 or 5 coefficients [k1, k2, p1, p2, k3] "
-                f"(higher-order models unsupported), got {d.size}"
-            )
-        dist = np.concatenate([d, np.zeros(5 - d.size)])
-
-    R = _array(R, (3, 3), "a 3x3 world-to-camera rotation matrix", where, "R")
-    _check_rotation(R, where)
-    t = _array(t, (3,), "3 values [tx, ty, tz] in metres", where, "t")
-    return name, width, height, K, dist, R, t
-
-
-def _camera_where(source: str, index: int | None, name: Any) -> str:
-    if index is None:
-        return f"{source}: camera {_fmt(name)}"
-    return f"{source}: cameras[{index}] {_fmt(name)}"
-
-
-# ----------------------------------------------------------------------------------------------------- OpenCV files
-
-
-def _read_node(node: Any) -> Any:
-    """Convert a cv2.FileNode to a Python/numpy value (matrix, nested list, number or string)."""
-    if node.isMap():
-        mat = node.mat()
-        if mat is None:
-            raise ValueError("not an opencv-matrix")
-        return np.asarray(mat, dtype=np.float64)
-    if node.isSeq():
-        return [_read_node(node.at(i)) for i in range(node.size())]
-    if node.isString():
-        return node.string()
-    return node.real()
-
-
-def _read_opencv(path: Path, where: str) -> dict[str, Any]:
-    """Read the camera keys of an OpenCV FileStorage calibration file into rig-entry keys."""
-    import cv2
-
-    if not path.is_file():
-        raise RigError(f"{where}: opencv: file not found: {path}")
-    try:
-        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-        opened = fs.isOpened()
-    except Exception as exc:  # cv2 raises cv2.error or SystemError on unparsable files
-        raise RigError(f"{where}: opencv: cannot read {path} as an OpenCV FileStorage file: {_fmt(str(exc))}") from None
-    if not opened:
-        raise RigError(f"{where}: opencv: cannot open {path} as an OpenCV FileStorage file")
-    out: dict[str, Any] = {}
-    try:
-
-        def get(key: str) -> Any:
-            try:
-                node = fs.getNode(key)
-                if node.empty() or node.isNone():
-                    return None
-                return _read_node(node)
-            except Exception:
-                raise RigError(f"{where}: opencv: {path}: key '{key}' is not a number or matrix") from None
-
-        for field, keys in _OPENCV_KEYS.items():
-            value = next((v for v in (get(k) for k in keys) if v is not None), None)
-            if value is not None:
-                out[field] = value
-        rvec, R = get("rvec"), get("R")
-        if rvec is not None:
-            out["rvec"] = rvec
-        if R is not None:
-            out["R"] = R
-    finally:
-        fs.release()
-    return out
-
-
-def save_opencv(camera: Camera, path: str | os.PathLike[str]) -> None:
-    """Write ``camera`` as an OpenCV FileStorage file (format chosen by cv2 from the suffix: .yml/.yaml/.xml/.json).
-
-    Keys written: ``image_width``, ``image_height``, ``camera_matrix`` (3x3), ``distortion_coefficients`` (1x5),
-    ``R`` (3x3), ``rvec`` (3x1) and ``tvec`` (3x1, metres) - the keys a rig ``opencv:`` entry reads. The file is
-    written atomically (temporary file in the same directory, then ``os.replace``).
-
-    Raises:
-        OutputError: the file cannot be written.
-    """
-    import cv2
-
-    path = Path(path)
-    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
-    try:
-        fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
-        if not fs.isOpened():
-            raise OSError("cannot open for writing")
-        fs.write("image_width", int(camera.width))
-        fs.write("image_height", int(camera.height))
-        fs.write("camera_matrix", np.array(camera.K))
-        fs.write("distortion_coefficients", np.array(camera.dist).reshape(1, 5))
-        fs.write("R", np.array(camera.R))
-        fs.write("rvec", camera.rvec.reshape(3, 1))
-        fs.write("tvec", np.array(camera.t).reshape(3, 1))
-        fs.release()
-        os.replace(tmp, path)
-    except (OSError, cv2.error) as exc:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise OutputError(f"{path}: cannot write OpenCV camera file: {_fmt(str(exc))}") from None
 
 
 # ----------------------------------------------------------------------------------------------------- Camera
@@ -548,71 +296,7 @@ class Camera:
         Raises:
             RigError: any invalid, missing or unknown field.
         """
-        if not isinstance(d, Mapping):
-            raise RigError(f"{source}: cameras[{index}]: expected a mapping of camera fields, got {_fmt(d)}")
-        if "tsai" in d:
-            from .tsai import camera_from_entry
-
-            return camera_from_entry(d, source, index, base_dir)
-        raw_name = d.get("name")
-        entry: dict[str, Any] = {}
-        cv_path: Path | None = None
-        if "opencv" in d:
-            ref = d["opencv"]
-            if not isinstance(ref, (str, os.PathLike)) or not str(ref):
-                where = _camera_where(source, index, raw_name if raw_name is not None else f"cam{index}")
-                raise RigError(f"{where}: opencv: expected a file path, got {_fmt(ref)}")
-            cv_path = Path(ref)
-            if not cv_path.is_absolute() and base_dir is not None:
-                cv_path = Path(base_dir) / cv_path
-            if raw_name is None:
-                raw_name = cv_path.stem
-            entry.update(_read_opencv(cv_path, _camera_where(source, index, raw_name)))
-        if raw_name is None:
-            raw_name = f"cam{index}"
-        if isinstance(raw_name, (int, np.integer)) and not isinstance(raw_name, bool):
-            raw_name = str(raw_name)
-        where = _camera_where(source, index, raw_name)
-
-        unknown = [k for k in d if k not in _CAMERA_KEYS]
-        if unknown:
-            raise RigError(f"{where}: unknown field {_fmt(unknown[0])} (expected one of {', '.join(_CAMERA_KEYS)})")
-        if "R" in d or "rvec" in d:  # a rotation given beside opencv: replaces the file's rotation (either form)
-            entry.pop("R", None)
-            entry.pop("rvec", None)
-        entry.update({k: v for k, v in d.items() if k not in ("name", "opencv")})
-
-        missing = [f for f in ("width", "height", "K", "t") if f not in entry]
-        if "R" not in entry and "rvec" not in entry:
-            missing.append("R")
-        if missing:
-            field = missing[0]
-            help_ = _FIELD_HELP.get(field, "world-to-camera rotation")
-            if cv_path is not None:
-                keys = ("rvec", "R") if field == "R" else _OPENCV_KEYS[field]
-                names = " or ".join(f"'{k}'" for k in keys)
-                raise RigError(f"{where}: opencv: {cv_path}: missing key {names} ({help_})")
-            names = "'R' or 'rvec'" if field == "R" else f"'{field}'"
-            raise RigError(f"{where}: missing field {names} ({help_})")
-
-        R = entry.get("R")
-        if "rvec" in entry:
-            rvec = _array(entry["rvec"], (3,), "a Rodrigues vector [rx, ry, rz] in radians", where, "rvec")
-            R_from_rvec = _rodrigues_to_matrix(rvec)
-            if R is None:
-                R = R_from_rvec
-            else:
-                R = _array(R, (3, 3), "a 3x3 world-to-camera rotation matrix", where, "R")
-                _check_rotation(R, where)
-                diff = float(np.max(np.abs(R - R_from_rvec)))
-                if diff > ROTATION_TOL:
-                    raise RigError(
-                        f"{where}: rvec: disagrees with R (max difference {diff:.3g} > {ROTATION_TOL:g}); give only one"
-                    )
-        fields = _validated_fields(
-            raw_name, entry["width"], entry["height"], entry["K"], entry.get("dist"), R, entry["t"], where
-        )
-        return cls(*fields)
+        return camera_from_dict(cls, d, source, index, base_dir)
 
 
 # ----------------------------------------------------------------------------------------------------- Rig
@@ -707,23 +391,7 @@ class Rig:
         Raises:
             RigError: missing, unreadable or invalid file.
         """
-        path = Path(path)
-        source = str(path)
-        suffix = path.suffix.lower()
-        if suffix not in _SUFFIXES:
-            raise RigError(f"{source}: unsupported rig file extension {path.suffix!r} (expected .yaml, .yml or .json)")
-        if not path.exists():
-            raise RigError(f"{source}: rig file not found")
-        try:
-            text = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise RigError(f"{source}: cannot read rig file: {_fmt(str(exc))}") from None
-        try:
-            data = json.loads(text) if suffix == ".json" else yaml.safe_load(text)
-        except (json.JSONDecodeError, yaml.YAMLError) as exc:
-            kind = "JSON" if suffix == ".json" else "YAML"
-            raise RigError(f"{source}: not valid {kind}: {' '.join(str(exc).split())}") from None
-        return cls.from_dict(data, source=source, base_dir=path.parent)
+        return load_rig(cls, path)
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write the rig as YAML or JSON (chosen by suffix), atomically (temp file in the same dir + ``os.replace``).
@@ -732,31 +400,7 @@ class Rig:
             RigError: unsupported suffix.
             OutputError: the file cannot be written.
         """
-        path = Path(path)
-        suffix = path.suffix.lower()
-        if suffix not in _SUFFIXES:
-            raise RigError(f"{path}: unsupported rig file extension {path.suffix!r} (expected .yaml, .yml or .json)")
-        data = self.to_dict()
-        if suffix == ".json":
-            text = json.dumps(data, indent=2) + "\n"
-        else:
-            text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None)
-        tmp_name: str | None = None
-        try:
-            with tempfile.NamedTemporaryFile(
-                "w", encoding="utf-8", dir=path.parent, prefix=f".{path.name}.", suffix=".tmp", delete=False
-            ) as fh:
-                tmp_name = fh.name
-                os.fchmod(fh.fileno(), default_file_mode())  # NamedTemporaryFile's 0600 -> the umask's mode
-                fh.write(text)
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.replace(tmp_name, path)
-        except OSError as exc:
-            if tmp_name is not None:
-                with contextlib.suppress(OSError):
-                    os.unlink(tmp_name)
-            raise OutputError(f"{path}: cannot write rig file: {_fmt(str(exc))}") from None
+        save_rig(self, path)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-Python representation (the rig-file layout): ``cameras`` and, if set, ``volume``."""
@@ -770,7 +414,7 @@ class Rig:
 
     @classmethod
     def from_dict(cls, d: Any, source: str = "<dict>", base_dir: Path | None = None) -> Rig:
-        """Build a rig from the rig-file layout (see the module docstring).
+        """Build a rig from the rig-file layout (see :mod:`wptrack.rig_file`).
 
         Args:
             d: Mapping with ``cameras`` (list of camera entries) and optional ``volume`` ``{min, max}``.
@@ -780,27 +424,7 @@ class Rig:
         Raises:
             RigError: any invalid field.
         """
-        if not isinstance(d, Mapping):
-            raise RigError(f"{source}: expected a mapping with a 'cameras' list at the top level, got {_fmt(d)}")
-        unknown = [k for k in d if k not in _RIG_KEYS]
-        if unknown:
-            raise RigError(f"{source}: unknown top-level field {_fmt(unknown[0])} (expected cameras, volume, ground)")
-        if "cameras" not in d:
-            raise RigError(f"{source}: missing field 'cameras' (a non-empty list of cameras)")
-        entries = d["cameras"]
-        if not isinstance(entries, list) or not entries:
-            raise RigError(f"{source}: cameras: expected a non-empty list of cameras, got {_fmt(entries)}")
-        cameras = tuple(Camera.from_dict(e, source=source, index=i, base_dir=base_dir) for i, e in enumerate(entries))
-        volume = None
-        if d.get("volume") is not None:
-            vol = d["volume"]
-            if not isinstance(vol, Mapping) or set(vol) != {"min", "max"}:
-                raise RigError(
-                    f"{source}: volume: expected {{min: [x, y, z], max: [x, y, z]}} in metres, got {_fmt(vol)}"
-                )
-            volume = (vol["min"], vol["max"])
-        ground = GroundPlane.from_dict(d["ground"], source) if d.get("ground") is not None else None
-        return cls(cameras=cameras, volume=volume, source=source, ground=ground)
+        return rig_from_dict(cls, d, source, base_dir)
 
     # -- queries
 
@@ -927,16 +551,3 @@ class GroundPlane:
             )
         except RigError as exc:
             raise RigError(str(exc).replace("<memory>", source, 1)) from None
-
-
-def _parse_volume(volume: Any, source: str) -> tuple[np.ndarray, np.ndarray]:
-    where = source
-    if isinstance(volume, Mapping) or not isinstance(volume, (tuple, list)) or len(volume) != 2:
-        raise RigError(f"{where}: volume: expected (min_xyz, max_xyz) in metres, got {_fmt(volume)}")
-    lo = _array(volume[0], (3,), "3 values [x, y, z] in metres", where, "volume: min")
-    hi = _array(volume[1], (3,), "3 values [x, y, z] in metres", where, "volume: max")
-    if not np.all(lo < hi):
-        raise RigError(
-            f"{where}: volume: min must be < max on every axis, got min {_fmt(lo.tolist())} max {_fmt(hi.tolist())}"
-        )
-    return _readonly(lo), _readonly(hi)

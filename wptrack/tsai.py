@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RigError
+from .rig_checks import _camera_where, _fmt, _positive_int
 
 __all__ = ["TsaiCalibration", "read_tsai", "load_tsai_camera", "tsai_to_camera", "tsai_fit_residual", "UNITS"]
 
@@ -335,8 +336,6 @@ def camera_from_entry(d, source: str, index: int, base_dir: Path | None):
     Raises:
         RigError: an unknown key, a bad value, or any problem of the file (message names rig file, camera, field).
     """
-    from .rig import _camera_where, _fmt, _positive_int
-
     ref = d["tsai"]
     name = d.get("name")
     if not isinstance(ref, (str, os.PathLike)) or not str(ref):
