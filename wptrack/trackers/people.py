@@ -403,6 +403,7 @@ class PeopleTracker:
         self.top = wp.zeros((b.max_people, axes), dtype=wp.float32, device=d)  # per person and axis
         self._top_host = wp.zeros((b.max_people, axes), dtype=wp.float32, device="cpu", pinned=pinned)
         self.min_votes = min(b.min_cameras, len(rig))
+        self._centres: tuple[np.ndarray, np.ndarray] | None = None
         # the pool of person filters, allocated once
         self.pool = [PersonFilter(self, k) for k in range(b.max_people)]
         self.slot_id = np.full(b.max_people, -1, dtype=np.int64)  # person id per slot, -1 = free
@@ -442,6 +443,8 @@ class PeopleTracker:
             m = np.asarray(m)
             if m.ndim == 3:
                 m = m.max(axis=2)
+            if m.dtype != np.uint8 and m.dtype != np.bool_:
+                m = m != 0
             for what, shape in (("frame", img.shape[:2]), ("mask", m.shape)):
                 if tuple(shape) != (cam.height, cam.width):
                     raise FrameError(
@@ -449,7 +452,7 @@ class PeopleTracker:
                         f"{cam.width}x{cam.height}"
                     )
             bgr[3 * offs[c] : 3 * offs[c + 1]] = img.reshape(-1)
-            np.not_equal(m.reshape(-1), 0, out=msk[offs[c] : offs[c + 1]].view(bool))
+            msk[offs[c] : offs[c + 1]] = m.reshape(-1)  # the kernels read nonzero as motion
         wp.copy(self.bgr, self._bgr_host)
         wp.copy(self.mask, self._mask_host)
 
@@ -573,10 +576,13 @@ class PeopleTracker:
 
     # --- who is there (ours) ---------------------------------------------------------------------------------
     def _cell_centres(self) -> tuple[np.ndarray, np.ndarray]:
-        c = self.config.birth.cell
-        xs = self.grid_origin[0] + c * (np.arange(self.nx) + 0.5)
-        ys = self.grid_origin[1] + c * (np.arange(self.ny) + 0.5)
-        return np.meshgrid(xs, ys)  # (ny, nx) each
+        """(x, y) of the evidence map's cell centres, metres, (ny, nx) each (computed once)."""
+        if self._centres is None:
+            c = self.config.birth.cell
+            xs = self.grid_origin[0] + c * (np.arange(self.nx) + 0.5)
+            ys = self.grid_origin[1] + c * (np.arange(self.ny) + 0.5)
+            self._centres = tuple(np.meshgrid(xs, ys))
+        return self._centres
 
     def _update_population(self, est: PeopleEstimate, active: list[int], column: np.ndarray) -> None:
         """Remove people without multi-view support, duplicates and people who left; add people where the
