@@ -147,6 +147,37 @@ class PersonFilter(ParticleFilter):
         self.grid = wp.zeros(self.grid_dims, dtype=wp.float32, device=d)  # occupancy pdf around the person, 1/m^3
         self.grid_host = wp.zeros(self.grid_dims, dtype=wp.float32, device="cpu", pinned=tracker.is_cuda)
         self.log_norm = wp.zeros(1, dtype=wp.float64, device=d)
+        self._occupancy_cmds: dict[int, tuple[wp.Launch, wp.Launch]] = {}  # recorded launches per parity
+
+    def launch_occupancy(self, origin: np.ndarray) -> None:
+        """Launch the occupancy grid of the current particles with its corner at ``origin`` (metres) into
+        :attr:`grid` and its asynchronous copy into :attr:`grid_host` (recorded launches: a few microseconds of
+        host time each instead of a full ``wp.launch``)."""
+        cur = self.parity
+        if cur not in self._occupancy_cmds:
+            oc, d = self.tracker.config.occupancy, self.device
+            norm = wp.launch(
+                kocc.log_norm_kernel,
+                dim=1,
+                inputs=[self.est, int(kreduce.EST_LOGLIK), self.n],
+                outputs=[self.log_norm],
+                device=d,
+                record_cmd=True,
+            )
+            grid = wp.launch(
+                kocc.occupancy_kernel,
+                dim=self.grid_dims,
+                inputs=[self.x[cur], self.logw[cur], self.log_norm, oc.sigma, oc.cutoff, wp.vec3(0.0), oc.voxel],
+                outputs=[self.grid],
+                device=d,
+                record_cmd=True,
+            )
+            self._occupancy_cmds[cur] = (norm, grid)
+        norm, grid = self._occupancy_cmds[cur]
+        grid.set_param_by_name("origin", wp.vec3(*(float(v) for v in origin)))
+        norm.launch()
+        grid.launch()
+        wp.copy(self.grid_host, self.grid)  # asynchronous on CUDA (pinned)
 
     def spawn(self, xy: np.ndarray, frame: int) -> None:
         """Start the filter on a new person standing at ``xy`` (ground, metres): particles uniform in the
@@ -709,22 +740,7 @@ class PeopleTracker:
             centre = p.est_host.numpy()[kreduce.EST_MEAN : kreduce.EST_MEAN + 3]
             dims = np.asarray(p.grid_dims)
             origin = np.floor((centre - 0.5 * dims * oc.voxel) / oc.voxel) * oc.voxel  # on the voxel lattice
-            cur = p.parity
-            wp.launch(
-                kocc.log_norm_kernel,
-                dim=1,
-                inputs=[p.est, int(kreduce.EST_LOGLIK), p.n],
-                outputs=[p.log_norm],
-                device=self.device,
-            )
-            wp.launch(
-                kocc.occupancy_kernel,
-                dim=p.grid_dims,
-                inputs=[p.x[cur], p.logw[cur], p.log_norm, oc.sigma, oc.cutoff, wp.vec3(*origin), oc.voxel],
-                outputs=[p.grid],
-                device=self.device,
-            )
-            wp.copy(p.grid_host, p.grid)  # asynchronous on CUDA (pinned)
+            p.launch_occupancy(origin)
             launched[pid] = (origin, p)
         wp.synchronize_device(self.device)
         return {pid: (origin, p.grid_host.numpy().copy()) for pid, (origin, p) in launched.items()}
