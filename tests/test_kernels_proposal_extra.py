@@ -1,5 +1,7 @@
-"""Proposal kernels not covered by test_proposal.py, against NumPy references on every device: the count of valid
-detection components (``detection_count_kernel``) and the fused S1 iteration with the mixture proposal
+"""Proposal kernels not covered by test_proposal.py, against NumPy references on every device: the detection
+components (``detection_components_kernel``: camera pair, rejection-sampled target pixels, triangulation or a point
+along one ray, from a NumPy Philox and cv2 rays; test_proposal only checks that they lie on the ball), the count of
+valid components (``detection_count_kernel``) and the fused S1 iteration with the mixture proposal
 (``colour_mixture_predict_score_kernel``): branch choice, draw and log p/q of every particle from a NumPy Philox
 and the NumPy densities of test_proposal, eqs. 5-7 from cv2 projections, the weights' accumulation, alpha = 1 on the
 first frame after a uniform initialisation, eps = 0 when no component is valid, and the per-block partials."""
@@ -11,13 +13,99 @@ import pytest
 import warp as wp
 from test_kernels_colour import TARGETS, make_rig, mask_and_integral, random_frames, upload, window_ref
 from test_kernels_people_extra import uniform4_ref
+from test_kernels_random import philox_ref
 from test_kernels_scoring_extra import FRAME, SEED, check_partials, launch_fused, normal4_ref
-from test_proposal import HI, LO, np_log_det, np_log_motion
+from test_proposal import HI, LO, np_log_det, np_log_motion, ray_dir, rig3
 
 from wptrack.kernels import proposal as kproposal
 from wptrack.kernels import random as krand
 from wptrack.kernels import scoring as kscoring
 from wptrack.warpcams import DeviceRig
+
+
+def components_ref(rig, masks, seed, frame, k, tries, max_gap, depth_lo, depth_hi):
+    """(centres (K, 3), valid (K,), ambiguous (K,)) float64: ``ambiguous`` marks a gap within 1e-4 m of max_gap."""
+    m = len(rig.cameras)
+
+    def words(t):
+        ctr = np.stack([np.arange(k), np.full(k, frame), np.full(k, int(kproposal.STREAM_PROPOSAL_PIXELS)), t], 1)
+        return philox_ref(ctr.astype(np.uint64), seed).astype(np.int64)
+
+    w0 = words(np.zeros(k))
+    cam_a = w0[:, 0] % m
+    cam_b = (cam_a + 1 + w0[:, 1] % (m - 1)) % m if m > 1 else cam_a
+    draws = np.stack([words(np.full(k, t + 1)) for t in range(tries)])  # (tries, K, 4)
+    centres = np.zeros((k, 3))
+    valid = np.zeros(k, int)
+    amb = np.zeros(k, bool)
+    for i in range(k):
+        ca, cb = rig.cameras[cam_a[i]], rig.cameras[cam_b[i]]
+
+        def first_hit(c, col, cam, i=i):
+            q = draws[:, i, col] % (cam.width * cam.height)  # uniform pixel draws, the first on the target wins
+            hits = np.flatnonzero(masks[c].reshape(-1)[q])
+            return int(q[hits[0]]) if len(hits) else -1
+
+        pa = first_hit(cam_a[i], 0, ca)
+        pb = first_hit(cam_b[i], 1, cb) if m > 1 else -1
+        if pa < 0:
+            continue
+        da = ray_dir(ca, (pa % ca.width, pa // ca.width))
+        if pb >= 0:
+            db = ray_dir(cb, (pb % cb.width, pb // cb.width))
+            (s, t), *_ = np.linalg.lstsq(np.stack([da, -db], 1), cb.center - ca.center, rcond=None)
+            p1, p2 = ca.center + s * da, cb.center + t * db
+            gap = np.linalg.norm(p1 - p2)
+            amb[i] = abs(gap - max_gap) < 1e-4
+            if s > 0 and t > 0 and gap <= max_gap:
+                centres[i], valid[i] = 0.5 * (p1 + p2), 1
+                continue
+        depth = depth_lo + (depth_hi - depth_lo) * ((w0[i, 2] >> 8) + 0.5) / 16777216.0
+        centres[i], valid[i] = ca.center + depth * da, 2
+    return centres, valid, amb
+
+
+@pytest.mark.parametrize("blank", [None, 1], ids=["all_cameras", "camera1_blank"])
+def test_detection_components_match_numpy(device, rng, blank):
+    rig = rig3()
+    frames = random_frames(rig, rng)
+    if blank is not None:
+        frames[blank][:] = 90  # grey: no target pixel in that camera
+    drig = DeviceRig(rig, device)
+    target = TARGETS[0]
+    bgr = upload(frames, device)
+    mask, *_ = mask_and_integral(drig, target, bgr, device)
+    mk = mask.numpy().astype(bool)
+    masks = [mk[drig.pixel_offsets[c] : drig.pixel_offsets[c + 1]] for c in range(len(rig.cameras))]
+    k, tries, max_gap, depth_lo, depth_hi = 96, 40, 0.2, 0.1, 2.5
+    centres = wp.full(k, wp.vec3(7.0, 7.0, 7.0), dtype=wp.vec3, device=device)
+    valid = wp.full(k, 7, dtype=wp.int32, device=device)
+    wp.launch(
+        kproposal.detection_components_kernel,
+        dim=k,
+        inputs=[
+            drig.cams,
+            target.to_struct(device),
+            bgr,
+            wp.vec2ui(*SEED),
+            wp.array([FRAME], dtype=wp.int32, device=device),
+            tries,
+            max_gap,
+            depth_lo,
+            depth_hi,
+        ],
+        outputs=[centres, valid],
+        device=device,
+    )
+    ref_c, ref_v, amb = components_ref(rig, masks, SEED, FRAME, k, tries, max_gap, depth_lo, depth_hi)
+    got_c, got_v = centres.numpy(), valid.numpy()
+    assert amb.sum() <= 2
+    np.testing.assert_array_equal(got_v[~amb], ref_v[~amb])
+    np.testing.assert_allclose(got_c[~amb], ref_c[~amb], atol=2e-3)
+    if blank is None:
+        assert (ref_v == 1).sum() >= 10 and (ref_v == 2).sum() >= 10  # both kinds of component
+    else:
+        assert (ref_v == 0).sum() >= 10 and (ref_v == 2).sum() >= 10  # camera a blank: none; camera b blank: a ray
 
 
 def detection_count(device, valid) -> int:
