@@ -7,8 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import warp as wp
-from test_kernels_people_extra import uniform4_ref
-from test_kernels_scoring_extra import normal4_ref
+from kernel_refs import normal4_ref, uniform4_ref
 
 from wptrack.kernels import motion as kmotion
 from wptrack.kernels import random as krand

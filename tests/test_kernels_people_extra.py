@@ -1,16 +1,30 @@
-"""S2 people-tracker kernels not covered by test_kernels_people.py, against NumPy references on every device:
-the ground-grid motion votes used to add and remove people (``ground_votes_kernel``), the birth draw uniform in a
-vertical cylinder (``init_cylinder_kernel``: exact against a NumPy Philox, and statistically: radial CDF r^2/R^2,
-uniform angle and height) and the estimate -> ground position copy (``person_xy_kernel``)."""
+"""S2 people-tracker kernels not covered (or only statistically / through other kernels) by test_kernels_people.py,
+against NumPy references on every device: the ground-grid motion votes used to add and remove people
+(``ground_votes_kernel``), the birth draw uniform in a vertical cylinder (``init_cylinder_kernel``: exact against a
+NumPy Philox, and statistically: radial CDF r^2/R^2, uniform angle and height), the estimate -> ground position copy
+(``person_xy_kernel``), the constant-velocity draw of ``predict_kernel`` (eq. 5) draw by draw, and
+``score_moments_kernel`` (eq. 11 = eqs. 9-10 + eqs. 23-26, and its block partials, MAP index included)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import warp as wp
+from kernel_refs import check_partials, normal4_ref, uniform4_ref
 from scipy import stats
-from test_kernels_people import make_rig, project_all
-from test_kernels_random import philox_ref
+from test_kernels_people import (
+    NB,
+    appearance_ref,
+    make_rig,
+    motion_masks,
+    motion_ref,
+    project_all,
+    random_frames,
+    random_histograms,
+    random_points,
+    run_descriptor,
+    run_predict,
+)
 
 from wptrack.kernels import people as kpeople
 from wptrack.kernels import random as krand
@@ -204,13 +218,6 @@ def test_ground_votes_camera_that_sees_nothing_does_not_vote(device):
 # ------------------------------------------------------------------------------------------ birth cylinder
 
 
-def uniform4_ref(seed: tuple[int, int], n: int, frame: int, stream: int) -> np.ndarray:
-    """(n, 4) float64 of ``random.uniform4`` from the NumPy Philox of test_kernels_random (exact: 24-bit values)."""
-    ctr = np.stack([np.arange(n), np.full(n, frame), np.full(n, stream), np.zeros(n)], axis=1).astype(np.uint64)
-    w = philox_ref(ctr, seed)
-    return ((w >> np.uint32(8)).astype(np.float64) + 0.5) / 16777216.0
-
-
 def init_cylinder(device, centre, radius, z_lo, z_hi, seed, frame, n):
     pos = wp.full(n, wp.vec3(7.0, 7.0, 7.0), dtype=wp.vec3, device=device)
     vel = wp.full(n, wp.vec3(7.0, 7.0, 7.0), dtype=wp.vec3, device=device)
@@ -280,3 +287,62 @@ def test_person_xy_copies_the_estimate_mean(device):
     np.testing.assert_array_equal(got[[0, 2]], 9.0)  # only row j is written
     wp.launch(kpeople.person_xy_kernel, dim=1, inputs=[est_dev, 4, 2], outputs=[people], device=device)
     np.testing.assert_array_equal(people.numpy()[2], np.float32(est[4:6]))
+
+
+# ------------------------------------------------------------------------------------------ predict, score_moments
+
+
+def test_predict_constant_velocity_matches_numpy_philox(device, rng):
+    """Eq. 5 draw by draw: P = P_a + Pdot_a + sigma_pos z_P, Pdot = Pdot_a + sigma_vel z_V with z_P, z_V the first
+    three normals of the (seed, i, frame, STREAM_MOTION) and (..., STREAM_PEOPLE_VELOCITY) blocks."""
+    n, sp, sv, seed, frame = 2000, 0.02, 0.005, 11, 5
+    pos = rng.uniform(-1, 1, (n, 3)).astype(np.float32)
+    vel = rng.normal(0, 0.05, (n, 3)).astype(np.float32)
+    model, desc = random_histograms(rng, n), random_histograms(rng, n)
+    anc = rng.integers(0, n, n).astype(np.int32)
+    p, v, _ = run_predict(device, pos, vel, model, desc, np.ones(n, np.float32), anc, sp, sv, 0.1, seed, frame)
+    zp = normal4_ref((seed, 0), n, frame, int(krand.STREAM_MOTION))[:, :3]
+    zv = normal4_ref((seed, 0), n, frame, int(krand.STREAM_PEOPLE_VELOCITY))[:, :3]
+    p64, v64 = pos.astype(np.float64)[anc], vel.astype(np.float64)[anc]
+    np.testing.assert_allclose(p, p64 + v64 + np.float32(sp) * zp, rtol=0, atol=3e-6)
+    np.testing.assert_allclose(v, v64 + np.float32(sv) * zv, rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize(("resampled", "drop_worst"), [(1, 1), (0, 0)])
+def test_score_moments_matches_numpy(device, rng, resampled, drop_worst):
+    """log w = eqs. 9-10 (motion, the worst camera dropped or not) + eqs. 23-26 (appearance) + the previous log-weight
+    unless resampled; block partials (max, MAP index, sums) from NumPy, at a size that leaves a partial block."""
+    rig = make_rig()
+    drig = DeviceRig(rig, device)
+    n, chunk, block = 300, 64, 32
+    blocks = (n + chunk - 1) // chunk
+    bgr = random_frames(rig, rng)
+    mask = motion_masks(rig, rng)
+    pts = random_points(rng, n)
+    desc, mass, rgb = run_descriptor(drig, bgr, pts, device)
+    model = random_histograms(rng, n)
+    logw_prev = rng.normal(0, 1, n).astype(np.float32)
+    p_b, sn, sigma_p = 0.1, 0.01, 0.3
+    logw = wp.full(n, 7.0, dtype=wp.float32, device=device)
+    pm = wp.full(blocks, 7.0, dtype=wp.float32, device=device)
+    pa = wp.full(blocks, -7, dtype=wp.int32, device=device)
+    part = wp.full((blocks, int(kreduce.N_SUMS)), 7.0, dtype=wp.float64, device=device)
+    wp.launch_tiled(
+        kpeople.score_moments_kernel,
+        dim=[blocks],
+        inputs=[drig.cams, wp.array(mask, dtype=wp.uint8, device=device), p_b, 0.0, drop_worst]
+        + [wp.array(pts, dtype=wp.vec3, device=device), wp.array(model, device=device), desc, mass, rgb, NB]
+        + [wp.array(logw_prev, device=device), wp.array([resampled], dtype=wp.int32, device=device)]
+        + [wp.array([sn], dtype=wp.float32, device=device), sigma_p, n, chunk],
+        outputs=[logw, pm, pa, part],
+        block_dim=block,
+        device=device,
+    )
+    uvz = project_all(drig, pts, device)
+    lm = motion_ref(rig, uvz, mask, drig.pixel_offsets, p_b, 0.0, drop_worst)
+    la = appearance_ref(model, desc.numpy(), mass.numpy(), rgb.numpy(), sn, sigma_p)
+    ref = lm + la + (0.0 if resampled else logw_prev)
+    got = logw.numpy()
+    np.testing.assert_allclose(got, ref, rtol=1e-5, atol=1e-4)
+    assert (mass.numpy() == 0).sum() >= 3 and len(np.unique(np.round(lm, 4))) >= 4  # unseen and varied particles
+    check_partials((pm.numpy(), pa.numpy(), part.numpy()), got, pts, chunk)

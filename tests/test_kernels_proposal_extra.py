@@ -11,10 +11,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import warp as wp
+from kernel_refs import check_partials, normal4_ref, uniform4_ref
 from test_kernels_colour import TARGETS, make_rig, mask_and_integral, random_frames, upload, window_ref
-from test_kernels_people_extra import uniform4_ref
 from test_kernels_random import philox_ref
-from test_kernels_scoring_extra import FRAME, SEED, check_partials, launch_fused, normal4_ref
+from test_kernels_scoring_extra import FRAME, SEED, launch_fused
 from test_proposal import HI, LO, np_log_det, np_log_motion, ray_dir, rig3
 
 from wptrack.kernels import proposal as kproposal

@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import warp as wp
+from kernel_refs import check_partials, normal4_ref
 from test_kernels_colour import TARGETS, make_rig, mask_and_integral, random_frames, upload, window_ref
-from test_kernels_people_extra import uniform4_ref
 
 from wptrack.kernels import random as krand
 from wptrack.kernels import reduce as kreduce
@@ -20,36 +20,6 @@ from wptrack.warpcams import DeviceRig
 BLOCK = 256  # as wptrack.pf launches the fused kernels
 SEED = (7, 3)
 FRAME = 5
-
-
-def normal4_ref(seed: tuple[int, int], n: int, frame: int, stream: int) -> np.ndarray:
-    """(n, 4) float64 of ``random.normal4``: two Box-Muller transforms of the NumPy Philox uniforms."""
-    u = uniform4_ref(seed, n, frame, stream)
-    r0, r1 = np.sqrt(-2 * np.log(u[:, 0])), np.sqrt(-2 * np.log(u[:, 2]))
-    a0, a1 = 2 * np.pi * u[:, 1], 2 * np.pi * u[:, 3]
-    return np.column_stack([r0 * np.cos(a0), r0 * np.sin(a0), r1 * np.cos(a1), r1 * np.sin(a1)])
-
-
-def partials_ref(logw: np.ndarray, x: np.ndarray, chunk: int):
-    """Per block of ``chunk`` particles: max log-weight (after the floor), lowest index attaining it, and the sums of
-    w, w^2, w x (3), w x^2 (3) with w = exp(logw - block max), float64."""
-    lw = np.where(np.isnan(logw) | (logw < kreduce.LOGW_FLOOR), kreduce.LOGW_FLOOR, logw).astype(np.float64)
-    pm, pa, part = [], [], []
-    for s in range(0, len(lw), chunk):
-        b, xb = lw[s : s + chunk], x[s : s + chunk].astype(np.float64)
-        m = b.max()
-        w = np.exp(b - m)
-        pm.append(m)
-        pa.append(s + int(np.argmax(b == m)))
-        part.append(np.r_[w.sum(), (w * w).sum(), w @ xb, w @ (xb * xb)])
-    return np.array(pm), np.array(pa), np.array(part)
-
-
-def check_partials(got, logw, x, chunk):
-    pm, pa, part = partials_ref(logw, x, chunk)
-    np.testing.assert_array_equal(got[0], pm.astype(np.float32))
-    np.testing.assert_array_equal(got[1], pa)
-    np.testing.assert_allclose(got[2], part, rtol=2e-6, atol=1e-12)
 
 
 def launch_fused(kernel, observation, parents, anc, logw_prev, resampled, sigma, n, chunk, device):
