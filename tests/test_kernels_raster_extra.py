@@ -63,7 +63,7 @@ def labels_ref(cam, plane, kind, pos, pieces, i: int):
 def test_render_labels_matches_painters_algorithm(device, rng, tilted):
     plane = TILTED if tilted else GroundPlane()
     overlap = covered = 0
-    for _ in range(3):
+    for _ in range(2):
         cam = random_camera(rng, plane=plane)
         n, r = 4, 4
         kind, pos, heading, dims = random_scene(rng, cam, plane, n, r, p_empty=0.15)
