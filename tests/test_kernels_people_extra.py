@@ -83,6 +83,15 @@ def near_axis_distance(centre: np.ndarray, ray: np.ndarray, axis: np.ndarray, z_
     return float(np.linalg.norm(c2 + s * r2 - axis))
 
 
+def all_rays(rig: Rig) -> np.ndarray:
+    """(P, 3) world directions of every pixel's viewing ray, cameras concatenated (the driver's ``rays``)."""
+    out = []
+    for cam in rig.cameras:
+        v, u = np.mgrid[0 : cam.height, 0 : cam.width]
+        out.append(cam.pixel_rays(np.column_stack([u.ravel(), v.ravel()])))
+    return np.concatenate(out)
+
+
 def ground_votes_ref(
     rig, drig, mask, rays, people, person_radius, person_height, min_fraction, device, origin=ORIGIN, cell=CELL
 ):
@@ -159,14 +168,7 @@ def test_ground_votes_match_numpy(device, min_fraction):
     rig = make_rig()
     drig = DeviceRig(rig, device)
     mask = person_masks(rig, drig, device, rng)
-    rays = np.concatenate(
-        [
-            cam.pixel_rays(
-                np.column_stack([g.ravel() for g in np.meshgrid(np.arange(cam.width), np.arange(cam.height))])
-            )
-            for cam in rig.cameras
-        ]
-    )
+    rays = all_rays(rig)
     # people[1] is PERSON_B but n_people = 1: only PERSON_A is tracked (the kernel must not read past n_people)
     people_all = [PERSON_A, PERSON_B]
     radius, height = 0.2, 1.1
@@ -198,6 +200,32 @@ def test_ground_votes_match_numpy(device, min_fraction):
     )
     np.testing.assert_array_equal(free2[~ref2[2]], ref2[1][~ref2[2]])
     assert free2.reshape(NY, NX)[cell_of(PERSON_B)] == 0
+
+
+def test_ground_votes_explained_only_between_ground_and_person_height(device):
+    """A tracked person explains a motion pixel only through the part of its viewing ray between z = 0 and
+    ``person_height`` (s > 0): with motion everywhere in one camera, every cell's free vote depends on where its
+    column's rays enter and leave that slab. People on the camera's line of sight to the grid, one near the camera
+    (the rays pass over its head) and one far beyond the grid (the rays are under the ground there), and one in the
+    grid; the full horizontal lines of many rays pass through all three axes."""
+    rig = Rig(make_rig().cameras[:1])
+    drig = DeviceRig(rig, device)
+    mask = np.ones(drig.total_pixels, np.uint8)
+    rays = all_rays(rig)
+    cam = rig.cameras[0]
+    mid = np.array([0.5, 0.5])
+    toward = (mid - cam.center[:2]) / np.linalg.norm(mid - cam.center[:2])
+    people = [cam.center[:2] + 0.4 * toward, mid + 4.0 * toward, mid + np.array([0.1, -0.2])]
+    radius, height = 0.25, 1.1
+    votes, free = launch_ground_votes(drig, mask, rays, people, 3, radius, height, 0.5, device)
+    ref_votes, ref_free, amb = ground_votes_ref(
+        rig, drig, mask, rays, [np.asarray(p) for p in people], radius, height, 0.5, device
+    )
+    np.testing.assert_array_equal(votes, ref_votes)
+    assert amb.sum() <= 0.05 * amb.size
+    np.testing.assert_array_equal(free[~amb], ref_free[~amb])
+    seen = ref_votes == 1
+    assert seen.sum() > 50 and 10 < (ref_free[seen] == 0).sum() < seen.sum() - 10  # explained and unexplained cells
 
 
 def test_ground_votes_camera_that_sees_nothing_does_not_vote(device):
