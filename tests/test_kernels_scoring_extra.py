@@ -22,6 +22,11 @@ SEED = (7, 3)
 FRAME = 5
 
 
+def partials_rtol(device) -> float:
+    """The scoring module is compiled with fast_math: on CUDA its exp is __expf (a few ulp more per unit of |x|)."""
+    return 2e-5 if wp.get_device(device).is_cuda else 2e-6
+
+
 def launch_fused(kernel, observation, parents, anc, logw_prev, resampled, sigma, n, chunk, device):
     """Launch a fused kernel as ``ParticleFilter._launch_fused`` does; returns (x, logw, (part_max, part_arg, part))."""
     blocks = (n + chunk - 1) // chunk
@@ -97,7 +102,7 @@ def test_colour_predict_score_matches_numpy(device, rng, mode, resampled):
     np.testing.assert_allclose(lw[~amb], ref_lw[~amb], rtol=1e-5, atol=1e-5)
     if not resampled:
         assert np.all(lw[::97] == np.float32(kreduce.LOGW_FLOOR))
-    check_partials(parts, lw, x, chunk)
+    check_partials(parts, lw, x, chunk, rtol=partials_rtol(device))
 
 
 @pytest.mark.parametrize("resampled", [True, False], ids=["resampled", "accumulate"])
@@ -118,4 +123,4 @@ def test_gaussian3d_predict_score_matches_numpy(device, rng, resampled):
     ll = -np.sum((x.astype(np.float64) - np.float32(obs_pt)) ** 2, axis=1) / (2 * sigma_obs**2)
     ref_lw = np.maximum(ll if resampled else ll + logw_prev, kreduce.LOGW_FLOOR)
     np.testing.assert_allclose(lw, ref_lw, rtol=1e-5, atol=1e-5)
-    check_partials(parts, lw, x, chunk)
+    check_partials(parts, lw, x, chunk, rtol=partials_rtol(device))
