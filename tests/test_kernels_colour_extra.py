@@ -18,7 +18,7 @@ def table_bits(table: np.ndarray, rgb: np.ndarray) -> np.ndarray:
     return ((table[idx >> 5] >> (idx & 31).astype(np.uint32)) & 1).astype(bool)
 
 
-def test_colours(rng) -> np.ndarray:
+def sample_colours(rng) -> np.ndarray:
     """(K, 3) RGB: random colours, the grey axis, and every colour with one channel 0 and another 255."""
     v = np.arange(256)
     grey = np.repeat(v[:, None], 3, axis=1)
@@ -30,13 +30,10 @@ def test_colours(rng) -> np.ndarray:
     return np.concatenate([rng.integers(0, 256, (1 << 18, 3)), grey, *edges]).astype(np.uint8)
 
 
-test_colours.__test__ = False  # a helper, not a test
-
-
 @pytest.mark.parametrize("target", TARGETS)
 def test_colour_table_matches_hsi_reference(device, rng, target):
     table = target.to_struct(device).table.numpy()
-    rgb = test_colours(rng)
+    rgb = sample_colours(rng)
     got = table_bits(table, rgb)
     bgr = rgb[:, ::-1]
     ref, _ = match_ref(bgr, target)
