@@ -271,3 +271,12 @@ def test_ray_failing_run_reported_after_retries(ray_local, tmp_path, capsys):
     assert_clean(out)
     with pytest.raises(ConfigError, match="the Ray cluster has 0 GPU"):
         run_batch(flaky_manifest(tmp_path, "raise"), tmp_path / "gpu", gpus_per_task=1)
+
+
+def test_example_manifest_is_valid():
+    from wptrack.batch import validate
+
+    m = load_manifest(Path(__file__).resolve().parents[1] / "examples" / "batch_lab.yaml")
+    assert [r.id for r in m.runs][:2] == ["n200-seed0", "n200-seed1"] and len(m.runs) == 7 and m.retries == 2
+    for r in m.runs:
+        validate(r)

@@ -416,6 +416,7 @@ def execute_run(spec: RunSpec, out_root: str | os.PathLike, force_cpu: bool = Fa
     from .io import atomic_write_json
 
     root = Path(out_root)
+    root.mkdir(parents=True, exist_ok=True)
     final = root / spec.id
     _clear_partials(root, spec.id)
     attempts = _bump_attempts(root, spec.id)

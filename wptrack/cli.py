@@ -447,7 +447,7 @@ def cmd_bench(args) -> int:
     import warp as wp
 
     second = getattr(suite, "second", "cameras")  # the case's second field: cameras, or objects (templates)
-    for flag in ("cameras", "objects"):
+    for flag in ("cameras", "objects", "runs"):
         if flag != second and getattr(args, flag):
             raise ConfigError(f"--{flag}: the {args.tracker!r} suite's cases are particles x {second}; use --{second}")
     grid = suite.default_grid(wp.get_device(device).is_cuda)
@@ -743,6 +743,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--particles", type=float, nargs="+", help="particle counts (default: the suite's grid)")
     b.add_argument("--cameras", type=int, nargs="+", help="camera counts (default: the suite's grid)")
     b.add_argument("--objects", type=int, nargs="+", help="object counts of the templates suite (default: its grid)")
+    b.add_argument("--runs", type=int, nargs="+", help="runs K per batch of the batch suite (default: its grid)")
     b.add_argument("--frames", type=_positive_int, default=50, help="timed frames per case")
     b.add_argument("--numpy-max", type=int, default=100_000, help="largest N also run by the NumPy reference")
     b.add_argument("--out", default=None, help="write the results as JSON here")
