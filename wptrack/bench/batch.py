@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import tempfile
 import time
 from dataclasses import dataclass
@@ -50,10 +51,13 @@ class BatchCase:
 
 
 def _scene(work: Path, frames: int) -> tuple[Path, dict]:
+    """The s1-lab scene with ``frames`` frames in ``work`` (rendered once per work folder and frame count)."""
     from wptrack.synth import render_scene
 
-    res = render_scene("s1-lab", work / "scene", frames=frames, seed=0)
-    return res.out_dir, json.loads(Path(res.scene_json).read_text())
+    out = work / f"scene-{frames}"
+    if not (out / "scene.json").exists():
+        render_scene("s1-lab", out, frames=frames, seed=0)
+    return out, json.loads((out / "scene.json").read_text())
 
 
 def _manifest(scene_dir: Path, hints: dict, particles: int, runs: int, frames: int, device: str) -> Path:
@@ -126,12 +130,15 @@ def parallel_efficiency(
         scene_dir, hints = _scene(work, frames)
         device = "auto" if gpu else "cpu"  # auto in a GPU task: the task's GPU (CUDA_VISIBLE_DEVICES)
         manifest = _manifest(scene_dir, hints, particles, runs, frames, device)
-        execute_run(load_manifest(manifest).runs[0], work / "warmup")  # compile the kernels into the cache
-        t1, run1 = _timed_batch(manifest, work / "w1", 1, gpu)
-        tg, rung = _timed_batch(manifest, work / f"w{workers}", workers, gpu)
+        batches = work / f"batches-{particles}-{runs}-{frames}"
+        shutil.rmtree(batches, ignore_errors=True)  # every run runs (none reused from an earlier measurement)
+        execute_run(load_manifest(manifest).runs[0], batches / "warmup")  # compile the kernels into the cache
+        t1, run1 = _timed_batch(manifest, batches / "w1", 1, gpu)
+        tg, rung = _timed_batch(manifest, batches / f"w{workers}", workers, gpu)
         ids = [s.id for s in load_manifest(manifest).runs]
         equivalent = all(
-            (work / "w1" / i / "tracks.csv").read_bytes() == (work / f"w{workers}" / i / "tracks.csv").read_bytes()
+            (batches / "w1" / i / "tracks.csv").read_bytes()
+            == (batches / f"w{workers}" / i / "tracks.csv").read_bytes()
             for i in ids
         )
         from wptrack.io import versions
@@ -191,16 +198,18 @@ def main(argv=None) -> int:
     ap.add_argument("--particles", type=float, default=10_000)
     ap.add_argument("--frames", type=int, default=50)
     ap.add_argument("--out", default=None, help="write the results as JSON here")
+    ap.add_argument("--work", default=None, help="work folder (scene, run outputs; default: a temporary one)")
     a = ap.parse_args(argv)
     gpu = a.gpus is not None
     results = []
     print(HEADER)
-    for k in a.runs:
-        r = parallel_efficiency(k, a.gpus if gpu else a.cpus, int(a.particles), a.frames, gpu)
-        results.append(r)
-        print(format_row(r), flush=True)
-        if a.out:
-            Path(a.out).write_text(json.dumps(results, indent=2))
+    with tempfile.TemporaryDirectory(prefix="wptrack-batch-bench-") as tmp:
+        for k in a.runs:  # one scene for every K
+            r = parallel_efficiency(k, a.gpus if gpu else a.cpus, int(a.particles), a.frames, gpu, a.work or tmp)
+            results.append(r)
+            print(format_row(r), flush=True)
+            if a.out:
+                Path(a.out).write_text(json.dumps(results, indent=2))
     return 0 if all(r["equivalent"] for r in results) else 1
 
 
