@@ -40,7 +40,8 @@ def format_row(r: dict) -> str:
     return (
         f"{'batch':6s} {r['particles']:>10d} {r['runs']:>4d} {r['workers']:>3d} {r['kind']:4s} {r['frames']:>6d} "
         f"{r['t1_s']:9.2f} {r['tg_s']:9.2f} {r['speedup']:8.3f} {r['parallel_efficiency']:10.3f} {eq:>4s}  "
-        f"(one run: {r['run_s_1']:.2f} s alone, {r['run_s_g']:.2f} s with {r['workers']} workers)"
+        f"(one run: {r['run_s_1']:.2f} s alone, {r['run_s_g']:.2f} s with {r['workers']} workers; "
+        f"GPU:device {' '.join(r['used_g'])})"
     )
 
 
@@ -87,8 +88,9 @@ def _manifest(scene_dir: Path, hints: dict, particles: int, runs: int, frames: i
     return path
 
 
-def _timed_batch(manifest: Path, out: Path, workers: int, gpu: bool) -> tuple[float, float]:
-    """(wall seconds of the batch, mean seconds of one run inside its task) with ``workers`` worker slots."""
+def _timed_batch(manifest: Path, out: Path, workers: int, gpu: bool) -> tuple[float, float, list[str]]:
+    """(wall seconds of the batch, mean seconds of one run inside its task, the GPU ids / devices the runs used)
+    with ``workers`` worker slots."""
     import ray
 
     from wptrack.batch import run_batch
@@ -106,7 +108,8 @@ def _timed_batch(manifest: Path, out: Path, workers: int, gpu: bool) -> tuple[fl
     bad = [r["id"] for r in res if r["status"] != "complete"]
     if bad:
         raise RuntimeError(f"batch bench: runs failed: {bad} ({res[0].get('error')})")
-    return seconds, sum(r["seconds"] for r in res) / len(res)
+    used = sorted({f"{r.get('gpus') or '-'}:{(r.get('summary') or {}).get('device')}" for r in res})
+    return seconds, sum(r["seconds"] for r in res) / len(res), used
 
 
 def parallel_efficiency(
@@ -133,8 +136,8 @@ def parallel_efficiency(
         batches = work / f"batches-{particles}-{runs}-{frames}"
         shutil.rmtree(batches, ignore_errors=True)  # every run runs (none reused from an earlier measurement)
         execute_run(load_manifest(manifest).runs[0], batches / "warmup")  # compile the kernels into the cache
-        t1, run1 = _timed_batch(manifest, batches / "w1", 1, gpu)
-        tg, rung = _timed_batch(manifest, batches / f"w{workers}", workers, gpu)
+        t1, run1, used1 = _timed_batch(manifest, batches / "w1", 1, gpu)
+        tg, rung, usedg = _timed_batch(manifest, batches / f"w{workers}", workers, gpu)
         ids = [s.id for s in load_manifest(manifest).runs]
         equivalent = all(
             (batches / "w1" / i / "tracks.csv").read_bytes()
@@ -154,6 +157,8 @@ def parallel_efficiency(
             "tg_s": tg,
             "run_s_1": run1,
             "run_s_g": rung,
+            "used_1": used1,  # CUDA_VISIBLE_DEVICES:device of the runs
+            "used_g": usedg,
             "speedup": t1 / tg,
             "parallel_efficiency": t1 / (workers * tg),
             "equivalent": equivalent,
