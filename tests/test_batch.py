@@ -220,8 +220,10 @@ def test_sweep_is_a_batch_with_the_same_table(tmp_path, capsys):
     rows = read_summary(tmp_path / "runs")
     assert len(rows) == 4 and {r["param.sigma"] for r in rows} == {"0.02", "0.2"}
     capsys.readouterr()
-    assert main(argv) == 0  # every run reused
+    assert main([*argv, "--report"]) == 0  # every run reused; the report has the sigma_m heatmap (S1 Fig. 7)
     assert all(r["reused"] == "1" for r in read_summary(tmp_path / "runs"))
+    assert (tmp_path / "report" / "sweep_heatmap.png").stat().st_size > 0
+    assert "sweep_heatmap.png" in (tmp_path / "report" / "index.html").read_text()
 
 
 # ---------------------------------------------------------------------------------------------- Ray
