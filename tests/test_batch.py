@@ -273,6 +273,7 @@ def test_ray_failing_run_reported_after_retries(ray_local, tmp_path, capsys):
     assert_clean(out)
     with pytest.raises(ConfigError, match="the Ray cluster has 0 GPU"):
         run_batch(flaky_manifest(tmp_path, "raise"), tmp_path / "gpu", gpus_per_task=1)
+    assert not (tmp_path / "gpu").exists()
 
 
 def test_example_manifest_is_valid():

@@ -588,6 +588,7 @@ def run_batch(
             raise ConfigError(f"--address {address}: Ray is not installed (pip install 'wptrack[ray]')")
         log.warning("Ray is not installed: running the batch in this process, one run after another")
         use_ray = False
+    created = not Path(out_dir).exists()
     out = ensure_writable_dir(out_dir)
     results: dict[str, dict[str, Any]] = {}
     pending = []
@@ -609,7 +610,12 @@ def run_batch(
             on_result(res)
 
     if pending and use_ray:
-        _run_ray(pending, out, address, gpus_per_task, cpus_per_task, retries, record)
+        try:
+            _run_ray(pending, out, address, gpus_per_task, cpus_per_task, retries, record)
+        except ConfigError:  # the cluster cannot run the tasks: leave nothing behind
+            if created and not any(out.iterdir()):
+                out.rmdir()
+            raise
     else:
         for spec in pending:
             record(_run_inline(spec, out, retries, force_cpu=gpus_per_task == 0))
