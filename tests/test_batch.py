@@ -283,3 +283,20 @@ def test_example_manifest_is_valid():
     assert [r.id for r in m.runs][:2] == ["n200-seed0", "n200-seed1"] and len(m.runs) == 7 and m.retries == 2
     for r in m.runs:
         validate(r)
+
+
+def test_track_arguments_of_every_tracker(tmp_path):
+    """Manifest args become the command's own options: lists for nargs and repeated options, booleans as flags."""
+    from wptrack.batch import RunSpec, parse_track_args
+
+    kw = {"rig": "r.yaml", "video": "v.avi", "classes": ["human"], "no_virtual": True, "camera": 0, "t_add": 0.4}
+    t = parse_track_args(RunSpec("t", "templates", {**kw, "max_frames": None}), tmp_path)
+    assert (t.classes, t.no_virtual, t.camera, t.t_add, t.max_frames) == (["human"], True, "0", 0.4, None)
+    assert t.out == str(tmp_path)
+    p = parse_track_args(RunSpec("p", "people", {"rig": "r.yaml", "video": ["a.avi", "b.avi"], "p_b": 0.1}), "o")
+    assert p.video == ["a.avi", "b.avi"] and p.p_b == 0.1 and p.quiet and not p.resume
+    kw = {"rig": "r", "video": "v", "hue": [350, 10], "sat": [0, 1], "init_random": True, "report": False}
+    c = parse_track_args(RunSpec("c", "color", {**kw, "volume": [-1, -1, 0, 1, 1, 2]}), "o")
+    assert c.hue == [350.0, 10.0] and c.init_random and c.volume == [-1, -1, 0, 1, 1, 2] and c.report is False
+    with pytest.raises(ConfigError, match="args.report: expected true or false"):
+        parse_track_args(RunSpec("t", "templates", {"rig": "r", "report": "yes"}), "o")

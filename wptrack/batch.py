@@ -25,6 +25,10 @@ Manifest::
         function: my_experiment.py:run   # or package.module:function; called as fn(out_dir=..., **args)
         args: {n: 3}
 
+The top-level ``tracker``, ``function``, ``args`` and ``grid`` are defaults of every run (a run's own override
+them key by key); without ``runs`` the manifest is one run (or one grid) with the top-level ``id``. A run's
+identity (what makes a re-run skip it) is its tracker, function and arguments: input files are named, not hashed.
+
 Execution (``address``):
 
 * ``local`` (default): a new local Ray instance (``ray.init(address="local")``), one task per run, each pinned to
@@ -266,6 +270,8 @@ def track_argv(spec: RunSpec, out_dir: str | os.PathLike) -> list[str]:
             known = sorted(k for k in actions if k not in RESERVED_ARGS and k != "help")
             raise ConfigError(f"run {spec.id}: args.{key}: not an option of 'wptrack track {spec.tracker}' ({known})")
         opt = next((o for o in a.option_strings if o.startswith("--")), a.option_strings[0])
+        if value is None:  # the command's default
+            continue
         if isinstance(a, argparse.BooleanOptionalAction):
             argv.append(opt if value else "--no-" + opt[2:])
         elif isinstance(a, (argparse._StoreTrueAction, argparse._StoreFalseAction)):
@@ -273,13 +279,12 @@ def track_argv(spec: RunSpec, out_dir: str | os.PathLike) -> list[str]:
                 raise ConfigError(f"run {spec.id}: args.{key}: expected true or false, got {value!r}")
             if value == isinstance(a, argparse._StoreTrueAction):
                 argv.append(opt)
-        elif isinstance(a, argparse._AppendAction):
-            for v in value if isinstance(value, list) else [value]:
-                argv += [opt, str(v)]
+        elif isinstance(a, argparse._AppendAction):  # OPT=VALUE: a value may start with -
+            argv += [f"{opt}={v}" for v in (value if isinstance(value, list) else [value])]
         elif a.nargs not in (None, "?"):
             argv += [opt, *(str(v) for v in (value if isinstance(value, list) else [value]))]
-        elif value is not None:
-            argv += [opt, str(value)]
+        else:
+            argv.append(f"{opt}={value}")
     return [*argv, "--out", str(out_dir), "-q"]
 
 
