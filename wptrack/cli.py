@@ -358,10 +358,11 @@ def cmd_report(args) -> int:
 
 # --- convergence (section III.C) ---------------------------------------------------------------------------
 def cmd_convergence(args) -> int:
-    from .experiments import default_sigmas, jump_experiment, write_sweep
+    from .experiments import default_sigmas, sweep_batch
 
     sigmas = args.sigma or list(default_sigmas(args.steps))
-    table = jump_experiment(
+    table = sweep_batch(
+        args.out,
         sigmas=sigmas,
         particles=args.particles,
         iterations=args.iterations,
@@ -371,9 +372,10 @@ def cmd_convergence(args) -> int:
         runs=args.runs,
         seed=args.seed,
         device=args.device,
-        progress=not args.quiet,
+        address=args.address,
+        retries=args.retries,
     )
-    path = write_sweep(table, args.out)
+    path = Path(args.out) / "errors.csv"
     for row in table["summary"]:
         c0 = row["converge_initial"]
         c1 = row["converge_after_jump"]
@@ -381,7 +383,39 @@ def cmd_convergence(args) -> int:
             f"sigma_m = {row['sigma']:.4f} m: converges in {c0 if c0 is not None else '>' + str(args.jump_at)} "
             f"iterations, after the jump in {c1 if c1 is not None else 'not within the run'}"
         )
-    print(f"error-vs-iteration table: {path}")
+    print(f"error-vs-iteration table: {path} (runs: {Path(args.out) / 'runs'})")
+    if args.report:
+        _report_after_tracking(args.out)
+    return 0
+
+
+# --- batch (Ray) -----------------------------------------------------------------------------------------------
+def cmd_batch(args) -> int:
+    from .batch import run_batch
+
+    def say(r: dict) -> None:
+        if args.quiet:
+            return
+        how = "already complete" if r.get("reused") else r["status"]
+        secs = f" in {r['seconds']:.1f} s" if isinstance(r.get("seconds"), (int, float)) and not r.get("reused") else ""
+        tries = f" ({r['attempts']} attempts)" if (r.get("attempts") or 1) > 1 else ""
+        err = f": {r['error']}" if r.get("error") else ""
+        print(f"{r['id']}: {how}{secs}{tries}{err}", flush=True)
+
+    results = run_batch(
+        args.manifest,
+        args.out,
+        address=args.address,
+        gpus_per_task=args.gpus_per_task,
+        cpus_per_task=args.cpus_per_task,
+        retries=args.retries,
+        on_result=say,
+    )
+    failed = [r["id"] for r in results if r["status"] != "complete"]
+    print(f"{len(results) - len(failed)}/{len(results)} runs complete; summary: {Path(args.out) / 'summary.csv'}")
+    if failed:
+        print(f"wptrack: {len(failed)} run(s) failed: {', '.join(failed)}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -413,7 +447,7 @@ def cmd_bench(args) -> int:
     import warp as wp
 
     second = getattr(suite, "second", "cameras")  # the case's second field: cameras, or objects (templates)
-    for flag in ("cameras", "objects"):
+    for flag in ("cameras", "objects", "runs"):
         if flag != second and getattr(args, flag):
             raise ConfigError(f"--{flag}: the {args.tracker!r} suite's cases are particles x {second}; use --{second}")
     grid = suite.default_grid(wp.get_device(device).is_cuda)
@@ -625,7 +659,10 @@ def build_parser() -> argparse.ArgumentParser:
     e.set_defaults(func=cmd_evaluate)
 
     v = sub.add_parser(
-        "convergence", parents=[common], help="filter dynamics with 3D observations (extended paper, section III.C)"
+        "convergence",
+        aliases=["sweep"],
+        parents=[common],
+        help="filter dynamics with 3D observations, the sigma_m sweep (extended paper, section III.C, Fig. 7)",
     )
     v.add_argument("--sigma", type=float, action="append", help="sigma_m value(s); default: a sweep 0.001..0.3")
     v.add_argument("--steps", type=_positive_int, default=12, help="sweep steps between 0.001 and 0.3 m")
@@ -636,7 +673,10 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--sigma-obs", type=float, default=0.05, help="3D observation deviation, metres")
     v.add_argument("--runs", type=_positive_int, default=10, help="independent runs averaged per sigma_m")
     v.add_argument("--seed", type=int, default=0)
-    v.add_argument("--out", required=True, help="output folder (errors.csv, summary.json)")
+    v.add_argument("--out", required=True, help="output folder (errors.csv, summary.json, runs/)")
+    v.add_argument("--address", default="inline", help="inline (default: here), or Ray: local, auto, ray://HOST:PORT")
+    v.add_argument("--retries", type=int, default=None, help="retries of a failed run (default 2)")
+    v.add_argument("--report", action="store_true", help="render OUT/report with the heatmap (S1 Fig. 7)")
     _add_device(v)
     v.set_defaults(func=cmd_convergence)
 
@@ -678,11 +718,32 @@ def build_parser() -> argparse.ArgumentParser:
     _add_device(mk)
     mk.set_defaults(func=cmd_masks)
 
+    bt = sub.add_parser(
+        "batch",
+        parents=[common],
+        help="many runs or a parameter grid from a YAML manifest, one Ray task per run (GPU or CPU)",
+        description="Runs the manifest's runs (wptrack track options, or grids of them) as Ray tasks, each into "
+        "OUT/<run-id>/, with OUT/summary.csv; completed runs are skipped when the manifest is run again.",
+    )
+    bt.add_argument("manifest", help="batch manifest (YAML): runs, grids, retries")
+    bt.add_argument("--out", required=True, help="batch folder: OUT/<run-id>/ per run and OUT/summary.csv")
+    bt.add_argument(
+        "--address",
+        default="local",
+        help="local (new local Ray instance, default), auto (running cluster), HOST:PORT, ray://HOST:PORT, or "
+        "inline (no Ray: one run after another here; also the default without Ray installed)",
+    )
+    bt.add_argument("--gpus-per-task", type=float, default=None, help="GPUs per run (default 1 if the cluster has any)")
+    bt.add_argument("--cpus-per-task", type=float, default=1.0, help="CPU cores reserved per run (default 1)")
+    bt.add_argument("--retries", type=int, default=None, help="retries of a failed/killed run (default: manifest, 2)")
+    bt.set_defaults(func=cmd_batch)
+
     b = sub.add_parser("bench", parents=[common], help="benchmark suites: stage times, NumPy baseline, equivalence")
     b.add_argument("--tracker", default="color", help="suite name (default: color)")
     b.add_argument("--particles", type=float, nargs="+", help="particle counts (default: the suite's grid)")
     b.add_argument("--cameras", type=int, nargs="+", help="camera counts (default: the suite's grid)")
     b.add_argument("--objects", type=int, nargs="+", help="object counts of the templates suite (default: its grid)")
+    b.add_argument("--runs", type=int, nargs="+", help="runs K per batch of the batch suite (default: its grid)")
     b.add_argument("--frames", type=_positive_int, default=50, help="timed frames per case")
     b.add_argument("--numpy-max", type=int, default=100_000, help="largest N also run by the NumPy reference")
     b.add_argument("--out", default=None, help="write the results as JSON here")

@@ -66,28 +66,59 @@ def jump_experiment(
     if not (0 < jump_at < iterations):
         raise ConfigError(f"jump_at: expected 0 < jump_at < iterations ({iterations}), got {jump_at}")
     device = resolve_device(device)
-    truth = jump_trajectory(iterations, jump_at, jump)
     errors = np.zeros((len(sigmas), runs, iterations))
     from tqdm import tqdm
 
     bar = tqdm(total=len(sigmas) * runs, desc="sigma sweep", disable=not progress, leave=False)
     for si, sigma in enumerate(sigmas):
         for r in range(runs):
-            box = (truth[0] - init_spread, truth[0] + init_spread)
-            pf = Gaussian3DTracker(
-                particles=particles,
-                sigma=float(sigma),
-                sigma_obs=sigma_obs,
-                init=None,
-                init_box=box,
-                device=device,
-                seed=seed + 1000 * r + si,
+            errors[si, r] = jump_run(
+                sigma, sweep_seed(seed, si, r), particles, iterations, jump_at, jump, sigma_obs, device, init_spread
             )
-            for k in range(iterations):
-                est = pf.step(truth[k])
-                errors[si, r, k] = np.linalg.norm(est.mean - truth[k])
             bar.update(1)
     bar.close()
+    return sweep_table(sigmas, errors, particles, iterations, jump_at, jump, sigma_obs, runs, seed, device,
+                       init_spread, tol, hold)  # fmt: skip
+
+
+def sweep_seed(seed: int, sigma_index: int, run: int) -> int:
+    """Tracker seed of run ``run`` of the ``sigma_index``-th sigma_m of a sweep started with ``seed``."""
+    return seed + 1000 * run + sigma_index
+
+
+def jump_run(
+    sigma: float,
+    seed: int,
+    particles: int = 200,
+    iterations: int = 100,
+    jump_at: int = 30,
+    jump: float = 2.0,
+    sigma_obs: float = 0.05,
+    device: str = "auto",
+    init_spread: float = 1.0,
+) -> np.ndarray:
+    """One run of the jump experiment: error of the MMSE estimate per iteration (iterations,), metres."""
+    truth = jump_trajectory(iterations, jump_at, jump)
+    box = (truth[0] - init_spread, truth[0] + init_spread)
+    pf = Gaussian3DTracker(
+        particles=particles,
+        sigma=float(sigma),
+        sigma_obs=sigma_obs,
+        init=None,
+        init_box=box,
+        device=resolve_device(device),
+        seed=seed,
+    )
+    errors = np.zeros(iterations)
+    for k in range(iterations):
+        est = pf.step(truth[k])
+        errors[k] = np.linalg.norm(est.mean - truth[k])
+    return errors
+
+
+def sweep_table(sigmas, errors, particles, iterations, jump_at, jump, sigma_obs, runs, seed, device, init_spread,
+                tol, hold) -> dict:  # fmt: skip
+    """The table of :func:`jump_experiment` from the errors of every run (S, runs, iterations), metres."""
     mean = errors.mean(axis=1)
     summary = []
     for si, sigma in enumerate(sigmas):
@@ -140,6 +171,73 @@ def read_sweep(path) -> dict:
     for r in rows:
         errors[sigmas.index(float(r["sigma"])), int(r["iteration"])] = float(r["error_mean"])
     return {"sigmas": np.asarray(sigmas), "errors": errors}
+
+
+def jump_task(out_dir, sigma: float, seed: int, **kw) -> dict:
+    """One run of the jump experiment as a batch run (``tracker: function``): ``errors.npy`` (iterations,) metres.
+
+    ``kw``: the other arguments of :func:`jump_run`."""
+    errors = jump_run(sigma, seed, **kw)
+    np.save(Path(out_dir) / "errors.npy", errors)
+    return {"frames": int(errors.size), "sigma": float(sigma), "seed": int(seed), "final_error": float(errors[-1])}
+
+
+def sweep_batch(
+    out_dir,
+    sigmas: Sequence[float],
+    particles: int = 200,
+    iterations: int = 100,
+    jump_at: int = 30,
+    jump: float = 2.0,
+    sigma_obs: float = 0.05,
+    runs: int = 10,
+    seed: int = 0,
+    device: str = "auto",
+    init_spread: float = 1.0,
+    tol: float = 0.05,
+    hold: int = 5,
+    address: str = "inline",
+    retries: int | None = None,
+    on_result=None,
+) -> dict:
+    """:func:`jump_experiment` as a batch (:mod:`wptrack.batch`): one run per (sigma_m, seed) into
+    ``out_dir/runs/<id>/`` (with ``out_dir/runs/summary.csv``), spread over Ray workers with ``address`` (``local``,
+    ``auto``, a cluster) or run here (``inline``). The table is the same as :func:`jump_experiment`'s (the same
+    seeds) and is written with :func:`write_sweep` (``out_dir/errors.csv``, ``summary.json``). Completed runs are
+    reused when the sweep is run again.
+    """
+    from .batch import Manifest, RunSpec, run_batch
+
+    if len(sigmas) == 0:
+        raise ConfigError("sigma: give at least one value")
+    if any(not (s > 0) for s in sigmas):
+        raise ConfigError(f"sigma: values must be > 0 metres, got {list(sigmas)}")
+    if not (0 < jump_at < iterations):
+        raise ConfigError(f"jump_at: expected 0 < jump_at < iterations ({iterations}), got {jump_at}")
+    out = ensure_writable_dir(out_dir)
+    device = resolve_device(device)  # resolved here: every run on the same device
+    common = {"particles": particles, "iterations": iterations, "jump_at": jump_at, "jump": jump,
+              "sigma_obs": sigma_obs, "device": device, "init_spread": init_spread}  # fmt: skip
+    specs = []
+    for si, sigma in enumerate(sigmas):
+        for r in range(runs):
+            s = sweep_seed(seed, si, r)
+            params = {"sigma": float(sigma), "seed": s}
+            specs.append(RunSpec(f"sigma{float(sigma):g}-seed{s}", "function", {**common, **params}, JUMP_TASK, params))
+    results = run_batch(Manifest(out / "sweep.yaml", tuple(specs)), out / "runs", address=address,
+                        gpus_per_task=0, retries=retries, on_result=on_result)  # fmt: skip
+    failed = [r["id"] for r in results if r["status"] != "complete"]
+    if failed:
+        raise RuntimeError(f"sweep: {len(failed)} run(s) failed ({', '.join(failed[:5])}); see {out / 'runs'}")
+    errors = np.stack([np.load(out / "runs" / spec.id / "errors.npy") for spec in specs])
+    errors = errors.reshape(len(sigmas), runs, iterations)
+    table = sweep_table(sigmas, errors, particles, iterations, jump_at, jump, sigma_obs, runs, seed, device,
+                        init_spread, tol, hold)  # fmt: skip
+    write_sweep(table, out)
+    return table
+
+
+JUMP_TASK = f"{__name__}:jump_task"
 
 
 def drift_study(

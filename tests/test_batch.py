@@ -1,0 +1,302 @@
+"""``wptrack batch``: manifests and grids, the same outputs as ``wptrack track``, idempotent re-runs, retries of
+failed runs and of killed workers, in-process and on a local Ray instance (2 CPUs), and the sigma sweep."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wptrack.batch import BATCH_FILE, load_manifest, run_batch
+from wptrack.cli import main
+from wptrack.errors import ConfigError
+from wptrack.frames import write_video
+from wptrack.rig import Camera, Rig
+
+BALL = np.array([0.42, 0.45, 0.035])
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory) -> dict:
+    """Two small cameras watching a pink disc at BALL, 6 frames each (as tests/test_cli.py)."""
+    import cv2
+
+    d = tmp_path_factory.mktemp("scene")
+    c1 = Camera.look_at("cam1", 96, 72, (0.5, 0.0, 0.195), (0.4, 0.45, 0.05), 90.0)
+    c2 = Camera.look_at("cam2", 72, 96, (0.07, 0.485, 0.085), (0.45, 0.45, 0.05), 90.0, roll_deg=90)
+    rig = Rig((c1, c2))
+    rig.save(d / "rig.yaml")
+    for cam in rig.cameras:
+        img = np.full((cam.height, cam.width, 3), 90, np.uint8)
+        uv, depth = cam.project(BALL[None])
+        r = max(2, int(0.035 * cam.fx / depth[0]))
+        cv2.circle(img, (int(round(uv[0, 0])), int(round(uv[0, 1]))), r, (180, 60, 230), -1)
+        write_video(d / f"{cam.name}.avi", [img] * 6, fps=10)
+    return {"dir": d}
+
+
+COLOUR_ARGS = """\
+tracker: color
+args:
+  rig: rig.yaml
+  video: [cam1.avi, cam2.avi]
+  hue: [300, 340]
+  sat: [0.3, 1.0]
+  init: [0.42, 0.45, 0.05]
+  device: cpu
+  keep_particles: 50
+"""
+
+FLAKY = """\
+import os
+from pathlib import Path
+
+
+def run(out_dir, marker, mode="ok"):
+    (Path(out_dir) / "partial.txt").write_text("written before the failure")
+    if mode == "always":
+        raise RuntimeError("this run always fails")
+    if not Path(marker).exists():
+        Path(marker).write_text("first attempt")
+        if mode == "exit":
+            os._exit(1)  # the worker process dies mid-run
+        raise RuntimeError("first attempt fails")
+    (Path(out_dir) / "result.txt").write_text("done")
+    return {"frames": 1, "value": 42.0}
+"""
+
+
+def write_manifest(scene, text: str, name: str = "batch.yaml") -> Path:
+    path = scene["dir"] / name
+    path.write_text(text)
+    return path
+
+
+def read_summary(out: Path) -> list[dict]:
+    with open(out / "summary.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def flaky_manifest(tmp_path: Path, mode: str, retries: int = 2) -> Path:
+    (tmp_path / "flaky.py").write_text(FLAKY)
+    path = tmp_path / f"flaky-{mode}.yaml"
+    marker = tmp_path / f"marker-{mode}"
+    path.write_text(
+        f"tracker: function\nfunction: flaky.py:run\nretries: {retries}\nruns:\n"
+        f"  - id: flaky\n    args: {{marker: '{marker}', mode: {mode}}}\n"
+    )
+    return path
+
+
+def assert_clean(out: Path) -> None:
+    """No partial, old or attempt-counter leftovers in the batch folder."""
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".")]
+
+
+# ---------------------------------------------------------------------------------------------- manifests
+def test_manifest_grid_ids_paths_and_hash(scene):
+    path = write_manifest(
+        scene,
+        COLOUR_ARGS
+        + "runs:\n  - id: base\n  - id: 'n{particles}-s{seed}'\n    grid: {particles: [100, 200], seed: [0, 1]}\n"
+        + "  - grid: {sigma: [0.01]}\n",
+    )
+    m = load_manifest(path)
+    assert [r.id for r in m.runs] == ["base", "n100-s0", "n100-s1", "n200-s0", "n200-s1", "run002-sigma0.01"]
+    r = m.runs[2]
+    assert r.tracker == "color" and r.args["particles"] == 100 and r.args["seed"] == 1
+    assert r.params == {"particles": 100, "seed": 1}
+    assert r.args["rig"] == str(scene["dir"] / "rig.yaml")  # relative to the manifest's folder
+    assert r.args["video"] == [str(scene["dir"] / "cam1.avi"), str(scene["dir"] / "cam2.avi")]
+    assert len({x.hash for x in m.runs}) == len(m.runs)  # every entry its own hash
+    assert load_manifest(path).runs[2].hash == r.hash  # stable
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("runs: 3\n", "runs: expected a non-empty list"),
+        ("tracker: nope\n", "tracker: expected one of"),
+        ("speed: 1\n", "unknown key(s) ['speed']"),
+        (COLOUR_ARGS + "runs:\n  - args: {particle: 10}\n", "args.particle: not an option of 'wptrack track color'"),
+        (COLOUR_ARGS + "runs:\n  - args: {particles: many}\n", "run run000: argument --particles"),
+        (COLOUR_ARGS + "runs:\n  - id: a\n  - id: a\n", "run id 'a' is used twice"),
+        (COLOUR_ARGS + "runs:\n  - id: ../x\n", "is not a valid run id"),
+        (COLOUR_ARGS + "runs:\n  - grid: {seed: 3}\n", "grid.seed: expected a non-empty list"),
+        (COLOUR_ARGS + "runs:\n  - args: {out: x}\n", "are set by the batch"),
+        ("tracker: function\nfunction: nowhere.py:f\n", "nowhere.py not found"),
+        ("tracker: function\nfunction: wptrack.io:nothing\n", "cannot load it"),
+        ("runs: [\n", "not valid YAML"),
+    ],
+)
+def test_bad_manifest_one_line_error_nothing_written(scene, tmp_path, capsys, text, message):
+    path = write_manifest(scene, text, "bad.yaml")
+    out = tmp_path / "out"
+    assert main(["batch", str(path), "--out", str(out), "--address", "inline"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("wptrack: error: ") and message in err and err.count("\n") == 1, err
+    assert not out.exists()
+
+
+# ---------------------------------------------------------------------------------------------- in-process
+def test_inline_batch_same_outputs_as_track_and_idempotent(scene, tmp_path, capsys):
+    path = write_manifest(scene, COLOUR_ARGS + "runs:\n  - id: 'n{particles}'\n    grid: {particles: [100, 150]}\n")
+    out = tmp_path / "batch"
+    assert main(["batch", str(path), "--out", str(out), "--address", "inline"]) == 0
+    assert "2/2 runs complete" in capsys.readouterr().out
+    # the same run with `wptrack track color`
+    d = scene["dir"]
+    ref = tmp_path / "ref"
+    argv = ["track", "color", "-q", "--rig", str(d / "rig.yaml"), "--video", str(d / "cam1.avi"), "--video",
+            str(d / "cam2.avi"), "--hue", "300", "340", "--sat", "0.3", "1.0", "--init", "0.42", "0.45", "0.05",
+            "--device", "cpu", "--keep-particles", "50", "--particles", "150", "--out", str(ref)]  # fmt: skip
+    assert main(argv) == 0
+    run = out / "n150"
+    assert {p.name for p in ref.iterdir()} | {BATCH_FILE} == {p.name for p in run.iterdir()}
+    assert (run / "tracks.csv").read_bytes() == (ref / "tracks.csv").read_bytes()
+    a, b = (json.loads((p / "run.json").read_text()) for p in (run, ref))
+    assert a["status"] == "complete" and a["config"] == b["config"] and a["summary"] == b["summary"]
+    rows = read_summary(out)
+    assert [r["id"] for r in rows] == ["n100", "n150"]
+    assert [r["param.particles"] for r in rows] == ["100", "150"]
+    assert all(r["status"] == "complete" and r["reused"] == "0" and r["frames"] == "6" for r in rows)
+    assert float(rows[0]["seconds"]) > 0 and float(rows[0]["time.filter_s"]) > 0
+    assert_clean(out)
+    # again: nothing runs; a changed entry runs again and replaces its folder, the other is kept
+    before = (out / "n100" / "run.json").stat().st_mtime_ns
+    res = run_batch(path, out, address="inline")
+    assert [r.get("reused") for r in res] == [True, True]
+    write_manifest(scene, COLOUR_ARGS + "runs:\n  - id: 'n{particles}'\n    grid: {particles: [100]}\n"
+                   "    args: {seed: 3}\n  - {id: n150, args: {particles: 150}}\n")  # fmt: skip
+    res = run_batch(path, out, address="inline")
+    assert [bool(r.get("reused")) for r in res] == [False, True]
+    assert (out / "n100" / "run.json").stat().st_mtime_ns != before
+    assert json.loads((out / "n100" / "run.json").read_text())["config"]["tracker"]["seed"] == 3
+    assert_clean(out)
+
+
+def test_inline_retries_a_failing_run(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["batch", str(flaky_manifest(tmp_path, "raise")), "--out", str(out), "--address", "inline"]) == 0
+    assert "flaky: complete" in capsys.readouterr().out
+    res = json.loads((out / "flaky" / BATCH_FILE).read_text())
+    assert res["attempts"] == 2 and res["summary"]["value"] == 42.0
+    assert (out / "flaky" / "result.txt").exists()
+    assert_clean(out)
+    rc = main(["batch", str(flaky_manifest(tmp_path, "always")), "--out", str(out / "b"), "--address", "inline"])
+    assert rc == 1
+    assert "1 run(s) failed: flaky" in capsys.readouterr().err
+    (row,) = read_summary(out / "b")
+    assert row["status"] == "failed" and row["attempts"] == "3" and "always fails" in row["error"]
+    assert not (out / "b" / "flaky").exists()
+    assert_clean(out / "b")
+
+
+def test_without_ray_local_runs_inline(tmp_path, monkeypatch):
+    import wptrack.batch as batch
+
+    monkeypatch.setattr(batch, "ray_available", lambda: False)
+    res = run_batch(flaky_manifest(tmp_path, "raise"), tmp_path / "out")  # address "local" by default
+    assert res[0]["status"] == "complete" and res[0]["attempts"] == 2
+    with pytest.raises(ConfigError, match="Ray is not installed"):
+        run_batch(flaky_manifest(tmp_path, "raise"), tmp_path / "out2", address="ray://head:10001")
+
+
+def test_sweep_is_a_batch_with_the_same_table(tmp_path, capsys):
+    from wptrack.experiments import jump_experiment, read_sweep
+
+    kw = {"particles": 64, "iterations": 12, "jump_at": 6, "runs": 2, "device": "cpu"}
+    ref = jump_experiment([0.02, 0.2], **kw)
+    argv = ["sweep", "-q", "--sigma", "0.02", "--sigma", "0.2", "--particles", "64", "--iterations", "12",
+            "--jump-at", "6", "--runs", "2", "--device", "cpu", "--out", str(tmp_path)]  # fmt: skip
+    assert main(argv) == 0
+    got = read_sweep(tmp_path / "errors.csv")
+    np.testing.assert_allclose(got["errors"], ref["errors"], atol=1e-6)  # errors.csv keeps 6 decimals
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["summary"] == ref["summary"]
+    rows = read_summary(tmp_path / "runs")
+    assert len(rows) == 4 and {r["param.sigma"] for r in rows} == {"0.02", "0.2"}
+    capsys.readouterr()
+    assert main([*argv, "--report"]) == 0  # every run reused; the report has the sigma_m heatmap (S1 Fig. 7)
+    assert all(r["reused"] == "1" for r in read_summary(tmp_path / "runs"))
+    assert (tmp_path / "report" / "sweep_heatmap.png").stat().st_size > 0
+    assert "sweep_heatmap.png" in (tmp_path / "report" / "index.html").read_text()
+
+
+# ---------------------------------------------------------------------------------------------- Ray
+@pytest.fixture(scope="module")
+def ray_local():
+    """One local Ray instance (2 CPUs) for the module; run_batch uses an instance this process already joined."""
+    ray = pytest.importorskip("ray")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    yield ray
+    ray.shutdown()
+
+
+def test_ray_batch_same_outputs_as_inline(ray_local, scene, tmp_path):
+    path = write_manifest(scene, COLOUR_ARGS + "runs:\n  - id: 'n{particles}'\n    grid: {particles: [100, 150]}\n")
+    res = run_batch(path, tmp_path / "ray", address="local", gpus_per_task=0)
+    assert [r["status"] for r in res] == ["complete", "complete"]
+    assert len({r["pid"] for r in res}) >= 1 and all(r["gpus"] in (None, "") for r in res)
+    run_batch(path, tmp_path / "inline", address="inline")
+    for rid in ("n100", "n150"):
+        a, b = (tmp_path / k / rid / "tracks.csv" for k in ("ray", "inline"))
+        assert a.read_bytes() == b.read_bytes()
+    assert [r["status"] for r in read_summary(tmp_path / "ray")] == ["complete", "complete"]
+    assert_clean(tmp_path / "ray")
+
+
+def test_ray_killed_task_is_retried(ray_local, tmp_path):
+    """The run's worker process dies (os._exit) in its first attempt: Ray retries it on a new worker, the retry
+    starts from a clean partial folder and the completed run replaces it."""
+    out = tmp_path / "out"
+    res = run_batch(flaky_manifest(tmp_path, "exit"), out, address="local", gpus_per_task=0)
+    assert res[0]["status"] == "complete" and res[0]["attempts"] == 2
+    assert (tmp_path / "marker-exit").read_text() == "first attempt"  # the first attempt did die
+    assert sorted(p.name for p in (out / "flaky").iterdir()) == [BATCH_FILE, "partial.txt", "result.txt", "run.json"]
+    assert_clean(out)
+    (row,) = read_summary(out)
+    assert row["status"] == "complete" and row["attempts"] == "2" and row["value"] == "42.0"
+
+
+def test_ray_failing_run_reported_after_retries(ray_local, tmp_path, capsys):
+    out = tmp_path / "out"
+    rc = main(["batch", str(flaky_manifest(tmp_path, "always", retries=1)), "--out", str(out),
+               "--gpus-per-task", "0"])  # fmt: skip
+    assert rc == 1
+    (row,) = read_summary(out)
+    assert row["status"] == "failed" and "always fails" in row["error"]
+    assert not (out / "flaky").exists()
+    assert_clean(out)
+    with pytest.raises(ConfigError, match="the Ray cluster has 0 GPU"):
+        run_batch(flaky_manifest(tmp_path, "raise"), tmp_path / "gpu", gpus_per_task=1)
+    assert not (tmp_path / "gpu").exists()
+
+
+def test_example_manifest_is_valid():
+    from wptrack.batch import validate
+
+    m = load_manifest(Path(__file__).resolve().parents[1] / "examples" / "batch_lab.yaml")
+    assert [r.id for r in m.runs][:2] == ["n200-seed0", "n200-seed1"] and len(m.runs) == 7 and m.retries == 2
+    for r in m.runs:
+        validate(r)
+
+
+def test_track_arguments_of_every_tracker(tmp_path):
+    """Manifest args become the command's own options: lists for nargs and repeated options, booleans as flags."""
+    from wptrack.batch import RunSpec, parse_track_args
+
+    kw = {"rig": "r.yaml", "video": "v.avi", "classes": ["human"], "no_virtual": True, "camera": 0, "t_add": 0.4}
+    t = parse_track_args(RunSpec("t", "templates", {**kw, "max_frames": None}), tmp_path)
+    assert (t.classes, t.no_virtual, t.camera, t.t_add, t.max_frames) == (["human"], True, "0", 0.4, None)
+    assert t.out == str(tmp_path)
+    p = parse_track_args(RunSpec("p", "people", {"rig": "r.yaml", "video": ["a.avi", "b.avi"], "p_b": 0.1}), "o")
+    assert p.video == ["a.avi", "b.avi"] and p.p_b == 0.1 and p.quiet and not p.resume
+    kw = {"rig": "r", "video": "v", "hue": [350, 10], "sat": [0, 1], "init_random": True, "report": False}
+    c = parse_track_args(RunSpec("c", "color", {**kw, "volume": [-1, -1, 0, 1, 1, 2]}), "o")
+    assert c.hue == [350.0, 10.0] and c.init_random and c.volume == [-1, -1, 0, 1, 1, 2] and c.report is False
+    with pytest.raises(ConfigError, match="args.report: expected true or false"):
+        parse_track_args(RunSpec("t", "templates", {"rig": "r", "report": "yes"}), "o")
