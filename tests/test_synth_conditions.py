@@ -269,3 +269,17 @@ def test_dark_car_as_dark_as_the_road() -> None:
     # a scene without a car: unchanged (with a warning)
     people = _scene("s3-people", dark_car=True)
     assert [a.shape for a in people.actors] == [a.shape for a in _scene("s3-people").actors]
+
+
+def test_condition_mask_quality_small() -> None:
+    from wptrack.experiments_conditions import _markdown, condition_mask_quality, render_arrays
+    from wptrack.masks import MaskConfig
+
+    images, perfect, fps = render_arrays("s3-cars", "compression", seed=0, frames=3)
+    assert images.shape == (3, 480, 640, 3) and perfect.shape == (3, 480, 640) and fps == P.FPS
+    ref, _, _ = render_arrays("s3-cars", None, seed=0, frames=3)
+    np.testing.assert_array_equal(images[1], C.jpeg_roundtrip(ref[1]))  # the noise draws of render_scene
+    row = condition_mask_quality("s3-cars", "compression", seed=0, frames=6, config=MaskConfig(device="cpu"))
+    assert row["frames"] == 6 and row["condition"] == "compression"
+    assert 0.0 <= row["iou"] <= 1.0 and 0.0 <= row["fp_fraction"] < 0.05 and row["precision"] > 0.5
+    assert "| compression | 0 |" in _markdown([row])
