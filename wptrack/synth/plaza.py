@@ -44,6 +44,10 @@ holds the perfect foreground masks: the visible pixels of the moving objects (sh
 ``visibility`` of scene.json is the visible fraction of the least visible object of the ground truth (hidden by
 clutter or another object; null when there is none). ``max_objects`` counts the objects of the ground truth at once
 over the scene's default length (180 frames at 15 fps).
+
+Hard conditions, each a switch off by default (objects standing in view at frame 0, people stopping and walking
+on, a low sun with hard shadows, a global illumination change, stronger sensor noise, JPEG compression, a car as
+dark as the road): :mod:`wptrack.synth.conditions`, ``wptrack synth s3-... --conditions ...``.
 """
 
 from __future__ import annotations
@@ -57,6 +61,7 @@ from typing import Any
 import numpy as np
 
 from wptrack.rig import Camera, Rig
+from wptrack.synth import conditions as C
 from wptrack.synth.actors import (
     _BOX_SIGNS,
     HUMAN,
@@ -188,8 +193,6 @@ class PlazaScene(Scene):
 
     def _static_start(self, actors: list[PlazaActor]) -> list[PlazaActor]:
         """``static-start``: freeze the whole scene at the first frame with the most objects in view, then play."""
-        from wptrack.synth import conditions as C
-
         self.actors, self._states = actors, None
         n = self.default_frames
         count = self.states(n).present[:, :n].sum(axis=0)
@@ -201,8 +204,6 @@ class PlazaScene(Scene):
 
     def _stop_and_go(self, actors: list[PlazaActor]) -> list[PlazaActor]:
         """``stop-and-go``: each person (each group together) stops at 40 % of their frames in view."""
-        from wptrack.synth import conditions as C
-
         self.actors, self._states = actors, None
         n = self.default_frames
         present = self.states(n).present[:, :n]
