@@ -148,3 +148,21 @@ def test_wrong_size_source_clear_error(tmp_path, capsys, kind, size, needle) -> 
     lines = [ln for ln in err.strip().splitlines() if not ln.startswith("Warp CUDA warning")]
     assert code == 2 and len(lines) == 1 and lines[0].startswith("wptrack: error:") and needle in lines[0], err
     assert not out.exists()
+
+
+def test_shake_moves_only_the_chosen_frames(rng) -> None:
+    from wptrack.experiments_conditions import shake
+
+    frames = _textured(rng, 8)
+    out = shake(frames, first=2, count=3, amplitude=4)
+    for t in range(8):
+        if 2 <= t < 5:
+            shifts = [
+                (dy, dx)
+                for dy in range(-4, 5)
+                for dx in range(-4, 5)
+                if np.array_equal(np.roll(frames[t], (dy, dx), axis=(0, 1)), out[t])
+            ]
+            assert len(shifts) == 1 and max(abs(v) for v in shifts[0]) >= 2, (t, shifts)
+        else:
+            np.testing.assert_array_equal(out[t], frames[t])

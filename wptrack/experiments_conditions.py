@@ -13,6 +13,9 @@ mask (the visible pixels of the moving objects, shadows excluded):
 Command (one row per condition, CPU)::
 
     python3 -m wptrack.experiments_conditions --scene s3-mixed --seeds 0 [--frames 180] [--out table.json]
+
+``--shake 0,2,4,8,16`` instead shakes frames 60-71 of the scene (:func:`shake`) and reports the masks' foreground
+fraction and the frames the run's flood guard (:mod:`wptrack.runs.flood`) flags.
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ from .synth.conditions import CONDITION_NAMES, parse_conditions
 
 log = logging.getLogger(__name__)
 
-__all__ = ["condition_mask_quality", "condition_table", "main", "render_arrays"]
+__all__ = ["condition_mask_quality", "condition_table", "main", "render_arrays", "shake", "shake_floods"]
 
 
 def render_arrays(
@@ -125,6 +128,57 @@ def condition_table(
     return [condition_mask_quality(scene_name, cond, seed, frames, config) for cond in conditions for seed in seeds]
 
 
+def shake(images: np.ndarray, first: int, count: int, amplitude: int, seed: int = 5) -> np.ndarray:
+    """A copy of ``images`` (T, H, W, 3) whose frames ``first .. first + count - 1`` are shifted (camera shake).
+
+    Each shaken frame moves by a random (dy, dx) in ``[-amplitude, amplitude]`` pixels per axis, an axis drawn
+    under ``amplitude / 2`` taking ``amplitude`` (so every shaken frame moves); pixels wrap around (np.roll).
+    """
+    rng = np.random.default_rng(seed)
+    out = images.copy()
+    for f in range(first, min(first + count, len(images))):
+        d = rng.integers(-amplitude, amplitude + 1, 2)
+        d[np.abs(d) < amplitude // 2] = amplitude
+        out[f] = np.roll(images[f], (int(d[0]), int(d[1])), axis=(0, 1))
+    return out
+
+
+def shake_floods(
+    scene_name: str = "s3-mixed",
+    amplitudes: Sequence[int] = (2, 4, 8, 16),
+    first: int = 60,
+    count: int = 12,
+    seed: int = 0,
+    config: MaskConfig | None = None,
+) -> list[dict[str, Any]]:
+    """Foreground fraction of the motion masks and the frames :class:`wptrack.runs.flood.FloodGuard` flags, when
+    frames ``first .. first + count - 1`` of the scene are shaken by each amplitude (pixels; 0: no shake)."""
+    from .runs.flood import FloodGuard
+
+    config = MaskConfig() if config is None else config
+    images, _, _ = render_arrays(scene_name, None, seed)
+    rows = []
+    for amp in amplitudes:
+        video = shake(images, first, count, int(amp)) if amp else images
+        guard = FloodGuard()
+        fractions = []
+        for m in open_masks(video=video, config=config):
+            fractions.append(float(np.count_nonzero(m)) / m.size)
+            guard.filter(m)
+        shaken = fractions[first : first + count]
+        rest = fractions[:first] + fractions[first + count :]
+        rows.append(
+            {
+                "amplitude_px": int(amp),
+                "median_fraction_unshaken": float(np.median(rest)),
+                "median_fraction_shaken": float(np.median(shaken)),
+                "flagged_shaken": sum(first <= i < first + count for i in guard.flooded),
+                "flagged_other": sum(not first <= i < first + count for i in guard.flooded),
+            }
+        )
+    return rows
+
+
 def _markdown(rows: list[dict[str, Any]]) -> str:
     lines = [
         "| condition | seed | mean IoU | precision | recall | false-positive pixels |",
@@ -147,6 +201,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--frames", type=int, default=None)
     p.add_argument("--mask-config", default=None, help="JSON object of MaskConfig fields, e.g. '{\"shadow_lo\": 0.3}'")
     p.add_argument("--out", default=None, help="also write the rows as JSON here")
+    p.add_argument("--shake", default=None, help="instead: camera shake of frames 60-71 by these amplitudes (px)")
     args = p.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
     conds: list[str | None] = (
@@ -155,6 +210,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         else [None if c.strip() == "none" else c.strip() for c in args.conditions.split(",")]
     )
     config = MaskConfig(**json.loads(args.mask_config)) if args.mask_config else MaskConfig()
+    if args.shake:
+        amps = [int(a) for a in args.shake.split(",")]
+        shaken = shake_floods(args.scene, amps, seed=seeds[0], config=config)
+        print("| shake (px) | foreground, other frames | foreground, shaken frames | flagged: shaken / 12, other |")
+        print("|---|---|---|---|")
+        for r in shaken:
+            print(
+                f"| {r['amplitude_px']} | {100 * r['median_fraction_unshaken']:.1f} % "
+                f"| {100 * r['median_fraction_shaken']:.1f} % | {r['flagged_shaken']}, {r['flagged_other']} |"
+            )
+        return 0
     rows = condition_table(args.scene, seeds, conds, args.frames, config)
     print(f"scene {args.scene}, seeds {seeds}, mask config {dataclasses.asdict(config)}")
     print(_markdown(rows))
