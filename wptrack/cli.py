@@ -296,8 +296,11 @@ def cmd_evaluate(args) -> int:
 def cmd_synth(args) -> int:
     from .synth import render_scene
 
-    res = render_scene(args.scene, args.out, frames=args.frames, seed=args.seed, progress=not args.quiet)
-    print(f"wrote scene '{args.scene}' ({res.frames} frames) to {res.out_dir}")
+    res = render_scene(
+        args.scene, args.out, frames=args.frames, seed=args.seed, progress=not args.quiet, conditions=args.conditions
+    )
+    extra = f" under conditions {args.conditions}" if args.conditions not in (None, "", "none") else ""
+    print(f"wrote scene '{args.scene}' ({res.frames} frames){extra} to {res.out_dir}")
     return 0
 
 
@@ -502,6 +505,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True)
     s.add_argument("--frames", type=_positive_int, default=None)
     s.add_argument("--seed", type=int, default=0)
+    s.add_argument(
+        "--conditions",
+        default=None,
+        help="s3 scenes only: comma-separated hard conditions, each alone measurable: static-start, stop-and-go, sun, "
+        "light-change, noise, compression, dark-car; or all (default: none; see wptrack.synth.conditions)",
+    )
     s.set_defaults(func=cmd_synth)
 
     t = sub.add_parser("track", parents=[common], help="track objects in calibrated videos")

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError, FrameError, OutputError
+from .flood import FloodGuard
 from .loop import TrackerRun, run_tracker
 
 log = logging.getLogger(__name__)
@@ -138,6 +139,8 @@ class TemplateRun(TrackerRun):
         max_frames: stop after this many frames.
         save_masks: also write the masks used to ``masks.avi``.
         virtual: write the best particle's virtual scenes to ``virtual.avi``.
+        flood_guard: hold the last normal mask on flooded frames (camera shake, :mod:`wptrack.runs.flood`); the
+            flooded frames are counted in run.json (``flooded_frames``).
 
     Raises:
         WptrackError subclasses for bad input (rig, sizes, parameters, device).
@@ -157,6 +160,7 @@ class TemplateRun(TrackerRun):
         max_frames: int | None = None,
         save_masks: bool = False,
         virtual: bool = True,
+        flood_guard: bool = True,
     ) -> None:
         from dataclasses import asdict, replace
 
@@ -199,6 +203,7 @@ class TemplateRun(TrackerRun):
             "mask": asdict(mask_config),
             "tracker": config.to_dict(),
         }
+        self._flood = FloodGuard(name=str(masks if masks is not None else video)) if flood_guard else None
         self._seen: dict[int, str] = {}
         self._penalties: list[int] = []
         self._best_csv: _CsvAppender | None = None
@@ -227,7 +232,7 @@ class TemplateRun(TrackerRun):
 
     def step(self, item: Any) -> Any:
         self._mask = item
-        return self.tracker.step(item)
+        return self.tracker.step(item if self._flood is None else self._flood.filter(item))
 
     def record(self, est: Any, out: Any) -> None:
         out.add_rows([object_row(est.frame, o) for o in est.objects])
@@ -251,12 +256,15 @@ class TemplateRun(TrackerRun):
             "job.seen_ids": np.asarray(ids, dtype=np.int64),
             "job.seen_classes": np.asarray([self._seen[i] for i in ids], dtype=str),
             "job.penalties": np.asarray(self._penalties, dtype=np.int64),
+            **(self._flood.state() if self._flood is not None else {}),
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         super().load_state_dict(state)
         self._seen = {int(i): str(c) for i, c in zip(state["job.seen_ids"], state["job.seen_classes"], strict=True)}
         self._penalties = [int(v) for v in state["job.penalties"]]
+        if self._flood is not None:
+            self._flood.load(state, self.tracker.frames_done)
 
     def finish(self) -> None:
         if self._best_csv is not None:
@@ -273,6 +281,7 @@ class TemplateRun(TrackerRun):
             "objects": len(seen),
             "classes": {c: sum(1 for v in seen.values() if v == c) for c in ("human", "vehicle")},
             "mean_penalty": float(np.mean(self._penalties)) if self._penalties else None,
+            "flooded_frames": len(self._flood.flooded) if self._flood is not None else None,
         }
 
 
@@ -290,6 +299,7 @@ def run_template_tracking(
     progress: bool = False,
     resume: bool = False,
     checkpoint_seconds: float = 60.0,
+    flood_guard: bool = True,
 ) -> dict[str, Any]:
     """Track objects with the template tracker and write the run folder (see the module docstring and
     :class:`TemplateRun` for the arguments).
@@ -299,7 +309,7 @@ def run_template_tracking(
     Returns:
         The run summary (also in run.json).
     """
-    job = TemplateRun(rig_path, config, video, masks, mask_config, device, max_frames, save_masks, virtual)
+    job = TemplateRun(rig_path, config, video, masks, mask_config, device, max_frames, save_masks, virtual, flood_guard)
     return run_tracker(
         job, out_dir, progress=progress, max_frames=max_frames, resume=resume, checkpoint_seconds=checkpoint_seconds
     )

@@ -96,6 +96,14 @@ class Scene(ABC):
         images, vis = self.render_frame(index, positions, rngs)
         return images, vis, None
 
+    def with_conditions(self, conditions: Any) -> Scene:
+        """The same scene under hard conditions (:mod:`wptrack.synth.conditions`); only the s3 scenes take them.
+
+        Raises:
+            ConfigError: the scene takes no conditions.
+        """
+        raise ConfigError("this scene takes no conditions (only the s3 plaza scenes do)")
+
     def groundtruth_columns(self, frames: int) -> dict[str, dict[int, np.ndarray]] | None:
         """Extra ground-truth columns written after ``frame,id,x,y,z`` (default: none).
 
@@ -219,7 +227,12 @@ def _groundtruth_csv(trajectories: dict[int, np.ndarray], extra: dict[str, dict[
 
 
 def render_scene(
-    name: str, out_dir: str | Path, frames: int | None = None, seed: int = 0, progress: bool = False
+    name: str,
+    out_dir: str | Path,
+    frames: int | None = None,
+    seed: int = 0,
+    progress: bool = False,
+    conditions: Any = None,
 ) -> SceneResult:
     """Render a registered scene to ``out_dir`` (see the module docstring for the files).
 
@@ -230,12 +243,15 @@ def render_scene(
         seed: Seed of the sensor noise; for scenes registered with ``seeded=True`` also of the layout (paths,
             clothing), for the others the layout does not depend on it.
         progress: Show a tqdm progress bar.
+        conditions: Hard conditions (:class:`wptrack.synth.conditions.PlazaConditions`, or its comma-separated
+            names); None or all off: the scene as registered. Written to scene.json (``conditions``) when any is on.
 
     Returns:
         The paths written.
 
     Raises:
-        ConfigError: unknown scene, ``frames < 1`` or ``seed < 0``.
+        ConfigError: unknown scene, ``frames < 1``, ``seed < 0``, an unknown condition, or conditions for a scene
+            that takes none.
         OutputError: ``out_dir`` or a file in it cannot be written.
     """
     from tqdm import tqdm
@@ -249,6 +265,16 @@ def render_scene(
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ConfigError(f"seed must be a non-negative integer, got {seed!r}")
     scene = spec.build(int(seed)) if spec.seeded else spec.build()
+    if conditions is not None:
+        from wptrack.synth.conditions import PlazaConditions, parse_conditions
+
+        if not isinstance(conditions, PlazaConditions):
+            conditions = parse_conditions(conditions)
+        if conditions.any:
+            try:
+                scene = scene.with_conditions(conditions)
+            except ConfigError as exc:
+                raise ConfigError(f"scene {name!r}: {exc}") from None
     n_frames = int(frames if frames is not None else scene.default_frames)
     out = ensure_writable_dir(out_dir)
 

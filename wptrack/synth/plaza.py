@@ -44,6 +44,10 @@ holds the perfect foreground masks: the visible pixels of the moving objects (sh
 ``visibility`` of scene.json is the visible fraction of the least visible object of the ground truth (hidden by
 clutter or another object; null when there is none). ``max_objects`` counts the objects of the ground truth at once
 over the scene's default length (180 frames at 15 fps).
+
+Hard conditions, each a switch off by default (objects standing in view at frame 0, people stopping and walking
+on, a low sun with hard shadows, a global illumination change, stronger sensor noise, JPEG compression, a car as
+dark as the road): :mod:`wptrack.synth.conditions`, ``wptrack synth s3-... --conditions ...``.
 """
 
 from __future__ import annotations
@@ -51,12 +55,13 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from wptrack.rig import Camera, Rig
+from wptrack.synth import conditions as C
 from wptrack.synth.actors import (
     _BOX_SIGNS,
     HUMAN,
@@ -70,6 +75,14 @@ from wptrack.synth.actors import (
     _Rgb,
 )
 from wptrack.synth.base import Scene, register_scene
+from wptrack.synth.conditions import (
+    PlazaConditions,
+    Retimed,
+    TimeWarp,
+    jpeg_roundtrip,
+    light_change_factor,
+    sensor_sigma,
+)
 from wptrack.synth.plaza_background import (
     CAMERA_POSITION,
     FPS,
@@ -77,8 +90,6 @@ from wptrack.synth.plaza_background import (
     MIN_IN_IMAGE,
     NOISE_SIGMA,
     ROAD_LANES,
-    SHADOW_STRENGTH,
-    SHADOW_TINT,
     plaza_background,
     plaza_camera,
 )
@@ -140,11 +151,19 @@ class PlazaScene(Scene):
         actors: The moving objects.
         frames: Default number of frames.
         fps: Frames per second.
+        conditions: Hard conditions to render (:mod:`wptrack.synth.conditions`); default: none.
     """
 
     writes_masks = True
 
-    def __init__(self, actors: Sequence[PlazaActor], frames: int = FRAMES, fps: float = FPS) -> None:
+    def __init__(
+        self,
+        actors: Sequence[PlazaActor],
+        frames: int = FRAMES,
+        fps: float = FPS,
+        conditions: PlazaConditions | None = None,
+    ) -> None:
+        self.base_actors = list(actors)
         self.actors = list(actors)
         self.fps = float(fps)
         self.default_frames = int(frames)
@@ -152,6 +171,63 @@ class PlazaScene(Scene):
         self.rig = Rig(cameras=(cam,), volume=((-16.0, 3.0, 0.0), (16.0, 27.0, 3.0)))
         self.noise_sigma = NOISE_SIGMA
         self._states: _States | None = None
+        self.conditions = PlazaConditions() if conditions is None else conditions
+        if not isinstance(self.conditions, PlazaConditions):
+            raise TypeError(f"conditions must be a PlazaConditions, got {type(self.conditions).__name__}")
+        if self.conditions.dark_car:
+            self.actors = _dark_car(self.actors)
+        if self.conditions.static_start:
+            self.actors = self._static_start(self.actors)
+        if self.conditions.stop_and_go:
+            self.actors = self._stop_and_go(self.actors)
+
+    def with_conditions(self, conditions: PlazaConditions) -> PlazaScene:
+        """The same scene (actors, length, frame rate) rendered under ``conditions``."""
+        return PlazaScene(self.base_actors, frames=self.default_frames, fps=self.fps, conditions=conditions)
+
+    # -- conditions that change the motion (the ground truth follows)
+
+    def _span(self) -> tuple[float, float]:
+        """Scene times the retiming maps cover, seconds (beyond: slope 1)."""
+        return -2.0, self.default_frames / self.fps + 60.0
+
+    def _static_start(self, actors: list[PlazaActor]) -> list[PlazaActor]:
+        """``static-start``: freeze the whole scene at the first frame with the most objects in view, then play."""
+        self.actors, self._states = actors, None
+        n = self.default_frames
+        count = self.states(n).present[:, :n].sum(axis=0)
+        origin = float(np.argmax(count)) / self.fps
+        self._states = None
+        warp = TimeWarp.build([(-math.inf, C.HOLD_S)], origin=origin, span=self._span())
+        self.static_origin_s = origin
+        return [replace(a, track=Retimed(a.track, warp)) for a in actors]
+
+    def _stop_and_go(self, actors: list[PlazaActor]) -> list[PlazaActor]:
+        """``stop-and-go``: each person (each group together) stops at 40 % of their frames in view."""
+        self.actors, self._states = actors, None
+        n = self.default_frames
+        present = self.states(n).present[:, :n]
+        self._states = None
+        groups: dict[int, list[int]] = {}
+        for a, actor in enumerate(actors):
+            if actor.shape.cls != HUMAN or not np.any(present[a]):
+                continue
+            track = actor.track.inner if isinstance(actor.track, Retimed) else actor.track
+            key = id(track.formation) if hasattr(track, "formation") else -1 - a
+            groups.setdefault(key, []).append(a)
+        out = list(actors)
+        start = C.HOLD_S + C.EASE_S if self.conditions.static_start else 0.0
+        self.stops_s: dict[int, float] = {}
+        for members in groups.values():
+            frames = np.flatnonzero(np.any(present[members], axis=0))
+            lo = max(float(frames[0]) / self.fps, start + C.EASE_S)
+            hi = max(float(frames[-1]) / self.fps, lo)
+            at = lo + C.STOP_AT * (hi - lo)
+            warp = TimeWarp.build([(at, at + C.STOP_S)], origin=self._span()[0], span=self._span())
+            for a in members:
+                out[a] = replace(actors[a], track=Retimed(actors[a].track, warp))
+                self.stops_s[actors[a].oid] = at
+        return out
 
     # -- motion and ground truth
 
@@ -241,13 +317,16 @@ class PlazaScene(Scene):
         return int(self.states(n).present[:, :n].sum(axis=0).max())
 
     def hints(self) -> dict[str, Any]:
-        """Tracker hints: tracker family, ground plane, most objects at once, object classes."""
-        return {
+        """Tracker hints: tracker family, ground plane, most objects at once, object classes; the conditions."""
+        out: dict[str, Any] = {
             "tracker": "templates",
             "ground": {"origin": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]},
             "max_objects": self.max_objects(),
             "classes": self.classes(),
         }
+        if self.conditions.any:
+            out["conditions"] = self.conditions.describe()
+        return out
 
     # -- pixels
 
@@ -256,7 +335,10 @@ class PlazaScene(Scene):
         t = index / self.fps
         b = 1.0 + 0.035 * math.sin(2 * math.pi * t / 16.0 + 0.4) - 0.02 * math.sin(2 * math.pi * t / 37.0)
         warm = 0.012 * math.sin(2 * math.pi * t / 23.0)
-        return b * np.array([1.0 + warm, 1.0, 1.0 - warm])
+        out = b * np.array([1.0 + warm, 1.0, 1.0 - warm])
+        if self.conditions.light_change:
+            out = out * light_change_factor(t)
+        return out
 
     def primitives(self, index: int) -> list[tuple[PlazaActor, list[_Prim]]]:
         """Body parts of every actor on its path at frame ``index``."""
@@ -288,7 +370,8 @@ class PlazaScene(Scene):
         """
         import cv2
 
-        bg = plaza_background()
+        cond = self.conditions
+        bg = plaza_background(sun=True) if cond.sun_shadows else plaza_background()
         view, light = bg.view, bg.light
         cam = view.camera
         h, w = cam.height, cam.width
@@ -305,7 +388,7 @@ class PlazaScene(Scene):
 
         actors = self.primitives(index)
         sun = light.unit
-        tint = np.asarray(SHADOW_TINT, dtype=np.float32)
+        tint = np.asarray(bg.shadow_tint, dtype=np.float32)
         up = np.array([0.0, 0.0, 1e-3])
         for _actor, prims in actors:
             # shadow footprint: the parts' corners and their projections along the sun on z = 0
@@ -330,8 +413,9 @@ class PlazaScene(Scene):
                 continue
             hard = np.zeros(len(pts), dtype=np.float32)
             hard[np.flatnonzero(valid)[hit]] = 1.0
-            soft = cv2.GaussianBlur(hard.reshape(v1 - v0, u1 - u0), (5, 5), 1.0)
-            amount = SHADOW_STRENGTH * soft * bg.sunlit[v0:v1, u0:u1] * valid.reshape(v1 - v0, u1 - u0)
+            hard2 = hard.reshape(v1 - v0, u1 - u0)
+            soft = cv2.GaussianBlur(hard2, (5, 5), 1.0) if bg.soft_shadows else hard2
+            amount = bg.shadow_strength * soft * bg.sunlit[v0:v1, u0:u1] * valid.reshape(v1 - v0, u1 - u0)
             img[v0:v1, u0:u1] *= 1.0 - amount[..., None] * tint[None, None, :]
 
         zbuf = view.depth.copy()
@@ -369,9 +453,13 @@ class PlazaScene(Scene):
 
         scale = (255.0 * light.exposure * self.gain(index)).astype(np.float32)
         img *= scale[None, None, :]
-        if self.noise_sigma > 0:
+        if cond.sensor_noise:
+            img += rng.standard_normal((h, w, 3), dtype=np.float32) * sensor_sigma(img)
+        elif self.noise_sigma > 0:
             img += rng.standard_normal((h, w, 3), dtype=np.float32) * np.float32(self.noise_sigma)
         bgr = np.clip(np.rint(img[:, :, ::-1]), 0, 255).astype(np.uint8)
+        if cond.compression:
+            bgr = jpeg_roundtrip(bgr)
         return bgr, labels, pixels
 
     def render_frame_masks(
@@ -423,6 +511,18 @@ _PAVING_LIKE: _Rgb = (0.52, 0.49, 0.44)
 """Clothing close to the paving colour (hard for background subtraction)."""
 _ASPHALT_LIKE: _Rgb = (0.2, 0.2, 0.21)
 """Clothing or paint close to the asphalt colour."""
+ASPHALT_RGB: _Rgb = (0.21, 0.21, 0.22)
+"""Mean albedo of the road's asphalt (see ``plaza_background._ground_texture``): the ``dark-car`` paint."""
+
+
+def _dark_car(actors: list[PlazaActor]) -> list[PlazaActor]:
+    """``dark-car``: the first car (lowest id) painted in the asphalt's colour; no car: unchanged (a warning)."""
+    cars = [a for a in actors if isinstance(a.shape, Car)]
+    if not cars:
+        log.warning("condition dark-car: the scene has no car; nothing changed")
+        return actors
+    first = min(cars, key=lambda a: a.oid)
+    return [replace(a, shape=replace(a.shape, body=ASPHALT_RGB)) if a is first else a for a in actors]
 
 
 def _people(count: int, seed: int, camouflage: Sequence[int] = ()) -> list[Person]:

@@ -209,6 +209,9 @@ class PlazaBackground:
         bush_index: (K,) flat indices of flickering vegetation pixels.
         bush_uv: (K, 2) float64 pixel coordinates of those pixels.
         light: The lighting.
+        shadow_strength: Darkening of a fully shadowed up-facing surface (0..1), times ``shadow_tint``.
+        shadow_tint: Relative darkening of R, G, B in shadows.
+        soft_shadows: Cast shadows blurred into a penumbra (5x5 Gaussian, sigma 1 pixel); False: hard edges.
     """
 
     view: StaticView
@@ -217,16 +220,48 @@ class PlazaBackground:
     bush_index: np.ndarray
     bush_uv: np.ndarray
     light: Light
+    shadow_strength: float = SHADOW_STRENGTH
+    shadow_tint: tuple[float, float, float] = SHADOW_TINT
+    soft_shadows: bool = True
 
 
-@functools.lru_cache(maxsize=1)
-def plaza_background() -> PlazaBackground:
-    """Ray cast the static plaza once per process (cached; the arrays are read-only)."""
+DEFAULT_LIGHT = Light(direction=SUN, ambient=0.4, diffuse=0.65, exposure=1.0)
+"""The scenes' default lighting: a hazy sun at about 54 degrees."""
+
+
+def sun_light() -> tuple[Light, float]:
+    """Lighting of the ``sun`` condition (:mod:`wptrack.synth.conditions`) and its shadow strength.
+
+    A sun at ``SUN_ELEVATION_DEG`` with the default azimuth, less sky light and more direct light; the exposure keeps
+    a lit horizontal surface at its default brightness. Returns ``(light, 1 - shadow ratio)``.
+    """
+    from wptrack.synth import conditions as C
+
+    direction = C.sun_elevation_direction(SUN)
+    d = DEFAULT_LIGHT
+    lit_default = d.ambient + d.diffuse * float(d.unit[2])
+    lit_sun = C.SUN_AMBIENT + C.SUN_DIFFUSE * direction[2]
+    light = Light(direction=direction, ambient=C.SUN_AMBIENT, diffuse=C.SUN_DIFFUSE, exposure=lit_default / lit_sun)
+    return light, 1.0 - C.sun_shadow_ratio()
+
+
+@functools.lru_cache(maxsize=2)
+def plaza_background(sun: bool = False) -> PlazaBackground:
+    """Ray cast the static plaza once per process (cached; the arrays are read-only).
+
+    Args:
+        sun: The ``sun`` condition's lighting (:func:`sun_light`): low sun, hard neutral shadows; default: the
+            scenes' own lighting (:data:`DEFAULT_LIGHT`, soft bluish shadows).
+    """
     import cv2
 
     start = time.perf_counter()
     cam = plaza_camera()
-    light = Light(direction=SUN, ambient=0.4, diffuse=0.65, exposure=1.0)
+    if sun:
+        light, strength = sun_light()
+        tint_rgb, soft_shadows = (1.0, 1.0, 1.0), False
+    else:
+        light, strength, tint_rgb, soft_shadows = DEFAULT_LIGHT, SHADOW_STRENGTH, SHADOW_TINT, True
     objects = _static_objects()
     view = render_static(cam, objects, light, background=(0.55, 0.62, 0.72))
     h, w = cam.height, cam.width
@@ -255,13 +290,13 @@ def plaza_background() -> PlazaBackground:
             shadow[idx] |= _shadow_hits(obj, pts[idx] + np.array([0.0, 0.0, 1e-4]), sun)
     hard = np.zeros(h * w, dtype=np.float32)
     hard[view.up_index] = shadow
-    soft = cv2.GaussianBlur(hard.reshape(h, w), (5, 5), 1.0)
+    soft = cv2.GaussianBlur(hard.reshape(h, w), (5, 5), 1.0) if soft_shadows else hard.reshape(h, w)
     up = np.zeros(h * w, dtype=np.float32)
     up[view.up_index] = 1.0
     soft *= up.reshape(h, w)
     sunlit = (1.0 - soft).astype(np.float32)
-    tint = np.asarray(SHADOW_TINT, dtype=np.float32)
-    radiance = view.radiance * (1.0 - SHADOW_STRENGTH * soft[..., None] * tint[None, None, :])
+    tint = np.asarray(tint_rgb, dtype=np.float32)
+    radiance = view.radiance * (1.0 - strength * soft[..., None] * tint[None, None, :])
     view.radiance = radiance.astype(np.float32)
     bush_index = np.flatnonzero(view.label.reshape(-1) == LABEL_BUSH)
     bush_uv = np.stack([bush_index % w, bush_index // w], axis=1).astype(np.float64)
@@ -275,6 +310,9 @@ def plaza_background() -> PlazaBackground:
         bush_index=bush_index,
         bush_uv=bush_uv,
         light=light,
+        shadow_strength=strength,
+        shadow_tint=tint_rgb,
+        soft_shadows=soft_shadows,
     )
 
 

@@ -1,0 +1,168 @@
+"""Bad input of the S3 pipeline (issue 10): a recording shorter than the background window, camera shake (flooded
+masks), a video or mask source of the wrong size, an empty scene. Small, CPU only."""
+
+from __future__ import annotations
+
+import csv
+import json
+import logging
+
+import numpy as np
+import pytest
+
+from wptrack.cli import main
+from wptrack.errors import ConfigError
+from wptrack.frames import write_video
+from wptrack.rig import Camera, Rig
+from wptrack.runs.flood import FloodGuard
+from wptrack.runs.templates import run_template_tracking
+from wptrack.trackers.templates import TemplateConfig
+
+W, H = 160, 120
+
+
+def _rig(tmp_path) -> str:
+    cam = Camera.look_at("cam0", W, H, position=[0, -6, 5], target=[0, 8, 0], fx=130)
+    path = tmp_path / "rig.yaml"
+    Rig(cameras=(cam,)).save(path)
+    return str(path)
+
+
+def _textured(rng: np.random.Generator, frames: int, noise: float = 2.0) -> np.ndarray:
+    """A static textured view (tiles, like paving) with sensor noise: (frames, H, W, 3) uint8."""
+    import cv2
+
+    base = cv2.resize(rng.uniform(60, 200, (H // 6, W // 6, 3)).astype(np.float32), (W, H), cv2.INTER_NEAREST)
+    return np.clip(base + rng.normal(0, noise, (frames, H, W, 3)), 0, 255).astype(np.uint8)
+
+
+def _ids(path) -> set[int]:
+    with open(path, newline="") as fh:
+        return {int(r["id"]) for r in csv.DictReader(fh)}
+
+
+# ----------------------------------------------------------------------------------------------------- flood guard
+
+
+def test_flood_guard_flags_jumps_and_holds_the_last_normal_mask(caplog) -> None:
+    guard = FloodGuard(name="cam0.avi")
+    normal = np.zeros((10, 10), np.uint8)
+    normal[:2, :2] = 1  # 4 %
+    grown = normal.copy()
+    grown[2, :3] = 1  # 7 %: an object growing, not a flood
+    shaken = np.zeros((10, 10), np.uint8)
+    shaken[:, :2] = 1  # 20 %: a jump over 2x and 5 points above the recent median
+    full = np.ones((10, 10), np.uint8)
+    with caplog.at_level(logging.WARNING):
+        out = [guard.filter(m) for m in (normal, normal, grown, shaken, shaken, grown, normal)]
+    assert guard.flooded == [3, 4]
+    assert out[3] is grown and out[4] is grown and out[5] is grown
+    assert caplog.text.count("motion mask flooded") == 1 and "cam0.avi: frame 3" in caplog.text
+    first = FloodGuard()
+    assert not np.any(first.filter(full)) and first.flooded == [0]  # above `fraction` even without history
+    with pytest.raises(ConfigError, match="FloodGuard.ratio"):
+        FloodGuard(ratio=1.0)
+    with pytest.raises(ConfigError, match="FloodGuard.fraction"):
+        FloodGuard(fraction=0.0)
+
+
+def _shaken_video(tmp_path, rng) -> tuple[str, np.ndarray]:
+    """24 frames of a static textured scene with a dark box walking across; frames 10-15 shaken by 3-4 pixels."""
+    frames = _textured(rng, 24)
+    for t in range(24):
+        u = 20 + 4 * t
+        frames[t, 60:90, u : u + 10] = 25
+    for t in range(10, 16):
+        dy, dx = (3, -4) if t % 2 else (-4, 3)
+        frames[t] = np.roll(frames[t], (dy, dx), axis=(0, 1))
+    path = tmp_path / "shaken.avi"
+    write_video(path, list(frames), fps=15)
+    return str(path), frames
+
+
+def test_camera_shake_adds_no_objects_with_the_guard(tmp_path, rng) -> None:
+    rig = _rig(tmp_path)
+    video, _ = _shaken_video(tmp_path, rng)
+    config = TemplateConfig(particles=150, max_objects=8, seed=1)
+    runs = {}
+    for guard in (True, False):
+        out = tmp_path / f"run{guard}"
+        summary = run_template_tracking(rig, out, config, video=video, device="cpu", flood_guard=guard, virtual=False)
+        runs[guard] = summary, json.loads((out / "run.json").read_text())
+    guarded, unguarded = runs[True][0], runs[False][0]
+    assert guarded["flooded_frames"] == 6 and unguarded["flooded_frames"] is None
+    assert runs[True][1]["summary"]["flooded_frames"] == 6
+    # objects first reported during the shake (and the frame after): the shaken edges, unless the guard holds
+    new = {}
+    for guard in (True, False):
+        first: dict[int, int] = {}
+        with open(tmp_path / f"run{guard}" / "tracks.csv", newline="") as fh:
+            for r in csv.DictReader(fh):
+                first.setdefault(int(r["id"]), int(r["frame"]))
+        new[guard] = sum(10 <= f <= 16 for f in first.values())
+    assert new[False] >= 3 and new[True] <= 1, new
+
+
+# ----------------------------------------------------------------------------------------------------- recordings
+
+
+def test_recording_shorter_than_the_window_tracks_with_a_warning(tmp_path, rng, caplog) -> None:
+    rig = _rig(tmp_path)
+    for frames in (5, 1):
+        video = tmp_path / f"short{frames}.avi"
+        write_video(video, list(_textured(rng, frames)), fps=15)
+        with caplog.at_level(logging.WARNING):
+            summary = run_template_tracking(
+                rig, tmp_path / f"run{frames}", TemplateConfig(particles=100), video=str(video), device="cpu"
+            )
+        assert summary["frames"] == frames
+        assert f"{frames} frames, shorter than the background window of 300 frames" in caplog.text
+    assert "background from 1 frame(s)" in caplog.text
+
+
+def test_empty_scene_tracks_nothing(tmp_path, rng) -> None:
+    """A static scene (noise only) through the offline masks: no object, no flood, an empty tracks.csv."""
+    rig = _rig(tmp_path)
+    video = tmp_path / "static.avi"
+    write_video(video, list(_textured(rng, 20, noise=3.0)), fps=15)
+    out = tmp_path / "run"
+    summary = run_template_tracking(rig, out, TemplateConfig(particles=100), video=str(video), device="cpu")
+    assert summary["frames"] == 20 and summary["objects"] == 0 and summary["flooded_frames"] == 0
+    assert _ids(out / "tracks.csv") == set()
+
+
+@pytest.mark.parametrize(
+    ("kind", "size", "needle"),
+    [
+        ("--video", (100, 120), "frame size 100x120 differs from camera 'cam0' calibration 160x120"),
+        ("--masks", (100, 120), "size 100x120 differs from camera 'cam0' calibration 160x120"),
+    ],
+)
+def test_wrong_size_source_clear_error(tmp_path, capsys, kind, size, needle) -> None:
+    rig = _rig(tmp_path)
+    src = tmp_path / "src.avi"
+    write_video(src, [np.zeros((size[1], size[0], 3), np.uint8)] * 3, fps=15)
+    out = tmp_path / "out"
+    code = main(["track", "templates", "--rig", rig, kind, str(src), "--out", str(out), "--device", "cpu", "-q"])
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.strip().splitlines() if not ln.startswith("Warp CUDA warning")]
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("wptrack: error:") and needle in lines[0], err
+    assert not out.exists()
+
+
+def test_shake_moves_only_the_chosen_frames(rng) -> None:
+    from wptrack.experiments_conditions import shake
+
+    frames = _textured(rng, 8)
+    out = shake(frames, first=2, count=3, amplitude=4)
+    for t in range(8):
+        if 2 <= t < 5:
+            shifts = [
+                (dy, dx)
+                for dy in range(-4, 5)
+                for dx in range(-4, 5)
+                if np.array_equal(np.roll(frames[t], (dy, dx), axis=(0, 1)), out[t])
+            ]
+            assert len(shifts) == 1 and max(abs(v) for v in shifts[0]) >= 2, (t, shifts)
+        else:
+            np.testing.assert_array_equal(out[t], frames[t])
