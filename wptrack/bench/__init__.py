@@ -22,6 +22,7 @@ SUITES: dict[str, str] = {
     "templates": "wptrack.bench.templates:TemplateSuite",
     "masks": "wptrack.bench.masks:MasksSuite",
     "people": "wptrack.bench.people:PeopleSuite",
+    "soak": "wptrack.bench.soak:SoakSuite",
 }
 """Suite name (``wptrack bench --tracker NAME``) -> ``"module:Class"`` of its suite class."""
 

@@ -91,6 +91,8 @@ class TrackerRun:
         total: number of frames the source will give (None when unknown), for the progress bar.
         particles_every: keep the particle subsample of every this many frames in particles.npz (0: none).
         particles_max: at most this many particles per kept frame.
+        particles_frames: at most this many frames of particles kept (evenly spaced over the run, see
+            :class:`wptrack.io.ParticleStore`), so memory stays bounded however long the run.
     """
 
     name: str
@@ -99,6 +101,7 @@ class TrackerRun:
     total: int | None = None
     particles_every: int = 0
     particles_max: int = 2000
+    particles_frames: int = 500
 
     def info(self) -> dict[str, Any]:
         """Extra run.json fields (device, seed, ...)."""
@@ -252,6 +255,7 @@ def run_tracker(
             job.config,
             particles_every=job.particles_every,
             particles_max=job.particles_max,
+            particles_frames=job.particles_frames,
             resume_from=after,
         ) as out,
     ):
