@@ -8,7 +8,8 @@ half-written file.
 Files of a run directory (see :class:`RunWriter`):
 
 * ``run.json``: tracker, status (``running`` / ``complete`` / ``interrupted`` / ``failed``), config, versions,
-  start/finish times, frames written and the last frame written (``last_frame``), per-stage timings, summary.
+  start/finish times, frames written and the last frame written (``last_frame``), per-stage timings, summary; the
+  run loop adds ``stopped_early`` (where a truncated source ended, or None).
 * ``tracks.csv``: one line per (frame, target): ``frame,id,x,y,z`` then tracker-specific columns.
 * ``particles.npz``: subsampled particle clouds of some frames.
 

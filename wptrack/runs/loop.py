@@ -12,6 +12,8 @@ is built (rig, videos, sizes, parameters, device), and the loop then owns what a
 * a tqdm progress bar,
 * interruption: Ctrl-C (SIGINT) and SIGTERM stop the run after the frame in progress, with ``run.json`` status
   ``interrupted`` and the last frame written (``last_frame``); the outputs written so far stay valid,
+* a source that ends before its announced length (a video truncated mid-stream): the frames up to the break are
+  tracked and run.json's ``stopped_early`` says where (``{camera, frame, expected, reason}``; None otherwise),
 * checkpoints: ``checkpoint.npz`` (the tracker's whole state after a frame and the job's summary inputs) every
   ``checkpoint_seconds`` and when interrupted, so ``resume=True`` (``--resume``) continues an interrupted or
   crashed run and gives the same outputs as an uninterrupted run (the random streams are counter-based, keyed by
@@ -132,6 +134,18 @@ class TrackerRun:
     def summary(self) -> dict[str, Any]:
         """The run summary recorded in run.json and returned by :func:`run_tracker`."""
         return {}
+
+    def stopped_early(self) -> dict[str, Any] | None:
+        """Where the frame source ended before its reported length (a truncated video), or None: the
+        ``stopped_early`` of the job's frame source (``self._frames``) or of its mask stream(s) (``self._masks``,
+        ``self._stream``; a mask stream's ``source``). Recorded in run.json."""
+        candidates = [getattr(self, "_frames", None), getattr(self, "_stream", None), *getattr(self, "_masks", [])]
+        for obj in candidates:
+            for src in (obj, getattr(obj, "source", None)):
+                info = getattr(src, "stopped_early", None)
+                if isinstance(info, dict):
+                    return info
+        return None
 
     def state_dict(self) -> dict[str, Any]:
         """Everything needed to continue after the last frame: the tracker's state (``self.tracker.state_dict()``)
@@ -295,6 +309,15 @@ def run_tracker(
         finally:
             bar.close()
             job.finish()
+            stopped = job.stopped_early()
+            out.set_info(stopped_early=stopped)  # None: the source gave every frame it announced
+            if stopped:
+                log.warning(
+                    "the frames ended early: %s at frame %d (%s)",
+                    stopped["camera"],
+                    stopped["frame"],
+                    stopped["reason"],
+                )
         summary = job.summary()
         out.close("complete", summary)
     (out_dir / CHECKPOINT_FILE).unlink(missing_ok=True)
