@@ -62,10 +62,12 @@ def test_track_people_writes_outputs(scene, tmp_path, capsys):
     text = capsys.readouterr().out
     assert "2 people" in text and "MOTA" in text
     t = read_tracks(out / "tracks.csv")
-    assert list(t)[:5] == ["frame", "id", "x", "y", "z"] and {"cloud_z", "top"} <= set(t)
+    assert list(t)[:5] == ["frame", "id", "x", "y", "z"] and {"cloud_z", "top", "degenerate"} <= set(t)
+    assert (t["degenerate"] == 0).all()
     assert set(np.unique(t["id"])) == {0, 1}
     run = json.loads((out / "run.json").read_text())
     assert run["status"] == "complete" and run["tracker"] == "people" and run["summary"]["people"] == 2
+    assert run["summary"]["degenerate_estimates"] == 0 and run["stopped_early"] is None
     idx, verts = read_chunks(out / "hulls")
     assert len(idx) == len(t["frame"]) and verts.shape[1] == 3 and (idx[:, 3] >= 4).all()
     # each hull lies around its person's centroid

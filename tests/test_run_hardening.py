@@ -54,3 +54,62 @@ def test_truncated_video_stops_the_run_at_the_break(tmp_path, videos):
     run = json.loads((tmp_path / "fail" / "run.json").read_text())
     assert run["status"] == "failed" and run["stopped_early"]["frame"] == stop["frame"]
     assert run["last_frame"] == stop["frame"] - 1 and str(cut) in run["error"]
+
+
+# ------------------------------------------------------------------------------------------ degenerate weights
+
+
+def test_template_tracker_flags_a_frame_with_zero_likelihood_everywhere(device):
+    """All log-weights NaN (a broken observation): the score kernel floors them, the frame keeps the predicted
+    particles with uniform weights, stays finite and is flagged; the next frame is normal again."""
+    import numpy as np
+
+    from wptrack.kernels.reduce import LOGW_FLOOR
+    from wptrack.rig import Camera, Rig
+    from wptrack.trackers.templates import TemplateConfig, TemplateTracker
+
+    cam = Camera.look_at("cam0", 160, 120, position=[0, -4, 10], target=[0, 9, 0], fx=125.0)
+    tr = TemplateTracker(Rig(cameras=(cam,)), TemplateConfig(particles=200, max_objects=4, seed=1), device=device)
+    mask = np.zeros((120, 160), np.uint8)
+    mask[40:80, 60:70] = 1
+    for _ in range(3):
+        assert not tr.step(mask).degenerate
+    tr.state[tr.parity].logw.fill_(float("nan"))
+    lost = tr.step(mask)
+    assert lost.degenerate and lost.loglik == pytest.approx(float(LOGW_FLOOR))
+    assert lost.ess == pytest.approx(200, rel=1e-6)  # uniform weights: the prior
+    np.testing.assert_array_equal(tr.weights.numpy(), 1.0)
+    assert all(np.all(np.isfinite(o.position)) for o in lost.objects + lost.best)
+    back = tr.step(mask)
+    assert not back.degenerate and np.isfinite(back.loglik) and back.loglik > 0.5 * float(LOGW_FLOOR)
+
+
+def test_people_tracker_flags_a_person_with_zero_likelihood_everywhere(device):
+    """A person's appearance model turned NaN: every particle's log-likelihood is NaN, floored; the person's estimate
+    keeps the predicted cloud (uniform weights), stays finite and is flagged."""
+    import sys
+    from pathlib import Path
+
+    import numpy as np
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_tracker_people import crossing, render, rig3
+
+    from wptrack.trackers.people import PeopleConfig, PeopleTracker
+
+    rng = np.random.default_rng(5)
+    rig = rig3()
+    tr = PeopleTracker(rig, PeopleConfig(particles=300, seed=3), device=device)
+    est = None
+    for _, people in crossing(10):
+        est = tr.step(*render(rig, people, rng))
+        assert not any(p.degenerate for p in est.people)
+    assert est.people, "nobody tracked after 10 frames"
+    for f in tr.pool:
+        for m in f.model:
+            m.fill_(float("nan"))
+    lost = tr.step(*render(rig, people, rng))
+    assert lost.people and all(p.degenerate for p in lost.people)
+    for p in lost.people:
+        assert np.all(np.isfinite(p.mean)) and np.all(np.isfinite(p.std))
+        assert p.ess == pytest.approx(300, rel=1e-3)

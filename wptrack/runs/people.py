@@ -2,9 +2,11 @@
 
 Outputs::
 
-    out_dir/tracks.csv     frame,id,x,y,z,sx,sy,sz,map_x,map_y,map_z,ess,loglik,age,cloud_z,top: x, y, z the person's
-                           3D centroid (BodyConfig), cloud_z the particles' mean height (the paper's estimate),
-                           top the top of the person's silhouette column (metres; empty when not found)
+    out_dir/tracks.csv     frame,id,x,y,z,sx,sy,sz,map_x,map_y,map_z,ess,loglik,age,cloud_z,top,degenerate: x, y, z
+                           the person's 3D centroid (BodyConfig), cloud_z the particles' mean height (the paper's
+                           estimate), top the top of the person's silhouette column (metres; empty when not found),
+                           degenerate 1 when every particle of the person had zero likelihood (log-weights -inf/NaN:
+                           the predicted particles were kept with uniform weights, the prior)
     out_dir/hulls/         per (frame, person) the convex hull of the smallest particle set holding P_H of the
                            weight (section 4), streamed to one .npz per 500 frames (``wptrack.chunklog``; memory
                            bounded): rows (frame, id, start, count) into a (V, 3) vertex array, metres; read
@@ -44,6 +46,7 @@ PEOPLE_COLUMNS = [
     "age",
     "cloud_z",
     "top",
+    "degenerate",
 ]
 HULLS_DIR = "hulls"
 OCCUPANCY_FILE = "occupancy.npz"
@@ -173,6 +176,7 @@ class PeopleRun(TrackerRun):
         self._hulls: Any = None  # ChunkLog, opened by start()
         self._occupancy = _Thinned(cap=300)
         self._ids: dict[int, int] = {}  # id -> frames tracked
+        self._degenerate = 0  # (frame, person) estimates with all log-weights -inf/NaN
         self._out_dir: Path | None = None
         self._mask_writers: list[Any] = []
         self._frame_masks: list[np.ndarray] = []
@@ -209,8 +213,10 @@ class PeopleRun(TrackerRun):
             rows.append(
                 [est.frame, person.id, *person.centroid, *person.std, *person.map, person.ess, person.loglik]
                 + [person.age, person.mean[2], person.top if np.isfinite(person.top) else None]
+                + [int(person.degenerate)]
             )
             self._ids[person.id] = self._ids.get(person.id, 0) + 1
+            self._degenerate += int(person.degenerate)
             if person.particles is not None:
                 self._hulls.add(est.frame, person.id, hull_points(person.particles, person.weights, p_h))
         out.add_rows(rows)
@@ -269,11 +275,13 @@ class PeopleRun(TrackerRun):
             **self.tracker.state_dict(),
             "job.ids": np.asarray(ids, dtype=np.int64),
             "job.frames": np.asarray([self._ids[i] for i in ids], dtype=np.int64),
+            "job.degenerate": np.int64(self._degenerate),
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.tracker.load_state_dict({k: v for k, v in state.items() if not k.startswith("job.")})
         self._ids = {int(i): int(n) for i, n in zip(state["job.ids"], state["job.frames"], strict=True)}
+        self._degenerate = int(state["job.degenerate"])
 
     def summary(self) -> dict[str, Any]:
         return {
@@ -281,6 +289,7 @@ class PeopleRun(TrackerRun):
             "device": self.tracker.device,
             "people": len(self._ids),
             "frames_per_person": {str(k): v for k, v in sorted(self._ids.items())},
+            "degenerate_estimates": self._degenerate,
         }
 
 
