@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from wptrack.bench.soak import RSS_LIMIT, Case, SoakSuite, growth
+from wptrack.bench.soak import RSS_LIMIT, Case, SoakSuite, TemplateSoakSuite, growth
 from wptrack.chunklog import ChunkLog, read_chunks
 from wptrack.io import ParticleStore, RunWriter, StageTimer
 
@@ -38,6 +38,15 @@ def test_soak_suite_short_run_structure():
     assert isinstance(r["passed"], bool)
     assert {"tracks.csv", "run.json", "particles.npz"} <= set(r["output_bytes"])
     assert "pass" in SoakSuite.format_row(r) or "FAIL" in SoakSuite.format_row(r)
+
+
+def test_template_soak_suite_short_run():
+    """The template tracker's job over the cycled masks: objects are tracked and written, memory sampled."""
+    r = TemplateSoakSuite.run_case(Case(200, 1), "cpu", frames=24, sample_every=12, settle=12)
+    assert r["tracker"] == "soak-templates" and r["job"] == "templates" and r["frames"] == 24
+    assert [f for f, _ in r["rss"]] == [1, 12, 24] and isinstance(r["passed"], bool)
+    assert r["output_bytes"]["tracks.csv"] > 200 and r["output_bytes"]["best.csv"] > 200  # objects tracked
+    assert r["output_bytes"]["virtual.avi"] > 0
 
 
 def test_soak_suite_detects_a_leak():

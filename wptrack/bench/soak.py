@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from wptrack.runs.colour import ColourRun
+from wptrack.runs.templates import TemplateRun
 
 WIDTH, HEIGHT = 320, 240
 PERIOD = 96
@@ -117,10 +118,11 @@ def cycle_scene(cameras: int, seed: int = 0) -> tuple[Any, list[np.ndarray], np.
     return rig, videos, balls
 
 
-class SoakRun(ColourRun):
-    """:class:`~wptrack.runs.colour.ColourRun` over its (in-memory) frames repeated to ``frames`` frames, calling
-    ``on_record(job, estimate)`` after each frame is recorded. The frames are yielded as views: nothing accumulates.
-    """
+class _Cycled:
+    """Mixin for a run-loop job: its frame source (``_source_attr``, re-iterable and in memory) repeated to
+    ``frames`` frames, and ``on_record(job, estimate)`` called after each frame is recorded. Nothing accumulates."""
+
+    _source_attr = "_frames"
 
     def __init__(self, *args: Any, frames: int, on_record: Callable[[Any, Any], None] | None = None, **kw: Any):
         super().__init__(*args, **kw)
@@ -128,12 +130,52 @@ class SoakRun(ColourRun):
         self._on_record = on_record
 
     def frames(self) -> Iterator[Any]:
-        return itertools.islice(itertools.chain.from_iterable(itertools.repeat(self._frames)), self.total)
+        source = getattr(self, self._source_attr)
+        return itertools.islice(itertools.chain.from_iterable(itertools.repeat(source)), self.total)
 
     def record(self, est: Any, out: Any) -> None:
         super().record(est, out)
         if self._on_record is not None:
             self._on_record(self, est)
+
+
+class SoakRun(_Cycled, ColourRun):
+    """:class:`~wptrack.runs.colour.ColourRun` over its in-memory videos repeated to ``frames`` frames."""
+
+
+class TemplateSoakRun(_Cycled, TemplateRun):
+    """:class:`~wptrack.runs.templates.TemplateRun` over its in-memory motion masks repeated to ``frames`` frames."""
+
+    _source_attr = "_stream"
+
+
+def template_cycle(seed: int = 0) -> tuple[Any, np.ndarray]:
+    """A 320x240 camera above a ground plane and ``PERIOD`` motion masks rendered by a one-particle template tracker:
+    a person walking 6 m across the view, then the next one entering where the first started (so objects are
+    added and dropped every cycle), plus a few isolated noise pixels.
+
+    Returns:
+        ``(rig, masks)``: masks ``(PERIOD, H, W)`` uint8, 0 or 255.
+    """
+    from wptrack.rig import Camera, Rig
+    from wptrack.trackers.templates import TemplateConfig, TemplateTracker
+
+    cam = Camera.look_at("cam0", 320, 240, position=[0, -4, 10], target=[0, 9, 0], fx=250.0)
+    rig = Rig(cameras=(cam,))
+    painter = TemplateTracker(rig, TemplateConfig(particles=1, max_objects=1), device="cpu")
+    rng = np.random.default_rng(seed)
+    masks = np.zeros((PERIOD, 240, 320), np.uint8)
+    for k in range(PERIOD):
+        painter.set_particles(
+            kind=np.array([[1]]),  # human
+            label=np.array([[0]]),
+            pos=np.array([[[-3.0 + 6.0 * k / PERIOD, 5.0]]], np.float32),
+            dims=np.array([[[1.75, 0.5, 0.3]]], np.float32),
+            heading=np.zeros((1, 1)),
+        )
+        masks[k] = painter.render_virtual()[0] != 0
+        masks[k][rng.random((240, 320)) < 0.001] = 1
+    return rig, masks * np.uint8(255)  # given masks: foreground above MaskConfig.threshold
 
 
 def soak_job(
@@ -159,13 +201,32 @@ def soak_job(
     return SoakRun(rig_path, videos, target, cfg, device=device, frames=frames, on_record=on_record)
 
 
+def template_soak_job(
+    case: Case,
+    device: str,
+    frames: int,
+    out_dir: Path,
+    seed: int = 0,
+    on_record: Callable[[Any, Any], None] | None = None,
+) -> TemplateSoakRun:
+    """The template tracker's run-loop job (virtual scenes written too) on the cycled masks, ``frames`` long."""
+    from wptrack.trackers.templates import TemplateConfig
+
+    rig, masks = template_cycle(seed)
+    rig_path = out_dir / "rig.yaml"
+    rig.save(rig_path)
+    cfg = TemplateConfig(particles=case.particles, max_objects=4, seed=seed, fps=15.0)
+    return TemplateSoakRun(rig_path, cfg, masks=masks, device=device, frames=frames, on_record=on_record)
+
+
 class SoakSuite:
     """Colour tracker through the whole run loop for ``--frames`` frames (default 10,000): memory over time."""
 
     name = "soak"
+    job = "color"
     default_frames = 10_000
     HEADER = (
-        f"{'suite':6s} {'N':>7s} {'cams':>4s} {'frames':>6s} {'ms/frame':>8s} {'RSS@settle MiB':>14s} "
+        f"{'suite':14s} {'N':>7s} {'cams':>4s} {'frames':>6s} {'ms/frame':>8s} {'RSS@settle MiB':>14s} "
         f"{'RSS max MiB':>11s} {'growth':>7s} {'device growth':>13s}  verdict"
     )
 
@@ -173,8 +234,9 @@ class SoakSuite:
     def default_grid(is_cuda: bool) -> list[Case]:
         return [Case(100_000 if is_cuda else 200, 2)]
 
-    @staticmethod
+    @classmethod
     def run_case(
+        cls,
         case: Case,
         device: str,
         frames: int = 10_000,
@@ -210,7 +272,8 @@ class SoakSuite:
                     if d is not None:
                         dev.append((n, d))
 
-            job = soak_job(case, device, frames, Path(tmp), seed, on_record=sample)
+            make = soak_job if cls.job == "color" else template_soak_job
+            job = make(case, device, frames, Path(tmp), seed, on_record=sample)
             out_dir = Path(tmp) / "run"
             t0 = time.perf_counter()
             summary = run_tracker(job, out_dir, checkpoint_seconds=60.0)
@@ -221,8 +284,8 @@ class SoakSuite:
         passed = rss_growth is not None and rss_growth <= RSS_LIMIT and (dev_growth is None or dev_growth == 0)
         ref = next((v for f, v in rss if f >= settle), None)
         return {
-            "tracker": "soak",
-            "job": "color",
+            "tracker": cls.name,
+            "job": cls.job,
             "particles": case.particles,
             "cameras": case.cameras,
             "frames": int(summary["frames"]),
@@ -250,6 +313,17 @@ class SoakSuite:
         ref = (r["rss_settle"] or 0) / mib
         top = (r["rss_max_after_settle"] or 0) / mib
         return (
-            f"{r['tracker']:6s} {r['particles']:>7d} {r['cameras']:>4d} {r['frames']:>6d} {r['frame_ms']:8.2f} "
+            f"{r['tracker']:14s} {r['particles']:>7d} {r['cameras']:>4d} {r['frames']:>6d} {r['frame_ms']:8.2f} "
             f"{ref:14.1f} {top:11.1f} {g:>7s} {d:>13s}  {'pass' if r['passed'] else 'FAIL'}"
         )
+
+
+class TemplateSoakSuite(SoakSuite):
+    """The template tracker (S3) through the whole run loop, masks cycled: memory over time (``soak-templates``)."""
+
+    name = "soak-templates"
+    job = "templates"
+
+    @staticmethod
+    def default_grid(is_cuda: bool) -> list[Case]:
+        return [Case(10_000 if is_cuda else 200, 1)]
