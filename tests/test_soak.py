@@ -165,3 +165,8 @@ def test_chunk_log_streams_and_resumes(tmp_path):
     np.testing.assert_array_equal(index2, index)
     np.testing.assert_array_equal(allv2, allv)
     assert read_chunks(tmp_path / "missing")[0].shape == (0, 4)
+    some, somev = read_chunks(tmp_path / "h", frames=[3, 12, 34, 99])  # only these frames are loaded
+    assert sorted({int(f) for f in some[:, 0]}) == [3, 12, 34] and len(some) == 6
+    for f, pid, s, c in some:
+        np.testing.assert_array_equal(somev[s : s + c], verts[(int(f), int(pid))])
+    assert len(somev) == sum(int(c) for c in some[:, 3])

@@ -17,6 +17,7 @@ Layout: ``folder/<first frame, 8 digits>.npz``, each with
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -110,14 +111,25 @@ class ChunkLog:
         self._records = []
 
 
-def read_chunks(folder: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
-    """All records of a :class:`ChunkLog` folder: ``(index (R, 4) int64, vertices (V, 3) float32)``, ``start``
-    renumbered into the concatenated vertices; empty arrays when the folder is missing or empty."""
+def read_chunks(folder: str | os.PathLike, frames: Iterable[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The records of a :class:`ChunkLog` folder: ``(index (R, 4) int64, vertices (V, 3) float32)``, ``start``
+    renumbered into the concatenated vertices; empty arrays when the folder is missing or empty.
+
+    Args:
+        folder: The log's folder.
+        frames: Only the records of these frames (memory then bounded by them, whatever the run's length).
+    """
+    wanted = None if frames is None else np.asarray(sorted({int(f) for f in frames}), dtype=np.int64)
     indices, verts = [], []
     offset = 0
     for _first, path in _chunk_files(Path(folder)):
         with np.load(path) as z:
             index, v = z["index"].astype(np.int64), z["vertices"]
+        if wanted is not None:
+            index = index[np.isin(index[:, 0], wanted)]
+            parts = [v[s : s + c] for _f, _i, s, c in index]
+            index[:, 2] = np.cumsum([0, *index[:-1, 3]]) if len(index) else index[:, 2]
+            v = np.concatenate(parts) if parts else np.zeros((0, 3), np.float32)
         index[:, 2] += offset
         offset += len(v)
         indices.append(index)

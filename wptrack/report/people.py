@@ -35,12 +35,13 @@ MATCH_DISTANCE = 0.5
 """Ground-plane matching radius of the metrics, metres (issue 11)."""
 
 
-def load_hulls(run_dir: Path) -> dict[tuple[int, int], np.ndarray]:
+def load_hulls(run_dir: Path, frames: Any = None) -> dict[tuple[int, int], np.ndarray]:
     """``{(frame, id): (V, 3) hull vertices}`` from the run's ``hulls/`` chunks (``wptrack.chunklog``) or, for older
-    runs, ``hulls.npz`` (same index/vertices layout); empty when neither exists."""
+    runs, ``hulls.npz`` (same index/vertices layout); empty when neither exists. ``frames``: only these frames (the
+    report's), so a long run's hulls are never all in memory."""
     from ..chunklog import read_chunks
 
-    index, verts = read_chunks(run_dir / HULLS_DIR)
+    index, verts = read_chunks(run_dir / HULLS_DIR, frames)
     path = run_dir / HULLS_FILE
     if not len(index) and path.exists():
         with np.load(path) as z:
@@ -77,7 +78,7 @@ def section_occupancy(ctx: ReportContext) -> Section | None:
         "iso-surfaces at 25 % and 60 % of its peak, and the convex hull of the particles that hold 95 % of the "
         "weight (the bounding volume) as a wire mesh, one colour per id, with the camera frusta.",
     )
-    hulls = load_hulls(data.run_dir)
+    hulls = load_hulls(data.run_dir, ctx.frames)
     occ, voxel = load_occupancy(data.run_dir)
     if not hulls:
         sec.notes.append(f"no hulls ({HULLS_DIR}/): the bounding volumes are left out")
@@ -214,7 +215,7 @@ def section_segmentation(ctx: ReportContext) -> Section | None:
         text="The 95 % bounding volume of each person projected into every camera (filled, outlined, with its id):"
         " the multi-camera segmentation of the paper's Figs. 5 and 7.",
     )
-    hulls = load_hulls(data.run_dir)
+    hulls = load_hulls(data.run_dir, ctx.frames)
     if not hulls:
         sec.notes.append(f"no hulls ({HULLS_DIR}/): nothing to project")
         return sec
