@@ -29,7 +29,7 @@ import warp as wp
 from .camera import Camera, pixel_of, project
 from .descriptor import appearance_log_prob, descriptor_at
 from .random import STREAM_MOTION, STREAM_PEOPLE_VELOCITY, normal4, uniform4
-from .reduce import moments_push, moments_store, moments_zero
+from .reduce import finite_logw, moments_push, moments_store, moments_zero
 
 wp.set_module_options({"enable_backward": False})
 
@@ -256,6 +256,7 @@ def step_kernel(
         lw += appearance_log_prob(model_out, i, desc_out, i, m, rgb, n_bins, sn, sigma_p)  # eqs. 23-26, eq. 11
         if keep:
             lw += logw_prev[i]
+        lw = finite_logw(lw)  # -inf/NaN -> the floor, as the estimate and the resampler read it
         logw_out[i] = lw
         best, arg, sw, sw2, sx, sxx = moments_push(best, arg, sw, sw2, sx, sxx, lw, i, x)
     moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)
@@ -483,6 +484,7 @@ def score_moments_kernel(
         lw += appearance_log_prob(model, i, desc, i, mass[i], rgb[i], n_bins, sn, sigma_p)  # eqs. 23-26, eq. 11
         if keep:
             lw += logw_prev[i]
+        lw = finite_logw(lw)  # -inf/NaN -> the floor, as the estimate and the resampler read it
         logw_out[i] = lw
         best, arg, sw, sw2, sx, sxx = moments_push(best, arg, sw, sw2, sx, sxx, lw, i, x)
     moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)

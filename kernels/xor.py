@@ -11,6 +11,7 @@ which ``kernels.uoh`` builds the Uncovered Object Histogram.
 import warp as wp
 
 from .raster import PIECES, row_intervals
+from .reduce import finite_logw
 
 wp.set_module_options({"enable_backward": False})
 
@@ -132,4 +133,4 @@ def xor_score_kernel(
                 cost += cost_a[kk] + cost_b[kk] * wp.exp(-age[i, s])  # eq. 5
         penalty[i] = m
         complexity[i] = cost
-        logw[i] = logw[i] - (float(m) + cost) * scale  # eq. 6 in log space
+        logw[i] = finite_logw(logw[i] - (float(m) + cost) * scale)  # eq. 6 in log space; -inf/NaN -> the floor

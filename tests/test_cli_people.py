@@ -1,4 +1,4 @@
-"""`wptrack track people` end to end on small videos written to disk: outputs (tracks.csv, hulls.npz, occupancy.npz,
+"""`wptrack track people` end to end on small videos written to disk: outputs (tracks.csv, hulls/, occupancy.npz,
 run.json), evaluation, resume, and bad input (one camera, masks of the wrong size, camera count) with one-line
 errors, exit code 2 and nothing written."""
 
@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from wptrack.chunklog import read_chunks
 from wptrack.cli import main
 from wptrack.frames import write_video
 from wptrack.io import read_tracks
@@ -62,18 +63,19 @@ def test_track_people_writes_outputs(scene, tmp_path, capsys):
     text = capsys.readouterr().out
     assert "2 people" in text and "MOTA" in text
     t = read_tracks(out / "tracks.csv")
-    assert list(t)[:5] == ["frame", "id", "x", "y", "z"] and {"cloud_z", "top"} <= set(t)
+    assert list(t)[:5] == ["frame", "id", "x", "y", "z"] and {"cloud_z", "top", "degenerate"} <= set(t)
+    assert (t["degenerate"] == 0).all()
     assert set(np.unique(t["id"])) == {0, 1}
     run = json.loads((out / "run.json").read_text())
     assert run["status"] == "complete" and run["tracker"] == "people" and run["summary"]["people"] == 2
-    with np.load(out / "hulls.npz") as z:
-        idx, verts = z["index"], z["vertices"]
-        assert len(idx) == len(t["frame"]) and verts.shape[1] == 3 and (idx[:, 3] >= 4).all()
-        # each hull lies around its person's centroid
-        for frame, pid, start, count in idx[-4:]:
-            c = verts[start : start + count].mean(0)
-            row = (t["frame"] == frame) & (t["id"] == pid)
-            assert np.hypot(c[0] - t["x"][row][0], c[1] - t["y"][row][0]) < 0.3
+    assert run["summary"]["degenerate_estimates"] == 0 and run["stopped_early"] is None
+    idx, verts = read_chunks(out / "hulls")
+    assert len(idx) == len(t["frame"]) and verts.shape[1] == 3 and (idx[:, 3] >= 4).all()
+    # each hull lies around its person's centroid
+    for frame, pid, start, count in idx[-4:]:
+        c = verts[start : start + count].mean(0)
+        row = (t["frame"] == frame) & (t["id"] == pid)
+        assert np.hypot(c[0] - t["x"][row][0], c[1] - t["y"][row][0]) < 0.3
     with np.load(out / "occupancy.npz") as z:
         assert len(z["index"]) == len(z["grid"]) > 0 and set(z["index"][:, 0] % 5) == {0}
         assert z["grid"].dtype == np.float16 and float(z["voxel"]) > 0

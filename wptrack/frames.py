@@ -91,12 +91,17 @@ class FrameSource:
         fps: Frames per second when the source knows it (videos), else None.
 
     Iterating yields ``(H, W, 3)`` uint8 BGR frames; every iteration starts again from the first frame.
+
+    ``stopped_early`` is None, or after an iteration that ended before the reported frame count (a truncated or
+    corrupt video) ``{"camera": name, "frame": index of the first frame not read, "expected": reported count,
+    "reason": ...}``.
     """
 
     name: str
     width: int
     height: int
     fps: float | None = None
+    stopped_early: dict[str, Any] | None = None
 
     def __len__(self) -> int:
         """Number of frames (as reported by the source; a video may turn out shorter when read)."""
@@ -186,12 +191,19 @@ class VideoSource(FrameSource):
         return self._count
 
     def __iter__(self) -> Iterator[np.ndarray]:
+        self.stopped_early = None
         cap = self._open()
         try:
             for i in range(self._count):
                 ok, frame = cap.read()
                 if not ok or frame is None:
                     log.warning("video %s ended after %d frames, although it reports %d", self.path, i, self._count)
+                    self.stopped_early = {
+                        "camera": self.name,
+                        "frame": i,
+                        "expected": self._count,
+                        "reason": f"video ended after {i} of its {self._count} reported frames (truncated or corrupt)",
+                    }
                     return
                 frame = _to_bgr(frame)
                 self._check_size(frame, i)
@@ -332,8 +344,12 @@ class SyncedFrames:
     Iterating yields, per frame index, a list with one ``(H_c, W_c, 3)`` uint8 BGR frame per camera. If a video
     turns out shorter than it reported while others continue, a :class:`FrameError` is raised at that point
     (frames before it have been yielded); with ``stop_at_shortest``, or when all sources end together,
-    iteration just stops early.
+    iteration just stops early. Either way ``stopped_early`` then says where: ``{"camera": the ended source(s),
+    "frame": the first frame index not delivered, "expected": the frames expected, "reason": ...}`` (None after
+    an iteration that delivered every frame).
     """
+
+    stopped_early: dict[str, Any] | None = None
 
     def __init__(
         self, sources: list[FrameSource], stop_at_shortest: bool = False, max_frames: int | None = None
@@ -374,6 +390,7 @@ class SyncedFrames:
         return self._len
 
     def __iter__(self) -> Iterator[list[np.ndarray]]:
+        self.stopped_early = None
         if self._len == 0:
             return
         iterators = [iter(s) for s in self.sources]
@@ -391,6 +408,13 @@ class SyncedFrames:
                     yield frames
                     continue
                 names = ", ".join(self.sources[c].name for c in ended)
+                reasons = [self.sources[c].stopped_early for c in ended]
+                self.stopped_early = {
+                    "camera": names,
+                    "frame": index,
+                    "expected": self._len,
+                    "reason": "; ".join(r["reason"] for r in reasons if r) or "the source ended early",
+                }
                 if len(ended) == len(iterators) or self.stop_at_shortest:
                     log.warning("%s ended after %d frames (expected %d); stopping there", names, index, self._len)
                     return

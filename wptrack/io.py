@@ -8,9 +8,15 @@ half-written file.
 Files of a run directory (see :class:`RunWriter`):
 
 * ``run.json``: tracker, status (``running`` / ``complete`` / ``interrupted`` / ``failed``), config, versions,
-  start/finish times, frames written and the last frame written (``last_frame``), per-stage timings, summary.
+  start/finish times, frames written and the last frame written (``last_frame``), per-stage timings, summary; the
+  run loop adds ``stopped_early`` (where a truncated source ended, or None).
 * ``tracks.csv``: one line per (frame, target): ``frame,id,x,y,z`` then tracker-specific columns.
 * ``particles.npz``: subsampled particle clouds of some frames.
+
+Memory stays bounded however long the run: rows go to disk as they come, the particle clouds kept for
+``particles.npz`` are capped (:class:`RunWriter`'s ``particles_frames``: past the cap the kept frames are thinned
+to every other one, see :class:`ParticleStore`), and the per-stage timings are running statistics
+(:class:`StageTimer`: exact totals and means, the median of a bounded reservoir).
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ import logging
 import math
 import os
 import platform
+import random
 import tempfile
 import time
 from collections.abc import Iterable, Sequence
@@ -250,6 +257,102 @@ def _now() -> str:
     return datetime.now(timezone.utc).astimezone().isoformat(timespec="seconds")
 
 
+# ----------------------------------------------------------------------------------------------- bounded stores
+
+
+class StageTimer:
+    """Running statistics of one stage's durations, in bounded memory.
+
+    ``total_s``, ``count`` and ``mean_ms`` are exact. ``median_ms`` is exact up to ``reservoir`` samples; past that it
+    is the median of a uniform random sample of ``reservoir`` durations (Vitter's Algorithm R with a fixed seed, so
+    a run's run.json is reproducible): with the default 4096 samples the reported median lies between the true
+    49th and 51st percentiles with probability > 0.95 (the rank of a sample median has standard error
+    ``0.5 / sqrt(4096)`` = 0.8 %).
+
+    Args:
+        reservoir: Samples kept (>= 1).
+        seed: Seed of the replacement choices.
+    """
+
+    def __init__(self, reservoir: int = 4096, seed: int = 0) -> None:
+        if reservoir < 1:
+            raise ValueError(f"reservoir must be >= 1, got {reservoir}")
+        self.total = 0.0
+        self.count = 0
+        self._samples = np.empty(int(reservoir), dtype=np.float64)
+        self._rng = random.Random(seed)
+
+    def add(self, seconds: float) -> None:
+        """Add one duration (seconds)."""
+        v = float(seconds)
+        self.total += v
+        size = self._samples.shape[0]
+        if self.count < size:
+            self._samples[self.count] = v
+        else:
+            j = self._rng.randrange(self.count + 1)  # Algorithm R: keep the new sample with probability size/(n+1)
+            if j < size:
+                self._samples[j] = v
+        self.count += 1
+
+    @property
+    def exact(self) -> bool:
+        """Whether :meth:`summary`'s median is exact (every sample kept)."""
+        return self.count <= self._samples.shape[0]
+
+    def summary(self) -> dict[str, float]:
+        """``{"total_s", "count", "mean_ms", "median_ms"}`` (NaN mean and median without samples)."""
+        kept = self._samples[: min(self.count, self._samples.shape[0])]
+        return {
+            "total_s": float(self.total),
+            "count": int(self.count),
+            "mean_ms": float(self.total / self.count * 1e3) if self.count else math.nan,
+            "median_ms": float(np.median(kept) * 1e3) if self.count else math.nan,
+        }
+
+
+class ParticleStore:
+    """The particle clouds kept for ``particles.npz``, at most ``cap`` frames of them.
+
+    Frames are kept when their number is a multiple of the current stride, which starts at ``every``; when a new
+    frame would make more than ``cap``, the stride doubles and the frames no longer on it are dropped. After frames
+    ``0..F`` the store therefore holds exactly the frames ``f <= F`` with ``f % stride(F) == 0``, ``stride(F)`` the
+    smallest ``every * 2^j`` leaving at most ``cap`` of them: evenly spaced over the whole run, a function of ``F``
+    alone, so a resumed run ends with the same frames as an uninterrupted one. Memory: at most ``cap`` frames of
+    ``particles_max`` particles (16 bytes each).
+
+    Args:
+        every: Initial stride (frames), >= 1.
+        cap: Most frames kept, >= 1.
+    """
+
+    def __init__(self, every: int, cap: int) -> None:
+        if every < 1 or cap < 1:
+            raise ValueError(f"need every >= 1 and cap >= 1, got {every}, {cap}")
+        self.every = int(every)
+        self.cap = int(cap)
+        self.stride = int(every)
+        self.frames: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def wants(self, frame: int) -> bool:
+        """Whether ``frame`` is on the current stride (worth preparing its particles)."""
+        return int(frame) % self.stride == 0
+
+    def add(self, frame: int, positions: np.ndarray, weights: np.ndarray) -> bool:
+        """Keep a frame's ``(K, 3)`` positions and ``(K,)`` weights if it is on the stride; returns whether kept."""
+        frame = int(frame)
+        if frame % self.stride != 0:
+            return False
+        self.frames[frame] = (positions, weights)
+        while len(self.frames) > self.cap:
+            self.stride *= 2
+            self.frames = {f: v for f, v in self.frames.items() if f % self.stride == 0}
+        return frame in self.frames
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+
 # ----------------------------------------------------------------------------------------------- RunWriter
 
 
@@ -284,6 +387,12 @@ class RunWriter:
     and flushed at the end of every :meth:`add_rows` call (fsync'ed at most every ``flush_seconds`` and on
     close). ``particles.npz`` is rewritten atomically at most every ``flush_seconds`` and on close.
 
+    Memory is bounded for runs of any length: the particles of at most ``particles_frames`` frames are kept
+    (:class:`ParticleStore`: evenly spaced over the run, the spacing doubling as the run grows; ``particles.npz``
+    records it as ``every``), timings are running statistics (:class:`StageTimer`), and frames are counted, not
+    listed (rows must come in non-decreasing frame order, as the run loop writes them: ``frames`` counts the changes
+    of frame number).
+
     Use it as a context manager: leaving the block normally closes with ``"complete"``, by KeyboardInterrupt
     (or SystemExit) with ``"interrupted"``, by another exception with ``"failed"`` (the error is recorded in
     ``run.json``); exceptions are always re-raised.
@@ -295,6 +404,7 @@ class RunWriter:
         config: Tracker/run configuration recorded in run.json (made JSON-safe).
         particles_every: Keep the particles of frames whose number is a multiple of this; 0 keeps none.
         particles_max: At most this many particles per frame (deterministic evenly-strided subsample).
+        particles_frames: At most this many frames of particles kept (and written to particles.npz).
         flush_seconds: Minimum interval between periodic rewrites of run.json/particles.npz (and CSV fsyncs).
         resume_from: Continue the run already in ``out_dir`` after this frame: its tracks.csv rows and particle
             frames up to this frame are kept (later ones dropped) and appended to; run.json keeps its start time and
@@ -315,6 +425,7 @@ class RunWriter:
         particles_max: int = 2000,
         flush_seconds: float = 2.0,
         resume_from: int | None = None,
+        particles_frames: int = 500,
     ) -> None:
         columns = [str(c) for c in columns]
         if tuple(columns[: len(BASE_COLUMNS)]) != BASE_COLUMNS:
@@ -324,10 +435,10 @@ class RunWriter:
         bad = [c for c in columns if not c or any(ch in c for ch in ',"\n\r')]
         if bad:
             raise ValueError(f"invalid tracks column names: {bad}")
-        if particles_every < 0 or particles_max < 1 or flush_seconds < 0:
+        if particles_every < 0 or particles_max < 1 or flush_seconds < 0 or particles_frames < 1:
             raise ValueError(
-                f"need particles_every >= 0, particles_max >= 1, flush_seconds >= 0; got {particles_every}, "
-                f"{particles_max}, {flush_seconds}"
+                f"need particles_every >= 0, particles_max >= 1, flush_seconds >= 0, particles_frames >= 1; got "
+                f"{particles_every}, {particles_max}, {flush_seconds}, {particles_frames}"
             )
         self.out_dir = ensure_writable_dir(out_dir)
         self.tracks_path = self.out_dir / TRACKS_FILE
@@ -339,11 +450,12 @@ class RunWriter:
         self.flush_seconds = float(flush_seconds)
         self.status = "running"
         self.rows_written = 0
-        self._frames: set[int] = set()
+        self._frames_count = 0
+        self._last_row_frame: int | None = None
         self._last_frame: int | None = None
-        self._particles: list[tuple[int, np.ndarray, np.ndarray]] = []
+        self._particles = ParticleStore(max(1, self.particles_every), int(particles_frames))
         self._particles_dirty = False
-        self._timings: dict[str, list[float]] = {}
+        self._timings: dict[str, StageTimer] = {}
         self._t0 = time.monotonic()
         self._last_flush = self._t0
         self._closed = False
@@ -426,14 +538,18 @@ class RunWriter:
         self.rows_written += n
         for f in frames:
             with contextlib.suppress(TypeError, ValueError):
-                self._frames.add(int(f))
-                self._last_frame = int(f) if self._last_frame is None else max(self._last_frame, int(f))
+                f = int(f)
+                if f != self._last_row_frame:
+                    self._frames_count += 1
+                    self._last_row_frame = f
+                self._last_frame = f if self._last_frame is None else max(self._last_frame, f)
         self._maybe_flush()
 
     def add_particles(self, frame: int, positions: np.ndarray, weights: np.ndarray | None = None) -> None:
         """Record a frame's particles (kept in memory; written to particles.npz periodically and on close).
 
-        Only frames whose number is a multiple of ``particles_every`` are kept. More than ``particles_max``
+        Only frames whose number is a multiple of ``particles_every`` are kept, at most ``particles_frames`` of them
+        (see :class:`ParticleStore`). More than ``particles_max``
         particles are subsampled with an even deterministic stride (weights subsampled alike, not renormalised).
 
         Args:
@@ -445,7 +561,7 @@ class RunWriter:
             ValueError: Wrong shapes.
         """
         self._check_open()
-        if self.particles_every == 0 or int(frame) % self.particles_every != 0:
+        if self.particles_every == 0 or not self._particles.wants(frame):
             return
         pos = np.asarray(positions)
         if pos.ndim != 2 or pos.shape[1] != 3:
@@ -460,7 +576,7 @@ class RunWriter:
         if k > self.particles_max:
             idx = (np.arange(self.particles_max, dtype=np.int64) * k) // self.particles_max
             pos, w = pos[idx], w[idx]
-        self._particles.append((int(frame), pos.astype(np.float32, copy=True), w.astype(np.float32, copy=True)))
+        self._particles.add(int(frame), pos.astype(np.float32, copy=True), w.astype(np.float32, copy=True))
         self._particles_dirty = True
         self._maybe_flush()
 
@@ -470,25 +586,20 @@ class RunWriter:
 
     def add_timing(self, stage: str, seconds: float) -> None:
         """Add one duration sample (seconds) to a stage; run.json reports total, count, mean and median."""
-        self._timings.setdefault(stage, []).append(float(seconds))
+        timer = self._timings.get(stage)
+        if timer is None:
+            timer = self._timings[stage] = StageTimer()
+        timer.add(seconds)
 
     def timings(self) -> dict[str, dict[str, float]]:
-        """Per-stage summary: ``{stage: {"total_s", "count", "mean_ms", "median_ms"}}``."""
-        out = {}
-        for stage, samples in self._timings.items():
-            arr = np.asarray(samples, dtype=np.float64)
-            out[stage] = {
-                "total_s": float(arr.sum()),
-                "count": int(arr.size),
-                "mean_ms": float(arr.mean() * 1e3),
-                "median_ms": float(np.median(arr) * 1e3),
-            }
-        return out
+        """Per-stage summary: ``{stage: {"total_s", "count", "mean_ms", "median_ms"}}`` (the median is exact up to
+        4096 samples, then estimated from a bounded reservoir: :class:`StageTimer`)."""
+        return {stage: timer.summary() for stage, timer in self._timings.items()}
 
     @property
     def frames_written(self) -> int:
-        """Number of distinct frame numbers among the rows written."""
-        return len(self._frames)
+        """Number of distinct frame numbers among the rows written (rows in non-decreasing frame order)."""
+        return self._frames_count
 
     def flush(self) -> None:
         """fsync tracks.csv and rewrite particles.npz (if changed) and run.json now."""
@@ -517,7 +628,7 @@ class RunWriter:
             os.fsync(self._csv_file.fileno())
         finally:
             self._csv_file.close()
-        if self._particles:
+        if len(self._particles):
             self._write_particles()
         self._run.update(status=status, finished=_now())
         if summary is not None:
@@ -556,16 +667,19 @@ class RunWriter:
         self.rows_written = truncate_csv_after(self.tracks_path, frame)
         if self.rows_written:
             frames = read_tracks(self.tracks_path)["frame"]
-            self._frames = {int(f) for f in frames}
+            self._frames_count = len(np.unique(frames))
+            self._last_row_frame = int(frames[-1])
         self._last_frame = frame
         self._run["started"] = previous.get("started", self._run["started"])
         self._run["resumed"] = [*previous.get("resumed", []), {"after_frame": frame, "at": _now()}]
         if self.particles_path.exists():
             with np.load(self.particles_path) as z:
+                if "every" in z.files:  # the stride when it was written (>= the stride at ``frame``)
+                    self._particles.stride = max(self._particles.stride, int(z["every"]))
                 keep = z["frames"] <= frame
                 for f, pos, w in zip(z["frames"][keep], z["positions"][keep], z["weights"][keep], strict=True):
                     ok = ~np.isnan(w)
-                    self._particles.append((int(f), pos[ok], w[ok]))
+                    self._particles.add(int(f), pos[ok], w[ok])
             self._particles_dirty = True
 
     def _check_open(self) -> None:
@@ -577,15 +691,22 @@ class RunWriter:
             self.flush()
 
     def _write_particles(self) -> None:
-        n = len(self._particles)
-        k = max((p.shape[0] for _, p, _ in self._particles), default=0)
-        frames = np.array([f for f, _, _ in self._particles], dtype=np.int32)
+        kept = sorted(self._particles.frames.items())
+        n = len(kept)
+        k = max((p.shape[0] for _, (p, _) in kept), default=0)
+        frames = np.array([f for f, _ in kept], dtype=np.int32)
         positions = np.full((n, k, 3), np.nan, dtype=np.float32)
         weights = np.full((n, k), np.nan, dtype=np.float32)
-        for i, (_, p, w) in enumerate(self._particles):
+        for i, (_, (p, w)) in enumerate(kept):
             positions[i, : p.shape[0]] = p
             weights[i, : w.shape[0]] = w
-        atomic_save_npz(self.particles_path, frames=frames, positions=positions, weights=weights)
+        atomic_save_npz(
+            self.particles_path,
+            frames=frames,
+            positions=positions,
+            weights=weights,
+            every=np.int64(self._particles.stride),
+        )
         self._run["files"]["particles"] = PARTICLES_FILE
         self._particles_dirty = False
 

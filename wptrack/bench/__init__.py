@@ -23,6 +23,8 @@ SUITES: dict[str, str] = {
     "masks": "wptrack.bench.masks:MasksSuite",
     "people": "wptrack.bench.people:PeopleSuite",
     "batch": "wptrack.bench.batch:BatchSuite",
+    "soak": "wptrack.bench.soak:SoakSuite",
+    "soak-templates": "wptrack.bench.soak:TemplateSoakSuite",
 }
 """Suite name (``wptrack bench --tracker NAME``) -> ``"module:Class"`` of its suite class."""
 

@@ -5,7 +5,7 @@ Sections, in page order:
 1. 3D scene (the generic one): camera frusta, ground grid, each person's trajectory, ground truth.
 2. Occupancy and bounding volumes (paper Figs. 6 and 8): at the chosen frames, each person's occupancy pdf from
    ``occupancy.npz`` as iso-surfaces (PyVista contours of the voxel grid, off-screen) and the convex hull of the
-   particles holding P_H of the weight from ``hulls.npz`` as a mesh, with the camera frusta.
+   particles holding P_H of the weight from the run's ``hulls/`` chunks as a mesh, with the camera frusta.
 3. Each camera's frame with the hulls projected (the per-camera segmentation, Figs. 5 and 7) and the ids.
 4. Bird's-eye view of the trajectories, error vs frame against the ground truth, tracking metrics (MOTA, IDF1 at
    0.5 m, mean 3D centroid error), timings.
@@ -28,19 +28,25 @@ from .templates import id_bgr
 log = logging.getLogger(__name__)
 
 HULLS_FILE = "hulls.npz"
+"""The hulls of runs written before they were streamed in chunks (``hulls/``); still read."""
+HULLS_DIR = "hulls"
 OCCUPANCY_FILE = "occupancy.npz"
 MATCH_DISTANCE = 0.5
 """Ground-plane matching radius of the metrics, metres (issue 11)."""
 
 
-def load_hulls(run_dir: Path) -> dict[tuple[int, int], np.ndarray]:
-    """``{(frame, id): (V, 3) hull vertices}`` from ``hulls.npz`` (empty when the file is missing)."""
+def load_hulls(run_dir: Path, frames: Any = None) -> dict[tuple[int, int], np.ndarray]:
+    """``{(frame, id): (V, 3) hull vertices}`` from the run's ``hulls/`` chunks (``wptrack.chunklog``) or, for older
+    runs, ``hulls.npz`` (same index/vertices layout); empty when neither exists. ``frames``: only these frames (the
+    report's), so a long run's hulls are never all in memory."""
+    from ..chunklog import read_chunks
+
+    index, verts = read_chunks(run_dir / HULLS_DIR, frames)
     path = run_dir / HULLS_FILE
-    if not path.exists():
-        return {}
-    with np.load(path) as z:
-        index, verts = z["index"], z["vertices"]
-        return {(int(f), int(i)): verts[s : s + c].astype(np.float64) for f, i, s, c in index}
+    if not len(index) and path.exists():
+        with np.load(path) as z:
+            index, verts = z["index"], z["vertices"]
+    return {(int(f), int(i)): verts[s : s + c].astype(np.float64) for f, i, s, c in index}
 
 
 def load_occupancy(run_dir: Path) -> tuple[dict[tuple[int, int], tuple[np.ndarray, np.ndarray]], float]:
@@ -72,10 +78,10 @@ def section_occupancy(ctx: ReportContext) -> Section | None:
         "iso-surfaces at 25 % and 60 % of its peak, and the convex hull of the particles that hold 95 % of the "
         "weight (the bounding volume) as a wire mesh, one colour per id, with the camera frusta.",
     )
-    hulls = load_hulls(data.run_dir)
+    hulls = load_hulls(data.run_dir, ctx.frames)
     occ, voxel = load_occupancy(data.run_dir)
     if not hulls:
-        sec.notes.append(f"no {HULLS_FILE}: the bounding volumes are left out")
+        sec.notes.append(f"no hulls ({HULLS_DIR}/): the bounding volumes are left out")
     if not occ:
         sec.notes.append(f"no {OCCUPANCY_FILE} (tracked with --occupancy-every 0?): the occupancy is left out")
     if not hulls and not occ:
@@ -209,9 +215,9 @@ def section_segmentation(ctx: ReportContext) -> Section | None:
         text="The 95 % bounding volume of each person projected into every camera (filled, outlined, with its id):"
         " the multi-camera segmentation of the paper's Figs. 5 and 7.",
     )
-    hulls = load_hulls(data.run_dir)
+    hulls = load_hulls(data.run_dir, ctx.frames)
     if not hulls:
-        sec.notes.append(f"no {HULLS_FILE}: nothing to project")
+        sec.notes.append(f"no hulls ({HULLS_DIR}/): nothing to project")
         return sec
     images = scene3d.frames_for(ctx, data)
     if not images:

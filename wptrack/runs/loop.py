@@ -12,6 +12,8 @@ is built (rig, videos, sizes, parameters, device), and the loop then owns what a
 * a tqdm progress bar,
 * interruption: Ctrl-C (SIGINT) and SIGTERM stop the run after the frame in progress, with ``run.json`` status
   ``interrupted`` and the last frame written (``last_frame``); the outputs written so far stay valid,
+* a source that ends before its announced length (a video truncated mid-stream): the frames up to the break are
+  tracked and run.json's ``stopped_early`` says where (``{camera, frame, expected, reason}``; None otherwise),
 * checkpoints: ``checkpoint.npz`` (the tracker's whole state after a frame and the job's summary inputs) every
   ``checkpoint_seconds`` and when interrupted, so ``resume=True`` (``--resume``) continues an interrupted or
   crashed run and gives the same outputs as an uninterrupted run (the random streams are counter-based, keyed by
@@ -91,6 +93,8 @@ class TrackerRun:
         total: number of frames the source will give (None when unknown), for the progress bar.
         particles_every: keep the particle subsample of every this many frames in particles.npz (0: none).
         particles_max: at most this many particles per kept frame.
+        particles_frames: at most this many frames of particles kept (evenly spaced over the run, see
+            :class:`wptrack.io.ParticleStore`), so memory stays bounded however long the run.
     """
 
     name: str
@@ -99,6 +103,7 @@ class TrackerRun:
     total: int | None = None
     particles_every: int = 0
     particles_max: int = 2000
+    particles_frames: int = 500
 
     def info(self) -> dict[str, Any]:
         """Extra run.json fields (device, seed, ...)."""
@@ -129,6 +134,18 @@ class TrackerRun:
     def summary(self) -> dict[str, Any]:
         """The run summary recorded in run.json and returned by :func:`run_tracker`."""
         return {}
+
+    def stopped_early(self) -> dict[str, Any] | None:
+        """Where the frame source ended before its reported length (a truncated video), or None: the
+        ``stopped_early`` of the job's frame source (``self._frames``) or of its mask stream(s) (``self._masks``,
+        ``self._stream``; a mask stream's ``source``). Recorded in run.json."""
+        candidates = [getattr(self, "_frames", None), getattr(self, "_stream", None), *getattr(self, "_masks", [])]
+        for obj in candidates:
+            for src in (obj, getattr(obj, "source", None)):
+                info = getattr(src, "stopped_early", None)
+                if isinstance(info, dict):
+                    return info
+        return None
 
     def state_dict(self) -> dict[str, Any]:
         """Everything needed to continue after the last frame: the tracker's state (``self.tracker.state_dict()``)
@@ -252,6 +269,7 @@ def run_tracker(
             job.config,
             particles_every=job.particles_every,
             particles_max=job.particles_max,
+            particles_frames=job.particles_frames,
             resume_from=after,
         ) as out,
     ):
@@ -291,6 +309,15 @@ def run_tracker(
         finally:
             bar.close()
             job.finish()
+            stopped = job.stopped_early()
+            out.set_info(stopped_early=stopped)  # None: the source gave every frame it announced
+            if stopped:
+                log.warning(
+                    "the frames ended early: %s at frame %d (%s)",
+                    stopped["camera"],
+                    stopped["frame"],
+                    stopped["reason"],
+                )
         summary = job.summary()
         out.close("complete", summary)
     (out_dir / CHECKPOINT_FILE).unlink(missing_ok=True)

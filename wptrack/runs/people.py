@@ -2,11 +2,15 @@
 
 Outputs::
 
-    out_dir/tracks.csv     frame,id,x,y,z,sx,sy,sz,map_x,map_y,map_z,ess,loglik,age,cloud_z,top: x, y, z the person's
-                           3D centroid (BodyConfig), cloud_z the particles' mean height (the paper's estimate),
-                           top the top of the person's silhouette column (metres; empty when not found)
-    out_dir/hulls.npz      per (frame, person) the convex hull of the smallest particle set holding P_H of the
-                           weight (section 4): rows (frame, id, start, count) into one (V, 3) vertex array, metres
+    out_dir/tracks.csv     frame,id,x,y,z,sx,sy,sz,map_x,map_y,map_z,ess,loglik,age,cloud_z,top,degenerate: x, y, z
+                           the person's 3D centroid (BodyConfig), cloud_z the particles' mean height (the paper's
+                           estimate), top the top of the person's silhouette column (metres; empty when not found),
+                           degenerate 1 when every particle of the person had zero likelihood (log-weights -inf/NaN:
+                           the predicted particles were kept with uniform weights, the prior)
+    out_dir/hulls/         per (frame, person) the convex hull of the smallest particle set holding P_H of the
+                           weight (section 4), streamed to one .npz per 500 frames (``wptrack.chunklog``; memory
+                           bounded): rows (frame, id, start, count) into a (V, 3) vertex array, metres; read
+                           them with ``wptrack.chunklog.read_chunks``
     out_dir/occupancy.npz  every ``occupancy_every`` frames, each person's occupancy pdf on a voxel grid (float16,
                            1 / m^3) with its origin and voxel edge (Figs. 6 and 8)
     out_dir/masks_camK.avi the motion masks used (only with ``save_masks``)
@@ -42,8 +46,9 @@ PEOPLE_COLUMNS = [
     "age",
     "cloud_z",
     "top",
+    "degenerate",
 ]
-HULLS_FILE = "hulls.npz"
+HULLS_DIR = "hulls"
 OCCUPANCY_FILE = "occupancy.npz"
 
 
@@ -168,9 +173,10 @@ class PeopleRun(TrackerRun):
             "tracker": asdict(config),
             "occupancy_every": occupancy_every,
         }
-        self._hulls: list[tuple[int, int, np.ndarray]] = []
+        self._hulls: Any = None  # ChunkLog, opened by start()
         self._occupancy = _Thinned(cap=300)
         self._ids: dict[int, int] = {}  # id -> frames tracked
+        self._degenerate = 0  # (frame, person) estimates with all log-weights -inf/NaN
         self._out_dir: Path | None = None
         self._mask_writers: list[Any] = []
         self._frame_masks: list[np.ndarray] = []
@@ -183,9 +189,11 @@ class PeopleRun(TrackerRun):
         return zip(self._frames, *self._masks, strict=False)  # the masks may run longer (checked: not shorter)
 
     def start(self, out_dir: Path, resume_after: int | None = None) -> None:
+        from ..chunklog import ChunkLog
         from ..frames import VideoWriter
 
         self._out_dir = out_dir
+        self._hulls = ChunkLog(out_dir / HULLS_DIR, resume_after=resume_after)
         if resume_after is not None:
             self._load_npz_logs(out_dir, resume_after)
         if self._save_masks:
@@ -205,10 +213,12 @@ class PeopleRun(TrackerRun):
             rows.append(
                 [est.frame, person.id, *person.centroid, *person.std, *person.map, person.ess, person.loglik]
                 + [person.age, person.mean[2], person.top if np.isfinite(person.top) else None]
+                + [int(person.degenerate)]
             )
             self._ids[person.id] = self._ids.get(person.id, 0) + 1
+            self._degenerate += int(person.degenerate)
             if person.particles is not None:
-                self._hulls.append((est.frame, person.id, hull_points(person.particles, person.weights, p_h)))
+                self._hulls.add(est.frame, person.id, hull_points(person.particles, person.weights, p_h))
         out.add_rows(rows)
         if self._occupancy_every and est.frame % self._occupancy_every == 0:
             occ = self.tracker.occupancies([p.id for p in est.people])
@@ -219,19 +229,13 @@ class PeopleRun(TrackerRun):
         if est.frame % 100 == 99:
             self.flush()
 
-    # --- the npz logs (rewritten atomically) ------------------------------------------------------------
+    # --- the npz logs (hulls streamed in chunks, occupancy rewritten atomically) ------------------------
     def flush(self) -> None:
         from ..io import atomic_save_npz
 
         if self._out_dir is None:
             return
-        index = np.zeros((len(self._hulls), 4), dtype=np.int64)
-        start = 0
-        for r, (frame, pid, verts) in enumerate(self._hulls):
-            index[r] = (frame, pid, start, len(verts))
-            start += len(verts)
-        verts = np.concatenate([v for _, _, v in self._hulls]) if self._hulls else np.zeros((0, 3))
-        atomic_save_npz(self._out_dir / HULLS_FILE, index=index, vertices=verts.astype(np.float32))
+        self._hulls.flush()
         rows, origins, grids = [], [], []
         for frame, people in self._occupancy.items:
             for pid, origin, grid in people:
@@ -248,12 +252,7 @@ class PeopleRun(TrackerRun):
         )
 
     def _load_npz_logs(self, out_dir: Path, after: int) -> None:
-        hp, op = out_dir / HULLS_FILE, out_dir / OCCUPANCY_FILE
-        if hp.exists():
-            with np.load(hp) as z:
-                for frame, pid, start, count in z["index"]:
-                    if frame <= after:
-                        self._hulls.append((int(frame), int(pid), z["vertices"][start : start + count]))
+        op = out_dir / OCCUPANCY_FILE
         if op.exists():
             with np.load(op) as z:
                 by_frame: dict[int, list] = {}
@@ -265,6 +264,8 @@ class PeopleRun(TrackerRun):
 
     def finish(self) -> None:
         self.flush()
+        if self._hulls is not None:
+            self._hulls.close()
         for writer in self._mask_writers:
             writer.close()
 
@@ -274,11 +275,13 @@ class PeopleRun(TrackerRun):
             **self.tracker.state_dict(),
             "job.ids": np.asarray(ids, dtype=np.int64),
             "job.frames": np.asarray([self._ids[i] for i in ids], dtype=np.int64),
+            "job.degenerate": np.int64(self._degenerate),
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.tracker.load_state_dict({k: v for k, v in state.items() if not k.startswith("job.")})
         self._ids = {int(i): int(n) for i, n in zip(state["job.ids"], state["job.frames"], strict=True)}
+        self._degenerate = int(state["job.degenerate"])
 
     def summary(self) -> dict[str, Any]:
         return {
@@ -286,6 +289,7 @@ class PeopleRun(TrackerRun):
             "device": self.tracker.device,
             "people": len(self._ids),
             "frames_per_person": {str(k): v for k, v in sorted(self._ids.items())},
+            "degenerate_estimates": self._degenerate,
         }
 
 

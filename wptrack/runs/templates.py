@@ -2,9 +2,11 @@
 
 Outputs (all written incrementally or atomically, so an interrupted run leaves valid partial results)::
 
-    out_dir/tracks.csv     frame,id,x,y,z,class,length,width,height,orientation,speed,existence,gx,gy,sx,sy
+    out_dir/tracks.csv     frame,id,x,y,z,class,length,width,height,orientation,speed,existence,gx,gy,sx,sy,degenerate
                            (objects with existence >= min_existence; x,y,z the ground-contact point in the world
-                           frame and gx,gy on the ground plane, metres; orientation radians; speed m/s)
+                           frame and gx,gy on the ground plane, metres; orientation radians; speed m/s; degenerate 1
+                           when every particle's log-weight was -inf/NaN that frame: the predicted particles were
+                           kept with uniform weights, the prior; run.json's summary counts such frames)
     out_dir/best.csv       the same columns for the objects of the best particle (its whole scene hypothesis)
     out_dir/virtual.avi    the best particle's virtual scene per frame (paper Fig. 5), one colour per object id
     out_dir/masks.avi      the motion masks used (only with save_masks)
@@ -44,11 +46,12 @@ TEMPLATE_COLUMNS = [
     "gy",
     "sx",
     "sy",
+    "degenerate",
 ]
 
 
-def object_row(frame: int, o) -> list[Any]:
-    """One tracks.csv row of a ``TrackedObject``."""
+def object_row(frame: int, o, degenerate: bool = False) -> list[Any]:
+    """One tracks.csv row of a ``TrackedObject`` (``degenerate``: the frame's flag, ``TemplateEstimate.degenerate``)."""
     length, width, height = o.size
     return [
         frame,
@@ -65,6 +68,7 @@ def object_row(frame: int, o) -> list[Any]:
         float(o.ground[1]),
         float(o.std[0]),
         float(o.std[1]),
+        int(degenerate),
     ]
 
 
@@ -205,7 +209,9 @@ class TemplateRun(TrackerRun):
         }
         self._flood = FloodGuard(name=str(masks if masks is not None else video)) if flood_guard else None
         self._seen: dict[int, str] = {}
-        self._penalties: list[int] = []
+        self._penalty_sum = 0
+        self._penalty_frames = 0
+        self._degenerate = 0
         self._best_csv: _CsvAppender | None = None
         self._vwriter: Any = None
         self._mwriter: Any = None
@@ -235,11 +241,13 @@ class TemplateRun(TrackerRun):
         return self.tracker.step(item if self._flood is None else self._flood.filter(item))
 
     def record(self, est: Any, out: Any) -> None:
-        out.add_rows([object_row(est.frame, o) for o in est.objects])
-        self._best_csv.add([object_row(est.frame, o) for o in est.best])
+        out.add_rows([object_row(est.frame, o, est.degenerate) for o in est.objects])
+        self._best_csv.add([object_row(est.frame, o, est.degenerate) for o in est.best])
         for o in est.objects:
             self._seen.setdefault(o.id, o.cls)
-        self._penalties.append(est.penalty)
+        self._penalty_sum += int(est.penalty)  # running sums: memory bounded however long the run
+        self._penalty_frames += 1
+        self._degenerate += int(est.degenerate)
         if self._vwriter is not None and est.virtual is not None:
             self._vwriter.write(colour_virtual(est.virtual, self.tracker.host["slot_label"].numpy()))
         if self._mwriter is not None:
@@ -255,14 +263,18 @@ class TemplateRun(TrackerRun):
             **self.tracker.state_dict(),
             "job.seen_ids": np.asarray(ids, dtype=np.int64),
             "job.seen_classes": np.asarray([self._seen[i] for i in ids], dtype=str),
-            "job.penalties": np.asarray(self._penalties, dtype=np.int64),
+            "job.penalty_sum": np.int64(self._penalty_sum),
+            "job.penalty_frames": np.int64(self._penalty_frames),
+            "job.degenerate": np.int64(self._degenerate),
             **(self._flood.state() if self._flood is not None else {}),
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         super().load_state_dict(state)
         self._seen = {int(i): str(c) for i, c in zip(state["job.seen_ids"], state["job.seen_classes"], strict=True)}
-        self._penalties = [int(v) for v in state["job.penalties"]]
+        self._penalty_sum = int(state["job.penalty_sum"])
+        self._penalty_frames = int(state["job.penalty_frames"])
+        self._degenerate = int(state["job.degenerate"])
         if self._flood is not None:
             self._flood.load(state, self.tracker.frames_done)
 
@@ -280,7 +292,8 @@ class TemplateRun(TrackerRun):
             "device": self.tracker.device,
             "objects": len(seen),
             "classes": {c: sum(1 for v in seen.values() if v == c) for c in ("human", "vehicle")},
-            "mean_penalty": float(np.mean(self._penalties)) if self._penalties else None,
+            "mean_penalty": self._penalty_sum / self._penalty_frames if self._penalty_frames else None,
+            "degenerate_frames": self._degenerate,
             "flooded_frames": len(self._flood.flooded) if self._flood is not None else None,
         }
 

@@ -74,6 +74,8 @@ class PersonEstimate:
         age: frames since the person was added.
         particles: (K, 3) subsample of the particles (before resampling), metres, or None.
         weights: (K,) their weights relative to the best particle, or None.
+        degenerate: every particle's log-weight was -inf/NaN this frame (floored to ``kernels.reduce.LOGW_FLOOR``):
+            the person's predicted particles were kept with uniform weights (the prior), the estimate is finite.
     """
 
     id: int
@@ -87,6 +89,7 @@ class PersonEstimate:
     age: int
     particles: np.ndarray | None = None
     weights: np.ndarray | None = None
+    degenerate: bool = False
 
 
 @dataclass
@@ -344,6 +347,7 @@ class PersonFilter(ParticleFilter):
             ess=float(e[kreduce.EST_ESS]),
             loglik=float(e[kreduce.EST_LOGLIK]),
             age=age,
+            degenerate=bool(e[kreduce.EST_DEGENERATE]),
         )
         if self.keep:
             est.particles = self.sub_x_host.numpy().copy()

@@ -264,4 +264,7 @@ class TemplateEstimate:
     """(H, W) uint8 virtual scene of the best particle: 0 background, 1 + slot of the nearest object."""
     uoh: np.ndarray | None = None
     """(H, W) int32 Uncovered Object Histogram (eq. 10), when requested."""
+    degenerate: bool = False
+    """Every particle's log-weight was -inf or NaN (floored to ``kernels.reduce.LOGW_FLOOR``): the frame kept the
+    predicted particles with uniform weights (the prior) and its estimate is the prior's; ``loglik`` is the floor."""
     timings: dict[str, float] = field(default_factory=dict)

@@ -345,6 +345,7 @@ class TemplateTracker(FrameChain):
             "best_state": wp.zeros((r, 11), dtype=wp.float32, device="cpu", pinned=pinned),
             "add": wp.zeros(2, dtype=wp.int32, device="cpu", pinned=pinned),
             "qtotal": wp.zeros(1, dtype=wp.int32, device="cpu", pinned=pinned),
+            "est": wp.zeros(int(kreduce.EST_SIZE), dtype=wp.float64, device="cpu", pinned=pinned),
         }
         if self.keep_virtual:
             self.host["virtual"] = wp.zeros((h, w), dtype=wp.uint8, device="cpu", pinned=pinned)
@@ -544,6 +545,7 @@ class TemplateTracker(FrameChain):
         wp.copy(h["best_state"], self.best_state)
         wp.copy(h["add"], self.add)
         wp.copy(h["qtotal"], self.qtotal)
+        wp.copy(h["est"], self.est)
         if self.keep_virtual:
             wp.copy(h["virtual"], self.virtual)
         if self.keep_uoh:
@@ -640,6 +642,8 @@ class TemplateTracker(FrameChain):
             ess=float(se[0, kslots.SE_ESS]),
             loglik=float(se[0, kslots.SE_LOGLIK]),
             added=added,
+            # every log-weight -inf/NaN (floored in the score kernel): uniform weights, the predicted particles kept
+            degenerate=bool(h["est"].numpy()[kreduce.EST_MAXLOGW] <= float(kreduce.LOGW_FLOOR)),
         )
         if self.keep_virtual:
             est.virtual = h["virtual"].numpy().copy()
