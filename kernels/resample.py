@@ -12,6 +12,7 @@ non-monotone by an ulp (see :func:`positive_parent`).
 """
 
 import warp as wp
+
 from wptrack.kernels.random import STREAM_RESAMPLE, STREAM_RESIDUAL, random_words, word_to_unit64
 
 wp.set_module_options({"enable_backward": False})

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 from test_kernels_random import philox_ref
+
 from wptrack.kernels import reduce as kreduce
 
 

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from wptrack.kernels import reduce as kred
 
 from tests.test_kernels_reduce import run_reduction
+from wptrack.kernels import reduce as kred
 from wptrack.trackers.gaussian3d import Gaussian3DTracker
 
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import warp as wp
-from wptrack.kernels import camera as kcam
 
+from wptrack.kernels import camera as kcam
 from wptrack.rig import Camera, Rig
 from wptrack.warpcams import DeviceRig, fold_radius2
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import warp as wp
+
 from wptrack.kernels import colour as kcolour
 from wptrack.kernels import scoring as kscoring
-
 from wptrack.rig import Camera, Rig
 from wptrack.trackers.colour import HSITarget
 from wptrack.warpcams import ColourMaps, DeviceRig, camera_struct

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import warp as wp
+
 from wptrack.kernels import motion as kmotion
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 from kernel_refs import normal4_ref, uniform4_ref
+
 from wptrack.kernels import motion as kmotion
 from wptrack.kernels import random as krand
 

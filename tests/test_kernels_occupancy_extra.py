@@ -9,6 +9,7 @@ import pytest
 import warp as wp
 from scipy.special import logsumexp
 from test_kernels_reduce import run_reduction
+
 from wptrack.kernels import occupancy as kocc
 from wptrack.kernels import reduce as kreduce
 

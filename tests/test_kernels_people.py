@@ -10,11 +10,11 @@ import colorsys
 import numpy as np
 import pytest
 import warp as wp
+
 from wptrack.kernels import camera as kcam
 from wptrack.kernels import descriptor as kdesc
 from wptrack.kernels import occupancy as kocc
 from wptrack.kernels import people as kpeople
-
 from wptrack.rig import Camera, Rig
 from wptrack.warpcams import DeviceRig
 

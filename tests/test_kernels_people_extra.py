@@ -25,10 +25,10 @@ from test_kernels_people import (
     run_descriptor,
     run_predict,
 )
+
 from wptrack.kernels import people as kpeople
 from wptrack.kernels import random as krand
 from wptrack.kernels import reduce as kreduce
-
 from wptrack.rig import Rig
 from wptrack.warpcams import DeviceRig
 

@@ -16,10 +16,10 @@ from test_kernels_colour import TARGETS, make_rig, mask_and_integral, random_fra
 from test_kernels_random import philox_ref
 from test_kernels_scoring_extra import FRAME, SEED, launch_fused
 from test_proposal import HI, LO, np_log_det, np_log_motion, ray_dir, rig3
+
 from wptrack.kernels import proposal as kproposal
 from wptrack.kernels import random as krand
 from wptrack.kernels import scoring as kscoring
-
 from wptrack.warpcams import DeviceRig
 
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import warp as wp
 from scipy import stats
+
 from wptrack.kernels import random as krand
 
 M0, M1 = 0xD2511F53, 0xCD9E8D57

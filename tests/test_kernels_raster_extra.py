@@ -18,8 +18,8 @@ from test_kernels_templates import (
     raster,
     reference_scene,
 )
-from wptrack.kernels import raster as kraster
 
+from wptrack.kernels import raster as kraster
 from wptrack.rig import GroundPlane
 
 

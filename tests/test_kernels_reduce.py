@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import warp as wp
+
 from wptrack.kernels import reduce as kred
 
 BLOCK = 256

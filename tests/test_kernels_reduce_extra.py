@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import warp as wp
+
 from wptrack.kernels import reduce as kreduce
 
 

@@ -11,10 +11,10 @@ import pytest
 import warp as wp
 from kernel_refs import check_partials, normal4_ref
 from test_kernels_colour import TARGETS, make_rig, mask_and_integral, random_frames, upload, window_ref
+
 from wptrack.kernels import random as krand
 from wptrack.kernels import reduce as kreduce
 from wptrack.kernels import scoring as kscoring
-
 from wptrack.warpcams import DeviceRig
 
 BLOCK = 256  # as wptrack.pf launches the fused kernels

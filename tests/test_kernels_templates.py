@@ -17,13 +17,13 @@ import math
 import numpy as np
 import pytest
 import warp as wp
+
 from wptrack.kernels import dynamics as kdyn
 from wptrack.kernels import raster as kraster
 from wptrack.kernels import reduce as kreduce
 from wptrack.kernels import slots as kslots
 from wptrack.kernels import uoh as kuoh
 from wptrack.kernels import xor as kxor
-
 from wptrack.pf import BLOCK, _seed_words
 from wptrack.rig import Camera, GroundPlane, Rig
 from wptrack.trackers.templates import (

@@ -11,13 +11,13 @@ import cv2
 import numpy as np
 import pytest
 import warp as wp
-from wptrack.kernels import background as kbg
 
 from wptrack.background import bracket, plan_windows
 from wptrack.bench import numpy_masks
 from wptrack.cli import main
 from wptrack.errors import ConfigError, FrameError
 from wptrack.frames import open_source, write_video
+from wptrack.kernels import background as kbg
 from wptrack.masks import MaskConfig, open_masks
 
 H, W = 72, 96

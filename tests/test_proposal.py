@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import warp as wp
 from test_tracker_colour import BALL, TARGET, frames_for, small_rig
-from wptrack.kernels import proposal as kproposal
 
 from wptrack.errors import ConfigError
+from wptrack.kernels import proposal as kproposal
 from wptrack.rig import Camera, Rig
 from wptrack.trackers.colour import ColorConfig, ColorTracker, HSITarget
 from wptrack.warpcams import DeviceRig

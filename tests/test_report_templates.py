@@ -71,8 +71,8 @@ def test_template_outlines_match_raster_kernel():
     """The report's NumPy template hulls are the tracker's: same vertices, same projection (distortion included),
     on a shifted and tilted ground plane."""
     import warp as wp
-    from wptrack.kernels import raster as kraster
 
+    from wptrack.kernels import raster as kraster
     from wptrack.report.templates import template_outlines
     from wptrack.trackers.templates import Hulls, _plane_struct
     from wptrack.warpcams import camera_struct

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import warp as wp
-from wptrack.kernels import random as wrand
-from wptrack.kernels import resample as kres
 
 from wptrack.errors import ConfigError
+from wptrack.kernels import random as wrand
+from wptrack.kernels import resample as kres
 from wptrack.resampling import SCHEMES, Resampler, make_resampler, offspring_counts
 
 SEED = wp.vec2ui(0x1234ABCD, 0x0BADF00D)

@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import warp as wp
-from wptrack.kernels import camera as kcam
 
 from wptrack.errors import ConfigError, RigError
 from wptrack.groundtruth import boxes_to_ground, read_box_groundtruth, read_boxes
+from wptrack.kernels import camera as kcam
 from wptrack.rig import Rig
 from wptrack.tsai import _distorted_radius, load_tsai_camera, read_tsai, tsai_fit_residual, tsai_to_camera
 from wptrack.warpcams import DeviceRig
