@@ -37,10 +37,11 @@ PER_LANE_GPU = 8
 2.19 ms, 8 -> 1.48 ms, 32 -> 2.28 ms)."""
 PER_LANE_CPU = 1024
 LONG_RANGE = 64
-"""Longest offspring range a thread of the scatter kernels writes itself; a parent with more children writes its
-first slot and leaves the rest to :func:`kernels.resample.long_ranges_fill_kernel`, which spreads them over a fixed
-grid (one parent owning ~1e6 of 1e8 slots serialised the scatter: 199 ms on an H200). The list costs
-8 / (LONG_RANGE + 1) bytes per particle (0.12)."""
+"""Longest offspring range a thread of the scatter kernels writes itself on a GPU; a parent with more children
+writes its first slot and leaves the rest to :func:`kernels.resample.long_ranges_fill_kernel`, which spreads them
+over a fixed grid (one parent owning ~1e6 of 1e8 slots serialised the scatter: 199 ms on an H200). The list costs
+8 / (LONG_RANGE + 1) bytes per particle (0.12). On the CPU backend, which runs a launch on one thread, the default is
+no list (a range costs the same wherever it is written; no fill launch)."""
 FILL_BLOCKS_GPU = 512
 """Blocks of the long-range fill kernel on a GPU (on the CPU backend: one)."""
 
@@ -64,19 +65,21 @@ class Resampler:
         log_weights: build for :meth:`from_log_weights` (float32 log-weights) instead of :meth:`__call__`.
         long_range: the longest offspring range one thread writes itself (systematic and residual schemes); longer
             ones are filled by the whole grid (:func:`kernels.resample.long_ranges_fill_kernel`). Any value >= 1
-            gives the same ancestors.
+            gives the same ancestors. Default: :data:`LONG_RANGE` on a GPU, ``capacity`` (no list) on the CPU.
 
     Raises:
         ConfigError: unknown scheme (the message lists the valid names), a capacity below 1 or a long_range below 1.
     """
 
     def __init__(
-        self, scheme: str, capacity: int, device: str, log_weights: bool = False, long_range: int = LONG_RANGE
+        self, scheme: str, capacity: int, device: str, log_weights: bool = False, long_range: int | None = None
     ) -> None:
         if scheme not in SCHEMES:
             raise ConfigError(f"resampling scheme {scheme!r}: expected one of {', '.join(SCHEMES)}")
         if int(capacity) < 1:
             raise ConfigError(f"resampler capacity {capacity}: expected at least 1 particle")
+        if long_range is None:
+            long_range = int(capacity) if wp.get_device(device).is_cpu else LONG_RANGE
         if int(long_range) < 1:
             raise ConfigError(f"resampler long_range {long_range}: expected at least 1 slot")
         self.scheme = scheme
@@ -188,7 +191,7 @@ class Resampler:
                 device=self.device,
             )
             if self.scheme == "systematic":
-                self._fill_long(ancestors, groups)
+                self._fill_long(ancestors, groups, n)
             return
         wp.launch(
             kres.residual_split_kernel,
@@ -206,7 +209,7 @@ class Resampler:
             outputs=[ancestors, *self._long_lists()],
             device=self.device,
         )
-        self._fill_long(ancestors, groups)  # before the draws, which may copy deterministic slots
+        self._fill_long(ancestors, groups, n)  # before the draws, which may copy deterministic slots
         wp.launch(
             kres.residual_draw_kernel,
             dim=n,
@@ -300,15 +303,17 @@ class Resampler:
             block_dim=BLOCK,
             device=self.device,
         )
-        self._fill_long(ancestors, self.blocks)
+        self._fill_long(ancestors, self.blocks, n)
 
     def _long_lists(self) -> list[wp.array]:
         """The long-range list arrays, in the kernels' argument order."""
         return [self.long_meta, self.long_base, self.long_lo, self.long_off]
 
-    def _fill_long(self, ancestors: wp.array, groups: int) -> None:
+    def _fill_long(self, ancestors: wp.array, groups: int, n: int) -> None:
         """Fill the long offspring ranges recorded by the scatter kernel (a fixed launch that returns at once when
-        there are none)."""
+        there are none; not launched when no range can be long)."""
+        if self.long_range >= n:
+            return
         wp.launch_tiled(
             kres.long_ranges_fill_kernel,
             dim=[self.fill_blocks],
