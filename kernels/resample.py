@@ -146,8 +146,9 @@ def long_ranges_fill_kernel(
     zero) and returns at once when there are none (the usual case). Otherwise the threads walk the concatenated long
     slots with a grid stride (consecutive threads, consecutive slots); a thread finds the group of its flat index by
     binary search over the scan, the range within the group by binary search over the offsets, and searches again
-    only when its index leaves the current range. The parent is read back from the range's first slot, written by
-    the scatter kernel. Launch ``wp.launch_tiled(dim=[fill_blocks])``.
+    only when its index leaves the current range (the group search only when it leaves the group). The parent is
+    read back from the range's first slot, written by the scatter kernel. Launch
+    ``wp.launch_tiled(dim=[fill_blocks])``.
 
     Args:
         long_meta: (>= groups,) packed ``count << 32 | total length`` of each group's recorded ranges.
@@ -164,29 +165,36 @@ def long_ranges_fill_kernel(
         return
     f = b * wp.block_dim() + lane
     stride = fill_blocks * wp.block_dim()
-    start = int(0)  # noqa: UP018 (dynamic variables: the current range, as flat indices and its slots)
+    # dynamic variables: the current group (flat indices [gstart, gend), list entries [base, base + cnt)) and range
+    # (flat indices [start, end) -> slots from slot0); f only grows, so both searches only move forward
+    gstart = int(0)  # noqa: UP018
+    gend = int(0)  # noqa: UP018
+    base = int(0)  # noqa: UP018
+    cnt = int(0)  # noqa: UP018
+    a = int(0)  # noqa: UP018
+    start = int(0)  # noqa: UP018
     end = int(0)  # noqa: UP018
     slot0 = int(0)  # noqa: UP018
     parent = int(0)  # noqa: UP018
     while f < total:
         if f >= end:
-            lo = int(0)  # noqa: UP018 (first group g with ends[g] > f)
-            hi = groups
-            while lo < hi:
-                mid = (lo + hi) // 2
-                if ends[mid] > f:
-                    hi = mid
-                else:
-                    lo = mid + 1
-            g = lo
-            m = long_meta[g]
-            glen = int(m & LOW_MASK)
-            cnt = int(m >> LONG_SHIFT)
-            gstart = int(ends[g]) - glen
+            if f >= gend:
+                lo = int(0)  # noqa: UP018 (first group g with ends[g] > f)
+                hi = groups
+                while lo < hi:
+                    mid = (lo + hi) // 2
+                    if ends[mid] > f:
+                        hi = mid
+                    else:
+                        lo = mid + 1
+                m = long_meta[lo]
+                gend = int(ends[lo])
+                gstart = gend - int(m & LOW_MASK)
+                cnt = int(m >> LONG_SHIFT)
+                base = int(long_base[lo])
+                a = 0
             local = f - gstart
-            base = int(long_base[g])
-            a = int(0)  # noqa: UP018 (last entry k with long_off[base + k] <= local)
-            z = cnt - 1
+            z = cnt - 1  # last entry k >= a with long_off[base + k] <= local
             while a < z:
                 mid = (a + z + 1) // 2
                 if int(long_off[base + mid]) <= local:
@@ -194,7 +202,7 @@ def long_ranges_fill_kernel(
                 else:
                     z = mid - 1
             start = gstart + int(long_off[base + a])
-            end = gstart + glen
+            end = gend
             if a + 1 < cnt:
                 end = gstart + int(long_off[base + a + 1])
             slot0 = int(long_lo[base + a])
@@ -580,7 +588,7 @@ def systematic_logw_kernel(
     start = b * chunk
     stop = wp.min(start + chunk, n)
     if lane == 0:
-        long_meta[b] = wp.int64(0)  # before the block-wide sums below, which synchronise the block
+        long_meta[b] = wp.int64(0)  # before the block-wide sums below (with several warps: a __syncthreads)
     if enabled[0] == 0:
         for i in range(start + lane, stop, bd):
             ancestors[i] = i
