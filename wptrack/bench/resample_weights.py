@@ -22,7 +22,8 @@ import numpy as np
 WEIGHT_SIGMAS = {"ordinary": 1.0, "concentrated": 5.0}
 """Standard deviation of the synthetic log-weights of each ``--weights`` case."""
 SERIAL_FRAMES = 5
-"""Timed calls of the serial reference path (slow by design on concentrated weights on a GPU)."""
+"""Timed calls of the serial reference path on a GPU (slow by design on concentrated weights); ``frames`` on the
+CPU."""
 
 
 def _time_calls(call, count: int, device) -> list[float]:
@@ -88,7 +89,8 @@ def run_weights_case(n: int, device: str, weights: str, frames: int = 50, numpy_
     result_anc = anc.numpy()
     meta = r.long_meta.numpy()
     anc_serial = wp.zeros(n, dtype=wp.int32, device=dev)
-    serial_times = _time_calls(lambda: resample(serial, anc_serial), min(frames, SERIAL_FRAMES), dev)
+    serial_frames = frames if dev.is_cpu else min(frames, SERIAL_FRAMES)
+    serial_times = _time_calls(lambda: resample(serial, anc_serial), serial_frames, dev)
     equivalent = bool(np.array_equal(result_anc, anc_serial.numpy()))
     if n <= numpy_max:
         q_dev = wp.zeros(n, dtype=wp.int64, device=dev)
