@@ -9,6 +9,10 @@ frame number lives in a device array so that a captured graph can be replayed fr
 Conventions: ``n`` is the number of live particles (launch dimension), ``ancestors[j]`` is the parent of output
 particle ``j``. A parent with zero weight is never selected, even when float rounding in the scan makes the CDF
 non-monotone by an ulp (see :func:`positive_parent`).
+
+The scatter kernels (systematic, residual) write short offspring ranges from the parent's thread and leave ranges
+longer than ``long_range`` slots to :func:`long_ranges_fill_kernel`, which spreads them over its whole grid (one
+parent owning most of the slots no longer serialises the pass).
 """
 
 import warp as wp

@@ -12,6 +12,9 @@ Two inputs:
   prefix sums in 20-bit limbs) fused with the scatter, with no per-particle temporary; the other schemes write the
   float64 weights first.
 
+Offspring ranges longer than ``long_range`` slots (systematic and residual schemes, GPU default :data:`LONG_RANGE`)
+are written by a follow-up fill kernel with all its threads, so one heavy parent does not serialise the scatter.
+
 Example::
 
     resampler = make_resampler("systematic", capacity=n, device="cuda:0")
