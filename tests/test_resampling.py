@@ -352,14 +352,17 @@ def test_log_weights_systematic_exact_cdf(device, rng, n):
 def test_log_weights_systematic_offspring(device, rng):
     """Every frame: offspring counts are floor or ceil of N q_i / T, sum to N, zero weights get none; over 200
     frames the pooled counts are unbiased (chi-square at significance 1e-4) and the count variance is the exact
-    systematic one (within 5 %)."""
+    systematic one (within 5 %). Every frame, ranges above 2 slots filled by the long-range kernel give the same
+    ancestors (so the same statistics)."""
     n, frames = 3000, 200
     logw = _log_weights(rng, n)
     r = Resampler("systematic", n, device, log_weights=True)
+    r_long = Resampler("systematic", n, device, log_weights=True, long_range=2)
     counts = np.empty((frames, n))
     q = None
     for k in range(frames):
         a, q = _run_log(r, logw, k, device)
+        np.testing.assert_array_equal(_run_log(r_long, logw, k, device)[0], a)
         c = offspring_counts(a, n)
         x = n * q / q.sum()
         assert c.sum() == n
@@ -372,6 +375,7 @@ def test_log_weights_systematic_offspring(device, rng):
     assert chi2 < _chi2_upper(int(live.sum()) - 1, 3.719), chi2
     var_exact = _expected_count_variance("systematic", q.astype(np.float64)).sum()
     assert abs(counts.var(axis=0, ddof=1).sum() / var_exact - 1.0) < 0.05
+    assert (r_long.long_meta.numpy() >> 32).sum() > 0  # the last frame used the long-range list
 
 
 @pytest.mark.parametrize("scheme", SCHEMES)
