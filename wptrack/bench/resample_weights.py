@@ -27,8 +27,9 @@ alternates with the timed path, ``frames`` calls each."""
 
 
 def _time_calls(call, count: int, device) -> list[float]:
-    """Seconds of ``count`` calls of ``call`` (CUDA events around each on a GPU; wall clock on the CPU, whose
-    launches are synchronous)."""
+    """Seconds of ``count`` calls of ``call``: CUDA events around each on a GPU; on the CPU, whose launches run
+    synchronously on the calling thread, that thread's CPU time (a shared machine's load changes the wall clock by
+    several times; the CPU time much less)."""
     import warp as wp
 
     if device.is_cuda:
@@ -41,9 +42,9 @@ def _time_calls(call, count: int, device) -> list[float]:
         return [wp.get_event_elapsed_time(ev[k], ev[k + 1]) / 1000.0 for k in range(count)]
     out = []
     for _ in range(count):
-        t0 = time.perf_counter()
+        t0 = time.thread_time()
         call()
-        out.append(time.perf_counter() - t0)
+        out.append(time.thread_time() - t0)
     return out
 
 
