@@ -64,7 +64,6 @@ class Resampler:
         scheme: one of :data:`SCHEMES`.
         capacity: the largest particle count a call may use; all temporaries are allocated for it here.
         device: Warp device alias (``"cpu"``, ``"cuda:0"``, ...).
-
         log_weights: build for :meth:`from_log_weights` (float32 log-weights) instead of :meth:`__call__`.
         long_range: the longest offspring range one thread writes itself (systematic and residual schemes); longer
             ones are filled by the whole grid (:func:`kernels.resample.long_ranges_fill_kernel`). Any value >= 1
@@ -181,8 +180,8 @@ class Resampler:
         buf = self._buffers(n)
         wp.utils.array_scan(w, buf["cdf"], inclusive=True)
         groups, chunk = block_partition(n, self.device.is_cpu, BLOCK, MAX_BLOCKS)
-        if self.long_meta is not None:
-            self.long_meta.zero_()
+        if self.long_meta is not None and self.long_range < n:
+            self.long_meta.zero_()  # the counters of the groups (the fused log-weight pass zeroes its own)
         if self.scheme in _SEARCH_KERNELS:
             long_args = [self.long_range, chunk] if self.scheme == "systematic" else []
             long_out = self._long_lists() if self.scheme == "systematic" else []
