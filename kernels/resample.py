@@ -103,11 +103,10 @@ def long_base_of(first_slot: int, long_range: int, group: int):
 
 
 @wp.func
-def scatter_range(
+def record_long_range(
     lo: int,
     hi: int,
     parent: int,
-    long_range: int,
     group: int,
     base: int,
     ancestors: wp.array(dtype=wp.int32),
@@ -115,17 +114,14 @@ def scatter_range(
     long_lo: wp.array(dtype=wp.int32),
     long_off: wp.array(dtype=wp.int32),
 ):
-    """Write ``parent`` to the output slots ``[lo, hi)``: directly up to ``long_range`` slots, else the first slot
-    plus a list entry (first unwritten slot, offset in the group's concatenated long ranges) for the fill kernel."""
-    if hi - lo > long_range:
-        ancestors[lo] = parent
-        old = wp.atomic_add(long_meta, group, LONG_ONE + wp.int64(hi - lo - 1))
-        k = base + int(old >> LONG_SHIFT)
-        long_lo[k] = lo + 1
-        long_off[k] = int(old & LOW_MASK)
-    else:
-        for s in range(lo, hi):
-            ancestors[s] = parent
+    """A long offspring range ``[lo, hi)`` (more than ``long_range`` slots; the callers write shorter ones
+    themselves): write ``parent`` to its first slot and append a list entry (first unwritten slot, offset in the
+    group's concatenated long ranges) for :func:`long_ranges_fill_kernel`."""
+    ancestors[lo] = parent
+    old = wp.atomic_add(long_meta, group, LONG_ONE + wp.int64(hi - lo - 1))
+    k = base + int(old >> LONG_SHIFT)
+    long_lo[k] = lo + 1
+    long_off[k] = int(old & LOW_MASK)
 
 
 @wp.func
@@ -247,7 +243,7 @@ def systematic_kernel(
         n: number of particles (launch dimension).
         long_range, chunk: the longest range written by its own thread; parents per group of the list.
         ancestors: (n,) output parent indices.
-        long_meta, long_base, long_lo, long_off: the long-range list (see :func:`scatter_range`).
+        long_meta, long_base, long_lo, long_off: the long-range list (see :func:`record_long_range`).
     """
     i = wp.tid()
     if enabled[0] == 0:
@@ -274,7 +270,11 @@ def systematic_kernel(
     if hi <= lo:
         return
     k = positive_parent(weights, i, n)
-    scatter_range(lo, hi, k, long_range, g, base, ancestors, long_meta, long_lo, long_off)
+    if hi - lo > long_range:
+        record_long_range(lo, hi, k, g, base, ancestors, long_meta, long_lo, long_off)
+    else:
+        for s in range(lo, hi):
+            ancestors[s] = k
 
 
 @wp.kernel
@@ -392,7 +392,7 @@ def residual_scatter_kernel(
         n: number of particles (launch dimension).
         long_range, chunk: the longest range written by its own thread; parents per group of the list.
         ancestors: (n,) output parent indices (slots ``[0, sum(counts))``).
-        long_meta, long_base, long_lo, long_off: the long-range list (see :func:`scatter_range`).
+        long_meta, long_base, long_lo, long_off: the long-range list (see :func:`record_long_range`).
     """
     i = wp.tid()
     if enabled[0] == 0:
@@ -409,8 +409,11 @@ def residual_scatter_kernel(
         base = long_base_of(base, long_range, g)
     if i == first:
         long_base[g] = base
-    if end > start:
-        scatter_range(start, end, i, long_range, g, base, ancestors, long_meta, long_lo, long_off)
+    if end - start > long_range:
+        record_long_range(start, end, i, g, base, ancestors, long_meta, long_lo, long_off)
+    else:
+        for s in range(start, end):
+            ancestors[s] = i
 
 
 @wp.kernel
@@ -585,7 +588,7 @@ def systematic_logw_kernel(
         n: number of particles.
         long_range: the longest offspring range a lane writes itself.
         ancestors: (n,) int32 output parent indices.
-        long_meta, long_base, long_lo, long_off: the long-range list (see :func:`scatter_range`), one group per block.
+        long_meta, long_base, long_lo, long_off: the long-range list (:func:`record_long_range`), a group per block.
     """
     b, lane = wp.tid()
     bd = wp.block_dim()
@@ -632,7 +635,11 @@ def systematic_logw_kernel(
                 hi = systematic_slot_exact(c, ratio, u, n)
                 if i == n - 1:
                     hi = n
-                scatter_range(lo, hi, i, long_range, b, list_base, ancestors, long_meta, long_lo, long_off)
+                if hi - lo > long_range:
+                    record_long_range(lo, hi, i, b, list_base, ancestors, long_meta, long_lo, long_off)
+                else:
+                    for s in range(lo, hi):
+                        ancestors[s] = i
                 lo = hi
         last = wp.tile_from_thread(shape=1, value=inclusive, thread_idx=bd - 1)
         carry += last[0]  # the round's total (the last lane's inclusive sum)
