@@ -457,10 +457,13 @@ def test_long_ranges_log_weights_exact(device, rng, case, long_range):
     logw = _concentrated_log_weights(rng, n, case)
     r = Resampler("systematic", n, device, log_weights=True, long_range=long_range)
     serial = Resampler("systematic", n, device, log_weights=True, long_range=n)
+    strided = Resampler("systematic", n, device, log_weights=True, long_range=long_range)
+    strided.fill_blocks = 7  # another grid stride (on the CPU backend: 7 one-lane blocks instead of one)
     for frame in (0, 9):
         anc, q = _run_log(r, logw, frame, device)
         ref = systematic_exact_reference(q, frame, device)
         np.testing.assert_array_equal(anc, ref)
+        np.testing.assert_array_equal(_run_log(strided, logw, frame, device)[0], ref)
         lengths = offspring_counts(ref, n)
         recorded = r.long_meta.numpy()
         assert int((recorded >> 32).sum()) == int((lengths > long_range).sum())
