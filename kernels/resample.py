@@ -9,6 +9,10 @@ frame number lives in a device array so that a captured graph can be replayed fr
 Conventions: ``n`` is the number of live particles (launch dimension), ``ancestors[j]`` is the parent of output
 particle ``j``. A parent with zero weight is never selected, even when float rounding in the scan makes the CDF
 non-monotone by an ulp (see :func:`positive_parent`).
+
+The scatter kernels (systematic, residual) write short offspring ranges from the parent's thread and leave ranges
+longer than ``long_range`` slots to :func:`long_ranges_fill_kernel`, which spreads them over its whole grid (one
+parent owning most of the slots no longer serialises the pass).
 """
 
 import warp as wp
@@ -74,6 +78,140 @@ def systematic_slot(c: wp.float64, nf: wp.float64, total: wp.float64, u: wp.floa
     return s
 
 
+# --- long offspring ranges: written by the whole grid, not by one thread ---------------------------------------
+#
+# A parent whose offspring range [lo, hi) is longer than ``long_range`` slots writes only its first slot and records
+# the rest, [lo + 1, hi), in a list; :func:`long_ranges_fill_kernel` then fills all recorded slots with every thread
+# of a fixed grid. The ranges are the same integers as before, so the ancestors are bit-identical; only who writes
+# them changes. The parents are split into ``groups`` contiguous groups (the blocks of the fused pass); group ``g``
+# counts its long ranges and their total length in one packed int64 ``long_meta[g]`` (count << 32 | length; one
+# atomic add per long range on the group's own counter, never per particle on one address) and writes its entries
+# from ``long_base[g] = S_g // (long_range + 1) + g`` on, ``S_g`` being its first output slot. Long ranges are
+# disjoint and longer than ``long_range``, so group g has at most ``(S_{g+1} - S_g) // (long_range + 1)`` of them and
+# the groups' regions never overlap: the list needs ``n // (long_range + 1) + groups + 1`` entries in all.
+
+MAX_GROUPS = wp.constant(2048)
+"""Largest number of parent groups of the long-range list (the fill kernel scans their lengths as one tile)."""
+LONG_SHIFT = wp.constant(wp.int64(32))
+LONG_ONE = wp.constant(wp.int64(1 << 32))
+LOW_MASK = wp.constant(wp.int64(0xFFFFFFFF))
+
+
+@wp.func
+def long_base_of(first_slot: int, long_range: int, group: int):
+    """First list entry of a group whose offspring start at output slot ``first_slot``."""
+    return first_slot // (long_range + 1) + group
+
+
+@wp.func
+def record_long_range(
+    lo: int,
+    hi: int,
+    parent: int,
+    group: int,
+    base: int,
+    ancestors: wp.array(dtype=wp.int32),
+    long_meta: wp.array(dtype=wp.int64),
+    long_lo: wp.array(dtype=wp.int32),
+    long_off: wp.array(dtype=wp.int32),
+):
+    """A long offspring range ``[lo, hi)`` (more than ``long_range`` slots; the callers write shorter ones
+    themselves): write ``parent`` to its first slot and append a list entry (first unwritten slot, offset in the
+    group's concatenated long ranges) for :func:`long_ranges_fill_kernel`."""
+    ancestors[lo] = parent
+    old = wp.atomic_add(long_meta, group, LONG_ONE + wp.int64(hi - lo - 1))
+    k = base + int(old >> LONG_SHIFT)
+    long_lo[k] = lo + 1
+    long_off[k] = int(old & LOW_MASK)
+
+
+@wp.func
+def low_word(v: wp.int64):
+    """The length field (low 32 bits) of a packed ``long_meta`` entry."""
+    return wp.int32(v & LOW_MASK)
+
+
+@wp.kernel
+def long_ranges_fill_kernel(
+    long_meta: wp.array(dtype=wp.int64),
+    long_base: wp.array(dtype=wp.int32),
+    long_lo: wp.array(dtype=wp.int32),
+    long_off: wp.array(dtype=wp.int32),
+    groups: int,
+    fill_blocks: int,
+    ancestors: wp.array(dtype=wp.int32),
+):
+    """Fill the recorded long offspring ranges with every thread of a fixed grid (after the scatter kernel).
+
+    Each block scans the groups' long-range lengths (one tile of :data:`MAX_GROUPS`; entries past ``groups`` must be
+    zero) and returns at once when there are none (the usual case). Otherwise the threads walk the concatenated long
+    slots with a grid stride (consecutive threads, consecutive slots); a thread finds the group of its flat index by
+    binary search over the scan, the range within the group by binary search over the offsets, and searches again
+    only when its index leaves the current range (the group search only when it leaves the group). The parent is
+    read back from the range's first slot, written by the scatter kernel. Launch
+    ``wp.launch_tiled(dim=[fill_blocks])``.
+
+    Args:
+        long_meta: (>= groups,) packed ``count << 32 | total length`` of each group's recorded ranges.
+        long_base: (>= groups,) first list entry of each group.
+        long_lo, long_off: list entries: first unwritten slot, offset within the group's concatenation.
+        groups: number of parent groups of this call (at most :data:`MAX_GROUPS`).
+        fill_blocks: launch dimension (the grid stride is ``fill_blocks x block_dim``).
+        ancestors: (n,) int32 output parent indices (completed in place).
+    """
+    b, lane = wp.tid()
+    ends = wp.tile_scan_inclusive(wp.tile_map(low_word, wp.tile_load(long_meta, shape=MAX_GROUPS)))
+    total = ends[MAX_GROUPS - 1]
+    if total == 0:
+        return
+    f = b * wp.block_dim() + lane
+    stride = fill_blocks * wp.block_dim()
+    # dynamic variables: the current group (flat indices [gstart, gend), list entries [base, base + cnt)) and range
+    # (flat indices [start, end) -> slots from slot0); f only grows, so both searches only move forward
+    gstart = int(0)  # noqa: UP018
+    gend = int(0)  # noqa: UP018
+    base = int(0)  # noqa: UP018
+    cnt = int(0)  # noqa: UP018
+    a = int(0)  # noqa: UP018
+    start = int(0)  # noqa: UP018
+    end = int(0)  # noqa: UP018
+    slot0 = int(0)  # noqa: UP018
+    parent = int(0)  # noqa: UP018
+    while f < total:
+        if f >= end:
+            if f >= gend:
+                lo = int(0)  # noqa: UP018 (first group g with ends[g] > f)
+                hi = groups
+                while lo < hi:
+                    mid = (lo + hi) // 2
+                    if ends[mid] > f:
+                        hi = mid
+                    else:
+                        lo = mid + 1
+                m = long_meta[lo]
+                gend = int(ends[lo])
+                gstart = gend - int(m & LOW_MASK)
+                cnt = int(m >> LONG_SHIFT)
+                base = int(long_base[lo])
+                a = 0
+            local = f - gstart
+            z = cnt - 1  # last entry k >= a with long_off[base + k] <= local
+            while a < z:
+                mid = (a + z + 1) // 2
+                if int(long_off[base + mid]) <= local:
+                    a = mid
+                else:
+                    z = mid - 1
+            start = gstart + int(long_off[base + a])
+            end = gend
+            if a + 1 < cnt:
+                end = gstart + int(long_off[base + a + 1])
+            slot0 = int(long_lo[base + a])
+            parent = int(ancestors[slot0 - 1])
+        ancestors[slot0 + f - start] = parent
+        f += stride
+
+
 @wp.kernel
 def systematic_kernel(
     weights: wp.array(dtype=wp.float64),
@@ -82,12 +220,20 @@ def systematic_kernel(
     frame: wp.array(dtype=wp.int32),
     enabled: wp.array(dtype=wp.int32),
     n: int,
+    long_range: int,
+    chunk: int,
     ancestors: wp.array(dtype=wp.int32),
+    long_meta: wp.array(dtype=wp.int64),
+    long_base: wp.array(dtype=wp.int32),
+    long_lo: wp.array(dtype=wp.int32),
+    long_off: wp.array(dtype=wp.int32),
 ):
     """Systematic resampling as an O(n) scatter over parents (one uniform ``U`` per frame, counter index 0).
 
     Parent ``i`` writes its index to the output slots ``[floor(n C_{i-1}/T + U), floor(n C_i/T + U))``; the first
     parent starts at 0 and the last ends at ``n``, so every slot is written (exactly once for a monotone CDF).
+    Ranges longer than ``long_range`` go to the long-range list of group ``i // chunk`` (``long_meta`` zeroed
+    before the launch) and :func:`long_ranges_fill_kernel` completes them.
 
     Args:
         weights: (n,) unnormalised non-negative weights.
@@ -96,7 +242,9 @@ def systematic_kernel(
         frame: (1,) filter iteration.
         enabled: (1,) 0 -> identity.
         n: number of particles (launch dimension).
+        long_range, chunk: the longest range written by its own thread; parents per group of the list.
         ancestors: (n,) output parent indices.
+        long_meta, long_base, long_lo, long_off: the long-range list (see :func:`record_long_range`).
     """
     i = wp.tid()
     if enabled[0] == 0:
@@ -111,11 +259,23 @@ def systematic_kernel(
     hi = n
     if i < n - 1:
         hi = systematic_slot(cdf[i], nf, total, u, n)
+    g = i // chunk
+    first = g * chunk
+    base = int(0)  # noqa: UP018 (dynamic variable: the group's list base, needed by its first and long parents)
+    if i == first or hi - lo > long_range:
+        if first > 0:
+            base = systematic_slot(cdf[first - 1], nf, total, u, n)
+        base = long_base_of(base, long_range, g)
+    if i == first:
+        long_base[g] = base
     if hi <= lo:
         return
     k = positive_parent(weights, i, n)
-    for s in range(lo, hi):
-        ancestors[s] = k
+    if hi - lo > long_range:
+        record_long_range(lo, hi, k, g, base, ancestors, long_meta, long_lo, long_off)
+    else:
+        for s in range(lo, hi):
+            ancestors[s] = k
 
 
 @wp.kernel
@@ -213,16 +373,27 @@ def residual_scatter_kernel(
     positions: wp.array(dtype=wp.int32),
     enabled: wp.array(dtype=wp.int32),
     n: int,
+    long_range: int,
+    chunk: int,
     ancestors: wp.array(dtype=wp.int32),
+    long_meta: wp.array(dtype=wp.int64),
+    long_base: wp.array(dtype=wp.int32),
+    long_lo: wp.array(dtype=wp.int32),
+    long_off: wp.array(dtype=wp.int32),
 ):
     """Deterministic part of residual resampling: parent ``i`` fills ``counts_i`` slots ending at ``positions[i]``.
+
+    Ranges longer than ``long_range`` go to the long-range list of group ``i // chunk`` (``long_meta`` zeroed before
+    the launch); :func:`long_ranges_fill_kernel` completes them before :func:`residual_draw_kernel` runs.
 
     Args:
         counts: (n,) deterministic copies per parent.
         positions: (n,) inclusive prefix sum of ``counts``.
         enabled: (1,) 0 -> identity.
         n: number of particles (launch dimension).
+        long_range, chunk: the longest range written by its own thread; parents per group of the list.
         ancestors: (n,) output parent indices (slots ``[0, sum(counts))``).
+        long_meta, long_base, long_lo, long_off: the long-range list (see :func:`record_long_range`).
     """
     i = wp.tid()
     if enabled[0] == 0:
@@ -230,8 +401,20 @@ def residual_scatter_kernel(
         return
     end = wp.min(positions[i], n)
     start = positions[i] - counts[i]
-    for s in range(start, end):
-        ancestors[s] = i
+    g = i // chunk
+    first = g * chunk
+    base = int(0)  # noqa: UP018 (dynamic variable: the group's list base, needed by its first and long parents)
+    if i == first or end - start > long_range:
+        if first > 0:
+            base = wp.min(positions[first - 1], n)
+        base = long_base_of(base, long_range, g)
+    if i == first:
+        long_base[g] = base
+    if end - start > long_range:
+        record_long_range(start, end, i, g, base, ancestors, long_meta, long_lo, long_off)
+    else:
+        for s in range(start, end):
+            ancestors[s] = i
 
 
 @wp.kernel
@@ -377,7 +560,12 @@ def systematic_logw_kernel(
     n: int,
     chunk: int,
     per_lane: int,
+    long_range: int,
     ancestors: wp.array(dtype=wp.int32),
+    long_meta: wp.array(dtype=wp.int64),
+    long_base: wp.array(dtype=wp.int32),
+    long_lo: wp.array(dtype=wp.int32),
+    long_off: wp.array(dtype=wp.int32),
 ):
     """Pass 2 of systematic resampling from log-weights: exact scan and O(N) scatter, fused.
 
@@ -386,7 +574,9 @@ def systematic_logw_kernel(
     ``block_dim x per_lane`` particles (``per_lane`` contiguous ones per lane), scans the rounds' q_i exactly (three
     int32 limb scans) and writes parent ``i`` to the slots ``[slot(C_{i-1}), slot(C_i))`` with
     ``slot(c) = floor(n c / T + U)`` and one uniform U per frame (Philox counter ``(0, frame, STREAM_RESAMPLE)``,
-    as :func:`systematic_kernel`). When ``enabled[0] == 0`` it writes the identity. Launch
+    as :func:`systematic_kernel`). When ``enabled[0] == 0`` it writes the identity. A range longer than
+    ``long_range`` slots goes to block b's long-range list (the block zeroes its ``long_meta[b]`` first) and
+    :func:`long_ranges_fill_kernel`, launched next, completes it. Launch
     ``wp.launch_tiled(dim=[blocks], block_dim=B)``.
 
     Args:
@@ -397,12 +587,16 @@ def systematic_logw_kernel(
         per_lane: contiguous particles per lane and scan round (any value >= 1 is exact).
         seed, frame, enabled: as :func:`systematic_kernel`.
         n: number of particles.
+        long_range: the longest offspring range a lane writes itself.
         ancestors: (n,) int32 output parent indices.
+        long_meta, long_base, long_lo, long_off: the long-range list (:func:`record_long_range`), a group per block.
     """
     b, lane = wp.tid()
     bd = wp.block_dim()
     start = b * chunk
     stop = wp.min(start + chunk, n)
+    if lane == 0:
+        long_meta[b] = wp.int64(0)  # before the block-wide sums below (with several warps: a __syncthreads)
     if enabled[0] == 0:
         for i in range(start + lane, stop, bd):
             ancestors[i] = i
@@ -418,6 +612,9 @@ def systematic_logw_kernel(
     total = block_sum_exact(every)
     u = word_to_unit64(random_words(seed, 0, frame[0], STREAM_RESAMPLE)[0])
     ratio = wp.float64(n) / wp.float64(total)
+    list_base = long_base_of(systematic_slot_exact(offset, ratio, u, n), long_range, b)
+    if lane == 0:
+        long_base[b] = list_base
     carry = offset
     for base in range(start, stop, bd * per_lane):
         first = base + lane * per_lane
@@ -439,8 +636,11 @@ def systematic_logw_kernel(
                 hi = systematic_slot_exact(c, ratio, u, n)
                 if i == n - 1:
                     hi = n
-                for s in range(lo, hi):
-                    ancestors[s] = i
+                if hi - lo > long_range:
+                    record_long_range(lo, hi, i, b, list_base, ancestors, long_meta, long_lo, long_off)
+                else:
+                    for s in range(lo, hi):
+                        ancestors[s] = i
                 lo = hi
         last = wp.tile_from_thread(shape=1, value=inclusive, thread_idx=bd - 1)
         carry += last[0]  # the round's total (the last lane's inclusive sum)

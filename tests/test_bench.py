@@ -37,6 +37,25 @@ def test_bench_color_tiny(tmp_path, capsys, device):
     assert "frame ms" in text
 
 
+def test_bench_color_weights(tmp_path, capsys, device):
+    """--weights: resampling alone on synthetic log-weights, one case per particle count, the long-range path
+    bit-identical to the serial scatter and to the NumPy reference."""
+    out = tmp_path / "weights.json"
+    argv = ["bench", "-q", "--device", device, "--particles", "3000", "--weights", "concentrated", "--frames", "2"]
+    code = main([*argv, "--out", str(out)])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    (r,) = json.loads(out.read_text())["results"]
+    assert r["weights"] == "concentrated" and r["equivalent"] is True, r
+    assert r["long_ranges"] > 0 and r["max_offspring"] > 64 and r["resample_ms"] > 0 and r["serial_ms"] > 0
+    assert "resample concentrated" in text
+
+
+def test_bench_weights_only_for_color(capsys):
+    assert main(["bench", "--tracker", "templates", "--device", "cpu", "--weights", "ordinary"]) == 2
+    assert "--weights" in capsys.readouterr().err
+
+
 def test_bench_unknown_suite(capsys):
     assert main(["bench", "--tracker", "nope", "--device", "cpu"]) == 2
     assert "unknown suite" in capsys.readouterr().err

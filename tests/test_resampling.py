@@ -9,7 +9,7 @@ import warp as wp
 from wptrack.errors import ConfigError
 from wptrack.kernels import random as wrand
 from wptrack.kernels import resample as kres
-from wptrack.resampling import SCHEMES, Resampler, make_resampler, offspring_counts
+from wptrack.resampling import MAX_BLOCKS, SCHEMES, Resampler, make_resampler, offspring_counts
 
 SEED = wp.vec2ui(0x1234ABCD, 0x0BADF00D)
 UNIT64 = 2.3283064365386963e-10  # word_to_unit64: (w + 0.5) * 2^-32
@@ -352,14 +352,17 @@ def test_log_weights_systematic_exact_cdf(device, rng, n):
 def test_log_weights_systematic_offspring(device, rng):
     """Every frame: offspring counts are floor or ceil of N q_i / T, sum to N, zero weights get none; over 200
     frames the pooled counts are unbiased (chi-square at significance 1e-4) and the count variance is the exact
-    systematic one (within 5 %)."""
+    systematic one (within 5 %). Every frame, ranges above 2 slots filled by the long-range kernel give the same
+    ancestors (so the same statistics)."""
     n, frames = 3000, 200
     logw = _log_weights(rng, n)
     r = Resampler("systematic", n, device, log_weights=True)
+    r_long = Resampler("systematic", n, device, log_weights=True, long_range=2)
     counts = np.empty((frames, n))
     q = None
     for k in range(frames):
         a, q = _run_log(r, logw, k, device)
+        np.testing.assert_array_equal(_run_log(r_long, logw, k, device)[0], a)
         c = offspring_counts(a, n)
         x = n * q / q.sum()
         assert c.sum() == n
@@ -372,6 +375,7 @@ def test_log_weights_systematic_offspring(device, rng):
     assert chi2 < _chi2_upper(int(live.sum()) - 1, 3.719), chi2
     var_exact = _expected_count_variance("systematic", q.astype(np.float64)).sum()
     assert abs(counts.var(axis=0, ddof=1).sum() / var_exact - 1.0) < 0.05
+    assert (r_long.long_meta.numpy() >> 32).sum() > 0  # the last frame used the long-range list
 
 
 @pytest.mark.parametrize("scheme", SCHEMES)
@@ -423,3 +427,111 @@ def test_log_weights_systematic_large(device, rng):
     x = n * q / q.sum()
     assert c.sum() == n and np.all((c == np.floor(x)) | (c == np.ceil(x)))
     np.testing.assert_array_equal(anc, systematic_exact_reference(q, 1, device))
+
+
+# --- long offspring ranges: filled by the whole grid (issue 13) -----------------------------------------------------
+
+LONG_N = 40_000  # three blocks of the fused pass on the CPU backend (16384 particles each), 157 on a GPU
+
+
+def _concentrated_log_weights(rng: np.random.Generator, n: int, case: str) -> np.ndarray:
+    """float32 log-weights of the long-range cases: ``spread`` (N(0, 1): short ranges only at the default
+    threshold), ``one`` (one parent with almost all the weight), ``few`` (a few heavy parents, two adjacent in the
+    first block, the others in later blocks), ``halves`` (two parents, in the first and last block, with half the
+    weight each: the first one's range covers the output slots of the middle block's particles)."""
+    if case == "spread":
+        return rng.normal(size=n).astype(np.float32)
+    logw = (rng.normal(size=n) - 25.0).astype(np.float32)  # exp(-25) 2^k: quantised to 0..2 (k = 44 at 4e4)
+    heavy = {"one": [n // 3], "few": [5, 6, 9000, n // 2 + 17, n - 2], "halves": [100, n - 100]}[case]
+    logw[heavy] = rng.uniform(-0.5, 0.0, size=len(heavy)).astype(np.float32)
+    return logw
+
+
+@pytest.mark.parametrize("case", ["spread", "one", "few", "halves"])
+@pytest.mark.parametrize("long_range", [1, 64])
+def test_long_ranges_log_weights_exact(device, rng, case, long_range):
+    """Systematic resampling from log-weights with long offspring ranges equals the NumPy reference on the same
+    integers, and the ancestors with a threshold no range reaches (every range written by its own lane, the code
+    before the long-range list); the list is used whenever a range exceeds the threshold."""
+    n = LONG_N
+    logw = _concentrated_log_weights(rng, n, case)
+    r = Resampler("systematic", n, device, log_weights=True, long_range=long_range)
+    serial = Resampler("systematic", n, device, log_weights=True, long_range=n)
+    strided = Resampler("systematic", n, device, log_weights=True, long_range=long_range)
+    strided.fill_blocks = 7  # another grid stride (on the CPU backend: 7 one-lane blocks instead of one)
+    for frame in (0, 9):
+        anc, q = _run_log(r, logw, frame, device)
+        ref = systematic_exact_reference(q, frame, device)
+        np.testing.assert_array_equal(anc, ref)
+        np.testing.assert_array_equal(_run_log(strided, logw, frame, device)[0], ref)
+        lengths = offspring_counts(ref, n)
+        recorded = r.long_meta.numpy()
+        assert int((recorded >> 32).sum()) == int((lengths > long_range).sum())
+        assert int((recorded & 0xFFFFFFFF).sum()) == int((lengths[lengths > long_range] - 1).sum())
+        np.testing.assert_array_equal(_run_log(serial, logw, frame, device)[0], anc)
+        assert not (serial.long_meta.numpy() >> 32).any()
+    if case in ("one", "halves"):
+        assert lengths.max() > n // 3  # a range across the output slots of several blocks
+    if case == "few":
+        assert lengths.max() > n // 10
+        assert ((r.long_meta.numpy() >> 32) > 0).sum() >= 2  # long ranges recorded by more than one block
+        assert (r.long_meta.numpy()[0] >> 32) >= 2  # and several in the same block
+
+
+def test_long_ranges_reset_between_frames(device, rng):
+    """A concentrated frame, then a spread one and a disabled one on the same resampler: the list of the earlier
+    frame is never replayed."""
+    n = LONG_N
+    r = Resampler("systematic", n, device, log_weights=True, long_range=8)
+    for case in ("one", "spread"):
+        logw = _concentrated_log_weights(rng, n, case)
+        anc, q = _run_log(r, logw, 3, device)
+        np.testing.assert_array_equal(anc, systematic_exact_reference(q, 3, device))
+    _run_log(r, _concentrated_log_weights(rng, n, "one"), 4, device)
+    anc, _ = _run_log(r, _concentrated_log_weights(rng, n, "one"), 4, device, enabled=0)
+    np.testing.assert_array_equal(anc, np.arange(n))
+
+
+@pytest.mark.parametrize("scheme", ["systematic", "residual"])
+@pytest.mark.parametrize("long_range", [1, 64])
+def test_long_ranges_float_weights(device, rng, scheme, long_range):
+    """The float64-weight paths with long ranges (one parent with almost all the weight, then a few heavy ones;
+    all of the capacity, then n below it) equal their NumPy references."""
+    cap = LONG_N
+    r = Resampler(scheme, cap, device, long_range=long_range)
+    for n, heavy in ((cap, [cap // 3]), (cap - 1000, [7, 8, 20_000, cap - 1001])):
+        w = rng.gamma(0.7, size=n) * 1e-6
+        w[heavy] = 1.0 + rng.random(len(heavy))
+        w_dev = wp.array(w, dtype=wp.float64, device=device)
+        for frame in (0, 5):
+            anc = _run(r, w_dev, frame, device)
+            np.testing.assert_array_equal(anc, reference(scheme, w, r, frame, device))
+            assert (r.long_meta.numpy() >> 32).sum() >= len(heavy)
+
+
+def test_long_range_config(device):
+    assert MAX_BLOCKS <= kres.MAX_GROUPS  # the fill kernel scans the groups as one tile
+    with pytest.raises(ConfigError, match="long_range"):
+        Resampler("systematic", 10, device, long_range=0)
+
+
+def test_long_ranges_cuda_graph(device, rng):
+    """The fused pass and the fill kernel captured once replay spread and concentrated weights exactly."""
+    if wp.get_device(device).is_cpu:
+        pytest.skip("CUDA graph capture needs a CUDA device")
+    n = LONG_N
+    r = Resampler("systematic", n, device, log_weights=True)
+    est = wp.zeros(16, dtype=wp.float64, device=device)
+    logw_dev = wp.zeros(n, dtype=wp.float32, device=device)
+    anc = wp.zeros(n, dtype=wp.int32, device=device)
+    frame = wp.array([2], dtype=wp.int32, device=device)
+    r.from_log_weights(logw_dev, est, MAX_SLOT, SEED, frame, anc)  # warm-up: module load, scratch
+    with wp.ScopedCapture(device=device) as capture:
+        r.from_log_weights(logw_dev, est, MAX_SLOT, SEED, frame, anc)
+    for case in ("spread", "one", "few"):
+        logw = _concentrated_log_weights(rng, n, case)
+        logw_dev.assign(logw)
+        est.assign(np.where(np.arange(16) == MAX_SLOT, float(logw.max()), 0.0))
+        wp.capture_launch(capture.graph)
+        _, q = _run_log(r, logw, 2, device)
+        np.testing.assert_array_equal(anc.numpy(), systematic_exact_reference(q, 2, device))

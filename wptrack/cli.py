@@ -458,12 +458,18 @@ def cmd_bench(args) -> int:
         counts = [int(p) for p in args.particles] if args.particles else sorted({g.particles for g in grid})
         seconds = getattr(args, second) or sorted({getattr(g, second) for g in grid})
         grid = [type(grid[0])(p, c) for c in seconds for p in counts]
+    extra = {}
+    if args.weights:  # resampling alone on synthetic log-weights, once per particle count
+        if args.tracker != "color":
+            raise ConfigError(f"--weights: only the 'color' suite times resampling alone, not {args.tracker!r}")
+        extra["weights"] = args.weights
+        grid = list({case.particles: case for case in grid}.values())
     results = []
     row = getattr(suite, "format_row", format_row)
     print(getattr(suite, "HEADER", HEADER))
     for case in grid:
         frames = args.frames if args.frames is not None else getattr(suite, "default_frames", 50)
-        r = suite.run_case(case, device, frames=frames, numpy_max=args.numpy_max)
+        r = suite.run_case(case, device, frames=frames, numpy_max=args.numpy_max, **extra)
         results.append(r)
         print(row(r), flush=True)
         if args.out:
@@ -761,6 +767,12 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--frames", type=_positive_int, default=None, help="timed frames per case (default 50; soak 10000)")
     b.add_argument("--numpy-max", type=int, default=100_000, help="largest N also run by the NumPy reference")
     b.add_argument("--out", default=None, help="write the results as JSON here")
+    b.add_argument(
+        "--weights",
+        choices=("ordinary", "concentrated"),
+        default=None,
+        help="color suite: time resampling alone on synthetic log-weights, N(0, 1) or N(0, 5^2)",
+    )
     _add_device(b)
     b.set_defaults(func=cmd_bench)
     return p

@@ -12,6 +12,9 @@ Two inputs:
   prefix sums in 20-bit limbs) fused with the scatter, with no per-particle temporary; the other schemes write the
   float64 weights first.
 
+Offspring ranges longer than ``long_range`` slots (systematic and residual schemes, GPU default :data:`LONG_RANGE`)
+are written by a follow-up fill kernel with all its threads, so one heavy parent does not serialise the scatter.
+
 Example::
 
     resampler = make_resampler("systematic", capacity=n, device="cuda:0")
@@ -36,6 +39,14 @@ PER_LANE_GPU = 8
 """Contiguous particles per lane and scan round of the fused systematic pass on a GPU (H200, 1e8 particles: 2 ->
 2.19 ms, 8 -> 1.48 ms, 32 -> 2.28 ms)."""
 PER_LANE_CPU = 1024
+LONG_RANGE = 64
+"""Longest offspring range a thread of the scatter kernels writes itself on a GPU; a parent with more children
+writes its first slot and leaves the rest to :func:`kernels.resample.long_ranges_fill_kernel`, which spreads them
+over a fixed grid (one parent owning ~1e6 of 1e8 slots serialised the scatter: 199 ms on an H200). The list costs
+8 / (LONG_RANGE + 1) bytes per particle (0.12). On the CPU backend, which runs a launch on one thread, the default is
+no list (a range costs the same wherever it is written; no fill launch)."""
+FILL_BLOCKS_GPU = 512
+"""Blocks of the long-range fill kernel on a GPU (on the CPU backend: one)."""
 
 SCHEMES: tuple[str, ...] = ("multinomial", "stratified", "systematic", "residual")
 
@@ -53,16 +64,26 @@ class Resampler:
         scheme: one of :data:`SCHEMES`.
         capacity: the largest particle count a call may use; all temporaries are allocated for it here.
         device: Warp device alias (``"cpu"``, ``"cuda:0"``, ...).
+        log_weights: build for :meth:`from_log_weights` (float32 log-weights) instead of :meth:`__call__`.
+        long_range: the longest offspring range one thread writes itself (systematic and residual schemes); longer
+            ones are filled by the whole grid (:func:`kernels.resample.long_ranges_fill_kernel`). Any value >= 1
+            gives the same ancestors. Default: :data:`LONG_RANGE` on a GPU, ``capacity`` (no list) on the CPU.
 
     Raises:
-        ConfigError: unknown scheme (the message lists the valid names) or a capacity below 1.
+        ConfigError: unknown scheme (the message lists the valid names), a capacity below 1 or a long_range below 1.
     """
 
-    def __init__(self, scheme: str, capacity: int, device: str, log_weights: bool = False) -> None:
+    def __init__(
+        self, scheme: str, capacity: int, device: str, log_weights: bool = False, long_range: int | None = None
+    ) -> None:
         if scheme not in SCHEMES:
             raise ConfigError(f"resampling scheme {scheme!r}: expected one of {', '.join(SCHEMES)}")
         if int(capacity) < 1:
             raise ConfigError(f"resampler capacity {capacity}: expected at least 1 particle")
+        if long_range is None:
+            long_range = int(capacity) if wp.get_device(device).is_cpu else LONG_RANGE
+        if int(long_range) < 1:
+            raise ConfigError(f"resampler long_range {long_range}: expected at least 1 slot")
         self.scheme = scheme
         self.capacity = int(capacity)
         self.device = wp.get_device(device)
@@ -81,6 +102,17 @@ class Resampler:
         self.weights = (
             wp.zeros(cap, dtype=wp.float64, device=self.device) if self.log_weights and not self.exact else None
         )
+        # long offspring ranges (systematic, residual): per group of parents (the blocks above) a packed counter
+        # and the first list entry; the list itself holds at most capacity // (long_range + 1) + groups entries
+        self.long_range = int(long_range)
+        self.fill_blocks = 1 if self.device.is_cpu else min(self.blocks, FILL_BLOCKS_GPU)
+        self.long_meta: wp.array | None = None
+        if scheme in ("systematic", "residual"):
+            entries = cap // (self.long_range + 1) + self.blocks + 1
+            self.long_meta = wp.zeros(self.blocks, dtype=wp.int64, device=self.device)
+            self.long_base = wp.zeros(self.blocks, dtype=wp.int32, device=self.device)
+            self.long_lo = wp.zeros(entries, dtype=wp.int32, device=self.device)
+            self.long_off = wp.zeros(entries, dtype=wp.int32, device=self.device)
         self.cdf = None if self.exact else wp.zeros(cap, dtype=wp.float64, device=self.device)
         self.counts: wp.array | None = None
         self.positions: wp.array | None = None
@@ -147,14 +179,21 @@ class Resampler:
         w = weights if weights.shape[0] == n else weights[:n]
         buf = self._buffers(n)
         wp.utils.array_scan(w, buf["cdf"], inclusive=True)
+        groups, chunk = block_partition(n, self.device.is_cpu, BLOCK, MAX_BLOCKS)
+        if self.long_meta is not None and self.long_range < n:
+            self.long_meta.zero_()  # the counters of the groups (the fused log-weight pass zeroes its own)
         if self.scheme in _SEARCH_KERNELS:
+            long_args = [self.long_range, chunk] if self.scheme == "systematic" else []
+            long_out = self._long_lists() if self.scheme == "systematic" else []
             wp.launch(
                 _SEARCH_KERNELS[self.scheme],
                 dim=n,
-                inputs=[w, buf["cdf"], seed, frame, enabled, n],
-                outputs=[ancestors],
+                inputs=[w, buf["cdf"], seed, frame, enabled, n, *long_args],
+                outputs=[ancestors, *long_out],
                 device=self.device,
             )
+            if self.scheme == "systematic":
+                self._fill_long(ancestors, groups, n)
             return
         wp.launch(
             kres.residual_split_kernel,
@@ -168,10 +207,11 @@ class Resampler:
         wp.launch(
             kres.residual_scatter_kernel,
             dim=n,
-            inputs=[buf["counts"], buf["positions"], enabled, n],
-            outputs=[ancestors],
+            inputs=[buf["counts"], buf["positions"], enabled, n, self.long_range, chunk],
+            outputs=[ancestors, *self._long_lists()],
             device=self.device,
         )
+        self._fill_long(ancestors, groups, n)  # before the draws, which may copy deterministic slots
         wp.launch(
             kres.residual_draw_kernel,
             dim=n,
@@ -259,7 +299,27 @@ class Resampler:
                 n,
                 self.chunk,
                 self.per_lane,
+                self.long_range,
             ],
+            outputs=[ancestors, *self._long_lists()],
+            block_dim=BLOCK,
+            device=self.device,
+        )
+        self._fill_long(ancestors, self.blocks, n)
+
+    def _long_lists(self) -> list[wp.array]:
+        """The long-range list arrays, in the kernels' argument order."""
+        return [self.long_meta, self.long_base, self.long_lo, self.long_off]
+
+    def _fill_long(self, ancestors: wp.array, groups: int, n: int) -> None:
+        """Fill the long offspring ranges recorded by the scatter kernel (a fixed launch that returns at once when
+        there are none; not launched when no range can be long)."""
+        if self.long_range >= n:
+            return
+        wp.launch_tiled(
+            kres.long_ranges_fill_kernel,
+            dim=[self.fill_blocks],
+            inputs=[self.long_meta, self.long_base, self.long_lo, self.long_off, groups, self.fill_blocks],
             outputs=[ancestors],
             block_dim=BLOCK,
             device=self.device,
@@ -275,7 +335,9 @@ def quantisation_bits(capacity: int) -> int:
 def bytes_per_particle(scheme: str, log_weights: bool = False) -> int:
     """Device bytes per particle of a :class:`Resampler`: the float64 CDF, up to 8 bytes of prefix-sum scratch,
     the residual scheme's counts, positions, residuals and their CDF, and (from log-weights) the float64 weights.
-    Systematic resampling from log-weights needs none (an int64 per block of particles)."""
+    Systematic resampling from log-weights needs none (an int64 per block of particles). Not counted (under one
+    byte): the long-range list of the systematic and residual schemes, 8 / (long_range + 1) bytes per particle
+    (0.12 at the default :data:`LONG_RANGE`) plus 12 bytes per block."""
     if log_weights and scheme == "systematic":
         return 0
     extra = 4 + 4 + 8 + 8 if scheme == "residual" else 0

@@ -90,7 +90,12 @@ class ColourSuite:
         numpy_frames: int = 30,
         seed: int = 0,
         offspring_at: tuple[int, ...] = (10**7,),
+        weights: str | None = None,
     ) -> dict:
+        if weights is not None:  # --weights: the resampling pass alone on synthetic log-weights (cameras unused)
+            from .resample_weights import run_weights_case
+
+            return run_weights_case(case.particles, device, weights, frames, numpy_max, seed)
         import warp as wp
 
         from wptrack.trackers.colour import ColorTracker, HSITarget
@@ -178,6 +183,16 @@ class ColourSuite:
             result["speedup_vs_numpy"] = result["numpy_ms"] / result["step_ms"]
         del tracker
         return result
+
+    @staticmethod
+    def format_row(r: dict) -> str:
+        from . import format_row
+
+        if "weights" in r:
+            from .resample_weights import format_weights_row
+
+            return format_weights_row(r)
+        return format_row(r)
 
 
 def offspring_check(tracker, replays: int = 32, groups: int = 1000) -> dict:
