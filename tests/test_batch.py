@@ -229,9 +229,10 @@ def test_sweep_is_a_batch_with_the_same_table(tmp_path, capsys):
 # ---------------------------------------------------------------------------------------------- Ray
 @pytest.fixture(scope="module")
 def ray_local():
-    """One local Ray instance (2 CPUs) for the module; run_batch uses an instance this process already joined."""
+    """One local Ray instance (2 CPUs, no GPU even on a GPU machine: the tests pin CPU tasks and check the error
+    for a GPU request) for the module; run_batch uses an instance this process already joined."""
     ray = pytest.importorskip("ray")
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    ray.init(num_cpus=2, num_gpus=0, include_dashboard=False, log_to_driver=False)
     yield ray
     ray.shutdown()
 
