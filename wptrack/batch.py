@@ -408,18 +408,26 @@ def _run_function(spec: RunSpec, out: Path) -> dict[str, Any]:
     return run
 
 
-def execute_run(spec: RunSpec, out_root: str | os.PathLike, force_cpu: bool = False) -> dict[str, Any]:
+def execute_run(
+    spec: RunSpec, out_root: str | os.PathLike, force_cpu: bool = False, threads: int | None = None
+) -> dict[str, Any]:
     """Run one batch run into ``out_root/<id>`` (through a partial folder renamed when complete).
 
     This is the Ray task (and the in-process fallback's step). A user-input error (:class:`WptrackError`) is
     returned as a ``failed`` result, not raised, so it is not retried; any other exception is raised (the batch
-    retries the run).
+    retries the run). ``threads``: OpenCV's thread pool (video decoding) is limited to this many threads, the
+    cores Ray reserved for the task (Ray limits OpenMP the same way), so that parallel runs on one machine do not
+    oversubscribe its cores; None leaves OpenCV's default.
 
     Returns:
         The run's result row: id, tracker, status, attempts, seconds, host, error, summary, timings.
     """
     from .io import atomic_write_json
 
+    if threads is not None:
+        import cv2
+
+        cv2.setNumThreads(max(1, int(threads)))
     root = Path(out_root)
     root.mkdir(parents=True, exist_ok=True)
     final = root / spec.id
@@ -681,7 +689,8 @@ def _run_ray(
         task = ray.remote(num_gpus=gpus_per_task, num_cpus=cpus_per_task, max_calls=1 if gpus_per_task > 0 else 0)(
             execute_run
         ).options(max_retries=retries, retry_exceptions=True)
-        refs = {task.remote(spec, str(out), gpus_per_task == 0): spec for spec in pending}
+        threads = max(1, int(cpus_per_task))
+        refs = {task.remote(spec, str(out), gpus_per_task == 0, threads): spec for spec in pending}
         waiting = list(refs)
         while waiting:
             ready, waiting = ray.wait(waiting, num_returns=1)
