@@ -127,3 +127,33 @@ def test_empty_and_full_foreground(tmp_path):
         assert np.isfinite(est.ess) and np.isfinite(est.loglik)
         assert all(np.all(np.isfinite(o.position)) for o in est.objects + est.best)
     assert est.added is not None or est.best  # everything is foreground: objects get proposed
+
+
+def test_offline_masks_keep_backgrounds_for_the_report(scene, capsys):
+    """A run on the video (offline masks, the default) saves each background window it used (atomically, with an
+    index), and the report's Fig. 5 shows the nearest one beside the frame."""
+    import cv2
+
+    out = scene / "run-video"
+    code, _, err = _run(
+        [
+            "track", "templates", "--rig", str(scene / "scene/rig.yaml"), "--video", str(scene / "scene/cam0.avi"),
+            "--out", str(out), "--device", "cpu", "--particles", "100", "-q", "--save-masks",
+        ],
+        capsys,
+    )  # fmt: skip
+    assert code == 0, err
+    index = json.loads((out / "backgrounds" / "index.json").read_text())
+    assert index["windows"] and [w["window"] for w in index["windows"]] == sorted(w["window"] for w in index["windows"])
+    first = cv2.imread(str(out / "backgrounds" / index["windows"][0]["file"]), cv2.IMREAD_COLOR)
+    frame0 = cv2.VideoCapture(str(scene / "scene/cam0.avi")).read()[1]
+    assert first.shape == frame0.shape
+    assert np.abs(first.astype(int) - frame0.astype(int)).mean() < 20  # a background of this scene, not noise
+
+    from wptrack.report.templates import _background_for, _backgrounds
+
+    saved = _backgrounds(out)
+    assert len(saved) == len(index["windows"])
+    window, image = _background_for(saved, 5)
+    assert window == min(saved, key=lambda w: abs(w[1] - 5))[0] and image.shape == frame0.shape
+    assert _background_for(_backgrounds(scene / "nowhere"), 5) is None

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -230,6 +231,9 @@ class OfflineBackground:
         self.last_gain = np.ones(3)  # the global gain of the last frame given to evidence() (B, G, R)
         self._stacks: dict[int, Any] = {}
         self._sampler = _Sampler(source)
+        self.on_build: Callable[[int, float, np.ndarray], None] | None = None
+        """Called as ``on_build(window, centre, background)`` when a window is built (in the thread that asked
+        for it), with its ``(H, W, 3)`` uint8 BGR background: e.g. a run saving the backgrounds for its report."""
         p = kbg.ForegroundParams()
         p.threshold = float(config.fg_threshold)
         p.soft_scale = float(config.soft_scale)
@@ -269,6 +273,9 @@ class OfflineBackground:
         )
         self._built[i] = (median, mad)
         log.debug("%s: background window %d from %d frames", self.source.name, i, k)
+        if self.on_build is not None:
+            image = median.numpy().reshape(self.source.height, self.source.width, 3).copy()
+            self.on_build(i, float(self.centres[i]), image)
         return median, mad
 
     def background(self, i: int = 0) -> np.ndarray:

@@ -261,6 +261,32 @@ def _binary(img: np.ndarray) -> np.ndarray:
     return (a.max(axis=2) if a.ndim == 3 else a) > 127
 
 
+def _backgrounds(run_dir: Path) -> list[tuple[int, float, Path]]:
+    """``(window, centre frame, png)`` of the background windows a run with offline masks saved
+    (``backgrounds/index.json``, see :class:`wptrack.runs.templates.BackgroundSaver`); empty when there are none
+    or the index cannot be read."""
+    import json
+
+    index = Path(run_dir) / "backgrounds" / "index.json"
+    try:
+        windows = json.loads(index.read_text())["windows"]
+        out = [(int(w["window"]), float(w["centre"]), index.parent / str(w["file"])) for w in windows]
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
+    return [w for w in out if w[2].is_file()]
+
+
+def _background_for(backgrounds: list[tuple[int, float, Path]], frame: int) -> tuple[int, np.ndarray] | None:
+    """The saved background whose window centre is nearest ``frame``: ``(window, BGR image)``, or None."""
+    if not backgrounds:
+        return None
+    import cv2
+
+    window, _, path = min(backgrounds, key=lambda w: abs(w[1] - frame))
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    return None if image is None else (window, image)
+
+
 def section_fig5(ctx: ReportContext) -> Section | None:
     """The paper's Fig. 5: frame, motion mask, best particle's virtual scene and their XOR."""
     data = ctx.data
@@ -271,7 +297,9 @@ def section_fig5(ctx: ReportContext) -> Section | None:
         "fig5",
         "Motion mask and virtual scene (Fig. 5)",
         text=(
-            "Per chosen frame: the camera frame, the binary motion mask q the tracker matched, the virtual scene of "
+            "Per chosen frame: the camera frame, the background of the offline motion model (the window nearest the "
+            "frame, when the run made its masks offline), the binary motion mask q the tracker matched, the virtual "
+            "scene of "
             "the best particle (each object's templates in its colour) and their XOR (eq. 4): white where both agree, "
             "red where the mask has foreground no template covers, blue where a template covers background; m is "
             "the number of XOR pixels."
@@ -285,6 +313,7 @@ def section_fig5(ctx: ReportContext) -> Section | None:
         return sec
 
     with ctx.timed("fig5"):
+        backgrounds = _backgrounds(data.run_dir)
         video = _read(ctx, run.video, ctx.frames)
         masks = _read(ctx, run.masks, ctx.frames)
         virtual = _read(ctx, run.virtual, ctx.frames)
@@ -293,6 +322,10 @@ def section_fig5(ctx: ReportContext) -> Section | None:
             if f in video:
                 panels.append(_bgr_image(video[f]))
                 labels.append(f"frame {f}")
+            bg = _background_for(backgrounds, f)
+            if bg is not None:
+                panels.append(bg[1])
+                labels.append(f"background (window {bg[0]})")
             q = _binary(masks[f]) if f in masks else None
             v = _binary(virtual[f]) if f in virtual else None
             if q is not None:

@@ -10,6 +10,7 @@ Outputs (all written incrementally or atomically, so an interrupted run leaves v
     out_dir/best.csv       the same columns for the objects of the best particle (its whole scene hypothesis)
     out_dir/virtual.avi    the best particle's virtual scene per frame (paper Fig. 5), one colour per object id
     out_dir/masks.avi      the motion masks used (only with save_masks)
+    out_dir/backgrounds/   offline masks: the background of each window used, for the report (BackgroundSaver)
     out_dir/run.json       configuration, inputs, device, versions, timings, summary
 """
 
@@ -128,6 +129,37 @@ def _camera_for_size(camera, width: int, height: int, source: str, rig_source: s
     )
 
 
+BACKGROUNDS_DIR = "backgrounds"
+"""Folder of a run with offline masks: ``window_NNNN.png`` (the background of each window the run used) and
+``index.json`` (``{"windows": [{"window", "centre", "file"}]}``, centres in frames)."""
+
+
+class BackgroundSaver:
+    """``OfflineBackground.on_build`` callback writing each window's background into ``folder`` (atomically, the
+    index rewritten after every image, so an interrupted run leaves a readable folder)."""
+
+    def __init__(self, folder: Path) -> None:
+        self.folder = Path(folder)
+        self.windows: dict[int, dict[str, Any]] = {}
+        index = self.folder / "index.json"
+        if index.exists():  # a resumed run keeps the windows saved before
+            import json
+
+            try:
+                self.windows = {int(w["window"]): w for w in json.loads(index.read_text())["windows"]}
+            except (ValueError, KeyError, TypeError):
+                self.windows = {}
+
+    def __call__(self, window: int, centre: float, image: np.ndarray) -> None:
+        from ..io import atomic_imwrite, atomic_write_json
+
+        self.folder.mkdir(parents=True, exist_ok=True)
+        name = f"window_{window:04d}.png"
+        atomic_imwrite(self.folder / name, image)
+        self.windows[int(window)] = {"window": int(window), "centre": float(centre), "file": name}
+        atomic_write_json(self.folder / "index.json", {"windows": [self.windows[k] for k in sorted(self.windows)]})
+
+
 class TemplateRun(TrackerRun):
     """The template tracker as a run-loop job. Everything the user gave is validated here (rig, video or masks,
     sizes, parameters, device), before the run loop touches the output folder.
@@ -235,6 +267,9 @@ class TemplateRun(TrackerRun):
         suffix = "" if resume_after is None else f".from{resume_after + 1}"
         self._vwriter = VideoWriter(out_dir / f"virtual{suffix}.avi", fps=self._fps) if self._virtual else None
         self._mwriter = VideoWriter(out_dir / f"masks{suffix}.avi", fps=self._fps) if self._save_masks else None
+        model = getattr(self._stream, "model", None)
+        if model is not None:  # offline masks: keep each background window for the report's Fig. 5 panels
+            model.on_build = BackgroundSaver(out_dir / BACKGROUNDS_DIR)
 
     def step(self, item: Any) -> Any:
         self._mask = item
