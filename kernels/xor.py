@@ -77,6 +77,7 @@ def xor_score_kernel(
     cost_a: wp.vec3,
     cost_b: wp.vec3,
     scale: float,
+    bg_weight: float,
     logw: wp.array(dtype=wp.float32),
     penalty: wp.array(dtype=wp.int32),
     complexity: wp.array(dtype=wp.float32),
@@ -93,7 +94,10 @@ def xor_score_kernel(
         qrow: (H, W+1) row prefix sums of the motion mask; qtotal: (1,) |q|.
         cost_a, cost_b: a_r and b_r of eq. 5 indexed by kind (pixels).
         scale: s / (W H) of eq. 6 (1 / pixels).
-        logw: (N,) log-weight, updated in place: ``logw_i += -(m_i + c_i) s / (W H)`` (it holds the prior
+        bg_weight: weight lambda of a template pixel on mask background in the weighted penalty
+            ``m'_i = |q AND NOT v_i| + lambda |v_i AND NOT q|`` that enters the log-weight (1: eq. 4 exactly; < 1
+            when the masks miss parts of objects more often than they show motion where there is none).
+        logw: (N,) log-weight, updated in place: ``logw_i += -(m'_i + c_i) s / (W H)`` (it holds the prior
             log-weight after prediction: 0 after resampling).
         penalty: (N,) m_i, pixels (exact). complexity: (N,) c_i, pixels.
         cov_diff: (H, W+1) per-row difference array of coverage counts; each covered span [u0, u1] adds 1 at
@@ -130,6 +134,8 @@ def xor_score_kernel(
             kk = kind[i, s]
             if kk > 0:
                 cost += cost_a[kk] + cost_b[kk] * wp.exp(-age[i, s])  # eq. 5
+        # weighted eq. 4: uncovered foreground + lambda x template pixels on background (= m when lambda = 1)
+        mw = float(qtotal[0] - tb[0]) + bg_weight * float(tc[0] - tb[0])
         penalty[i] = m
         complexity[i] = cost
-        logw[i] = logw[i] - (float(m) + cost) * scale  # eq. 6 in log space
+        logw[i] = logw[i] - (mw + cost) * scale  # eq. 6 in log space

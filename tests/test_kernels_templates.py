@@ -56,22 +56,27 @@ TILTED = GroundPlane(origin=(0.4, -0.7, 0.3), normal=(0.12, -0.2, 1.0), x_axis=(
 def template_vertices(kind: int, piece: int, dims, heading: float) -> np.ndarray:
     """Vertices (n, 3) of one piece in the object's frame (along e1, along e2, height), metres, float64.
 
-    Re-derived from ``kernels.raster``'s docstring: human body = regular octagonal prism inscribed in a cylinder of
-    the body radius, from the ground to ``height - 2 head_r`` (at least 0.1 m); head = octahedron + cube vertices on
-    the head sphere centred at ``height - head_r``; vehicle = lower box (full length/width, 0.55 of the height) and a
-    cabin box (0.6 of the length, 0.9 of the width) up to the full height, rotated by the heading.
+    Re-derived from ``kernels.raster``'s docstring: human legs = regular octagonal prism of radius 0.65 x the body
+    radius from the ground to half the height; human upper body = hexagons of the body radius at half the height
+    and at the shoulders (``max(height - 2.5 head_r, height / 2)``) and a square of half-diagonal head_r at the top;
+    vehicle = lower box (full length/width, 0.55 of the height) and a cabin box (0.6 of the length, 0.9 of the
+    width) up to the full height, rotated by the heading.
     """
     if kind == HUMAN:
         height, body_r, head_r = (float(v) for v in dims)
+        hip = 0.5 * height
         if piece == 0:
             a = np.arange(8) * (2.0 * np.pi / 8.0)
-            ring = np.stack([body_r * np.cos(a), body_r * np.sin(a)], axis=1)
-            top = max(height - 2.0 * head_r, 0.1)
-            return np.concatenate([np.c_[ring, np.zeros(8)], np.c_[ring, np.full(8, top)]])
-        centre = np.array([0.0, 0.0, height - head_r])
-        octa = np.concatenate([np.eye(3), -np.eye(3)]) * head_r
-        cube = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * head_r / np.sqrt(3)
-        return np.concatenate([octa, cube]) + centre
+            ring = np.stack([0.65 * body_r * np.cos(a), 0.65 * body_r * np.sin(a)], axis=1)
+            return np.concatenate([np.c_[ring, np.zeros(8)], np.c_[ring, np.full(8, hip)]])
+        a = np.arange(6) * (2.0 * np.pi / 6.0)
+        ring = np.stack([body_r * np.cos(a), body_r * np.sin(a)], axis=1)
+        shoulder = max(height - 2.5 * head_r, hip)
+        a = np.arange(4) * (np.pi / 2.0)
+        top = np.stack([head_r * np.cos(a), head_r * np.sin(a)], axis=1)
+        return np.concatenate(
+            [np.c_[ring, np.full(6, hip)], np.c_[ring, np.full(6, shoulder)], np.c_[top, np.full(4, height)]]
+        )
     if kind == VEHICLE:
         length, width, height = (float(v) for v in dims)
         hl, hw, z0, z1 = 0.5 * length, 0.5 * width, 0.0, 0.55 * height
@@ -533,7 +538,7 @@ class XorCase:
         self.kind_d = wp.array(kind, dtype=wp.int32, device=device)
         self.age_d = wp.array(self.age, dtype=wp.float32, device=device)
 
-    def score(self):
+    def score(self, bg_weight: float = 1.0):
         d = self.device
         launch_mask_rows(self.qd, self.qrow, self.qtotal, d)
         logw = wp.array(self.prior, dtype=wp.float32, device=d)
@@ -553,6 +558,7 @@ class XorCase:
                 wp.vec3(*self.cost_a),
                 wp.vec3(*self.cost_b),
                 self.scale,
+                bg_weight,
             ],
             outputs=[logw, penalty, complexity, self.cov_diff],
             block_dim=SCORE_BLOCK,
@@ -561,13 +567,15 @@ class XorCase:
         return logw.numpy(), penalty.numpy(), complexity.numpy()
 
 
-def test_xor_penalty_complexity_logw_and_coverage_exact(device, rng):
+@pytest.mark.parametrize("bg_weight", [1.0, 0.375])
+def test_xor_penalty_complexity_logw_and_coverage_exact(device, rng, bg_weight):
     """mask_rows/mask_total are exact prefix sums of q != 0; xor_score_kernel gives m_i = sum(q XOR v_i) exactly
     (eq. 4) for N = 20 random particles (one empty, one taller than a CUDA block), c_i = sum over alive slots of
-    a[kind] + b[kind] exp(-age) (eq. 5; empty slots must not count, their cost is 1e6), logw = prior - (m + c) s
-    (eq. 6); the row cumulative sum of cov_diff is the per-pixel count of particles covering each pixel."""
+    a[kind] + b[kind] exp(-age) (eq. 5; empty slots must not count, their cost is 1e6), logw = prior - (m' + c) s
+    (eq. 6) with the weighted penalty m' = |q AND NOT v| + lambda |v AND NOT q| (m' = m at lambda = 1); the row
+    cumulative sum of cov_diff is the per-pixel count of particles covering each pixel."""
     case = XorCase(device, rng)
-    logw, penalty, complexity = case.score()
+    logw, penalty, complexity = case.score(bg_weight)
     q = case.q != 0
     qrow = np.zeros((q.shape[0], q.shape[1] + 1), dtype=np.int64)
     qrow[:, 1:] = np.cumsum(q, axis=1)
@@ -581,7 +589,12 @@ def test_xor_penalty_complexity_logw_and_coverage_exact(device, rng):
     c_ref = np.sum(np.where(alive, case.cost_a[k] + case.cost_b[k] * np.exp(-case.age.astype(np.float64)), 0), axis=1)
     np.testing.assert_allclose(complexity, c_ref, rtol=1e-5)
     assert complexity[0] == 0.0 and penalty[0] == q.sum()
-    logw_ref = case.prior.astype(np.float64) - (m_ref + c_ref) * np.float64(np.float32(case.scale))
+    mw_ref = np.sum(q[None] & ~v, axis=(1, 2)) + bg_weight * np.sum(v & ~q[None], axis=(1, 2))
+    if bg_weight == 1.0:
+        np.testing.assert_array_equal(mw_ref, m_ref)
+    else:
+        assert np.any(mw_ref != m_ref), "the weight must change some penalty"
+    logw_ref = case.prior.astype(np.float64) - (mw_ref + c_ref) * np.float64(np.float32(case.scale))
     np.testing.assert_allclose(logw, logw_ref, rtol=1e-6, atol=1e-5)
     cov = case.cov_diff.numpy()
     np.testing.assert_array_equal(np.cumsum(cov[:, :-1], axis=1), v.sum(axis=0))

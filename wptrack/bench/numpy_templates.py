@@ -30,7 +30,7 @@ import numpy as np
 
 KIND_NONE, KIND_HUMAN, KIND_VEHICLE = 0, 1, 2
 PIECES = 2
-"""Convex pieces per object (human: body, head; vehicle: lower body, cabin)."""
+"""Convex pieces per object (human: legs, upper body with head; vehicle: lower body, cabin)."""
 HULL_MAX = 16
 """Most vertices per piece."""
 LOWER, CABIN_LENGTH, CABIN_WIDTH = 0.55, 0.6, 0.9
@@ -39,17 +39,15 @@ MIN_DEPTH = 1.0e-6
 """Camera depth (metres) at or below which a point is not seen (``kernels.camera.MIN_DEPTH``)."""
 
 
+LEG_RATIO, HIP, SHOULDER = 0.65, 0.5, 2.5
+"""Human proportions (``kernels.raster``): leg radius / body radius, hip height / height, shoulders in head radii
+below the top."""
+
 _OCTAGON = (np.arange(16) % 8) * (2.0 * np.pi / 8.0)
-_BODY = np.stack([np.cos(_OCTAGON), np.sin(_OCTAGON), (np.arange(16) >= 8).astype(np.float64)], axis=1)
-"""(16, 3) body prism on the unit cylinder: (cos a, sin a, 0 bottom / 1 top), the bottom octagon then the top."""
-_HEAD = np.concatenate(
-    [
-        np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float64),
-        np.array([[1 - 2 * (j % 2), 1 - 2 * ((j // 2) % 2), 1 - 2 * (j // 4)] for j in range(8)], dtype=np.float64)
-        / np.sqrt(3.0),
-    ]
-)
-"""(14, 3) head vertices on the unit sphere: octahedron (k < 6: axis k // 2, sign by parity) then cube corners."""
+_LEGS = np.stack([np.cos(_OCTAGON), np.sin(_OCTAGON), (np.arange(16) >= 8).astype(np.float64)], axis=1)
+"""(16, 3) leg prism on the unit cylinder: (cos a, sin a, 0 bottom / 1 top), the bottom octagon then the top."""
+_HEXAGON = (np.arange(12) % 6) * (2.0 * np.pi / 6.0)
+_SQUARE = np.arange(4) * (0.5 * np.pi)
 _BOX = np.array([[1 - 2 * (k % 2), 1 - 2 * ((k // 2) % 2), float(k >= 4)] for k in range(8)], dtype=np.float64)
 """(8, 3) box corners: (+-1 along the length, +-1 along the width, bottom 0 / top 1)."""
 
@@ -140,15 +138,24 @@ class NumpyTemplateScorer:
         if np.any(human):
             d = dims[human]
             height, body_r, head_r = d[:, 0:1], d[:, 1:2], d[:, 2:3]
-            top = np.maximum(height - 2.0 * head_r, 0.1)
-            body = np.stack([body_r * _BODY[:, 0], body_r * _BODY[:, 1], top * _BODY[:, 2]], axis=-1)
-            head = head_r[:, :, None] * _HEAD[None]
-            head[..., 2] += (height - head_r)[:, :]
+            hip = HIP * height
+            legs = np.stack(
+                [LEG_RATIO * body_r * _LEGS[:, 0], LEG_RATIO * body_r * _LEGS[:, 1], hip * _LEGS[:, 2]], axis=-1
+            )
+            shoulder = np.maximum(height - SHOULDER * head_r, hip)
+            ring_z = np.where(np.arange(12) >= 6, shoulder, hip)
+            upper = np.concatenate(
+                [
+                    np.stack([body_r * np.cos(_HEXAGON), body_r * np.sin(_HEXAGON), ring_z], axis=-1),
+                    np.stack([head_r * np.cos(_SQUARE), head_r * np.sin(_SQUARE), np.repeat(height, 4, axis=1)], -1),
+                ],
+                axis=1,
+            )
             v = np.zeros((len(d), PIECES, HULL_MAX, 3))
-            v[:, 0, :16] = body
-            v[:, 1, :14] = head
+            v[:, 0, :16] = legs
+            v[:, 1, :16] = upper
             verts[human] = v
-            count[human] = (16, 14)
+            count[human] = (16, 16)
         vehicle = kind == KIND_VEHICLE
         if np.any(vehicle):
             d = dims[vehicle]

@@ -405,6 +405,7 @@ class TemplateTracker(FrameChain):
                 self.cost_a,
                 self.cost_b,
                 self.score_scale,
+                float(self.config.bg_weight),
             ],
             outputs=[s.logw, self.penalty, self.complexity, self.cov_diff],
             block_dim=SCORE_BLOCK,
