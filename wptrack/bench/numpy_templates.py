@@ -78,6 +78,8 @@ class NumpyTemplateScorer:
         scale: s of eq. 6 (the log-weight is ``-(m + c) s / (W H)``).
         r2_max: squared normalised radius beyond which a point is "not seen" (``warpcams.camera_struct``); inf to
             project everything in front of the camera.
+        bg_weight: lambda of the weighted penalty ``|q AND NOT v| + lambda |v AND NOT q|`` in the log-weight.
+        exclusion: cost of two objects' ground overlap, pixels per pair (``kernels.xor.pair_overlap``).
     """
 
     def __init__(
@@ -88,7 +90,11 @@ class NumpyTemplateScorer:
         cost_b: tuple[float, float, float],
         scale: float,
         r2_max: float = float("inf"),
+        bg_weight: float = 1.0,
+        exclusion: float = 0.0,
     ) -> None:
+        self.bg_weight = float(bg_weight)
+        self.exclusion = float(exclusion)
         self.width, self.height = int(camera.width), int(camera.height)
         self.R = np.asarray(camera.R, dtype=np.float64)
         self.t = np.asarray(camera.t, dtype=np.float64)
@@ -114,6 +120,8 @@ class NumpyTemplateScorer:
             (0.0, cfg.human.cost_b, cfg.vehicle.cost_b),
             cfg.scale,
             r2_max=float(tracker.cam.r2_max),
+            bg_weight=cfg.bg_weight,
+            exclusion=cfg.exclusion,
         )
 
     # --- geometry ------------------------------------------------------------------------------------------
@@ -321,11 +329,52 @@ class NumpyTemplateScorer:
         return out
 
     # --- measurement ---------------------------------------------------------------------------------------
-    def complexity(self, kind: np.ndarray, age: np.ndarray) -> np.ndarray:
-        """c_i of eq. 5: sum over the particle's objects of a_r + b_r exp(-tau_r); (N,) float64 pixels."""
+    def complexity(self, kind: np.ndarray, age: np.ndarray, pos=None, heading=None, dims=None) -> np.ndarray:
+        """c_i of eq. 5: sum over the particle's objects of a_r + b_r exp(-tau_r), plus the exclusion prior (pairs'
+        ground overlap x ``exclusion``, when the state is given); (N,) float64 pixels."""
         kind = np.asarray(kind)
         cost = self.cost_a[kind] + self.cost_b[kind] * np.exp(-np.asarray(age, dtype=np.float64))
-        return np.where(kind > 0, cost, 0.0).sum(axis=1)
+        c = np.where(kind > 0, cost, 0.0).sum(axis=1)
+        if self.exclusion > 0.0 and pos is not None:
+            c = c + self.exclusion * self.overlap(kind, np.asarray(pos), np.asarray(heading), np.asarray(dims))
+        return c
+
+    @staticmethod
+    def overlap(kind: np.ndarray, pos: np.ndarray, heading: np.ndarray, dims: np.ndarray) -> np.ndarray:
+        """Summed ground overlap of every pair of objects of each particle (``kernels.xor.pair_overlap``); (N,)."""
+        pos = pos.astype(np.float64)
+        heading = heading.astype(np.float64)
+        dims = dims.astype(np.float64)
+
+        def disc_in_box(c, r, centre, a, hl, hw):
+            d = c - centre
+            lx = np.abs(np.cos(a) * d[..., 0] + np.sin(a) * d[..., 1])
+            ly = np.abs(-np.sin(a) * d[..., 0] + np.cos(a) * d[..., 1])
+            return np.clip(np.minimum(hl + r - lx, hw + r - ly) / (2.0 * r), 0.0, 1.0)
+
+        n, r = kind.shape
+        total = np.zeros(n)
+        for s in range(r):
+            for t in range(s + 1, r):
+                ka, kb = kind[:, s], kind[:, t]
+                pa, pb, ha, hb, da, db = pos[:, s], pos[:, t], heading[:, s], heading[:, t], dims[:, s], dims[:, t]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    hh = np.clip(1.0 - np.linalg.norm(pa - pb, axis=-1) / (da[:, 1] + db[:, 1]), 0.0, 1.0)
+                    hv = disc_in_box(pa, da[:, 1], pb, hb, 0.5 * db[:, 0], 0.5 * db[:, 1])
+                    vh = disc_in_box(pb, db[:, 1], pa, ha, 0.5 * da[:, 0], 0.5 * da[:, 1])
+                    rr = 0.5 * db[:, 1]
+                    ax = np.maximum(0.5 * db[:, 0] - rr, 0.0)[:, None] * np.stack([np.cos(hb), np.sin(hb)], -1)
+                    vv = np.max(
+                        [disc_in_box(pb + f * ax, rr, pa, ha, 0.5 * da[:, 0], 0.5 * da[:, 1]) for f in (0, 1, -1)],
+                        axis=0,
+                    )
+                o = np.where(
+                    (ka == KIND_HUMAN) & (kb == KIND_HUMAN),
+                    hh,
+                    np.where(ka == KIND_HUMAN, hv, np.where(kb == KIND_HUMAN, vh, vv)),
+                )
+                total += np.where((ka > 0) & (kb > 0), np.nan_to_num(o), 0.0)
+        return total
 
     def measure(
         self,
@@ -352,6 +401,7 @@ class NumpyTemplateScorer:
         total = int(np.count_nonzero(q))
         pts, hn, rows = self.hulls(kind, pos, heading, dims)
         penalty = np.full(n_p, total, dtype=np.int64)
+        weighted = np.full(n_p, float(total))
         cov = np.zeros((self.height, self.width), dtype=np.int64)
         part, y, u0, u1 = self.spans(pts, hn, rows)
         bounds = np.searchsorted(part, np.arange(n_p + 1))
@@ -363,9 +413,10 @@ class NumpyTemplateScorer:
             v, y0, x0 = res
             win = q[y0 : y0 + v.shape[0], x0 : x0 + v.shape[1]]
             penalty[i] = total - int(np.count_nonzero(win)) + int(np.count_nonzero(win ^ v))  # eq. 4
+            weighted[i] = total - int(np.count_nonzero(win & v)) + self.bg_weight * int(np.count_nonzero(v & ~win))
             cov[y0 : y0 + v.shape[0], x0 : x0 + v.shape[1]] += v
-        complexity = self.complexity(kind, age)
+        complexity = self.complexity(kind, age, pos, heading, dims)
         prior = np.zeros(n_p) if logw_prior is None else np.asarray(logw_prior, dtype=np.float64)
-        logw = prior - (penalty + complexity) * self.scale / float(self.width * self.height)  # eq. 6
+        logw = prior - (weighted + complexity) * self.scale / float(self.width * self.height)  # eq. 6
         uoh = np.where(q, n_p - cov, 0)  # eq. 10
         return TemplateMeasurement(penalty, complexity, logw, uoh, total)

@@ -150,6 +150,11 @@ class TemplateConfig:
     they show motion where there is none, so a template pixel on background is weaker evidence against a
     hypothesis than a foreground pixel left uncovered (a per-pixel Bernoulli model with a miss rate above the
     false-alarm rate gives lambda < 1)."""
+    exclusion: float = 0.0
+    """Cost of two objects of a particle sharing the same ground, pixels per pair at full overlap (added to eq. 5's
+    c_i; 0: eq. 5 exactly). Beyond the paper: humans are discs of their body radius and vehicles boxes on the ground
+    (``kernels.xor.pair_overlap``); solid objects cannot overlap, which keeps two hypotheses off one person in a
+    group and humans off a car that its template does not fit yet."""
     t_add: float = 0.3
     """T_add of eq. 12: fraction of particles that receive the frame's proposed object."""
     t_del: float = 0.02
@@ -186,6 +191,7 @@ class TemplateConfig:
         _nonneg(self.fps, "fps", "frames/s", strict=True)
         _nonneg(self.scale, "scale", "s of eq. 6", strict=True)
         _nonneg(self.bg_weight, "bg_weight", "weight of template pixels on background", upper=1.0)
+        _nonneg(self.exclusion, "exclusion", "pixels")
         _nonneg(self.t_add, "t_add", "probability", upper=1.0)
         _nonneg(self.t_del, "t_del", "probability", upper=1.0)
         _nonneg(self.sigma_pos, "sigma_pos", "m")
