@@ -10,7 +10,7 @@ which ``kernels.uoh`` builds the Uncovered Object Histogram.
 
 import warp as wp
 
-from .raster import PIECES, row_intervals
+from .raster import KIND_HUMAN, PIECES, row_intervals
 from .reduce import finite_logw
 
 wp.set_module_options({"enable_backward": False})
@@ -66,6 +66,51 @@ def mask_total_kernel(qrow: wp.array2d(dtype=wp.int32), total: wp.array(dtype=wp
         total[0] = t[0]
 
 
+@wp.func
+def disc_in_box(c: wp.vec2, r: float, centre: wp.vec2, heading: float, half: wp.vec2):
+    """Penetration of a ground disc (centre ``c``, radius ``r``, metres) into an oriented box (``centre``,
+    ``heading`` radians, half length and half width ``half``, metres), as a fraction of the disc's diameter in
+    [0, 1]: 0 when they do not overlap, 1 when the disc is pushed a whole diameter in."""
+    d = c - centre
+    ca = wp.cos(heading)
+    sa = wp.sin(heading)
+    lx = wp.abs(ca * d[0] + sa * d[1])
+    ly = wp.abs(-sa * d[0] + ca * d[1])
+    depth = wp.min(half[0] + r - lx, half[1] + r - ly)
+    return wp.clamp(depth / (2.0 * r), 0.0, 1.0)
+
+
+@wp.func
+def footprint(k: int, dims: wp.vec3):
+    """Radius of an object's ground disc (human: body radius; vehicle: half width, metres)."""
+    if k == KIND_HUMAN:
+        return dims[1]
+    return 0.5 * dims[1]
+
+
+@wp.func
+def pair_overlap(ka: int, pa: wp.vec2, ha: float, da: wp.vec3, kb: int, pb: wp.vec2, hb: float, db: wp.vec3):
+    """Ground-footprint overlap of two objects in [0, 1] (the exclusion prior of ``xor_score_kernel``).
+
+    Humans are discs of their body radius, vehicles boxes of their length and width. Two humans: ``1 - d / (r_a +
+    r_b)`` (d the distance of their centres). Human and vehicle: the disc's penetration into the box
+    (``disc_in_box``). Two vehicles: the deepest penetration of three discs of half the width along b (its centre
+    and both ends) into a's box.
+    """
+    if ka == KIND_HUMAN and kb == KIND_HUMAN:
+        return wp.clamp(1.0 - wp.length(pa - pb) / (da[1] + db[1]), 0.0, 1.0)
+    if ka == KIND_HUMAN:
+        return disc_in_box(pa, da[1], pb, hb, wp.vec2(0.5 * db[0], 0.5 * db[1]))
+    if kb == KIND_HUMAN:
+        return disc_in_box(pb, db[1], pa, ha, wp.vec2(0.5 * da[0], 0.5 * da[1]))
+    r = 0.5 * db[1]
+    along = wp.max(0.5 * db[0] - r, 0.0) * wp.vec2(wp.cos(hb), wp.sin(hb))
+    half = wp.vec2(0.5 * da[0], 0.5 * da[1])
+    o = disc_in_box(pb, r, pa, ha, half)
+    o = wp.max(o, disc_in_box(pb + along, r, pa, ha, half))
+    return wp.max(o, disc_in_box(pb - along, r, pa, ha, half))
+
+
 @wp.kernel
 def xor_score_kernel(
     hull_pts: wp.array3d(dtype=wp.vec2),
@@ -73,11 +118,16 @@ def xor_score_kernel(
     hull_rows: wp.array2d(dtype=wp.vec2i),
     kind: wp.array2d(dtype=wp.int32),
     age: wp.array2d(dtype=wp.float32),
+    pos: wp.array2d(dtype=wp.vec2),
+    heading: wp.array2d(dtype=wp.float32),
+    dims: wp.array2d(dtype=wp.vec3),
     qrow: wp.array2d(dtype=wp.int32),
     qtotal: wp.array(dtype=wp.int32),
     cost_a: wp.vec3,
     cost_b: wp.vec3,
     scale: float,
+    bg_weight: float,
+    exclusion: float,
     logw: wp.array(dtype=wp.float32),
     penalty: wp.array(dtype=wp.int32),
     complexity: wp.array(dtype=wp.float32),
@@ -91,10 +141,18 @@ def xor_score_kernel(
     Args:
         hull_pts, hull_n, hull_rows: the particles' piece hulls from ``raster.template_hulls_kernel``.
         kind: (N, R) KIND_* per slot. age: (N, R) seconds each object has been in the particle (tau of eq. 5).
+        pos, heading, dims: (N, R) ground position (metres), heading (radians), dims (metres) per slot.
         qrow: (H, W+1) row prefix sums of the motion mask; qtotal: (1,) |q|.
         cost_a, cost_b: a_r and b_r of eq. 5 indexed by kind (pixels).
         scale: s / (W H) of eq. 6 (1 / pixels).
-        logw: (N,) log-weight, updated in place: ``logw_i += -(m_i + c_i) s / (W H)`` (it holds the prior
+        bg_weight: weight lambda of a template pixel on mask background in the weighted penalty
+            ``m'_i = |q AND NOT v_i| + lambda |v_i AND NOT q|`` that enters the log-weight (1: eq. 4 exactly; < 1
+            when the masks miss parts of objects more often than they show motion where there is none).
+        exclusion: cost of two objects sharing the same ground, pixels: ``c_i`` gains ``exclusion x
+            pair_overlap`` for every pair of objects (0: eq. 5 exactly). Solid objects cannot overlap on the
+            ground; eq. 5's complexity penalty was introduced against objects placed at very similar positions, and
+            this prior says so directly (it keeps two hypotheses off one person and humans off a car).
+        logw: (N,) log-weight, updated in place: ``logw_i += -(m'_i + c_i) s / (W H)`` (it holds the prior
             log-weight after prediction: 0 after resampling).
         penalty: (N,) m_i, pixels (exact). complexity: (N,) c_i, pixels.
         cov_diff: (H, W+1) per-row difference array of coverage counts; each covered span [u0, u1] adds 1 at
@@ -131,6 +189,16 @@ def xor_score_kernel(
             kk = kind[i, s]
             if kk > 0:
                 cost += cost_a[kk] + cost_b[kk] * wp.exp(-age[i, s])  # eq. 5
+                if exclusion > 0.0:
+                    for t in range(s + 1, slots):
+                        kt = kind[i, t]
+                        if kt > 0:
+                            o = pair_overlap(
+                                kk, pos[i, s], heading[i, s], dims[i, s], kt, pos[i, t], heading[i, t], dims[i, t]
+                            )
+                            cost += exclusion * o
+        # weighted eq. 4: uncovered foreground + lambda x template pixels on background (= m when lambda = 1)
+        mw = float(qtotal[0] - tb[0]) + bg_weight * float(tc[0] - tb[0])
         penalty[i] = m
         complexity[i] = cost
-        logw[i] = finite_logw(logw[i] - (float(m) + cost) * scale)  # eq. 6 in log space; -inf/NaN -> the floor
+        logw[i] = finite_logw(logw[i] - (mw + cost) * scale)  # eq. 6 in log space; -inf/NaN -> the floor

@@ -56,22 +56,27 @@ TILTED = GroundPlane(origin=(0.4, -0.7, 0.3), normal=(0.12, -0.2, 1.0), x_axis=(
 def template_vertices(kind: int, piece: int, dims, heading: float) -> np.ndarray:
     """Vertices (n, 3) of one piece in the object's frame (along e1, along e2, height), metres, float64.
 
-    Re-derived from ``kernels.raster``'s docstring: human body = regular octagonal prism inscribed in a cylinder of
-    the body radius, from the ground to ``height - 2 head_r`` (at least 0.1 m); head = octahedron + cube vertices on
-    the head sphere centred at ``height - head_r``; vehicle = lower box (full length/width, 0.55 of the height) and a
-    cabin box (0.6 of the length, 0.9 of the width) up to the full height, rotated by the heading.
+    Re-derived from ``kernels.raster``'s docstring: human legs = regular octagonal prism of radius 0.65 x the body
+    radius from the ground to half the height; human upper body = hexagons of the body radius at half the height
+    and at the shoulders (``max(height - 2.5 head_r, height / 2)``) and a square of half-diagonal head_r at the top;
+    vehicle = lower box (full length/width, 0.55 of the height) and a cabin box (0.6 of the length, 0.9 of the
+    width) up to the full height, rotated by the heading.
     """
     if kind == HUMAN:
         height, body_r, head_r = (float(v) for v in dims)
+        hip = 0.5 * height
         if piece == 0:
             a = np.arange(8) * (2.0 * np.pi / 8.0)
-            ring = np.stack([body_r * np.cos(a), body_r * np.sin(a)], axis=1)
-            top = max(height - 2.0 * head_r, 0.1)
-            return np.concatenate([np.c_[ring, np.zeros(8)], np.c_[ring, np.full(8, top)]])
-        centre = np.array([0.0, 0.0, height - head_r])
-        octa = np.concatenate([np.eye(3), -np.eye(3)]) * head_r
-        cube = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * head_r / np.sqrt(3)
-        return np.concatenate([octa, cube]) + centre
+            ring = np.stack([0.65 * body_r * np.cos(a), 0.65 * body_r * np.sin(a)], axis=1)
+            return np.concatenate([np.c_[ring, np.zeros(8)], np.c_[ring, np.full(8, hip)]])
+        a = np.arange(6) * (2.0 * np.pi / 6.0)
+        ring = np.stack([body_r * np.cos(a), body_r * np.sin(a)], axis=1)
+        shoulder = max(height - 2.5 * head_r, hip)
+        a = np.arange(4) * (np.pi / 2.0)
+        top = np.stack([head_r * np.cos(a), head_r * np.sin(a)], axis=1)
+        return np.concatenate(
+            [np.c_[ring, np.full(6, hip)], np.c_[ring, np.full(6, shoulder)], np.c_[top, np.full(4, height)]]
+        )
     if kind == VEHICLE:
         length, width, height = (float(v) for v in dims)
         hl, hw, z0, z1 = 0.5 * length, 0.5 * width, 0.0, 0.55 * height
@@ -513,6 +518,7 @@ class XorCase:
         pos[1, 0], dims[1, 0] = tall
         self.cam, self.plane, self.n, self.r = cam, plane, n, r
         self.kind, self.age = kind, rng.uniform(0.0, 3.0, (n, r)).astype(np.float32)
+        self.pos, self.heading, self.dims = pos, heading, dims
         self.q = random_mask(rng, cam.width, cam.height)
         self.prior = rng.normal(-2.0, 1.0, n).astype(np.float32)
         self.cost_a = np.array([1.0e6, 17.5, 43.25], np.float32)  # index 0 (empty slot) must never be used
@@ -532,8 +538,11 @@ class XorCase:
         self.cov_diff = wp.zeros((h, w + 1), dtype=wp.int32, device=device)
         self.kind_d = wp.array(kind, dtype=wp.int32, device=device)
         self.age_d = wp.array(self.age, dtype=wp.float32, device=device)
+        self.pos_d = wp.array(pos, dtype=wp.vec2, device=device)
+        self.heading_d = wp.array(heading, dtype=wp.float32, device=device)
+        self.dims_d = wp.array(dims, dtype=wp.vec3, device=device)
 
-    def score(self):
+    def score(self, bg_weight: float = 1.0, exclusion: float = 0.0):
         d = self.device
         launch_mask_rows(self.qd, self.qrow, self.qtotal, d)
         logw = wp.array(self.prior, dtype=wp.float32, device=d)
@@ -548,11 +557,16 @@ class XorCase:
                 self.hulls.rows,
                 self.kind_d,
                 self.age_d,
+                self.pos_d,
+                self.heading_d,
+                self.dims_d,
                 self.qrow,
                 self.qtotal,
                 wp.vec3(*self.cost_a),
                 wp.vec3(*self.cost_b),
                 self.scale,
+                bg_weight,
+                exclusion,
             ],
             outputs=[logw, penalty, complexity, self.cov_diff],
             block_dim=SCORE_BLOCK,
@@ -561,13 +575,91 @@ class XorCase:
         return logw.numpy(), penalty.numpy(), complexity.numpy()
 
 
-def test_xor_penalty_complexity_logw_and_coverage_exact(device, rng):
+def disc_in_box_ref(c, r, centre, heading, half) -> float:
+    """Penetration of a disc into an oriented box as a fraction of the disc's diameter, clipped to [0, 1]."""
+    d = np.asarray(c, np.float64) - centre
+    lx = abs(math.cos(heading) * d[0] + math.sin(heading) * d[1])
+    ly = abs(-math.sin(heading) * d[0] + math.cos(heading) * d[1])
+    return float(np.clip(min(half[0] + r - lx, half[1] + r - ly) / (2 * r), 0.0, 1.0))
+
+
+def pair_overlap_ref(ka, pa, ha, da, kb, pb, hb, db) -> float:
+    """Ground overlap of two objects (``kernels.xor.pair_overlap``, re-derived from its docstring)."""
+    pa, pb, da, db = (np.asarray(v, np.float64) for v in (pa, pb, da, db))
+    if ka == HUMAN and kb == HUMAN:
+        return float(np.clip(1 - np.linalg.norm(pa - pb) / (da[1] + db[1]), 0, 1))
+    if ka == HUMAN:
+        return disc_in_box_ref(pa, da[1], pb, float(hb), 0.5 * db[:2])
+    if kb == HUMAN:
+        return disc_in_box_ref(pb, db[1], pa, float(ha), 0.5 * da[:2])
+    r = 0.5 * db[1]
+    axis = max(0.5 * db[0] - r, 0.0) * np.array([math.cos(hb), math.sin(hb)])
+    return max(disc_in_box_ref(pb + t * axis, r, pa, float(ha), 0.5 * da[:2]) for t in (0.0, 1.0, -1.0))
+
+
+def test_pair_overlap_cases(device):
+    """The exclusion prior's overlap on hand-made pairs: humans apart / touching / coincident, a human beside and
+    inside a car, two cars nose to tail and side by side (every device, against the NumPy reference)."""
+    h, v = (1.7, 0.2, 0.1), (4.0, 2.0, 1.5)
+    pairs = [
+        (HUMAN, (0, 0), 0.0, h, HUMAN, (1.0, 0), 0.0, h, 0.0),
+        (HUMAN, (0, 0), 0.0, h, HUMAN, (0.2, 0), 0.0, h, 0.5),
+        (HUMAN, (0, 0), 0.0, h, HUMAN, (0.0, 0), 0.0, h, 1.0),
+        (HUMAN, (0, 1.3), 0.0, h, VEHICLE, (0, 0), 0.0, v, 0.0),
+        (HUMAN, (0.5, 0.3), 0.0, h, VEHICLE, (0, 0), 0.0, v, 1.0),
+        (VEHICLE, (0, 0), 0.0, v, HUMAN, (0, 1.1), 0.0, h, 0.25),
+        (VEHICLE, (0, 0), 0.0, v, VEHICLE, (4.5, 0), 0.0, v, 0.0),
+        (VEHICLE, (0, 0), 0.0, v, VEHICLE, (3.5, 0), 0.0, v, 0.25),
+        (VEHICLE, (0, 0), 0.0, v, VEHICLE, (0, 1.5), math.pi / 2, v, None),
+    ]
+    n = len(pairs)
+    kind = np.zeros((n, 2), np.int32)
+    pos = np.zeros((n, 2, 2), np.float32)
+    heading = np.zeros((n, 2), np.float32)
+    dims = np.zeros((n, 2, 3), np.float32)
+    for i, (ka, pa, ha, da, kb, pb, hb, db, _) in enumerate(pairs):
+        kind[i], pos[i], heading[i], dims[i] = (ka, kb), (pa, pb), (ha, hb), (da, db)
+    out = wp.zeros(n, dtype=wp.float32, device=device)
+    wp.launch(
+        pair_overlap_test_kernel,
+        dim=n,
+        inputs=[wp.array(kind, dtype=wp.int32, device=device), wp.array(pos, dtype=wp.vec2, device=device)]
+        + [wp.array(heading, dtype=wp.float32, device=device), wp.array(dims, dtype=wp.vec3, device=device)],
+        outputs=[out],
+        device=device,
+    )
+    got = out.numpy()
+    for i, (ka, pa, ha, da, kb, pb, hb, db, expected) in enumerate(pairs):
+        ref = pair_overlap_ref(ka, pa, ha, da, kb, pb, hb, db)
+        assert got[i] == pytest.approx(ref, abs=1e-5), pairs[i]
+        if expected is not None:
+            assert ref == pytest.approx(expected, abs=1e-6), pairs[i]
+    assert got[-1] > 0.5  # a car across another's middle
+
+
+@wp.kernel
+def pair_overlap_test_kernel(
+    kind: wp.array2d(dtype=wp.int32),
+    pos: wp.array2d(dtype=wp.vec2),
+    heading: wp.array2d(dtype=wp.float32),
+    dims: wp.array2d(dtype=wp.vec3),
+    out: wp.array(dtype=wp.float32),
+):
+    i = wp.tid()
+    out[i] = kxor.pair_overlap(
+        kind[i, 0], pos[i, 0], heading[i, 0], dims[i, 0], kind[i, 1], pos[i, 1], heading[i, 1], dims[i, 1]
+    )
+
+
+@pytest.mark.parametrize(("bg_weight", "exclusion"), [(1.0, 0.0), (0.375, 250.0)])
+def test_xor_penalty_complexity_logw_and_coverage_exact(device, rng, bg_weight, exclusion):
     """mask_rows/mask_total are exact prefix sums of q != 0; xor_score_kernel gives m_i = sum(q XOR v_i) exactly
     (eq. 4) for N = 20 random particles (one empty, one taller than a CUDA block), c_i = sum over alive slots of
-    a[kind] + b[kind] exp(-age) (eq. 5; empty slots must not count, their cost is 1e6), logw = prior - (m + c) s
-    (eq. 6); the row cumulative sum of cov_diff is the per-pixel count of particles covering each pixel."""
+    a[kind] + b[kind] exp(-age) (eq. 5; empty slots must not count, their cost is 1e6), logw = prior - (m' + c) s
+    (eq. 6) with the weighted penalty m' = |q AND NOT v| + lambda |v AND NOT q| (m' = m at lambda = 1); the row
+    cumulative sum of cov_diff is the per-pixel count of particles covering each pixel."""
     case = XorCase(device, rng)
-    logw, penalty, complexity = case.score()
+    logw, penalty, complexity = case.score(bg_weight, exclusion)
     q = case.q != 0
     qrow = np.zeros((q.shape[0], q.shape[1] + 1), dtype=np.int64)
     qrow[:, 1:] = np.cumsum(q, axis=1)
@@ -579,9 +671,23 @@ def test_xor_penalty_complexity_logw_and_coverage_exact(device, rng):
     alive = case.kind > 0
     k = case.kind
     c_ref = np.sum(np.where(alive, case.cost_a[k] + case.cost_b[k] * np.exp(-case.age.astype(np.float64)), 0), axis=1)
+    excl = np.zeros(case.n)
+    for i in range(case.n):
+        for s in range(case.r):
+            for t in range(s + 1, case.r):
+                if k[i, s] > 0 and k[i, t] > 0:
+                    a = (k[i, s], case.pos[i, s], case.heading[i, s], case.dims[i, s])
+                    excl[i] += pair_overlap_ref(*a, k[i, t], case.pos[i, t], case.heading[i, t], case.dims[i, t])
+    assert excl.max() > 0.0, "some particle must hold overlapping objects"
+    c_ref = c_ref + exclusion * excl
     np.testing.assert_allclose(complexity, c_ref, rtol=1e-5)
     assert complexity[0] == 0.0 and penalty[0] == q.sum()
-    logw_ref = case.prior.astype(np.float64) - (m_ref + c_ref) * np.float64(np.float32(case.scale))
+    mw_ref = np.sum(q[None] & ~v, axis=(1, 2)) + bg_weight * np.sum(v & ~q[None], axis=(1, 2))
+    if bg_weight == 1.0:
+        np.testing.assert_array_equal(mw_ref, m_ref)
+    else:
+        assert np.any(mw_ref != m_ref), "the weight must change some penalty"
+    logw_ref = case.prior.astype(np.float64) - (mw_ref + c_ref) * np.float64(np.float32(case.scale))
     np.testing.assert_allclose(logw, logw_ref, rtol=1e-6, atol=1e-5)
     cov = case.cov_diff.numpy()
     np.testing.assert_array_equal(np.cumsum(cov[:, :-1], axis=1), v.sum(axis=0))

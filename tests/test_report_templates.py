@@ -53,11 +53,16 @@ def plaza_like_camera() -> Camera:
 def test_template_pieces_shapes_and_extents():
     from wptrack.report.templates import CABIN_LENGTH, LOWER, template_pieces
 
-    body, head = template_pieces("human", (1.8, 0.2, 0.1))
-    assert body.shape == (16, 3) and head.shape == (14, 3)
-    np.testing.assert_allclose(np.hypot(body[:, 0], body[:, 1]), 0.2)
-    np.testing.assert_allclose(sorted(set(np.round(body[:, 2], 9))), [0.0, 1.6])
-    np.testing.assert_allclose(np.linalg.norm(head - [0, 0, 1.7], axis=1), 0.1)
+    legs, upper = template_pieces("human", (1.8, 0.2, 0.1))
+    assert legs.shape == upper.shape == (16, 3)
+    # legs: octagonal prism of 0.65 x the body radius up to the hips (half the height)
+    np.testing.assert_allclose(np.hypot(legs[:, 0], legs[:, 1]), 0.65 * 0.2)
+    np.testing.assert_allclose(sorted(set(np.round(legs[:, 2], 9))), [0.0, 0.9])
+    # upper body: hexagons of the body radius at the hips and the shoulders (1.8 - 2.5 x 0.1), head square at the top
+    np.testing.assert_allclose(np.hypot(upper[:12, 0], upper[:12, 1]), 0.2)
+    np.testing.assert_allclose(sorted(set(np.round(upper[:12, 2], 9))), [0.9, 1.55])
+    np.testing.assert_allclose(np.hypot(upper[12:, 0], upper[12:, 1]), 0.1)
+    np.testing.assert_allclose(upper[12:, 2], 1.8)
     lower, cabin = template_pieces("vehicle", (4.0, 2.0, 1.5), heading=np.pi / 2)
     assert lower.shape == cabin.shape == (8, 3)
     # rotated a quarter turn: the length lies along ground y

@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import json
 from collections.abc import Sequence
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -333,91 +334,174 @@ def drift_study(
 S3_SCENES: tuple[str, ...] = ("s3-people", "s3-cars", "s3-groups", "s3-mixed")
 
 
+S3_MASKS: tuple[str, ...] = ("offline", "mog2", "perfect")
+"""Motion masks of :func:`template_accuracy`: the default pipeline (offline background model), OpenCV MOG2, or the
+scene's perfect silhouettes."""
+
+
+def _s3_scene(name: str, scenes_dir: Path, frames: int | None, seed: int, progress: bool):
+    """Render scene ``name`` with scene seed ``seed`` into ``scenes_dir/<name>/s<seed>`` (reused when it is already
+    there with the same frame count: rendering is deterministic)."""
+    from .synth import render_scene
+    from .synth.base import SceneResult
+
+    out = scenes_dir / name / f"s{seed}"
+    meta = out / "scene.json"
+    if meta.exists():
+        hints = json.loads(meta.read_text())
+        if hints.get("scene") == name and hints.get("seed") == seed and (frames is None or hints["frames"] == frames):
+            cams = hints["cameras"]
+            return SceneResult(
+                out_dir=out,
+                rig_path=out / "rig.yaml",
+                videos=[out / v for v in hints["videos"]],
+                groundtruth_path=out / "groundtruth.csv",
+                scene_json=meta,
+                frames=int(hints["frames"]),
+                mask_videos=[out / f"{c}_mask.avi" for c in cams],
+            )
+    return render_scene(name, out, frames=frames, seed=seed, progress=progress)
+
+
+def _s3_masks(res, masks: str, mask_config) -> Path:
+    """The motion-mask video of a rendered scene: its perfect silhouettes, or masks made once from its video by
+    ``wptrack.masks`` (``masks`` = ``"offline"``: the default pipeline; ``"mog2"``) and cached next to it."""
+    from dataclasses import replace
+
+    from .masks import MaskConfig, write_masks
+
+    if masks == "perfect":
+        return Path(res.mask_videos[0])
+    cfg = mask_config if mask_config is not None else MaskConfig()
+    cfg = replace(cfg, method=masks)
+    out = Path(res.out_dir) / f"masks-{masks}"
+    summary = out / "masks.json"
+    if summary.exists() and json.loads(summary.read_text()).get("config") == json.loads(json.dumps(asdict(cfg))):
+        return out / "masks.avi"
+    write_masks(str(res.videos[0]), out, config=cfg)
+    return out / "masks.avi"
+
+
 def template_accuracy(
     scenes: Sequence[str] = S3_SCENES,
-    seeds: int = 6,
+    seeds: int | Sequence[int] = 6,
     out_dir: str | Path = "s3-accuracy",
     frames: int | None = None,
     particles: int = 1000,
-    masks: str = "mog2",
+    masks: str = "offline",
     device: str = "auto",
     progress: bool = False,
     config_overrides: dict | None = None,
     mask_config=None,
+    scene_seeds: Sequence[int] = (0,),
+    scenes_dir: str | Path | None = None,
 ) -> dict:
     """Section 5 of Juza et al.: run every scene ``seeds`` times with different tracker seeds, evaluate each run
     against the ground truth (paper accuracy, MOTA, IDF1 at 1 m) and average, as the paper does.
 
-    Each scene is rendered once into ``out_dir/<scene>/scene``; runs go to ``out_dir/<scene>/seed<k>``. Writes
-    ``out_dir/accuracy.json`` (per run and averaged) and ``out_dir/accuracy.csv`` (one row per scene).
+    Each scene is rendered once per scene seed into ``scenes_dir/<scene>/s<scene seed>`` (reused when present), its
+    motion masks made once next to it (``masks-<method>/masks.avi``); runs go to
+    ``out_dir/<scene>/s<scene seed>/seed<k>``. Writes ``out_dir/accuracy.json`` (per run, and averaged over all
+    runs of a scene: every scene seed x tracker seed) and ``out_dir/accuracy.csv`` (one row per scene: mean and
+    minimum over the runs).
 
     Args:
         scenes: registered s3 scene names.
-        seeds: runs per scene (tracker seeds 0..seeds-1).
+        seeds: tracker seeds: a count k (seeds 0..k-1) or the seeds themselves.
         out_dir: output folder.
         frames: frames per scene (default: the scene's own).
         particles: N.
-        masks: ``"mog2"`` (background subtraction on the rendered video) or ``"perfect"`` (the scene's masks).
+        masks: ``"offline"`` (the default pipeline of ``wptrack.masks`` on the rendered video), ``"mog2"`` (OpenCV
+            background subtraction) or ``"perfect"`` (the scene's silhouettes).
         device: ``auto``, ``cpu``, ``cuda``...
         progress: tqdm progress bars.
         config_overrides: extra ``TemplateConfig`` fields.
-        mask_config: ``wptrack.masks.MaskConfig`` of the background subtraction (default: its defaults).
+        mask_config: ``wptrack.masks.MaskConfig`` of the mask pipeline (default: its defaults; ``method`` is set
+            from ``masks``).
+        scene_seeds: scene seeds rendered per scene (``render_scene(seed=...)``).
+        scenes_dir: where scenes and their masks are rendered and cached (default: ``out_dir``).
 
     Returns:
         ``{"scenes": {name: {"runs": [...], "average": {...}}}, ...}``.
     """
-    import json as _json
-
     from .evaluation import average, evaluate
     from .runs.templates import run_template_tracking
-    from .synth import render_scene
     from .trackers.templates import TemplateConfig
 
-    if masks not in ("mog2", "perfect"):
-        raise ConfigError(f"masks: expected 'mog2' or 'perfect', got {masks!r}")
-    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
-        raise ConfigError(f"seeds: expected a positive integer, got {seeds!r}")
+    if masks not in S3_MASKS:
+        raise ConfigError(f"masks: expected one of {', '.join(repr(m) for m in S3_MASKS)}, got {masks!r}")
+    if isinstance(seeds, (int, np.integer)) and not isinstance(seeds, bool):
+        if seeds < 1:
+            raise ConfigError(f"seeds: expected a positive integer or a list of seeds, got {seeds!r}")
+        tracker_seeds = list(range(int(seeds)))
+    else:
+        try:
+            tracker_seeds = [int(s) for s in seeds]  # type: ignore[union-attr]
+        except (TypeError, ValueError):
+            raise ConfigError(f"seeds: expected a positive integer or a list of seeds, got {seeds!r}") from None
+        if not tracker_seeds or any(s < 0 for s in tracker_seeds):
+            raise ConfigError(f"seeds: expected non-negative tracker seeds, got {seeds!r}")
+    scene_seeds = [int(s) for s in scene_seeds]
+    if not scene_seeds or any(s < 0 for s in scene_seeds):
+        raise ConfigError(f"scene_seeds: expected non-negative scene seeds, got {scene_seeds!r}")
     out = ensure_writable_dir(out_dir)
+    cache = ensure_writable_dir(scenes_dir if scenes_dir is not None else out)
     device = resolve_device(device)
-    table: dict = {"masks": masks, "particles": particles, "seeds": seeds, "device": device, "scenes": {}}
-    rows = ["scene,runs,accuracy,accuracy_min,tracking,classification,mota,idf1,id_switches"]
+    table: dict = {
+        "masks": masks,
+        "particles": particles,
+        "seeds": tracker_seeds,
+        "scene_seeds": scene_seeds,
+        "device": device,
+        "config_overrides": {k: repr(v) for k, v in (config_overrides or {}).items()},
+        "scenes": {},
+    }
+    rows = [
+        "scene,runs,accuracy,accuracy_min,tracking,classification,mota,mota_min,idf1,idf1_min,"
+        "id_switches,id_switches_max"
+    ]
     for name in scenes:
-        scene_dir = out / name / "scene"
-        res = render_scene(name, scene_dir, frames=frames, seed=0, progress=progress)
-        hints = _json.loads(Path(res.scene_json).read_text())
         runs = []
-        for seed in range(seeds):
-            cfg = TemplateConfig(
-                particles=particles,
-                seed=seed,
-                fps=float(hints.get("fps", 15.0)),
-                max_objects=max(8, int(hints.get("max_objects", 8)) + 3),
-                **(config_overrides or {}),
-            )
-            run_dir = out / name / f"seed{seed}"
-            run_template_tracking(
-                res.rig_path,
-                run_dir,
-                cfg,
-                video=res.videos[0],
-                masks=res.mask_videos[0] if masks == "perfect" else None,
-                mask_config=mask_config,
-                device=device,
-                virtual=False,
-                progress=progress,
-            )
-            ev = evaluate(res.groundtruth_path, run_dir / "tracks.csv", threshold=1.0)
-            runs.append(ev)
+        labels = []
+        for scene_seed in scene_seeds:
+            res = _s3_scene(name, cache, frames, scene_seed, progress)
+            mask_video = _s3_masks(res, masks, mask_config)
+            hints = json.loads(Path(res.scene_json).read_text())
+            for seed in tracker_seeds:
+                cfg = TemplateConfig(
+                    particles=particles,
+                    seed=seed,
+                    fps=float(hints.get("fps", 15.0)),
+                    max_objects=max(8, int(hints.get("max_objects", 8)) + 3),
+                    **(config_overrides or {}),
+                )
+                run_dir = out / name / f"s{scene_seed}" / f"seed{seed}"
+                run_template_tracking(
+                    res.rig_path,
+                    run_dir,
+                    cfg,
+                    video=res.videos[0],
+                    masks=mask_video,
+                    device=device,
+                    virtual=False,
+                    progress=progress,
+                )
+                runs.append(evaluate(res.groundtruth_path, run_dir / "tracks.csv", threshold=1.0))
+                labels.append({"scene_seed": scene_seed, "seed": seed})
         avg = average(runs)
-        table["scenes"][name] = {"runs": [r.to_dict() for r in runs], "average": avg}
+        table["scenes"][name] = {
+            "runs": [lab | r.to_dict() for lab, r in zip(labels, runs, strict=True)],
+            "average": avg,
+        }
 
         def m(key: str, stat: str = "mean", avg=avg) -> float:
             v = avg.get(key, {}).get(stat)
             return float("nan") if v is None else float(v)
 
         rows.append(
-            f"{name},{seeds},{m('accuracy'):.3f},{m('accuracy', 'min'):.3f},{m('tracking_accuracy'):.3f},"
-            f"{m('classification_accuracy'):.3f},{m('mota'):.3f},{m('idf1'):.3f},{m('id_switches'):.1f}"
+            f"{name},{len(runs)},{m('accuracy'):.3f},{m('accuracy', 'min'):.3f},{m('tracking_accuracy'):.3f},"
+            f"{m('classification_accuracy'):.3f},{m('mota'):.3f},{m('mota', 'min'):.3f},{m('idf1'):.3f},"
+            f"{m('idf1', 'min'):.3f},{m('id_switches'):.1f},{m('id_switches', 'max'):.0f}"
         )
         atomic_write_json(out / "accuracy.json", table)
         atomic_write_text(out / "accuracy.csv", "\n".join(rows) + "\n")

@@ -30,7 +30,7 @@ import numpy as np
 
 KIND_NONE, KIND_HUMAN, KIND_VEHICLE = 0, 1, 2
 PIECES = 2
-"""Convex pieces per object (human: body, head; vehicle: lower body, cabin)."""
+"""Convex pieces per object (human: legs, upper body with head; vehicle: lower body, cabin)."""
 HULL_MAX = 16
 """Most vertices per piece."""
 LOWER, CABIN_LENGTH, CABIN_WIDTH = 0.55, 0.6, 0.9
@@ -39,17 +39,15 @@ MIN_DEPTH = 1.0e-6
 """Camera depth (metres) at or below which a point is not seen (``kernels.camera.MIN_DEPTH``)."""
 
 
+LEG_RATIO, HIP, SHOULDER = 0.65, 0.5, 2.5
+"""Human proportions (``kernels.raster``): leg radius / body radius, hip height / height, shoulders in head radii
+below the top."""
+
 _OCTAGON = (np.arange(16) % 8) * (2.0 * np.pi / 8.0)
-_BODY = np.stack([np.cos(_OCTAGON), np.sin(_OCTAGON), (np.arange(16) >= 8).astype(np.float64)], axis=1)
-"""(16, 3) body prism on the unit cylinder: (cos a, sin a, 0 bottom / 1 top), the bottom octagon then the top."""
-_HEAD = np.concatenate(
-    [
-        np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float64),
-        np.array([[1 - 2 * (j % 2), 1 - 2 * ((j // 2) % 2), 1 - 2 * (j // 4)] for j in range(8)], dtype=np.float64)
-        / np.sqrt(3.0),
-    ]
-)
-"""(14, 3) head vertices on the unit sphere: octahedron (k < 6: axis k // 2, sign by parity) then cube corners."""
+_LEGS = np.stack([np.cos(_OCTAGON), np.sin(_OCTAGON), (np.arange(16) >= 8).astype(np.float64)], axis=1)
+"""(16, 3) leg prism on the unit cylinder: (cos a, sin a, 0 bottom / 1 top), the bottom octagon then the top."""
+_HEXAGON = (np.arange(12) % 6) * (2.0 * np.pi / 6.0)
+_SQUARE = np.arange(4) * (0.5 * np.pi)
 _BOX = np.array([[1 - 2 * (k % 2), 1 - 2 * ((k // 2) % 2), float(k >= 4)] for k in range(8)], dtype=np.float64)
 """(8, 3) box corners: (+-1 along the length, +-1 along the width, bottom 0 / top 1)."""
 
@@ -80,6 +78,8 @@ class NumpyTemplateScorer:
         scale: s of eq. 6 (the log-weight is ``-(m + c) s / (W H)``).
         r2_max: squared normalised radius beyond which a point is "not seen" (``warpcams.camera_struct``); inf to
             project everything in front of the camera.
+        bg_weight: lambda of the weighted penalty ``|q AND NOT v| + lambda |v AND NOT q|`` in the log-weight.
+        exclusion: cost of two objects' ground overlap, pixels per pair (``kernels.xor.pair_overlap``).
     """
 
     def __init__(
@@ -90,7 +90,11 @@ class NumpyTemplateScorer:
         cost_b: tuple[float, float, float],
         scale: float,
         r2_max: float = float("inf"),
+        bg_weight: float = 1.0,
+        exclusion: float = 0.0,
     ) -> None:
+        self.bg_weight = float(bg_weight)
+        self.exclusion = float(exclusion)
         self.width, self.height = int(camera.width), int(camera.height)
         self.R = np.asarray(camera.R, dtype=np.float64)
         self.t = np.asarray(camera.t, dtype=np.float64)
@@ -116,6 +120,8 @@ class NumpyTemplateScorer:
             (0.0, cfg.human.cost_b, cfg.vehicle.cost_b),
             cfg.scale,
             r2_max=float(tracker.cam.r2_max),
+            bg_weight=cfg.bg_weight,
+            exclusion=cfg.exclusion,
         )
 
     # --- geometry ------------------------------------------------------------------------------------------
@@ -140,15 +146,24 @@ class NumpyTemplateScorer:
         if np.any(human):
             d = dims[human]
             height, body_r, head_r = d[:, 0:1], d[:, 1:2], d[:, 2:3]
-            top = np.maximum(height - 2.0 * head_r, 0.1)
-            body = np.stack([body_r * _BODY[:, 0], body_r * _BODY[:, 1], top * _BODY[:, 2]], axis=-1)
-            head = head_r[:, :, None] * _HEAD[None]
-            head[..., 2] += (height - head_r)[:, :]
+            hip = HIP * height
+            legs = np.stack(
+                [LEG_RATIO * body_r * _LEGS[:, 0], LEG_RATIO * body_r * _LEGS[:, 1], hip * _LEGS[:, 2]], axis=-1
+            )
+            shoulder = np.maximum(height - SHOULDER * head_r, hip)
+            ring_z = np.where(np.arange(12) >= 6, shoulder, hip)
+            upper = np.concatenate(
+                [
+                    np.stack([body_r * np.cos(_HEXAGON), body_r * np.sin(_HEXAGON), ring_z], axis=-1),
+                    np.stack([head_r * np.cos(_SQUARE), head_r * np.sin(_SQUARE), np.repeat(height, 4, axis=1)], -1),
+                ],
+                axis=1,
+            )
             v = np.zeros((len(d), PIECES, HULL_MAX, 3))
-            v[:, 0, :16] = body
-            v[:, 1, :14] = head
+            v[:, 0, :16] = legs
+            v[:, 1, :16] = upper
             verts[human] = v
-            count[human] = (16, 14)
+            count[human] = (16, 16)
         vehicle = kind == KIND_VEHICLE
         if np.any(vehicle):
             d = dims[vehicle]
@@ -314,11 +329,52 @@ class NumpyTemplateScorer:
         return out
 
     # --- measurement ---------------------------------------------------------------------------------------
-    def complexity(self, kind: np.ndarray, age: np.ndarray) -> np.ndarray:
-        """c_i of eq. 5: sum over the particle's objects of a_r + b_r exp(-tau_r); (N,) float64 pixels."""
+    def complexity(self, kind: np.ndarray, age: np.ndarray, pos=None, heading=None, dims=None) -> np.ndarray:
+        """c_i of eq. 5: sum over the particle's objects of a_r + b_r exp(-tau_r), plus the exclusion prior (pairs'
+        ground overlap x ``exclusion``, when the state is given); (N,) float64 pixels."""
         kind = np.asarray(kind)
         cost = self.cost_a[kind] + self.cost_b[kind] * np.exp(-np.asarray(age, dtype=np.float64))
-        return np.where(kind > 0, cost, 0.0).sum(axis=1)
+        c = np.where(kind > 0, cost, 0.0).sum(axis=1)
+        if self.exclusion > 0.0 and pos is not None:
+            c = c + self.exclusion * self.overlap(kind, np.asarray(pos), np.asarray(heading), np.asarray(dims))
+        return c
+
+    @staticmethod
+    def overlap(kind: np.ndarray, pos: np.ndarray, heading: np.ndarray, dims: np.ndarray) -> np.ndarray:
+        """Summed ground overlap of every pair of objects of each particle (``kernels.xor.pair_overlap``); (N,)."""
+        pos = pos.astype(np.float64)
+        heading = heading.astype(np.float64)
+        dims = dims.astype(np.float64)
+
+        def disc_in_box(c, r, centre, a, hl, hw):
+            d = c - centre
+            lx = np.abs(np.cos(a) * d[..., 0] + np.sin(a) * d[..., 1])
+            ly = np.abs(-np.sin(a) * d[..., 0] + np.cos(a) * d[..., 1])
+            return np.clip(np.minimum(hl + r - lx, hw + r - ly) / (2.0 * r), 0.0, 1.0)
+
+        n, r = kind.shape
+        total = np.zeros(n)
+        for s in range(r):
+            for t in range(s + 1, r):
+                ka, kb = kind[:, s], kind[:, t]
+                pa, pb, ha, hb, da, db = pos[:, s], pos[:, t], heading[:, s], heading[:, t], dims[:, s], dims[:, t]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    hh = np.clip(1.0 - np.linalg.norm(pa - pb, axis=-1) / (da[:, 1] + db[:, 1]), 0.0, 1.0)
+                    hv = disc_in_box(pa, da[:, 1], pb, hb, 0.5 * db[:, 0], 0.5 * db[:, 1])
+                    vh = disc_in_box(pb, db[:, 1], pa, ha, 0.5 * da[:, 0], 0.5 * da[:, 1])
+                    rr = 0.5 * db[:, 1]
+                    ax = np.maximum(0.5 * db[:, 0] - rr, 0.0)[:, None] * np.stack([np.cos(hb), np.sin(hb)], -1)
+                    vv = np.max(
+                        [disc_in_box(pb + f * ax, rr, pa, ha, 0.5 * da[:, 0], 0.5 * da[:, 1]) for f in (0, 1, -1)],
+                        axis=0,
+                    )
+                o = np.where(
+                    (ka == KIND_HUMAN) & (kb == KIND_HUMAN),
+                    hh,
+                    np.where(ka == KIND_HUMAN, hv, np.where(kb == KIND_HUMAN, vh, vv)),
+                )
+                total += np.where((ka > 0) & (kb > 0), np.nan_to_num(o), 0.0)
+        return total
 
     def measure(
         self,
@@ -345,6 +401,7 @@ class NumpyTemplateScorer:
         total = int(np.count_nonzero(q))
         pts, hn, rows = self.hulls(kind, pos, heading, dims)
         penalty = np.full(n_p, total, dtype=np.int64)
+        weighted = np.full(n_p, float(total))
         cov = np.zeros((self.height, self.width), dtype=np.int64)
         part, y, u0, u1 = self.spans(pts, hn, rows)
         bounds = np.searchsorted(part, np.arange(n_p + 1))
@@ -356,9 +413,10 @@ class NumpyTemplateScorer:
             v, y0, x0 = res
             win = q[y0 : y0 + v.shape[0], x0 : x0 + v.shape[1]]
             penalty[i] = total - int(np.count_nonzero(win)) + int(np.count_nonzero(win ^ v))  # eq. 4
+            weighted[i] = total - int(np.count_nonzero(win & v)) + self.bg_weight * int(np.count_nonzero(v & ~win))
             cov[y0 : y0 + v.shape[0], x0 : x0 + v.shape[1]] += v
-        complexity = self.complexity(kind, age)
+        complexity = self.complexity(kind, age, pos, heading, dims)
         prior = np.zeros(n_p) if logw_prior is None else np.asarray(logw_prior, dtype=np.float64)
-        logw = prior - (penalty + complexity) * self.scale / float(self.width * self.height)  # eq. 6
+        logw = prior - (weighted + complexity) * self.scale / float(self.width * self.height)  # eq. 6
         uoh = np.where(q, n_p - cov, 0)  # eq. 10
         return TemplateMeasurement(penalty, complexity, logw, uoh, total)

@@ -15,8 +15,12 @@ CABIN_LENGTH = 0.6
 """Vehicle: cabin length / total length (``kernels.raster.CABIN_LENGTH``)."""
 CABIN_WIDTH = 0.9
 """Vehicle: cabin width / total width (``kernels.raster.CABIN_WIDTH``)."""
-MIN_BODY_TOP = 0.1
-"""Human: lowest top of the body prism, metres (as in the kernel)."""
+LEG_RATIO = 0.65
+"""Human: leg prism radius / body radius (``kernels.raster.LEG_RATIO``)."""
+HIP = 0.5
+"""Human: hip height / height (``kernels.raster.HIP``)."""
+SHOULDER = 2.5
+"""Human: shoulders this many head radii below the top of the head (``kernels.raster.SHOULDER``)."""
 DEFAULT_HEAD_RADIUS = 0.10
 """Head radius drawn for humans when run.json has no human prior (tracks.csv does not store it), metres."""
 
@@ -31,9 +35,10 @@ def template_pieces(cls: str, dims: Sequence[float], heading: float = 0.0) -> li
 
     Returns:
         Two (K, 3) arrays (body then head / lower body then cabin): (along ground x, along ground y, height above
-        the plane), metres, relative to the object's ground-contact point. Human: an octagonal prism (16 vertices)
-        inscribed in the body cylinder from the ground to ``height - 2 head radius`` and a 14-vertex head
-        (octahedron + cube vertices on the head sphere). Vehicle: the lower box (``LOWER`` of the height) and the
+        the plane), metres, relative to the object's ground-contact point. Human: the legs, an octagonal prism
+        (16 vertices) of radius ``LEG_RATIO`` x body radius up to the hips (``HIP`` x height), and the upper body,
+        hexagons of the body radius at the hips and the shoulders and a square of the head radius at the top (16
+        vertices). Vehicle: the lower box (``LOWER`` of the height) and the
         cabin box (``CABIN_LENGTH`` x ``CABIN_WIDTH`` of the footprint, up to the full height), 8 vertices each.
 
     Raises:
@@ -42,18 +47,23 @@ def template_pieces(cls: str, dims: Sequence[float], heading: float = 0.0) -> li
     d = [float(v) for v in dims]
     if cls == "human":
         height, body_r, head_r = d
-        top = max(height - 2.0 * head_r, MIN_BODY_TOP)
+        hip = HIP * height
         a = np.arange(8) * (math.pi / 4.0)
-        ring = np.column_stack([body_r * np.cos(a), body_r * np.sin(a)])
-        body = np.vstack([np.column_stack([ring, np.zeros(8)]), np.column_stack([ring, np.full(8, top)])])
-        c = height - head_r
-        octa = np.zeros((6, 3))
-        for k in range(6):
-            octa[k, k // 2] = (1.0 - 2.0 * (k % 2)) * head_r
-        j = np.arange(8)
-        cube = np.column_stack([1.0 - 2.0 * (j % 2), 1.0 - 2.0 * ((j // 2) % 2), 1.0 - 2.0 * (j // 4)])
-        head = np.vstack([octa, cube * (head_r / math.sqrt(3.0))]) + np.array([0.0, 0.0, c])
-        return [body, head]
+        ring = LEG_RATIO * body_r * np.column_stack([np.cos(a), np.sin(a)])
+        legs = np.vstack([np.column_stack([ring, np.zeros(8)]), np.column_stack([ring, np.full(8, hip)])])
+        a6 = np.arange(6) * (math.pi / 3.0)
+        hexa = body_r * np.column_stack([np.cos(a6), np.sin(a6)])
+        shoulder = max(height - SHOULDER * head_r, hip)
+        a4 = np.arange(4) * (math.pi / 2.0)
+        top = head_r * np.column_stack([np.cos(a4), np.sin(a4)])
+        upper = np.vstack(
+            [
+                np.column_stack([hexa, np.full(6, hip)]),
+                np.column_stack([hexa, np.full(6, shoulder)]),
+                np.column_stack([top, np.full(4, height)]),
+            ]
+        )
+        return [legs, upper]
     if cls == "vehicle":
         length, width, height = d
         ca, sa = math.cos(heading), math.sin(heading)

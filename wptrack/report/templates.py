@@ -53,8 +53,10 @@ from .template_data import TemplateObject, TemplateRun, _read, template_run
 from .template_geometry import (
     CABIN_LENGTH,
     CABIN_WIDTH,
+    HIP,
+    LEG_RATIO,
     LOWER,
-    MIN_BODY_TOP,
+    SHOULDER,
     _rgb01,
     id_bgr,
     template_outlines,
@@ -540,14 +542,20 @@ def _plane_matrix(plane: Any) -> np.ndarray:
 
 
 def template_mesh(pv: Any, plane: Any, obj: TemplateObject) -> Any:
-    """A PyVista mesh of an object's template in world coordinates: cylinder + sphere (human) or two boxes
-    (vehicle), the smooth shapes the tracker's polyhedra are inscribed in."""
+    """A PyVista mesh of an object's template in world coordinates: leg and torso cylinders + a head sphere (human)
+    or two boxes (vehicle), smooth shapes close to the tracker's polyhedra."""
     gx, gy = (float(v) for v in obj.ground)
     if obj.cls == "human":
         height, body_r, head_r = obj.dims
-        top = max(height - 2.0 * head_r, MIN_BODY_TOP)
+        hip = HIP * height
+        top = max(height - SHOULDER * head_r, hip + 0.01)
         parts = [
-            pv.Cylinder(center=(gx, gy, top / 2.0), direction=(0, 0, 1), radius=body_r, height=top, resolution=24),
+            pv.Cylinder(
+                center=(gx, gy, hip / 2.0), direction=(0, 0, 1), radius=LEG_RATIO * body_r, height=hip, resolution=24
+            ),
+            pv.Cylinder(
+                center=(gx, gy, (hip + top) / 2.0), direction=(0, 0, 1), radius=body_r, height=top - hip, resolution=24
+            ),
             pv.Sphere(radius=head_r, center=(gx, gy, height - head_r), theta_resolution=16, phi_resolution=12),
         ]
     else:
