@@ -147,6 +147,7 @@ def test_bench_templates_tiny(tmp_path, capsys):
     assert (r["tracker"], r["particles"], r["objects"], r["equivalence_particles"]) == ("templates", 100, 1, 100)
     assert r["equivalent"] is True and r["penalty_median_rel_diff"] < 1e-3
     assert r["penalty_mean"] > 0 and r["complexity_max_rel_diff"] < 1e-5 and r["uoh_frac_pixels_diff"] < 1e-3
+    assert r["logw_max_rel_diff"] < 1e-4  # the same particles' eq. 6 (the CPU once compared against a view)
     assert r["frame_ms"] > 0 and r["numpy_ms"] > 0 and r["particles_per_s"] > 0
     assert set(r["stages_ms"]) == {"observe", "raster", "score", "uoh", "estimate", "resample_predict", "readback"}
     assert "fps" in text and "templates" in text

@@ -36,6 +36,9 @@ EQUIV_SUBSET = 1000
 """Particles compared when the NumPy reference is skipped for time (m_i does not depend on the other particles)."""
 EQUIV_MEDIAN_RTOL = 1e-3
 """The check passes when the median over particles of |m_warp - m_numpy| / max(m_numpy, 1) is below this."""
+EQUIV_LOGW_RTOL = 1e-4
+"""... and the log-weights (eq. 6) agree within this fraction of their largest magnitude (float32 against
+float64)."""
 MAX_OBJECTS = 12
 """Cells of the scene's object grid."""
 TIMING_CHUNK = 10
@@ -153,7 +156,11 @@ def compare(warp: dict[str, np.ndarray], ref) -> dict:
         du = np.abs(warp["uoh"].astype(np.int64) - ref.uoh)
         out["uoh_frac_pixels_diff"] = float(np.mean(du > 0))
         out["uoh_rel_l1_diff"] = float(du.sum() / max(int(np.abs(ref.uoh).sum()), 1))
-    out["equivalent"] = bool(out["penalty_median_rel_diff"] < EQUIV_MEDIAN_RTOL)
+    scale = max(1.0, float(np.max(np.abs(ref.logw), initial=0.0)))
+    out["logw_max_rel_diff"] = out["logw_max_abs_diff"] / scale
+    out["equivalent"] = bool(
+        out["penalty_median_rel_diff"] < EQUIV_MEDIAN_RTOL and out["logw_max_rel_diff"] < EQUIV_LOGW_RTOL
+    )
     return out
 
 

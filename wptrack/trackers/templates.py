@@ -680,11 +680,12 @@ class TemplateTracker(FrameChain):
 
     def particles(self) -> dict[str, np.ndarray]:
         """The current (predicted) particle state as host arrays: kind, label, pos, vel, heading, dims, age (N, R,
-        ...), logw (N,)."""
+        ...), logw (N,). Copies: on the CPU ``wp.array.numpy()`` is a view of the tracker's memory, which the next
+        frame overwrites."""
         s = self.state[self.parity]
         return {
-            name: getattr(s, name).numpy() for name in ("kind", "label", "pos", "vel", "heading", "dims", "age")
-        } | {"logw": s.logw.numpy()}
+            name: getattr(s, name).numpy().copy() for name in ("kind", "label", "pos", "vel", "heading", "dims", "age")
+        } | {"logw": s.logw.numpy().copy()}
 
     def set_particles(self, **arrays: np.ndarray) -> None:
         """Overwrite fields of the current particle state (tests, warm starts): kind, label, pos, vel, heading,
