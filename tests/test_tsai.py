@@ -191,6 +191,9 @@ def test_box_groundtruth(tmp_path):
     rig_file.write_text(f"cameras:\n  - tsai: {XML}\n    width: 480\n    height: 360\n")
     gt_small = read_box_groundtruth(BOXES, rig_file, box_size=(768, 576))
     np.testing.assert_allclose(gt_small["x"], gt["x"], atol=1e-9)
+    # ... without the boxes' size they would land on wrong ground points: refused, naming what to give
+    with pytest.raises(ConfigError, match=r"beyond camera .*480x360.*--box-size"):
+        read_box_groundtruth(BOXES, rig_file)
     bad = tmp_path / "b.xml"
     bad.write_text('<dataset><frame number="0"><objectlist><object id="1"><box xc="1" yc="2" w="3"/></object>')
     with pytest.raises(ConfigError, match="cannot read"):

@@ -133,6 +133,18 @@ def read_box_groundtruth(
 
     rig = Rig.load(rig_path)
     cam = rig[camera]
+    boxes = read_boxes(path)
     if box_size is not None and tuple(box_size) != (cam.width, cam.height):
         cam = cam.scaled(*box_size)
-    return boxes_to_ground(read_boxes(path), cam, rig.ground, frame_offset)
+    elif box_size is None:
+        # boxes drawn in a larger image than the camera's (PETS: 768x576 boxes, 480x360 copies) would be
+        # back-projected to wrong ground points without an error: refuse and say what to give
+        right = float(np.max(boxes["xc"] + 0.5 * boxes["w"]))
+        bottom = float(np.max(boxes["yc"] + 0.5 * boxes["h"]))
+        if right > 1.1 * cam.width or bottom > 1.1 * cam.height:
+            raise ConfigError(
+                f"ground truth {path}: boxes reach x = {right:.0f}, y = {bottom:.0f} px, beyond camera "
+                f"'{cam.name}' ({cam.width}x{cam.height}): give the size of the image they were drawn in "
+                "(--box-size WIDTHxHEIGHT; PETS 2009: 768x576)"
+            )
+    return boxes_to_ground(boxes, cam, rig.ground, frame_offset)
