@@ -56,6 +56,21 @@ def pixel_of(uv: float):
     return int(wp.floor(uv + 0.5))
 
 
+@wp.func
+def pixel_index(cam: Camera, x: wp.vec3):
+    """Index in flat per-frame pixel buffers (``cam.pixel_offset + row * width + column``) of the pixel whose centre
+    is nearest to the projection of world point ``x``, or -1 when the camera does not see it (behind it, or outside
+    the image)."""
+    uvz = project(cam, x)
+    if uvz[2] <= 0.0:
+        return -1
+    px = pixel_of(uvz[0])
+    py = pixel_of(uvz[1])
+    if px < 0 or py < 0 or px >= cam.width or py >= cam.height:
+        return -1
+    return cam.pixel_offset + py * cam.width + px
+
+
 @wp.kernel
 def project_kernel(
     cams: wp.array(dtype=Camera),

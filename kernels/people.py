@@ -26,7 +26,7 @@ array (H bins, S bins, V bins; each block sums to 1). At initialisation C_0 is t
 
 import warp as wp
 
-from .camera import Camera, pixel_of, project
+from .camera import Camera, pixel_index
 from .descriptor import appearance_log_prob, descriptor_at
 from .random import STREAM_MOTION, STREAM_PEOPLE_VELOCITY, normal4, uniform4
 from .reduce import finite_logw, moments_push, moments_store, moments_zero
@@ -126,16 +126,12 @@ def motion_log_likelihood(
     total = float(0.0)
     worst = float(0.0)
     for c in range(cams.shape[0]):
-        cam = cams[c]
-        uvz = project(cam, x)
+        pix = pixel_index(cams[c], x)
         term = log_outside
-        if uvz[2] > 0.0:
-            px = pixel_of(uvz[0])
-            py = pixel_of(uvz[1])
-            if px >= 0 and py >= 0 and px < cam.width and py < cam.height:
-                term = lout
-                if mask[cam.pixel_offset + py * cam.width + px] != wp.uint8(0):
-                    term = lin
+        if pix >= 0:
+            term = lout
+            if mask[pix] != wp.uint8(0):
+                term = lin
         total += term
         if c == 0 or term < worst:
             worst = term
@@ -330,21 +326,17 @@ def ground_votes_kernel(
         hit = int(0)
         free = int(0)
         for k in range(heights.shape[0]):
-            uvz = project(cam, wp.vec3(cx, cy, heights[k]))
-            if uvz[2] > 0.0:
-                px = pixel_of(uvz[0])
-                py = pixel_of(uvz[1])
-                if px >= 0 and py >= 0 and px < cam.width and py < cam.height:
-                    vis += 1
-                    pix = cam.pixel_offset + py * cam.width + px
-                    if mask[pix] != wp.uint8(0):
-                        hit += 1
-                        explained = int(0)
-                        for j in range(npeople):
-                            if ray_near_axis(centre, rays[pix], people[j], person_height, person_radius):
-                                explained = 1
-                        if explained == 0:
-                            free += 1
+            pix = pixel_index(cam, wp.vec3(cx, cy, heights[k]))
+            if pix >= 0:
+                vis += 1
+                if mask[pix] != wp.uint8(0):
+                    hit += 1
+                    explained = int(0)
+                    for j in range(npeople):
+                        if ray_near_axis(centre, rays[pix], people[j], person_height, person_radius):
+                            explained = 1
+                    if explained == 0:
+                        free += 1
         if vis > 0:
             if float(hit) >= min_fraction * float(vis):
                 v += 1
@@ -402,14 +394,10 @@ def column_seen_kernel(
     x = wp.vec3(axis[0], axis[1], z_lo + dz * float(k))
     n = int(0)
     for c in range(cams.shape[0]):
-        cam = cams[c]
-        uvz = project(cam, x)
-        if uvz[2] > 0.0:
-            px = pixel_of(uvz[0])
-            py = pixel_of(uvz[1])
-            if px >= 0 and py >= 0 and px < cam.width and py < cam.height:
-                if mask[cam.pixel_offset + py * cam.width + px] != wp.uint8(0):
-                    n += 1
+        pix = pixel_index(cams[c], x)
+        if pix >= 0:
+            if mask[pix] != wp.uint8(0):  # nested: Warp may evaluate both operands of `and`
+                n += 1
     seen[i, a, k] = wp.uint8(n)
 
 
