@@ -234,6 +234,31 @@ def disc_radius(cam: Camera, depth: float, r_n: float, r_min: float, r_max: floa
 
 
 @wp.func
+def disc_window(cam: Camera, x: wp.vec3, r_n: float, r_min: float, r_max: float):
+    """The disc of world point ``x`` in one camera (eqs. 19-20): ``(u, v, r, x0, x1, y0, y1)``, its centre and
+    radius r_i (:func:`disc_radius`), pixels, and the pixel box around it clipped to the image (inclusive). The box is
+    empty (``x1 < x0``) when the camera does not see ``x``."""
+    uvz = project(cam, x)
+    if uvz[2] <= 0.0:
+        return 0.0, 0.0, 0.0, 0, -1, 0, -1
+    r = disc_radius(cam, uvz[2], r_n, r_min, r_max)
+    u = uvz[0]
+    v = uvz[1]
+    x0 = wp.max(int(wp.ceil(u - r)), 0)
+    x1 = wp.min(int(wp.floor(u + r)), cam.width - 1)
+    y0 = wp.max(int(wp.ceil(v - r)), 0)
+    y1 = wp.min(int(wp.floor(v + r)), cam.height - 1)
+    return u, v, r, x0, x1, y0, y1
+
+
+@wp.func
+def pixel_rgb(bgr: wp.array(dtype=wp.uint8), cam: Camera, px: int, py: int):
+    """(R, G, B) in [0, 1] of pixel (px, py) of a camera's image in the flat interleaved BGR buffer."""
+    o = 3 * (cam.pixel_offset + py * cam.width + px)
+    return wp.vec3(float(bgr[o + 2]), float(bgr[o + 1]), float(bgr[o])) * (1.0 / 255.0)
+
+
+@wp.func
 def hist_add(out: wp.array2d(dtype=wp.float32), i: int, base: int, x: float, nb: int, wrap: int, w: float):
     k0, k1, w1 = bin_split(x, nb, wrap)
     out[i, base + k0] = out[i, base + k0] + w * (1.0 - w1)
@@ -261,16 +286,9 @@ def descriptor_at(
     crgb = wp.vec3()
     for c in range(cams.shape[0]):
         cam = cams[c]
-        uvz = project(cam, x)
-        if uvz[2] <= 0.0:
+        u, vv, r, x0, x1, y0, y1 = disc_window(cam, x, r_n, r_min, r_max)
+        if x1 < x0 or y1 < y0:
             continue
-        r = disc_radius(cam, uvz[2], r_n, r_min, r_max)
-        u = uvz[0]
-        vv = uvz[1]
-        x0 = wp.max(int(wp.ceil(u - r)), 0)
-        x1 = wp.min(int(wp.floor(u + r)), cam.width - 1)
-        y0 = wp.max(int(wp.ceil(vv - r)), 0)
-        y1 = wp.min(int(wp.floor(vv + r)), cam.height - 1)
         r2 = r * r
         norm = INV_2PI * float(step * step) / r2  # each sample stands for step x step pixels
         for py in range(y0, y1 + 1, step):
@@ -280,8 +298,7 @@ def descriptor_at(
                 d2 = dx * dx + dy * dy
                 if d2 <= r2:
                     w = norm * wp.exp(-0.5 * d2 / r2)  # G of eq. 20, sigma = r_i
-                    o = 3 * (cam.pixel_offset + py * cam.width + px)
-                    rgb = wp.vec3(float(bgr[o + 2]), float(bgr[o + 1]), float(bgr[o])) * (1.0 / 255.0)
+                    rgb = pixel_rgb(bgr, cam, px, py)
                     hsv = rgb_to_hsv(rgb[0], rgb[1], rgb[2])  # eqs. 12-14, only for the pixels the discs cover
                     hist_add(desc, i, 0, hsv[0], nb, 1, w)
                     hist_add(desc, i, nb, hsv[1], nb, 0, w)
@@ -445,16 +462,7 @@ def descriptor_block_kernel(
     acc = desc_acc()
     for c in range(cams.shape[0]):
         cam = cams[c]
-        uvz = project(cam, x)
-        if uvz[2] <= 0.0:
-            continue
-        r = disc_radius(cam, uvz[2], r_n, r_min, r_max)
-        u = uvz[0]
-        vv = uvz[1]
-        x0 = wp.max(int(wp.ceil(u - r)), 0)
-        x1 = wp.min(int(wp.floor(u + r)), cam.width - 1)
-        y0 = wp.max(int(wp.ceil(vv - r)), 0)
-        y1 = wp.min(int(wp.floor(vv + r)), cam.height - 1)
+        u, vv, r, x0, x1, y0, y1 = disc_window(cam, x, r_n, r_min, r_max)
         if x1 < x0 or y1 < y0:
             continue
         nx = (x1 - x0) / step + 1
@@ -469,8 +477,7 @@ def descriptor_block_kernel(
             d2 = dx * dx + dy * dy
             if d2 <= r2:
                 w = norm * wp.exp(-0.5 * d2 / r2)  # G of eq. 20, sigma = r_i
-                o = 3 * (cam.pixel_offset + py * cam.width + px)
-                rgb = wp.vec3(float(bgr[o + 2]), float(bgr[o + 1]), float(bgr[o])) * (1.0 / 255.0)
+                rgb = pixel_rgb(bgr, cam, px, py)
                 hsv = rgb_to_hsv(rgb[0], rgb[1], rgb[2])
                 acc = acc_add(acc, 0, hsv[0], nb, 1, w)
                 acc = acc_add(acc, nb, hsv[1], nb, 0, w)
