@@ -28,6 +28,29 @@ class Camera:
     integral_offset: int  # start of this camera's (H+1) x (W+1) integral image in flat buffers
 
 
+CAMERA_SET_SIZE = wp.constant(8)
+"""Most cameras a :class:`CameraSet` holds."""
+
+
+@wp.struct
+class CameraSet:
+    """Up to ``CAMERA_SET_SIZE`` cameras by value: a kernel argument of this type lives in the launch's constant
+    parameter memory, so every thread reads the camera parameters as constants instead of loading them from a
+    ``wp.array(dtype=Camera)`` for every particle and camera (the compiler cannot hoist those loads out of a particle
+    loop that also stores). Cameras ``c0 .. c{count-1}`` are used; ``count = 0`` means "use the array instead" (rigs of
+    more than ``CAMERA_SET_SIZE`` cameras)."""
+
+    count: int
+    c0: Camera
+    c1: Camera
+    c2: Camera
+    c3: Camera
+    c4: Camera
+    c5: Camera
+    c6: Camera
+    c7: Camera
+
+
 @wp.func
 def project(cam: Camera, x: wp.vec3):
     """Project a world point into the image.

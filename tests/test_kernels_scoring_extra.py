@@ -15,6 +15,7 @@ from test_kernels_colour import TARGETS, make_rig, mask_and_integral, random_fra
 from wptrack.kernels import random as krand
 from wptrack.kernels import reduce as kreduce
 from wptrack.kernels import scoring as kscoring
+from wptrack.rig import Camera, Rig
 from wptrack.warpcams import DeviceRig
 
 BLOCK = 256  # as wptrack.pf launches the fused kernels
@@ -66,7 +67,7 @@ def particle_state(rng, n: int, lo, hi):
 
 
 @pytest.mark.parametrize("resampled", [True, False], ids=["resampled", "accumulate"])
-@pytest.mark.parametrize("mode", ["direct", "integral", "map"])
+@pytest.mark.parametrize("mode", ["direct", "integral", "map", "map-set"])
 def test_colour_predict_score_matches_numpy(device, rng, mode, resampled):
     rig = make_rig(rng)
     frames = random_frames(rig, rng)
@@ -76,11 +77,14 @@ def test_colour_predict_score_matches_numpy(device, rng, mode, resampled):
     mask, integral, window, _ = mask_and_integral(drig, target, bgr, device)
     n, chunk, sigma = 1500, 256, 0.02  # 6 blocks, the last one partial
     parents, anc, logw_prev = particle_state(rng, n, [0.0, 0.0, -0.1], [0.9, 0.9, 0.4])
-    m = {"direct": kscoring.SCORE_DIRECT, "integral": kscoring.SCORE_INTEGRAL, "map": kscoring.SCORE_MAP}[mode]
-    obs = [drig.cams, target.to_struct(device), bgr, integral, window, int(m)]
-    x, lw, parts = launch_fused(
-        kscoring.colour_predict_score_kernel, obs, parents, anc, logw_prev, resampled, sigma, n, chunk, device
-    )
+    kernel = kscoring.colour_predict_score_kernel
+    if mode == "map-set":  # the large-N kernel: map scoring, the cameras by value
+        kernel, obs = kscoring.colour_predict_score_map_kernel, [drig.cam_set, window]
+        assert drig.cam_set.count == len(rig.cameras)
+    else:
+        m = {"direct": kscoring.SCORE_DIRECT, "integral": kscoring.SCORE_INTEGRAL, "map": kscoring.SCORE_MAP}[mode]
+        obs = [drig.cams, target.to_struct(device), bgr, integral, window, int(m)]
+    x, lw, parts = launch_fused(kernel, obs, parents, anc, logw_prev, resampled, sigma, n, chunk, device)
     # eqs. 1-3: the resampled parent plus sigma N(0, I) of the (seed, i, frame, STREAM_MOTION) stream
     z = normal4_ref(SEED, n, FRAME, int(krand.STREAM_MOTION))
     ref_x = parents.astype(np.float32).astype(np.float64)[anc] + sigma * z[:, :3]
@@ -103,6 +107,58 @@ def test_colour_predict_score_matches_numpy(device, rng, mode, resampled):
     if not resampled:
         assert np.all(lw[::97] == np.float32(kreduce.LOGW_FLOOR))
     check_partials(parts, lw, x, chunk, rtol=partials_rtol(device))
+
+
+def test_colour_predict_score_map_kernel_equals_general(device, rng):
+    """The large-N kernel (map scoring, cameras by value) is only a faster form of the general kernel in map mode:
+    same particles and log-weights (bit for bit on the CPU) for 1 to 8 cameras (each member of the camera set is
+    read)."""
+    base = make_rig(rng).cameras
+    cams = tuple(
+        Camera.look_at(f"c{k}", 48, 40, (0.5 + 0.4 * np.cos(a), 0.45 + 0.4 * np.sin(a), 0.3), (0.45, 0.45, 0.1), 45.0)
+        for k, a in enumerate(np.linspace(0.0, 2 * np.pi, 6, endpoint=False))
+    )
+    n, chunk, sigma = 700, 256, 0.02
+    parents, anc, logw_prev = particle_state(rng, n, [0.2, 0.2, -0.1], [0.7, 0.7, 0.3])
+    for count in (1, 3, 8):
+        rig = Rig((base + cams)[:count])
+        drig = DeviceRig(rig, device)
+        bgr = upload(random_frames(rig, rng), device)
+        _mask, integral, window, _ = mask_and_integral(drig, TARGETS[0], bgr, device)
+        general = [drig.cams, TARGETS[0].to_struct(device), bgr, integral, window, int(kscoring.SCORE_MAP)]
+        outs = []
+        for kernel, obs in (
+            (kscoring.colour_predict_score_map_kernel, [drig.cam_set, window]),
+            (kscoring.colour_predict_score_kernel, general),
+        ):
+            x, lw, _parts = launch_fused(
+                kernel,
+                obs,
+                parents,
+                anc,
+                logw_prev,
+                True,
+                sigma,
+                n,
+                chunk,
+                device,
+            )
+            outs.append((x, lw))
+        assert drig.cam_set.count == count
+        if wp.get_device(device).is_cpu:
+            np.testing.assert_array_equal(outs[0][0], outs[1][0])
+            np.testing.assert_array_equal(outs[0][1], outs[1][1])
+        else:  # the compiler may contract the two kernels' arithmetic differently (fast_math): a pixel-boundary case
+            np.testing.assert_allclose(outs[0][0], outs[1][0], rtol=0, atol=2e-6)
+            assert np.mean(np.abs(outs[0][1] - outs[1][1]) > 1e-5) < 0.01
+        assert np.unique(outs[0][1]).size > 20  # the cameras see the blobs: the log-weights vary
+
+
+def test_camera_set_beyond_eight_cameras_uses_the_array():
+    cam = Camera.look_at("a", 32, 24, (1.0, 0.0, 0.5), (0.0, 0.0, 0.0), 30.0)
+    rig = Rig(tuple(Camera.look_at(f"c{k}", 32, 24, (1.0, 0.1 * k, 0.5), (0.0, 0.0, 0.0), 30.0) for k in range(9)))
+    assert DeviceRig(rig, "cpu").cam_set.count == 0
+    assert DeviceRig(Rig((cam,)), "cpu").cam_set.count == 1
 
 
 @pytest.mark.parametrize("resampled", [True, False], ids=["resampled", "accumulate"])

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .kernels.camera import CAMERA_SET_SIZE, CameraSet
 from .kernels.camera import Camera as CameraStruct
 from .rig import Camera, Rig
 
@@ -66,11 +67,23 @@ def camera_struct(cam: Camera, pixel_offset: int = 0, integral_offset: int = 0) 
     return s
 
 
+def camera_set(structs: list[CameraStruct]) -> CameraSet:
+    """The cameras by value for kernels that read them as constants (``kernels.camera.CameraSet``); ``count`` is 0
+    (the kernels then read the camera array) when there are more than ``CAMERA_SET_SIZE`` of them."""
+    s = CameraSet()
+    size = int(CAMERA_SET_SIZE)
+    s.count = len(structs) if len(structs) <= size else 0
+    for k in range(size):
+        setattr(s, f"c{k}", structs[k] if s.count and k < len(structs) else CameraStruct())
+    return s
+
+
 class DeviceRig:
     """A rig on a device, with its cameras' images laid out back to back in flat buffers.
 
     Attributes:
         cams: (M,) ``wp.array`` of camera structs.
+        cam_set: the same cameras by value (``kernels.camera.CameraSet``; ``count`` 0 beyond 8 cameras).
         pixel_offsets: (M + 1,) start of each camera's image in flat pixel buffers (last = total pixels).
         integral_offsets: (M + 1,) start of each (H+1) x (W+1) integral image (last = total size).
         max_pixels, max_width, max_height: launch bounds over cameras.
@@ -86,6 +99,7 @@ class DeviceRig:
             for i, c in enumerate(rig.cameras)
         ]
         self.cams = wp.array(structs, dtype=CameraStruct, device=device)
+        self.cam_set = camera_set(structs)
         self.total_pixels = int(self.pixel_offsets[-1])
         self.total_integral = int(self.integral_offsets[-1])
         self.max_pixels = max(w * h for w, h in sizes)

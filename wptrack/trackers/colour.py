@@ -332,6 +332,11 @@ class ColorTracker(ParticleFilter):
         observation = [self.drig.cams, self._target, self.bgr, self._integral, self._window, self._mode_id]
         cfg = self.config
         if cfg.proposal == "prior":
+            if self.score_mode == "map" and self.drig.cam_set.count > 0:  # the large-N kernel (cameras by value)
+                self._launch_fused(
+                    kscoring.colour_predict_score_map_kernel, [self.drig.cam_set, self._window], src, dst
+                )
+                return
             self._launch_fused(kscoring.colour_predict_score_kernel, observation, src, dst)
             return
         d = self.device
