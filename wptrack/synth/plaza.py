@@ -144,6 +144,37 @@ def _image_box(cam: Camera, corners: np.ndarray, pad: int = 2) -> tuple[int, int
     return u0, u1, v0, v1
 
 
+def image_box_cover(
+    cam: Camera, shape: Person | Car, pos: np.ndarray, heading: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """How much of an object's image bounding box lies inside the image, per frame.
+
+    Args:
+        cam: The camera.
+        shape: The object's :class:`Person` or :class:`Car` (its :meth:`box`).
+        pos: (N, 2) ground positions, metres.
+        heading: (N,) headings, radians.
+
+    Returns:
+        ``(ok, area, inside)``: (N,) bool, all box corners in front of the camera; (N,) area of the image bounding
+        box of the 8 box corners and (N,) the part of it inside the image, square pixels.
+    """
+    n = len(pos)
+    half, height = shape.box()
+    c, s = np.cos(heading), np.sin(heading)
+    local = _BOX_SIGNS * half[None, :] + np.array([0.0, 0.0, 0.5 * height])
+    wx = pos[:, 0, None] + c[:, None] * local[None, :, 0] - s[:, None] * local[None, :, 1]
+    wy = pos[:, 1, None] + s[:, None] * local[None, :, 0] + c[:, None] * local[None, :, 1]
+    wz = np.broadcast_to(local[None, :, 2], wx.shape)
+    uv, depth = cam.project(np.stack([wx, wy, wz], axis=-1).reshape(-1, 3))
+    uv = uv.reshape(n, 8, 2)
+    ok = np.all(depth.reshape(n, 8) > 0.1, axis=1)
+    lo, hi = uv.min(axis=1), uv.max(axis=1)
+    area = np.prod(np.maximum(hi - lo, 1e-6), axis=1)
+    inside = np.prod(np.clip(np.minimum(hi, [cam.width, cam.height]) - np.maximum(lo, 0.0), 0.0, None), axis=1)
+    return ok, area, inside
+
+
 class PlazaScene(Scene):
     """A plaza scene: one camera, people and cars with class, size and heading ground truth, perfect masks.
 
@@ -266,18 +297,7 @@ class PlazaScene(Scene):
             ph = 2 * np.pi * np.cumsum(sp * dt / stride) + 1.3 * actor.oid
             pos[a], active[a], heading[a], speed[a], phase[a] = p, act, ang, sp, ph
             # in the ground truth where >= MIN_IN_IMAGE of the object's image bounding box is inside the image
-            half, height = actor.shape.box()
-            c, s = np.cos(ang), np.sin(ang)
-            local = _BOX_SIGNS * half[None, :] + np.array([0.0, 0.0, 0.5 * height])
-            wx = p[:, 0, None] + c[:, None] * local[None, :, 0] - s[:, None] * local[None, :, 1]
-            wy = p[:, 1, None] + s[:, None] * local[None, :, 0] + c[:, None] * local[None, :, 1]
-            wz = np.broadcast_to(local[None, :, 2], wx.shape)
-            uv, depth = cam.project(np.stack([wx, wy, wz], axis=-1).reshape(-1, 3))
-            uv = uv.reshape(n, 8, 2)
-            ok = np.all(depth.reshape(n, 8) > 0.1, axis=1)
-            lo, hi = uv.min(axis=1), uv.max(axis=1)
-            area = np.prod(np.maximum(hi - lo, 1e-6), axis=1)
-            inside = np.prod(np.clip(np.minimum(hi, [cam.width, cam.height]) - np.maximum(lo, 0.0), 0.0, None), axis=1)
+            ok, area, inside = image_box_cover(cam, actor.shape, p, ang)
             present[a] = act & ok & (inside >= MIN_IN_IMAGE * area)
         self._states = _States(n, pos, active, present, heading, speed, phase)
         return self._states
