@@ -569,8 +569,17 @@ def _people(count: int, seed: int, camouflage: Sequence[int] = ()) -> list[Perso
     return out
 
 
-def people_actors() -> list[PlazaActor]:
-    """``s3-people``: five people on waypoint paths, entering and leaving at different times."""
+def _drawn(name: str, seed: int) -> list[PlazaActor]:
+    """The actors of scene ``name`` at a scene seed >= 1 (:mod:`wptrack.synth.plaza_seeds`)."""
+    from wptrack.synth import plaza_seeds
+
+    return plaza_seeds.draw_actors(name, seed)
+
+
+def people_actors(seed: int = 0) -> list[PlazaActor]:
+    """``s3-people``: five people on waypoint paths, entering and leaving at different times (seed 0: fixed)."""
+    if seed:
+        return _drawn("s3-people", seed)
     looks = _people(5, seed=301, camouflage=(2,))
     paths = [
         Path(
@@ -592,31 +601,34 @@ def people_actors() -> list[PlazaActor]:
     return [PlazaActor(i, look, path) for i, (look, path) in enumerate(zip(looks, paths, strict=True))]
 
 
+U_TURN: tuple[tuple[float, float], ...] = (
+    (15.5, ROAD_LANES[1]),
+    (9.0, ROAD_LANES[1]),
+    (4.0, ROAD_LANES[1] + 0.5),
+    (0.8, 18.0),
+    (-2.2, 17.3),
+    (-3.2, 15.2),
+    (-2.4, 12.9),
+    (0.4, 11.9),
+    (4.5, 12.2),
+    (9.0, ROAD_LANES[0]),
+    (17.0, ROAD_LANES[0]),
+)
+"""Waypoints of the U-turn of ``s3-cars`` (seed 0): in the far lane towards -x, a wide left turn, out along +x."""
+U_TURN_SPEEDS: tuple[float, ...] = (5.0, 4.5, 3.2, 2.3, 2.2, 2.2, 2.3, 2.8, 3.5, 4.5, 5.0)
+"""Speeds at the :data:`U_TURN` waypoints, m/s."""
+
+
 def _car(length: float, width: float, height: float, rgb: _Rgb) -> Car:
     return Car(length=length, width=width, height=height, body=rgb)
 
 
-def cars_actors() -> list[PlazaActor]:
-    """``s3-cars``: two cars passing each other in opposite lanes, a third making a U-turn."""
+def cars_actors(seed: int = 0) -> list[PlazaActor]:
+    """``s3-cars``: two cars passing each other in opposite lanes, a third making a U-turn (seed 0: fixed)."""
+    if seed:
+        return _drawn("s3-cars", seed)
     near, far = ROAD_LANES
-    u_turn = Path(
-        (
-            (15.5, far),
-            (9.0, far),
-            (4.0, far + 0.5),
-            (0.8, 18.0),
-            (-2.2, 17.3),
-            (-3.2, 15.2),
-            (-2.4, 12.9),
-            (0.4, 11.9),
-            (4.5, 12.2),
-            (9.0, near),
-            (17.0, near),
-        ),
-        (5.0, 4.5, 3.2, 2.3, 2.2, 2.2, 2.3, 2.8, 3.5, 4.5, 5.0),
-        1.0,
-        smooth_m=4.0,
-    )
+    u_turn = Path(U_TURN, U_TURN_SPEEDS, 1.0, smooth_m=4.0)
     return [
         PlazaActor(0, _car(4.5, 1.8, 1.5, (0.24, 0.24, 0.26)), Path(((-17.0, near), (17.0, near)), 6.5, -1.0)),
         PlazaActor(1, _car(4.2, 1.75, 1.45, (0.8, 0.8, 0.78)), Path(((18.0, far), (-18.0, far)), 5.5, -1.3)),
@@ -624,8 +636,10 @@ def cars_actors() -> list[PlazaActor]:
     ]
 
 
-def groups_actors() -> list[PlazaActor]:
-    """``s3-groups``: a group of six walking together and one straggler following it."""
+def groups_actors(seed: int = 0) -> list[PlazaActor]:
+    """``s3-groups``: a group walking together (six at seed 0, five or six at other seeds) and a straggler."""
+    if seed:
+        return _drawn("s3-groups", seed)
     looks = _people(7, seed=303, camouflage=(1, 4))
     route = ((-4.0, 3.6), (-2.0, 5.6), (-0.5, 7.6), (0.0, 9.2), (0.3, 11.5), (1.5, 14.5), (3.5, 18.0))
     group = Formation(
@@ -638,8 +652,10 @@ def groups_actors() -> list[PlazaActor]:
     return actors
 
 
-def mixed_actors() -> list[PlazaActor]:
+def mixed_actors(seed: int = 0) -> list[PlazaActor]:
     """``s3-mixed``: two cars on the road and two people, one crossing the road between the cars' passages."""
+    if seed:
+        return _drawn("s3-mixed", seed)
     near, far = ROAD_LANES
     looks = _people(2, seed=306, camouflage=(1,))
     crossing = Path(
@@ -654,21 +670,31 @@ def mixed_actors() -> list[PlazaActor]:
     ]
 
 
-@register_scene("s3-people", "Juza et al.: up to 5 people walking randomly on a plaza, occlusions; 1 high camera")
-def _s3_people() -> Scene:
-    return PlazaScene(people_actors())
+@register_scene(
+    "s3-people", "Juza et al.: up to 5 people walking randomly on a plaza, occlusions; 1 high camera", seeded=True
+)
+def _s3_people(seed: int = 0) -> Scene:
+    return PlazaScene(people_actors(seed))
 
 
-@register_scene("s3-cars", "Juza et al.: 3 cars, two passing each other (occlusion), one U-turn; 1 high camera")
-def _s3_cars() -> Scene:
-    return PlazaScene(cars_actors())
+@register_scene(
+    "s3-cars", "Juza et al.: 3 cars, two passing each other (occlusion), one U-turn; 1 high camera", seeded=True
+)
+def _s3_cars(seed: int = 0) -> Scene:
+    return PlazaScene(cars_actors(seed))
 
 
-@register_scene("s3-groups", "Juza et al.: a group of 6 people walking together and a straggler; 1 high camera")
-def _s3_groups() -> Scene:
-    return PlazaScene(groups_actors())
+@register_scene(
+    "s3-groups", "Juza et al.: a group of 5-6 people walking together and a straggler; 1 high camera", seeded=True
+)
+def _s3_groups(seed: int = 0) -> Scene:
+    return PlazaScene(groups_actors(seed))
 
 
-@register_scene("s3-mixed", "Juza et al.: 2 cars and 2 people, one crossing the road between the cars; 1 high camera")
-def _s3_mixed() -> Scene:
-    return PlazaScene(mixed_actors())
+@register_scene(
+    "s3-mixed",
+    "Juza et al.: 2 cars and 2 people, one crossing the road between the cars; 1 high camera",
+    seeded=True,
+)
+def _s3_mixed(seed: int = 0) -> Scene:
+    return PlazaScene(mixed_actors(seed))
