@@ -258,3 +258,20 @@ def test_render_scene_with_a_new_seed(tmp_path, name: str) -> None:
     np.testing.assert_array_equal(masks[1][..., 0], np.where(labels > 0, 255, 0))
     zero = render_scene(name, tmp_path / "zero", frames=2)
     assert res.groundtruth_path.read_text() != zero.groundtruth_path.read_text()
+
+
+def test_accuracy_cache_renders_stale_scenes_again(tmp_path, caplog) -> None:
+    """A scene folder of template_accuracy rendered before seeds drew new sequences is not reused."""
+    from wptrack.experiments import _s3_scene
+
+    first = _s3_scene("s3-cars", tmp_path, 2, 2, False)
+    assert _s3_scene("s3-cars", tmp_path, 2, 2, False).groundtruth_path == first.groundtruth_path
+    fresh = first.groundtruth_path.read_text()
+    assert len(fresh.splitlines()) > 1
+    first.groundtruth_path.write_text(render_scene("s3-cars", tmp_path / "old", frames=2).groundtruth_path.read_text())
+    (first.out_dir / "masks-offline").mkdir()
+    (first.out_dir / "masks-offline" / "masks.json").write_text("{}")
+    again = _s3_scene("s3-cars", tmp_path, 2, 2, False)
+    assert again.groundtruth_path.read_text() == fresh
+    assert not (first.out_dir / "masks-offline").exists()
+    assert "stale scene" in caplog.text
