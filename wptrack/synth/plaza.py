@@ -7,7 +7,8 @@ Their ten test sequences fall into four types (Table 2), replicated here on one 
   times, occluding each other;
 - ``s3-cars``: up to three cars: two pass each other in opposite lanes (the far one is partly hidden by the near
   one), the third makes a slow U-turn;
-- ``s3-groups``: six people walking together (0.6-1.2 m apart, slowly changing formation) and one straggler;
+- ``s3-groups``: five or six people (six at seed 0) walking together (0.6-1.2 m apart, slowly changing formation)
+  and one straggler;
 - ``s3-mixed``: two cars and two people; one person crosses the road between the two cars' passages (partly
   hiding each car as it passes behind), the other strolls across the plaza.
 
@@ -32,8 +33,14 @@ ellipsoids), 1.6-1.9 m tall, in varied clothes (some close to the paving or asph
 a cabin box (windows on the sides, roof in the body colour) and four dark wheels, 4.0-4.8 m long, 1.7-1.9 m wide,
 1.4-1.6 m high, its heading along its velocity. Paths are centripetal Catmull-Rom splines through waypoints,
 travelled with a smoothly varying speed (people 0.8-1.6 m/s, cars 2-8 m/s); a group is a formation around one
-path. The layout, the objects and their paths are fixed (a fixed internal seed); the ``seed`` of
-:func:`~wptrack.synth.base.render_scene` only changes the sensor noise.
+path.
+
+Scene seeds (the ``seed`` of :func:`~wptrack.synth.base.render_scene`, also the sensor noise's): the plaza, its
+clutter and the camera never change. At seed 0 the objects, their looks and paths are the fixed sequences written
+out below (all published numbers use them; a test pins their ground truth). Any other seed draws a new sequence of
+the same scene type (the counts, events and speed ranges above): new paths, speeds, start times, sizes, clothes and
+paints, all from ``np.random.default_rng([zlib.crc32(name), seed])``, kept only when the objects stay apart, off the
+clutter (people) or on the road (cars), and in view long enough (:mod:`wptrack.synth.plaza_seeds`).
 
 Ground truth (``groundtruth.csv``): ``frame,id,x,y,z,class,length,width,height,orientation`` with the object's
 ground-contact centre (z = 0), class ``human`` or ``vehicle``, its dimensions in metres (a human's length and width
