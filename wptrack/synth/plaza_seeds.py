@@ -405,10 +405,11 @@ def _route(
     inner: tuple[int, int] = (1, 3),
     max_turn_deg: float = 100.0,
 ) -> tuple[tuple[float, float], ...]:
-    """Waypoints from outside the image through 1-3 random inner points to outside the image."""
+    """Waypoints from outside the image (left, right or bottom edge) through 1-3 random inner points (ordered along
+    the way) to outside the image at another edge."""
     sides = ("left", "right", "bottom")
     while True:
-        entry, exit_ = (sides[int(i)] for i in rng.integers(3, size=2))
+        entry, exit_ = (sides[int(i)] for i in rng.permutation(3)[:2])  # out at another edge than in
         k = int(rng.integers(inner[0], inner[1] + 1))
         a, b = _edge_point(rng, entry, edge_y), _edge_point(rng, exit_, edge_y)
         axis = np.subtract(b, a)
@@ -566,7 +567,7 @@ def _straight_line() -> Path:
 
 def _group_offsets(rng: np.random.Generator, count: int) -> tuple[tuple[float, float], ...]:
     """(along, across) offsets of ``count`` members whose nearest neighbours stay 0.6-1.2 m apart as they wobble."""
-    times = np.arange(CHECK_FRAMES) / FPS
+    times = np.arange(0.0, CHECK_FRAMES / FPS, 0.2)  # the wobble is slow (periods of 14 and 19 s)
     while True:
         pts = [np.zeros(2)]
         for _ in range(200):
