@@ -18,12 +18,16 @@ from wptrack.synth.render import Box, Cylinder
 
 FRAMES = 4
 S3 = ("s3-people", "s3-cars", "s3-groups", "s3-mixed")
+SEED = 0
+"""Scene seed of the rendered fixture: the fixed sequences (other seeds: tests/test_synth_plaza_seeds.py)."""
+SEEDS = (0, 1, 2)
+"""Scene seeds of the ground-truth tests: seed 0's fixed sequences and two drawn ones (seed 1's group has 5)."""
 COLUMNS = ["frame", "id", "x", "y", "z", "class", "length", "width", "height", "orientation"]
 
 
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory) -> dict[str, SceneResult]:
-    return {name: render_scene(name, tmp_path_factory.mktemp(name), frames=FRAMES, seed=1) for name in S3}
+    return {name: render_scene(name, tmp_path_factory.mktemp(name), frames=FRAMES, seed=SEED) for name in S3}
 
 
 def _rows(path: Path) -> tuple[list[str], list[dict[str, str]]]:
@@ -36,8 +40,10 @@ def _frames(videos: list[Path]) -> list[np.ndarray]:
     return [frames[0] for frames in open_frames(videos)]
 
 
-def _ground_truth(name: str) -> tuple[P.PlazaScene, int, dict[int, np.ndarray], dict[str, dict[int, np.ndarray]]]:
-    scene = SCENES[name].build()
+def _ground_truth(
+    name: str, seed: int = 0
+) -> tuple[P.PlazaScene, int, dict[int, np.ndarray], dict[str, dict[int, np.ndarray]]]:
+    scene = SCENES[name].build(seed)
     n = scene.default_frames
     return scene, n, scene.trajectories(n), scene.groundtruth_columns(n)
 
@@ -97,9 +103,10 @@ def test_files_columns_and_hints(rendered: dict[str, SceneResult]) -> None:
             assert np.array_equal(mask[..., 0], mask[..., 2])
 
 
-def test_object_counts_match_scene_types() -> None:
+@pytest.mark.parametrize("seed", SEEDS)
+def test_object_counts_match_scene_types(seed: int) -> None:
     for name in S3:
-        scene, n, traj, cols = _ground_truth(name)
+        scene, n, traj, cols = _ground_truth(name, seed)
         present = np.array([np.all(np.isfinite(traj[oid]), axis=1) for oid in sorted(traj)])
         classes = np.array([cols["class"][oid][0] for oid in sorted(traj)])
         humans = present[classes == P.HUMAN].sum(axis=0)
@@ -129,9 +136,10 @@ def test_object_counts_match_scene_types() -> None:
             assert np.all(np.cos(heading - np.arctan2(step[:, 1], step[:, 0])) > 0.95), (name, oid)
 
 
-def test_car_scene_events() -> None:
+@pytest.mark.parametrize("seed", SEEDS)
+def test_car_scene_events(seed: int) -> None:
     """Two cars in opposite lanes at once, one U-turn (heading turns by about pi, slowly)."""
-    scene, n, traj, cols = _ground_truth("s3-cars")
+    scene, n, traj, cols = _ground_truth("s3-cars", seed)
     heading = {oid: np.unwrap(cols["orientation"][oid][np.all(np.isfinite(traj[oid]), axis=1)]) for oid in traj}
     turns = [oid for oid, h in heading.items() if np.ptp(h) > 0.9 * math.pi]
     assert len(turns) == 1
@@ -145,14 +153,16 @@ def test_car_scene_events() -> None:
     assert np.cos(cols["orientation"][straight[0]][f] - cols["orientation"][straight[1]][f]) < -0.99
 
 
-def test_group_spacing() -> None:
-    scene, n, traj, _ = _ground_truth("s3-groups")
-    members = [traj[oid][:, :2] for oid in range(6)]
+@pytest.mark.parametrize("seed", SEEDS)
+def test_group_spacing(seed: int) -> None:
+    scene, n, traj, _ = _ground_truth("s3-groups", seed)
+    members = [traj[oid][:, :2] for oid in sorted(traj)[:-1]]  # the last one is the straggler
+    assert len(members) == (5 if seed == 1 else 6)
     for f in range(n):
         pts = np.array([m[f] for m in members])
         if np.any(~np.isfinite(pts)):
             continue
-        d = np.linalg.norm(pts[:, None] - pts[None, :], axis=2) + np.eye(6) * 99
+        d = np.linalg.norm(pts[:, None] - pts[None, :], axis=2) + np.eye(len(members)) * 99
         nearest = d.min(axis=1)
         assert np.all(nearest >= 0.6) and np.all(nearest <= 1.2), (f, nearest)
 
@@ -168,10 +178,11 @@ def _footprint_circles(actor: P.PlazaActor, xy: np.ndarray, heading: np.ndarray)
     ]
 
 
-def test_objects_avoid_each_other_and_the_clutter() -> None:
+@pytest.mark.parametrize("seed", SEEDS)
+def test_objects_avoid_each_other_and_the_clutter(seed: int) -> None:
     obstacles = [o for o in plaza_background._static_objects()[2:] if (o.lo[2] if isinstance(o, Box) else o.z0) < 1.0]
     for name in S3:
-        scene = SCENES[name].build()
+        scene = SCENES[name].build(seed)
         st = scene.states(scene.default_frames)
         circles = [_footprint_circles(actor, st.pos[a], st.heading[a]) for a, actor in enumerate(scene.actors)]
         for a, actor in enumerate(scene.actors):
@@ -196,7 +207,7 @@ def test_objects_avoid_each_other_and_the_clutter() -> None:
 def test_ground_point_projects_near_the_silhouette_bottom(rendered: dict[str, SceneResult]) -> None:
     checked = 0
     for name, res in rendered.items():
-        scene = SCENES[name].build()
+        scene = SCENES[name].build(SEED)
         cam = Rig.load(res.rig_path)["cam0"]
         header, rows = _rows(res.groundtruth_path)
         masks = _frames(res.mask_videos)
@@ -224,17 +235,29 @@ def test_ground_point_projects_near_the_silhouette_bottom(rendered: dict[str, Sc
     assert checked >= 20
 
 
-def test_noise_seed_changes_pixels_not_groundtruth(tmp_path: Path, rendered: dict[str, SceneResult]) -> None:
+def test_scene_seed_draws_a_new_sequence(tmp_path: Path, rendered: dict[str, SceneResult]) -> None:
+    """The same seed renders the same video and ground truth (seed 0's the fixed sequence); another seed another."""
     first = rendered["s3-mixed"]
-    again = render_scene("s3-mixed", tmp_path / "a", frames=FRAMES, seed=1)
-    other = render_scene("s3-mixed", tmp_path / "b", frames=FRAMES, seed=2)
-    for a, b, c in zip(_frames(first.videos), _frames(again.videos), _frames(other.videos), strict=True):
+    again = render_scene("s3-mixed", tmp_path / "a", frames=FRAMES, seed=SEED)
+    other = render_scene("s3-mixed", tmp_path / "b", frames=FRAMES, seed=SEED + 1)
+    for a, b in zip(_frames(first.videos), _frames(again.videos), strict=True):
         np.testing.assert_array_equal(a, b)
-        diff = a.astype(int) - c.astype(int)
-        assert np.mean(diff != 0) > 0.5 and abs(diff.mean()) < 0.5
-    for a, c in zip(_frames(first.mask_videos), _frames(other.mask_videos), strict=True):
-        np.testing.assert_array_equal(a, c)
-    assert other.groundtruth_path.read_text() == first.groundtruth_path.read_text()
+    assert again.groundtruth_path.read_text() == first.groundtruth_path.read_text()
+    assert other.groundtruth_path.read_text() != first.groundtruth_path.read_text()
+    _, _, traj, _ = _ground_truth("s3-mixed")
+    rows = _rows(first.groundtruth_path)[1]
+    assert rows
+    for r in rows:
+        np.testing.assert_allclose([float(r["x"]), float(r["y"])], traj[int(r["id"])][int(r["frame"]), :2], atol=1e-6)
+
+
+def test_noise_generator_changes_pixels_not_objects() -> None:
+    scene = SCENES["s3-mixed"].build(SEED)
+    a, la, _ = scene.render_labels(1, np.random.default_rng(1))
+    c, lc, _ = scene.render_labels(1, np.random.default_rng(2))
+    np.testing.assert_array_equal(la, lc)
+    diff = a.astype(int) - c.astype(int)
+    assert np.mean(diff != 0) > 0.5 and abs(diff.mean()) < 0.5
 
 
 def test_s1_scenes_write_no_masks(tmp_path: Path) -> None:

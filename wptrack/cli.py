@@ -515,7 +515,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("scene", help="scene name (e.g. s1-lab, s1-lab-jump)")
     s.add_argument("--out", required=True)
     s.add_argument("--frames", type=_positive_int, default=None)
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="scene seed: the sensor noise; s2 and s3 scenes also draw their people/cars from it "
+        "(s3: 0 = the fixed sequence, others new sequences of the same type)",
+    )
     s.add_argument(
         "--conditions",
         default=None,

@@ -341,25 +341,38 @@ scene's perfect silhouettes."""
 
 def _s3_scene(name: str, scenes_dir: Path, frames: int | None, seed: int, progress: bool):
     """Render scene ``name`` with scene seed ``seed`` into ``scenes_dir/<name>/s<seed>`` (reused when it is already
-    there with the same frame count: rendering is deterministic)."""
+    there with the same frame count and ground truth: rendering is deterministic; one rendered by an older version,
+    e.g. before scene seeds drew new plaza sequences, is rendered again and its cached masks are removed)."""
+    import logging
+    import shutil
+
     from .synth import render_scene
-    from .synth.base import SceneResult
+    from .synth.base import SceneResult, _groundtruth_csv, get_scene
 
     out = scenes_dir / name / f"s{seed}"
     meta = out / "scene.json"
     if meta.exists():
         hints = json.loads(meta.read_text())
         if hints.get("scene") == name and hints.get("seed") == seed and (frames is None or hints["frames"] == frames):
-            cams = hints["cameras"]
-            return SceneResult(
-                out_dir=out,
-                rig_path=out / "rig.yaml",
-                videos=[out / v for v in hints["videos"]],
-                groundtruth_path=out / "groundtruth.csv",
-                scene_json=meta,
-                frames=int(hints["frames"]),
-                mask_videos=[out / f"{c}_mask.avi" for c in cams],
-            )
+            spec = get_scene(name)
+            scene = spec.build(seed) if spec.seeded else spec.build()
+            n = int(hints["frames"])
+            gt = out / "groundtruth.csv"
+            if gt.exists() and gt.read_text() == _groundtruth_csv(scene.trajectories(n), scene.groundtruth_columns(n)):
+                cams = hints["cameras"]
+                return SceneResult(
+                    out_dir=out,
+                    rig_path=out / "rig.yaml",
+                    videos=[out / v for v in hints["videos"]],
+                    groundtruth_path=out / "groundtruth.csv",
+                    scene_json=meta,
+                    frames=int(hints["frames"]),
+                    mask_videos=[out / f"{c}_mask.avi" for c in cams],
+                )
+            logging.getLogger(__name__).warning("%s: stale scene (its ground truth changed), rendered again", out)
+            for old in out.glob("masks-*"):
+                if old.is_dir():
+                    shutil.rmtree(old)
     return render_scene(name, out, frames=frames, seed=seed, progress=progress)
 
 

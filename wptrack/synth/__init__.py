@@ -14,8 +14,10 @@ Scenes:
 - ``s2-office-twocolour``: the same, one person in a red front and a blue back (the paper's Fig. 9 case).
 - ``s3-people``: Juza et al., up to 5 people walking randomly on a plaza, entering and leaving, occluding each other.
 - ``s3-cars``: Juza et al., 3 cars: two passing each other in opposite lanes (occlusion), one making a U-turn.
-- ``s3-groups``: Juza et al., a group of 6 people walking together (0.6-1.2 m apart) and a straggler.
+- ``s3-groups``: Juza et al., a group of 5-6 people walking together (0.6-1.2 m apart) and a straggler.
 - ``s3-mixed``: Juza et al., 2 cars and 2 people, one person crossing the road between the cars.
+
+(s3 scenes are seeded: seed 0 is the fixed sequence, another seed draws a new one of the same type.)
 
 The s3 scenes have one high camera ``cam0`` over a plaza (ground plane z = 0), ground truth with class, size and
 heading per object, and perfect foreground masks (``cam0_mask.avi``); see :mod:`wptrack.synth.plaza`.

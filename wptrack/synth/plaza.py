@@ -7,7 +7,8 @@ Their ten test sequences fall into four types (Table 2), replicated here on one 
   times, occluding each other;
 - ``s3-cars``: up to three cars: two pass each other in opposite lanes (the far one is partly hidden by the near
   one), the third makes a slow U-turn;
-- ``s3-groups``: six people walking together (0.6-1.2 m apart, slowly changing formation) and one straggler;
+- ``s3-groups``: five or six people (six at seed 0) walking together (0.6-1.2 m apart, slowly changing formation)
+  and one straggler;
 - ``s3-mixed``: two cars and two people; one person crosses the road between the two cars' passages (partly
   hiding each car as it passes behind), the other strolls across the plaza.
 
@@ -32,8 +33,14 @@ ellipsoids), 1.6-1.9 m tall, in varied clothes (some close to the paving or asph
 a cabin box (windows on the sides, roof in the body colour) and four dark wheels, 4.0-4.8 m long, 1.7-1.9 m wide,
 1.4-1.6 m high, its heading along its velocity. Paths are centripetal Catmull-Rom splines through waypoints,
 travelled with a smoothly varying speed (people 0.8-1.6 m/s, cars 2-8 m/s); a group is a formation around one
-path. The layout, the objects and their paths are fixed (a fixed internal seed); the ``seed`` of
-:func:`~wptrack.synth.base.render_scene` only changes the sensor noise.
+path.
+
+Scene seeds (the ``seed`` of :func:`~wptrack.synth.base.render_scene`, also the sensor noise's): the plaza, its
+clutter and the camera never change. At seed 0 the objects, their looks and paths are the fixed sequences written
+out below (all published numbers use them; a test pins their ground truth). Any other seed draws a new sequence of
+the same scene type (the counts, events and speed ranges above): new paths, speeds, start times, sizes, clothes and
+paints, all from ``np.random.default_rng([zlib.crc32(name), seed])``, kept only when the objects stay apart, off the
+clutter (people) or on the road (cars), and in view long enough (:mod:`wptrack.synth.plaza_seeds`).
 
 Ground truth (``groundtruth.csv``): ``frame,id,x,y,z,class,length,width,height,orientation`` with the object's
 ground-contact centre (z = 0), class ``human`` or ``vehicle``, its dimensions in metres (a human's length and width
@@ -142,6 +149,37 @@ def _image_box(cam: Camera, corners: np.ndarray, pad: int = 2) -> tuple[int, int
     if u0 >= u1 or v0 >= v1:
         return None
     return u0, u1, v0, v1
+
+
+def image_box_cover(
+    cam: Camera, shape: Person | Car, pos: np.ndarray, heading: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """How much of an object's image bounding box lies inside the image, per frame.
+
+    Args:
+        cam: The camera.
+        shape: The object's :class:`Person` or :class:`Car` (its :meth:`box`).
+        pos: (N, 2) ground positions, metres.
+        heading: (N,) headings, radians.
+
+    Returns:
+        ``(ok, area, inside)``: (N,) bool, all box corners in front of the camera; (N,) area of the image bounding
+        box of the 8 box corners and (N,) the part of it inside the image, square pixels.
+    """
+    n = len(pos)
+    half, height = shape.box()
+    c, s = np.cos(heading), np.sin(heading)
+    local = _BOX_SIGNS * half[None, :] + np.array([0.0, 0.0, 0.5 * height])
+    wx = pos[:, 0, None] + c[:, None] * local[None, :, 0] - s[:, None] * local[None, :, 1]
+    wy = pos[:, 1, None] + s[:, None] * local[None, :, 0] + c[:, None] * local[None, :, 1]
+    wz = np.broadcast_to(local[None, :, 2], wx.shape)
+    uv, depth = cam.project(np.stack([wx, wy, wz], axis=-1).reshape(-1, 3))
+    uv = uv.reshape(n, 8, 2)
+    ok = np.all(depth.reshape(n, 8) > 0.1, axis=1)
+    lo, hi = uv.min(axis=1), uv.max(axis=1)
+    area = np.prod(np.maximum(hi - lo, 1e-6), axis=1)
+    inside = np.prod(np.clip(np.minimum(hi, [cam.width, cam.height]) - np.maximum(lo, 0.0), 0.0, None), axis=1)
+    return ok, area, inside
 
 
 class PlazaScene(Scene):
@@ -266,18 +304,7 @@ class PlazaScene(Scene):
             ph = 2 * np.pi * np.cumsum(sp * dt / stride) + 1.3 * actor.oid
             pos[a], active[a], heading[a], speed[a], phase[a] = p, act, ang, sp, ph
             # in the ground truth where >= MIN_IN_IMAGE of the object's image bounding box is inside the image
-            half, height = actor.shape.box()
-            c, s = np.cos(ang), np.sin(ang)
-            local = _BOX_SIGNS * half[None, :] + np.array([0.0, 0.0, 0.5 * height])
-            wx = p[:, 0, None] + c[:, None] * local[None, :, 0] - s[:, None] * local[None, :, 1]
-            wy = p[:, 1, None] + s[:, None] * local[None, :, 0] + c[:, None] * local[None, :, 1]
-            wz = np.broadcast_to(local[None, :, 2], wx.shape)
-            uv, depth = cam.project(np.stack([wx, wy, wz], axis=-1).reshape(-1, 3))
-            uv = uv.reshape(n, 8, 2)
-            ok = np.all(depth.reshape(n, 8) > 0.1, axis=1)
-            lo, hi = uv.min(axis=1), uv.max(axis=1)
-            area = np.prod(np.maximum(hi - lo, 1e-6), axis=1)
-            inside = np.prod(np.clip(np.minimum(hi, [cam.width, cam.height]) - np.maximum(lo, 0.0), 0.0, None), axis=1)
+            ok, area, inside = image_box_cover(cam, actor.shape, p, ang)
             present[a] = act & ok & (inside >= MIN_IN_IMAGE * area)
         self._states = _States(n, pos, active, present, heading, speed, phase)
         return self._states
@@ -549,8 +576,17 @@ def _people(count: int, seed: int, camouflage: Sequence[int] = ()) -> list[Perso
     return out
 
 
-def people_actors() -> list[PlazaActor]:
-    """``s3-people``: five people on waypoint paths, entering and leaving at different times."""
+def _drawn(name: str, seed: int) -> list[PlazaActor]:
+    """The actors of scene ``name`` at a scene seed >= 1 (:mod:`wptrack.synth.plaza_seeds`)."""
+    from wptrack.synth import plaza_seeds
+
+    return plaza_seeds.draw_actors(name, seed)
+
+
+def people_actors(seed: int = 0) -> list[PlazaActor]:
+    """``s3-people``: five people on waypoint paths, entering and leaving at different times (seed 0: fixed)."""
+    if seed:
+        return _drawn("s3-people", seed)
     looks = _people(5, seed=301, camouflage=(2,))
     paths = [
         Path(
@@ -572,31 +608,34 @@ def people_actors() -> list[PlazaActor]:
     return [PlazaActor(i, look, path) for i, (look, path) in enumerate(zip(looks, paths, strict=True))]
 
 
+U_TURN: tuple[tuple[float, float], ...] = (
+    (15.5, ROAD_LANES[1]),
+    (9.0, ROAD_LANES[1]),
+    (4.0, ROAD_LANES[1] + 0.5),
+    (0.8, 18.0),
+    (-2.2, 17.3),
+    (-3.2, 15.2),
+    (-2.4, 12.9),
+    (0.4, 11.9),
+    (4.5, 12.2),
+    (9.0, ROAD_LANES[0]),
+    (17.0, ROAD_LANES[0]),
+)
+"""Waypoints of the U-turn of ``s3-cars`` (seed 0): in the far lane towards -x, a wide left turn, out along +x."""
+U_TURN_SPEEDS: tuple[float, ...] = (5.0, 4.5, 3.2, 2.3, 2.2, 2.2, 2.3, 2.8, 3.5, 4.5, 5.0)
+"""Speeds at the :data:`U_TURN` waypoints, m/s."""
+
+
 def _car(length: float, width: float, height: float, rgb: _Rgb) -> Car:
     return Car(length=length, width=width, height=height, body=rgb)
 
 
-def cars_actors() -> list[PlazaActor]:
-    """``s3-cars``: two cars passing each other in opposite lanes, a third making a U-turn."""
+def cars_actors(seed: int = 0) -> list[PlazaActor]:
+    """``s3-cars``: two cars passing each other in opposite lanes, a third making a U-turn (seed 0: fixed)."""
+    if seed:
+        return _drawn("s3-cars", seed)
     near, far = ROAD_LANES
-    u_turn = Path(
-        (
-            (15.5, far),
-            (9.0, far),
-            (4.0, far + 0.5),
-            (0.8, 18.0),
-            (-2.2, 17.3),
-            (-3.2, 15.2),
-            (-2.4, 12.9),
-            (0.4, 11.9),
-            (4.5, 12.2),
-            (9.0, near),
-            (17.0, near),
-        ),
-        (5.0, 4.5, 3.2, 2.3, 2.2, 2.2, 2.3, 2.8, 3.5, 4.5, 5.0),
-        1.0,
-        smooth_m=4.0,
-    )
+    u_turn = Path(U_TURN, U_TURN_SPEEDS, 1.0, smooth_m=4.0)
     return [
         PlazaActor(0, _car(4.5, 1.8, 1.5, (0.24, 0.24, 0.26)), Path(((-17.0, near), (17.0, near)), 6.5, -1.0)),
         PlazaActor(1, _car(4.2, 1.75, 1.45, (0.8, 0.8, 0.78)), Path(((18.0, far), (-18.0, far)), 5.5, -1.3)),
@@ -604,8 +643,10 @@ def cars_actors() -> list[PlazaActor]:
     ]
 
 
-def groups_actors() -> list[PlazaActor]:
-    """``s3-groups``: a group of six walking together and one straggler following it."""
+def groups_actors(seed: int = 0) -> list[PlazaActor]:
+    """``s3-groups``: a group walking together (six at seed 0, five or six at other seeds) and a straggler."""
+    if seed:
+        return _drawn("s3-groups", seed)
     looks = _people(7, seed=303, camouflage=(1, 4))
     route = ((-4.0, 3.6), (-2.0, 5.6), (-0.5, 7.6), (0.0, 9.2), (0.3, 11.5), (1.5, 14.5), (3.5, 18.0))
     group = Formation(
@@ -618,8 +659,10 @@ def groups_actors() -> list[PlazaActor]:
     return actors
 
 
-def mixed_actors() -> list[PlazaActor]:
+def mixed_actors(seed: int = 0) -> list[PlazaActor]:
     """``s3-mixed``: two cars on the road and two people, one crossing the road between the cars' passages."""
+    if seed:
+        return _drawn("s3-mixed", seed)
     near, far = ROAD_LANES
     looks = _people(2, seed=306, camouflage=(1,))
     crossing = Path(
@@ -634,21 +677,31 @@ def mixed_actors() -> list[PlazaActor]:
     ]
 
 
-@register_scene("s3-people", "Juza et al.: up to 5 people walking randomly on a plaza, occlusions; 1 high camera")
-def _s3_people() -> Scene:
-    return PlazaScene(people_actors())
+@register_scene(
+    "s3-people", "Juza et al.: up to 5 people walking randomly on a plaza, occlusions; 1 high camera", seeded=True
+)
+def _s3_people(seed: int = 0) -> Scene:
+    return PlazaScene(people_actors(seed))
 
 
-@register_scene("s3-cars", "Juza et al.: 3 cars, two passing each other (occlusion), one U-turn; 1 high camera")
-def _s3_cars() -> Scene:
-    return PlazaScene(cars_actors())
+@register_scene(
+    "s3-cars", "Juza et al.: 3 cars, two passing each other (occlusion), one U-turn; 1 high camera", seeded=True
+)
+def _s3_cars(seed: int = 0) -> Scene:
+    return PlazaScene(cars_actors(seed))
 
 
-@register_scene("s3-groups", "Juza et al.: a group of 6 people walking together and a straggler; 1 high camera")
-def _s3_groups() -> Scene:
-    return PlazaScene(groups_actors())
+@register_scene(
+    "s3-groups", "Juza et al.: a group of 5-6 people walking together and a straggler; 1 high camera", seeded=True
+)
+def _s3_groups(seed: int = 0) -> Scene:
+    return PlazaScene(groups_actors(seed))
 
 
-@register_scene("s3-mixed", "Juza et al.: 2 cars and 2 people, one crossing the road between the cars; 1 high camera")
-def _s3_mixed() -> Scene:
-    return PlazaScene(mixed_actors())
+@register_scene(
+    "s3-mixed",
+    "Juza et al.: 2 cars and 2 people, one crossing the road between the cars; 1 high camera",
+    seeded=True,
+)
+def _s3_mixed(seed: int = 0) -> Scene:
+    return PlazaScene(mixed_actors(seed))

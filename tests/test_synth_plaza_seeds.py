@@ -1,0 +1,277 @@
+"""Scene seeds of the s3 plaza scenes: seed 0 is pinned, other seeds draw new sequences of the same scene type."""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import math
+
+import numpy as np
+import pytest
+
+from wptrack.errors import ConfigError
+from wptrack.frames import open_frames
+from wptrack.kernels.raster import MAX_SLOTS
+from wptrack.synth import SCENES, render_scene
+from wptrack.synth import plaza as P
+from wptrack.synth import plaza_seeds as S
+from wptrack.synth.base import _groundtruth_csv
+from wptrack.trackers.template_config import TemplateConfig
+
+S3 = ("s3-people", "s3-cars", "s3-groups", "s3-mixed")
+FRAMES = 180
+
+# Computed before scene seeds changed the sequences (commit 1d54f66): sha256 of groundtruth.csv over the default 180
+# frames, and of the repr of the scene's actors (looks and paths).
+PINNED = {
+    "s3-people": (
+        "747570ac5d4754600e0f0da9aa116e5e63f9a0644ba2b43c879889949d53bb28",
+        "0d7ace6c88f3331c860ac5b2ec37022223996606bf529761e51e4e034861ed97",
+    ),
+    "s3-cars": (
+        "3266beb0387d407f297e2eab5c24e5a30407144440acba1be59746fba419a621",
+        "b0bf6af6d9f8e28168f373eb0d60b60dc11336e57aff2ff1392074edd433c484",
+    ),
+    "s3-groups": (
+        "71f00b2b2c63bf9035d5ea4248053540ee4af854db14e2d996d40f0f542f70b1",
+        "fb1637b93a880cae159af01a7325c648b34272bf8b81a8ab23ce119c6fa24892",
+    ),
+    "s3-mixed": (
+        "e1312e49f569838ff37657022eb6189f75138ea531cf9c97b49e98be3995cb4c",
+        "26a448b55cb35569b0946006f23225b715d1181878c080864cf9f02eca4dd531",
+    ),
+}
+
+
+def _sha(text: str) -> str:
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+@pytest.mark.parametrize("name", S3)
+def test_seed_zero_is_pinned(name: str) -> None:
+    """Scene seed 0 (all published numbers) keeps its ground truth and actors byte for byte."""
+    scene = SCENES[name].build()
+    n = scene.default_frames
+    assert n == 180
+    gt_hash, actors_hash = PINNED[name]
+    assert _sha(repr(scene.base_actors)) == actors_hash
+    assert _sha(_groundtruth_csv(scene.trajectories(n), scene.groundtruth_columns(n))) == gt_hash
+
+
+# ----------------------------------------------------------------------------------------------------- new seeds
+
+
+@functools.cache
+def _scene(name: str, seed: int) -> P.PlazaScene:
+    scene = SCENES[name].build(seed)
+    assert isinstance(scene, P.PlazaScene)
+    return scene
+
+
+def _fingerprint(scene: P.PlazaScene) -> tuple[float, ...]:
+    """Ground positions of every object at frames 0, 45, 90, 135 (NaN where absent), rounded to 1 cm."""
+    traj = scene.trajectories(FRAMES)
+    return tuple(np.round(np.concatenate([traj[k][::45, :2].ravel() for k in sorted(traj)]), 2).tolist())
+
+
+def test_registered_as_seeded_with_seed_zero_the_default() -> None:
+    for name in S3:
+        spec = SCENES[name]
+        assert spec.seeded
+        assert repr(spec.build().base_actors) == repr(spec.build(0).base_actors)
+        assert repr(spec.build(7).base_actors) == repr(SCENES[name].build(7).base_actors)  # same seed, same draw
+
+
+@pytest.mark.parametrize("name", S3)
+def test_new_seeds_draw_new_sequences(name: str) -> None:
+    """Seeds 1-20: new trajectories, different from seed 0's and from each other's; new looks too."""
+    prints = {seed: _fingerprint(_scene(name, seed)) for seed in range(21)}
+    assert len(set(prints.values())) == 21, name
+    looks = {repr([a.shape for a in _scene(name, seed).actors]) for seed in range(21)}
+    assert len(looks) == 21, name
+
+
+def test_draw_actors_rejects_bad_input() -> None:
+    with pytest.raises(ConfigError, match="seed"):
+        S.draw_actors("s3-cars", 0)
+    with pytest.raises(ConfigError, match="seed"):
+        S.draw_actors("s3-cars", -3)
+    with pytest.raises(ConfigError, match="scene"):
+        S.draw_actors("s1-lab", 1)
+
+
+def _outline(pos: np.ndarray, heading: np.ndarray, car: P.Car) -> np.ndarray:
+    """(N, K, 2) points on a car's footprint rectangle (every ~0.2 m of its outline) at (N, 2) and (N,) headings."""
+    u = np.linspace(-0.5, 0.5, 21)
+    local = np.concatenate(
+        [np.stack([u * car.length, np.full_like(u, s * 0.5 * car.width)], 1) for s in (-1, 1)]
+        + [np.stack([np.full_like(u, s * 0.5 * car.length), u * car.width], 1) for s in (-1, 1)]
+    )
+    c, s = np.cos(heading)[:, None], np.sin(heading)[:, None]
+    wx = pos[:, 0, None] + c * local[None, :, 0] - s * local[None, :, 1]
+    wy = pos[:, 1, None] + s * local[None, :, 0] + c * local[None, :, 1]
+    return np.stack([wx, wy], axis=2)
+
+
+def _footprint_distance(p: np.ndarray, pos: np.ndarray, heading: np.ndarray, car: P.Car) -> np.ndarray:
+    """Distance from points (N, ...) x 2 to a car's footprint rectangle at (N, 2), (N,) headings (0 inside)."""
+    extra = (slice(None),) + (None,) * (p.ndim - 2)
+    c, s = np.cos(heading)[extra], np.sin(heading)[extra]
+    rx, ry = p[..., 0] - pos[:, 0][extra], p[..., 1] - pos[:, 1][extra]
+    along = np.maximum(np.abs(c * rx + s * ry) - 0.5 * car.length, 0.0)
+    across = np.maximum(np.abs(-s * rx + c * ry) - 0.5 * car.width, 0.0)
+    return np.hypot(along, across)
+
+
+def _check_invariants(name: str, seed: int) -> None:
+    scene = _scene(name, seed)
+    actors = scene.actors
+    humans = [a for a in actors if isinstance(a.shape, P.Person)]
+    cars = [a for a in actors if isinstance(a.shape, P.Car)]
+    where = f"{name} seed {seed}"
+    # counts per scene type (paper Table 2), the share of camouflaged clothes and of dark cars as at seed 0
+    expected = {"s3-people": ((5,), 0), "s3-cars": ((0,), 3), "s3-groups": ((6, 7), 0), "s3-mixed": ((2,), 2)}
+    assert len(humans) in expected[name][0] and len(cars) == expected[name][1], where
+    camouflaged = sum(P._PAVING_LIKE in (a.shape.shirt, a.shape.trousers) for a in humans)
+    assert camouflaged == {"s3-people": 1, "s3-cars": 0, "s3-groups": 2, "s3-mixed": 1}[name], where
+    assert sum(max(a.shape.body) < S.DARK_PAINT_MAX for a in cars) == (1 if cars else 0), where
+    for a in cars:
+        assert 4.0 <= a.shape.length <= 4.8 and 1.7 <= a.shape.width <= 1.9 and 1.4 <= a.shape.height <= 1.6, where
+
+    st = scene.states(S.CHECK_FRAMES)
+    act = st.active
+    present = st.present[:, :FRAMES]
+    # every object in the ground truth long enough; at most R_max objects at once
+    assert present.sum(axis=1).min() >= S.MIN_PRESENT, (where, present.sum(axis=1))
+    assert scene.max_objects() <= TemplateConfig().max_objects and scene.max_objects() + 3 <= int(MAX_SLOTS), where
+    # speeds (m/s) where on the path
+    for a, actor in enumerate(actors):
+        lo, hi = (0.8, 1.6) if isinstance(actor.shape, P.Person) else (2.0, 8.0)
+        sp = st.speed[a, act[a]]
+        assert lo - 0.02 <= sp.min() and sp.max() <= hi + 0.02, (where, actor.oid, sp.min(), sp.max())
+    # people keep off the clutter, cars stay on the road (seed 0's U-turn brushes the kerb and the parking line)
+    road = (10.5, 19.6) if seed == 0 else (10.8, 19.3)
+    for a, actor in enumerate(actors):
+        pos = st.pos[a, act[a]]
+        if isinstance(actor.shape, P.Person):
+            assert S.clutter_distance(pos).min() >= 0.45, (where, actor.oid)
+        else:
+            h = st.heading[a, act[a]]
+            for sx, sy in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+                lx, ly = sx * 0.5 * actor.shape.length, sy * 0.5 * actor.shape.width
+                y = pos[:, 1] + np.sin(h) * lx + np.cos(h) * ly
+                assert road[0] <= y.min() and y.max() <= road[1], (where, actor.oid, y.min(), y.max())
+    # objects keep apart while both are on their paths (group members: the paper's 0.6 m)
+    for a in range(len(actors)):
+        for b in range(a + 1, len(actors)):
+            both = act[a] & act[b]
+            if not np.any(both):
+                continue
+            sa, sb = actors[a].shape, actors[b].shape
+            pa, pb = st.pos[a, both], st.pos[b, both]
+            if isinstance(sa, P.Person) and isinstance(sb, P.Person):
+                assert np.linalg.norm(pa - pb, axis=1).min() >= 0.6, (where, a, b)
+            elif isinstance(sa, P.Car) and isinstance(sb, P.Car):
+                ha, hb = st.heading[a, both], st.heading[b, both]
+                gap = min(
+                    _footprint_distance(_outline(pa, ha, sa), pb, hb, sb).min(),
+                    _footprint_distance(_outline(pb, hb, sb), pa, ha, sa).min(),
+                )
+                assert gap >= 0.5, (where, a, b, gap)
+            else:
+                (pp, cc, car) = (pa, b, sb) if isinstance(sa, P.Person) else (pb, a, sa)
+                gap = _footprint_distance(pp, st.pos[cc, both], st.heading[cc, both], car)
+                assert gap.min() >= 0.6, (where, a, b, gap.min())
+    # a group: 5-6 members, each 0.6-1.2 m from its nearest fellow member at every frame
+    if name == "s3-groups":
+        members = [a for a, actor in enumerate(actors) if hasattr(actor.track, "formation")]
+        assert len(members) in (5, 6) and len(members) == len(actors) - 1, where
+        pts = st.pos[members][:, :FRAMES]
+        d = np.linalg.norm(pts[:, None] - pts[None, :], axis=-1) + 99.0 * np.eye(len(members))[:, :, None]
+        nearest = d.min(axis=1)
+        assert nearest.min() >= 0.6 and nearest.max() <= 1.2, (where, nearest.min(), nearest.max())
+    # the rules of the generator itself, appearing/vanishing in view included (seed 0 is the fixed sequence and
+    # breaks three of them slightly: see plaza_seeds)
+    if 1 <= seed <= 10:
+        assert S.layout_problems(list(actors)) == [], where
+
+
+@pytest.mark.parametrize("name", S3)
+def test_invariants_for_seeds_0_to_50(name: str) -> None:
+    for seed in range(51):
+        _check_invariants(name, seed)
+
+
+def test_cars_pass_each_other_and_one_turns(name: str = "s3-cars") -> None:
+    """s3-cars at new seeds: two cars in opposite lanes side by side in view (occlusion), one U-turn."""
+    for seed in range(1, 21):
+        scene = _scene(name, seed)
+        cols = scene.groundtruth_columns(FRAMES)
+        traj = scene.trajectories(FRAMES)
+        seen = {k: np.all(np.isfinite(traj[k]), axis=1) for k in traj}
+        turns = [k for k in traj if np.ptp(np.unwrap(cols["orientation"][k][seen[k]])) > 0.9 * math.pi]
+        assert len(turns) == 1, seed
+        a, b = (k for k in traj if k not in turns)
+        both = seen[a] & seen[b]
+        dx = np.abs(traj[a][both, 0] - traj[b][both, 0])
+        assert dx.min() < 1.0, seed  # level with each other: the near car hides part of the far one
+        f = np.flatnonzero(both)[np.argmin(dx)]
+        assert np.cos(cols["orientation"][a][f] - cols["orientation"][b][f]) < -0.99, seed
+
+
+def test_people_enter_leave_and_occlude() -> None:
+    for seed in range(1, 21):
+        scene = _scene("s3-people", seed)
+        present = scene.states(FRAMES).present[:, :FRAMES]
+        first = [int(np.flatnonzero(p)[0]) for p in present]
+        last = [int(np.flatnonzero(p)[-1]) for p in present]
+        assert len(set(first)) >= 3 and min(last) < FRAMES - 1 and present.sum(axis=0).max() >= 3, seed
+
+
+def test_mixed_crossing_between_the_passages() -> None:
+    """s3-mixed at new seeds: one person crosses the road, one car passes the crossing point before and one after."""
+    for seed in range(1, 21):
+        scene = _scene("s3-mixed", seed)
+        st = scene.states(FRAMES)
+        crosser = 2
+        on_road = st.active[crosser] & (st.pos[crosser, :, 1] > 10.8) & (st.pos[crosser, :, 1] < 19.3)
+        assert np.any(on_road), seed
+        kerb = int(np.argmax(st.pos[crosser, :, 1] >= 10.8))
+        x_cross = st.pos[crosser, int(np.argmax(st.pos[crosser, :, 1] >= 15.0)), 0]
+        passes = [int(np.argmin(np.where(st.active[k], np.abs(st.pos[k, :, 0] - x_cross), np.inf))) for k in (0, 1)]
+        assert min(passes) < kerb < max(passes), (seed, passes, kerb)
+
+
+@pytest.mark.parametrize("name", S3)
+def test_render_scene_with_a_new_seed(tmp_path, name: str) -> None:
+    seed = 11
+    res = render_scene(name, tmp_path, frames=2, seed=seed)
+    scene = _scene(name, seed)
+    meta = json.loads(res.scene_json.read_text())
+    assert meta["seed"] == seed and meta["max_objects"] == scene.max_objects() and meta["frames"] == 2
+    assert res.groundtruth_path.read_text() == _groundtruth_csv(scene.trajectories(2), scene.groundtruth_columns(2))
+    images = [frames[0] for frames in open_frames(res.videos)]
+    masks = [frames[0] for frames in open_frames(res.mask_videos)]
+    assert len(images) == len(masks) == 2 and all(image.shape == (480, 640, 3) for image in images)
+    _, labels, _ = scene.render_labels(1, np.random.default_rng(0))
+    np.testing.assert_array_equal(masks[1][..., 0], np.where(labels > 0, 255, 0))
+    zero = _scene(name, 0)
+    assert res.groundtruth_path.read_text() != _groundtruth_csv(zero.trajectories(2), zero.groundtruth_columns(2))
+
+
+def test_accuracy_cache_renders_stale_scenes_again(tmp_path, caplog) -> None:
+    """A scene folder of template_accuracy rendered before seeds drew new sequences is not reused."""
+    from wptrack.experiments import _s3_scene
+
+    first = _s3_scene("s3-cars", tmp_path, 2, 2, False)
+    assert _s3_scene("s3-cars", tmp_path, 2, 2, False).groundtruth_path == first.groundtruth_path
+    fresh = first.groundtruth_path.read_text()
+    assert len(fresh.splitlines()) > 1
+    first.groundtruth_path.write_text(render_scene("s3-cars", tmp_path / "old", frames=2).groundtruth_path.read_text())
+    (first.out_dir / "masks-offline").mkdir()
+    (first.out_dir / "masks-offline" / "masks.json").write_text("{}")
+    again = _s3_scene("s3-cars", tmp_path, 2, 2, False)
+    assert again.groundtruth_path.read_text() == fresh
+    assert not (first.out_dir / "masks-offline").exists()
+    assert "stale scene" in caplog.text
