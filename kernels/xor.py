@@ -10,7 +10,7 @@ which ``kernels.uoh`` builds the Uncovered Object Histogram.
 
 import warp as wp
 
-from .raster import KIND_HUMAN, PIECES, row_intervals
+from .raster import KIND_HUMAN, PIECES, row_intervals, vec32i
 from .reduce import finite_logw
 
 wp.set_module_options({"enable_backward": False})
@@ -171,8 +171,10 @@ def xor_score_kernel(
             y1 = wp.max(y1, r[1])
     covered = int(0)
     both = int(0)
+    down = vec32i()  # the pieces' hull chain walks (raster.hull_chain_span) over this lane's increasing rows
+    up = vec32i()
     for y in range(y0 + lane, y1 + 1, wp.block_dim()):
-        count, m0, m1 = row_intervals(hull_pts, hull_n, hull_rows, i, pieces, y, width)
+        count, m0, m1, down, up = row_intervals(hull_pts, hull_n, hull_rows, i, pieces, y, width, down, up)
         for k in range(count):
             a = m0[k]
             b = m1[k]
