@@ -123,25 +123,34 @@ def block_exclusive_scan_i64_wide(v: wp.int64):
 
 
 @wp.kernel
-def uoh_box_sums_kernel(a_sat: wp.array2d(dtype=wp.int64)):
+def uoh_box_sums_kernel(cols: int, a_sat: wp.array2d(dtype=wp.int64)):
     """Summed-area table of the UOH in place: ``a_sat[y, x] = sum_{y' < y, x' < x} UOH(x', y')`` from the row
     prefix sums that ``coverage_uoh_kernel`` wrote (pixels x particles, exact int64).
 
-    Launch with ``wp.launch_tiled(dim=[W + 1], block_dim=B)``: block ``x`` is column ``x``; its lanes own
-    contiguous runs of the rows 1..H (``xor.row_segment``; all of them on the CPU backend), a block-wide exclusive
-    scan of the runs' sums gives every lane the column sum above its run. Used by ``candidate_score_kernel`` to
-    bound a candidate's gain by the UOH mass of its bounding box.
+    Launch with ``wp.launch_tiled(dim=[ceil((W + 1) / cols)], block_dim=B)``: block ``b`` owns the columns ``[b
+    cols, (b + 1) cols)``. With one lane (the CPU backend) it adds each row to the next, row after row (``cols = W
+    + 1``: one pass over the table in memory order). With several lanes, for each of its columns the lanes own
+    contiguous runs of the rows 1..H (``xor.row_segment``) and a block-wide exclusive scan of the runs' sums gives
+    every lane the column sum above its run (``cols = 1`` on GPUs: one block per column). Used by
+    ``candidate_score_kernel`` to bound a candidate's gain by the UOH mass of its bounding box.
     """
-    x, lane = wp.tid()
-    r0, r1 = row_segment(a_sat.shape[0] - 1, lane)
-    acc = wp.int64(0)
-    if wp.block_dim() > 1:  # uniform over the block: every lane reaches the scan or none does
-        for y in range(r0, r1):
-            acc += a_sat[y + 1, x]
-        acc = block_exclusive_scan_i64_wide(acc)
-    for y in range(r0, r1):
-        acc += a_sat[y + 1, x]
-        a_sat[y + 1, x] = acc
+    blk, lane = wp.tid()
+    c0 = blk * cols
+    c1 = wp.min(c0 + cols, a_sat.shape[1])
+    if wp.block_dim() == 1:
+        for y in range(1, a_sat.shape[0]):
+            for x in range(c0, c1):
+                a_sat[y, x] = a_sat[y, x] + a_sat[y - 1, x]
+    else:  # uniform over the block: every lane reaches the scans
+        r0, r1 = row_segment(a_sat.shape[0] - 1, lane)
+        for x in range(c0, c1):
+            acc = wp.int64(0)
+            for y in range(r0, r1):
+                acc += a_sat[y + 1, x]
+            acc = block_exclusive_scan_i64_wide(acc)
+            for y in range(r0, r1):
+                acc += a_sat[y + 1, x]
+                a_sat[y + 1, x] = acc
 
 
 @wp.kernel

@@ -712,7 +712,7 @@ def coverage_uoh(device, q, n: int, beta: float, cov_diff, block_dim: int = ROW_
         block_dim=block_dim,
         device=device,
     )
-    wp.launch_tiled(kuoh.uoh_box_sums_kernel, dim=[w + 1], inputs=[a_sat], block_dim=block_dim, device=device)
+    wp.launch_tiled(kuoh.uoh_box_sums_kernel, dim=[w + 1], inputs=[1, a_sat], block_dim=block_dim, device=device)
     return uoh, gain_rows, a_sat
 
 
@@ -784,14 +784,18 @@ def test_coverage_uoh_at_particle_limit_exact(device, rng, cpu_blocks, block_dim
 
 @pytest.mark.parametrize("block_dim", [ROW_BLOCK, 32, 7])
 @pytest.mark.parametrize("h", [1, 7, 300])
-def test_uoh_box_sums_exact_past_2_47(device, rng, cpu_blocks, block_dim, h):
+@pytest.mark.parametrize("cols", [1, 4, 6])
+def test_uoh_box_sums_exact_past_2_47(device, rng, cpu_blocks, block_dim, h, cols):
     """uoh_box_sums_kernel turns row prefix sums (rows 1..H of a_sat; row 0 zero) into their column cumulative sums
-    exactly, for column totals past 2^47 (the three-part block scan), more and fewer rows than the block has lanes."""
+    exactly, for column totals past 2^47 (the three-part block scan), more and fewer rows than the block has lanes,
+    one column per block (the tracker on GPUs), all of them (the tracker on the CPU) and a last block with fewer
+    columns."""
     w = 5
     rows = np.zeros((h + 1, w + 1), dtype=np.int64)
     rows[1:, 1:] = np.cumsum(rng.integers(0, 2**44, (h, w), dtype=np.int64), axis=1)
     a_sat = wp.array(rows, dtype=wp.int64, device=device)
-    wp.launch_tiled(kuoh.uoh_box_sums_kernel, dim=[w + 1], inputs=[a_sat], block_dim=block_dim, device=device)
+    blocks = (w + cols) // cols
+    wp.launch_tiled(kuoh.uoh_box_sums_kernel, dim=[blocks], inputs=[cols, a_sat], block_dim=block_dim, device=device)
     np.testing.assert_array_equal(a_sat.numpy(), np.cumsum(rows, axis=0))
     if h == 300:
         assert rows[:, -1].sum() > 2**47
