@@ -145,22 +145,28 @@ def convex_hull(xs: vec16, ys: vec16, n: int):
     count = int(0)
     cur = start
     for _it in range(HULL_MAX):
-        hx[count] = xs[cur]
-        hy[count] = ys[cur]
+        cx = xs[cur]
+        cy = ys[cur]
+        hx[count] = cx
+        hy[count] = cy
         count += 1
         cand = cur
+        ax = float(0.0)  # the candidate's offset from the current vertex
+        ay = float(0.0)
         for j in range(n):
             if j != cur:
+                bx = xs[j] - cx
+                by = ys[j] - cy
                 if cand == cur:
                     cand = j
+                    ax = bx
+                    ay = by
                 else:
-                    ax = xs[cand] - xs[cur]
-                    ay = ys[cand] - ys[cur]
-                    bx = xs[j] - xs[cur]
-                    by = ys[j] - ys[cur]
                     cross = ax * by - ay * bx
                     if cross < 0.0 or (cross == 0.0 and bx * bx + by * by > ax * ax + ay * ay):
                         cand = j
+                        ax = bx
+                        ay = by
         if cand == cur:
             break
         if xs[cand] == xs[cur] and ys[cand] == ys[cur]:

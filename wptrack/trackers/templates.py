@@ -432,8 +432,13 @@ class TemplateTracker(FrameChain):
             block_dim=ROW_BLOCK,
             device=d,
         )
+        cols = 1 if self.is_cuda else self.width + 1  # a block per column; one pass in memory order on the CPU
         wp.launch_tiled(
-            kuoh.uoh_box_sums_kernel, dim=[self.width + 1], inputs=[self.a_sat], block_dim=ROW_BLOCK, device=d
+            kuoh.uoh_box_sums_kernel,
+            dim=[(self.width + cols) // cols],
+            inputs=[cols, self.a_sat],
+            block_dim=ROW_BLOCK,
+            device=d,
         )
         wp.launch_tiled(
             kuoh.candidate_score_kernel,
