@@ -310,22 +310,15 @@ def hull_chain_span(
     The hull's vertex 0 is its topmost (``template_hulls_kernel``), so v grows along edges 0, 1, ... (the down
     chain) to the bottom vertex and shrinks again to vertex 0 (the up chain, walked backwards from edge n - 1).
     ``down`` is the first down-chain edge to test and ``up`` counts up-chain edges already passed; both start at 0
-    and, for increasing ``y`` (a lane's rows), only move forward: a row costs the edges it crosses plus those
-    passed since the last row. Each chain's edges crossing the row are contiguous, and every edge tested goes
-    through ``edge_x`` with the same ends in the same order as in ``hull_span``, so the columns are identical. A
-    row above the previous one restarts the walk.
+    and only move forward, so ``y`` must not decrease between calls that pass a walk on (start a row above the
+    last one from zeros). A row costs the edges it crosses plus those passed since the last row. On each chain the
+    edges crossing a row are contiguous (the hull is convex), and every edge tested goes through ``edge_x`` with
+    the same ends in the same order as in ``hull_span``, so the columns are identical.
     """
     xl = float(3.0e38)
     xr = float(-3.0e38)
-    # a walk left below the row's start (a row above the previous one) restarts
-    if down > 0:
-        if hull_pts[i, q, down][1] >= y:
-            down = 0
-    if up > 0:
-        if hull_pts[i, q, n - up][1] >= y:
-            up = 0
     # down chain, edge k = (k, k + 1): skip the edges ending above the row (none of them crosses it), then test
-    # edges while they cross it
+    # edges while they cross it; an edge ending below the row ends the run (the next one starts below it)
     while down < n - 1 and hull_pts[i, q, down + 1][1] < y:
         down += 1
     k = down
@@ -338,10 +331,12 @@ def hull_chain_span(
         if k > down and (y < wp.min(a[1], b[1]) or y > wp.max(a[1], b[1])):
             break
         xl, xr = edge_x(a, b, y, xl, xr)
+        if b[1] > y:
+            break
         a = b
         k += 1
     # up chain, edge j = (j, j + 1) for j = n - 1 - up, n - 2 - up, ...: skip the edges whose lower end (j) is
-    # above the row, then test edges while they cross it
+    # above the row, then test edges while they cross it; a lower end below the row ends the run
     while up < n - 1 and hull_pts[i, q, n - 1 - up][1] < y:
         up += 1
     j = n - 1 - up
@@ -353,6 +348,8 @@ def hull_chain_span(
         if j < n - 1 - up and (y < wp.min(a[1], b[1]) or y > wp.max(a[1], b[1])):
             break
         xl, xr = edge_x(a, b, y, xl, xr)
+        if a[1] > y:
+            break
         b = a
         j -= 1
     u0, u1 = span_columns(xl, xr, width)
@@ -374,7 +371,7 @@ def row_intervals(
     """The covered columns of row ``y`` of particle ``i``'s virtual scene as disjoint sorted intervals.
 
     ``down``, ``up``: per piece, the chain walks of ``hull_chain_span`` (zeros to start; pass back what the
-    previous row returned when walking rows downwards). Returns ``(count, starts, ends, down, up)``: ``count``
+    previous row returned only when ``y`` is below that row). Returns ``(count, starts, ends, down, up)``: ``count``
     merged intervals ``[starts[k], ends[k]]`` (inclusive columns), sorted, separated by at least one uncovered
     pixel, and the walks after this row.
     """

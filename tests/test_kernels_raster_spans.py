@@ -2,8 +2,9 @@
 against ``raster.hull_span`` (every edge tested) on every device: identical columns, bit for bit, on the projected
 hulls of random scenes and on hand-made hulls with vertices exactly on rows, horizontal top and bottom edges, both
 orientations and degenerate one- and two-vertex hulls; rows visited upwards, downwards, in strided passes (the
-lanes of a block) and at random (walk restarts). The NumPy reference for the columns themselves is the float64
-rasteriser of test_kernels_templates, through ``render_virtual_kernel`` (which uses the chain walk)."""
+lanes of a block) and at random (fresh walks at every row above the last). The NumPy reference for the columns
+themselves is the float64 rasteriser of test_kernels_templates, through ``render_virtual_kernel`` (which uses the
+chain walk)."""
 
 from __future__ import annotations
 
@@ -29,7 +30,8 @@ def chain_vs_full_kernel(
     chain: wp.array3d(dtype=wp.int32),
 ):
     """Per piece (i, q) and row y of ``order`` within its rows: ``full[i * Q + q, y] = (u0, u1)`` of
-    ``hull_span`` and ``chain[...]`` of ``hull_chain_span``, its walks carried over ``order``."""
+    ``hull_span`` and ``chain[...]`` of ``hull_chain_span``, its walks carried over ``order`` while the rows
+    increase and started afresh when they do not."""
     i, q = wp.tid()
     m = hull_n[i, q]
     if m == 0:
@@ -38,8 +40,13 @@ def chain_vs_full_kernel(
     p = i * hull_n.shape[1] + q
     down = int(0)  # noqa: UP018  (a mutable Warp loop variable)
     up = int(0)  # noqa: UP018
+    last = int(-1)  # noqa: UP018
     for k in range(order.shape[0]):
         y = order[k]
+        if y < last:  # a row above the last one: fresh walks
+            down = 0
+            up = 0
+        last = y
         if y >= r[0] and y <= r[1]:
             a0, a1 = kraster.hull_span(hull_pts, i, q, m, float(y), width)
             b0, b1, down, up = kraster.hull_chain_span(hull_pts, i, q, m, float(y), width, down, up)
