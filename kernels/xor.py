@@ -135,8 +135,10 @@ def xor_score_kernel(
 ):
     """Matching penalty (eq. 4), complexity penalty (eq. 5) and log-weight (eq. 6) of every particle.
 
-    Launch with ``wp.launch_tiled(dim=[N], block_dim=B)``: block ``i`` is particle ``i`` and its threads stride
-    over the rows its templates cover (one thread per block on the CPU backend).
+    Launch with ``wp.launch_tiled(dim=[N], block_dim=B)``: block ``i`` is particle ``i`` and each of its threads
+    takes a contiguous run of the rows its templates cover (``row_segment``; one thread per block on the CPU
+    backend). Along its rows a thread walks each piece's hull chains (``raster.hull_chain_span``), keeps the pieces'
+    spans sorted and merges them into the row's disjoint intervals (as ``raster.row_intervals``).
 
     Args:
         hull_pts, hull_n, hull_rows: the particles' piece hulls from ``raster.template_hulls_kernel``.
@@ -178,11 +180,12 @@ def xor_score_kernel(
             r1[q] = 0
     covered = int(0)
     both = int(0)
-    down = vec32i()  # the pieces' hull chain walks (raster.hull_chain_span) over this lane's increasing rows
+    down = vec32i()  # the pieces' hull chain walks (raster.hull_chain_span) over this lane's rows
     up = vec32i()
     s0 = vec32i()  # the row's piece spans sorted by start (raster.row_intervals, written out: no vector copies)
     s1 = vec32i()
-    for y in range(y0 + lane, y1 + 1, wp.block_dim()):
+    ya, yb = row_segment(wp.max(y1 - y0 + 1, 0), lane)  # this lane's run of rows: the walks move forward row by row
+    for y in range(y0 + ya, y0 + yb):
         yf = float(y)
         n = int(0)
         for q in range(pieces):

@@ -654,7 +654,7 @@ def pair_overlap_test_kernel(
 
 
 @pytest.mark.parametrize(("bg_weight", "exclusion"), [(1.0, 0.0), (0.375, 250.0)])
-def test_xor_penalty_complexity_logw_and_coverage_exact(device, rng, bg_weight, exclusion):
+def test_xor_penalty_complexity_logw_and_coverage_exact(device, rng, cpu_blocks, bg_weight, exclusion):
     """mask_rows/mask_total are exact prefix sums of q != 0; xor_score_kernel gives m_i = sum(q XOR v_i) exactly
     (eq. 4) for N = 20 random particles (one empty, one taller than a CUDA block), c_i = sum over alive slots of
     a[kind] + b[kind] exp(-age) (eq. 5; empty slots must not count, their cost is 1e6), logw = prior - (m' + c) s
