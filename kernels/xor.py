@@ -164,7 +164,7 @@ def xor_score_kernel(
     slots = kind.shape[1]
     pieces = slots * PIECES
     width = qrow.shape[1] - 1
-    y0 = qrow.shape[0]  # empty row range unless a piece is visible (no overflow of y0 + lane)
+    y0 = qrow.shape[0]  # empty row range unless a piece is visible
     y1 = int(-1)
     r0 = vec32i()  # each piece's rows (an empty range for pieces not drawn), read once
     r1 = vec32i()
