@@ -145,22 +145,28 @@ def convex_hull(xs: vec16, ys: vec16, n: int):
     count = int(0)
     cur = start
     for _it in range(HULL_MAX):
-        hx[count] = xs[cur]
-        hy[count] = ys[cur]
+        cx = xs[cur]
+        cy = ys[cur]
+        hx[count] = cx
+        hy[count] = cy
         count += 1
         cand = cur
+        ax = float(0.0)  # the candidate's offset from the current vertex
+        ay = float(0.0)
         for j in range(n):
             if j != cur:
+                bx = xs[j] - cx
+                by = ys[j] - cy
                 if cand == cur:
                     cand = j
+                    ax = bx
+                    ay = by
                 else:
-                    ax = xs[cand] - xs[cur]
-                    ay = ys[cand] - ys[cur]
-                    bx = xs[j] - xs[cur]
-                    by = ys[j] - ys[cur]
                     cross = ax * by - ay * bx
                     if cross < 0.0 or (cross == 0.0 and bx * bx + by * by > ax * ax + ay * ay):
                         cand = j
+                        ax = bx
+                        ay = by
         if cand == cur:
             break
         if xs[cand] == xs[cur] and ys[cand] == ys[cur]:
@@ -188,7 +194,8 @@ def template_hulls_kernel(
 
     Launch with ``dim=(N, R)``. Inputs are (N, R) per slot: ``kind`` (KIND_*), ``pos`` ground position (metres),
     ``heading`` (radians), ``dims`` (metres, see the module docstring). Outputs per piece ``q = slot * PIECES +
-    piece``: ``hull_pts`` (N, R * PIECES, HULL_MAX) hull vertices (pixels), ``hull_n`` vertex count (0: the piece
+    piece``: ``hull_pts`` (N, R * PIECES, HULL_MAX) hull vertices (pixels) in order around the hull, the first
+    one topmost (smallest v; ``hull_chain_span`` relies on it), ``hull_n`` vertex count (0: the piece
     does not exist, is partly behind the camera or misses the image), ``hull_rows`` (first, last) image row the
     piece covers (clipped to the image), ``hull_depth`` camera depth of the object's ground point (metres).
     """
@@ -217,12 +224,19 @@ def template_hulls_kernel(
         row1 = int(-1)
         if visible:
             hx, hy, count = convex_hull(xs, ys, n)
+            top = int(0)  # stored from its topmost vertex (the first of smallest v): see hull_chain_span
+            for j in range(1, count):
+                if hy[j] < hy[top]:
+                    top = j
             xmin = hx[0]
             xmax = hx[0]
             ymin = hy[0]
             ymax = hy[0]
             for j in range(count):
-                hull_pts[i, q, j] = wp.vec2(hx[j], hy[j])
+                jt = j + top
+                if jt >= count:
+                    jt -= count
+                hull_pts[i, q, j] = wp.vec2(hx[jt], hy[jt])
                 xmin = wp.min(xmin, hx[j])
                 xmax = wp.max(xmax, hx[j])
                 ymin = wp.min(ymin, hy[j])
@@ -240,33 +254,106 @@ def template_hulls_kernel(
 
 
 @wp.func
-def hull_span(hull_pts: wp.array3d(dtype=wp.vec2), i: int, q: int, n: int, y: float, width: int):
-    """Columns ``(u0, u1)`` of image row ``y`` covered by hull ``q`` of particle ``i`` (``u1 < u0``: none).
+def edge_x(a: wp.vec2, b: wp.vec2, y: float, xl: float, xr: float):
+    """``(xl, xr)`` widened by the crossing of row ``y`` with the closed hull edge ``a -> b`` (both ends when the
+    edge is horizontal on the row); unchanged when the edge misses the row. The one place the crossing is computed:
+    ``hull_span`` and ``hull_chain_span`` agree bit for bit."""
+    lo = wp.min(a[1], b[1])
+    hi = wp.max(a[1], b[1])
+    if y >= lo and y <= hi:
+        if a[1] == b[1]:
+            xl = wp.min(xl, wp.min(a[0], b[0]))
+            xr = wp.max(xr, wp.max(a[0], b[0]))
+        else:
+            x = a[0] + (y - a[1]) * (b[0] - a[0]) / (b[1] - a[1])
+            xl = wp.min(xl, x)
+            xr = wp.max(xr, x)
+    return xl, xr
 
-    The row's intersection with the closed convex hull is ``[x_left, x_right]``; covered pixels are those whose
-    centres lie in it, clipped to ``[0, width - 1]``.
-    """
-    xl = float(3.0e38)
-    xr = float(-3.0e38)
-    for k in range(n):
-        a = hull_pts[i, q, k]
-        b = hull_pts[i, q, (k + 1) % n]
-        lo = wp.min(a[1], b[1])
-        hi = wp.max(a[1], b[1])
-        if y >= lo and y <= hi:
-            if a[1] == b[1]:
-                xl = wp.min(xl, wp.min(a[0], b[0]))
-                xr = wp.max(xr, wp.max(a[0], b[0]))
-            else:
-                x = a[0] + (y - a[1]) * (b[0] - a[0]) / (b[1] - a[1])
-                xl = wp.min(xl, x)
-                xr = wp.max(xr, x)
+
+@wp.func
+def span_columns(xl: float, xr: float, width: int):
+    """Pixel columns ``(u0, u1)`` whose centres lie in ``[xl, xr]``, clipped to ``[0, width - 1]`` (``u1 < u0``:
+    none)."""
     u0 = int(0)
     u1 = int(-1)
     if xl <= xr:
         u0 = wp.max(int(wp.ceil(xl)), 0)
         u1 = wp.min(int(wp.floor(xr)), width - 1)
     return u0, u1
+
+
+@wp.func
+def hull_span(hull_pts: wp.array3d(dtype=wp.vec2), i: int, q: int, n: int, y: float, width: int):
+    """Columns ``(u0, u1)`` of image row ``y`` covered by hull ``q`` of particle ``i`` (``u1 < u0``: none).
+
+    The row's intersection with the closed convex hull is ``[x_left, x_right]``; covered pixels are those whose
+    centres lie in it, clipped to ``[0, width - 1]``. Tests every edge (O(n)); ``hull_chain_span`` gives the same
+    columns in O(1) amortised over increasing rows.
+    """
+    xl = float(3.0e38)
+    xr = float(-3.0e38)
+    a = hull_pts[i, q, n - 1]
+    for k in range(n):
+        b = hull_pts[i, q, k]
+        xl, xr = edge_x(a, b, y, xl, xr)
+        a = b
+    return span_columns(xl, xr, width)
+
+
+@wp.func
+def hull_chain_span(
+    hull_pts: wp.array3d(dtype=wp.vec2), i: int, q: int, n: int, y: float, width: int, down: int, up: int
+):
+    """``hull_span`` by walking the hull's two y-monotone chains: returns ``(u0, u1, down, up)``.
+
+    The hull's vertex 0 is its topmost (``template_hulls_kernel``), so v grows along edges 0, 1, ... (the down
+    chain) to the bottom vertex and shrinks again to vertex 0 (the up chain, walked backwards from edge n - 1).
+    ``down`` is the first down-chain edge to test and ``up`` counts up-chain edges already passed; both start at 0
+    and only move forward, so ``y`` must not decrease between calls that pass a walk on (start a row above the
+    last one from zeros). A row costs the edges it crosses plus those passed since the last row. On each chain the
+    edges crossing a row are contiguous (the hull is convex), and every edge tested goes through ``edge_x`` with
+    the same ends in the same order as in ``hull_span``, so the columns are identical.
+    """
+    xl = float(3.0e38)
+    xr = float(-3.0e38)
+    # down chain, edge k = (k, k + 1): skip the edges ending above the row (none of them crosses it), then test
+    # edges while they cross it; an edge ending below the row ends the run (the next one starts below it)
+    while down < n - 1 and hull_pts[i, q, down + 1][1] < y:
+        down += 1
+    k = down
+    a = hull_pts[i, q, k]
+    while k < n:
+        kb = k + 1
+        if kb == n:
+            kb = 0
+        b = hull_pts[i, q, kb]
+        if k > down and (y < wp.min(a[1], b[1]) or y > wp.max(a[1], b[1])):
+            break
+        xl, xr = edge_x(a, b, y, xl, xr)
+        if b[1] > y:
+            break
+        a = b
+        k += 1
+    # up chain, edge j = (j, j + 1) for j = n - 1 - up, n - 2 - up, ...: skip the edges whose lower end (j) is
+    # above the row, then test edges while they cross it; a lower end below the row ends the run
+    while up < n - 1 and hull_pts[i, q, n - 1 - up][1] < y:
+        up += 1
+    j = n - 1 - up
+    b = hull_pts[i, q, 0]
+    if j < n - 1:
+        b = hull_pts[i, q, j + 1]
+    while j >= 0:
+        a = hull_pts[i, q, j]
+        if j < n - 1 - up and (y < wp.min(a[1], b[1]) or y > wp.max(a[1], b[1])):
+            break
+        xl, xr = edge_x(a, b, y, xl, xr)
+        if a[1] > y:
+            break
+        b = a
+        j -= 1
+    u0, u1 = span_columns(xl, xr, width)
+    return u0, u1, down, up
 
 
 @wp.func
@@ -278,11 +365,15 @@ def row_intervals(
     pieces: int,
     y: int,
     width: int,
+    down: vec32i,
+    up: vec32i,
 ):
     """The covered columns of row ``y`` of particle ``i``'s virtual scene as disjoint sorted intervals.
 
-    Returns ``(count, starts, ends)``: ``count`` merged intervals ``[starts[k], ends[k]]`` (inclusive columns),
-    sorted, separated by at least one uncovered pixel.
+    ``down``, ``up``: per piece, the chain walks of ``hull_chain_span`` (zeros to start; pass back what the
+    previous row returned only when ``y`` is below that row). Returns ``(count, starts, ends, down, up)``: ``count``
+    merged intervals ``[starts[k], ends[k]]`` (inclusive columns), sorted, separated by at least one uncovered
+    pixel, and the walks after this row.
     """
     s0 = vec32i()
     s1 = vec32i()
@@ -293,7 +384,9 @@ def row_intervals(
         if m > 0:
             r = hull_rows[i, q]
             if y >= r[0] and y <= r[1]:
-                u0, u1 = hull_span(hull_pts, i, q, m, yf, width)
+                u0, u1, dq, uq = hull_chain_span(hull_pts, i, q, m, yf, width, down[q], up[q])
+                down[q] = dq
+                up[q] = uq
                 if u0 <= u1:
                     j = n
                     while j > 0 and s0[j - 1] > u0:
@@ -303,17 +396,16 @@ def row_intervals(
                     s0[j] = u0
                     s1[j] = u1
                     n += 1
-    m0 = vec32i()
-    m1 = vec32i()
+    # merge in place: interval ``count`` is written at or before the input ``k`` it comes from
     count = int(0)
     for k in range(n):
-        if count > 0 and s0[k] <= m1[count - 1] + 1:
-            m1[count - 1] = wp.max(m1[count - 1], s1[k])
+        if count > 0 and s0[k] <= s1[count - 1] + 1:
+            s1[count - 1] = wp.max(s1[count - 1], s1[k])
         else:
-            m0[count] = s0[k]
-            m1[count] = s1[k]
+            s0[count] = s0[k]
+            s1[count] = s1[k]
             count += 1
-    return count, m0, m1
+    return count, s0, s1, down, up
 
 
 @wp.kernel
@@ -334,7 +426,7 @@ def render_virtual_kernel(
     width = out.shape[2]
     for x in range(width):
         out[k, y, x] = wp.uint8(0)
-    count, m0, m1 = row_intervals(hull_pts, hull_n, hull_rows, i, pieces, y, width)
+    count, m0, m1, _down, _up = row_intervals(hull_pts, hull_n, hull_rows, i, pieces, y, width, vec32i(), vec32i())
     for c in range(count):
         for x in range(m0[c], m1[c] + 1):
             out[k, y, x] = wp.uint8(1)

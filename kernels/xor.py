@@ -10,7 +10,7 @@ which ``kernels.uoh`` builds the Uncovered Object Histogram.
 
 import warp as wp
 
-from .raster import KIND_HUMAN, PIECES, row_intervals
+from .raster import KIND_HUMAN, PIECES, hull_chain_span, vec32i
 from .reduce import finite_logw
 
 wp.set_module_options({"enable_backward": False})
@@ -135,8 +135,10 @@ def xor_score_kernel(
 ):
     """Matching penalty (eq. 4), complexity penalty (eq. 5) and log-weight (eq. 6) of every particle.
 
-    Launch with ``wp.launch_tiled(dim=[N], block_dim=B)``: block ``i`` is particle ``i`` and its threads stride
-    over the rows its templates cover (one thread per block on the CPU backend).
+    Launch with ``wp.launch_tiled(dim=[N], block_dim=B)``: block ``i`` is particle ``i`` and each of its threads
+    takes a contiguous run of the rows its templates cover (``row_segment``; one thread per block on the CPU
+    backend). Along its rows a thread walks each piece's hull chains (``raster.hull_chain_span``), keeps the pieces'
+    spans sorted and merges them into the row's disjoint intervals (as ``raster.row_intervals``).
 
     Args:
         hull_pts, hull_n, hull_rows: the particles' piece hulls from ``raster.template_hulls_kernel``.
@@ -162,24 +164,59 @@ def xor_score_kernel(
     slots = kind.shape[1]
     pieces = slots * PIECES
     width = qrow.shape[1] - 1
-    y0 = qrow.shape[0]  # empty row range unless a piece is visible (no overflow of y0 + lane)
+    y0 = qrow.shape[0]  # empty row range unless a piece is visible
     y1 = int(-1)
+    r0 = vec32i()  # each piece's rows (an empty range for pieces not drawn), read once
+    r1 = vec32i()
     for q in range(pieces):
+        r = hull_rows[i, q]
         if hull_n[i, q] > 0:
-            r = hull_rows[i, q]
+            r0[q] = r[0]
+            r1[q] = r[1]
             y0 = wp.min(y0, r[0])
             y1 = wp.max(y1, r[1])
+        else:
+            r0[q] = 1
+            r1[q] = 0
     covered = int(0)
     both = int(0)
-    for y in range(y0 + lane, y1 + 1, wp.block_dim()):
-        count, m0, m1 = row_intervals(hull_pts, hull_n, hull_rows, i, pieces, y, width)
-        for k in range(count):
-            a = m0[k]
-            b = m1[k]
-            covered += b - a + 1
-            both += qrow[y, b + 1] - qrow[y, a]
-            wp.atomic_add(cov_diff, y, a, 1)
-            wp.atomic_add(cov_diff, y, b + 1, -1)
+    down = vec32i()  # the pieces' hull chain walks (raster.hull_chain_span) over this lane's rows
+    up = vec32i()
+    s0 = vec32i()  # the row's piece spans sorted by start (raster.row_intervals, written out: no vector copies)
+    s1 = vec32i()
+    ya, yb = row_segment(wp.max(y1 - y0 + 1, 0), lane)  # this lane's run of rows: the walks move forward row by row
+    for y in range(y0 + ya, y0 + yb):
+        yf = float(y)
+        n = int(0)
+        for q in range(pieces):
+            if y >= r0[q] and y <= r1[q]:
+                u0, u1, dq, uq = hull_chain_span(hull_pts, i, q, hull_n[i, q], yf, width, down[q], up[q])
+                down[q] = dq
+                up[q] = uq
+                if u0 <= u1:
+                    j = n
+                    while j > 0 and s0[j - 1] > u0:
+                        s0[j] = s0[j - 1]
+                        s1[j] = s1[j - 1]
+                        j -= 1
+                    s0[j] = u0
+                    s1[j] = u1
+                    n += 1
+        # merge the sorted spans into disjoint intervals [a, b] (separated by an uncovered pixel) and count them
+        if n > 0:
+            a = s0[0]
+            b = s1[0]
+            for k in range(1, n + 1):
+                if k < n and s0[k] <= b + 1:
+                    b = wp.max(b, s1[k])
+                else:
+                    covered += b - a + 1
+                    both += qrow[y, b + 1] - qrow[y, a]
+                    wp.atomic_add(cov_diff, y, a, 1)
+                    wp.atomic_add(cov_diff, y, b + 1, -1)
+                    if k < n:
+                        a = s0[k]
+                        b = s1[k]
     tc = wp.tile_sum(wp.tile(covered))
     tb = wp.tile_sum(wp.tile(both))
     if lane == 0:

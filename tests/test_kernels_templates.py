@@ -441,11 +441,13 @@ def test_object_partly_outside_image_is_clipped(device):
         lengths = (rows[:, 1] - rows[:, 0] + 1).reshape(r, PIECES).sum(axis=1)
         offsets = wp.array(np.r_[0, np.cumsum(lengths)[:-1]].astype(np.int32), dtype=wp.int32, device=device)
         spans = wp.full(int(lengths.sum()), wp.vec2i(-99, -99), dtype=wp.vec2i, device=device)
+        box = wp.zeros(r, dtype=wp.vec4i, device=device)
+        pixels = wp.zeros(r, dtype=wp.int32, device=device)
         wp.launch(
             kuoh.candidate_spans_kernel,
             dim=r,
             inputs=[pts, hn1, rows1, offsets, PIECES, cam.width],
-            outputs=[spans],
+            outputs=[spans, box, pixels],
             device=device,
         )
         sp = spans.numpy()
@@ -652,7 +654,7 @@ def pair_overlap_test_kernel(
 
 
 @pytest.mark.parametrize(("bg_weight", "exclusion"), [(1.0, 0.0), (0.375, 250.0)])
-def test_xor_penalty_complexity_logw_and_coverage_exact(device, rng, bg_weight, exclusion):
+def test_xor_penalty_complexity_logw_and_coverage_exact(device, rng, cpu_blocks, bg_weight, exclusion):
     """mask_rows/mask_total are exact prefix sums of q != 0; xor_score_kernel gives m_i = sum(q XOR v_i) exactly
     (eq. 4) for N = 20 random particles (one empty, one taller than a CUDA block), c_i = sum over alive slots of
     a[kind] + b[kind] exp(-age) (eq. 5; empty slots must not count, their cost is 1e6), logw = prior - (m' + c) s
@@ -696,19 +698,29 @@ def test_xor_penalty_complexity_logw_and_coverage_exact(device, rng, bg_weight, 
 
 
 def coverage_uoh(device, q, n: int, beta: float, cov_diff, block_dim: int = ROW_BLOCK):
-    """coverage_uoh_kernel as the tracker launches it, into garbage-filled outputs: (uoh, gain_rows) device arrays."""
+    """coverage_uoh_kernel and uoh_box_sums_kernel as the tracker launches them, into garbage-filled outputs:
+    (uoh, gain_rows, a_sat) device arrays."""
     h, w = q.shape
     uoh = wp.full((h, w), -7, dtype=wp.int32, device=device)
     gain_rows = wp.full((h, w + 1), np.nan, dtype=wp.float64, device=device)
+    a_sat = wp.full((h + 1, w + 1), -(2**40) - 3, dtype=wp.int64, device=device)
     wp.launch_tiled(
         kuoh.coverage_uoh_kernel,
         dim=[h],
         inputs=[q, n, beta],
-        outputs=[cov_diff, uoh, gain_rows],
+        outputs=[cov_diff, uoh, gain_rows, a_sat],
         block_dim=block_dim,
         device=device,
     )
-    return uoh, gain_rows
+    wp.launch_tiled(kuoh.uoh_box_sums_kernel, dim=[w + 1], inputs=[1, a_sat], block_dim=block_dim, device=device)
+    return uoh, gain_rows, a_sat
+
+
+def summed_area(u: np.ndarray) -> np.ndarray:
+    """(H+1, W+1) int64 summed-area table: out[y, x] = u[:y, :x].sum()."""
+    out = np.zeros((u.shape[0] + 1, u.shape[1] + 1), dtype=np.int64)
+    out[1:, 1:] = np.cumsum(np.cumsum(u.astype(np.int64), axis=0), axis=1)
+    return out
 
 
 @pytest.mark.parametrize("beta", [0.0, 1.0, 0.5, 0.37])
@@ -727,8 +739,9 @@ def test_coverage_uoh_exact(device, rng, cpu_blocks, beta):
     gain_ref[:, 1:] = np.cumsum(free * (q - b64 * (1 - q)), axis=1)
     for _frame in range(2):
         case.score()
-        uoh, gain_rows = coverage_uoh(device, case.qd, case.n, beta, case.cov_diff)
+        uoh, gain_rows, a_sat = coverage_uoh(device, case.qd, case.n, beta, case.cov_diff)
         np.testing.assert_array_equal(uoh.numpy(), q * (case.n - cov))
+        np.testing.assert_array_equal(a_sat.numpy(), summed_area(q * (case.n - cov)))
         if beta in (0.0, 0.5, 1.0):
             np.testing.assert_array_equal(gain_rows.numpy(), gain_ref)
         else:
@@ -755,9 +768,11 @@ def test_coverage_uoh_at_particle_limit_exact(device, rng, cpu_blocks, block_dim
     diff[:, w] = -cov[:, -1]
     cov_diff = wp.array(diff.astype(np.int32), dtype=wp.int32, device=device)
     qd = wp.array(np.where(q, 255, 0).astype(np.uint8), dtype=wp.uint8, device=device)
-    uoh, gain_rows = coverage_uoh(device, qd, n, 0.5, cov_diff, block_dim)
+    uoh, gain_rows, a_sat = coverage_uoh(device, qd, n, 0.5, cov_diff, block_dim)
     free = n - cov
     np.testing.assert_array_equal(uoh.numpy(), np.where(q, free, 0))
+    np.testing.assert_array_equal(a_sat.numpy(), summed_area(np.where(q, free, 0)))
+    assert a_sat.numpy()[-1, -1] > 2**40
     a = np.cumsum(np.where(q, free, 0), axis=1)  # int64, exact
     b = np.cumsum(np.where(q, 0, free), axis=1)
     gain_ref = np.zeros((h, w + 1))
@@ -765,6 +780,25 @@ def test_coverage_uoh_at_particle_limit_exact(device, rng, cpu_blocks, block_dim
     assert a[0, -1] > 2**39  # far past int32 (and past 2^32)
     np.testing.assert_array_equal(gain_rows.numpy(), gain_ref)
     assert not cov_diff.numpy().any()
+
+
+@pytest.mark.parametrize("block_dim", [ROW_BLOCK, 32, 7])
+@pytest.mark.parametrize("h", [1, 7, 300])
+@pytest.mark.parametrize("cols", [1, 4, 6])
+def test_uoh_box_sums_exact_past_2_47(device, rng, cpu_blocks, block_dim, h, cols):
+    """uoh_box_sums_kernel turns row prefix sums (rows 1..H of a_sat; row 0 zero) into their column cumulative sums
+    exactly, for column totals past 2^47 (the three-part block scan), more and fewer rows than the block has lanes,
+    one column per block (the tracker on GPUs), all of them (the tracker on the CPU) and a last block with fewer
+    columns."""
+    w = 5
+    rows = np.zeros((h + 1, w + 1), dtype=np.int64)
+    rows[1:, 1:] = np.cumsum(rng.integers(0, 2**44, (h, w), dtype=np.int64), axis=1)
+    a_sat = wp.array(rows, dtype=wp.int64, device=device)
+    blocks = (w + cols) // cols
+    wp.launch_tiled(kuoh.uoh_box_sums_kernel, dim=[blocks], inputs=[cols, a_sat], block_dim=block_dim, device=device)
+    np.testing.assert_array_equal(a_sat.numpy(), np.cumsum(rows, axis=0))
+    if h == 300:
+        assert rows[:, -1].sum() > 2**47
 
 
 # ------------------------------------------------------------------------------------------ 4-5. candidates
@@ -792,9 +826,13 @@ def candidate_case(device, rng, min_gain: float, min_area: int, beta: float = 0.
             cands.hulls.n,
             cands.offsets,
             cands.spans,
+            cands.box,
+            cands.pixels,
             PIECES,
             wp.array(gain_rows, dtype=wp.float64, device=device),
+            wp.array(summed_area(q * (n - cov)), dtype=wp.int64, device=device),
             n,
+            beta,
             min_gain,
             min_area,
         ],
@@ -805,7 +843,18 @@ def candidate_case(device, rng, min_gain: float, min_area: int, beta: float = 0.
     sil = render(device, cands.hulls, 1, w, h, np.arange(cands.count)).astype(bool)
     area_ref = sil.sum(axis=(1, 2))
     gain_ref = np.einsum("khw,hw->k", sil.astype(np.float64), gain_px) / n
-    return score.numpy(), area.numpy(), area_ref, gain_ref, cands
+    rows, cols = sil.any(axis=2), sil.any(axis=1)
+    box_ref = np.stack(
+        [
+            cols.argmax(axis=1),
+            rows.argmax(axis=1),
+            w - 1 - cols[:, ::-1].argmax(axis=1),
+            h - 1 - rows[:, ::-1].argmax(axis=1),
+        ],
+        axis=1,
+    )
+    box_ref[area_ref == 0] = (w, np.iinfo(np.int32).max, -1, -1)
+    return score.numpy(), area.numpy(), area_ref, gain_ref, cands, box_ref, q * (n - cov)
 
 
 @pytest.mark.parametrize("block_dim", [CANDIDATE_BLOCK, 7])
@@ -816,8 +865,21 @@ def test_candidate_scores_match_union_silhouettes(device, rng, cpu_blocks, block
     integer, so the float64 sums are exact in any lane order), else -3e38 (gain < min_gain x area or area <
     min_area); both outcomes occur; lanes striding over a candidate's rows (block sizes 32 and 7) change nothing."""
     min_gain, min_area = 0.3, 30
-    score, area, area_ref, gain_ref, cands = candidate_case(device, rng, min_gain, min_area, block_dim=block_dim)
+    score, area, area_ref, gain_ref, cands, box_ref, uoh_ref = candidate_case(
+        device, rng, min_gain, min_area, block_dim=block_dim
+    )
     np.testing.assert_array_equal(area, area_ref)
+    np.testing.assert_array_equal(cands.pixels.numpy(), area_ref)
+    # box: the silhouette's bounding box (u_min, v_min, u_max, v_max), u_max < u_min when empty
+    np.testing.assert_array_equal(cands.box.numpy(), box_ref)
+    # the bounding-box bound settles many candidates without their rows, and leaves ineligible ones to the rows
+    u0, v0, u1, v1 = box_ref.T
+    ok_box = u0 <= u1
+    sat = summed_area(uoh_ref)
+    mass = np.where(ok_box, sat[v1 + 1, u1 + 1] - sat[v0, u1 + 1] - sat[v1 + 1, u0] + sat[v0, u0], 0)
+    settled = (area_ref >= min_area) & (mass / 37 < min_gain * area_ref - 1e-3)
+    assert settled.sum() > 0.2 * len(settled)
+    assert np.sum(~settled & (area_ref >= min_area) & (gain_ref < min_gain * area_ref)) >= 3
     assert np.mean(area_ref > 0) > 0.9  # a few candidates near the horizon cover no pixel centre
     # both pieces overlap on some rows for most candidates: the union is smaller than the sum of the pieces
     eligible = (area_ref >= min_area) & (gain_ref >= min_gain * area_ref)
@@ -833,9 +895,9 @@ def test_candidate_scores_match_union_silhouettes(device, rng, cpu_blocks, block
 def test_candidate_min_area_rule(device):
     """With min_gain far below every gain, eligibility is decided by area alone: candidates smaller than min_area
     (a median candidate's area) get -3e38, the others (area == min_area included) their exact gain."""
-    score0, _, area_ref0, _, _ = candidate_case(device, np.random.default_rng(7), -1e9, 0)
+    score0, _, area_ref0, *_ = candidate_case(device, np.random.default_rng(7), -1e9, 0)
     min_area = int(np.sort(area_ref0)[len(area_ref0) // 2])
-    score, area, area_ref, gain_ref, _ = candidate_case(device, np.random.default_rng(7), -1e9, min_area)
+    score, area, area_ref, gain_ref, *_ = candidate_case(device, np.random.default_rng(7), -1e9, min_area)
     np.testing.assert_array_equal(area, area_ref)
     small = area_ref < min_area
     assert 0 < small.sum() < len(small) and np.any(area_ref == min_area)

@@ -183,11 +183,13 @@ class Candidates:
         offsets = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int32)
         self.offsets = wp.array(offsets, dtype=wp.int32, device=d)
         self.spans = wp.zeros(max(int(lengths.sum()), 1), dtype=wp.vec2i, device=d)
+        self.box = wp.zeros(c, dtype=wp.vec4i, device=d)
+        self.pixels = wp.zeros(c, dtype=wp.int32, device=d)
         wp.launch(
             kuoh.candidate_spans_kernel,
             dim=c,
             inputs=[self.hulls.pts, self.hulls.n, self.hulls.rows, self.offsets, int(kraster.PIECES), camera.width],
-            outputs=[self.spans],
+            outputs=[self.spans, self.box, self.pixels],
             device=d,
         )
         self.kind = wp.array(self.kind_np, dtype=wp.int32, device=d)
@@ -201,7 +203,7 @@ class Candidates:
         self.part_arg = wp.zeros(self.blocks, dtype=wp.int32, device=d)
         self.est = wp.zeros(int(kreduce.EST_SIZE), dtype=wp.float64, device=d)
         self.best = wp.zeros(1, dtype=wp.int32, device=d)
-        self.bytes = int(lengths.sum()) * 8 + c * (int(kraster.PIECES) * (int(kraster.HULL_MAX) * 8 + 16) + 32)
+        self.bytes = int(lengths.sum()) * 8 + c * (int(kraster.PIECES) * (int(kraster.HULL_MAX) * 8 + 16) + 52)
 
 
 def _dynamics_struct(config: TemplateConfig) -> kdyn.Dynamics:
@@ -289,7 +291,7 @@ class TemplateTracker(FrameChain):
         self.keep_virtual = bool(keep_virtual)
         self.keep_uoh = bool(keep_uoh)
         h, w = self.height, self.width
-        image_bytes = h * (w + 1) * (4 + 4 + 8) + h * w * (1 + 4 + 1)
+        image_bytes = h * (w + 1) * (4 + 4 + 8) + (h + 1) * (w + 1) * 8 + h * w * (1 + 4 + 1)
         check_fits(n, particle_bytes(r, config.resampling), image_bytes, d, what="template tracker particles")
         self.candidates = Candidates(self.camera, self.plane, self.cam, self.plane_struct, config, d)
         log.info(
@@ -311,6 +313,7 @@ class TemplateTracker(FrameChain):
         self.cov_diff = wp.zeros((h, w + 1), dtype=wp.int32, device=d)
         self.uoh = wp.zeros((h, w), dtype=wp.int32, device=d)
         self.gain_rows = wp.zeros((h, w + 1), dtype=wp.float64, device=d)
+        self.a_sat = wp.zeros((h + 1, w + 1), dtype=wp.int64, device=d)  # UOH summed-area table (candidate bounds)
         self.virtual = wp.zeros((h, w), dtype=wp.uint8, device=d)
         self.penalty = wp.zeros(n, dtype=wp.int32, device=d)
         self.complexity = wp.zeros(n, dtype=wp.float32, device=d)
@@ -425,7 +428,15 @@ class TemplateTracker(FrameChain):
             kuoh.coverage_uoh_kernel,
             dim=[self.height],
             inputs=[self.q, self.n, float(cfg.add_beta)],
-            outputs=[self.cov_diff, self.uoh, self.gain_rows],
+            outputs=[self.cov_diff, self.uoh, self.gain_rows, self.a_sat],
+            block_dim=ROW_BLOCK,
+            device=d,
+        )
+        cols = 1 if self.is_cuda else self.width + 1  # a block per column; one pass in memory order on the CPU
+        wp.launch_tiled(
+            kuoh.uoh_box_sums_kernel,
+            dim=[(self.width + cols) // cols],
+            inputs=[cols, self.a_sat],
             block_dim=ROW_BLOCK,
             device=d,
         )
@@ -437,9 +448,13 @@ class TemplateTracker(FrameChain):
                 c.hulls.n,
                 c.offsets,
                 c.spans,
+                c.box,
+                c.pixels,
                 int(kraster.PIECES),
                 self.gain_rows,
+                self.a_sat,
                 self.n,
+                float(cfg.add_beta),
                 float(cfg.add_min_gain),
                 int(cfg.min_candidate_area),
             ],
