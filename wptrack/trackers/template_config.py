@@ -163,6 +163,23 @@ class TemplateConfig:
     """T_del of eq. 13: per-frame deletion probability of each object in each particle."""
     sigma_pos: float = 0.03
     """Position diffusion added to eqs. 8-9, m per frame (helps new objects settle)."""
+    dims_revert: float = 0.0
+    """Per-frame pull of every object's dims towards its class's prior mean ``dims_mean``, in [0, 1]: eqs. 8-9's
+    d_t = d + dims_revert (mean - d) + N(0, sigma_d^2) (0: the random walk of eqs. 8-9). Beyond the paper: a mean-
+    reverting (Ornstein-Uhlenbeck) size, stationary deviation sigma_d / sqrt(2 dims_revert) per dimension. In a group
+    the feet of the people behind are hidden, and a template placed too near the camera and grown tall covers the
+    same pixels as the right one; the pull keeps the size from drifting to dims_max to explain a depth error."""
+    occlusion_del: float = 1.0
+    """Share of T_del (eq. 13) that an object's occlusion removes, in [0, 1]: an object whose image box is hidden a
+    fraction o by nearer objects of its particle (``kernels.occlusion``) is deleted with probability T_del (1 -
+    occlusion_del o) (0: eq. 13 exactly). Beyond the paper: a hidden object explains no pixel, so deleting it costs
+    the particle nothing, and under eq. 13 a person walking behind others in a group is removed from a growing share
+    of the particles until the slot is freed and the person is re-added with a new label (an identity switch).
+    Objects in plain view (wrong hypotheses on background, objects that left the image) are deleted as before."""
+    occlusion_noise: float = 0.0
+    """Share of the velocity, turn and position noise (eqs. 8-9, ``sigma_pos``) that an object's occlusion removes,
+    in [0, 1]: noise x (1 - occlusion_noise o) (0: eqs. 8-9 exactly). Beyond the paper: a hidden object gets no
+    evidence that could correct a diffused velocity, so it keeps its motion while hidden."""
     human: HumanPrior = field(default_factory=HumanPrior)
     vehicle: VehiclePrior = field(default_factory=VehiclePrior)
     classes: tuple[str, ...] = CLASSES
@@ -197,6 +214,9 @@ class TemplateConfig:
         _nonneg(self.t_add, "t_add", "probability", upper=1.0)
         _nonneg(self.t_del, "t_del", "probability", upper=1.0)
         _nonneg(self.sigma_pos, "sigma_pos", "m")
+        _nonneg(self.dims_revert, "dims_revert", "fraction per frame", upper=1.0)
+        _nonneg(self.occlusion_del, "occlusion_del", "share of T_del", upper=1.0)
+        _nonneg(self.occlusion_noise, "occlusion_noise", "share of the noise", upper=1.0)
         _nonneg(self.max_range, "max_range", "m", strict=True)
         _nonneg(self.add_min_gain, "add_min_gain", "fraction")
         _nonneg(self.add_beta, "add_beta", "weight")

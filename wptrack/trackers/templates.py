@@ -33,6 +33,7 @@ import warp as wp
 
 from wptrack.errors import ConfigError, FrameError, RigError
 from wptrack.kernels import dynamics as kdyn
+from wptrack.kernels import occlusion as kocc
 from wptrack.kernels import raster as kraster
 from wptrack.kernels import reduce as kreduce
 from wptrack.kernels import slots as kslots
@@ -103,7 +104,9 @@ def _new_state(n: int, r: int, device: str) -> kdyn.TemplateState:
     return s
 
 
-SLOT_STATE_BYTES = 2 * (4 + 4 + 8 + 8 + 4 + 12 + 4) + int(kraster.PIECES) * (int(kraster.HULL_MAX) * 8 + 4 + 8 + 4)
+SLOT_STATE_BYTES = (
+    2 * (4 + 4 + 8 + 8 + 4 + 12 + 4) + int(kraster.PIECES) * (int(kraster.HULL_MAX) * 8 + 4 + 8 + 4) + 4  # + occlusion
+)
 """Device bytes per object slot of a particle: two ping-pong state buffers and the piece hulls."""
 PARTICLE_BYTES = 2 * 4 + 4 + 4 + 4 + 8
 """Device bytes per particle besides the slots: log-weights (2), penalty, complexity, ancestor, weight."""
@@ -227,6 +230,9 @@ def _dynamics_struct(config: TemplateConfig) -> kdyn.Dynamics:
     s.turn_max = v.turn_max
     s.t_add = config.t_add
     s.t_del = config.t_del
+    s.occlusion_del = config.occlusion_del
+    s.dims_revert = config.dims_revert
+    s.occlusion_noise = config.occlusion_noise
     return s
 
 
@@ -304,6 +310,8 @@ class TemplateTracker(FrameChain):
         )
         self.state = [_new_state(n, r, d), _new_state(n, r, d)]
         self.hulls = Hulls(n, r, d)
+        self.occlusion = wp.zeros((n, r), dtype=wp.float32, device=d)
+        self.use_occlusion = config.occlusion_del > 0.0 or config.occlusion_noise > 0.0
         self.q = wp.zeros((h, w), dtype=wp.uint8, device=d)
         self.q_host = wp.zeros((h, w), dtype=wp.uint8, device="cpu", pinned=self.is_cuda)
         self.qrow = wp.zeros((h, w + 1), dtype=wp.int32, device=d)
@@ -389,6 +397,14 @@ class TemplateTracker(FrameChain):
     def _raster(self, cur: int) -> None:
         s = self.state[cur]
         self.hulls.launch(self.cam, self.plane_struct, s.kind, s.pos, s.heading, s.dims, self.device)
+        if self.use_occlusion:  # beyond the paper: per-object occlusion for the prediction (kernels.occlusion)
+            wp.launch(
+                kocc.occlusion_kernel,
+                dim=(self.n, self.r),
+                inputs=[self.hulls.pts, self.hulls.n, self.hulls.depth, self.width, self.height],
+                outputs=[self.occlusion],
+                device=self.device,
+            )
 
     def _score(self, cur: int) -> None:
         s = self.state[cur]
@@ -535,6 +551,7 @@ class TemplateTracker(FrameChain):
                 c.kind,
                 c.pos,
                 c.heading,
+                self.occlusion,
                 self.state[cur],
             ],
             outputs=[self.state[nxt]],
