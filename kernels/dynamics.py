@@ -21,6 +21,7 @@ from .random import (
     uniform4,
 )
 from .raster import KIND_HUMAN, KIND_NONE, KIND_VEHICLE, MAX_SLOTS
+from .xor import disc_in_box
 
 wp.set_module_options({"enable_backward": False})
 
@@ -80,6 +81,7 @@ class Dynamics:
     t_del: float  # T_del of eq. 13
     occlusion_del: float  # share of T_del an object's occlusion removes (beyond the paper; 0: eq. 13), in [0, 1]
     dims_revert: float  # per-frame pull of the dims towards the prior mean (beyond the paper; 0: eqs. 8-9)
+    absorb: int  # 1: an added vehicle removes the humans on its footprint (beyond the paper; kernels.classify)
     occlusion_noise: float  # share of the velocity/position noise its occlusion removes (0: eqs. 8-9), in [0, 1]
 
 
@@ -112,6 +114,8 @@ def template_predict_kernel(
         ancestors: (N,) parent of each particle (identity when not resampled); resampled: (1,) 1 when the
             weights restart from 0.
         add: (2,) this frame's addition ``(slot, candidate)`` or ``slot = -1`` (``uoh.choose_addition_kernel``).
+            With ``dyn.absorb``, a vehicle added to a particle removes the particle's humans whose ground disc
+            meets the candidate's footprint (a box of the prior's mean length and width; beyond the paper).
         slot_label: (R,) label of each slot. cand_kind, cand_pos, cand_heading: (C,) candidate objects.
         occlusion: (N, R) fraction of each object hidden by nearer objects of its particle, read at the parent
             (``occlusion.occlusion_kernel``; zeros: the paper's prediction). Beyond the paper: an object hidden a
@@ -141,6 +145,15 @@ def template_predict_kernel(
     u = uniform4(seed, idx, f, STREAM_TEMPLATE_EVENT)
     if k != KIND_NONE and u[0] < dyn.t_del * (1.0 - dyn.occlusion_del * occ):
         k = KIND_NONE
+    if k == KIND_HUMAN and dyn.absorb != 0 and add[0] >= 0:
+        # beyond the paper (kernels.classify): a vehicle added to this particle (the same draw as the addition
+        # below, keyed by the particle) replaces the humans standing on its footprint, in one move
+        cv = add[1]
+        if cand_kind[cv] == KIND_VEHICLE and src.kind[a, add[0]] == KIND_NONE:
+            if uniform4(seed, j, f, STREAM_TEMPLATE_ADD)[0] < dyn.t_add:
+                half = 0.5 * wp.vec2(dyn.dims_mean_vehicle[0], dyn.dims_mean_vehicle[1])
+                if disc_in_box(p, d[1], cand_pos[cv], cand_heading[cv], half) > 0.0:
+                    k = KIND_NONE
     if k == KIND_NONE and s == add[0]:
         ua = uniform4(seed, j, f, STREAM_TEMPLATE_ADD)
         if ua[0] < dyn.t_add:

@@ -953,6 +953,7 @@ def quiet_dynamics(**overrides):
     dyn.dims_revert = 0.0
     dyn.occlusion_del = 0.0
     dyn.occlusion_noise = 0.0
+    dyn.absorb = 0
     for k, v in overrides.items():
         setattr(dyn, k, v)
     return dyn

@@ -192,6 +192,15 @@ class TemplateConfig:
     """A candidate is proposed when its gain (eq. 11 score) is at least this fraction of its area."""
     add_beta: float = 0.5
     """Weight of uncovered background in the addition gain (0: eq. 11 exactly; see ``kernels.uoh``)."""
+    vehicle_fit: float = 0.0
+    """Class-aware addition (``kernels.classify``; 0: off, eq. 11 exactly): when eq. 11 picks a human candidate, the
+    vehicle candidate within half a vehicle length (``vehicle.dims_mean``) whose silhouette is the largest fraction
+    of foreground replaces it if that fraction is at least ``vehicle_fit``. Beyond the paper: the uncovered part of
+    a partly explained car is human-sized, so eq. 11 adds humans on it; a car's blob fills a vehicle template, a
+    person's does not."""
+    absorb: bool = False
+    """A vehicle added to a particle removes the particle's humans whose ground disc meets its footprint (one move
+    that replaces the humans covering a car by the vehicle; the weights of eq. 6 judge it). Beyond the paper."""
     min_candidate_area: int = 30
     """Smallest candidate silhouette, pixels."""
     min_existence: float = 0.5
@@ -215,6 +224,9 @@ class TemplateConfig:
         _nonneg(self.t_del, "t_del", "probability", upper=1.0)
         _nonneg(self.sigma_pos, "sigma_pos", "m")
         _nonneg(self.dims_revert, "dims_revert", "fraction per frame", upper=1.0)
+        _nonneg(self.vehicle_fit, "vehicle_fit", "fraction of a vehicle candidate on foreground", upper=1.0)
+        if not isinstance(self.absorb, bool):
+            raise ConfigError(f"absorb: expected true or false, got {self.absorb!r}")
         _nonneg(self.occlusion_del, "occlusion_del", "share of T_del", upper=1.0)
         _nonneg(self.occlusion_noise, "occlusion_noise", "share of the noise", upper=1.0)
         _nonneg(self.max_range, "max_range", "m", strict=True)

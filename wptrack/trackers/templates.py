@@ -32,6 +32,7 @@ import numpy as np
 import warp as wp
 
 from wptrack.errors import ConfigError, FrameError, RigError
+from wptrack.kernels import classify as kcls
 from wptrack.kernels import dynamics as kdyn
 from wptrack.kernels import occlusion as kocc
 from wptrack.kernels import raster as kraster
@@ -204,7 +205,13 @@ class Candidates:
         self.part_arg = wp.zeros(self.blocks, dtype=wp.int32, device=d)
         self.est = wp.zeros(int(kreduce.EST_SIZE), dtype=wp.float64, device=d)
         self.best = wp.zeros(1, dtype=wp.int32, device=d)
-        self.bytes = int(lengths.sum()) * 8 + c * (int(kraster.PIECES) * (int(kraster.HULL_MAX) * 8 + 16) + 32)
+        # class-aware addition (kernels.classify): vehicle fits near a chosen human and their argmax
+        self.fit = wp.zeros(c, dtype=wp.float32, device=d)
+        self.fit_max = wp.zeros(self.blocks, dtype=wp.float32, device=d)
+        self.fit_arg = wp.zeros(self.blocks, dtype=wp.int32, device=d)
+        self.fit_est = wp.zeros(int(kreduce.EST_SIZE), dtype=wp.float64, device=d)
+        self.fit_best = wp.zeros(1, dtype=wp.int32, device=d)
+        self.bytes = int(lengths.sum()) * 8 + c * (int(kraster.PIECES) * (int(kraster.HULL_MAX) * 8 + 16) + 36)
 
 
 def _dynamics_struct(config: TemplateConfig) -> kdyn.Dynamics:
@@ -232,6 +239,7 @@ def _dynamics_struct(config: TemplateConfig) -> kdyn.Dynamics:
     s.t_del = config.t_del
     s.occlusion_del = config.occlusion_del
     s.dims_revert = config.dims_revert
+    s.absorb = 1 if config.absorb else 0
     s.occlusion_noise = config.occlusion_noise
     return s
 
@@ -464,6 +472,36 @@ class TemplateTracker(FrameChain):
             device=d,
         )
         self._argmax(c.score, c.count, c.blocks, c.chunk, c.part_max, c.part_arg, c.est, c.best)
+        if cfg.vehicle_fit > 0.0 and "vehicle" in cfg.classes and "human" in cfg.classes:
+            # beyond the paper: a vehicle that fits the blob replaces a chosen human (kernels.classify)
+            wp.launch_tiled(
+                kcls.vehicle_fit_kernel,
+                dim=[c.count],
+                inputs=[
+                    c.hulls.rows,
+                    c.hulls.n,
+                    c.offsets,
+                    c.spans,
+                    int(kraster.PIECES),
+                    c.kind,
+                    c.pos,
+                    c.best,
+                    self.qrow,
+                    0.5 * float(cfg.vehicle.dims_mean[0]),
+                    int(cfg.min_candidate_area),
+                ],
+                outputs=[c.fit],
+                block_dim=CANDIDATE_BLOCK,
+                device=d,
+            )
+            self._argmax(c.fit, c.count, c.blocks, c.chunk, c.fit_max, c.fit_arg, c.fit_est, c.fit_best)
+            wp.launch(
+                kcls.prefer_vehicle_kernel,
+                dim=1,
+                inputs=[c.fit_best, c.fit_est, int(kreduce.EST_MAXLOGW), float(cfg.vehicle_fit)],
+                outputs=[c.best],
+                device=d,
+            )
 
     def _argmax(self, values, n, blocks, chunk, part_max, part_arg, est, best) -> None:
         wp.launch_tiled(
