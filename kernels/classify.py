@@ -19,6 +19,8 @@ proposed as one move, and the weights (eq. 6) decide between the particles that 
 import warp as wp
 
 from .raster import KIND_HUMAN, KIND_VEHICLE
+from .slots import SE_DIMS, SE_EXIST, SE_HEADING, SE_X
+from .xor import pair_overlap
 
 wp.set_module_options({"enable_backward": False})
 
@@ -34,10 +36,15 @@ def vehicle_fit_kernel(
     pieces: int,
     cand_kind: wp.array(dtype=wp.int32),
     cand_pos: wp.array(dtype=wp.vec2),
+    cand_heading: wp.array(dtype=wp.float32),
     best: wp.array(dtype=wp.int32),
     qrow: wp.array2d(dtype=wp.int32),
     radius: float,
     min_area: int,
+    dims: wp.vec3,
+    slot_est: wp.array2d(dtype=wp.float64),
+    slot_kind: wp.array(dtype=wp.int32),
+    min_existence: float,
     fit: wp.array(dtype=wp.float32),
 ):
     """Foreground fraction of the vehicle candidates near the chosen human candidate (module docstring).
@@ -48,11 +55,16 @@ def vehicle_fit_kernel(
 
     Args:
         hull_rows, hull_n, offsets, spans, pieces: the candidates' rows, piece counts and spans.
-        cand_kind, cand_pos: (C,) kind and ground position (metres) of each candidate.
+        cand_kind, cand_pos, cand_heading: (C,) kind, ground position (metres) and heading (radians) of each
+            candidate.
         best: (1,) the candidate eq. 11 chose (``reduce.final_max_kernel``; < 0: none).
         qrow: (H, W+1) row prefix sums of the motion mask (``xor.mask_rows_kernel``).
         radius: vehicle candidates farther than this from the chosen candidate's ground point are skipped, metres.
         min_area: candidates with fewer pixels are skipped.
+        dims: (length, width, height) of the vehicle candidates, metres (the prior's mean).
+        slot_est, slot_kind, min_existence: the last estimate per slot (``slots.final_slot_moments_kernel``, (R,
+            NE)) and kind (R,): candidates whose footprint meets a reported vehicle's (existence >= min_existence,
+            ``xor.pair_overlap`` > 0) are skipped, so a tracked car does not get a second vehicle.
         fit: (C,) ``|q AND c| / |c|`` for a vehicle candidate within ``radius`` of a chosen human, else -3e38.
     """
     c, lane = wp.tid()
@@ -61,6 +73,16 @@ def vehicle_fit_kernel(
     if b >= 0 and b < cand_kind.shape[0]:
         if cand_kind[b] == KIND_HUMAN and cand_kind[c] == KIND_VEHICLE:
             eligible = wp.length(cand_pos[c] - cand_pos[b]) <= radius
+    if eligible:
+        for e in range(slot_kind.shape[0]):
+            if slot_kind[e] == KIND_VEHICLE and slot_est[e, SE_EXIST] >= wp.float64(min_existence):
+                sp = wp.vec2(float(slot_est[e, SE_X]), float(slot_est[e, SE_X + 1]))
+                sd = wp.vec3(
+                    float(slot_est[e, SE_DIMS]), float(slot_est[e, SE_DIMS + 1]), float(slot_est[e, SE_DIMS + 2])
+                )
+                sh = float(slot_est[e, SE_HEADING])
+                if pair_overlap(KIND_VEHICLE, cand_pos[c], cand_heading[c], dims, KIND_VEHICLE, sp, sh, sd) > 0.0:
+                    eligible = False
     fg = int(0)
     px = int(0)
     if eligible:  # uniform over the block: every lane reaches the tile sums below either way

@@ -31,6 +31,7 @@ from test_kernels_templates import (
 from wptrack.errors import ConfigError
 from wptrack.kernels import classify as kcls
 from wptrack.kernels import reduce as kreduce
+from wptrack.kernels import slots as kslots
 from wptrack.rig import GroundPlane
 from wptrack.trackers.templates import Candidates, TemplateConfig, VehiclePrior, _plane_struct
 from wptrack.warpcams import camera_struct
@@ -59,7 +60,8 @@ def test_vehicle_fit_matches_silhouettes(device, block_dim):
     b = int(humans[len(humans) // 2])
     radius, min_area = 4.0, 30
 
-    def run(best: int) -> np.ndarray:
+    def run(best: int, slot_est=None, slot_kind=(0, 0)) -> np.ndarray:
+        est = np.zeros((2, int(kslots.NE))) if slot_est is None else slot_est
         out = wp.zeros(cands.count, dtype=wp.float32, device=device)
         wp.launch_tiled(
             kcls.vehicle_fit_kernel,
@@ -72,10 +74,15 @@ def test_vehicle_fit_matches_silhouettes(device, block_dim):
                 PIECES,
                 cands.kind,
                 cands.pos,
+                cands.heading,
                 wp.array([best], dtype=wp.int32, device=device),
                 wp.array(qrow, dtype=wp.int32, device=device),
                 radius,
                 min_area,
+                wp.vec3(*config.vehicle.dims_mean),
+                wp.array(est, dtype=wp.float64, device=device),
+                wp.array(np.asarray(slot_kind, np.int32), dtype=wp.int32, device=device),
+                0.5,
             ],
             outputs=[out],
             block_dim=block_dim,
@@ -93,6 +100,21 @@ def test_vehicle_fit_matches_silhouettes(device, block_dim):
     vehicles = np.flatnonzero(cands.kind_np == VEHICLE)
     assert np.all(run(int(vehicles[0])) == NEG_INF32)
     assert np.all(run(-1) == NEG_INF32)
+    # a reported vehicle (existence 0.9) on candidate v blocks v and the candidates whose footprint meets it; one
+    # below min_existence (slot 1) or a human slot blocks nothing
+    v = int(np.flatnonzero(ok)[0])
+    est = np.zeros((2, int(kslots.NE)))
+    for row, exist in ((0, 0.9), (1, 0.3)):
+        est[row, kslots.SE_EXIST] = exist
+        est[row, kslots.SE_X : kslots.SE_X + 2] = cands.pos_np[v]
+        est[row, kslots.SE_HEADING] = cands.heading_np[v]
+        est[row, kslots.SE_DIMS : kslots.SE_DIMS + 3] = config.vehicle.dims_mean
+    blocked = run(b, est, (VEHICLE, VEHICLE))
+    assert blocked[v] == NEG_INF32
+    far = ok & (np.linalg.norm(cands.pos_np - cands.pos_np[v], axis=1) > 6.0)
+    np.testing.assert_array_equal(blocked[far], got[far])
+    assert np.all(blocked[~ok] == NEG_INF32) and far.sum() >= 1
+    np.testing.assert_array_equal(run(b, est, (HUMAN, 0)), got)
 
 
 @pytest.mark.parametrize(("fit", "min_fit", "expect"), [(0.8, 0.7, 9), (0.7, 0.7, 9), (0.6, 0.7, 3), (-3e38, 0.5, 3)])
