@@ -203,8 +203,8 @@ class TemplateConfig:
     of foreground replaces it if that fraction is at least ``vehicle_fit`` (candidates on the footprint of a
     reported vehicle are skipped). Beyond the paper: the uncovered part of a partly explained car (entering the
     image, turning, a vehicle hypothesis lagging behind it) is human-sized, so eq. 11 adds humans on it; a car's
-    blob fills a vehicle template, a person's does not. 0.85 was chosen on scene seed 0 over 0.7 (0.7 also
-    replaced humans next to cars in s3-mixed with the default masks; docs/reproduction.md)."""
+    blob fills a vehicle template, a person's does not. 0.85 was chosen on scene seed 0 over 0.7 (with 0.7 s3-mixed
+    lost a person for up to 50 frames; docs/reproduction.md)."""
     absorb: bool = True
     """A vehicle added to a particle removes the particle's humans whose ground disc meets its footprint (one move
     that replaces the humans covering a car by the vehicle, drawn with the addition's own random number; the
