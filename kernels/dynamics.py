@@ -21,6 +21,7 @@ from .random import (
     uniform4,
 )
 from .raster import KIND_HUMAN, KIND_NONE, KIND_VEHICLE, MAX_SLOTS
+from .xor import disc_in_box
 
 wp.set_module_options({"enable_backward": False})
 
@@ -78,6 +79,10 @@ class Dynamics:
     turn_max: float  # |theta| limit, rad/s
     t_add: float  # T_add of eq. 12
     t_del: float  # T_del of eq. 13
+    occlusion_del: float  # share of T_del an object's occlusion removes (beyond the paper; 0: eq. 13), in [0, 1]
+    dims_revert: float  # per-frame pull of the dims towards the prior mean (beyond the paper; 0: eqs. 8-9)
+    absorb: int  # 1: an added vehicle removes the humans on its footprint (beyond the paper; kernels.classify)
+    occlusion_noise: float  # share of the velocity/position noise its occlusion removes (0: eqs. 8-9), in [0, 1]
 
 
 @wp.func
@@ -97,6 +102,7 @@ def template_predict_kernel(
     cand_kind: wp.array(dtype=wp.int32),
     cand_pos: wp.array(dtype=wp.vec2),
     cand_heading: wp.array(dtype=wp.float32),
+    occlusion: wp.array2d(dtype=wp.float32),
     src: TemplateState,
     dst: TemplateState,
 ):
@@ -108,7 +114,14 @@ def template_predict_kernel(
         ancestors: (N,) parent of each particle (identity when not resampled); resampled: (1,) 1 when the
             weights restart from 0.
         add: (2,) this frame's addition ``(slot, candidate)`` or ``slot = -1`` (``uoh.choose_addition_kernel``).
+            With ``dyn.absorb``, a vehicle added to a particle removes the particle's humans whose ground disc
+            meets the candidate's footprint (a box of the prior's mean length and width; beyond the paper).
         slot_label: (R,) label of each slot. cand_kind, cand_pos, cand_heading: (C,) candidate objects.
+        occlusion: (N, R) fraction of each object hidden by nearer objects of its particle, read at the parent
+            (``occlusion.occlusion_kernel``; zeros: the paper's prediction). Beyond the paper: an object hidden a
+            fraction ``o`` is deleted with probability ``T_del (1 - occlusion_del o)`` and diffused with
+            ``(1 - occlusion_noise o)`` times the velocity, turn and position deviations: a hidden object gets no
+            evidence (eq. 6), so it keeps its motion and is not removed for free while it is hidden.
         src: state read at the parents. dst: predicted state written for particle j.
     """
     j, s = wp.tid()
@@ -127,10 +140,20 @@ def template_predict_kernel(
     alpha = src.heading[a, s]
     d = src.dims[a, s]
     age = src.age[a, s]
-    # stochastic diffusion: deletion (eq. 13), then addition (eq. 12)
+    occ = occlusion[a, s]
+    # stochastic diffusion: deletion (eq. 13, T_del lowered for hidden objects), then addition (eq. 12)
     u = uniform4(seed, idx, f, STREAM_TEMPLATE_EVENT)
-    if k != KIND_NONE and u[0] < dyn.t_del:
+    if k != KIND_NONE and u[0] < dyn.t_del * (1.0 - dyn.occlusion_del * occ):
         k = KIND_NONE
+    if k == KIND_HUMAN and dyn.absorb != 0 and add[0] >= 0:
+        # beyond the paper (kernels.classify): a vehicle added to this particle (the same draw as the addition
+        # below, keyed by the particle) replaces the humans standing on its footprint, in one move
+        cv = add[1]
+        if cand_kind[cv] == KIND_VEHICLE and src.kind[a, add[0]] == KIND_NONE:
+            if uniform4(seed, j, f, STREAM_TEMPLATE_ADD)[0] < dyn.t_add:
+                half = 0.5 * wp.vec2(dyn.dims_mean_vehicle[0], dyn.dims_mean_vehicle[1])
+                if disc_in_box(p, d[1], cand_pos[cv], cand_heading[cv], half) > 0.0:
+                    k = KIND_NONE
     if k == KIND_NONE and s == add[0]:
         ua = uniform4(seed, j, f, STREAM_TEMPLATE_ADD)
         if ua[0] < dyn.t_add:
@@ -156,37 +179,45 @@ def template_predict_kernel(
     if k != KIND_NONE:
         n1 = normal4(seed, idx, f, STREAM_TEMPLATE_NOISE)
         n2 = normal4(seed, idx, f, STREAM_TEMPLATE_NOISE2)
+        # beyond the paper: a hidden object keeps its motion (no evidence to correct a diffused velocity); an object
+        # added this frame is not hidden in its parent (its slot was empty there: occ = 0)
+        ns = 1.0 - dyn.occlusion_noise * occ
+        sig_pos = dyn.sigma_pos * ns
         if k == KIND_HUMAN:
-            # eq. 8: d_t = d + N(0, sd^2); v_t = v + N(0, sv^2); l_t = l + v_t dt
+            # eq. 8: d_t = d + N(0, sd^2); v_t = v + N(0, sv^2); l_t = l + v_t dt (+ the pull to the prior mean)
             d = clamp3(
-                d + wp.cw_mul(dyn.sigma_dims_human, wp.vec3(n1[0], n1[1], n1[2])),
+                d
+                + dyn.dims_revert * (dyn.dims_mean_human - d)
+                + wp.cw_mul(dyn.sigma_dims_human, wp.vec3(n1[0], n1[1], n1[2])),
                 dyn.dims_min_human,
                 dyn.dims_max_human,
             )
-            v = v + dyn.sigma_speed[KIND_HUMAN] * wp.vec2(n1[3], n2[0])
+            v = v + ns * dyn.sigma_speed[KIND_HUMAN] * wp.vec2(n1[3], n2[0])
             sp = wp.length(v)
             vmax = dyn.speed_max[KIND_HUMAN]
             if sp > vmax:
                 v = v * (vmax / sp)
-            p = p + v * dyn.dt + dyn.sigma_pos * wp.vec2(n2[1], n2[2])
+            p = p + v * dyn.dt + sig_pos * wp.vec2(n2[1], n2[2])
             if sp > 0.2:
                 alpha = wp.atan2(v[1], v[0])
         elif k == KIND_VEHICLE:
             # eq. 9: theta_t = theta + N; alpha_t = alpha + theta_{t-1} dt; v_t = v + N;
             #        l_t = l + v_{t-1} dt (cos alpha_t, sin alpha_t)
             d = clamp3(
-                d + wp.cw_mul(dyn.sigma_dims_vehicle, wp.vec3(n1[0], n1[1], n1[2])),
+                d
+                + dyn.dims_revert * (dyn.dims_mean_vehicle - d)
+                + wp.cw_mul(dyn.sigma_dims_vehicle, wp.vec3(n1[0], n1[1], n1[2])),
                 dyn.dims_min_vehicle,
                 dyn.dims_max_vehicle,
             )
             speed = v[0]
             turn = v[1]
             alpha = alpha + turn * dyn.dt
-            p = p + speed * dyn.dt * wp.vec2(wp.cos(alpha), wp.sin(alpha)) + dyn.sigma_pos * wp.vec2(n2[1], n2[2])
+            p = p + speed * dyn.dt * wp.vec2(wp.cos(alpha), wp.sin(alpha)) + sig_pos * wp.vec2(n2[1], n2[2])
             vmax = dyn.speed_max[KIND_VEHICLE]
             v = wp.vec2(
-                wp.clamp(speed + dyn.sigma_speed[KIND_VEHICLE] * n1[3], -vmax, vmax),
-                wp.clamp(turn + dyn.sigma_turn * n2[0], -dyn.turn_max, dyn.turn_max),
+                wp.clamp(speed + ns * dyn.sigma_speed[KIND_VEHICLE] * n1[3], -vmax, vmax),
+                wp.clamp(turn + ns * dyn.sigma_turn * n2[0], -dyn.turn_max, dyn.turn_max),
             )
         age = age + dyn.dt
     else:

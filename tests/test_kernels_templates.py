@@ -1012,6 +1012,10 @@ def quiet_dynamics(**overrides):
     dyn.sigma_dims_vehicle = wp.vec3(0.0, 0.0, 0.0)
     dyn.t_add = 0.0
     dyn.t_del = 0.0
+    dyn.dims_revert = 0.0
+    dyn.occlusion_del = 0.0
+    dyn.occlusion_noise = 0.0
+    dyn.absorb = 0
     for k, v in overrides.items():
         setattr(dyn, k, v)
     return dyn
@@ -1036,8 +1040,10 @@ def predict(
     slot_label=None,
     seed: int = 1234,
     frame: int = 3,
+    occlusion=None,
 ) -> dict[str, np.ndarray]:
     dst = make_state(device, n, r, label=np.full((n, r), -99), logw=np.full(n, np.nan))
+    occ = np.zeros((n, r), np.float32) if occlusion is None else np.asarray(occlusion, np.float32).reshape(n, r)
     anc = np.arange(n) if ancestors is None else ancestors
     sl = np.arange(r) + 10 if slot_label is None else slot_label
     wp.launch(
@@ -1054,6 +1060,7 @@ def predict(
             wp.array(CANDS["kind"], dtype=wp.int32, device=device),
             wp.array(CANDS["pos"], dtype=wp.vec2, device=device),
             wp.array(CANDS["heading"], dtype=wp.float32, device=device),
+            wp.array(occ, dtype=wp.float32, device=device),
             src,
         ],
         outputs=[dst],

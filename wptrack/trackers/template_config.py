@@ -163,6 +163,28 @@ class TemplateConfig:
     """T_del of eq. 13: per-frame deletion probability of each object in each particle."""
     sigma_pos: float = 0.03
     """Position diffusion added to eqs. 8-9, m per frame (helps new objects settle)."""
+    dims_revert: float = 0.02
+    """Per-frame pull of every object's dims towards its class's prior mean ``dims_mean``, in [0, 1]: eqs. 8-9's
+    d_t = d + dims_revert (mean - d) + N(0, sigma_d^2) (0: the random walk of eqs. 8-9). Beyond the paper: a mean-
+    reverting (Ornstein-Uhlenbeck) size, stationary deviation sigma_d / sqrt(2 dims_revert) per dimension (human
+    height: 0.05 m). In a group the feet of the people behind are hidden, and a template placed too near the camera
+    and grown tall (to dims_max) covers the same pixels as the right one: seen on s3-groups, where lagging hypotheses
+    sat 0.7-1 m nearer than their person with heights of 2.0-2.1 m. 0.02 was chosen on scene seed 0 (s3-groups,
+    perfect masks, tracker seeds 0-3: 8.0 ID switches per run instead of 10.0; docs/reproduction.md)."""
+    occlusion_del: float = 0.0
+    """Share of T_del (eq. 13) that an object's occlusion removes, in [0, 1]: an object whose image box is hidden a
+    fraction o by nearer objects of its particle (``kernels.occlusion``) is deleted with probability T_del (1 -
+    occlusion_del o) (0: eq. 13 exactly). Beyond the paper: a hidden object explains no pixel, so deleting it costs
+    the particle nothing, and under eq. 13 a person walking behind others in a group is removed from a growing share
+    of the particles until the slot is freed and the person is re-added with a new label (an identity switch).
+    Off by default: on the tuning scene it did not lower the group ID switches (1: 11.3 per run over tracker seeds
+    0-3 instead of 10.0; with ``dims_revert`` 17.5 instead of 8.0): hidden hypotheses that are kept also wander
+    onto the wrong person (docs/reproduction.md)."""
+    occlusion_noise: float = 0.0
+    """Share of the velocity, turn and position noise (eqs. 8-9, ``sigma_pos``) that an object's occlusion removes,
+    in [0, 1]: noise x (1 - occlusion_noise o) (0: eqs. 8-9 exactly). Beyond the paper: a hidden object gets no
+    evidence that could correct a diffused velocity, so it keeps its motion while hidden. Off by default: 0.7 (with
+    occlusion_del 1) gave 26 group ID switches instead of 10 on the one tracker seed tried."""
     human: HumanPrior = field(default_factory=HumanPrior)
     vehicle: VehiclePrior = field(default_factory=VehiclePrior)
     classes: tuple[str, ...] = CLASSES
@@ -175,6 +197,18 @@ class TemplateConfig:
     """A candidate is proposed when its gain (eq. 11 score) is at least this fraction of its area."""
     add_beta: float = 0.5
     """Weight of uncovered background in the addition gain (0: eq. 11 exactly; see ``kernels.uoh``)."""
+    vehicle_fit: float = 0.85
+    """Class-aware addition (``kernels.classify``; 0: off, eq. 11 exactly): when eq. 11 picks a human candidate, the
+    vehicle candidate within half a vehicle length (``vehicle.dims_mean``) whose silhouette is the largest fraction
+    of foreground replaces it if that fraction is at least ``vehicle_fit`` (candidates on the footprint of a
+    reported vehicle are skipped). Beyond the paper: the uncovered part of a partly explained car (entering the
+    image, turning, a vehicle hypothesis lagging behind it) is human-sized, so eq. 11 adds humans on it; a car's
+    blob fills a vehicle template, a person's does not. 0.85 was chosen on scene seed 0 over 0.7 (with 0.7 s3-mixed
+    lost a person for up to 50 frames; docs/reproduction.md)."""
+    absorb: bool = True
+    """A vehicle added to a particle removes the particle's humans whose ground disc meets its footprint (one move
+    that replaces the humans covering a car by the vehicle, drawn with the addition's own random number; the
+    weights of eq. 6 judge it like every addition and deletion of eqs. 12-13). Beyond the paper; false: eq. 12."""
     min_candidate_area: int = 30
     """Smallest candidate silhouette, pixels."""
     min_existence: float = 0.5
@@ -197,6 +231,12 @@ class TemplateConfig:
         _nonneg(self.t_add, "t_add", "probability", upper=1.0)
         _nonneg(self.t_del, "t_del", "probability", upper=1.0)
         _nonneg(self.sigma_pos, "sigma_pos", "m")
+        _nonneg(self.dims_revert, "dims_revert", "fraction per frame", upper=1.0)
+        _nonneg(self.vehicle_fit, "vehicle_fit", "fraction of a vehicle candidate on foreground", upper=1.0)
+        if not isinstance(self.absorb, bool):
+            raise ConfigError(f"absorb: expected true or false, got {self.absorb!r}")
+        _nonneg(self.occlusion_del, "occlusion_del", "share of T_del", upper=1.0)
+        _nonneg(self.occlusion_noise, "occlusion_noise", "share of the noise", upper=1.0)
         _nonneg(self.max_range, "max_range", "m", strict=True)
         _nonneg(self.add_min_gain, "add_min_gain", "fraction")
         _nonneg(self.add_beta, "add_beta", "weight")

@@ -32,7 +32,9 @@ import numpy as np
 import warp as wp
 
 from wptrack.errors import ConfigError, FrameError, RigError
+from wptrack.kernels import classify as kcls
 from wptrack.kernels import dynamics as kdyn
+from wptrack.kernels import occlusion as kocc
 from wptrack.kernels import raster as kraster
 from wptrack.kernels import reduce as kreduce
 from wptrack.kernels import slots as kslots
@@ -103,7 +105,9 @@ def _new_state(n: int, r: int, device: str) -> kdyn.TemplateState:
     return s
 
 
-SLOT_STATE_BYTES = 2 * (4 + 4 + 8 + 8 + 4 + 12 + 4) + int(kraster.PIECES) * (int(kraster.HULL_MAX) * 8 + 4 + 8 + 4)
+SLOT_STATE_BYTES = (
+    2 * (4 + 4 + 8 + 8 + 4 + 12 + 4) + int(kraster.PIECES) * (int(kraster.HULL_MAX) * 8 + 4 + 8 + 4) + 4  # + occlusion
+)
 """Device bytes per object slot of a particle: two ping-pong state buffers and the piece hulls."""
 PARTICLE_BYTES = 2 * 4 + 4 + 4 + 4 + 8
 """Device bytes per particle besides the slots: log-weights (2), penalty, complexity, ancestor, weight."""
@@ -203,7 +207,13 @@ class Candidates:
         self.part_arg = wp.zeros(self.blocks, dtype=wp.int32, device=d)
         self.est = wp.zeros(int(kreduce.EST_SIZE), dtype=wp.float64, device=d)
         self.best = wp.zeros(1, dtype=wp.int32, device=d)
-        self.bytes = int(lengths.sum()) * 8 + c * (int(kraster.PIECES) * (int(kraster.HULL_MAX) * 8 + 16) + 52)
+        # class-aware addition (kernels.classify): vehicle fits near a chosen human and their argmax
+        self.fit = wp.zeros(c, dtype=wp.float32, device=d)
+        self.fit_max = wp.zeros(self.blocks, dtype=wp.float32, device=d)
+        self.fit_arg = wp.zeros(self.blocks, dtype=wp.int32, device=d)
+        self.fit_est = wp.zeros(int(kreduce.EST_SIZE), dtype=wp.float64, device=d)
+        self.fit_best = wp.zeros(1, dtype=wp.int32, device=d)
+        self.bytes = int(lengths.sum()) * 8 + c * (int(kraster.PIECES) * (int(kraster.HULL_MAX) * 8 + 16) + 56)
 
 
 def _dynamics_struct(config: TemplateConfig) -> kdyn.Dynamics:
@@ -229,6 +239,10 @@ def _dynamics_struct(config: TemplateConfig) -> kdyn.Dynamics:
     s.turn_max = v.turn_max
     s.t_add = config.t_add
     s.t_del = config.t_del
+    s.occlusion_del = config.occlusion_del
+    s.dims_revert = config.dims_revert
+    s.absorb = 1 if config.absorb else 0
+    s.occlusion_noise = config.occlusion_noise
     return s
 
 
@@ -306,6 +320,8 @@ class TemplateTracker(FrameChain):
         )
         self.state = [_new_state(n, r, d), _new_state(n, r, d)]
         self.hulls = Hulls(n, r, d)
+        self.occlusion = wp.zeros((n, r), dtype=wp.float32, device=d)
+        self.use_occlusion = config.occlusion_del > 0.0 or config.occlusion_noise > 0.0
         self.q = wp.zeros((h, w), dtype=wp.uint8, device=d)
         self.q_host = wp.zeros((h, w), dtype=wp.uint8, device="cpu", pinned=self.is_cuda)
         self.qrow = wp.zeros((h, w + 1), dtype=wp.int32, device=d)
@@ -392,6 +408,14 @@ class TemplateTracker(FrameChain):
     def _raster(self, cur: int) -> None:
         s = self.state[cur]
         self.hulls.launch(self.cam, self.plane_struct, s.kind, s.pos, s.heading, s.dims, self.device)
+        if self.use_occlusion:  # beyond the paper: per-object occlusion for the prediction (kernels.occlusion)
+            wp.launch(
+                kocc.occlusion_kernel,
+                dim=(self.n, self.r),
+                inputs=[self.hulls.pts, self.hulls.n, self.hulls.depth, self.width, self.height],
+                outputs=[self.occlusion],
+                device=self.device,
+            )
 
     def _score(self, cur: int) -> None:
         s = self.state[cur]
@@ -463,6 +487,41 @@ class TemplateTracker(FrameChain):
             device=d,
         )
         self._argmax(c.score, c.count, c.blocks, c.chunk, c.part_max, c.part_arg, c.est, c.best)
+        if cfg.vehicle_fit > 0.0 and "vehicle" in cfg.classes and "human" in cfg.classes:
+            # beyond the paper: a vehicle that fits the blob replaces a chosen human (kernels.classify)
+            wp.launch_tiled(
+                kcls.vehicle_fit_kernel,
+                dim=[c.count],
+                inputs=[
+                    c.hulls.rows,
+                    c.hulls.n,
+                    c.offsets,
+                    c.spans,
+                    int(kraster.PIECES),
+                    c.kind,
+                    c.pos,
+                    c.heading,
+                    c.best,
+                    self.qrow,
+                    0.5 * float(cfg.vehicle.dims_mean[0]),
+                    int(cfg.min_candidate_area),
+                    wp.vec3(*cfg.vehicle.dims_mean),
+                    self.slot_est,
+                    self.slot_kind,
+                    float(cfg.min_existence),
+                ],
+                outputs=[c.fit],
+                block_dim=CANDIDATE_BLOCK,
+                device=d,
+            )
+            self._argmax(c.fit, c.count, c.blocks, c.chunk, c.fit_max, c.fit_arg, c.fit_est, c.fit_best)
+            wp.launch(
+                kcls.prefer_vehicle_kernel,
+                dim=1,
+                inputs=[c.fit_best, c.fit_est, int(kreduce.EST_MAXLOGW), float(cfg.vehicle_fit)],
+                outputs=[c.best],
+                device=d,
+            )
 
     def _argmax(self, values, n, blocks, chunk, part_max, part_arg, est, best) -> None:
         wp.launch_tiled(
@@ -550,6 +609,7 @@ class TemplateTracker(FrameChain):
                 c.kind,
                 c.pos,
                 c.heading,
+                self.occlusion,
                 self.state[cur],
             ],
             outputs=[self.state[nxt]],
