@@ -17,18 +17,24 @@ linearly interpolated between the two nearest windows (weight ``w`` of the secon
 * global illumination: every frame (and every sample of a window) is first divided by its global gain per
   channel, the median over a pixel subsample of its ratio to the background (computed by the driver), so a light
   dimming or a camera's auto-exposure neither hides people in the MAD nor floods the masks,
-* noise scale ``s = max(s0, 1.4826 sqrt(sum_c MAD_c^2 / 3))`` (8-bit units; ``1.4826 MAD`` estimates a gaussian
-  standard deviation, ``s0`` is the noise floor: the smallest scale allowed, for compressed or clipped pixels whose
-  samples barely vary); for gaussian noise ``3 z^2`` is chi-square with 3 degrees of freedom, so ``T = 4`` marks a
-  static pixel as foreground with probability about 2e-10 (``T = 3``: 6e-6),
+* noise scale ``s = max(s0, min(1.4826 sqrt(sum_c MAD_c^2 / 3), s_cap))`` (8-bit units; ``1.4826 MAD`` estimates a
+  gaussian standard deviation, ``s0`` is the noise floor: the smallest scale allowed, for compressed or clipped
+  pixels whose samples barely vary; ``s_cap`` the largest, a multiple of the image-wide median of the per-pixel
+  scales computed by the driver, or none when 0: an object standing on a pixel in a large minority of a window's
+  samples inflates that pixel's MAD, and without the cap hides itself while it stands); for gaussian noise ``3 z^2``
+  is chi-square with 3 degrees of freedom, so ``T = 4`` marks a static pixel as foreground with probability about
+  2e-10 (``T = 3``: 6e-6, ``T = 2``: 7e-3),
 * robust distance ``z = sqrt(sum_c (I_c - B_c)^2 / 3) / s`` (RMS colour difference in robust standard deviations),
 * shadow test (cast shadows keep the background's chromaticity and darken it by a bounded ratio): brightness
   ratio ``a = (I . B) / (B . B)`` (Horprasert et al.'s brightness distortion) and chromaticity distortion
   ``cd = |I - a B| / |B|``; a pixel is shadow when ``lo <= a <= hi`` and ``cd <= chroma_max`` (only where
-  ``|B| >= 1``, and only when the test is enabled),
+  ``|B| >= 1``, and only when the test is enabled; tested where ``z > T_low``),
 * soft foreground probability ``P = 1 / (1 + exp(-(z - T) / k))`` (``T`` the threshold, ``k`` the soft scale, both
   in robust standard deviations); shadow pixels get ``P = 0``,
-* binary mask ``M = 1`` iff ``z > T`` and not shadow (equivalently ``P > 1/2``).
+* mask level ``M = 2`` (strong) iff ``z > T`` and not shadow (equivalently ``P > 1/2``), ``M = 1`` (weak) iff
+  ``T_low < z <= T`` and not shadow, else 0. The driver keeps the weak pixels 8-connected to a strong one
+  (hysteresis, as Canny's edge linking: a low-contrast part of an object, e.g. legs in trousers of the paving's
+  colour, is accepted where it hangs on the object's contrasted parts; isolated noise above ``T_low`` is not).
 """
 
 import warp as wp
@@ -119,6 +125,8 @@ class ForegroundParams:
     """Per-frame test parameters (units: robust standard deviations unless stated)."""
 
     threshold: float  # T: foreground when z > T
+    low_threshold: float  # T_low <= T: weak foreground when T_low < z <= T (hysteresis)
+    spread_cap: float  # s_cap, 8-bit units: largest noise scale (0: no cap)
     soft_scale: float  # k of the logistic P = 1 / (1 + exp(-(z - T) / k))
     noise_floor: float  # s0, 8-bit units
     shadow: int  # 1: shadow test on
@@ -150,7 +158,7 @@ def foreground_kernel(
         gain: The frame's global gain per channel (B, G, R) relative to the background (illumination change):
             the frame is divided by it before the tests (1: none).
         params: Thresholds.
-        mask: ``(H W,)`` output, 1 = foreground.
+        mask: ``(H W,)`` output level: 2 = foreground, 1 = weak foreground (``T_low < z <= T``), 0 = background.
         prob: ``(H W,)`` output foreground probability in ``[0, 1]``.
         shadow: ``(H W,)`` output, 1 = cast shadow (counted as background).
     """
@@ -173,10 +181,13 @@ def foreground_kernel(
         ib += x * b
         bb += b * b
         ii += x * x
-    s = wp.max(params.noise_floor, MAD_TO_SIGMA * wp.sqrt(mm / 3.0))
+    spread = MAD_TO_SIGMA * wp.sqrt(mm / 3.0)
+    if params.spread_cap > 0.0:
+        spread = wp.min(spread, params.spread_cap)
+    s = wp.max(params.noise_floor, spread)
     z = wp.sqrt(dd / 3.0) / s
     is_shadow = int(0)
-    if params.shadow != 0 and bb >= 1.0 and z > params.threshold:
+    if params.shadow != 0 and bb >= 1.0 and z > params.low_threshold:
         a = ib / bb
         # |I - a B|^2 = I.I - 2 a I.B + a^2 B.B = I.I - a I.B  (a = I.B / B.B)
         cd = wp.sqrt(wp.max(ii - a * ib, 0.0) / bb)
@@ -187,6 +198,8 @@ def foreground_kernel(
     if is_shadow == 0:
         pr = 1.0 / (1.0 + wp.exp(-(z - params.threshold) / params.soft_scale))
         if z > params.threshold:
+            fg = 2
+        elif z > params.low_threshold:
             fg = 1
     mask[p] = wp.uint8(fg)
     prob[p] = pr

@@ -60,9 +60,15 @@ def test_median_mad_kernel_matches_numpy(device, rng, k):
 
 
 @pytest.mark.parametrize(
-    ("shadow", "gain"), [(True, (1.0, 1.0, 1.0)), (False, (1.0, 1.0, 1.0)), (True, (0.8, 0.9, 1.1))]
+    ("shadow", "gain", "low", "cap"),
+    [
+        (True, (1.0, 1.0, 1.0), 4.0, 0.0),
+        (False, (1.0, 1.0, 1.0), 4.0, 0.0),
+        (True, (0.8, 0.9, 1.1), 4.0, 0.0),
+        (True, (1.0, 1.0, 1.0), 2.0, 6.0),  # hysteresis levels and the spread cap
+    ],
 )
-def test_foreground_kernel_matches_numpy(device, rng, shadow, gain):
+def test_foreground_kernel_matches_numpy(device, rng, shadow, gain, low, cap):
     n = 4000
     bg0 = rng.integers(0, 256, (n, 3), dtype=np.uint8)
     bg1 = np.clip(bg0.astype(int) + rng.integers(-20, 21, (n, 3)), 0, 255).astype(np.uint8)
@@ -77,6 +83,7 @@ def test_foreground_kernel_matches_numpy(device, rng, shadow, gain):
     w = 0.3
     p = kbg.ForegroundParams()
     p.threshold, p.soft_scale, p.noise_floor, p.shadow = 4.0, 1.5, 3.0, int(shadow)
+    p.low_threshold, p.spread_cap = low, cap
     p.shadow_lo, p.shadow_hi, p.chroma_max = 0.4, 0.95, 0.1
     dev = [wp.array(a.reshape(-1), dtype=wp.uint8, device=device) for a in (frame, bg0, mad0, bg1, mad1)]
     mask = wp.zeros(n, dtype=wp.uint8, device=device)
@@ -85,20 +92,29 @@ def test_foreground_kernel_matches_numpy(device, rng, shadow, gain):
     wp.launch(
         kbg.foreground_kernel, dim=n, inputs=[*dev, w, wp.vec3(*gain), p], outputs=[mask, prob, shad], device=device
     )
-    ref = numpy_masks.foreground(frame, bg0, mad0, bg1, mad1, w, 4.0, 1.5, 3.0, shadow, 0.4, 0.95, 0.1, np.array(gain))
+    ref = numpy_masks.foreground(
+        frame, bg0, mad0, bg1, mad1, w, 4.0, 1.5, 3.0, shadow, 0.4, 0.95, 0.1, np.array(gain), low, cap
+    )
     near = (
         (np.abs(ref["z"] - 4.0) < 1e-4)
+        | (np.abs(ref["z"] - low) < 1e-4)
         | (np.abs(ref["a"] - 0.4) < 1e-5)
         | (np.abs(ref["a"] - 0.95) < 1e-5)
         | (np.abs(ref["cd"] - 0.1) < 1e-5)
     )
     assert near.sum() < 5
     ok = ~near
-    np.testing.assert_array_equal(mask.numpy()[ok], ref["mask"][ok])
+    np.testing.assert_array_equal(mask.numpy()[ok], ref["level"][ok])
     np.testing.assert_array_equal(shad.numpy()[ok].astype(bool), ref["shadow"][ok])
     np.testing.assert_allclose(prob.numpy()[ok], ref["prob"][ok], atol=1e-5)
     assert ref["mask"].sum() > n // 10 and (ref["shadow"].sum() > n // 20) == shadow  # the test sees all cases
     assert not ref["mask"][n // 4 : n // 2].any()
+    assert ((ref["level"] == 1).sum() > 10) == (low < 4.0)  # weak pixels only with a lower threshold
+    if cap:  # the cap changes z where the MAD exceeds it (MADs up to 11: sigma up to 16)
+        uncapped = numpy_masks.foreground(
+            frame, bg0, mad0, bg1, mad1, w, 4.0, 1.5, 3.0, shadow, 0.4, 0.95, 0.1, np.array(gain), low
+        )
+        assert (uncapped["z"] < ref["z"] - 1e-3).sum() > n // 10
 
 
 def test_plan_windows_and_bracket(caplog):
@@ -288,3 +304,73 @@ def test_sampler_seeks_read_the_sampled_frames(tmp_path, rng):
     assert min(np.diff(samples)) >= 8
     expected, _ = numpy_masks.median_mad(decoded[list(samples)])
     np.testing.assert_array_equal(masks.background(), expected)
+
+
+def _hysteresis_ref(levels: np.ndarray) -> np.ndarray:
+    """Breadth-first flood from the strong pixels through 8-connected weak/strong ones."""
+    h, w = levels.shape
+    out = np.zeros((h, w), np.uint8)
+    todo = [tuple(p) for p in np.argwhere(levels == 2)]
+    for p in todo:
+        out[p] = 1
+    while todo:
+        y, x = todo.pop()
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                v, u = y + dy, x + dx
+                if 0 <= v < h and 0 <= u < w and levels[v, u] > 0 and not out[v, u]:
+                    out[v, u] = 1
+                    todo.append((v, u))
+    return out
+
+
+def test_hysteresis_matches_flood_reference(rng):
+    from wptrack.background import hysteresis
+
+    for density in (0.05, 0.3, 0.6):
+        levels = (rng.random((40, 50)) < density).astype(np.uint8)
+        levels[rng.random((40, 50)) < 0.02] = 2
+        got = hysteresis(levels)
+        np.testing.assert_array_equal(got, _hysteresis_ref(levels))
+        assert got.sum() >= (levels == 2).sum()
+    assert hysteresis(np.ones((5, 5), np.uint8)).sum() == 0  # weak only: nothing
+    diag = np.eye(6, dtype=np.uint8)
+    diag[0, 0] = 2
+    assert hysteresis(diag).sum() == 6  # 8-connected along the diagonal
+
+
+def test_low_contrast_part_kept_when_attached(rng):
+    """A box whose lower half barely differs from the background (camouflage) is kept whole with the hysteresis;
+    the same faint patch alone (not attached to a contrasted part) stays background."""
+    grey = np.full((H, W, 3), 120.0, np.float32)
+    frames = 25
+    video = _noisy(rng, grey, frames, noise=1.0)
+    last = grey.copy()
+    last[10:25, 20:35] = (40, 160, 60)  # contrasted top
+    last[25:50, 20:35] += 5.5  # faint legs: z about 2.75 (noise scale: the floor, 2)
+    last[25:50, 60:75] += 5.5  # a faint patch alone
+    t = frames - 1
+    video[t] = np.clip(last + rng.normal(0, 1.0, last.shape), 0, 255).astype(np.uint8)
+    base = dict(window=frames, device="cpu", open_px=3, close_px=5, noise_floor=2.0)
+    plain = list(open_masks(video=video, config=MaskConfig(**base)))[t]
+    hyst = list(open_masks(video=video, config=MaskConfig(**base, fg_low=2.0)))[t]
+    assert plain[27:48, 22:33].mean() < 0.3 and hyst[27:48, 22:33].mean() > 0.9
+    assert hyst[27:48, 62:73].mean() < 0.05 and hyst[12:23, 22:33].mean() > 0.99
+    assert hyst[:, 40:56].sum() == 0 and hyst[55:, :].sum() == 0
+
+
+def test_spread_cap_finds_object_standing_in_many_samples(rng):
+    """An object standing in 10 of 25 samples inflates its pixels' MAD: without the cap it hides (z under the
+    threshold), with the image-wide cap it is foreground while it stands."""
+    bg = _texture(rng)
+    frames = 25
+    video = _noisy(rng, bg, frames)
+    colour = np.clip(bg[20:40, 30:50] + 22.0, 0, 255)
+    for t in range(10):
+        video[t, 20:40, 30:50] = np.clip(colour + rng.normal(0, 3.0, colour.shape), 0, 255).astype(np.uint8)
+    base = dict(window=frames, samples=frames, device="cpu")
+    plain = np.stack(list(open_masks(video=video, config=MaskConfig(**base))))
+    capped = np.stack(list(open_masks(video=video, config=MaskConfig(**base, spread_cap=1.5))))
+    assert plain[:10, 22:38, 32:48].mean() < 0.5
+    assert capped[:10, 22:38, 32:48].mean() > 0.95
+    assert capped[10:].sum() == 0 and np.delete(capped[:10], np.s_[20:40], axis=1).sum() == 0

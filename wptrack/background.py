@@ -24,6 +24,12 @@ Design (kernels and formulas: :mod:`wptrack.kernels.background`):
   grabbing otherwise), so only two windows' backgrounds are held and a long recording costs about
   ``K / (L / 2)`` extra decoded frames per frame (25 / 150 with the defaults). The exact frame a seek lands on
   does not matter: the median is robust to a sample being a frame off.
+* **Spread cap.** Each window also records the image-wide median of its per-pixel noise scales (on a pixel
+  subsample); with ``MaskConfig.spread_cap`` the per-pixel scale is capped at that many times it, so an object
+  standing in a large minority of a window's samples does not hide itself by inflating its pixels' MAD.
+* **Hysteresis.** With ``MaskConfig.fg_low``, the kernel marks weak foreground (``fg_low < z <= fg_threshold``)
+  beside the strong; :func:`hysteresis` keeps the weak pixels 8-connected to a strong one (OpenCV connected
+  components on the host, where the mask goes anyway).
 """
 
 from __future__ import annotations
@@ -191,13 +197,40 @@ def sample_gains(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return gains.astype(np.float32), np.median(x / gains[:, None, :], axis=0)
 
 
+def hysteresis(levels: np.ndarray) -> np.ndarray:
+    """Hysteresis of a mask of levels: weak pixels (1) count only when 8-connected to a strong one (2).
+
+    Args:
+        levels: ``(H, W)`` uint8 with values 0 (background), 1 (weak) and 2 (strong foreground).
+
+    Returns:
+        ``(H, W)`` uint8 mask with values ``{0, 1}``: the connected components of ``levels > 0`` that hold a
+        strong pixel.
+    """
+    import cv2
+
+    weak = (levels > 0).view(np.uint8)
+    count, labels = cv2.connectedComponents(weak, connectivity=8)
+    keep = np.zeros(count, dtype=np.uint8)
+    keep[labels[levels == 2]] = 1
+    keep[0] = 0
+    return keep[labels]
+
+
+def spread_scale(mad: np.ndarray, step: int = 7) -> float:
+    """Image-wide median of the per-pixel noise scales ``1.4826 sqrt(sum_c MAD_c^2 / 3)`` (8-bit units), over every
+    ``step``-th pixel of a flat ``(3 P,)`` MAD array."""
+    m = mad.reshape(-1, 3)[::step].astype(np.float64)
+    return float(np.median(1.4826 * np.sqrt((m * m).mean(axis=1))))
+
+
 class OfflineBackground:
     """Windowed median/MAD background of one source and the per-frame foreground evidence.
 
     Args:
         source: The camera's frames.
-        config: A ``MaskConfig`` (fields ``window``, ``samples``, ``fg_threshold``, ``soft_scale``,
-            ``noise_floor``, ``detect_shadows``, ``shadow_lo``, ``shadow_hi``, ``shadow_chroma``).
+        config: A ``MaskConfig`` (fields ``window``, ``samples``, ``fg_threshold``, ``fg_low``, ``spread_cap``,
+            ``soft_scale``, ``noise_floor``, ``detect_shadows``, ``shadow_lo``, ``shadow_hi``, ``shadow_chroma``).
         device: Warp device alias.
 
     Attributes:
@@ -225,6 +258,7 @@ class OfflineBackground:
         self._prob = wp.zeros(self.pixels, dtype=wp.float32, device=device)
         self._shadow = wp.zeros(self.pixels, dtype=wp.uint8, device=device)
         self._built: dict[int, tuple[Any, Any]] = {}
+        self._scale: dict[int, float] = {}  # image-wide median noise scale of each built window
         # channel values of a pixel subsample (every 13th pixel) for the global gains (illumination changes)
         self._sub = (3 * np.arange(0, self.pixels, 13)[:, None] + np.arange(3)[None, :]).reshape(-1)
         self._bg_sub: dict[int, np.ndarray] = {}
@@ -236,6 +270,8 @@ class OfflineBackground:
         for it), with its ``(H, W, 3)`` uint8 BGR background: e.g. a run saving the backgrounds for its report."""
         p = kbg.ForegroundParams()
         p.threshold = float(config.fg_threshold)
+        p.low_threshold = float(config.fg_low) if config.fg_low > 0 else float(config.fg_threshold)
+        p.spread_cap = 0.0
         p.soft_scale = float(config.soft_scale)
         p.noise_floor = float(config.noise_floor)
         p.shadow = int(bool(config.detect_shadows))
@@ -272,6 +308,8 @@ class OfflineBackground:
             kbg.median_mad_kernel, dim=3 * self.pixels, inputs=[stack, g], outputs=[median, mad], device=self.device
         )
         self._built[i] = (median, mad)
+        if self.config.spread_cap > 0:
+            self._scale[i] = spread_scale(mad.numpy())
         log.debug("%s: background window %d from %d frames", self.source.name, i, k)
         if self.on_build is not None:
             image = median.numpy().reshape(self.source.height, self.source.width, 3).copy()
@@ -296,8 +334,8 @@ class OfflineBackground:
             frame: ``(H, W, 3)`` uint8 BGR.
 
         Returns:
-            ``(mask, prob)``: ``(H, W)`` uint8 mask (1 = foreground, shadows excluded, not cleaned) and ``(H, W)``
-            float32 foreground probability.
+            ``(mask, prob)``: ``(H, W)`` uint8 mask (1 = foreground, shadows excluded, after the hysteresis, not
+            cleaned) and ``(H, W)`` float32 foreground probability.
         """
         import warp as wp
 
@@ -312,6 +350,8 @@ class OfflineBackground:
         bg_sub = (1.0 - w) * self._bg_sub[i] + w * self._bg_sub[j]
         gain = frame_gain(flat[self._sub].reshape(-1, 3), bg_sub)
         self.last_gain = gain
+        if self.config.spread_cap > 0:
+            self.params.spread_cap = float(self.config.spread_cap * ((1.0 - w) * self._scale[i] + w * self._scale[j]))
         wp.copy(self._frame, wp.array(flat, dtype=wp.uint8, device="cpu", copy=False))
         wp.launch(
             kbg.foreground_kernel,
@@ -321,7 +361,12 @@ class OfflineBackground:
             device=self.device,
         )
         shape = (self.source.height, self.source.width)
-        return self._mask.numpy().reshape(shape).copy(), self._prob.numpy().reshape(shape).copy()
+        levels = self._mask.numpy().reshape(shape)
+        if self.params.low_threshold < self.params.threshold:
+            mask = hysteresis(levels)
+        else:
+            mask = (levels == 2).view(np.uint8).copy()
+        return mask, self._prob.numpy().reshape(shape).copy()
 
     def close(self) -> None:
         """Release the sampler's video reader."""

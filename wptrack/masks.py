@@ -91,6 +91,12 @@ class MaskConfig:
         samples: Offline only: frames sampled per window for its temporal median (1 to 64).
         fg_threshold: Offline only: foreground when the RMS colour distance to the background exceeds this many
             robust standard deviations (> 0).
+        fg_low: Offline only: hysteresis low threshold, robust standard deviations: a pixel with
+            ``fg_low < z <= fg_threshold`` (not a shadow) is foreground when 8-connected to one above ``fg_threshold``
+            (0 disables; else in ``(0, fg_threshold]``).
+        spread_cap: Offline only: the per-pixel noise scale is capped at this many times the image-wide median
+            scale of the window (0 disables; else >= 1), so an object standing still in many of a window's samples
+            does not inflate its own pixels' noise scale and vanish.
         noise_floor: Offline only: lower bound of the per-pixel noise standard deviation, 8-bit units (> 0).
         shadow_lo: Offline only: smallest brightness ratio (pixel / background along the background colour) of a
             cast shadow, in ``(0, shadow_hi)``.
@@ -117,6 +123,8 @@ class MaskConfig:
     window: int = 300
     samples: int = 25
     fg_threshold: float = 4.0
+    fg_low: float = 0.0
+    spread_cap: float = 0.0
     noise_floor: float = 3.0
     shadow_lo: float = 0.4
     shadow_hi: float = 0.95
@@ -160,6 +168,10 @@ class MaskConfig:
             value = getattr(self, field)
             if not _is_real(value) or not math.isfinite(value) or value <= 0:
                 fail(field, expected)
+        if not _is_real(self.fg_low) or not (self.fg_low == 0 or 0 < self.fg_low <= self.fg_threshold):
+            fail("fg_low", f"0 (off) or in (0, fg_threshold={self.fg_threshold}] (robust standard deviations)")
+        if not _is_real(self.spread_cap) or not (self.spread_cap == 0 or 1 <= self.spread_cap < math.inf):
+            fail("spread_cap", "0 (off) or a finite number >= 1 (times the image-wide median noise scale)")
         for field in ("shadow_lo", "shadow_hi", "shadow_chroma"):
             if not _is_real(getattr(self, field)) or not math.isfinite(getattr(self, field)):
                 fail(field, "a finite number")

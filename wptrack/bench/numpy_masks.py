@@ -36,20 +36,31 @@ def foreground(
     shadow_hi: float,
     chroma_max: float,
     gain: np.ndarray | None = None,
+    low_threshold: float | None = None,
+    spread_cap: float = 0.0,
 ) -> dict[str, np.ndarray]:
-    """Per-pixel ``z``, shadow flag, probability and mask of ``(H, W, 3)`` uint8 images (module formulas), the
-    frame divided by its ``(3,)`` channel ``gain`` first."""
+    """Per-pixel ``z``, shadow flag, probability, level (0/1/2) and mask of ``(H, W, 3)`` uint8 images (module
+    formulas), the frame divided by its ``(3,)`` channel ``gain`` first; ``low_threshold`` (default: ``threshold``)
+    is the hysteresis threshold, ``spread_cap`` the largest noise scale (8-bit units, 0: none). ``mask`` is the
+    hysteresis of the levels (:func:`wptrack.background.hysteresis`) for 2-D images, ``level == 2`` otherwise."""
+    from wptrack.background import hysteresis
+
+    low = threshold if low_threshold is None else low_threshold
     b = (1.0 - w) * bg0.astype(np.float64) + w * bg1.astype(np.float64)
     m = (1.0 - w) * mad0.astype(np.float64) + w * mad1.astype(np.float64)
     x = frame.astype(np.float64) / (1.0 if gain is None else np.asarray(gain, dtype=np.float64))
-    s = np.maximum(noise_floor, MAD_TO_SIGMA * np.sqrt((m * m).sum(-1) / 3.0))
+    spread = MAD_TO_SIGMA * np.sqrt((m * m).sum(-1) / 3.0)
+    if spread_cap > 0:
+        spread = np.minimum(spread, spread_cap)
+    s = np.maximum(noise_floor, spread)
     z = np.sqrt(((x - b) ** 2).sum(-1) / 3.0) / s
     bb = (b * b).sum(-1)
     ib = (x * b).sum(-1)
     with np.errstate(divide="ignore", invalid="ignore"):
         a = np.where(bb >= 1.0, ib / np.maximum(bb, 1.0), 0.0)
         cd = np.linalg.norm(x - a[..., None] * b, axis=-1) / np.sqrt(np.maximum(bb, 1.0))
-    is_shadow = shadow & (bb >= 1.0) & (z > threshold) & (a >= shadow_lo) & (a <= shadow_hi) & (cd <= chroma_max)
+    is_shadow = shadow & (bb >= 1.0) & (z > low) & (a >= shadow_lo) & (a <= shadow_hi) & (cd <= chroma_max)
     prob = np.where(is_shadow, 0.0, 1.0 / (1.0 + np.exp(-(z - threshold) / soft_scale)))
-    mask = (z > threshold) & ~is_shadow
-    return {"z": z, "a": a, "cd": cd, "shadow": is_shadow, "prob": prob, "mask": mask}
+    level = np.where(is_shadow, 0, np.where(z > threshold, 2, np.where(z > low, 1, 0))).astype(np.uint8)
+    mask = hysteresis(level).astype(bool) if level.ndim == 2 and low < threshold else level == 2
+    return {"z": z, "a": a, "cd": cd, "shadow": is_shadow, "prob": prob, "level": level, "mask": mask}
