@@ -27,10 +27,12 @@ linearly interpolated between the two nearest windows (weight ``w`` of the secon
 * robust distance ``z = sqrt(sum_c (I_c - B_c)^2 / 3) / s`` (RMS colour difference in robust standard deviations),
 * shadow test (cast shadows keep the background's chromaticity and darken it by a bounded ratio): brightness
   ratio ``a = (I . B) / (B . B)`` (Horprasert et al.'s brightness distortion) and chromaticity distortion
-  ``cd = |I - a B| / |B|``; a pixel is shadow when ``lo <= a <= hi`` and ``cd <= chroma_max`` (only where
+  ``cd = |I - a B| / |B|``; a pixel is shadow when ``lo <= a <= hi`` and ``cd <= chroma_max``, and a penumbra
+  candidate when ``hi < a <= edge_hi`` and ``cd <= chroma_max`` (only where
   ``|B| >= 1``, and only when the test is enabled; tested where ``z > T_low``),
 * soft foreground probability ``P = 1 / (1 + exp(-(z - T) / k))`` (``T`` the threshold, ``k`` the soft scale, both
-  in robust standard deviations); shadow pixels get ``P = 0``,
+  in robust standard deviations); shadow pixels get ``P = 0``; penumbra candidates are left to the driver (kept as
+  shadow where 8-connected to a shadow pixel, the brighter rim of a cast shadow; else foreground by their ``z``),
 * mask level ``M = 2`` (strong) iff ``z > T`` and not shadow (equivalently ``P > 1/2``), ``M = 1`` (weak) iff
   ``T_low < z <= T`` and not shadow, else 0. The driver keeps the weak pixels 8-connected to a strong one
   (hysteresis, as Canny's edge linking: a low-contrast part of an object, e.g. legs in trousers of the paving's
@@ -132,6 +134,7 @@ class ForegroundParams:
     shadow: int  # 1: shadow test on
     shadow_lo: float  # brightness ratio bounds (dimensionless)
     shadow_hi: float
+    shadow_edge_hi: float  # penumbra candidates: shadow_hi < a <= shadow_edge_hi (= shadow_hi: none)
     chroma_max: float  # chromaticity distortion bound (dimensionless, |I - a B| / |B|)
 
 
@@ -158,9 +161,12 @@ def foreground_kernel(
         gain: The frame's global gain per channel (B, G, R) relative to the background (illumination change):
             the frame is divided by it before the tests (1: none).
         params: Thresholds.
-        mask: ``(H W,)`` output level: 2 = foreground, 1 = weak foreground (``T_low < z <= T``), 0 = background.
+        mask: ``(H W,)`` output ``level + 4 shadow``: level 2 = foreground, 1 = weak foreground
+            (``T_low < z <= T``), 0 = background (and every cast shadow); ``shadow`` as below (one array for the
+            driver to copy).
         prob: ``(H W,)`` output foreground probability in ``[0, 1]``.
-        shadow: ``(H W,)`` output, 1 = cast shadow (counted as background).
+        shadow: ``(H W,)`` output, 2 = cast shadow (counted as background), 1 = penumbra candidate (its ``mask``
+            and ``prob`` as if not a shadow), 0 = neither.
     """
     p = wp.tid()
     dd = float(0.0)
@@ -191,16 +197,19 @@ def foreground_kernel(
         a = ib / bb
         # |I - a B|^2 = I.I - 2 a I.B + a^2 B.B = I.I - a I.B  (a = I.B / B.B)
         cd = wp.sqrt(wp.max(ii - a * ib, 0.0) / bb)
-        if a >= params.shadow_lo and a <= params.shadow_hi and cd <= params.chroma_max:
-            is_shadow = 1
+        if a >= params.shadow_lo and cd <= params.chroma_max:
+            if a <= params.shadow_hi:
+                is_shadow = 2
+            elif a <= params.shadow_edge_hi:
+                is_shadow = 1
     fg = int(0)
     pr = float(0.0)
-    if is_shadow == 0:
+    if is_shadow < 2:
         pr = 1.0 / (1.0 + wp.exp(-(z - params.threshold) / params.soft_scale))
         if z > params.threshold:
             fg = 2
         elif z > params.low_threshold:
             fg = 1
-    mask[p] = wp.uint8(fg)
+    mask[p] = wp.uint8(fg + 4 * is_shadow)
     prob[p] = pr
     shadow[p] = wp.uint8(is_shadow)

@@ -60,15 +60,15 @@ def test_median_mad_kernel_matches_numpy(device, rng, k):
 
 
 @pytest.mark.parametrize(
-    ("shadow", "gain", "low", "cap"),
+    ("shadow", "gain", "low", "cap", "hi", "edge_hi"),
     [
-        (True, (1.0, 1.0, 1.0), 4.0, 0.0),
-        (False, (1.0, 1.0, 1.0), 4.0, 0.0),
-        (True, (0.8, 0.9, 1.1), 4.0, 0.0),
-        (True, (1.0, 1.0, 1.0), 2.0, 6.0),  # hysteresis levels and the spread cap
+        (True, (1.0, 1.0, 1.0), 4.0, 0.0, 0.95, 0.95),
+        (False, (1.0, 1.0, 1.0), 4.0, 0.0, 0.95, 0.95),
+        (True, (0.8, 0.9, 1.1), 4.0, 0.0, 0.95, 0.95),
+        (True, (1.0, 1.0, 1.0), 2.0, 6.0, 0.6, 0.95),  # hysteresis levels, spread cap, penumbra candidates
     ],
 )
-def test_foreground_kernel_matches_numpy(device, rng, shadow, gain, low, cap):
+def test_foreground_kernel_matches_numpy(device, rng, shadow, gain, low, cap, hi, edge_hi):
     n = 4000
     bg0 = rng.integers(0, 256, (n, 3), dtype=np.uint8)
     bg1 = np.clip(bg0.astype(int) + rng.integers(-20, 21, (n, 3)), 0, 255).astype(np.uint8)
@@ -84,7 +84,7 @@ def test_foreground_kernel_matches_numpy(device, rng, shadow, gain, low, cap):
     p = kbg.ForegroundParams()
     p.threshold, p.soft_scale, p.noise_floor, p.shadow = 4.0, 1.5, 3.0, int(shadow)
     p.low_threshold, p.spread_cap = low, cap
-    p.shadow_lo, p.shadow_hi, p.chroma_max = 0.4, 0.95, 0.1
+    p.shadow_lo, p.shadow_hi, p.shadow_edge_hi, p.chroma_max = 0.4, hi, edge_hi, 0.1
     dev = [wp.array(a.reshape(-1), dtype=wp.uint8, device=device) for a in (frame, bg0, mad0, bg1, mad1)]
     mask = wp.zeros(n, dtype=wp.uint8, device=device)
     prob = wp.zeros(n, dtype=wp.float32, device=device)
@@ -93,23 +93,26 @@ def test_foreground_kernel_matches_numpy(device, rng, shadow, gain, low, cap):
         kbg.foreground_kernel, dim=n, inputs=[*dev, w, wp.vec3(*gain), p], outputs=[mask, prob, shad], device=device
     )
     ref = numpy_masks.foreground(
-        frame, bg0, mad0, bg1, mad1, w, 4.0, 1.5, 3.0, shadow, 0.4, 0.95, 0.1, np.array(gain), low, cap
+        frame, bg0, mad0, bg1, mad1, w, 4.0, 1.5, 3.0, shadow, 0.4, hi, 0.1, np.array(gain), low, cap, edge_hi
     )
     near = (
         (np.abs(ref["z"] - 4.0) < 1e-4)
         | (np.abs(ref["z"] - low) < 1e-4)
         | (np.abs(ref["a"] - 0.4) < 1e-5)
-        | (np.abs(ref["a"] - 0.95) < 1e-5)
+        | (np.abs(ref["a"] - hi) < 1e-5)
+        | (np.abs(ref["a"] - edge_hi) < 1e-5)
         | (np.abs(ref["cd"] - 0.1) < 1e-5)
     )
     assert near.sum() < 5
     ok = ~near
-    np.testing.assert_array_equal(mask.numpy()[ok], ref["level"][ok])
-    np.testing.assert_array_equal(shad.numpy()[ok].astype(bool), ref["shadow"][ok])
+    np.testing.assert_array_equal(mask.numpy()[ok], ref["packed"][ok])
+    np.testing.assert_array_equal(shad.numpy()[ok], (2 * ref["shadow"] + ref["penumbra"])[ok])
+    assert (ref["penumbra"].sum() > 10) == (shadow and edge_hi > hi)
     np.testing.assert_allclose(prob.numpy()[ok], ref["prob"][ok], atol=1e-5)
     assert ref["mask"].sum() > n // 10 and (ref["shadow"].sum() > n // 20) == shadow  # the test sees all cases
     assert not ref["mask"][n // 4 : n // 2].any()
     assert ((ref["level"] == 1).sum() > 10) == (low < 4.0)  # weak pixels only with a lower threshold
+    np.testing.assert_array_equal(ref["packed"] & 3, ref["level"])
     if cap:  # the cap changes z where the MAD exceeds it (MADs up to 11: sigma up to 16)
         uncapped = numpy_masks.foreground(
             frame, bg0, mad0, bg1, mad1, w, 4.0, 1.5, 3.0, shadow, 0.4, 0.95, 0.1, np.array(gain), low
@@ -374,3 +377,50 @@ def test_spread_cap_finds_object_standing_in_many_samples(rng):
     assert plain[:10, 22:38, 32:48].mean() < 0.5
     assert capped[:10, 22:38, 32:48].mean() > 0.95
     assert capped[10:].sum() == 0 and np.delete(capped[:10], np.s_[20:40], axis=1).sum() == 0
+
+
+def test_resolve_levels_penumbra_near_shadow_only():
+    from wptrack.background import PENUMBRA_PX, resolve_levels
+
+    packed = np.zeros((30, 60), np.uint8)
+    packed[5:25, 5:15] = 8  # cast shadow (umbra)
+    packed[5:25, 15:17] = 4 + 2  # its rim: penumbra candidates, strong by z
+    packed[5:25, 40:50] = 4 + 2  # penumbra-like pixels far from any umbra: an object's part
+    packed[5:25, 50:52] = 1  # weak, attached to them
+    prob = np.ones((30, 60), np.float32)
+    mask = resolve_levels(packed.copy(), prob)
+    assert mask[:, :20].sum() == 0 and prob[5:25, 15:17].max() == 0.0
+    assert mask[5:25, 40:52].all() and prob[5:25, 40:50].min() == 1.0
+    assert mask.sum() == 20 * 12
+    far = np.zeros((30, 60), np.uint8)
+    far[5:25, 5:15] = 8
+    far[5:25, 15 + PENUMBRA_PX + 1 : 30] = 4 + 2  # beyond the rim width: kept
+    assert resolve_levels(far.copy()).sum() == 20 * (15 - PENUMBRA_PX - 1)
+
+
+def test_learnt_shadow_ratio_removes_deep_shadows_keeps_dark_objects(rng):
+    """Hard shadows darker than shadow_lo (ratio 0.36) move across a grey floor next to a dark grey object
+    (ratio 0.7, neutral: the fixed test takes it for a shadow). The learnt ratio removes the shadows and keeps the
+    object; the fixed bounds do the opposite."""
+    from wptrack.background import shadow_ratio
+
+    grey = np.full((H, W, 3), 140.0, np.float32)
+    frames = 25
+    video = _noisy(rng, grey, frames, noise=2.0)
+    for t in range(frames):
+        img = grey.copy()
+        img[5:35, 4 * t : 4 * t + 14] *= 0.36  # the shadow
+        img[45:65, 86 - 3 * t : 86 - 3 * t + 10] *= 0.7  # the dark object
+        video[t] = np.clip(img + rng.normal(0, 2.0, img.shape), 0, 255).astype(np.uint8)
+    base = dict(window=frames, samples=frames, device="cpu", fg_low=2.0)
+    fixed = np.stack(list(open_masks(video=video, config=MaskConfig(**base))))
+    learnt_masks = open_masks(video=video, config=MaskConfig(**base, shadow_band=0.08))
+    learnt = np.stack(list(learnt_masks))
+    ratio = learnt_masks.model._ratio[0]
+    assert ratio is not None and abs(ratio - 0.36) < 0.03
+    t = 12
+    shadow, obj = np.s_[7:33, 4 * t + 2 : 4 * t + 12], np.s_[47:63, 88 - 3 * t : 86 - 3 * t + 8]
+    assert fixed[t][shadow].mean() > 0.95 and fixed[t][obj].mean() < 0.05
+    assert learnt[t][shadow].mean() < 0.01 and learnt[t][obj].mean() > 0.95
+    flat = np.full((4, 100, 3), 100, np.uint8)
+    assert shadow_ratio(flat, np.ones((4, 3)), flat[0].astype(float), np.ones((100, 3)), 4.0, 3.0, 0.1) is None

@@ -101,6 +101,11 @@ class MaskConfig:
         shadow_lo: Offline only: smallest brightness ratio (pixel / background along the background colour) of a
             cast shadow, in ``(0, shadow_hi)``.
         shadow_hi: Offline only: largest brightness ratio of a cast shadow, in ``(shadow_lo, 1]``.
+        shadow_band: Offline only: learn the shadows' brightness ratio ``r`` from the recording (the peak of the
+            ratios of candidate shadow pixels of each window's samples, see :func:`wptrack.background.shadow_ratio`)
+            and take ``r - shadow_band <= a <= r + shadow_band`` as cast shadow, and ``r + shadow_band < a <=
+            shadow_hi`` as shadow only where 8-connected to it (the penumbra); 0 disables (then, and where nothing is
+            learnt: ``shadow_lo <= a <= shadow_hi``); else in ``(0, 0.5]``.
         shadow_chroma: Offline only: largest chromaticity distortion ``|I - a B| / |B|`` of a cast shadow (>= 0).
         soft_scale: Offline only: scale ``k`` of the foreground probability ``1 / (1 + exp(-(z - T) / k))``, robust
             standard deviations (> 0).
@@ -129,6 +134,7 @@ class MaskConfig:
     shadow_lo: float = 0.4
     shadow_hi: float = 0.95
     shadow_chroma: float = 0.1
+    shadow_band: float = 0.0
     soft_scale: float = 1.0
     device: str = "auto"
 
@@ -179,6 +185,8 @@ class MaskConfig:
             fail("shadow_lo", "in (0, 1) (brightness ratio)")
         if not self.shadow_lo < self.shadow_hi <= 1:
             fail("shadow_hi", f"in (shadow_lo={self.shadow_lo}, 1] (brightness ratio)")
+        if not _is_real(self.shadow_band) or not 0 <= self.shadow_band <= 0.5:
+            fail("shadow_band", "in [0, 0.5] (brightness ratio; 0: fixed bounds)")
         if self.shadow_chroma < 0:
             fail("shadow_chroma", ">= 0 (chromaticity distortion)")
         if not isinstance(self.device, str) or not (

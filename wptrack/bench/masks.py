@@ -131,8 +131,8 @@ class MasksSuite:
             t0 = time.perf_counter()
             ref = numpy_masks.foreground(
                 f, median, mad, median, mad, 0.0, c.fg_threshold, c.soft_scale, c.noise_floor, c.detect_shadows,
-                c.shadow_lo, c.shadow_hi, c.shadow_chroma, gains[t], model.params.low_threshold,
-                model.params.spread_cap,
+                model.params.shadow_lo, model.params.shadow_hi, c.shadow_chroma, gains[t], model.params.low_threshold,
+                model.params.spread_cap, model.params.shadow_edge_hi,
             )  # fmt: skip
             ref_t.append(time.perf_counter() - t0)
             near = (np.abs(ref["z"] - c.fg_threshold) < 1e-3) | (np.abs(ref["z"] - model.params.low_threshold) < 1e-3)

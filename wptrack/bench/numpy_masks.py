@@ -38,13 +38,16 @@ def foreground(
     gain: np.ndarray | None = None,
     low_threshold: float | None = None,
     spread_cap: float = 0.0,
+    shadow_edge_hi: float | None = None,
 ) -> dict[str, np.ndarray]:
     """Per-pixel ``z``, shadow flag, probability, level (0/1/2) and mask of ``(H, W, 3)`` uint8 images (module
     formulas), the frame divided by its ``(3,)`` channel ``gain`` first; ``low_threshold`` (default: ``threshold``)
-    is the hysteresis threshold, ``spread_cap`` the largest noise scale (8-bit units, 0: none). ``mask`` is the
-    hysteresis of the levels (:func:`wptrack.background.hysteresis`) for 2-D images, ``level == 2`` otherwise."""
-    from wptrack.background import hysteresis
+    is the hysteresis threshold, ``spread_cap`` the largest noise scale (8-bit units, 0: none), ``shadow_edge_hi``
+    (default ``shadow_hi``) the penumbra candidates' upper ratio. ``packed`` is the kernel's ``level + 4 shadow``;
+    ``mask`` is :func:`wptrack.background.resolve_levels` of it for 2-D images, ``level == 2`` otherwise."""
+    from wptrack.background import resolve_levels
 
+    edge_hi = shadow_hi if shadow_edge_hi is None else shadow_edge_hi
     low = threshold if low_threshold is None else low_threshold
     b = (1.0 - w) * bg0.astype(np.float64) + w * bg1.astype(np.float64)
     m = (1.0 - w) * mad0.astype(np.float64) + w * mad1.astype(np.float64)
@@ -59,8 +62,18 @@ def foreground(
     with np.errstate(divide="ignore", invalid="ignore"):
         a = np.where(bb >= 1.0, ib / np.maximum(bb, 1.0), 0.0)
         cd = np.linalg.norm(x - a[..., None] * b, axis=-1) / np.sqrt(np.maximum(bb, 1.0))
-    is_shadow = shadow & (bb >= 1.0) & (z > low) & (a >= shadow_lo) & (a <= shadow_hi) & (cd <= chroma_max)
+    candidate = shadow & (bb >= 1.0) & (z > low) & (a >= shadow_lo) & (cd <= chroma_max)
+    is_shadow = candidate & (a <= shadow_hi)
+    penumbra = candidate & (a > shadow_hi) & (a <= edge_hi)
     prob = np.where(is_shadow, 0.0, 1.0 / (1.0 + np.exp(-(z - threshold) / soft_scale)))
     level = np.where(is_shadow, 0, np.where(z > threshold, 2, np.where(z > low, 1, 0))).astype(np.uint8)
-    mask = hysteresis(level).astype(bool) if level.ndim == 2 and low < threshold else level == 2
-    return {"z": z, "a": a, "cd": cd, "shadow": is_shadow, "prob": prob, "level": level, "mask": mask}
+    packed = (level + 4 * (2 * is_shadow + penumbra)).astype(np.uint8)
+    if level.ndim == 2:
+        prob = prob.astype(np.float32)
+        mask = resolve_levels(packed.copy(), prob).astype(bool)
+    else:
+        mask = level == 2
+    return {
+        "z": z, "a": a, "cd": cd, "shadow": is_shadow, "penumbra": penumbra, "prob": prob, "level": level,
+        "packed": packed, "mask": mask,
+    }  # fmt: skip
