@@ -151,6 +151,7 @@ def foreground_kernel(
     mask: wp.array(dtype=wp.uint8),
     prob: wp.array(dtype=wp.float32),
     shadow: wp.array(dtype=wp.uint8),
+    diff: wp.array(dtype=wp.vec3),
 ):
     """Foreground mask, probability and shadow flag of one frame (see the module docstring for the formulas).
 
@@ -165,10 +166,13 @@ def foreground_kernel(
             (``T_low < z <= T``), 0 = background (and every cast shadow); ``shadow`` as below (one array for the
             driver to copy).
         prob: ``(H W,)`` output foreground probability in ``[0, 1]``.
+        diff: ``(H W,)`` output normalised difference ``(I - B) / s`` per channel (B, G, R; robust standard
+            deviations), for :func:`neighbourhood_kernel`.
         shadow: ``(H W,)`` output, 2 = cast shadow (counted as background), 1 = penumbra candidate (its ``mask``
             and ``prob`` as if not a shadow), 0 = neither.
     """
     p = wp.tid()
+    d = wp.vec3(0.0, 0.0, 0.0)
     dd = float(0.0)
     mm = float(0.0)
     ib = float(0.0)
@@ -182,6 +186,7 @@ def foreground_kernel(
             b = (1.0 - w) * b + w * float(bg1[j])
             m = (1.0 - w) * m + w * float(mad1[j])
         x = float(frame[j]) / gain[c]
+        d[c] = x - b
         dd += (x - b) * (x - b)
         mm += m * m
         ib += x * b
@@ -213,3 +218,54 @@ def foreground_kernel(
     mask[p] = wp.uint8(fg + 4 * is_shadow)
     prob[p] = pr
     shadow[p] = wp.uint8(is_shadow)
+    diff[p] = d / s
+
+
+@wp.kernel
+def neighbourhood_kernel(
+    packed: wp.array(dtype=wp.uint8),
+    diff: wp.array(dtype=wp.vec3),
+    width: int,
+    height: int,
+    radius: int,
+    low_threshold: float,
+    out: wp.array(dtype=wp.uint8),
+):
+    """Weak foreground from the mean difference of a neighbourhood (a faint but coherent change).
+
+    A background pixel (level 0, not a cast shadow) becomes weak foreground (level 1) when the mean normalised
+    difference over its ``(2 radius + 1)^2`` neighbours that are neither strong foreground nor cast shadow (edges of
+    contrasted objects and shadows would leak in) is far from 0: ``z_n = sqrt(sum_c m_c^2 / 3) sqrt(n) > T_low``
+    with ``m_c`` the mean of channel ``c`` over the ``n`` neighbours counted (under gaussian noise ``m_c`` has
+    standard deviation ``1 / sqrt(n)``, so ``z_n`` has the distribution of ``z``; a region darker by 1.5 robust
+    standard deviations gives ``z_n`` about 4.5 over 3 x 3 pixels). Other pixels are copied.
+
+    Args:
+        packed: ``(H W,)`` :func:`foreground_kernel`'s ``mask`` (``level + 4 shadow``).
+        diff: ``(H W,)`` its normalised differences.
+        width, height: Image size, pixels.
+        radius: Neighbourhood radius, pixels (>= 1).
+        low_threshold: ``T_low``.
+        out: ``(H W,)`` output, packed like ``packed``.
+    """
+    p = wp.tid()
+    v = int(packed[p])
+    if (v & 3) == 0 and (v >> 2) != 2:
+        y = p // width
+        x = p - y * width
+        acc = wp.vec3(0.0, 0.0, 0.0)
+        n = int(0)
+        for dy in range(-radius, radius + 1):
+            yy = y + dy
+            if yy >= 0 and yy < height:
+                for dx in range(-radius, radius + 1):
+                    xx = x + dx
+                    if xx >= 0 and xx < width:
+                        q = yy * width + xx
+                        u = int(packed[q])
+                        if (u & 3) < 2 and (u >> 2) != 2:
+                            acc += diff[q]
+                            n += 1
+        if n > 0 and wp.dot(acc, acc) / (3.0 * float(n)) > low_threshold * low_threshold:
+            v = v + 1
+    out[p] = wp.uint8(v)

@@ -89,8 +89,13 @@ def test_foreground_kernel_matches_numpy(device, rng, shadow, gain, low, cap, hi
     mask = wp.zeros(n, dtype=wp.uint8, device=device)
     prob = wp.zeros(n, dtype=wp.float32, device=device)
     shad = wp.zeros(n, dtype=wp.uint8, device=device)
+    diff = wp.zeros(n, dtype=wp.vec3, device=device)
     wp.launch(
-        kbg.foreground_kernel, dim=n, inputs=[*dev, w, wp.vec3(*gain), p], outputs=[mask, prob, shad], device=device
+        kbg.foreground_kernel,
+        dim=n,
+        inputs=[*dev, w, wp.vec3(*gain), p],
+        outputs=[mask, prob, shad, diff],
+        device=device,
     )
     ref = numpy_masks.foreground(
         frame, bg0, mad0, bg1, mad1, w, 4.0, 1.5, 3.0, shadow, 0.4, hi, 0.1, np.array(gain), low, cap, edge_hi
@@ -109,6 +114,7 @@ def test_foreground_kernel_matches_numpy(device, rng, shadow, gain, low, cap, hi
     np.testing.assert_array_equal(shad.numpy()[ok], (2 * ref["shadow"] + ref["penumbra"])[ok])
     assert (ref["penumbra"].sum() > 10) == (shadow and edge_hi > hi)
     np.testing.assert_allclose(prob.numpy()[ok], ref["prob"][ok], atol=1e-5)
+    np.testing.assert_allclose(diff.numpy(), ref["diff"], rtol=1e-4, atol=1e-4)
     assert ref["mask"].sum() > n // 10 and (ref["shadow"].sum() > n // 20) == shadow  # the test sees all cases
     assert not ref["mask"][n // 4 : n // 2].any()
     assert ((ref["level"] == 1).sum() > 10) == (low < 4.0)  # weak pixels only with a lower threshold
@@ -424,3 +430,30 @@ def test_learnt_shadow_ratio_removes_deep_shadows_keeps_dark_objects(rng):
     assert learnt[t][shadow].mean() < 0.01 and learnt[t][obj].mean() > 0.95
     flat = np.full((4, 100, 3), 100, np.uint8)
     assert shadow_ratio(flat, np.ones((4, 3)), flat[0].astype(float), np.ones((100, 3)), 4.0, 3.0, 0.1) is None
+
+
+@pytest.mark.parametrize("radius", [1, 2])
+def test_neighbourhood_kernel_matches_numpy(device, rng, radius):
+    h, w = 30, 41
+    packed = rng.choice(np.array([0, 0, 0, 1, 2, 4, 8], np.uint8), (h, w))
+    diff = rng.normal(0.0, 1.0, (h, w, 3)).astype(np.float32)
+    diff[5:15, 5:20] += 1.6  # a faint coherent region
+    out = wp.zeros(h * w, dtype=wp.uint8, device=device)
+    wp.launch(
+        kbg.neighbourhood_kernel,
+        dim=h * w,
+        inputs=[
+            wp.array(packed.reshape(-1), dtype=wp.uint8, device=device),
+            wp.array(diff.reshape(-1, 3), dtype=wp.vec3, device=device),
+            w, h, radius, 2.0,
+        ],
+        outputs=[out],
+        device=device,
+    )  # fmt: skip
+    ref = numpy_masks.neighbourhood(packed, diff.astype(np.float64), radius, 2.0)
+    got = out.numpy().reshape(h, w)
+    np.testing.assert_array_equal(got, ref)
+    changed = got != packed
+    assert changed.sum() > 20 and np.all(got[changed] == packed[changed] + 1)
+    assert np.all((packed[changed] & 3) == 0) and np.all((packed[changed] >> 2) != 2)
+    assert changed[5:15, 5:20].mean() > 2 * changed.mean()

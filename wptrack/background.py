@@ -358,6 +358,8 @@ class OfflineBackground:
         self._mask = wp.zeros(self.pixels, dtype=wp.uint8, device=device)
         self._prob = wp.zeros(self.pixels, dtype=wp.float32, device=device)
         self._shadow = wp.zeros(self.pixels, dtype=wp.uint8, device=device)
+        self._diff = wp.zeros(self.pixels, dtype=wp.vec3, device=device)
+        self._packed = wp.zeros(self.pixels, dtype=wp.uint8, device=device) if config.neighbourhood else None
         self._built: dict[int, tuple[Any, Any]] = {}
         self._scale: dict[int, float] = {}  # image-wide median noise scale of each built window
         self._ratio: dict[int, float | None] = {}  # learnt shadow ratio of each built window (None: not learnt)
@@ -485,12 +487,25 @@ class OfflineBackground:
             kbg.foreground_kernel,
             dim=self.pixels,
             inputs=[self._frame, b0, m0, b1, m1, w, wp.vec3(*gain), self.params],
-            outputs=[self._mask, self._prob, self._shadow],
+            outputs=[self._mask, self._prob, self._shadow, self._diff],
             device=self.device,
         )
+        packed = self._mask
+        if self._packed is not None:
+            wp.launch(
+                kbg.neighbourhood_kernel,
+                dim=self.pixels,
+                inputs=[
+                    self._mask, self._diff, self.source.width, self.source.height, int(self.config.neighbourhood),
+                    self.params.low_threshold,
+                ],
+                outputs=[self._packed],
+                device=self.device,
+            )  # fmt: skip
+            packed = self._packed
         shape = (self.source.height, self.source.width)
         prob = self._prob.numpy().reshape(shape).copy()
-        return resolve_levels(self._mask.numpy().reshape(shape), prob), prob
+        return resolve_levels(packed.numpy().reshape(shape), prob), prob
 
     def close(self) -> None:
         """Release the sampler's video reader."""

@@ -94,6 +94,9 @@ class MaskConfig:
         fg_low: Offline only: hysteresis low threshold, robust standard deviations: a pixel with
             ``fg_low < z <= fg_threshold`` (not a shadow) is foreground when 8-connected to one above ``fg_threshold``
             (0 disables; else in ``(0, fg_threshold]``).
+        neighbourhood: Offline only: radius in pixels of the neighbourhood whose mean difference to the background
+            also marks weak foreground (:func:`wptrack.kernels.background.neighbourhood_kernel`: a faint but
+            coherent change, as a dark car's roof on the road; 0 disables; 0 to 3). Needs ``fg_low``.
         spread_cap: Offline only: the per-pixel noise scale is capped at this many times the image-wide median
             scale of the window (0 disables; else >= 1), so an object standing still in many of a window's samples
             does not inflate its own pixels' noise scale and vanish.
@@ -130,6 +133,7 @@ class MaskConfig:
     fg_threshold: float = 4.0
     fg_low: float = 0.0
     spread_cap: float = 0.0
+    neighbourhood: int = 0
     noise_floor: float = 3.0
     shadow_lo: float = 0.4
     shadow_hi: float = 0.95
@@ -176,6 +180,10 @@ class MaskConfig:
                 fail(field, expected)
         if not _is_real(self.fg_low) or not (self.fg_low == 0 or 0 < self.fg_low <= self.fg_threshold):
             fail("fg_low", f"0 (off) or in (0, fg_threshold={self.fg_threshold}] (robust standard deviations)")
+        if not _is_int(self.neighbourhood) or not 0 <= self.neighbourhood <= 3:
+            fail("neighbourhood", "an integer in [0, 3] (pixels; 0 disables)")
+        if self.neighbourhood and not self.fg_low:
+            fail("neighbourhood", "0 unless fg_low is set (it adds weak foreground, kept by the hysteresis)")
         if not _is_real(self.spread_cap) or not (self.spread_cap == 0 or 1 <= self.spread_cap < math.inf):
             fail("spread_cap", "0 (off) or a finite number >= 1 (times the image-wide median noise scale)")
         for field in ("shadow_lo", "shadow_hi", "shadow_chroma"):

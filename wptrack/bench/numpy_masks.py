@@ -21,6 +21,22 @@ def median_mad(stack: np.ndarray, gains: np.ndarray | None = None) -> tuple[np.n
     return median, np.partition(dev, rank, axis=0)[rank]
 
 
+def neighbourhood(packed: np.ndarray, diff: np.ndarray, radius: int, low_threshold: float) -> np.ndarray:
+    """Reference of :func:`wptrack.kernels.background.neighbourhood_kernel` on ``(H, W)`` packed levels and
+    ``(H, W, 3)`` normalised differences."""
+    h, w = packed.shape
+    out = packed.copy()
+    usable = ((packed & 3) < 2) & ((packed >> 2) != 2)
+    d = np.where(usable[..., None], diff, 0.0)
+    for y, x in zip(*np.nonzero(((packed & 3) == 0) & ((packed >> 2) != 2)), strict=True):
+        sl = np.s_[max(y - radius, 0) : y + radius + 1, max(x - radius, 0) : x + radius + 1]
+        n = int(usable[sl].sum())
+        acc = d[sl].reshape(-1, 3).sum(axis=0)
+        if n and float(acc @ acc) / (3.0 * n) > low_threshold**2:
+            out[y, x] += 1
+    return out
+
+
 def foreground(
     frame: np.ndarray,
     bg0: np.ndarray,
@@ -73,7 +89,8 @@ def foreground(
         mask = resolve_levels(packed.copy(), prob).astype(bool)
     else:
         mask = level == 2
+    diff = (x - b) / s[..., None]
     return {
-        "z": z, "a": a, "cd": cd, "shadow": is_shadow, "penumbra": penumbra, "prob": prob, "level": level,
+        "diff": diff, "z": z, "a": a, "cd": cd, "shadow": is_shadow, "penumbra": penumbra, "prob": prob, "level": level,
         "packed": packed, "mask": mask,
     }  # fmt: skip
