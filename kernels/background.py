@@ -234,8 +234,8 @@ def neighbourhood_kernel(
     """Weak foreground from the mean difference of a neighbourhood (a faint but coherent change).
 
     A background pixel (level 0, not a cast shadow) becomes weak foreground (level 1) when the mean normalised
-    difference over its ``(2 radius + 1)^2`` neighbours that are neither strong foreground nor cast shadow (edges of
-    contrasted objects and shadows would leak in) is far from 0: ``z_n = sqrt(sum_c m_c^2 / 3) sqrt(n) > T_low``
+    difference over its ``(2 radius + 1)^2`` neighbours that are neither strong foreground nor cast shadow nor
+    penumbra candidate (edges of contrasted objects and shadows would leak in) is far from 0: ``z_n = sqrt(sum_c m_c^2 / 3) sqrt(n) > T_low``
     with ``m_c`` the mean of channel ``c`` over the ``n`` neighbours counted (under gaussian noise ``m_c`` has
     standard deviation ``1 / sqrt(n)``, so ``z_n`` has the distribution of ``z``; a region darker by 1.5 robust
     standard deviations gives ``z_n`` about 4.5 over 3 x 3 pixels). Other pixels are copied.
@@ -263,7 +263,7 @@ def neighbourhood_kernel(
                     if xx >= 0 and xx < width:
                         q = yy * width + xx
                         u = int(packed[q])
-                        if (u & 3) < 2 and (u >> 2) != 2:
+                        if (u & 3) < 2 and (u >> 2) == 0:
                             acc += diff[q]
                             n += 1
         if n > 0 and wp.dot(acc, acc) / (3.0 * float(n)) > low_threshold * low_threshold:

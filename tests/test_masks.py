@@ -280,6 +280,13 @@ def test_size_change_mid_stream(tmp_path):
         ({"min_area": -3}, "min_area"),
         ({"threshold": 255}, "threshold"),
         ({"threshold": True}, "threshold"),
+        ({"fg_low": 5.0}, "fg_low"),
+        ({"fg_low": -1.0}, "fg_low"),
+        ({"spread_cap": 0.5}, "spread_cap"),
+        ({"spread_cap": float("inf")}, "spread_cap"),
+        ({"shadow_band": 0.6}, "shadow_band"),
+        ({"neighbourhood": 4}, "neighbourhood"),
+        ({"neighbourhood": 1, "fg_low": 0}, "neighbourhood"),
     ],
 )
 def test_bad_config_names_field(kwargs, field):

@@ -26,7 +26,7 @@ def neighbourhood(packed: np.ndarray, diff: np.ndarray, radius: int, low_thresho
     ``(H, W, 3)`` normalised differences."""
     h, w = packed.shape
     out = packed.copy()
-    usable = ((packed & 3) < 2) & ((packed >> 2) != 2)
+    usable = ((packed & 3) < 2) & ((packed >> 2) == 0)
     d = np.where(usable[..., None], diff, 0.0)
     for y, x in zip(*np.nonzero(((packed & 3) == 0) & ((packed >> 2) != 2)), strict=True):
         sl = np.s_[max(y - radius, 0) : y + radius + 1, max(x - radius, 0) : x + radius + 1]
