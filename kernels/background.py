@@ -229,16 +229,19 @@ def neighbourhood_kernel(
     height: int,
     radius: int,
     low_threshold: float,
+    scale: float,
     out: wp.array(dtype=wp.uint8),
 ):
     """Weak foreground from the mean difference of a neighbourhood (a faint but coherent change).
 
     A background pixel (level 0, not a cast shadow) becomes weak foreground (level 1) when the mean normalised
     difference over its ``(2 radius + 1)^2`` neighbours that are neither strong foreground nor cast shadow nor
-    penumbra candidate (edges of contrasted objects and shadows would leak in) is far from 0: ``z_n = sqrt(sum_c m_c^2 / 3) sqrt(n) > T_low``
-    with ``m_c`` the mean of channel ``c`` over the ``n`` neighbours counted (under gaussian noise ``m_c`` has
-    standard deviation ``1 / sqrt(n)``, so ``z_n`` has the distribution of ``z``; a region darker by 1.5 robust
-    standard deviations gives ``z_n`` about 4.5 over 3 x 3 pixels). Other pixels are copied.
+    penumbra candidate (edges of contrasted objects and shadows would leak in) is far from 0:
+    ``z_n = c sqrt(n) sqrt(sum_c m_c^2 / 3) > T_low``, with ``m_c`` the mean of channel ``c`` over the ``n``
+    neighbours counted and ``c`` the ``scale`` (under independent
+    gaussian noise ``m_c`` has standard deviation ``1 / sqrt(n)``, so with ``scale`` 1 ``z_n`` has the distribution
+    of ``z``; a region darker by 1.5 robust standard deviations gives ``z_n`` about 4.5 over 3 x 3 pixels;
+    ``scale < 1`` for spatially correlated noise, measured by the driver). Other pixels are copied.
 
     Args:
         packed: ``(H W,)`` :func:`foreground_kernel`'s ``mask`` (``level + 4 shadow``).
@@ -246,6 +249,7 @@ def neighbourhood_kernel(
         width, height: Image size, pixels.
         radius: Neighbourhood radius, pixels (>= 1).
         low_threshold: ``T_low``.
+        scale: Noise correction ``c`` (1: independent pixels).
         out: ``(H W,)`` output, packed like ``packed``.
     """
     p = wp.tid()
@@ -266,6 +270,6 @@ def neighbourhood_kernel(
                         if (u & 3) < 2 and (u >> 2) == 0:
                             acc += diff[q]
                             n += 1
-        if n > 0 and wp.dot(acc, acc) / (3.0 * float(n)) > low_threshold * low_threshold:
+        if n > 0 and scale * scale * wp.dot(acc, acc) / (3.0 * float(n)) > low_threshold * low_threshold:
             v = v + 1
     out[p] = wp.uint8(v)

@@ -432,8 +432,8 @@ def test_learnt_shadow_ratio_removes_deep_shadows_keeps_dark_objects(rng):
     assert shadow_ratio(flat, np.ones((4, 3)), flat[0].astype(float), np.ones((100, 3)), 4.0, 3.0, 0.1) is None
 
 
-@pytest.mark.parametrize("radius", [1, 2])
-def test_neighbourhood_kernel_matches_numpy(device, rng, radius):
+@pytest.mark.parametrize(("radius", "scale"), [(1, 1.0), (2, 0.7)])
+def test_neighbourhood_kernel_matches_numpy(device, rng, radius, scale):
     h, w = 30, 41
     packed = rng.choice(np.array([0, 0, 0, 1, 2, 4, 8], np.uint8), (h, w))
     diff = rng.normal(0.0, 1.0, (h, w, 3)).astype(np.float32)
@@ -445,15 +445,29 @@ def test_neighbourhood_kernel_matches_numpy(device, rng, radius):
         inputs=[
             wp.array(packed.reshape(-1), dtype=wp.uint8, device=device),
             wp.array(diff.reshape(-1, 3), dtype=wp.vec3, device=device),
-            w, h, radius, 2.0,
+            w, h, radius, 2.0, scale,
         ],
         outputs=[out],
         device=device,
     )  # fmt: skip
-    ref = numpy_masks.neighbourhood(packed, diff.astype(np.float64), radius, 2.0)
+    ref = numpy_masks.neighbourhood(packed, diff.astype(np.float64), radius, 2.0, scale)
     got = out.numpy().reshape(h, w)
     np.testing.assert_array_equal(got, ref)
     changed = got != packed
     assert changed.sum() > 20 and np.all(got[changed] == packed[changed] + 1)
     assert np.all((packed[changed] & 3) == 0) and np.all((packed[changed] >> 2) != 2)
     assert changed[5:15, 5:20].mean() > 2 * changed.mean()
+
+
+def test_neighbourhood_scale_independent_vs_correlated_noise(rng):
+    from wptrack.background import neighbourhood_scale
+
+    k, h, w = 5, 60, 80
+    bg = np.full((h, w, 3), 120, np.uint8)
+    mad = np.full((h, w, 3), 2, np.uint8)
+    iid = np.clip(120 + rng.normal(0, 3.0, (k, h, w, 3)), 0, 255).astype(np.uint8)
+    blocks = rng.normal(0, 3.0, (k, h // 4, w // 4, 3))
+    corr = np.clip(120 + np.repeat(np.repeat(blocks, 4, axis=1), 4, axis=2), 0, 255).astype(np.uint8)
+    ones = np.ones((k, 3))
+    assert 0.85 < neighbourhood_scale(iid, ones, bg, mad, 1, 3.0) <= 1.0
+    assert neighbourhood_scale(corr, ones, bg, mad, 1, 3.0) < 0.6  # 4 x 4 blocks: neighbours move together

@@ -265,6 +265,51 @@ def spread_scale(mad: np.ndarray, step: int = 7) -> float:
     return float(np.median(1.4826 * np.sqrt((m * m).mean(axis=1))))
 
 
+def neighbourhood_scale(
+    samples: np.ndarray,
+    gains: np.ndarray,
+    median: np.ndarray,
+    mad: np.ndarray,
+    radius: int,
+    noise_floor: float,
+    max_samples: int = 5,
+) -> float:
+    """How much averaging over a ``(2 radius + 1)^2`` neighbourhood reduces the noise of a recording, relative to
+    independent pixels: ``c = sigma_1 / (sqrt(N) sigma_N)`` with ``sigma_1`` the robust spread (MAD) of the
+    normalised differences ``(I - B) / s`` of a window's samples and ``sigma_N`` that of their neighbourhood means
+    (N pixels). Independent noise (a rendered scene's sensor noise) gives 1; spatially correlated noise
+    (compression blocks, demosaicing, denoising) less, down to ``1 / sqrt(N)`` when neighbours move together.
+    :func:`wptrack.kernels.background.neighbourhood_kernel` multiplies its ``z_n`` by ``c``, so a coherent change
+    must beat the recording's real neighbourhood noise.
+
+    Args:
+        samples: ``(K, H, W, 3)`` uint8 a window's samples. gains: ``(K, 3)`` their global gains.
+        median: ``(H, W, 3)`` uint8 the window's background. mad: ``(H, W, 3)`` uint8 its MAD.
+        radius: Neighbourhood radius, pixels.
+        noise_floor: Smallest noise scale, 8-bit units.
+        max_samples: Samples used (evenly chosen), to bound the cost.
+
+    Returns:
+        ``c`` in ``[1 / sqrt(N), 1]``.
+    """
+    import cv2
+
+    n = (2 * radius + 1) ** 2
+    s = np.maximum(noise_floor, 1.4826 * np.sqrt((mad.astype(np.float32) ** 2).mean(axis=2)))[..., None]
+    b = median.astype(np.float32)
+    pick = np.unique(np.linspace(0, len(samples) - 1, min(max_samples, len(samples))).round().astype(int))
+    single, mean = [], []
+    for k in pick:
+        d = (samples[k].astype(np.float32) / gains[k].astype(np.float32) - b) / s
+        single.append(np.abs(d[radius:-radius:3, radius:-radius:3]).ravel())
+        mean.append(np.abs(cv2.blur(d, (2 * radius + 1, 2 * radius + 1))[radius:-radius:3, radius:-radius:3]).ravel())
+    s1 = float(np.median(np.concatenate(single)))
+    sn = float(np.median(np.concatenate(mean)))
+    if sn <= 0:
+        return 1.0
+    return float(np.clip(s1 / (np.sqrt(n) * sn), 1.0 / np.sqrt(n), 1.0))
+
+
 SHADOW_SEARCH = (0.3, 0.95)
 """Brightness ratios searched for the learnt shadow ratio (:func:`shadow_ratio`). Below 0.3 lie mostly dark
 objects (a dark car's sides on a grey road: 0.2), not outdoor cast shadows (the sky light alone is rarely under a
@@ -362,6 +407,7 @@ class OfflineBackground:
         self._packed = wp.zeros(self.pixels, dtype=wp.uint8, device=device) if config.neighbourhood else None
         self._built: dict[int, tuple[Any, Any]] = {}
         self._scale: dict[int, float] = {}  # image-wide median noise scale of each built window
+        self._nb_scale: dict[int, float] = {}  # neighbourhood_scale of each built window
         self._ratio: dict[int, float | None] = {}  # learnt shadow ratio of each built window (None: not learnt)
         # channel values of a pixel subsample (every 13th pixel) for the global gains (illumination changes)
         self._sub = (3 * np.arange(0, self.pixels, 13)[:, None] + np.arange(3)[None, :]).reshape(-1)
@@ -413,9 +459,19 @@ class OfflineBackground:
             kbg.median_mad_kernel, dim=3 * self.pixels, inputs=[stack, g], outputs=[median, mad], device=self.device
         )
         self._built[i] = (median, mad)
-        if self.config.spread_cap > 0 or self.config.shadow_band > 0:
+        c = self.config
+        if c.spread_cap > 0 or c.shadow_band > 0 or c.neighbourhood > 0:
             mad_host = mad.numpy()
             self._scale[i] = spread_scale(mad_host)
+            if c.neighbourhood > 0:
+                shape = (self.source.height, self.source.width, 3)
+                self._nb_scale[i] = neighbourhood_scale(
+                    host.reshape(k, *shape), gains, median.numpy().reshape(shape), mad_host.reshape(shape),
+                    c.neighbourhood, c.noise_floor,
+                )  # fmt: skip
+                log.info(
+                    "%s: background window %d: neighbourhood noise scale %.2f", self.source.name, i, self._nb_scale[i]
+                )
             if self.config.shadow_band > 0 and self.config.detect_shadows:
                 c = self.config
                 ratio = shadow_ratio(
@@ -497,7 +553,7 @@ class OfflineBackground:
                 dim=self.pixels,
                 inputs=[
                     self._mask, self._diff, self.source.width, self.source.height, int(self.config.neighbourhood),
-                    self.params.low_threshold,
+                    self.params.low_threshold, float((1.0 - w) * self._nb_scale[i] + w * self._nb_scale[j]),
                 ],
                 outputs=[self._packed],
                 device=self.device,

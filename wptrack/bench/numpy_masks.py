@@ -21,7 +21,9 @@ def median_mad(stack: np.ndarray, gains: np.ndarray | None = None) -> tuple[np.n
     return median, np.partition(dev, rank, axis=0)[rank]
 
 
-def neighbourhood(packed: np.ndarray, diff: np.ndarray, radius: int, low_threshold: float) -> np.ndarray:
+def neighbourhood(
+    packed: np.ndarray, diff: np.ndarray, radius: int, low_threshold: float, scale: float = 1.0
+) -> np.ndarray:
     """Reference of :func:`wptrack.kernels.background.neighbourhood_kernel` on ``(H, W)`` packed levels and
     ``(H, W, 3)`` normalised differences."""
     h, w = packed.shape
@@ -32,7 +34,7 @@ def neighbourhood(packed: np.ndarray, diff: np.ndarray, radius: int, low_thresho
         sl = np.s_[max(y - radius, 0) : y + radius + 1, max(x - radius, 0) : x + radius + 1]
         n = int(usable[sl].sum())
         acc = d[sl].reshape(-1, 3).sum(axis=0)
-        if n and float(acc @ acc) / (3.0 * n) > low_threshold**2:
+        if n and scale**2 * float(acc @ acc) / (3.0 * n) > low_threshold**2:
             out[y, x] += 1
     return out
 
