@@ -299,6 +299,8 @@ def test_config_defaults_and_edge_values():
     assert (c.method, c.history, c.var_threshold, c.dist2_threshold) == ("offline", 200, 16, 400)
     assert c.detect_shadows is True
     assert (c.learning_rate, c.open_px, c.close_px, c.min_area, c.threshold) == (-1, 3, 5, 0, 127)
+    assert (c.fg_low, c.spread_cap, c.shadow_band, c.neighbourhood) == (3.0, 1.5, 0.08, 1)
+    MaskConfig(fg_low=0, neighbourhood=0, spread_cap=0, shadow_band=0)  # the first offline model (round one)
     MaskConfig(learning_rate=0.0, open_px=0, close_px=0, threshold=0)
     MaskConfig(learning_rate=1, threshold=254)
 

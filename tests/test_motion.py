@@ -22,6 +22,9 @@ from wptrack.masks import MaskConfig, open_masks
 
 H, W = 72, 96
 
+#: MaskConfig fields of the first offline model (before hysteresis, spread cap, learnt shadows, neighbourhoods).
+ROUND_ONE = dict(fg_low=0.0, spread_cap=0.0, shadow_band=0.0, neighbourhood=0)
+
 
 def _texture(rng: np.random.Generator, lo: float = 60, hi: float = 200) -> np.ndarray:
     base = rng.uniform(lo, hi, size=(H // 8, W // 8, 3)).astype(np.float32)
@@ -361,8 +364,8 @@ def test_low_contrast_part_kept_when_attached(rng):
     t = frames - 1
     video[t] = np.clip(last + rng.normal(0, 1.0, last.shape), 0, 255).astype(np.uint8)
     base = dict(window=frames, device="cpu", open_px=3, close_px=5, noise_floor=2.0)
-    plain = list(open_masks(video=video, config=MaskConfig(**base)))[t]
-    hyst = list(open_masks(video=video, config=MaskConfig(**base, fg_low=2.0)))[t]
+    plain = list(open_masks(video=video, config=MaskConfig(**base, **ROUND_ONE)))[t]
+    hyst = list(open_masks(video=video, config=MaskConfig(**base, **{**ROUND_ONE, "fg_low": 2.0})))[t]
     assert plain[27:48, 22:33].mean() < 0.3 and hyst[27:48, 22:33].mean() > 0.9
     assert hyst[27:48, 62:73].mean() < 0.05 and hyst[12:23, 22:33].mean() > 0.99
     assert hyst[:, 40:56].sum() == 0 and hyst[55:, :].sum() == 0
@@ -378,8 +381,8 @@ def test_spread_cap_finds_object_standing_in_many_samples(rng):
     for t in range(10):
         video[t, 20:40, 30:50] = np.clip(colour + rng.normal(0, 3.0, colour.shape), 0, 255).astype(np.uint8)
     base = dict(window=frames, samples=frames, device="cpu")
-    plain = np.stack(list(open_masks(video=video, config=MaskConfig(**base))))
-    capped = np.stack(list(open_masks(video=video, config=MaskConfig(**base, spread_cap=1.5))))
+    plain = np.stack(list(open_masks(video=video, config=MaskConfig(**base, **ROUND_ONE))))
+    capped = np.stack(list(open_masks(video=video, config=MaskConfig(**base, **{**ROUND_ONE, "spread_cap": 1.5}))))
     assert plain[:10, 22:38, 32:48].mean() < 0.5
     assert capped[:10, 22:38, 32:48].mean() > 0.95
     assert capped[10:].sum() == 0 and np.delete(capped[:10], np.s_[20:40], axis=1).sum() == 0
@@ -418,8 +421,8 @@ def test_learnt_shadow_ratio_removes_deep_shadows_keeps_dark_objects(rng):
         img[5:35, 4 * t : 4 * t + 14] *= 0.36  # the shadow
         img[45:65, 86 - 3 * t : 86 - 3 * t + 10] *= 0.7  # the dark object
         video[t] = np.clip(img + rng.normal(0, 2.0, img.shape), 0, 255).astype(np.uint8)
-    base = dict(window=frames, samples=frames, device="cpu", fg_low=2.0)
-    fixed = np.stack(list(open_masks(video=video, config=MaskConfig(**base))))
+    base = dict(window=frames, samples=frames, device="cpu", fg_low=2.0, neighbourhood=0)
+    fixed = np.stack(list(open_masks(video=video, config=MaskConfig(**base, shadow_band=0.0))))
     learnt_masks = open_masks(video=video, config=MaskConfig(**base, shadow_band=0.08))
     learnt = np.stack(list(learnt_masks))
     ratio = learnt_masks.model._ratio[0]

@@ -131,14 +131,14 @@ class MaskConfig:
     window: int = 300
     samples: int = 25
     fg_threshold: float = 4.0
-    fg_low: float = 0.0
-    spread_cap: float = 0.0
-    neighbourhood: int = 0
+    fg_low: float = 3.0
+    spread_cap: float = 1.5
+    neighbourhood: int = 1
     noise_floor: float = 3.0
     shadow_lo: float = 0.4
     shadow_hi: float = 0.95
     shadow_chroma: float = 0.1
-    shadow_band: float = 0.0
+    shadow_band: float = 0.08
     soft_scale: float = 1.0
     device: str = "auto"
 
