@@ -222,9 +222,41 @@ def foreground_kernel(
 
 
 @wp.kernel
-def neighbourhood_kernel(
+def neighbourhood_rows_kernel(
     packed: wp.array(dtype=wp.uint8),
     diff: wp.array(dtype=wp.vec3),
+    width: int,
+    radius: int,
+    rows: wp.array(dtype=wp.vec4),
+):
+    """First (horizontal) pass of :func:`neighbourhood_kernel`: per pixel, the sum of the normalised differences
+    (x, y, z) and the count (w) of the usable pixels (neither strong foreground, cast shadow nor penumbra
+    candidate) among its row neighbours ``x - radius .. x + radius``.
+
+    Args:
+        packed: ``(H W,)`` :func:`foreground_kernel`'s ``mask``. diff: ``(H W,)`` its normalised differences.
+        width: Image width, pixels. radius: Neighbourhood radius, pixels.
+        rows: ``(H W,)`` output partial sums.
+    """
+    p = wp.tid()
+    y = p // width
+    x = p - y * width
+    acc = wp.vec4(0.0, 0.0, 0.0, 0.0)
+    for dx in range(-radius, radius + 1):
+        xx = x + dx
+        if xx >= 0 and xx < width:
+            q = p + dx
+            u = int(packed[q])
+            if (u & 3) < 2 and (u >> 2) == 0:
+                d = diff[q]
+                acc += wp.vec4(d[0], d[1], d[2], 1.0)
+    rows[p] = acc
+
+
+@wp.kernel
+def neighbourhood_kernel(
+    packed: wp.array(dtype=wp.uint8),
+    rows: wp.array(dtype=wp.vec4),
     width: int,
     height: int,
     radius: int,
@@ -245,7 +277,8 @@ def neighbourhood_kernel(
 
     Args:
         packed: ``(H W,)`` :func:`foreground_kernel`'s ``mask`` (``level + 4 shadow``).
-        diff: ``(H W,)`` its normalised differences.
+        rows: ``(H W,)`` :func:`neighbourhood_rows_kernel`'s row sums (separable box sum: 2 (2 radius + 1) reads
+            per pixel instead of (2 radius + 1)^2).
         width, height: Image size, pixels.
         radius: Neighbourhood radius, pixels (>= 1).
         low_threshold: ``T_low``.
@@ -256,20 +289,14 @@ def neighbourhood_kernel(
     v = int(packed[p])
     if (v & 3) == 0 and (v >> 2) != 2:
         y = p // width
-        x = p - y * width
-        acc = wp.vec3(0.0, 0.0, 0.0)
-        n = int(0)
+        acc = wp.vec4(0.0, 0.0, 0.0, 0.0)
         for dy in range(-radius, radius + 1):
             yy = y + dy
             if yy >= 0 and yy < height:
-                for dx in range(-radius, radius + 1):
-                    xx = x + dx
-                    if xx >= 0 and xx < width:
-                        q = yy * width + xx
-                        u = int(packed[q])
-                        if (u & 3) < 2 and (u >> 2) == 0:
-                            acc += diff[q]
-                            n += 1
-        if n > 0 and scale * scale * wp.dot(acc, acc) / (3.0 * float(n)) > low_threshold * low_threshold:
+                acc += rows[p + dy * width]
+        n = acc[3]
+        if n > 0.0 and scale * scale * (acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2]) / (3.0 * n) > (
+            low_threshold * low_threshold
+        ):
             v = v + 1
     out[p] = wp.uint8(v)

@@ -442,17 +442,23 @@ def test_neighbourhood_kernel_matches_numpy(device, rng, radius, scale):
     diff = rng.normal(0.0, 1.0, (h, w, 3)).astype(np.float32)
     diff[5:15, 5:20] += 1.6  # a faint coherent region
     out = wp.zeros(h * w, dtype=wp.uint8, device=device)
+    rows = wp.zeros(h * w, dtype=wp.vec4, device=device)
+    dev_packed = wp.array(packed.reshape(-1), dtype=wp.uint8, device=device)
+    dev_diff = wp.array(diff.reshape(-1, 3), dtype=wp.vec3, device=device)
+    wp.launch(
+        kbg.neighbourhood_rows_kernel,
+        dim=h * w,
+        inputs=[dev_packed, dev_diff, w, radius],
+        outputs=[rows],
+        device=device,
+    )
     wp.launch(
         kbg.neighbourhood_kernel,
         dim=h * w,
-        inputs=[
-            wp.array(packed.reshape(-1), dtype=wp.uint8, device=device),
-            wp.array(diff.reshape(-1, 3), dtype=wp.vec3, device=device),
-            w, h, radius, 2.0, scale,
-        ],
+        inputs=[dev_packed, rows, w, h, radius, 2.0, scale],
         outputs=[out],
         device=device,
-    )  # fmt: skip
+    )
     ref = numpy_masks.neighbourhood(packed, diff.astype(np.float64), radius, 2.0, scale)
     got = out.numpy().reshape(h, w)
     np.testing.assert_array_equal(got, ref)

@@ -405,6 +405,7 @@ class OfflineBackground:
         self._shadow = wp.zeros(self.pixels, dtype=wp.uint8, device=device)
         self._diff = wp.zeros(self.pixels, dtype=wp.vec3, device=device)
         self._packed = wp.zeros(self.pixels, dtype=wp.uint8, device=device) if config.neighbourhood else None
+        self._rows = wp.zeros(self.pixels, dtype=wp.vec4, device=device) if config.neighbourhood else None
         self._built: dict[int, tuple[Any, Any]] = {}
         self._scale: dict[int, float] = {}  # image-wide median noise scale of each built window
         self._nb_scale: dict[int, float] = {}  # neighbourhood_scale of each built window
@@ -548,16 +549,23 @@ class OfflineBackground:
         )
         packed = self._mask
         if self._packed is not None:
+            r = int(self.config.neighbourhood)
+            width, height = self.source.width, self.source.height
+            wp.launch(
+                kbg.neighbourhood_rows_kernel,
+                dim=self.pixels,
+                inputs=[self._mask, self._diff, width, r],
+                outputs=[self._rows],
+                device=self.device,
+            )
+            scale = float((1.0 - w) * self._nb_scale[i] + w * self._nb_scale[j])
             wp.launch(
                 kbg.neighbourhood_kernel,
                 dim=self.pixels,
-                inputs=[
-                    self._mask, self._diff, self.source.width, self.source.height, int(self.config.neighbourhood),
-                    self.params.low_threshold, float((1.0 - w) * self._nb_scale[i] + w * self._nb_scale[j]),
-                ],
+                inputs=[self._mask, self._rows, width, height, r, self.params.low_threshold, scale],
                 outputs=[self._packed],
                 device=self.device,
-            )  # fmt: skip
+            )
             packed = self._packed
         shape = (self.source.height, self.source.width)
         prob = self._prob.numpy().reshape(shape).copy()

@@ -25,18 +25,21 @@ def neighbourhood(
     packed: np.ndarray, diff: np.ndarray, radius: int, low_threshold: float, scale: float = 1.0
 ) -> np.ndarray:
     """Reference of :func:`wptrack.kernels.background.neighbourhood_kernel` on ``(H, W)`` packed levels and
-    ``(H, W, 3)`` normalised differences."""
-    h, w = packed.shape
-    out = packed.copy()
-    usable = ((packed & 3) < 2) & ((packed >> 2) == 0)
-    d = np.where(usable[..., None], diff, 0.0)
-    for y, x in zip(*np.nonzero(((packed & 3) == 0) & ((packed >> 2) != 2)), strict=True):
-        sl = np.s_[max(y - radius, 0) : y + radius + 1, max(x - radius, 0) : x + radius + 1]
-        n = int(usable[sl].sum())
-        acc = d[sl].reshape(-1, 3).sum(axis=0)
-        if n and scale**2 * float(acc @ acc) / (3.0 * n) > low_threshold**2:
-            out[y, x] += 1
-    return out
+    ``(H, W, 3)`` normalised differences (box sums over the usable neighbours, zero outside the image)."""
+    import cv2
+
+    usable = (((packed & 3) < 2) & ((packed >> 2) == 0)).astype(np.float64)
+    k = (2 * radius + 1, 2 * radius + 1)
+
+    def box(a: np.ndarray) -> np.ndarray:
+        return cv2.boxFilter(a, -1, k, normalize=False, borderType=cv2.BORDER_CONSTANT)
+
+    n = box(usable)
+    acc = np.stack([box(diff[..., c].astype(np.float64) * usable) for c in range(3)], axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z2 = np.where(n > 0, scale**2 * (acc * acc).sum(axis=-1) / (3.0 * np.maximum(n, 1.0)), 0.0)
+    target = ((packed & 3) == 0) & ((packed >> 2) != 2) & (n > 0) & (z2 > low_threshold**2)
+    return (packed + target).astype(np.uint8)
 
 
 def foreground(
@@ -57,12 +60,15 @@ def foreground(
     low_threshold: float | None = None,
     spread_cap: float = 0.0,
     shadow_edge_hi: float | None = None,
+    radius: int = 0,
+    nb_scale: float = 1.0,
 ) -> dict[str, np.ndarray]:
     """Per-pixel ``z``, shadow flag, probability, level (0/1/2) and mask of ``(H, W, 3)`` uint8 images (module
     formulas), the frame divided by its ``(3,)`` channel ``gain`` first; ``low_threshold`` (default: ``threshold``)
     is the hysteresis threshold, ``spread_cap`` the largest noise scale (8-bit units, 0: none), ``shadow_edge_hi``
     (default ``shadow_hi``) the penumbra candidates' upper ratio. ``packed`` is the kernel's ``level + 4 shadow``;
-    ``mask`` is :func:`wptrack.background.resolve_levels` of it for 2-D images, ``level == 2`` otherwise."""
+    ``mask`` is :func:`wptrack.background.resolve_levels` of it (after :func:`neighbourhood` with ``radius`` and
+    ``nb_scale`` when ``radius > 0``) for 2-D images, ``level == 2`` otherwise."""
     from wptrack.background import resolve_levels
 
     edge_hi = shadow_hi if shadow_edge_hi is None else shadow_edge_hi
@@ -86,12 +92,13 @@ def foreground(
     prob = np.where(is_shadow, 0.0, 1.0 / (1.0 + np.exp(-(z - threshold) / soft_scale)))
     level = np.where(is_shadow, 0, np.where(z > threshold, 2, np.where(z > low, 1, 0))).astype(np.uint8)
     packed = (level + 4 * (2 * is_shadow + penumbra)).astype(np.uint8)
+    diff = (x - b) / s[..., None]
     if level.ndim == 2:
         prob = prob.astype(np.float32)
-        mask = resolve_levels(packed.copy(), prob).astype(bool)
+        final = neighbourhood(packed, diff, radius, low, nb_scale) if radius > 0 else packed
+        mask = resolve_levels(final.copy(), prob).astype(bool)
     else:
         mask = level == 2
-    diff = (x - b) / s[..., None]
     return {
         "diff": diff, "z": z, "a": a, "cd": cd, "shadow": is_shadow, "penumbra": penumbra, "prob": prob, "level": level,
         "packed": packed, "mask": mask,
