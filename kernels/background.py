@@ -221,36 +221,55 @@ def foreground_kernel(
     diff[p] = d / s
 
 
+#: Pixels one thread of the neighbourhood kernels slides its box sum over (a run of a row or a column).
+RUN = wp.constant(32)
+
+
+@wp.func
+def usable_diff(packed: wp.array(dtype=wp.uint8), diff: wp.array(dtype=wp.vec3), q: int):
+    """``(d, 1)`` for a pixel that enters a neighbourhood mean (neither strong foreground, cast shadow nor penumbra
+    candidate), else 0."""
+    u = int(packed[q])
+    out = wp.vec4(0.0, 0.0, 0.0, 0.0)
+    if (u & 3) < 2 and (u >> 2) == 0:
+        d = diff[q]
+        out = wp.vec4(d[0], d[1], d[2], 1.0)
+    return out
+
+
 @wp.kernel
 def neighbourhood_rows_kernel(
     packed: wp.array(dtype=wp.uint8),
     diff: wp.array(dtype=wp.vec3),
     width: int,
+    height: int,
     radius: int,
     rows: wp.array(dtype=wp.vec4),
 ):
     """First (horizontal) pass of :func:`neighbourhood_kernel`: per pixel, the sum of the normalised differences
-    (x, y, z) and the count (w) of the usable pixels (neither strong foreground, cast shadow nor penumbra
-    candidate) among its row neighbours ``x - radius .. x + radius``.
+    (x, y, z) and the count (w) of the usable pixels (:func:`usable_diff`) among its row neighbours
+    ``x - radius .. x + radius``. One thread per row and run of :data:`RUN` pixels, sliding the sum along the run
+    (launch with ``dim = height * ceil(width / RUN)``).
 
     Args:
         packed: ``(H W,)`` :func:`foreground_kernel`'s ``mask``. diff: ``(H W,)`` its normalised differences.
-        width: Image width, pixels. radius: Neighbourhood radius, pixels.
+        width, height: Image size, pixels. radius: Neighbourhood radius, pixels.
         rows: ``(H W,)`` output partial sums.
     """
-    p = wp.tid()
-    y = p // width
-    x = p - y * width
+    t = wp.tid()
+    y = t % height
+    x0 = (t // height) * RUN
+    x1 = wp.min(x0 + RUN, width)
+    base = y * width
     acc = wp.vec4(0.0, 0.0, 0.0, 0.0)
-    for dx in range(-radius, radius + 1):
-        xx = x + dx
-        if xx >= 0 and xx < width:
-            q = p + dx
-            u = int(packed[q])
-            if (u & 3) < 2 and (u >> 2) == 0:
-                d = diff[q]
-                acc += wp.vec4(d[0], d[1], d[2], 1.0)
-    rows[p] = acc
+    for xx in range(wp.max(x0 - radius, 0), wp.min(x0 + radius + 1, width)):
+        acc += usable_diff(packed, diff, base + xx)
+    for x in range(x0, x1):
+        rows[base + x] = acc
+        if x + radius + 1 < width:
+            acc += usable_diff(packed, diff, base + x + radius + 1)
+        if x - radius >= 0:
+            acc -= usable_diff(packed, diff, base + x - radius)
 
 
 @wp.kernel
@@ -279,24 +298,33 @@ def neighbourhood_kernel(
         packed: ``(H W,)`` :func:`foreground_kernel`'s ``mask`` (``level + 4 shadow``).
         rows: ``(H W,)`` :func:`neighbourhood_rows_kernel`'s row sums (separable box sum: 2 (2 radius + 1) reads
             per pixel instead of (2 radius + 1)^2).
+
+    One thread per column and run of :data:`RUN` rows, sliding the column sum down the run (launch with
+    ``dim = width * ceil(height / RUN)``; few threads, so the per-thread overhead of a CPU launch stays small).
         width, height: Image size, pixels.
         radius: Neighbourhood radius, pixels (>= 1).
         low_threshold: ``T_low``.
         scale: Noise correction ``c`` (1: independent pixels).
         out: ``(H W,)`` output, packed like ``packed``.
     """
-    p = wp.tid()
-    v = int(packed[p])
-    if (v & 3) == 0 and (v >> 2) != 2:
-        y = p // width
-        acc = wp.vec4(0.0, 0.0, 0.0, 0.0)
-        for dy in range(-radius, radius + 1):
-            yy = y + dy
-            if yy >= 0 and yy < height:
-                acc += rows[p + dy * width]
+    t = wp.tid()
+    x = t % width
+    y0 = (t // width) * RUN
+    y1 = wp.min(y0 + RUN, height)
+    acc = wp.vec4(0.0, 0.0, 0.0, 0.0)
+    for yy in range(wp.max(y0 - radius, 0), wp.min(y0 + radius + 1, height)):
+        acc += rows[yy * width + x]
+    for y in range(y0, y1):
+        p = y * width + x
+        v = int(packed[p])
         n = acc[3]
-        if n > 0.0 and scale * scale * (acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2]) / (3.0 * n) > (
-            low_threshold * low_threshold
-        ):
-            v = v + 1
-    out[p] = wp.uint8(v)
+        if (v & 3) == 0 and (v >> 2) != 2 and n > 0.5:
+            if scale * scale * (acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2]) / (3.0 * n) > (
+                low_threshold * low_threshold
+            ):
+                v = v + 1
+        out[p] = wp.uint8(v)
+        if y + radius + 1 < height:
+            acc += rows[(y + radius + 1) * width + x]
+        if y - radius >= 0:
+            acc -= rows[(y - radius) * width + x]

@@ -437,24 +437,26 @@ def test_learnt_shadow_ratio_removes_deep_shadows_keeps_dark_objects(rng):
 
 @pytest.mark.parametrize(("radius", "scale"), [(1, 1.0), (2, 0.7)])
 def test_neighbourhood_kernel_matches_numpy(device, rng, radius, scale):
-    h, w = 30, 41
+    h, w = 70, 81  # several runs of RUN pixels per row and column, the last ones partial
     packed = rng.choice(np.array([0, 0, 0, 1, 2, 4, 8], np.uint8), (h, w))
     diff = rng.normal(0.0, 1.0, (h, w, 3)).astype(np.float32)
     diff[5:15, 5:20] += 1.6  # a faint coherent region
+    diff[40:60, 30:70] -= 1.6
     out = wp.zeros(h * w, dtype=wp.uint8, device=device)
     rows = wp.zeros(h * w, dtype=wp.vec4, device=device)
     dev_packed = wp.array(packed.reshape(-1), dtype=wp.uint8, device=device)
     dev_diff = wp.array(diff.reshape(-1, 3), dtype=wp.vec3, device=device)
+    run = int(kbg.RUN)
     wp.launch(
         kbg.neighbourhood_rows_kernel,
-        dim=h * w,
-        inputs=[dev_packed, dev_diff, w, radius],
+        dim=h * ((w + run - 1) // run),
+        inputs=[dev_packed, dev_diff, w, h, radius],
         outputs=[rows],
         device=device,
     )
     wp.launch(
         kbg.neighbourhood_kernel,
-        dim=h * w,
+        dim=w * ((h + run - 1) // run),
         inputs=[dev_packed, rows, w, h, radius, 2.0, scale],
         outputs=[out],
         device=device,

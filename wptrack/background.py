@@ -551,17 +551,18 @@ class OfflineBackground:
         if self._packed is not None:
             r = int(self.config.neighbourhood)
             width, height = self.source.width, self.source.height
+            run = int(kbg.RUN)
             wp.launch(
                 kbg.neighbourhood_rows_kernel,
-                dim=self.pixels,
-                inputs=[self._mask, self._diff, width, r],
+                dim=height * ((width + run - 1) // run),
+                inputs=[self._mask, self._diff, width, height, r],
                 outputs=[self._rows],
                 device=self.device,
             )
             scale = float((1.0 - w) * self._nb_scale[i] + w * self._nb_scale[j])
             wp.launch(
                 kbg.neighbourhood_kernel,
-                dim=self.pixels,
+                dim=width * ((height + run - 1) // run),
                 inputs=[self._mask, self._rows, width, height, r, self.params.low_threshold, scale],
                 outputs=[self._packed],
                 device=self.device,
