@@ -37,6 +37,10 @@ linearly interpolated between the two nearest windows (weight ``w`` of the secon
   ``T_low < z <= T`` and not shadow, else 0. The driver keeps the weak pixels 8-connected to a strong one
   (hysteresis, as Canny's edge linking: a low-contrast part of an object, e.g. legs in trousers of the paving's
   colour, is accepted where it hangs on the object's contrasted parts; isolated noise above ``T_low`` is not).
+
+Then, with a neighbourhood radius (:func:`neighbourhood_rows_kernel`, :func:`neighbourhood_kernel`), a background
+pixel whose neighbours' mean normalised difference is far from 0 becomes weak foreground too (a faint but coherent
+change, e.g. a car painted like the road).
 """
 
 import warp as wp

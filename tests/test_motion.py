@@ -291,6 +291,10 @@ def test_cli_masks_happy_path(tmp_path, rng, capsys):
         (["--video", "{tmp}/missing.avi"], "video file not found"),
         (["--video", "{video}", "--window", "0"], "MaskConfig.window"),
         (["--video", "{video}", "--shadow-lo", "0.9", "--shadow-hi", "0.5"], "MaskConfig.shadow_hi"),
+        (["--video", "{video}", "--fg-low", "5"], "MaskConfig.fg_low"),
+        (["--video", "{video}", "--fg-low", "0"], "MaskConfig.neighbourhood"),  # the neighbourhood needs it
+        (["--video", "{video}", "--spread-cap", "0.5"], "MaskConfig.spread_cap"),
+        (["--video", "{video}", "--shadow-band", "0.9"], "MaskConfig.shadow_band"),
     ],
 )
 def test_cli_masks_bad_input(tmp_path, rng, capsys, argv, message):

@@ -6,8 +6,10 @@ made in one of three ways:
 * **offline background model** (``method="offline"``, the default): the whole recording is available, so the
   background of each frame is the per-pixel temporal median of frames sampled before and after it, in sliding
   windows (:mod:`wptrack.background`, Warp kernels in :mod:`wptrack.kernels.background`); foreground is the robust
-  distance to it; cast shadows (same chromaticity, darker by a bounded ratio) count as background; a per-frame
-  foreground probability comes beside the mask (:meth:`MotionMasks.evidence`); then :func:`clean_mask`;
+  distance to it (per-pixel noise scale capped by the image-wide one, weak evidence kept where connected to strong:
+  hysteresis, and a neighbourhood test for faint coherent changes); cast shadows (same chromaticity, darker by the
+  recording's learnt shadow ratio) count as background; a per-frame foreground probability comes beside the mask
+  (:meth:`MotionMasks.evidence`); then :func:`clean_mask`;
 * **online background subtraction** of a camera's frames (``method="mog2"`` or ``"knn"``): OpenCV's
   ``cv2.createBackgroundSubtractorMOG2`` / ``cv2.createBackgroundSubtractorKNN``; shadow pixels (OpenCV's value
   127, when ``detect_shadows``) count as background; then :func:`clean_mask`: a morphological opening (removes
