@@ -490,7 +490,10 @@ class OfflineBackground:
     def shadow_bounds(self, i: int, j: int, w: float) -> tuple[float, float]:
         """Brightness-ratio bounds of the cast-shadow (umbra) test between windows ``i`` and ``j`` (weight ``w`` of
         ``j``): the learnt ratio ``r`` (interpolated; a window that learnt none uses the other's) gives
-        ``[max(r - band, 0.05), min(r + band, shadow_hi)]``; ratios above, up to ``shadow_hi``, are penumbra
+        ``[max(min(r - band, shadow_lo), 0.05), min(r + band, shadow_hi)]`` (the learnt ratio may lower the
+        configured bound, for deep sun shadows, but does not raise it: a scene's shadows are not all as faint as its
+        most common one; on the PETS clip, ratio 0.91, raising it made shadows foreground); ratios above, up to
+        ``shadow_hi``, are penumbra
         candidates (shadow only where attached to an umbra, :func:`resolve_levels`). No learnt ratio: the
         configured ``[shadow_lo, shadow_hi]``."""
         c = self.config
@@ -498,7 +501,7 @@ class OfflineBackground:
         if ri is None and rj is None:
             return float(c.shadow_lo), float(c.shadow_hi)
         r = (1.0 - w) * (ri if ri is not None else rj) + w * (rj if rj is not None else ri)
-        lo = max(r - c.shadow_band, 0.05)
+        lo = max(min(r - c.shadow_band, c.shadow_lo), 0.05)
         return float(lo), float(max(min(r + c.shadow_band, c.shadow_hi), lo))
 
     def background(self, i: int = 0) -> np.ndarray:
