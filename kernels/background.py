@@ -17,18 +17,30 @@ linearly interpolated between the two nearest windows (weight ``w`` of the secon
 * global illumination: every frame (and every sample of a window) is first divided by its global gain per
   channel, the median over a pixel subsample of its ratio to the background (computed by the driver), so a light
   dimming or a camera's auto-exposure neither hides people in the MAD nor floods the masks,
-* noise scale ``s = max(s0, 1.4826 sqrt(sum_c MAD_c^2 / 3))`` (8-bit units; ``1.4826 MAD`` estimates a gaussian
-  standard deviation, ``s0`` is the noise floor: the smallest scale allowed, for compressed or clipped pixels whose
-  samples barely vary); for gaussian noise ``3 z^2`` is chi-square with 3 degrees of freedom, so ``T = 4`` marks a
-  static pixel as foreground with probability about 2e-10 (``T = 3``: 6e-6),
+* noise scale ``s = max(s0, min(1.4826 sqrt(sum_c MAD_c^2 / 3), s_cap))`` (8-bit units; ``1.4826 MAD`` estimates a
+  gaussian standard deviation, ``s0`` is the noise floor: the smallest scale allowed, for compressed or clipped
+  pixels whose samples barely vary; ``s_cap`` the largest, a multiple of the image-wide median of the per-pixel
+  scales computed by the driver, or none when 0: an object standing on a pixel in a large minority of a window's
+  samples inflates that pixel's MAD, and without the cap hides itself while it stands); for gaussian noise ``3 z^2``
+  is chi-square with 3 degrees of freedom, so ``T = 4`` marks a static pixel as foreground with probability about
+  2e-10 (``T = 3``: 6e-6, ``T = 2``: 7e-3),
 * robust distance ``z = sqrt(sum_c (I_c - B_c)^2 / 3) / s`` (RMS colour difference in robust standard deviations),
 * shadow test (cast shadows keep the background's chromaticity and darken it by a bounded ratio): brightness
   ratio ``a = (I . B) / (B . B)`` (Horprasert et al.'s brightness distortion) and chromaticity distortion
-  ``cd = |I - a B| / |B|``; a pixel is shadow when ``lo <= a <= hi`` and ``cd <= chroma_max`` (only where
-  ``|B| >= 1``, and only when the test is enabled),
+  ``cd = |I - a B| / |B|``; a pixel is shadow when ``lo <= a <= hi`` and ``cd <= chroma_max``, and a penumbra
+  candidate when ``hi < a <= edge_hi`` and ``cd <= chroma_max`` (only where
+  ``|B| >= 1``, and only when the test is enabled; tested where ``z > T_low``),
 * soft foreground probability ``P = 1 / (1 + exp(-(z - T) / k))`` (``T`` the threshold, ``k`` the soft scale, both
-  in robust standard deviations); shadow pixels get ``P = 0``,
-* binary mask ``M = 1`` iff ``z > T`` and not shadow (equivalently ``P > 1/2``).
+  in robust standard deviations); shadow pixels get ``P = 0``; penumbra candidates are left to the driver (kept as
+  shadow where 8-connected to a shadow pixel, the brighter rim of a cast shadow; else foreground by their ``z``),
+* mask level ``M = 2`` (strong) iff ``z > T`` and not shadow (equivalently ``P > 1/2``), ``M = 1`` (weak) iff
+  ``T_low < z <= T`` and not shadow, else 0. The driver keeps the weak pixels 8-connected to a strong one
+  (hysteresis, as Canny's edge linking: a low-contrast part of an object, e.g. legs in trousers of the paving's
+  colour, is accepted where it hangs on the object's contrasted parts; isolated noise above ``T_low`` is not).
+
+Then, with a neighbourhood radius (:func:`neighbourhood_rows_kernel`, :func:`neighbourhood_kernel`), a background
+pixel whose neighbours' mean normalised difference is far from 0 becomes weak foreground too (a faint but coherent
+change, e.g. a car painted like the road).
 """
 
 import warp as wp
@@ -119,11 +131,14 @@ class ForegroundParams:
     """Per-frame test parameters (units: robust standard deviations unless stated)."""
 
     threshold: float  # T: foreground when z > T
+    low_threshold: float  # T_low <= T: weak foreground when T_low < z <= T (hysteresis)
+    spread_cap: float  # s_cap, 8-bit units: largest noise scale (0: no cap)
     soft_scale: float  # k of the logistic P = 1 / (1 + exp(-(z - T) / k))
     noise_floor: float  # s0, 8-bit units
     shadow: int  # 1: shadow test on
     shadow_lo: float  # brightness ratio bounds (dimensionless)
     shadow_hi: float
+    shadow_edge_hi: float  # penumbra candidates: shadow_hi < a <= shadow_edge_hi (= shadow_hi: none)
     chroma_max: float  # chromaticity distortion bound (dimensionless, |I - a B| / |B|)
 
 
@@ -140,6 +155,7 @@ def foreground_kernel(
     mask: wp.array(dtype=wp.uint8),
     prob: wp.array(dtype=wp.float32),
     shadow: wp.array(dtype=wp.uint8),
+    diff: wp.array(dtype=wp.vec3),
 ):
     """Foreground mask, probability and shadow flag of one frame (see the module docstring for the formulas).
 
@@ -150,11 +166,17 @@ def foreground_kernel(
         gain: The frame's global gain per channel (B, G, R) relative to the background (illumination change):
             the frame is divided by it before the tests (1: none).
         params: Thresholds.
-        mask: ``(H W,)`` output, 1 = foreground.
+        mask: ``(H W,)`` output ``level + 4 shadow``: level 2 = foreground, 1 = weak foreground
+            (``T_low < z <= T``), 0 = background (and every cast shadow); ``shadow`` as below (one array for the
+            driver to copy).
         prob: ``(H W,)`` output foreground probability in ``[0, 1]``.
-        shadow: ``(H W,)`` output, 1 = cast shadow (counted as background).
+        diff: ``(H W,)`` output normalised difference ``(I - B) / s`` per channel (B, G, R; robust standard
+            deviations), for :func:`neighbourhood_kernel`.
+        shadow: ``(H W,)`` output, 2 = cast shadow (counted as background), 1 = penumbra candidate (its ``mask``
+            and ``prob`` as if not a shadow), 0 = neither.
     """
     p = wp.tid()
+    d = wp.vec3(0.0, 0.0, 0.0)
     dd = float(0.0)
     mm = float(0.0)
     ib = float(0.0)
@@ -168,26 +190,145 @@ def foreground_kernel(
             b = (1.0 - w) * b + w * float(bg1[j])
             m = (1.0 - w) * m + w * float(mad1[j])
         x = float(frame[j]) / gain[c]
+        d[c] = x - b
         dd += (x - b) * (x - b)
         mm += m * m
         ib += x * b
         bb += b * b
         ii += x * x
-    s = wp.max(params.noise_floor, MAD_TO_SIGMA * wp.sqrt(mm / 3.0))
+    spread = MAD_TO_SIGMA * wp.sqrt(mm / 3.0)
+    if params.spread_cap > 0.0:
+        spread = wp.min(spread, params.spread_cap)
+    s = wp.max(params.noise_floor, spread)
     z = wp.sqrt(dd / 3.0) / s
     is_shadow = int(0)
-    if params.shadow != 0 and bb >= 1.0 and z > params.threshold:
+    if params.shadow != 0 and bb >= 1.0 and z > params.low_threshold:
         a = ib / bb
         # |I - a B|^2 = I.I - 2 a I.B + a^2 B.B = I.I - a I.B  (a = I.B / B.B)
         cd = wp.sqrt(wp.max(ii - a * ib, 0.0) / bb)
-        if a >= params.shadow_lo and a <= params.shadow_hi and cd <= params.chroma_max:
-            is_shadow = 1
+        if a >= params.shadow_lo and cd <= params.chroma_max:
+            if a <= params.shadow_hi:
+                is_shadow = 2
+            elif a <= params.shadow_edge_hi:
+                is_shadow = 1
     fg = int(0)
     pr = float(0.0)
-    if is_shadow == 0:
+    if is_shadow < 2:
         pr = 1.0 / (1.0 + wp.exp(-(z - params.threshold) / params.soft_scale))
         if z > params.threshold:
+            fg = 2
+        elif z > params.low_threshold:
             fg = 1
-    mask[p] = wp.uint8(fg)
+    mask[p] = wp.uint8(fg + 4 * is_shadow)
     prob[p] = pr
     shadow[p] = wp.uint8(is_shadow)
+    diff[p] = d / s
+
+
+#: Pixels one thread of the neighbourhood kernels slides its box sum over (a run of a row or a column).
+RUN = wp.constant(32)
+
+
+@wp.func
+def usable_diff(packed: wp.array(dtype=wp.uint8), diff: wp.array(dtype=wp.vec3), q: int):
+    """``(d, 1)`` for a pixel that enters a neighbourhood mean (neither strong foreground, cast shadow nor penumbra
+    candidate), else 0."""
+    u = int(packed[q])
+    out = wp.vec4(0.0, 0.0, 0.0, 0.0)
+    if (u & 3) < 2 and (u >> 2) == 0:
+        d = diff[q]
+        out = wp.vec4(d[0], d[1], d[2], 1.0)
+    return out
+
+
+@wp.kernel
+def neighbourhood_rows_kernel(
+    packed: wp.array(dtype=wp.uint8),
+    diff: wp.array(dtype=wp.vec3),
+    width: int,
+    height: int,
+    radius: int,
+    rows: wp.array(dtype=wp.vec4),
+):
+    """First (horizontal) pass of :func:`neighbourhood_kernel`: per pixel, the sum of the normalised differences
+    (x, y, z) and the count (w) of the usable pixels (:func:`usable_diff`) among its row neighbours
+    ``x - radius .. x + radius``. One thread per row and run of :data:`RUN` pixels, sliding the sum along the run
+    (launch with ``dim = height * ceil(width / RUN)``).
+
+    Args:
+        packed: ``(H W,)`` :func:`foreground_kernel`'s ``mask``. diff: ``(H W,)`` its normalised differences.
+        width, height: Image size, pixels. radius: Neighbourhood radius, pixels.
+        rows: ``(H W,)`` output partial sums.
+    """
+    t = wp.tid()
+    y = t % height
+    x0 = (t // height) * RUN
+    x1 = wp.min(x0 + RUN, width)
+    base = y * width
+    acc = wp.vec4(0.0, 0.0, 0.0, 0.0)
+    for xx in range(wp.max(x0 - radius, 0), wp.min(x0 + radius + 1, width)):
+        acc += usable_diff(packed, diff, base + xx)
+    for x in range(x0, x1):
+        rows[base + x] = acc
+        if x + radius + 1 < width:
+            acc += usable_diff(packed, diff, base + x + radius + 1)
+        if x - radius >= 0:
+            acc -= usable_diff(packed, diff, base + x - radius)
+
+
+@wp.kernel
+def neighbourhood_kernel(
+    packed: wp.array(dtype=wp.uint8),
+    rows: wp.array(dtype=wp.vec4),
+    width: int,
+    height: int,
+    radius: int,
+    low_threshold: float,
+    scale: float,
+    out: wp.array(dtype=wp.uint8),
+):
+    """Weak foreground from the mean difference of a neighbourhood (a faint but coherent change).
+
+    A background pixel (level 0, not a cast shadow) becomes weak foreground (level 1) when the mean normalised
+    difference over its ``(2 radius + 1)^2`` neighbours that are neither strong foreground nor cast shadow nor
+    penumbra candidate (edges of contrasted objects and shadows would leak in) is far from 0:
+    ``z_n = c sqrt(n) sqrt(sum_c m_c^2 / 3) > T_low``, with ``m_c`` the mean of channel ``c`` over the ``n``
+    neighbours counted and ``c`` the ``scale`` (under independent
+    gaussian noise ``m_c`` has standard deviation ``1 / sqrt(n)``, so with ``scale`` 1 ``z_n`` has the distribution
+    of ``z``; a region darker by 1.5 robust standard deviations gives ``z_n`` about 4.5 over 3 x 3 pixels;
+    ``scale < 1`` for spatially correlated noise, measured by the driver). Other pixels are copied.
+
+    Args:
+        packed: ``(H W,)`` :func:`foreground_kernel`'s ``mask`` (``level + 4 shadow``).
+        rows: ``(H W,)`` :func:`neighbourhood_rows_kernel`'s row sums (separable box sum: 2 (2 radius + 1) reads
+            per pixel instead of (2 radius + 1)^2).
+
+    One thread per column and run of :data:`RUN` rows, sliding the column sum down the run (launch with
+    ``dim = width * ceil(height / RUN)``; few threads, so the per-thread overhead of a CPU launch stays small).
+        width, height: Image size, pixels.
+        radius: Neighbourhood radius, pixels (>= 1).
+        low_threshold: ``T_low``.
+        scale: Noise correction ``c`` (1: independent pixels).
+        out: ``(H W,)`` output, packed like ``packed``.
+    """
+    t = wp.tid()
+    x = t % width
+    y0 = (t // width) * RUN
+    y1 = wp.min(y0 + RUN, height)
+    acc = wp.vec4(0.0, 0.0, 0.0, 0.0)
+    for yy in range(wp.max(y0 - radius, 0), wp.min(y0 + radius + 1, height)):
+        acc += rows[yy * width + x]
+    for y in range(y0, y1):
+        p = y * width + x
+        v = int(packed[p])
+        n = acc[3]
+        if (v & 3) == 0 and (v >> 2) != 2 and n > 0.5:
+            if scale * scale * (acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2]) / (3.0 * n) > (
+                low_threshold * low_threshold
+            ):
+                v = v + 1
+        out[p] = wp.uint8(v)
+        if y + radius + 1 < height:
+            acc += rows[(y + radius + 1) * width + x]
+        if y - radius >= 0:
+            acc -= rows[(y - radius) * width + x]

@@ -280,6 +280,13 @@ def test_size_change_mid_stream(tmp_path):
         ({"min_area": -3}, "min_area"),
         ({"threshold": 255}, "threshold"),
         ({"threshold": True}, "threshold"),
+        ({"fg_low": 5.0}, "fg_low"),
+        ({"fg_low": -1.0}, "fg_low"),
+        ({"spread_cap": 0.5}, "spread_cap"),
+        ({"spread_cap": float("inf")}, "spread_cap"),
+        ({"shadow_band": 0.6}, "shadow_band"),
+        ({"neighbourhood": 4}, "neighbourhood"),
+        ({"neighbourhood": 1, "fg_low": 0}, "neighbourhood"),
     ],
 )
 def test_bad_config_names_field(kwargs, field):
@@ -292,6 +299,8 @@ def test_config_defaults_and_edge_values():
     assert (c.method, c.history, c.var_threshold, c.dist2_threshold) == ("offline", 200, 16, 400)
     assert c.detect_shadows is True
     assert (c.learning_rate, c.open_px, c.close_px, c.min_area, c.threshold) == (-1, 3, 5, 0, 127)
+    assert (c.fg_low, c.spread_cap, c.shadow_band, c.neighbourhood) == (3.0, 1.5, 0.08, 1)
+    MaskConfig(fg_low=0, neighbourhood=0, spread_cap=0, shadow_band=0)  # the first offline model (round one)
     MaskConfig(learning_rate=0.0, open_px=0, close_px=0, threshold=0)
     MaskConfig(learning_rate=1, threshold=254)
 

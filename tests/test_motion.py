@@ -22,6 +22,9 @@ from wptrack.masks import MaskConfig, open_masks
 
 H, W = 72, 96
 
+#: MaskConfig fields of the first offline model (before hysteresis, spread cap, learnt shadows, neighbourhoods).
+ROUND_ONE = dict(fg_low=0.0, spread_cap=0.0, shadow_band=0.0, neighbourhood=0)
+
 
 def _texture(rng: np.random.Generator, lo: float = 60, hi: float = 200) -> np.ndarray:
     base = rng.uniform(lo, hi, size=(H // 8, W // 8, 3)).astype(np.float32)
@@ -60,9 +63,15 @@ def test_median_mad_kernel_matches_numpy(device, rng, k):
 
 
 @pytest.mark.parametrize(
-    ("shadow", "gain"), [(True, (1.0, 1.0, 1.0)), (False, (1.0, 1.0, 1.0)), (True, (0.8, 0.9, 1.1))]
+    ("shadow", "gain", "low", "cap", "hi", "edge_hi"),
+    [
+        (True, (1.0, 1.0, 1.0), 4.0, 0.0, 0.95, 0.95),
+        (False, (1.0, 1.0, 1.0), 4.0, 0.0, 0.95, 0.95),
+        (True, (0.8, 0.9, 1.1), 4.0, 0.0, 0.95, 0.95),
+        (True, (1.0, 1.0, 1.0), 2.0, 6.0, 0.6, 0.95),  # hysteresis levels, spread cap, penumbra candidates
+    ],
 )
-def test_foreground_kernel_matches_numpy(device, rng, shadow, gain):
+def test_foreground_kernel_matches_numpy(device, rng, shadow, gain, low, cap, hi, edge_hi):
     n = 4000
     bg0 = rng.integers(0, 256, (n, 3), dtype=np.uint8)
     bg1 = np.clip(bg0.astype(int) + rng.integers(-20, 21, (n, 3)), 0, 255).astype(np.uint8)
@@ -77,28 +86,47 @@ def test_foreground_kernel_matches_numpy(device, rng, shadow, gain):
     w = 0.3
     p = kbg.ForegroundParams()
     p.threshold, p.soft_scale, p.noise_floor, p.shadow = 4.0, 1.5, 3.0, int(shadow)
-    p.shadow_lo, p.shadow_hi, p.chroma_max = 0.4, 0.95, 0.1
+    p.low_threshold, p.spread_cap = low, cap
+    p.shadow_lo, p.shadow_hi, p.shadow_edge_hi, p.chroma_max = 0.4, hi, edge_hi, 0.1
     dev = [wp.array(a.reshape(-1), dtype=wp.uint8, device=device) for a in (frame, bg0, mad0, bg1, mad1)]
     mask = wp.zeros(n, dtype=wp.uint8, device=device)
     prob = wp.zeros(n, dtype=wp.float32, device=device)
     shad = wp.zeros(n, dtype=wp.uint8, device=device)
+    diff = wp.zeros(n, dtype=wp.vec3, device=device)
     wp.launch(
-        kbg.foreground_kernel, dim=n, inputs=[*dev, w, wp.vec3(*gain), p], outputs=[mask, prob, shad], device=device
+        kbg.foreground_kernel,
+        dim=n,
+        inputs=[*dev, w, wp.vec3(*gain), p],
+        outputs=[mask, prob, shad, diff],
+        device=device,
     )
-    ref = numpy_masks.foreground(frame, bg0, mad0, bg1, mad1, w, 4.0, 1.5, 3.0, shadow, 0.4, 0.95, 0.1, np.array(gain))
+    ref = numpy_masks.foreground(
+        frame, bg0, mad0, bg1, mad1, w, 4.0, 1.5, 3.0, shadow, 0.4, hi, 0.1, np.array(gain), low, cap, edge_hi
+    )
     near = (
         (np.abs(ref["z"] - 4.0) < 1e-4)
+        | (np.abs(ref["z"] - low) < 1e-4)
         | (np.abs(ref["a"] - 0.4) < 1e-5)
-        | (np.abs(ref["a"] - 0.95) < 1e-5)
+        | (np.abs(ref["a"] - hi) < 1e-5)
+        | (np.abs(ref["a"] - edge_hi) < 1e-5)
         | (np.abs(ref["cd"] - 0.1) < 1e-5)
     )
     assert near.sum() < 5
     ok = ~near
-    np.testing.assert_array_equal(mask.numpy()[ok], ref["mask"][ok])
-    np.testing.assert_array_equal(shad.numpy()[ok].astype(bool), ref["shadow"][ok])
+    np.testing.assert_array_equal(mask.numpy()[ok], ref["packed"][ok])
+    np.testing.assert_array_equal(shad.numpy()[ok], (2 * ref["shadow"] + ref["penumbra"])[ok])
+    assert (ref["penumbra"].sum() > 10) == (shadow and edge_hi > hi)
     np.testing.assert_allclose(prob.numpy()[ok], ref["prob"][ok], atol=1e-5)
+    np.testing.assert_allclose(diff.numpy(), ref["diff"], rtol=1e-4, atol=1e-4)
     assert ref["mask"].sum() > n // 10 and (ref["shadow"].sum() > n // 20) == shadow  # the test sees all cases
     assert not ref["mask"][n // 4 : n // 2].any()
+    assert ((ref["level"] == 1).sum() > 10) == (low < 4.0)  # weak pixels only with a lower threshold
+    np.testing.assert_array_equal(ref["packed"] & 3, ref["level"])
+    if cap:  # the cap changes z where the MAD exceeds it (MADs up to 11: sigma up to 16)
+        uncapped = numpy_masks.foreground(
+            frame, bg0, mad0, bg1, mad1, w, 4.0, 1.5, 3.0, shadow, 0.4, 0.95, 0.1, np.array(gain), low
+        )
+        assert (uncapped["z"] < ref["z"] - 1e-3).sum() > n // 10
 
 
 def test_plan_windows_and_bracket(caplog):
@@ -263,6 +291,10 @@ def test_cli_masks_happy_path(tmp_path, rng, capsys):
         (["--video", "{tmp}/missing.avi"], "video file not found"),
         (["--video", "{video}", "--window", "0"], "MaskConfig.window"),
         (["--video", "{video}", "--shadow-lo", "0.9", "--shadow-hi", "0.5"], "MaskConfig.shadow_hi"),
+        (["--video", "{video}", "--fg-low", "5"], "MaskConfig.fg_low"),
+        (["--video", "{video}", "--fg-low", "0"], "MaskConfig.neighbourhood"),  # the neighbourhood needs it
+        (["--video", "{video}", "--spread-cap", "0.5"], "MaskConfig.spread_cap"),
+        (["--video", "{video}", "--shadow-band", "0.9"], "MaskConfig.shadow_band"),
     ],
 )
 def test_cli_masks_bad_input(tmp_path, rng, capsys, argv, message):
@@ -288,3 +320,169 @@ def test_sampler_seeks_read_the_sampled_frames(tmp_path, rng):
     assert min(np.diff(samples)) >= 8
     expected, _ = numpy_masks.median_mad(decoded[list(samples)])
     np.testing.assert_array_equal(masks.background(), expected)
+
+
+def _hysteresis_ref(levels: np.ndarray) -> np.ndarray:
+    """Breadth-first flood from the strong pixels through 8-connected weak/strong ones."""
+    h, w = levels.shape
+    out = np.zeros((h, w), np.uint8)
+    todo = [tuple(p) for p in np.argwhere(levels == 2)]
+    for p in todo:
+        out[p] = 1
+    while todo:
+        y, x = todo.pop()
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                v, u = y + dy, x + dx
+                if 0 <= v < h and 0 <= u < w and levels[v, u] > 0 and not out[v, u]:
+                    out[v, u] = 1
+                    todo.append((v, u))
+    return out
+
+
+def test_hysteresis_matches_flood_reference(rng):
+    from wptrack.background import hysteresis
+
+    for density in (0.05, 0.3, 0.6):
+        levels = (rng.random((40, 50)) < density).astype(np.uint8)
+        levels[rng.random((40, 50)) < 0.02] = 2
+        got = hysteresis(levels)
+        np.testing.assert_array_equal(got, _hysteresis_ref(levels))
+        assert got.sum() >= (levels == 2).sum()
+    assert hysteresis(np.ones((5, 5), np.uint8)).sum() == 0  # weak only: nothing
+    diag = np.eye(6, dtype=np.uint8)
+    diag[0, 0] = 2
+    assert hysteresis(diag).sum() == 6  # 8-connected along the diagonal
+
+
+def test_low_contrast_part_kept_when_attached(rng):
+    """A box whose lower half barely differs from the background (camouflage) is kept whole with the hysteresis;
+    the same faint patch alone (not attached to a contrasted part) stays background."""
+    grey = np.full((H, W, 3), 120.0, np.float32)
+    frames = 25
+    video = _noisy(rng, grey, frames, noise=1.0)
+    last = grey.copy()
+    last[10:25, 20:35] = (40, 160, 60)  # contrasted top
+    last[25:50, 20:35] += 5.5  # faint legs: z about 2.75 (noise scale: the floor, 2)
+    last[25:50, 60:75] += 5.5  # a faint patch alone
+    t = frames - 1
+    video[t] = np.clip(last + rng.normal(0, 1.0, last.shape), 0, 255).astype(np.uint8)
+    base = dict(window=frames, device="cpu", open_px=3, close_px=5, noise_floor=2.0)
+    plain = list(open_masks(video=video, config=MaskConfig(**base, **ROUND_ONE)))[t]
+    hyst = list(open_masks(video=video, config=MaskConfig(**base, **{**ROUND_ONE, "fg_low": 2.0})))[t]
+    assert plain[27:48, 22:33].mean() < 0.3 and hyst[27:48, 22:33].mean() > 0.9
+    assert hyst[27:48, 62:73].mean() < 0.05 and hyst[12:23, 22:33].mean() > 0.99
+    assert hyst[:, 40:56].sum() == 0 and hyst[55:, :].sum() == 0
+
+
+def test_spread_cap_finds_object_standing_in_many_samples(rng):
+    """An object standing in 10 of 25 samples inflates its pixels' MAD: without the cap it hides (z under the
+    threshold), with the image-wide cap it is foreground while it stands."""
+    bg = _texture(rng)
+    frames = 25
+    video = _noisy(rng, bg, frames)
+    colour = np.clip(bg[20:40, 30:50] + 22.0, 0, 255)
+    for t in range(10):
+        video[t, 20:40, 30:50] = np.clip(colour + rng.normal(0, 3.0, colour.shape), 0, 255).astype(np.uint8)
+    base = dict(window=frames, samples=frames, device="cpu")
+    plain = np.stack(list(open_masks(video=video, config=MaskConfig(**base, **ROUND_ONE))))
+    capped = np.stack(list(open_masks(video=video, config=MaskConfig(**base, **{**ROUND_ONE, "spread_cap": 1.5}))))
+    assert plain[:10, 22:38, 32:48].mean() < 0.5
+    assert capped[:10, 22:38, 32:48].mean() > 0.95
+    assert capped[10:].sum() == 0 and np.delete(capped[:10], np.s_[20:40], axis=1).sum() == 0
+
+
+def test_resolve_levels_penumbra_near_shadow_only():
+    from wptrack.background import PENUMBRA_PX, resolve_levels
+
+    packed = np.zeros((30, 60), np.uint8)
+    packed[5:25, 5:15] = 8  # cast shadow (umbra)
+    packed[5:25, 15:17] = 4 + 2  # its rim: penumbra candidates, strong by z
+    packed[5:25, 40:50] = 4 + 2  # penumbra-like pixels far from any umbra: an object's part
+    packed[5:25, 50:52] = 1  # weak, attached to them
+    prob = np.ones((30, 60), np.float32)
+    mask = resolve_levels(packed.copy(), prob)
+    assert mask[:, :20].sum() == 0 and prob[5:25, 15:17].max() == 0.0
+    assert mask[5:25, 40:52].all() and prob[5:25, 40:50].min() == 1.0
+    assert mask.sum() == 20 * 12
+    far = np.zeros((30, 60), np.uint8)
+    far[5:25, 5:15] = 8
+    far[5:25, 15 + PENUMBRA_PX + 1 : 30] = 4 + 2  # beyond the rim width: kept
+    assert resolve_levels(far.copy()).sum() == 20 * (15 - PENUMBRA_PX - 1)
+
+
+def test_learnt_shadow_ratio_removes_deep_shadows_keeps_dark_objects(rng):
+    """Hard shadows darker than shadow_lo (ratio 0.36) move across a grey floor next to a dark grey object
+    (ratio 0.7, neutral: the fixed test takes it for a shadow). The learnt ratio removes the shadows and keeps the
+    object; the fixed bounds do the opposite."""
+    from wptrack.background import shadow_ratio
+
+    grey = np.full((H, W, 3), 140.0, np.float32)
+    frames = 25
+    video = _noisy(rng, grey, frames, noise=2.0)
+    for t in range(frames):
+        img = grey.copy()
+        img[5:35, 4 * t : 4 * t + 14] *= 0.36  # the shadow
+        img[45:65, 86 - 3 * t : 86 - 3 * t + 10] *= 0.7  # the dark object
+        video[t] = np.clip(img + rng.normal(0, 2.0, img.shape), 0, 255).astype(np.uint8)
+    base = dict(window=frames, samples=frames, device="cpu", fg_low=2.0, neighbourhood=0)
+    fixed = np.stack(list(open_masks(video=video, config=MaskConfig(**base, shadow_band=0.0))))
+    learnt_masks = open_masks(video=video, config=MaskConfig(**base, shadow_band=0.08))
+    learnt = np.stack(list(learnt_masks))
+    ratio = learnt_masks.model._ratio[0]
+    assert ratio is not None and abs(ratio - 0.36) < 0.03
+    t = 12
+    shadow, obj = np.s_[7:33, 4 * t + 2 : 4 * t + 12], np.s_[47:63, 88 - 3 * t : 86 - 3 * t + 8]
+    assert fixed[t][shadow].mean() > 0.95 and fixed[t][obj].mean() < 0.05
+    assert learnt[t][shadow].mean() < 0.01 and learnt[t][obj].mean() > 0.95
+    flat = np.full((4, 100, 3), 100, np.uint8)
+    assert shadow_ratio(flat, np.ones((4, 3)), flat[0].astype(float), np.ones((100, 3)), 4.0, 3.0, 0.1) is None
+
+
+@pytest.mark.parametrize(("radius", "scale"), [(1, 1.0), (2, 0.7)])
+def test_neighbourhood_kernel_matches_numpy(device, rng, radius, scale):
+    h, w = 70, 81  # several runs of RUN pixels per row and column, the last ones partial
+    packed = rng.choice(np.array([0, 0, 0, 1, 2, 4, 8], np.uint8), (h, w))
+    diff = rng.normal(0.0, 1.0, (h, w, 3)).astype(np.float32)
+    diff[5:15, 5:20] += 1.6  # a faint coherent region
+    diff[40:60, 30:70] -= 1.6
+    out = wp.zeros(h * w, dtype=wp.uint8, device=device)
+    rows = wp.zeros(h * w, dtype=wp.vec4, device=device)
+    dev_packed = wp.array(packed.reshape(-1), dtype=wp.uint8, device=device)
+    dev_diff = wp.array(diff.reshape(-1, 3), dtype=wp.vec3, device=device)
+    run = int(kbg.RUN)
+    wp.launch(
+        kbg.neighbourhood_rows_kernel,
+        dim=h * ((w + run - 1) // run),
+        inputs=[dev_packed, dev_diff, w, h, radius],
+        outputs=[rows],
+        device=device,
+    )
+    wp.launch(
+        kbg.neighbourhood_kernel,
+        dim=w * ((h + run - 1) // run),
+        inputs=[dev_packed, rows, w, h, radius, 2.0, scale],
+        outputs=[out],
+        device=device,
+    )
+    ref = numpy_masks.neighbourhood(packed, diff.astype(np.float64), radius, 2.0, scale)
+    got = out.numpy().reshape(h, w)
+    np.testing.assert_array_equal(got, ref)
+    changed = got != packed
+    assert changed.sum() > 20 and np.all(got[changed] == packed[changed] + 1)
+    assert np.all((packed[changed] & 3) == 0) and np.all((packed[changed] >> 2) != 2)
+    assert changed[5:15, 5:20].mean() > 2 * changed.mean()
+
+
+def test_neighbourhood_scale_independent_vs_correlated_noise(rng):
+    from wptrack.background import neighbourhood_scale
+
+    k, h, w = 5, 60, 80
+    bg = np.full((h, w, 3), 120, np.uint8)
+    mad = np.full((h, w, 3), 2, np.uint8)
+    iid = np.clip(120 + rng.normal(0, 3.0, (k, h, w, 3)), 0, 255).astype(np.uint8)
+    blocks = rng.normal(0, 3.0, (k, h // 4, w // 4, 3))
+    corr = np.clip(120 + np.repeat(np.repeat(blocks, 4, axis=1), 4, axis=2), 0, 255).astype(np.uint8)
+    ones = np.ones((k, 3))
+    assert 0.85 < neighbourhood_scale(iid, ones, bg, mad, 1, 3.0) <= 1.0
+    assert neighbourhood_scale(corr, ones, bg, mad, 1, 3.0) < 0.6  # 4 x 4 blocks: neighbours move together

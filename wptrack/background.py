@@ -24,6 +24,12 @@ Design (kernels and formulas: :mod:`wptrack.kernels.background`):
   grabbing otherwise), so only two windows' backgrounds are held and a long recording costs about
   ``K / (L / 2)`` extra decoded frames per frame (25 / 150 with the defaults). The exact frame a seek lands on
   does not matter: the median is robust to a sample being a frame off.
+* **Spread cap.** Each window also records the image-wide median of its per-pixel noise scales (on a pixel
+  subsample); with ``MaskConfig.spread_cap`` the per-pixel scale is capped at that many times it, so an object
+  standing in a large minority of a window's samples does not hide itself by inflating its pixels' MAD.
+* **Hysteresis.** With ``MaskConfig.fg_low``, the kernel marks weak foreground (``fg_low < z <= fg_threshold``)
+  beside the strong; :func:`hysteresis` keeps the weak pixels 8-connected to a strong one (OpenCV connected
+  components on the host, where the mask goes anyway).
 """
 
 from __future__ import annotations
@@ -191,13 +197,186 @@ def sample_gains(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return gains.astype(np.float32), np.median(x / gains[:, None, :], axis=0)
 
 
+def hysteresis(levels: np.ndarray) -> np.ndarray:
+    """Hysteresis of a mask of levels: weak pixels (1) count only when 8-connected to a strong one (2).
+
+    Args:
+        levels: ``(H, W)`` uint8 with values 0 (background), 1 (weak) and 2 (strong foreground).
+
+    Returns:
+        ``(H, W)`` uint8 mask with values ``{0, 1}``: the connected components of ``levels > 0`` that hold a
+        strong pixel.
+    """
+    import cv2
+
+    weak = (levels > 0).view(np.uint8)
+    count, labels = cv2.connectedComponents(weak, connectivity=8)
+    keep = np.zeros(count, dtype=np.uint8)
+    keep[labels[levels == 2]] = 1
+    keep[0] = 0
+    return keep[labels]
+
+
+PENUMBRA_PX = 3
+"""Penumbra candidates within this many pixels of a cast shadow are shadow (:func:`resolve_levels`)."""
+
+
+def _disc(diameter: int) -> np.ndarray:
+    import cv2
+
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (diameter, diameter))
+
+
+def resolve_levels(packed: np.ndarray, prob: np.ndarray | None = None) -> np.ndarray:
+    """The binary mask of a frame from the kernel's packed output ``level + 4 shadow``
+    (:func:`wptrack.kernels.background.foreground_kernel`).
+
+    Penumbra candidates (shadow 1) within :data:`PENUMBRA_PX` pixels of a cast shadow (shadow 2) are shadow
+    (background, probability 0 in ``prob``, changed in place): the brighter rim of a soft shadow; the others keep
+    their level (a shirt of the paving's colour attached to dark trousers taken for a shadow is not eaten whole);
+    then :func:`hysteresis`.
+
+    Args:
+        packed: ``(H, W)`` uint8 kernel output.
+        prob: ``(H, W)`` float32 probability to zero on the penumbrae, or ``None``.
+
+    Returns:
+        ``(H, W)`` uint8 mask with values ``{0, 1}``.
+    """
+    import cv2
+
+    levels = packed & 3
+    shadow = packed >> 2
+    if (shadow == 1).any():
+        near = cv2.dilate((shadow == 2).view(np.uint8), _disc(2 * PENUMBRA_PX + 1))
+        penumbra = (near > 0) & (shadow == 1)
+        levels[penumbra] = 0
+        if prob is not None:
+            prob[penumbra] = 0.0
+    if (levels == 1).any():
+        return hysteresis(levels)
+    return (levels == 2).view(np.uint8)
+
+
+def spread_scale(mad: np.ndarray, step: int = 7) -> float:
+    """Image-wide median of the per-pixel noise scales ``1.4826 sqrt(sum_c MAD_c^2 / 3)`` (8-bit units), over every
+    ``step``-th pixel of a flat ``(3 P,)`` MAD array."""
+    m = mad.reshape(-1, 3)[::step].astype(np.float64)
+    return float(np.median(1.4826 * np.sqrt((m * m).mean(axis=1))))
+
+
+def neighbourhood_scale(
+    samples: np.ndarray,
+    gains: np.ndarray,
+    median: np.ndarray,
+    mad: np.ndarray,
+    radius: int,
+    noise_floor: float,
+    max_samples: int = 5,
+) -> float:
+    """How much averaging over a ``(2 radius + 1)^2`` neighbourhood reduces the noise of a recording, relative to
+    independent pixels: ``c = sigma_1 / (sqrt(N) sigma_N)`` with ``sigma_1`` the robust spread (MAD) of the
+    normalised differences ``(I - B) / s`` of a window's samples and ``sigma_N`` that of their neighbourhood means
+    (N pixels). Independent noise (a rendered scene's sensor noise) gives 1; spatially correlated noise
+    (compression blocks, demosaicing, denoising) less, down to ``1 / sqrt(N)`` when neighbours move together.
+    :func:`wptrack.kernels.background.neighbourhood_kernel` multiplies its ``z_n`` by ``c``, so a coherent change
+    must beat the recording's real neighbourhood noise.
+
+    Args:
+        samples: ``(K, H, W, 3)`` uint8 a window's samples. gains: ``(K, 3)`` their global gains.
+        median: ``(H, W, 3)`` uint8 the window's background. mad: ``(H, W, 3)`` uint8 its MAD.
+        radius: Neighbourhood radius, pixels.
+        noise_floor: Smallest noise scale, 8-bit units.
+        max_samples: Samples used (evenly chosen), to bound the cost.
+
+    Returns:
+        ``c`` in ``[1 / sqrt(N), 1]``.
+    """
+    import cv2
+
+    n = (2 * radius + 1) ** 2
+    s = np.maximum(noise_floor, 1.4826 * np.sqrt((mad.astype(np.float32) ** 2).mean(axis=2)))[..., None]
+    b = median.astype(np.float32)
+    pick = np.unique(np.linspace(0, len(samples) - 1, min(max_samples, len(samples))).round().astype(int))
+    single, mean = [], []
+    for k in pick:
+        d = (samples[k].astype(np.float32) / gains[k].astype(np.float32) - b) / s
+        single.append(np.abs(d[radius:-radius:3, radius:-radius:3]).ravel())
+        mean.append(np.abs(cv2.blur(d, (2 * radius + 1, 2 * radius + 1))[radius:-radius:3, radius:-radius:3]).ravel())
+    s1 = float(np.median(np.concatenate(single)))
+    sn = float(np.median(np.concatenate(mean)))
+    if sn <= 0:
+        return 1.0
+    return float(np.clip(s1 / (np.sqrt(n) * sn), 1.0 / np.sqrt(n), 1.0))
+
+
+SHADOW_SEARCH = (0.3, 0.95)
+"""Brightness ratios searched for the learnt shadow ratio (:func:`shadow_ratio`). Below 0.3 lie mostly dark
+objects (a dark car's sides on a grey road: 0.2), not outdoor cast shadows (the sky light alone is rarely under a
+third of sky + sun on a horizontal surface)."""
+
+
+def shadow_ratio(
+    samples: np.ndarray,
+    gains: np.ndarray,
+    background: np.ndarray,
+    mad: np.ndarray,
+    threshold: float,
+    noise_floor: float,
+    chroma_max: float,
+    bin_width: float = 0.02,
+    min_count: int = 200,
+) -> float | None:
+    """The brightness ratio of the cast shadows of a recording, learnt from a window's samples.
+
+    Every sampled pixel that is foreground (``z > threshold``) and passes the chromaticity part of the shadow test
+    (``cd <= chroma_max``) votes for its brightness ratio ``a`` (see :mod:`wptrack.kernels.background`); the cast
+    shadows of one sun all darken the ground by about the same ratio and make the highest peak of the histogram
+    of ``a`` inside :data:`SHADOW_SEARCH` (dark objects spread over many ratios, or lie below it). The peak must
+    be a local maximum of the smoothed histogram, not the search range's end (the tail of a peak outside it).
+
+    Args:
+        samples: ``(K, P, 3)`` uint8 sampled values of P subsampled pixels. gains: ``(K, 3)`` the samples' global
+            gains. background: ``(P, 3)`` the window's background at those pixels. mad: ``(P, 3)`` its MAD.
+        threshold, noise_floor, chroma_max: As in :class:`wptrack.kernels.background.ForegroundParams`.
+        bin_width: Histogram bin width (ratio).
+        min_count: Fewer votes than this inside the search range: ``None`` (nothing learnt).
+
+    Returns:
+        The ratio at the peak, or ``None``.
+    """
+    b = background.astype(np.float64)
+    s = np.maximum(noise_floor, 1.4826 * np.sqrt((mad.astype(np.float64) ** 2).mean(axis=1)))
+    bb = (b * b).sum(axis=1)
+    votes = []
+    for xk, g in zip(samples, gains, strict=True):
+        x = xk.astype(np.float64) / g[None, :]
+        ib = (x * b).sum(axis=1)
+        a = ib / np.maximum(bb, 1.0)
+        cd = np.sqrt(np.maximum((x * x).sum(axis=1) - a * ib, 0.0) / np.maximum(bb, 1.0))
+        z = np.sqrt(((x - b) ** 2).mean(axis=1)) / s
+        votes.append(a[(z > threshold) & (cd <= chroma_max) & (bb >= 1.0)])
+    a = np.concatenate(votes)
+    lo, hi = SHADOW_SEARCH
+    edges = np.arange(lo, hi + bin_width / 2, bin_width)
+    counts, _ = np.histogram(a, bins=edges)
+    if counts.sum() < min_count:
+        return None
+    smooth = np.convolve(counts.astype(np.float64), [0.25, 0.5, 0.25], mode="same")
+    peaks = [i for i in range(1, len(smooth) - 1) if smooth[i] >= smooth[i - 1] and smooth[i] > smooth[i + 1]]
+    if not peaks:
+        return None
+    best = max(peaks, key=lambda i: smooth[i])
+    return float(edges[best] + bin_width / 2)
+
+
 class OfflineBackground:
     """Windowed median/MAD background of one source and the per-frame foreground evidence.
 
     Args:
         source: The camera's frames.
-        config: A ``MaskConfig`` (fields ``window``, ``samples``, ``fg_threshold``, ``soft_scale``,
-            ``noise_floor``, ``detect_shadows``, ``shadow_lo``, ``shadow_hi``, ``shadow_chroma``).
+        config: A ``MaskConfig`` (fields ``window``, ``samples``, ``fg_threshold``, ``fg_low``, ``spread_cap``,
+            ``soft_scale``, ``noise_floor``, ``detect_shadows``, ``shadow_lo``, ``shadow_hi``, ``shadow_chroma``).
         device: Warp device alias.
 
     Attributes:
@@ -224,7 +403,13 @@ class OfflineBackground:
         self._mask = wp.zeros(self.pixels, dtype=wp.uint8, device=device)
         self._prob = wp.zeros(self.pixels, dtype=wp.float32, device=device)
         self._shadow = wp.zeros(self.pixels, dtype=wp.uint8, device=device)
+        self._diff = wp.zeros(self.pixels, dtype=wp.vec3, device=device)
+        self._packed = wp.zeros(self.pixels, dtype=wp.uint8, device=device) if config.neighbourhood else None
+        self._rows = wp.zeros(self.pixels, dtype=wp.vec4, device=device) if config.neighbourhood else None
         self._built: dict[int, tuple[Any, Any]] = {}
+        self._scale: dict[int, float] = {}  # image-wide median noise scale of each built window
+        self._nb_scale: dict[int, float] = {}  # neighbourhood_scale of each built window
+        self._ratio: dict[int, float | None] = {}  # learnt shadow ratio of each built window (None: not learnt)
         # channel values of a pixel subsample (every 13th pixel) for the global gains (illumination changes)
         self._sub = (3 * np.arange(0, self.pixels, 13)[:, None] + np.arange(3)[None, :]).reshape(-1)
         self._bg_sub: dict[int, np.ndarray] = {}
@@ -236,11 +421,14 @@ class OfflineBackground:
         for it), with its ``(H, W, 3)`` uint8 BGR background: e.g. a run saving the backgrounds for its report."""
         p = kbg.ForegroundParams()
         p.threshold = float(config.fg_threshold)
+        p.low_threshold = float(config.fg_low) if config.fg_low > 0 else float(config.fg_threshold)
+        p.spread_cap = 0.0
         p.soft_scale = float(config.soft_scale)
         p.noise_floor = float(config.noise_floor)
         p.shadow = int(bool(config.detect_shadows))
         p.shadow_lo = float(config.shadow_lo)
         p.shadow_hi = float(config.shadow_hi)
+        p.shadow_edge_hi = float(config.shadow_hi)
         p.chroma_max = float(config.shadow_chroma)
         self.params = p
 
@@ -272,11 +460,49 @@ class OfflineBackground:
             kbg.median_mad_kernel, dim=3 * self.pixels, inputs=[stack, g], outputs=[median, mad], device=self.device
         )
         self._built[i] = (median, mad)
+        c = self.config
+        if c.spread_cap > 0 or c.shadow_band > 0 or c.neighbourhood > 0:
+            mad_host = mad.numpy()
+            self._scale[i] = spread_scale(mad_host)
+            if c.neighbourhood > 0:
+                shape = (self.source.height, self.source.width, 3)
+                self._nb_scale[i] = neighbourhood_scale(
+                    host.reshape(k, *shape), gains, median.numpy().reshape(shape), mad_host.reshape(shape),
+                    c.neighbourhood, c.noise_floor,
+                )  # fmt: skip
+                log.info(
+                    "%s: background window %d: neighbourhood noise scale %.2f", self.source.name, i, self._nb_scale[i]
+                )
+            if self.config.shadow_band > 0 and self.config.detect_shadows:
+                c = self.config
+                ratio = shadow_ratio(
+                    host[:, self._sub].reshape(k, -1, 3), gains, self._bg_sub[i], mad_host[self._sub].reshape(-1, 3),
+                    c.fg_threshold, c.noise_floor, c.shadow_chroma,
+                )  # fmt: skip
+                self._ratio[i] = ratio
+                log.info("%s: background window %d: learnt shadow ratio %s", self.source.name, i, ratio)
         log.debug("%s: background window %d from %d frames", self.source.name, i, k)
         if self.on_build is not None:
             image = median.numpy().reshape(self.source.height, self.source.width, 3).copy()
             self.on_build(i, float(self.centres[i]), image)
         return median, mad
+
+    def shadow_bounds(self, i: int, j: int, w: float) -> tuple[float, float]:
+        """Brightness-ratio bounds of the cast-shadow (umbra) test between windows ``i`` and ``j`` (weight ``w`` of
+        ``j``): the learnt ratio ``r`` (interpolated; a window that learnt none uses the other's) gives
+        ``[max(min(r - band, shadow_lo), 0.05), min(r + band, shadow_hi)]`` (the learnt ratio may lower the
+        configured bound, for deep sun shadows, but does not raise it: a scene's shadows are not all as faint as its
+        most common one; on the PETS clip, ratio 0.91, raising it made shadows foreground); ratios above, up to
+        ``shadow_hi``, are penumbra
+        candidates (shadow only where attached to an umbra, :func:`resolve_levels`). No learnt ratio: the
+        configured ``[shadow_lo, shadow_hi]``."""
+        c = self.config
+        ri, rj = self._ratio.get(i), self._ratio.get(j)
+        if ri is None and rj is None:
+            return float(c.shadow_lo), float(c.shadow_hi)
+        r = (1.0 - w) * (ri if ri is not None else rj) + w * (rj if rj is not None else ri)
+        lo = max(min(r - c.shadow_band, c.shadow_lo), 0.05)
+        return float(lo), float(max(min(r + c.shadow_band, c.shadow_hi), lo))
 
     def background(self, i: int = 0) -> np.ndarray:
         """``(H, W, 3)`` uint8 BGR background of window ``i`` (builds it if needed)."""
@@ -296,8 +522,8 @@ class OfflineBackground:
             frame: ``(H, W, 3)`` uint8 BGR.
 
         Returns:
-            ``(mask, prob)``: ``(H, W)`` uint8 mask (1 = foreground, shadows excluded, not cleaned) and ``(H, W)``
-            float32 foreground probability.
+            ``(mask, prob)``: ``(H, W)`` uint8 mask (1 = foreground, shadows excluded, after the hysteresis, not
+            cleaned) and ``(H, W)`` float32 foreground probability.
         """
         import warp as wp
 
@@ -312,16 +538,42 @@ class OfflineBackground:
         bg_sub = (1.0 - w) * self._bg_sub[i] + w * self._bg_sub[j]
         gain = frame_gain(flat[self._sub].reshape(-1, 3), bg_sub)
         self.last_gain = gain
+        if self.config.spread_cap > 0:
+            self.params.spread_cap = float(self.config.spread_cap * ((1.0 - w) * self._scale[i] + w * self._scale[j]))
+        if self.config.shadow_band > 0:
+            self.params.shadow_lo, self.params.shadow_hi = self.shadow_bounds(i, j, w)
         wp.copy(self._frame, wp.array(flat, dtype=wp.uint8, device="cpu", copy=False))
         wp.launch(
             kbg.foreground_kernel,
             dim=self.pixels,
             inputs=[self._frame, b0, m0, b1, m1, w, wp.vec3(*gain), self.params],
-            outputs=[self._mask, self._prob, self._shadow],
+            outputs=[self._mask, self._prob, self._shadow, self._diff],
             device=self.device,
         )
+        packed = self._mask
+        if self._packed is not None:
+            r = int(self.config.neighbourhood)
+            width, height = self.source.width, self.source.height
+            run = int(kbg.RUN)
+            wp.launch(
+                kbg.neighbourhood_rows_kernel,
+                dim=height * ((width + run - 1) // run),
+                inputs=[self._mask, self._diff, width, height, r],
+                outputs=[self._rows],
+                device=self.device,
+            )
+            scale = float((1.0 - w) * self._nb_scale[i] + w * self._nb_scale[j])
+            wp.launch(
+                kbg.neighbourhood_kernel,
+                dim=width * ((height + run - 1) // run),
+                inputs=[self._mask, self._rows, width, height, r, self.params.low_threshold, scale],
+                outputs=[self._packed],
+                device=self.device,
+            )
+            packed = self._packed
         shape = (self.source.height, self.source.width)
-        return self._mask.numpy().reshape(shape).copy(), self._prob.numpy().reshape(shape).copy()
+        prob = self._prob.numpy().reshape(shape).copy()
+        return resolve_levels(packed.numpy().reshape(shape), prob), prob
 
     def close(self) -> None:
         """Release the sampler's video reader."""

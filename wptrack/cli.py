@@ -428,7 +428,8 @@ def cmd_masks(args) -> int:
 
     kw = {"method": args.method, "device": args.device, "detect_shadows": not args.keep_shadows}
     for name in ("window", "samples", "fg_threshold", "noise_floor", "shadow_lo", "shadow_hi", "shadow_chroma",
-                 "soft_scale", "history", "open_px", "close_px", "min_area"):  # fmt: skip
+                 "soft_scale", "history", "open_px", "close_px", "min_area", "fg_low", "spread_cap", "shadow_band",
+                 "neighbourhood"):  # fmt: skip
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     summary = write_masks(
@@ -734,6 +735,10 @@ def build_parser() -> argparse.ArgumentParser:
     mk.add_argument("--shadow-hi", type=float, default=None, help="offline: shadow brightness ratio max (0.95)")
     mk.add_argument("--shadow-chroma", type=float, default=None, help="offline: shadow chromaticity bound (0.1)")
     mk.add_argument("--soft-scale", type=float, default=None, help="offline: probability scale, sigmas (1)")
+    mk.add_argument("--fg-low", type=float, default=None, help="offline: hysteresis low threshold, sigmas (3; 0: off)")
+    mk.add_argument("--spread-cap", type=float, default=None, help="offline: noise scale cap, x median (1.5; 0: off)")
+    mk.add_argument("--shadow-band", type=float, default=None, help="offline: learnt shadow band (0.08; 0: off)")
+    mk.add_argument("--neighbourhood", type=int, default=None, help="offline: neighbourhood radius, px (1; 0: off)")
     mk.add_argument("--history", type=int, default=None, help="mog2/knn: history, frames (200)")
     mk.add_argument("--keep-shadows", action="store_true", help="count shadow pixels as foreground")
     mk.add_argument("--open-px", type=int, default=None, help="morphological opening, pixels (3; 0: off)")

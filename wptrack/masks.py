@@ -6,8 +6,10 @@ made in one of three ways:
 * **offline background model** (``method="offline"``, the default): the whole recording is available, so the
   background of each frame is the per-pixel temporal median of frames sampled before and after it, in sliding
   windows (:mod:`wptrack.background`, Warp kernels in :mod:`wptrack.kernels.background`); foreground is the robust
-  distance to it; cast shadows (same chromaticity, darker by a bounded ratio) count as background; a per-frame
-  foreground probability comes beside the mask (:meth:`MotionMasks.evidence`); then :func:`clean_mask`;
+  distance to it (per-pixel noise scale capped by the image-wide one, weak evidence kept where connected to strong:
+  hysteresis, and a neighbourhood test for faint coherent changes); cast shadows (same chromaticity, darker by the
+  recording's learnt shadow ratio) count as background; a per-frame foreground probability comes beside the mask
+  (:meth:`MotionMasks.evidence`); then :func:`clean_mask`;
 * **online background subtraction** of a camera's frames (``method="mog2"`` or ``"knn"``): OpenCV's
   ``cv2.createBackgroundSubtractorMOG2`` / ``cv2.createBackgroundSubtractorKNN``; shadow pixels (OpenCV's value
   127, when ``detect_shadows``) count as background; then :func:`clean_mask`: a morphological opening (removes
@@ -91,10 +93,24 @@ class MaskConfig:
         samples: Offline only: frames sampled per window for its temporal median (1 to 64).
         fg_threshold: Offline only: foreground when the RMS colour distance to the background exceeds this many
             robust standard deviations (> 0).
+        fg_low: Offline only: hysteresis low threshold, robust standard deviations: a pixel with
+            ``fg_low < z <= fg_threshold`` (not a shadow) is foreground when 8-connected to one above ``fg_threshold``
+            (0 disables; else in ``(0, fg_threshold]``).
+        neighbourhood: Offline only: radius in pixels of the neighbourhood whose mean difference to the background
+            also marks weak foreground (:func:`wptrack.kernels.background.neighbourhood_kernel`: a faint but
+            coherent change, as a dark car's roof on the road; 0 disables; 0 to 3). Needs ``fg_low``.
+        spread_cap: Offline only: the per-pixel noise scale is capped at this many times the image-wide median
+            scale of the window (0 disables; else >= 1), so an object standing still in many of a window's samples
+            does not inflate its own pixels' noise scale and vanish.
         noise_floor: Offline only: lower bound of the per-pixel noise standard deviation, 8-bit units (> 0).
         shadow_lo: Offline only: smallest brightness ratio (pixel / background along the background colour) of a
             cast shadow, in ``(0, shadow_hi)``.
         shadow_hi: Offline only: largest brightness ratio of a cast shadow, in ``(shadow_lo, 1]``.
+        shadow_band: Offline only: learn the shadows' brightness ratio ``r`` from the recording (the peak of the
+            ratios of candidate shadow pixels of each window's samples, see :func:`wptrack.background.shadow_ratio`)
+            and take ``min(r - shadow_band, shadow_lo) <= a <= r + shadow_band`` as cast shadow, and
+            ``r + shadow_band < a <= shadow_hi`` as shadow only within 3 px of it (the penumbra); 0 disables (then,
+            and where nothing is learnt: ``shadow_lo <= a <= shadow_hi``); else in ``(0, 0.5]``.
         shadow_chroma: Offline only: largest chromaticity distortion ``|I - a B| / |B|`` of a cast shadow (>= 0).
         soft_scale: Offline only: scale ``k`` of the foreground probability ``1 / (1 + exp(-(z - T) / k))``, robust
             standard deviations (> 0).
@@ -117,10 +133,14 @@ class MaskConfig:
     window: int = 300
     samples: int = 25
     fg_threshold: float = 4.0
+    fg_low: float = 3.0
+    spread_cap: float = 1.5
+    neighbourhood: int = 1
     noise_floor: float = 3.0
     shadow_lo: float = 0.4
     shadow_hi: float = 0.95
     shadow_chroma: float = 0.1
+    shadow_band: float = 0.08
     soft_scale: float = 1.0
     device: str = "auto"
 
@@ -160,6 +180,14 @@ class MaskConfig:
             value = getattr(self, field)
             if not _is_real(value) or not math.isfinite(value) or value <= 0:
                 fail(field, expected)
+        if not _is_real(self.fg_low) or not (self.fg_low == 0 or 0 < self.fg_low <= self.fg_threshold):
+            fail("fg_low", f"0 (off) or in (0, fg_threshold={self.fg_threshold}] (robust standard deviations)")
+        if not _is_int(self.neighbourhood) or not 0 <= self.neighbourhood <= 3:
+            fail("neighbourhood", "an integer in [0, 3] (pixels; 0 disables)")
+        if self.neighbourhood and not self.fg_low:
+            fail("neighbourhood", "0 unless fg_low is set (it adds weak foreground, kept by the hysteresis)")
+        if not _is_real(self.spread_cap) or not (self.spread_cap == 0 or 1 <= self.spread_cap < math.inf):
+            fail("spread_cap", "0 (off) or a finite number >= 1 (times the image-wide median noise scale)")
         for field in ("shadow_lo", "shadow_hi", "shadow_chroma"):
             if not _is_real(getattr(self, field)) or not math.isfinite(getattr(self, field)):
                 fail(field, "a finite number")
@@ -167,6 +195,8 @@ class MaskConfig:
             fail("shadow_lo", "in (0, 1) (brightness ratio)")
         if not self.shadow_lo < self.shadow_hi <= 1:
             fail("shadow_hi", f"in (shadow_lo={self.shadow_lo}, 1] (brightness ratio)")
+        if not _is_real(self.shadow_band) or not 0 <= self.shadow_band <= 0.5:
+            fail("shadow_band", "in [0, 0.5] (brightness ratio; 0: fixed bounds)")
         if self.shadow_chroma < 0:
             fail("shadow_chroma", ">= 0 (chromaticity distortion)")
         if not isinstance(self.device, str) or not (

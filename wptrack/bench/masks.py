@@ -131,10 +131,11 @@ class MasksSuite:
             t0 = time.perf_counter()
             ref = numpy_masks.foreground(
                 f, median, mad, median, mad, 0.0, c.fg_threshold, c.soft_scale, c.noise_floor, c.detect_shadows,
-                c.shadow_lo, c.shadow_hi, c.shadow_chroma, gains[t],
+                model.params.shadow_lo, model.params.shadow_hi, c.shadow_chroma, gains[t], model.params.low_threshold,
+                model.params.spread_cap, model.params.shadow_edge_hi, c.neighbourhood, model._nb_scale.get(0, 1.0),
             )  # fmt: skip
             ref_t.append(time.perf_counter() - t0)
-            near = np.abs(ref["z"] - c.fg_threshold) < 1e-3
+            near = (np.abs(ref["z"] - c.fg_threshold) < 1e-3) | (np.abs(ref["z"] - model.params.low_threshold) < 1e-3)
             equivalent &= bool(np.all((masks[t] == ref["mask"]) | near))
             equivalent &= bool(np.allclose(probs[t], ref["prob"], atol=1e-4) or near.any())
         stride = max(c.window // 2, 1)
