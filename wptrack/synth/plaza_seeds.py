@@ -26,8 +26,8 @@ principle flip a borderline decision and so give another sequence for that seed:
   nearest neighbours are 0.6-1.2 m apart at every frame (the formation wobbles as at seed 0), walking 1.0-1.15 m/s
   along a route wide enough for it: at 65 % of the seeds from below the image up the free middle of the plaza,
   between the central kerb bollards and in a wide curve out along the road at a side (or that way reversed), else
-  along the road from side to side; every member in view for at least 90 frames. A straggler follows the route 1.5-4.5 s behind, offset by up to 0.4 m, at 0.95-1.12 times
-  the group's speed.
+  along the road from side to side; every member in view for at least 90 frames. A straggler follows the route
+  1.5-4.5 s behind, offset by up to 0.4 m, at 0.95-1.12 times the group's speed.
 - ``s3-mixed``: two cars (one dark, one light paint; each in a random lane, 3.5-7 m/s) and two people: one walks
   from the plaza between the kerb bollards across the road and through a gap between the parked cars towards the
   sidewalk, reaching the kerb 2-7.5 s into the sequence; one car passes the crossing point 0.3-2.5 s before that,
