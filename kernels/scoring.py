@@ -240,8 +240,9 @@ def colour_predict_score_map_kernel(
 ):
     """:func:`colour_predict_score_kernel` specialised for the large-N case: ``SCORE_MAP`` scoring and at most
     ``CAMERA_SET_SIZE`` cameras passed by value. Same particles and log-weights, bit for bit (the same functions in
-    the same order); without the other scoring modes' code and the per-particle loads of the camera structs it runs
-    in 2.8 instead of 3.6 ms at 1e8 particles x 4 cameras (H100). Launch and outputs as the general kernel.
+    the same order); without the other scoring modes' code and the per-particle loads of the camera structs, its
+    variant in ``benchmarks/colour_kernel_variants.py`` ran in 2.8 instead of 3.6 ms at 1e8 particles x 4 cameras on
+    an H100 (this kernel itself is not yet timed on a GPU: BENCHMARKS.md). Launch and outputs as the general kernel.
     """
     b, lane = wp.tid()
     start = b * chunk
