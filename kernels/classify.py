@@ -20,6 +20,7 @@ import warp as wp
 
 from .raster import KIND_HUMAN, KIND_VEHICLE
 from .slots import SE_DIMS, SE_EXIST, SE_HEADING, SE_X
+from .uoh import candidate_sum
 from .xor import pair_overlap
 
 wp.set_module_options({"enable_backward": False})
@@ -33,6 +34,7 @@ def vehicle_fit_kernel(
     hull_n: wp.array2d(dtype=wp.int32),
     offsets: wp.array(dtype=wp.int32),
     spans: wp.array(dtype=wp.vec2i),
+    cand_pixels: wp.array(dtype=wp.int32),
     pieces: int,
     cand_kind: wp.array(dtype=wp.int32),
     cand_pos: wp.array(dtype=wp.vec2),
@@ -50,11 +52,11 @@ def vehicle_fit_kernel(
     """Foreground fraction of the vehicle candidates near the chosen human candidate (module docstring).
 
     Launch with ``wp.launch_tiled(dim=[C], block_dim=B)``: block ``c`` is candidate ``c``; its lanes stride over
-    the rows of its pieces (one lane on the CPU backend) and ``tile_sum`` combines them. The candidates' spans are
-    those of ``uoh.candidate_spans_kernel`` (pixels covered by both pieces count once).
+    the rows of its pieces (``uoh.candidate_sum``; one lane on the CPU backend) and ``tile_sum`` combines them.
 
     Args:
         hull_rows, hull_n, offsets, spans, pieces: the candidates' rows, piece counts and spans.
+        cand_pixels: (C,) pixels of each candidate's silhouette (``uoh.candidate_spans_kernel``).
         cand_kind, cand_pos, cand_heading: (C,) kind, ground position (metres) and heading (radians) of each
             candidate.
         best: (1,) the candidate eq. 11 chose (``reduce.final_max_kernel``; < 0: none).
@@ -84,36 +86,13 @@ def vehicle_fit_kernel(
                 if pair_overlap(KIND_VEHICLE, cand_pos[c], cand_heading[c], dims, KIND_VEHICLE, sp, sh, sd) > 0.0:
                     eligible = False
     fg = int(0)
-    px = int(0)
-    if eligible:  # uniform over the block: every lane reaches the tile sums below either way
-        o = offsets[c]
-        o0 = o
-        r0 = wp.vec2i(0, -1)
-        if hull_n[c, 0] > 0:
-            r0 = hull_rows[c, 0]
-        for q in range(pieces):
-            if hull_n[c, q] > 0:
-                r = hull_rows[c, q]
-                for y in range(r[0] + lane, r[1] + 1, wp.block_dim()):
-                    s = spans[o + y - r[0]]
-                    u0 = s[0]
-                    u1 = s[1]
-                    if u0 <= u1:
-                        fg += qrow[y, u1 + 1] - qrow[y, u0]
-                        px += u1 - u0 + 1
-                        if q > 0 and y >= r0[0] and y <= r0[1]:
-                            t = spans[o0 + y - r0[0]]
-                            a0 = wp.max(u0, t[0])
-                            a1 = wp.min(u1, t[1])
-                            if a0 <= a1:
-                                fg -= qrow[y, a1 + 1] - qrow[y, a0]
-                                px -= a1 - a0 + 1
-                o += r[1] - r[0] + 1
+    if eligible:  # uniform over the block: every lane reaches the tile sum below either way
+        fg = candidate_sum(hull_rows, hull_n, offsets, spans, pieces, c, lane, qrow, int(0))
     ft = wp.tile_sum(wp.tile(fg))
-    pt = wp.tile_sum(wp.tile(px))
     if lane == 0:
-        if eligible and pt[0] >= min_area and pt[0] > 0:
-            fit[c] = float(ft[0]) / float(pt[0])
+        px = cand_pixels[c]
+        if eligible and px >= min_area and px > 0:
+            fit[c] = float(ft[0]) / float(px)
         else:
             fit[c] = NEG_INF
 

@@ -14,6 +14,8 @@ over the particles, which stops a large template from winning by covering severa
 them. The best candidate is proposed when gain(o) >= min_gain x area(o).
 """
 
+from typing import Any
+
 import warp as wp
 
 from .raster import hull_span
@@ -202,6 +204,47 @@ def candidate_spans_kernel(
     area[c] = px
 
 
+@wp.func
+def candidate_sum(
+    hull_rows: wp.array2d(dtype=wp.vec2i),
+    hull_n: wp.array2d(dtype=wp.int32),
+    offsets: wp.array(dtype=wp.int32),
+    spans: wp.array(dtype=wp.vec2i),
+    pieces: int,
+    c: int,
+    lane: int,
+    prefix: wp.array2d(dtype=Any),
+    zero: Any,
+):
+    """This lane's part of the sum of an image over candidate ``c``'s silhouette, from the image's row prefix sums
+    ``prefix`` (H, W+1): piece 0's spans, then each later piece's spans minus their overlap with piece 0 on the same
+    row (pixels covered by both count once). The lanes of a block stride over the rows; ``zero`` gives the sum's type.
+    """
+    o = offsets[c]
+    acc = zero
+    r0 = wp.vec2i(0, -1)
+    o0 = o
+    if hull_n[c, 0] > 0:
+        r0 = hull_rows[c, 0]
+    for q in range(pieces):
+        if hull_n[c, q] > 0:
+            r = hull_rows[c, q]
+            for y in range(r[0] + lane, r[1] + 1, wp.block_dim()):
+                s = spans[o + y - r[0]]
+                u0 = s[0]
+                u1 = s[1]
+                if u0 <= u1:
+                    acc += prefix[y, u1 + 1] - prefix[y, u0]
+                    if q > 0 and y >= r0[0] and y <= r0[1]:
+                        t = spans[o0 + y - r0[0]]
+                        a = wp.max(u0, t[0])
+                        b = wp.min(u1, t[1])
+                        if a <= b:
+                            acc -= prefix[y, b + 1] - prefix[y, a]
+            o += r[1] - r[0] + 1
+    return acc
+
+
 @wp.kernel
 def candidate_score_kernel(
     hull_rows: wp.array2d(dtype=wp.vec2i),
@@ -253,29 +296,7 @@ def candidate_score_kernel(
             area[c] = pa
             score[c] = NEG_INF
         return
-    o = offsets[c]
-    g = wp.float64(0.0)
-    # piece 0 spans, then piece 1 spans minus their overlap with piece 0 on the same row
-    r0 = wp.vec2i(0, -1)
-    o0 = o
-    if hull_n[c, 0] > 0:
-        r0 = hull_rows[c, 0]
-    for q in range(pieces):
-        if hull_n[c, q] > 0:
-            r = hull_rows[c, q]
-            for y in range(r[0] + lane, r[1] + 1, wp.block_dim()):
-                s = spans[o + y - r[0]]
-                u0 = s[0]
-                u1 = s[1]
-                if u0 <= u1:
-                    g += gain_rows[y, u1 + 1] - gain_rows[y, u0]
-                    if q > 0 and y >= r0[0] and y <= r0[1]:
-                        t = spans[o0 + y - r0[0]]
-                        a = wp.max(u0, t[0])
-                        b = wp.min(u1, t[1])
-                        if a <= b:
-                            g -= gain_rows[y, b + 1] - gain_rows[y, a]
-            o += r[1] - r[0] + 1
+    g = candidate_sum(hull_rows, hull_n, offsets, spans, pieces, c, lane, gain_rows, wp.float64(0.0))
     gt = wp.tile_sum(wp.tile(g))
     if lane == 0:
         gain = gt[0] / wp.float64(n)

@@ -71,6 +71,7 @@ def test_vehicle_fit_matches_silhouettes(device, block_dim):
                 cands.hulls.n,
                 cands.offsets,
                 cands.spans,
+                cands.pixels,
                 PIECES,
                 cands.kind,
                 cands.pos,

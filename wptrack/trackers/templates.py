@@ -497,6 +497,7 @@ class TemplateTracker(FrameChain):
                     c.hulls.n,
                     c.offsets,
                     c.spans,
+                    c.pixels,
                     int(kraster.PIECES),
                     c.kind,
                     c.pos,
