@@ -12,9 +12,11 @@ Two ways to count m, with identical results:
   large N: the per-particle reads, random accesses to L2, dominate the frame at 1e7+ particles).
 """
 
+import functools
+
 import warp as wp
 
-from .camera import Camera, CameraSet, pixel_of, project
+from .camera import CAMERA_SET_SIZE, Camera, CameraSet, pixel_of, project
 from .colour import HALF_WINDOW, ColourTarget, pixel_matches, window_count_integral
 from .motion import gaussian_walk
 from .reduce import finite_logw, moments_push, moments_store, moments_zero
@@ -114,29 +116,6 @@ def map_log_likelihood(cam: Camera, window: wp.array(dtype=wp.uint8), x: wp.vec3
     return wp.log(float(wp.max(m, 1))) - LOG_WINDOW_AREA
 
 
-@wp.func
-def map_log_likelihood_set(cams: CameraSet, window: wp.array(dtype=wp.uint8), x: wp.vec3):
-    """:func:`colour_log_likelihood` in ``SCORE_MAP`` mode over a :class:`~kernels.camera.CameraSet` (``count >=
-    1``): the same terms (eqs. 5-7) summed in the same order, the camera parameters read as constants."""
-    n = cams.count
-    total = map_log_likelihood(cams.c0, window, x)
-    if n > 1:
-        total += map_log_likelihood(cams.c1, window, x)
-    if n > 2:
-        total += map_log_likelihood(cams.c2, window, x)
-    if n > 3:
-        total += map_log_likelihood(cams.c3, window, x)
-    if n > 4:
-        total += map_log_likelihood(cams.c4, window, x)
-    if n > 5:
-        total += map_log_likelihood(cams.c5, window, x)
-    if n > 6:
-        total += map_log_likelihood(cams.c6, window, x)
-    if n > 7:
-        total += map_log_likelihood(cams.c7, window, x)
-    return total
-
-
 @wp.kernel
 def window_count_kernel(
     cams: wp.array(dtype=Camera),
@@ -219,48 +198,74 @@ def colour_predict_score_kernel(
     moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)
 
 
-@wp.kernel
-def colour_predict_score_map_kernel(
-    cams: CameraSet,
-    window: wp.array(dtype=wp.uint8),
-    particles: wp.array(dtype=wp.vec3),
-    ancestors: wp.array(dtype=wp.int32),
-    logw_prev: wp.array(dtype=wp.float32),
-    resampled: wp.array(dtype=wp.int32),
-    sigma: wp.array(dtype=wp.float32),
-    seed: wp.vec2ui,
-    frame: wp.array(dtype=wp.int32),
-    n: int,
-    chunk: int,
-    particles_out: wp.array(dtype=wp.vec3),
-    logw_out: wp.array(dtype=wp.float32),
-    part_max: wp.array(dtype=wp.float32),
-    part_arg: wp.array(dtype=wp.int32),
-    part: wp.array2d(dtype=wp.float64),
-):
-    """:func:`colour_predict_score_kernel` specialised for the large-N case: ``SCORE_MAP`` scoring and at most
-    ``CAMERA_SET_SIZE`` cameras passed by value. Same particles and log-weights, bit for bit (the same functions in
-    the same order); without the other scoring modes' code and the per-particle loads of the camera structs, its
-    variant in ``benchmarks/colour_kernel_variants.py`` ran in 2.8 instead of 3.6 ms at 1e8 particles x 4 cameras on
-    an H100 (this kernel itself is not yet timed on a GPU: BENCHMARKS.md). Launch and outputs as the general kernel.
+@functools.cache
+def colour_predict_score_map_kernel(count: int) -> wp.Kernel:
+    """:func:`colour_predict_score_kernel` specialised for the large-N case, compiled once per camera count:
+    ``SCORE_MAP``
+    scoring and ``count`` (1 to ``CAMERA_SET_SIZE``) cameras passed by value in a :class:`~kernels.camera.CameraSet`.
+    Same particles and log-weights, bit for bit (the same functions, the cameras summed in the same order). Launch and
+    outputs as the general kernel.
+
+    The one factory in ``kernels/``: the camera count is a compile-time constant (``wp.static``), because a count read
+    at run time (``if cams.count > k``) raised the kernel from 72 to 91 registers and lost a third of the occupancy
+    (3.57 vs 2.73 ms at 1e8 particles x 4 cameras, H200; BENCHMARKS.md, issue 13). Without the other scoring modes'
+    code and the per-particle loads of the camera structs it runs where the general kernel takes 3.5 ms.
     """
-    b, lane = wp.tid()
-    start = b * chunk
-    stop = wp.min(start + chunk, n)
-    s = sigma[0]
-    f = frame[0]
-    keep = resampled[0] == 0
-    best, arg, sw, sw2, sx, sxx = moments_zero()
-    for i in range(start + lane, stop, wp.block_dim()):
-        x = gaussian_walk(particles[ancestors[i]], s, seed, i, f)  # eqs. 1-3
-        particles_out[i] = x
-        lw = map_log_likelihood_set(cams, window, x)  # eqs. 5-7
-        if keep:
-            lw += logw_prev[i]
-        lw = finite_logw(lw)
-        logw_out[i] = lw
-        best, arg, sw, sw2, sx, sxx = moments_push(best, arg, sw, sw2, sx, sxx, lw, i, x)
-    moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)
+    if not 1 <= count <= CAMERA_SET_SIZE:
+        raise ValueError(f"camera count {count}: the camera-set kernel takes 1 to {CAMERA_SET_SIZE} cameras")
+
+    @wp.kernel(enable_backward=False, module="unique", module_options={"fast_math": True})
+    def colour_predict_score_map_kernel(
+        cams: CameraSet,
+        window: wp.array(dtype=wp.uint8),
+        particles: wp.array(dtype=wp.vec3),
+        ancestors: wp.array(dtype=wp.int32),
+        logw_prev: wp.array(dtype=wp.float32),
+        resampled: wp.array(dtype=wp.int32),
+        sigma: wp.array(dtype=wp.float32),
+        seed: wp.vec2ui,
+        frame: wp.array(dtype=wp.int32),
+        n: int,
+        chunk: int,
+        particles_out: wp.array(dtype=wp.vec3),
+        logw_out: wp.array(dtype=wp.float32),
+        part_max: wp.array(dtype=wp.float32),
+        part_arg: wp.array(dtype=wp.int32),
+        part: wp.array2d(dtype=wp.float64),
+    ):
+        b, lane = wp.tid()
+        start = b * chunk
+        stop = wp.min(start + chunk, n)
+        s = sigma[0]
+        f = frame[0]
+        keep = resampled[0] == 0
+        best, arg, sw, sw2, sx, sxx = moments_zero()
+        for i in range(start + lane, stop, wp.block_dim()):
+            x = gaussian_walk(particles[ancestors[i]], s, seed, i, f)  # eqs. 1-3
+            particles_out[i] = x
+            lw = map_log_likelihood(cams.c0, window, x)  # eqs. 5-7, camera by camera as colour_log_likelihood
+            if wp.static(count > 1):
+                lw += map_log_likelihood(cams.c1, window, x)
+            if wp.static(count > 2):
+                lw += map_log_likelihood(cams.c2, window, x)
+            if wp.static(count > 3):
+                lw += map_log_likelihood(cams.c3, window, x)
+            if wp.static(count > 4):
+                lw += map_log_likelihood(cams.c4, window, x)
+            if wp.static(count > 5):
+                lw += map_log_likelihood(cams.c5, window, x)
+            if wp.static(count > 6):
+                lw += map_log_likelihood(cams.c6, window, x)
+            if wp.static(count > 7):
+                lw += map_log_likelihood(cams.c7, window, x)
+            if keep:
+                lw += logw_prev[i]
+            lw = finite_logw(lw)
+            logw_out[i] = lw
+            best, arg, sw, sw2, sx, sxx = moments_push(best, arg, sw, sw2, sx, sxx, lw, i, x)
+        moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)
+
+    return colour_predict_score_map_kernel
 
 
 @wp.kernel

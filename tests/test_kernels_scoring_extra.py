@@ -79,7 +79,7 @@ def test_colour_predict_score_matches_numpy(device, rng, mode, resampled):
     parents, anc, logw_prev = particle_state(rng, n, [0.0, 0.0, -0.1], [0.9, 0.9, 0.4])
     kernel = kscoring.colour_predict_score_kernel
     if mode == "map-set":  # the large-N kernel: map scoring, the cameras by value
-        kernel, obs = kscoring.colour_predict_score_map_kernel, [drig.cam_set, window]
+        kernel, obs = kscoring.colour_predict_score_map_kernel(len(rig.cameras)), [drig.cam_set, window]
         assert drig.cam_set.count == len(rig.cameras)
     else:
         m = {"direct": kscoring.SCORE_DIRECT, "integral": kscoring.SCORE_INTEGRAL, "map": kscoring.SCORE_MAP}[mode]
@@ -120,7 +120,7 @@ def test_colour_predict_score_map_kernel_equals_general(device, rng):
     )
     n, chunk, sigma = 700, 256, 0.02
     parents, anc, logw_prev = particle_state(rng, n, [0.2, 0.2, -0.1], [0.7, 0.7, 0.3])
-    for count in (1, 3, 8):
+    for count in (1, 3, 4, 8):
         rig = Rig((base + cams)[:count])
         drig = DeviceRig(rig, device)
         bgr = upload(random_frames(rig, rng), device)
@@ -128,7 +128,7 @@ def test_colour_predict_score_map_kernel_equals_general(device, rng):
         general = [drig.cams, TARGETS[0].to_struct(device), bgr, integral, window, int(kscoring.SCORE_MAP)]
         outs = []
         for kernel, obs in (
-            (kscoring.colour_predict_score_map_kernel, [drig.cam_set, window]),
+            (kscoring.colour_predict_score_map_kernel(count), [drig.cam_set, window]),
             (kscoring.colour_predict_score_kernel, general),
         ):
             x, lw, _parts = launch_fused(
@@ -180,3 +180,9 @@ def test_gaussian3d_predict_score_matches_numpy(device, rng, resampled):
     ref_lw = np.maximum(ll if resampled else ll + logw_prev, kreduce.LOGW_FLOOR)
     np.testing.assert_allclose(lw, ref_lw, rtol=1e-5, atol=1e-5)
     check_partials(parts, lw, x, chunk, rtol=partials_rtol(device))
+
+
+@pytest.mark.parametrize("count", [0, 9])
+def test_camera_set_kernel_rejects_a_count_it_cannot_hold(count):
+    with pytest.raises(ValueError, match="1 to 8 cameras"):
+        kscoring.colour_predict_score_map_kernel(count)

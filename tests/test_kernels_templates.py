@@ -876,6 +876,8 @@ def test_candidate_scores_match_union_silhouettes(device, rng, cpu_blocks, block
     u0, v0, u1, v1 = box_ref.T
     ok_box = u0 <= u1
     sat = summed_area(uoh_ref)
+    # an empty box holds sentinels (u_min = INT_MAX): index with a dummy 0 there, its mass is replaced by 0
+    u0, v0, u1, v1 = (np.where(ok_box, c, 0) for c in (u0, v0, u1, v1))
     mass = np.where(ok_box, sat[v1 + 1, u1 + 1] - sat[v0, u1 + 1] - sat[v1 + 1, u0] + sat[v0, u0], 0)
     settled = (area_ref >= min_area) & (mass / 37 < min_gain * area_ref - 1e-3)
     assert settled.sum() > 0.2 * len(settled)

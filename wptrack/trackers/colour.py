@@ -333,9 +333,8 @@ class ColorTracker(ParticleFilter):
         cfg = self.config
         if cfg.proposal == "prior":
             if self.score_mode == "map" and self.drig.cam_set.count > 0:  # the large-N kernel (cameras by value)
-                self._launch_fused(
-                    kscoring.colour_predict_score_map_kernel, [self.drig.cam_set, self._window], src, dst
-                )
+                kernel = kscoring.colour_predict_score_map_kernel(self.drig.cam_set.count)
+                self._launch_fused(kernel, [self.drig.cam_set, self._window], src, dst)
                 return
             self._launch_fused(kscoring.colour_predict_score_kernel, observation, src, dst)
             return
