@@ -464,38 +464,54 @@ def residual_draw_kernel(
 #
 # The weights w_i = exp(logw_i - max) are quantised to integers q_i = floor(w_i 2^k) (k chosen by the driver so that
 # sum q < 2^60) and the CDF is an exact int64 prefix sum: no rounding, no order dependence, and zero weights give
-# empty offspring ranges by construction. The block-level scans split each int64 into three 20-bit limbs scanned as
-# int32 tiles (Warp tiles scan 32-bit types only). That is exact: the two low limbs sum to at most
-# block_dim x (2^20 - 1) < 2^31 (block_dim <= 2048), the high limb to at most (sum q) / 2^40 < 2^20.
-
-LIMB_BITS = wp.constant(wp.int64(20))
-LIMB_MASK = wp.constant(wp.int64(0xFFFFF))
+# empty offspring ranges by construction. The block-level sums and scans are int64 warp-shuffle scans
+# (:func:`block_scan_int64`, native CUDA: Warp's tile scans take 32-bit types only).
 
 
-@wp.func
-def limbs_of(v: wp.int64):
-    """The three 20-bit limbs of a non-negative int64 below 2^60, as int32."""
-    return (
-        wp.int32(v & LIMB_MASK),
-        wp.int32((v >> LIMB_BITS) & LIMB_MASK),
-        wp.int32(v >> (LIMB_BITS + LIMB_BITS)),
-    )
+BLOCK_SCAN_SNIPPET = """
+#if defined(__CUDA_ARCH__)
+    __shared__ long long warp_totals[32];
+    const int w = lane >> 5;
+    const int l = lane & 31;
+    const int warps = (bd + 31) >> 5;
+    long long x = v;
+#pragma unroll
+    for (int d = 1; d < 32; d <<= 1) {
+        const long long y = __shfl_up_sync(0xffffffffu, x, d);
+        if (l >= d) x += y;
+    }
+    if (l == 31) warp_totals[w] = x;
+    __syncthreads();
+    if (w == 0) {
+        long long t = l < warps ? warp_totals[l] : 0;
+#pragma unroll
+        for (int d = 1; d < 32; d <<= 1) {
+            const long long y = __shfl_up_sync(0xffffffffu, t, d);
+            if (l >= d) t += y;
+        }
+        if (l < warps) warp_totals[l] = t;
+    }
+    __syncthreads();
+    if (w > 0) x += warp_totals[w - 1];
+    const long long total = warp_totals[warps - 1];
+    __syncthreads();
+    return wp::vec_t<2, wp::int64>(x, total);
+#else
+    return wp::vec_t<2, wp::int64>(v, v);
+#endif
+"""
 
 
-@wp.func
-def from_limbs(l0: wp.int32, l1: wp.int32, l2: wp.int32):
-    """Inverse of :func:`limbs_of` for limb sums (each may exceed 20 bits): l0 + l1 2^20 + l2 2^40."""
-    return wp.int64(l0) + (wp.int64(l1) << LIMB_BITS) + (wp.int64(l2) << (LIMB_BITS + LIMB_BITS))
+@wp.func_native(BLOCK_SCAN_SNIPPET)
+def block_scan_int64(v: wp.int64, lane: int, bd: int) -> wp.vec2l:
+    """``(inclusive prefix sum of v over the block's lanes 0..lane, the block's total)``, exact in int64.
 
-
-@wp.func
-def block_sum_exact(v: wp.int64):
-    """Exact sum over the block's threads of a non-negative int64 (< 2^60 in total); every thread gets it."""
-    l0, l1, l2 = limbs_of(v)
-    s0 = wp.tile_sum(wp.tile(l0))
-    s1 = wp.tile_sum(wp.tile(l1))
-    s2 = wp.tile_sum(wp.tile(l2))
-    return from_limbs(s0[0], s1[0], s2[0])
+    One warp-shuffle scan per warp and one over the warp totals, 3 barriers. It replaced three scans of 20-bit limbs
+    with Warp's 32-bit tile scans (about 20 barriers per round) in the systematic pass (BENCHMARKS.md, issue 13).
+    CUDA: every lane of the block calls it, ``bd`` (the block size) a multiple of 32, at most 1024. The CPU branch is
+    the one-lane block of the CPU backend: the kernels that call it are launched with ``block_dim=1`` there.
+    """
+    ...
 
 
 @wp.func
@@ -528,7 +544,7 @@ def quantised_totals_kernel(
         w = wp.exp(logw[i] - mx)
         weights[i] = w
         acc += quantise(w, scale)
-    t = block_sum_exact(acc)
+    t = block_scan_int64(acc, lane, wp.block_dim())[1]
     if lane == 0:
         totals[b] = t
 
@@ -571,8 +587,8 @@ def systematic_logw_kernel(
 
     Block ``b`` owns particles ``[b chunk, (b+1) chunk)``. Its offset (the sum of the earlier blocks' ``totals``)
     and the grand total T are summed exactly by the block itself; it then walks its particles in rounds of
-    ``block_dim x per_lane`` particles (``per_lane`` contiguous ones per lane), scans the rounds' q_i exactly (three
-    int32 limb scans) and writes parent ``i`` to the slots ``[slot(C_{i-1}), slot(C_i))`` with
+    ``block_dim x per_lane`` particles (``per_lane`` contiguous ones per lane), scans the rounds' q_i exactly (int64
+    warp shuffles) and writes parent ``i`` to the slots ``[slot(C_{i-1}), slot(C_i))`` with
     ``slot(c) = floor(n c / T + U)`` and one uniform U per frame (Philox counter ``(0, frame, STREAM_RESAMPLE)``,
     as :func:`systematic_kernel`). When ``enabled[0] == 0`` it writes the identity. A range longer than
     ``long_range`` slots goes to block b's long-range list (the block zeroes its ``long_meta[b]`` first) and
@@ -608,8 +624,8 @@ def systematic_logw_kernel(
         every += t
         if j < b:
             below += t
-    offset = block_sum_exact(below)
-    total = block_sum_exact(every)
+    offset = block_scan_int64(below, lane, bd)[1]
+    total = block_scan_int64(every, lane, bd)[1]
     u = word_to_unit64(random_words(seed, 0, frame[0], STREAM_RESAMPLE)[0])
     ratio = wp.float64(n) / wp.float64(total)
     list_base = long_base_of(systematic_slot_exact(offset, ratio, u, n), long_range, b)
@@ -622,12 +638,8 @@ def systematic_logw_kernel(
         for k in range(per_lane):
             if first + k < stop:
                 own += quantise(weights[first + k], scale)
-        l0, l1, l2 = limbs_of(own)
-        s0 = wp.tile_scan_inclusive(wp.tile(l0))
-        s1 = wp.tile_scan_inclusive(wp.tile(l1))
-        s2 = wp.tile_scan_inclusive(wp.tile(l2))
-        inclusive = from_limbs(wp.untile(s0), wp.untile(s1), wp.untile(s2))
-        c = carry + inclusive - own  # exact cumulative weight before this lane's first particle
+        scan = block_scan_int64(own, lane, bd)
+        c = carry + scan[0] - own  # exact cumulative weight before this lane's first particle
         lo = systematic_slot_exact(c, ratio, u, n)
         for k in range(per_lane):
             i = first + k
@@ -642,8 +654,7 @@ def systematic_logw_kernel(
                     for s in range(lo, hi):
                         ancestors[s] = i
                 lo = hi
-        last = wp.tile_from_thread(shape=1, value=inclusive, thread_idx=bd - 1)
-        carry += last[0]  # the round's total (the last lane's inclusive sum)
+        carry += scan[1]  # the round's total
 
 
 @wp.kernel

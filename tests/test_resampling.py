@@ -371,6 +371,18 @@ def test_log_weights_systematic_exact_cdf(device, rng, n):
         np.testing.assert_array_equal(anc, systematic_exact_reference(q, frame, device))
 
 
+def test_log_weights_systematic_cpu_blocks(rng, monkeypatch):
+    """The exact systematic kernels' block scans are one-lane identities on the CPU backend: the resampler launches
+    them with one lane per block even when ``wp.config.enable_cpu_blocks`` would honour a larger block."""
+    n = 5000
+    logw = _log_weights(rng, n)
+    logw[n // 2] = 3.0 + max(float(logw.max()), 0.0)
+    monkeypatch.setattr(wp.config, "enable_cpu_blocks", True)
+    r = Resampler("systematic", n, "cpu", log_weights=True)
+    anc, q = _run_log(r, logw, 3, "cpu")
+    np.testing.assert_array_equal(anc, systematic_exact_reference(q, 3, "cpu"))
+
+
 def test_log_weights_systematic_offspring(device, rng):
     """Every frame: offspring counts are floor or ceil of N q_i / T, sum to N, zero weights get none; over 200
     frames the pooled counts are unbiased (chi-square at significance 1e-4) and the count variance is the exact

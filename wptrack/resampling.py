@@ -35,9 +35,10 @@ BLOCK = 256
 """Threads per block of the fused systematic kernels (the CPU backend runs one lane per block)."""
 MAX_BLOCKS = 2048
 """Upper bound on their blocks: each block sums the totals of the blocks before it (O(blocks^2) reads in all)."""
-PER_LANE_GPU = 8
-"""Contiguous particles per lane and scan round of the fused systematic pass on a GPU (H200, 1e8 particles: 2 ->
-2.19 ms, 8 -> 1.48 ms, 32 -> 2.28 ms)."""
+PER_LANE_GPU = 4
+"""Contiguous particles per lane and scan round of the fused systematic pass on a GPU. H200, 1e8 particles,
+``Resampler.from_log_weights`` (2026-11-23): with the int64 shuffle scan 4 -> 1.49 ms, 8 -> 1.60 ms; with the
+previous three 32-bit limb tile scans 4 -> 1.72-1.76 ms, 8 -> 1.69-1.70 ms (same ancestors)."""
 PER_LANE_CPU = 1024
 LONG_RANGE = 64
 """Longest offspring range a thread of the scatter kernels writes itself on a GPU; a parent with more children
@@ -97,6 +98,9 @@ class Resampler:
         # particles per lane and scan round: a few on a GPU (ILP, fewer block-wide scans), a long run on the CPU
         # backend, where a block is one lane and the scans are sequential anyway
         self.per_lane = PER_LANE_CPU if self.device.is_cpu else PER_LANE_GPU
+        # one lane per block on the CPU backend whatever wp.config.enable_cpu_blocks says: the block scans of the
+        # exact systematic kernels are warp shuffles on CUDA and a one-lane identity on the CPU
+        self.block_dim = 1 if self.device.is_cpu else BLOCK
         self.totals = wp.zeros(self.blocks, dtype=wp.int64, device=self.device) if self.exact else None
         self._scratch: wp.array | None = None
         self.weights = (
@@ -282,7 +286,7 @@ class Resampler:
             dim=[self.blocks],
             inputs=[logw, est, int(max_slot), self.scale, n, self.chunk],
             outputs=[self.totals, scratch],
-            block_dim=BLOCK,
+            block_dim=self.block_dim,
             device=self.device,
         )
         wp.launch_tiled(
@@ -302,7 +306,7 @@ class Resampler:
                 self.long_range,
             ],
             outputs=[ancestors, *self._long_lists()],
-            block_dim=BLOCK,
+            block_dim=self.block_dim,
             device=self.device,
         )
         self._fill_long(ancestors, self.blocks, n)
