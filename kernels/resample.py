@@ -520,6 +520,13 @@ def quantise(w: float, scale: wp.float64):
     return wp.int64(wp.floor(wp.float64(w) * scale))
 
 
+@wp.func
+def quantised_weight(logw: float, max_logw: float, scale: wp.float64):
+    """q_i = floor(exp(logw_i - max) scale): both systematic passes evaluate it from the log-weight (the same float32
+    operations, hence the same integer) instead of the second pass reading a stored weight."""
+    return quantise(wp.exp(logw - max_logw), scale)
+
+
 @wp.kernel
 def quantised_totals_kernel(
     logw: wp.array(dtype=wp.float32),
@@ -529,11 +536,10 @@ def quantised_totals_kernel(
     n: int,
     chunk: int,
     totals: wp.array(dtype=wp.int64),
-    weights: wp.array(dtype=wp.float32),
 ):
-    """Pass 1 of systematic resampling from log-weights: ``weights[i] = exp(logw_i - max)`` (float32) and
-    ``totals[b]`` = sum of q_i = floor(weights[i] scale) over block b's particles ``[b chunk, (b+1) chunk)``.
-    ``est[max_slot]`` holds the max log-weight. Launch ``wp.launch_tiled(dim=[blocks])``.
+    """Pass 1 of systematic resampling from log-weights: ``totals[b]`` = sum of q_i = floor(exp(logw_i - max) scale)
+    over block b's particles ``[b chunk, (b+1) chunk)``. ``est[max_slot]`` holds the max log-weight. Launch
+    ``wp.launch_tiled(dim=[blocks])``.
     """
     b, lane = wp.tid()
     start = b * chunk
@@ -541,9 +547,7 @@ def quantised_totals_kernel(
     mx = wp.float32(est[max_slot])
     acc = wp.int64(0)
     for i in range(start + lane, stop, wp.block_dim()):
-        w = wp.exp(logw[i] - mx)
-        weights[i] = w
-        acc += quantise(w, scale)
+        acc += quantised_weight(logw[i], mx, scale)
     t = block_scan_int64(acc, lane, wp.block_dim())[1]
     if lane == 0:
         totals[b] = t
@@ -566,7 +570,9 @@ def systematic_slot_exact(c: wp.int64, ratio: wp.float64, u: wp.float64, n: int)
 
 @wp.kernel
 def systematic_logw_kernel(
-    weights: wp.array(dtype=wp.float32),
+    logw: wp.array(dtype=wp.float32),
+    est: wp.array(dtype=wp.float64),
+    max_slot: int,
     scale: wp.float64,
     totals: wp.array(dtype=wp.int64),
     blocks: int,
@@ -596,7 +602,8 @@ def systematic_logw_kernel(
     ``wp.launch_tiled(dim=[blocks], block_dim=B)``.
 
     Args:
-        weights: (n,) float32 weights exp(logw - max) from :func:`quantised_totals_kernel`.
+        logw, est, max_slot: the float32 log-weights and the max log-weight ``est[max_slot]``, as in
+            :func:`quantised_totals_kernel`.
         scale: 2^k of the quantisation (the same value as in :func:`quantised_totals_kernel`).
         totals: (blocks,) int64 per-block sums of q from :func:`quantised_totals_kernel`.
         blocks, chunk: the block partition of the particles.
@@ -628,6 +635,7 @@ def systematic_logw_kernel(
     total = block_scan_int64(every, lane, bd)[1]
     u = word_to_unit64(random_words(seed, 0, frame[0], STREAM_RESAMPLE)[0])
     ratio = wp.float64(n) / wp.float64(total)
+    mx = wp.float32(est[max_slot])
     list_base = long_base_of(systematic_slot_exact(offset, ratio, u, n), long_range, b)
     if lane == 0:
         long_base[b] = list_base
@@ -637,14 +645,14 @@ def systematic_logw_kernel(
         own = wp.int64(0)
         for k in range(per_lane):
             if first + k < stop:
-                own += quantise(weights[first + k], scale)
+                own += quantised_weight(logw[first + k], mx, scale)
         scan = block_scan_int64(own, lane, bd)
         c = carry + scan[0] - own  # exact cumulative weight before this lane's first particle
         lo = systematic_slot_exact(c, ratio, u, n)
         for k in range(per_lane):
             i = first + k
             if i < stop:
-                c += quantise(weights[i], scale)
+                c += quantised_weight(logw[i], mx, scale)
                 hi = systematic_slot_exact(c, ratio, u, n)
                 if i == n - 1:
                     hi = n
@@ -679,4 +687,4 @@ def quantised_weights_kernel(
 ):
     """The integer weights q_i = floor(exp(logw_i - max) scale) of the systematic passes (tests and diagnostics)."""
     i = wp.tid()
-    q[i] = quantise(wp.exp(logw[i] - wp.float32(est[max_slot])), scale)
+    q[i] = quantised_weight(logw[i], wp.float32(est[max_slot]), scale)

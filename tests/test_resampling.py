@@ -559,7 +559,7 @@ def test_long_ranges_cuda_graph(device, rng):
     logw_dev = wp.zeros(n, dtype=wp.float32, device=device)
     anc = wp.zeros(n, dtype=wp.int32, device=device)
     frame = wp.array([2], dtype=wp.int32, device=device)
-    r.from_log_weights(logw_dev, est, MAX_SLOT, SEED, frame, anc)  # warm-up: module load, scratch
+    r.from_log_weights(logw_dev, est, MAX_SLOT, SEED, frame, anc)  # warm-up: module load
     with wp.ScopedCapture(device=device) as capture:
         r.from_log_weights(logw_dev, est, MAX_SLOT, SEED, frame, anc)
     for case in ("spread", "one", "few"):

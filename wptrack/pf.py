@@ -481,7 +481,6 @@ class ParticleFilter(FrameChain):
             )
 
     def _resample(self, dst: int) -> None:
-        # the other log-weight buffer is idle until the next prediction overwrites it: the resampler's scratch
         self.resampler.from_log_weights(
             self.logw[dst],
             self.est,
@@ -490,7 +489,6 @@ class ParticleFilter(FrameChain):
             self.frame,
             self.ancestors,
             enabled=self.resampled,
-            scratch=self.logw[1 - dst],
         )
         wp.launch(kreduce.increment_kernel, dim=1, inputs=[self.frame], device=self.device)
 

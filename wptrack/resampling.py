@@ -102,7 +102,6 @@ class Resampler:
         # exact systematic kernels are warp shuffles on CUDA and a one-lane identity on the CPU
         self.block_dim = 1 if self.device.is_cpu else BLOCK
         self.totals = wp.zeros(self.blocks, dtype=wp.int64, device=self.device) if self.exact else None
-        self._scratch: wp.array | None = None
         self.weights = (
             wp.zeros(cap, dtype=wp.float64, device=self.device) if self.log_weights and not self.exact else None
         )
@@ -233,7 +232,6 @@ class Resampler:
         frame: wp.array,
         ancestors: wp.array,
         enabled: wp.array | None = None,
-        scratch: wp.array | None = None,
     ) -> None:
         """Draw ``ancestors`` from log-weights (asynchronous: launches only, no host sync, no allocation).
 
@@ -248,9 +246,6 @@ class Resampler:
             est: float64 device vector whose entry ``max_slot`` holds ``max(logw)`` (e.g. ``kernels.reduce.EST_*``).
             max_slot: index of the max log-weight in ``est``.
             seed, frame, ancestors, enabled: as :meth:`__call__`.
-            scratch: (capacity,) float32 buffer the systematic passes may overwrite with exp(logw - max) (a particle
-                filter passes its idle log-weight ping-pong buffer); without it the resampler allocates one on the
-                first call.
 
         Raises:
             ValueError: the resampler was not built with ``log_weights=True``, or wrong lengths/dtypes/devices.
@@ -275,17 +270,11 @@ class Resampler:
             )
             self(self.weights, seed, frame, ancestors, enabled=enabled)
             return
-        if scratch is None:
-            if self._scratch is None:
-                self._scratch = wp.zeros(n, dtype=wp.float32, device=self.device)
-            scratch = self._scratch
-        if scratch.dtype != wp.float32 or scratch.shape[0] != n or scratch.device != self.device:
-            raise ValueError(f"resampler: scratch must be a float32 array of {n} entries on {self.device}")
         wp.launch_tiled(
             kres.quantised_totals_kernel,
             dim=[self.blocks],
             inputs=[logw, est, int(max_slot), self.scale, n, self.chunk],
-            outputs=[self.totals, scratch],
+            outputs=[self.totals],
             block_dim=self.block_dim,
             device=self.device,
         )
@@ -293,7 +282,9 @@ class Resampler:
             kres.systematic_logw_kernel,
             dim=[self.blocks],
             inputs=[
-                scratch,
+                logw,
+                est,
+                int(max_slot),
                 self.scale,
                 self.totals,
                 self.blocks,

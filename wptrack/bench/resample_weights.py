@@ -72,7 +72,6 @@ def run_weights_case(n: int, device: str, weights: str, frames: int = 50, numpy_
     est_np[kreduce.EST_MAXLOGW] = float(logw_np.max())
     logw = wp.array(logw_np, dtype=wp.float32, device=dev)
     est = wp.array(est_np, dtype=wp.float64, device=dev)
-    scratch = wp.zeros(n, dtype=wp.float32, device=dev)
     anc = wp.zeros(n, dtype=wp.int32, device=dev)
     frame = wp.zeros(1, dtype=wp.int32, device=dev)
     seed_v = wp.vec2ui(seed & 0xFFFFFFFF, (seed >> 32) & 0xFFFFFFFF)
@@ -81,7 +80,7 @@ def run_weights_case(n: int, device: str, weights: str, frames: int = 50, numpy_
     serial = Resampler("systematic", n, dev, log_weights=True, long_range=n)
 
     def resample(res=r, out=anc):
-        res.from_log_weights(logw, est, slot, seed_v, frame, out, scratch=scratch)
+        res.from_log_weights(logw, est, slot, seed_v, frame, out)
 
     anc_serial = wp.zeros(n, dtype=wp.int32, device=dev)
     resample()  # module load outside the timings
