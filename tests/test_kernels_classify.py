@@ -9,6 +9,7 @@ move of ``dynamics.template_predict_kernel``), on every device.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -161,7 +162,40 @@ def test_absorb_removes_humans_on_the_added_vehicle(device, absorb):
     assert np.all(got["kind"][:, 1] == HUMAN) and np.all(got["kind"][:, 2] == VEHICLE)
 
 
-@pytest.mark.parametrize(("field", "value"), [("vehicle_fit", 1.2), ("vehicle_fit", -0.1), ("absorb", 1)])
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("vehicle_fit", 1.2), ("vehicle_fit", -0.1), ("absorb", 1), ("vehicle_entry_px", -8), ("vehicle_entry_px", 4.5)],
+)
 def test_config_validated(field, value):
     with pytest.raises(ConfigError, match=field):
         TemplateConfig(**{field: value})
+
+
+def test_vehicle_candidates_beyond_the_border():
+    """vehicle_entry_px widens the vehicle candidates' pixel grid left, right and below the image (objects entering
+    the view); the human candidates and, with 0, the vehicle ones stay under the image's pixels."""
+    rng = np.random.default_rng(5)
+    cam = random_camera(rng)
+    plane = GroundPlane()
+    base = TemplateConfig(candidate_step_px=16, max_range=60.0, vehicle=VehiclePrior(orientations=1))
+    margin = 48
+
+    def image_coords(c: Candidates, kind: int) -> np.ndarray:
+        g = c.pos_np[c.kind_np == kind].astype(np.float64)
+        world = plane.origin + g[:, :1] * plane.x_axis + g[:, 1:] * plane.y_axis
+        uv, _ = cam.project(world)
+        return uv
+
+    inside = Candidates(cam, plane, camera_struct(cam), _plane_struct(plane), base, "cpu")
+    wide_cfg = dataclasses.replace(base, vehicle_entry_px=margin)
+    wide = Candidates(cam, plane, camera_struct(cam), _plane_struct(plane), wide_cfg, "cpu")
+    for c in (inside, wide):
+        uv = image_coords(c, HUMAN)
+        assert np.all((uv >= -0.5) & (uv <= [cam.width + 0.5, cam.height + 0.5]))
+    uv0 = image_coords(inside, VEHICLE)
+    assert np.all((uv0 >= -0.5) & (uv0 <= [cam.width + 0.5, cam.height + 0.5]))
+    uv = image_coords(wide, VEHICLE)
+    outside = (uv[:, 0] < 0) | (uv[:, 0] > cam.width) | (uv[:, 1] > cam.height)
+    assert outside.sum() > 0 and len(uv) > len(uv0)
+    assert np.all(uv[:, 0] > -margin - 1) and np.all(uv[:, 0] < cam.width + margin + 1)
+    assert np.all(uv[:, 1] < cam.height + margin + 1) and np.all(uv[:, 1] > -1)

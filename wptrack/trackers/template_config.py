@@ -209,6 +209,11 @@ class TemplateConfig:
     """A vehicle added to a particle removes the particle's humans whose ground disc meets its footprint (one move
     that replaces the humans covering a car by the vehicle, drawn with the addition's own random number; the
     weights of eq. 6 judge it like every addition and deletion of eqs. 12-13). Beyond the paper; false: eq. 12."""
+    vehicle_entry_px: int = 0
+    """Vehicle addition candidates also stand under the pixels up to this far beyond the image's left, right and
+    bottom borders, pixels (0: under the image only, as the paper's grid). Beyond the paper: a car entering the view
+    shows only its front, and no vehicle centred in the image fits that blob, so eq. 11 adds humans on it (the
+    short-lived false positives beside cars)."""
     min_candidate_area: int = 30
     """Smallest candidate silhouette, pixels."""
     min_existence: float = 0.5
@@ -249,6 +254,10 @@ class TemplateConfig:
         if not classes or any(c not in CLASSES for c in classes) or len(set(classes)) != len(classes):
             raise ConfigError(f"classes: expected a non-empty subset of {list(CLASSES)}, got {list(classes)}")
         object.__setattr__(self, "classes", classes)
+        if isinstance(self.vehicle_entry_px, bool) or not isinstance(self.vehicle_entry_px, (int, np.integer)):
+            raise ConfigError(f"vehicle_entry_px: expected an integer >= 0 (pixels), got {self.vehicle_entry_px!r}")
+        if self.vehicle_entry_px < 0:
+            raise ConfigError(f"vehicle_entry_px: expected an integer >= 0 (pixels), got {self.vehicle_entry_px!r}")
         for name in ("candidate_step_px", "min_candidate_area"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:

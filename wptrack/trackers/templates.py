@@ -142,20 +142,28 @@ class Candidates:
     """The fixed set of addition candidates (eq. 11): ground points under an image grid x class x orientation,
     at the prior's mean size, with their image spans precomputed on the device."""
 
-    def __init__(self, camera: Camera, plane: GroundPlane, cam_struct, plane_struct, config: TemplateConfig, device):
-        step = int(config.candidate_step_px)
-        us = np.arange(step / 2.0, camera.width, step)
-        vs = np.arange(step / 2.0, camera.height, step)
+    @staticmethod
+    def _grid(camera: Camera, plane: GroundPlane, step: int, margin: int, max_range: float) -> np.ndarray:
+        """(K, 2) ground points (metres) under the pixel grid of pitch ``step`` over the image widened by ``margin``
+        pixels left, right and below (the rays of pixels beyond the border: objects entering the view), within
+        ``max_range`` of the camera."""
+        us = np.arange(step / 2.0 - margin, camera.width + margin, step)
+        vs = np.arange(step / 2.0, camera.height + margin, step)
         grid = np.stack(np.meshgrid(us, vs), axis=-1).reshape(-1, 2)
         ground, dist = ground_rays(camera, plane, grid)
-        keep = dist <= config.max_range
-        if not np.any(keep):
+        return ground[dist <= max_range]
+
+    def __init__(self, camera: Camera, plane: GroundPlane, cam_struct, plane_struct, config: TemplateConfig, device):
+        step = int(config.candidate_step_px)
+        ground = self._grid(camera, plane, step, 0, config.max_range)
+        if len(ground) == 0:
             raise RigError(
                 f"camera '{camera.name}' does not see the ground plane (origin {plane.origin.tolist()}, normal "
                 f"{plane.normal.tolist()}) within {config.max_range} m: no image pixel's ray meets it in front of "
                 "the camera; check the rig's pose and its 'ground' entry"
             )
-        ground = ground[keep]
+        margin = int(config.vehicle_entry_px)
+        ground_v = ground if margin == 0 else self._grid(camera, plane, step, margin, config.max_range)
         kinds, pos, heading, dims = [], [], [], []
         if "human" in config.classes:
             kinds.append(np.full(len(ground), int(kraster.KIND_HUMAN)))
@@ -164,10 +172,10 @@ class Candidates:
             dims.append(np.tile(config.human.dims_mean, (len(ground), 1)))
         if "vehicle" in config.classes:
             for k in range(config.vehicle.orientations):
-                kinds.append(np.full(len(ground), int(kraster.KIND_VEHICLE)))
-                pos.append(ground)
-                heading.append(np.full(len(ground), math.pi * k / config.vehicle.orientations))
-                dims.append(np.tile(config.vehicle.dims_mean, (len(ground), 1)))
+                kinds.append(np.full(len(ground_v), int(kraster.KIND_VEHICLE)))
+                pos.append(ground_v)
+                heading.append(np.full(len(ground_v), math.pi * k / config.vehicle.orientations))
+                dims.append(np.tile(config.vehicle.dims_mean, (len(ground_v), 1)))
         self.kind_np = np.concatenate(kinds).astype(np.int32)
         self.pos_np = np.concatenate(pos).astype(np.float32)
         self.heading_np = np.concatenate(heading).astype(np.float32)
