@@ -139,7 +139,7 @@ def _template_config_from_args(args, fps: float | None):
         "seed": args.seed,
         "resampling": args.resampling,
     }
-    for name in ("scale", "t_add", "t_del", "add_min_gain", "min_existence", "candidate_step_px"):
+    for name in ("scale", "t_add", "t_del", "add_min_gain", "min_existence", "candidate_step_px", "vehicle_entry_px"):
         value = getattr(args, name)
         if value is not None:
             kw[name] = value
@@ -607,6 +607,12 @@ def build_parser() -> argparse.ArgumentParser:
     tt.add_argument("--add-min-gain", type=float, default=None, help="candidate gain / area to add (default 0.2)")
     tt.add_argument("--min-existence", type=float, default=None, help="report objects above this (default 0.5)")
     tt.add_argument("--candidate-step-px", type=int, default=None, help="addition grid pitch, pixels (default 8)")
+    tt.add_argument(
+        "--vehicle-entry-px",
+        type=int,
+        default=None,
+        help="vehicle addition candidates also this far beyond the image border, pixels (cars entering the view)",
+    )
     tt.add_argument("--resampling", default="systematic", help="systematic, stratified, multinomial or residual")
     tt.add_argument(
         "--mask-method",
