@@ -20,7 +20,7 @@ from .random import (
     normal4,
     uniform4,
 )
-from .raster import KIND_HUMAN, KIND_NONE, KIND_VEHICLE, MAX_SLOTS
+from .raster import KIND_HUMAN, KIND_NONE, KIND_VEHICLE, MAX_SLOTS, PIECES
 from .xor import disc_in_box
 
 wp.set_module_options({"enable_backward": False})
@@ -83,6 +83,7 @@ class Dynamics:
     dims_revert: float  # per-frame pull of the dims towards the prior mean (beyond the paper; 0: eqs. 8-9)
     absorb: int  # 1: an added vehicle removes the humans on its footprint (beyond the paper; kernels.classify)
     occlusion_noise: float  # share of the velocity/position noise its occlusion removes (0: eqs. 8-9), in [0, 1]
+    unseen_del: float  # deletion probability of an object none of whose pieces is in the image (0: eq. 13)
 
 
 @wp.func
@@ -103,6 +104,7 @@ def template_predict_kernel(
     cand_pos: wp.array(dtype=wp.vec2),
     cand_heading: wp.array(dtype=wp.float32),
     occlusion: wp.array2d(dtype=wp.float32),
+    hull_n: wp.array2d(dtype=wp.int32),
     src: TemplateState,
     dst: TemplateState,
 ):
@@ -122,6 +124,10 @@ def template_predict_kernel(
             fraction ``o`` is deleted with probability ``T_del (1 - occlusion_del o)`` and diffused with
             ``(1 - occlusion_noise o)`` times the velocity, turn and position deviations: a hidden object gets no
             evidence (eq. 6), so it keeps its motion and is not removed for free while it is hidden.
+        hull_n: (N, R * PIECES) the parents' piece hulls' vertex counts (``raster.template_hulls_kernel`` on the
+            state just scored; 0: the piece misses the image). Beyond the paper: an object none of whose pieces is
+            in the image (it has left the view) is deleted with probability ``dyn.unseen_del``; under eq. 13 alone
+            it stayed, invisible and unverifiable, for 1 / T_del frames on average.
         src: state read at the parents. dst: predicted state written for particle j.
     """
     j, s = wp.tid()
@@ -145,6 +151,13 @@ def template_predict_kernel(
     u = uniform4(seed, idx, f, STREAM_TEMPLATE_EVENT)
     if k != KIND_NONE and u[0] < dyn.t_del * (1.0 - dyn.occlusion_del * occ):
         k = KIND_NONE
+    if k != KIND_NONE and dyn.unseen_del > 0.0:
+        seen = False
+        for piece in range(PIECES):
+            if hull_n[a, s * PIECES + piece] > 0:
+                seen = True
+        if not seen and u[1] < dyn.unseen_del:
+            k = KIND_NONE
     if k == KIND_HUMAN and dyn.absorb != 0 and add[0] >= 0:
         # beyond the paper (kernels.classify): a vehicle added to this particle (the same draw as the addition
         # below, keyed by the particle) replaces the humans standing on its footprint, in one move

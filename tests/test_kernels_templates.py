@@ -1017,6 +1017,7 @@ def quiet_dynamics(**overrides):
     dyn.dims_revert = 0.0
     dyn.occlusion_del = 0.0
     dyn.occlusion_noise = 0.0
+    dyn.unseen_del = 0.0
     dyn.absorb = 0
     for k, v in overrides.items():
         setattr(dyn, k, v)
@@ -1043,8 +1044,11 @@ def predict(
     seed: int = 1234,
     frame: int = 3,
     occlusion=None,
+    hull_n=None,
 ) -> dict[str, np.ndarray]:
     dst = make_state(device, n, r, label=np.full((n, r), -99), logw=np.full(n, np.nan))
+    pieces = int(kraster.PIECES)
+    hn = np.full((n, r * pieces), 4, np.int32) if hull_n is None else np.asarray(hull_n, np.int32).reshape(n, -1)
     occ = np.zeros((n, r), np.float32) if occlusion is None else np.asarray(occlusion, np.float32).reshape(n, r)
     anc = np.arange(n) if ancestors is None else ancestors
     sl = np.arange(r) + 10 if slot_label is None else slot_label
@@ -1063,6 +1067,7 @@ def predict(
             wp.array(CANDS["pos"], dtype=wp.vec2, device=device),
             wp.array(CANDS["heading"], dtype=wp.float32, device=device),
             wp.array(occ, dtype=wp.float32, device=device),
+            wp.array(hn, dtype=wp.int32, device=device),
             src,
         ],
         outputs=[dst],
@@ -1191,6 +1196,29 @@ def test_predict_deletion_rate(device):
     assert np.all(got["label"][deleted] == -1) and np.all(got["pos"][deleted] == 0) and np.all(got["age"][deleted] == 0)
     np.testing.assert_array_equal(got["kind"][~deleted], HUMAN)
     np.testing.assert_array_equal(got["label"][~deleted], label[~deleted])
+
+
+def test_predict_unseen_deletion(device):
+    """unseen_del = 0.4, T_del = 0: an object none of whose pieces is in the image at its parent (every hull_n 0) is
+    deleted in 0.4 of the particles (4 binomial sigmas over 6000 objects); one piece in the image keeps it, and so
+    does unseen_del = 0 (eq. 13 alone); the draw is independent of T_del's (both at once: 1 - 0.7 x 0.6)."""
+    n, r = 3000, 4
+    pieces = int(kraster.PIECES)
+    kind = np.tile(np.array([HUMAN, VEHICLE, HUMAN, VEHICLE], np.int32), (n, 1))
+    dims = np.tile(np.array([[1.7, 0.22, 0.11], [4.4, 1.8, 1.5]] * 2, np.float32), (n, 1, 1))
+    src = make_state(device, n, r, kind=kind, label=np.tile(np.arange(r), (n, 1)), dims=dims, pos=np.ones((n, r, 2)))
+    hn = np.full((n, r, pieces), 5, np.int32)
+    hn[:, :2] = 0  # slots 0 and 1 have left the view
+    hn[:, 3, :-1] = 0  # slot 3 shows its last piece only
+    unseen = np.zeros((n, r), bool)
+    unseen[:, :2] = True
+    for p_del, t_del in ((0.4, 0.0), (0.0, 0.0), (0.4, 0.3)):
+        got = predict(device, quiet_dynamics(unseen_del=p_del, t_del=t_del), src, n, r, hull_n=hn)
+        deleted = got["kind"] == 0
+        p_unseen = 1 - (1 - t_del) * (1 - p_del)
+        count = int(unseen.sum())
+        assert abs(deleted[unseen].mean() - p_unseen) < 4 * math.sqrt(max(p_unseen * (1 - p_unseen), 1e-12) / count)
+        assert abs(deleted[~unseen].mean() - t_del) < 4 * math.sqrt(max(t_del * (1 - t_del), 1e-12) / count)
 
 
 @pytest.mark.parametrize("cand", [0, 1], ids=["human", "vehicle"])

@@ -185,6 +185,10 @@ class TemplateConfig:
     in [0, 1]: noise x (1 - occlusion_noise o) (0: eqs. 8-9 exactly). Beyond the paper: a hidden object gets no
     evidence that could correct a diffused velocity, so it keeps its motion while hidden. Off by default: 0.7 (with
     occlusion_del 1) gave 26 group ID switches instead of 10 on the one tracker seed tried."""
+    unseen_del: float = 0.0
+    """Per-frame deletion probability of an object none of whose pieces is in the image, in [0, 1] (0: eq. 13
+    only). Beyond the paper: an object that has left the view explains no pixel and no pixel contradicts it, so
+    under eq. 13 alone it stays (and is reported) for 1 / T_del = 50 frames on average after it left."""
     human: HumanPrior = field(default_factory=HumanPrior)
     vehicle: VehiclePrior = field(default_factory=VehiclePrior)
     classes: tuple[str, ...] = CLASSES
@@ -242,6 +246,7 @@ class TemplateConfig:
             raise ConfigError(f"absorb: expected true or false, got {self.absorb!r}")
         _nonneg(self.occlusion_del, "occlusion_del", "share of T_del", upper=1.0)
         _nonneg(self.occlusion_noise, "occlusion_noise", "share of the noise", upper=1.0)
+        _nonneg(self.unseen_del, "unseen_del", "probability", upper=1.0)
         _nonneg(self.max_range, "max_range", "m", strict=True)
         _nonneg(self.add_min_gain, "add_min_gain", "fraction")
         _nonneg(self.add_beta, "add_beta", "weight")

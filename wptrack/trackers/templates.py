@@ -248,6 +248,7 @@ def _dynamics_struct(config: TemplateConfig) -> kdyn.Dynamics:
     s.t_add = config.t_add
     s.t_del = config.t_del
     s.occlusion_del = config.occlusion_del
+    s.unseen_del = config.unseen_del
     s.dims_revert = config.dims_revert
     s.absorb = 1 if config.absorb else 0
     s.occlusion_noise = config.occlusion_noise
@@ -619,6 +620,7 @@ class TemplateTracker(FrameChain):
                 c.pos,
                 c.heading,
                 self.occlusion,
+                self.hulls.n,
                 self.state[cur],
             ],
             outputs=[self.state[nxt]],
