@@ -177,7 +177,9 @@ def test_vehicle_candidates_beyond_the_border():
     rng = np.random.default_rng(5)
     cam = random_camera(rng)
     plane = GroundPlane()
-    base = TemplateConfig(candidate_step_px=16, max_range=60.0, vehicle=VehiclePrior(orientations=1))
+    base = TemplateConfig(
+        candidate_step_px=16, max_range=60.0, vehicle=VehiclePrior(orientations=1), vehicle_entry_px=0
+    )
     margin = 48
 
     def image_coords(c: Candidates, kind: int) -> np.ndarray:

@@ -807,7 +807,9 @@ def test_uoh_box_sums_exact_past_2_47(device, rng, cpu_blocks, block_dim, h, col
 def candidate_case(device, rng, min_gain: float, min_area: int, beta: float = 0.5, block_dim: int = CANDIDATE_BLOCK):
     cam = random_camera(rng)
     plane = GroundPlane()
-    config = TemplateConfig(candidate_step_px=20, max_range=40.0, vehicle=VehiclePrior(orientations=2))
+    config = TemplateConfig(
+        candidate_step_px=20, max_range=40.0, vehicle=VehiclePrior(orientations=2), vehicle_entry_px=0
+    )
     cands = Candidates(cam, plane, camera_struct(cam), _plane_struct(plane), config, device)
     h, w, n = cam.height, cam.width, 37
     q = random_mask(rng, w, h) != 0
