@@ -20,16 +20,27 @@ Design (kernels and formulas: :mod:`wptrack.kernels.background`):
   bracket it (before the first centre / after the last: that window alone), so slow illumination changes are
   followed with a lag of at most a window, without steps at window boundaries.
 * **Passes.** Windows are built lazily while the frames are streamed (the mask pass): a second reader fetches the
-  ``K`` sampled frames of the next window when frame ``t`` first needs it (seeking when samples are far apart,
-  grabbing otherwise), so only two windows' backgrounds are held and a long recording costs about
-  ``K / (L / 2)`` extra decoded frames per frame (25 / 150 with the defaults). The exact frame a seek lands on
-  does not matter: the median is robust to a sample being a frame off.
+  ``K`` sampled frames of the next window when frame ``t`` first needs it, so only two windows' backgrounds are
+  held. It seeks only across gaps of :data:`SEEK_GAP` frames or more (an OpenCV seek decodes about 16 frames
+  before its target) and grabs the frames in between otherwise, keeping on its way the samples of the following
+  window (which overlaps this one by half), so it reads forward and decodes each frame about once: with the
+  defaults (a sample every 12 frames) a video costs about one extra decoding pass; an image sequence, or samples
+  more than :data:`SEEK_GAP` apart, about ``K / (L / 2)`` extra decoded frames per frame (25 / 150). The exact
+  frame a seek lands on does not matter: the median is robust to a sample being a frame off.
+* **Gains.** Each window's samples and each frame get a global gain per channel (illumination changes), the median
+  of their ratios to the background over a pixel subsample: every 13th pixel for the windows, thinned to at most
+  :data:`GAIN_PIXELS` for a frame (the same pixels up to 425,984 pixels per frame, e.g. 640x480; at 1920x1080
+  every 65th pixel).
 * **Spread cap.** Each window also records the image-wide median of its per-pixel noise scales (on a pixel
   subsample); with ``MaskConfig.spread_cap`` the per-pixel scale is capped at that many times it, so an object
   standing in a large minority of a window's samples does not hide itself by inflating its pixels' MAD.
 * **Hysteresis.** With ``MaskConfig.fg_low``, the kernel marks weak foreground (``fg_low < z <= fg_threshold``)
   beside the strong; :func:`hysteresis` keeps the weak pixels 8-connected to a strong one (OpenCV connected
   components on the host, where the mask goes anyway).
+* **Host work per frame** (the kernels are cheap; what costs is on the host): the frame's gain (bounded by
+  :data:`GAIN_PIXELS`), the hysteresis (one labelling of the foreground, then work on the weak pixels only) and
+  one copy of the probability for the caller. On CUDA the frame goes up and the mask and probability come down
+  through pinned buffers allocated once (one wait per frame, for the results).
 """
 
 from __future__ import annotations
@@ -47,8 +58,11 @@ from .frames import ArraySource, FrameSource, ImageSequenceSource, VideoSource, 
 
 log = logging.getLogger(__name__)
 
-#: Sample gap (frames) from which the sampler seeks instead of grabbing the frames in between.
-SEEK_GAP = 8
+#: Sample gap (frames) from which the sampler seeks instead of grabbing the frames in between. OpenCV's FFmpeg
+#: reader seeks 16 frames before the target and decodes forward from there (more after a sparse keyframe), and
+#: ``grab`` decodes as much as ``read`` (it only skips the colour conversion): a seek cost 17-27 decodes of a
+#: 1920x1080 FFV1 video on the CI machine, so grabbing forward is cheaper up to about 20 frames.
+SEEK_GAP = 24
 
 
 @dataclass(frozen=True)
@@ -109,14 +123,23 @@ def bracket(centres: list[float], t: int) -> tuple[int, int, float]:
 
 
 class _Sampler:
-    """Reads given frame indices of a source (increasing within a call), for the window backgrounds."""
+    """Reads given frame indices of a source (increasing within a call), for the window backgrounds.
+
+    A video is read forward: the frames between samples closer than :data:`SEEK_GAP` are grabbed, not sought, and
+    those of them that the next window samples (``ahead``) are kept, so that window, which overlaps this one by
+    half, does not seek back and decode them again (each frame is decoded about once by the sampler instead of
+    twice).
+    """
 
     def __init__(self, source: FrameSource) -> None:
         self.source = source
         self.cap: Any = None
         self.pos = 0  # index of the frame the next read() returns
+        self.kept: dict[int, np.ndarray] = {}  # frames passed by an earlier read that a later one samples
 
-    def read(self, indices: tuple[int, ...]) -> list[np.ndarray]:
+    def read(self, indices: tuple[int, ...], ahead: tuple[int, ...] = ()) -> list[np.ndarray]:
+        """The frames at ``indices`` (fewer when some cannot be read); a video keeps those of ``ahead`` (the next
+        read's indices) that it passes on the way."""
         s = self.source
         if isinstance(s, ArraySource):
             return [_to_bgr(np.ascontiguousarray(s.frames[i])) for i in indices]
@@ -124,34 +147,44 @@ class _Sampler:
             out = [_read_image(s.files[i]) for i in indices]
             return [f for f in out if f is not None and f.shape[:2] == (s.height, s.width)]
         if isinstance(s, VideoSource):
-            return self._read_video(indices)
+            return self._read_video(indices, set(ahead))
         return [f for i, f in enumerate(s) if i in set(indices)]  # any other source: one decoding pass
 
-    def _read_video(self, indices: tuple[int, ...]) -> list[np.ndarray]:
+    def _read_video(self, indices: tuple[int, ...], ahead: set[int]) -> list[np.ndarray]:
         import cv2
 
         if self.cap is None:
             self.cap = self.source._open()  # type: ignore[attr-defined]
             self.pos = 0
+        kept, self.kept = self.kept, {}
         out = []
         for i in indices:
-            if i < self.pos or i - self.pos >= SEEK_GAP:
-                self.cap.set(cv2.CAP_PROP_POS_FRAMES, float(i))
-                self.pos = i
-            ok = True
-            while ok and self.pos < i:
-                ok = self.cap.grab()
+            frame = kept.get(i)
+            if frame is None:
+                if i < self.pos or i - self.pos >= SEEK_GAP:
+                    self.cap.set(cv2.CAP_PROP_POS_FRAMES, float(i))
+                    self.pos = i
+                ok = True
+                while ok and self.pos < i:
+                    ok = self.cap.grab()
+                    if ok and self.pos in ahead:
+                        ok, passed = self.cap.retrieve()
+                        if ok and passed is not None:
+                            self.kept[self.pos] = passed
+                    self.pos += 1
+                ok, frame = self.cap.read() if ok else (False, None)
+                if not ok or frame is None:
+                    log.warning("%s: cannot read frame %d for the background; skipped", self.source.name, i)
+                    break  # the video ends earlier than it reported
                 self.pos += 1
-            ok, frame = self.cap.read() if ok else (False, None)
-            if not ok or frame is None:
-                log.warning("%s: cannot read frame %d for the background; skipped", self.source.name, i)
-                break  # the video ends earlier than it reported
-            self.pos += 1
+            if i in ahead:
+                self.kept[i] = frame
             if frame.ndim == 3 and frame.shape[2] == 3 and frame.shape[:2] == (self.source.height, self.source.width):
                 out.append(frame)
         return out
 
     def close(self) -> None:
+        self.kept = {}
         if self.cap is not None:
             self.cap.release()
             self.cap = None
@@ -509,7 +542,8 @@ class OfflineBackground:
 
         if i in self._built:
             return self._built[i]
-        frames = self._sampler.read(self.windows[i].samples)
+        ahead = self.windows[i + 1].samples if i + 1 < len(self.windows) else ()
+        frames = self._sampler.read(self.windows[i].samples, ahead)
         if not frames:
             if self._built:
                 log.warning("%s: no frame of background window %d could be read; reusing another", self.source.name, i)
