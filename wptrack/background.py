@@ -495,6 +495,8 @@ class OfflineBackground:
         self._stage_in = None if on_cpu else wp.empty(n3, dtype=wp.uint8, device="cpu", pinned=True)
         self._stage_mask = None if on_cpu else wp.empty(self.pixels, dtype=wp.uint8, device="cpu", pinned=True)
         self._stage_prob = None if on_cpu else wp.empty(self.pixels, dtype=wp.float32, device="cpu", pinned=True)
+        staged = (self._stage_in, self._stage_mask, self._stage_prob)
+        self._stage_views = None if on_cpu else [a.numpy() for a in staged]  # NumPy views of the pinned buffers
         self._mask = wp.zeros(self.pixels, dtype=wp.uint8, device=device)
         self._prob = wp.zeros(self.pixels, dtype=wp.float32, device=device)
         self._shadow = wp.zeros(self.pixels, dtype=wp.uint8, device=device)
@@ -654,7 +656,7 @@ class OfflineBackground:
         if self._stage_in is None:
             frame_in = wp.array(flat, dtype=wp.uint8, device="cpu", copy=False)
         else:
-            self._stage_in.numpy()[:] = flat
+            self._stage_views[0][:] = flat
             wp.copy(self._frame, self._stage_in)
             frame_in = self._frame
         wp.launch(
@@ -692,7 +694,7 @@ class OfflineBackground:
             wp.copy(self._stage_mask, packed)
             wp.copy(self._stage_prob, self._prob)
             wp.synchronize_stream(wp.get_stream(self.device))
-            levels, prob = self._stage_mask.numpy(), self._stage_prob.numpy()
+            levels, prob = self._stage_views[1], self._stage_views[2]
         prob = prob.reshape(shape).copy()  # the caller's own (the buffers are overwritten by the next frame)
         return resolve_levels(levels.reshape(shape), prob), prob
 
