@@ -220,3 +220,18 @@ def test_frame_gain_on_at_most_gain_pixels(rng, monkeypatch):
     np.testing.assert_array_equal(model.last_gain, expected)
     assert not np.array_equal(expected, _frame_gain_ref(frame.reshape(-1)[sub], background))
     model.close()
+
+
+def test_unreadable_window_reuses_another_with_its_statistics(rng, caplog):
+    """The frames before the last window's centre use the window before it when the last cannot be read (its
+    gains, spread and shadow statistics too: no KeyError)."""
+    video = np.clip(rng.normal(120, 5, (12, H, W, 3)), 0, 255).astype(np.uint8)
+    model = B.OfflineBackground(open_source(video), MaskConfig(window=6, samples=3, device="cpu"), "cpu")
+    assert len(model.windows) >= 2
+    read = model._sampler.read
+    model._sampler.read = lambda idx, ahead=(): [] if idx == model.windows[-1].samples else read(idx, ahead)
+    before = [t for t in range(len(video)) if model.centres[-2] < t < model.centres[-1]]
+    masks = [model.evidence(t, video[t])[0] for t in range(max(before) + 1)]
+    model.close()
+    assert before and "could be read; reusing another" in caplog.text
+    assert sum(m.sum() for m in masks) < 0.01 * masks[0].size * len(masks)  # a static scene: background

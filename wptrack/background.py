@@ -549,7 +549,11 @@ class OfflineBackground:
         if not frames:
             if self._built:
                 log.warning("%s: no frame of background window %d could be read; reusing another", self.source.name, i)
-                return self._built[max(self._built)]
+                m = max(self._built)
+                for stats in (self._bg_sub, self._bg_gain, self._scale, self._nb_scale, self._ratio):
+                    if m in stats:
+                        stats[i] = stats[m]
+                return self._built[m]
             raise FrameError(f"{self.source.name}: no frame of background window {i} could be read")
         k = len(frames)
         n3 = 3 * self.pixels
@@ -643,6 +647,8 @@ class OfflineBackground:
         i, j, w = bracket(self.centres, t)
         for old in [k for k in self._built if k < i]:
             del self._built[old]
+            self._bg_sub.pop(old, None)
+            self._bg_gain.pop(old, None)
         b0, m0 = self._window(i)
         b1, m1 = self._window(j)
         flat = np.ascontiguousarray(frame).reshape(-1)
