@@ -55,7 +55,7 @@ def test_sample_gains_and_frame_gain_equal_numpy_formulas(rng, k):
     np.testing.assert_array_equal(B.frame_gain(samples[0], dark), np.ones(3))
 
 
-@pytest.mark.parametrize("n", [1, 2, 7, 24, 25])
+@pytest.mark.parametrize("n", [1, 2, 7, 24, 25, 64, 65, 300, 301])
 def test_median_last_equals_numpy_median(rng, n):
     ints = rng.integers(0, 256, (4, 50, n), dtype=np.uint8)
     floats = ints / rng.uniform(0.5, 1.5, n)

@@ -230,7 +230,7 @@ def channel_gains(values: np.ndarray, background: np.ndarray) -> np.ndarray:
         b = background[c]
         ok = np.flatnonzero(b >= MIN_GAIN_LEVEL)
         if ok.size >= 16:
-            out[:, c] = np.median(values[:, c, ok] / b[ok], axis=1)
+            out[:, c] = median_last(values[:, c, ok] / b[ok])
     return np.clip(out, 0.05, 20.0)
 
 
@@ -249,12 +249,13 @@ def sample_gains(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def median_last(x: np.ndarray) -> np.ndarray:
-    """``np.median(x, axis=-1)`` (the same numbers, as float64) of an array without NaNs, faster on short rows:
-    a float array is sorted (NumPy's vectorised sort beats its multi-pivot selection on rows of a few tens), an
-    integer array partitioned; the middle value, or the mean of the two middle values ``(a + b) / 2``."""
+    """``np.median(x, axis=-1)`` (the same numbers, as float64) of an array without NaNs, faster: the middle value,
+    or the mean of the two middle values ``(a + b) / 2``, of rows sorted (float rows of at most 64 values: NumPy's
+    vectorised sort beats selection there) or partitioned at the middle only (``np.median`` also partitions at the
+    last value, for its NaN check, and costs several times more)."""
     n = x.shape[-1]
     h = n // 2
-    if np.issubdtype(x.dtype, np.floating):
+    if np.issubdtype(x.dtype, np.floating) and n <= 64:
         part = np.sort(x, axis=-1)
     else:
         part = np.partition(x, [h - 1, h] if n % 2 == 0 else h, axis=-1)
