@@ -59,10 +59,13 @@ def test_sample_gains_and_frame_gain_equal_numpy_formulas(rng, k):
 def test_median_last_equals_numpy_median(rng, n):
     ints = rng.integers(0, 256, (4, 50, n), dtype=np.uint8)
     floats = ints / rng.uniform(0.5, 1.5, n)
-    for x in (ints, floats):
-        got = B.median_last(x)
-        assert got.dtype == np.float64
-        np.testing.assert_array_equal(got, np.median(x.astype(np.float64), axis=-1))
+    singles = (floats * np.float32(np.pi)).astype(np.float32)  # float32 means round as np.median's do
+    for x in (ints, floats, singles, singles[0, 0]):
+        got, expected = B.median_last(x), np.median(x, axis=-1)
+        assert got.dtype == expected.dtype
+        np.testing.assert_array_equal(got, expected)
+        if x.dtype == np.uint8:
+            np.testing.assert_array_equal(got, np.median(x.astype(np.float64), axis=-1))
 
 
 def test_shadow_ratio_equals_full_formula(rng):

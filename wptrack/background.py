@@ -249,19 +249,18 @@ def sample_gains(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def median_last(x: np.ndarray) -> np.ndarray:
-    """``np.median(x, axis=-1)`` (the same numbers, as float64) of an array without NaNs, faster: the middle value,
-    or the mean of the two middle values ``(a + b) / 2``, of rows sorted (float rows of at most 64 values: NumPy's
-    vectorised sort beats selection there) or partitioned at the middle only (``np.median`` also partitions at the
-    last value, for its NaN check, and costs several times more)."""
+    """``np.median(x, axis=-1)`` of an array without NaNs, the same numbers and dtype (the mean of the middle value,
+    or of the two middle values, as ``np.median`` takes it), faster: rows sorted (float rows of at most 64 values:
+    NumPy's vectorised sort beats selection there) or partitioned at the middle only (``np.median`` also
+    partitions at the last value, for its NaN check, and costs several times more)."""
     n = x.shape[-1]
     h = n // 2
+    lo = h if n % 2 else h - 1
     if np.issubdtype(x.dtype, np.floating) and n <= 64:
         part = np.sort(x, axis=-1)
     else:
-        part = np.partition(x, [h - 1, h] if n % 2 == 0 else h, axis=-1)
-    if n % 2:
-        return part[..., h].astype(np.float64)
-    return (part[..., h - 1].astype(np.float64) + part[..., h]) / 2.0
+        part = np.partition(x, [lo, h] if lo < h else h, axis=-1)
+    return np.mean(part[..., lo : h + 1], axis=-1)
 
 
 def sample_gains_channels(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -390,8 +389,8 @@ def neighbourhood_scale(
         d /= s
         single.append(np.abs(d[radius:-radius:3, radius:-radius:3]).ravel())
         mean.append(np.abs(cv2.blur(d, (2 * radius + 1, 2 * radius + 1))[radius:-radius:3, radius:-radius:3]).ravel())
-    s1 = float(np.median(np.concatenate(single)))
-    sn = float(np.median(np.concatenate(mean)))
+    s1 = float(median_last(np.concatenate(single)))
+    sn = float(median_last(np.concatenate(mean)))
     if sn <= 0:
         return 1.0
     return float(np.clip(s1 / (np.sqrt(n) * sn), 1.0 / np.sqrt(n), 1.0))
