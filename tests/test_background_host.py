@@ -238,3 +238,13 @@ def test_unreadable_window_reuses_another_with_its_statistics(rng, caplog):
     model.close()
     assert before and "could be read; reusing another" in caplog.text
     assert sum(m.sum() for m in masks) < 0.01 * masks[0].size * len(masks)  # a static scene: background
+
+
+def test_evidence_rejects_a_frame_of_another_size(rng):
+    from wptrack.errors import FrameError
+
+    video = np.clip(rng.normal(120, 5, (4, H, W, 3)), 0, 255).astype(np.uint8)
+    model = B.OfflineBackground(open_source(video), MaskConfig(window=4, device="cpu"), "cpu")
+    with pytest.raises(FrameError, match=r"frame 1 has shape \(60, 79, 3\), expected \(60, 80, 3\)"):
+        model.evidence(1, video[1][:, :-1])
+    model.close()

@@ -657,7 +657,18 @@ class OfflineBackground:
             self._bg_gain.pop(old, None)
         b0, m0 = self._window(i)
         b1, m1 = self._window(j)
-        flat = np.ascontiguousarray(frame).reshape(-1)
+        flat = np.ascontiguousarray(frame, dtype=np.uint8).reshape(-1)
+        if flat.size != 3 * self.pixels:  # the kernel reads 3 H W values where the frame is
+            raise FrameError(
+                f"{self.source.name}: frame {t} has shape {np.shape(frame)}, expected "
+                f"({self.source.height}, {self.source.width}, 3) uint8"
+            )
+        if self._stage_in is None:
+            frame_in = wp.array(flat, dtype=wp.uint8, device="cpu", copy=False)
+        else:  # the upload runs while the host computes the gain
+            self._stage_views[0][:] = flat
+            wp.copy(self._frame, self._stage_in)
+            frame_in = self._frame
         bg = self._bg_gain[i] if w == 0.0 else (1.0 - w) * self._bg_gain[i] + w * self._bg_gain[j]
         gain = channel_gains(flat[self._gain_index][None], bg)[0]
         self.last_gain = gain
@@ -665,12 +676,6 @@ class OfflineBackground:
             self.params.spread_cap = float(self.config.spread_cap * ((1.0 - w) * self._scale[i] + w * self._scale[j]))
         if self.config.shadow_band > 0:
             self.params.shadow_lo, self.params.shadow_hi = self.shadow_bounds(i, j, w)
-        if self._stage_in is None:
-            frame_in = wp.array(flat, dtype=wp.uint8, device="cpu", copy=False)
-        else:
-            self._stage_views[0][:] = flat
-            wp.copy(self._frame, self._stage_in)
-            frame_in = self._frame
         wp.launch(
             kbg.foreground_kernel,
             dim=self.pixels,
