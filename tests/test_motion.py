@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.background import bracket, plan_windows
+from wptrack.background import SEEK_GAP, bracket, plan_windows
 from wptrack.bench import numpy_masks
 from wptrack.cli import main
 from wptrack.errors import ConfigError, FrameError
@@ -309,15 +309,15 @@ def test_cli_masks_bad_input(tmp_path, rng, capsys, argv, message):
 
 
 def test_sampler_seeks_read_the_sampled_frames(tmp_path, rng):
-    frames = 64
+    frames = 130
     video = _noisy(rng, _texture(rng), frames, noise=20.0)  # every frame differs
     path = tmp_path / "v.avi"
     write_video(path, video)
     decoded = np.stack(list(open_source(path)))
-    config = MaskConfig(window=frames, samples=5, device="cpu")  # samples 12.8 frames apart: seeks
+    config = MaskConfig(window=frames, samples=5, device="cpu")  # samples 26 frames apart: seeks
     masks = open_masks(video=path, config=config)
     samples = masks.model.windows[0].samples
-    assert min(np.diff(samples)) >= 8
+    assert min(np.diff(samples)) >= SEEK_GAP
     expected, _ = numpy_masks.median_mad(decoded[list(samples)])
     np.testing.assert_array_equal(masks.background(), expected)
 

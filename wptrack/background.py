@@ -20,16 +20,28 @@ Design (kernels and formulas: :mod:`wptrack.kernels.background`):
   bracket it (before the first centre / after the last: that window alone), so slow illumination changes are
   followed with a lag of at most a window, without steps at window boundaries.
 * **Passes.** Windows are built lazily while the frames are streamed (the mask pass): a second reader fetches the
-  ``K`` sampled frames of the next window when frame ``t`` first needs it (seeking when samples are far apart,
-  grabbing otherwise), so only two windows' backgrounds are held and a long recording costs about
-  ``K / (L / 2)`` extra decoded frames per frame (25 / 150 with the defaults). The exact frame a seek lands on
-  does not matter: the median is robust to a sample being a frame off.
+  ``K`` sampled frames of the next window when frame ``t`` first needs it, so only two windows' backgrounds are
+  held. It seeks only across gaps of :data:`SEEK_GAP` frames or more (an OpenCV seek decodes about 16 frames
+  before its target) and grabs the frames in between otherwise, keeping on its way the samples of the following
+  window (which overlaps this one by half), so it reads forward and decodes each frame about once: with the
+  defaults (a sample every 12 frames) a video costs at most one extra decoding pass (0.6 of the decoding time of
+  a 600-frame 640x480 FFV1 video on the CI machine, where seeking to every sample cost 2.9); an image sequence,
+  or samples more than :data:`SEEK_GAP` apart, about ``K / (L / 2)`` extra decoded frames per frame. The exact
+  frame a seek lands on does not matter: the median is robust to a sample being a frame off.
+* **Gains.** Each window's samples and each frame get a global gain per channel (illumination changes), the median
+  of their ratios to the background over a pixel subsample: every 13th pixel for the windows, thinned to at most
+  :data:`GAIN_PIXELS` for a frame (the same pixels up to 425,984 pixels per frame, e.g. 640x480; at 1920x1080
+  every 65th pixel).
 * **Spread cap.** Each window also records the image-wide median of its per-pixel noise scales (on a pixel
   subsample); with ``MaskConfig.spread_cap`` the per-pixel scale is capped at that many times it, so an object
   standing in a large minority of a window's samples does not hide itself by inflating its pixels' MAD.
 * **Hysteresis.** With ``MaskConfig.fg_low``, the kernel marks weak foreground (``fg_low < z <= fg_threshold``)
   beside the strong; :func:`hysteresis` keeps the weak pixels 8-connected to a strong one (OpenCV connected
   components on the host, where the mask goes anyway).
+* **Host work per frame** (the kernels are cheap; what costs is on the host): the frame's gain (bounded by
+  :data:`GAIN_PIXELS`), the hysteresis (one labelling of the foreground, then work on the weak pixels only) and
+  one copy of the probability for the caller. On CUDA the frame goes up and the mask and probability come down
+  through pinned buffers allocated once (one wait per frame, for the results).
 """
 
 from __future__ import annotations
@@ -47,8 +59,11 @@ from .frames import ArraySource, FrameSource, ImageSequenceSource, VideoSource, 
 
 log = logging.getLogger(__name__)
 
-#: Sample gap (frames) from which the sampler seeks instead of grabbing the frames in between.
-SEEK_GAP = 8
+#: Sample gap (frames) from which the sampler seeks instead of grabbing the frames in between. OpenCV's FFmpeg
+#: reader seeks 16 frames before the target and decodes forward from there (more after a sparse keyframe), and
+#: ``grab`` decodes as much as ``read`` (it only skips the colour conversion): a seek cost 17-27 decodes of a
+#: 1920x1080 FFV1 video on the CI machine, so grabbing forward is cheaper up to about 20 frames.
+SEEK_GAP = 24
 
 
 @dataclass(frozen=True)
@@ -109,14 +124,23 @@ def bracket(centres: list[float], t: int) -> tuple[int, int, float]:
 
 
 class _Sampler:
-    """Reads given frame indices of a source (increasing within a call), for the window backgrounds."""
+    """Reads given frame indices of a source (increasing within a call), for the window backgrounds.
+
+    A video is read forward: the frames between samples closer than :data:`SEEK_GAP` are grabbed, not sought, and
+    those of them that the next window samples (``ahead``) are kept, so that window, which overlaps this one by
+    half, does not seek back and decode them again (each frame is decoded about once by the sampler instead of
+    twice).
+    """
 
     def __init__(self, source: FrameSource) -> None:
         self.source = source
         self.cap: Any = None
         self.pos = 0  # index of the frame the next read() returns
+        self.kept: dict[int, np.ndarray] = {}  # frames passed by an earlier read that a later one samples
 
-    def read(self, indices: tuple[int, ...]) -> list[np.ndarray]:
+    def read(self, indices: tuple[int, ...], ahead: tuple[int, ...] = ()) -> list[np.ndarray]:
+        """The frames at ``indices`` (fewer when some cannot be read); a video keeps those of ``ahead`` (the next
+        read's indices) that it passes on the way."""
         s = self.source
         if isinstance(s, ArraySource):
             return [_to_bgr(np.ascontiguousarray(s.frames[i])) for i in indices]
@@ -124,38 +148,58 @@ class _Sampler:
             out = [_read_image(s.files[i]) for i in indices]
             return [f for f in out if f is not None and f.shape[:2] == (s.height, s.width)]
         if isinstance(s, VideoSource):
-            return self._read_video(indices)
+            return self._read_video(indices, set(ahead))
         return [f for i, f in enumerate(s) if i in set(indices)]  # any other source: one decoding pass
 
-    def _read_video(self, indices: tuple[int, ...]) -> list[np.ndarray]:
+    def _read_video(self, indices: tuple[int, ...], ahead: set[int]) -> list[np.ndarray]:
         import cv2
 
         if self.cap is None:
             self.cap = self.source._open()  # type: ignore[attr-defined]
             self.pos = 0
+        kept, self.kept = self.kept, {}
         out = []
         for i in indices:
-            if i < self.pos or i - self.pos >= SEEK_GAP:
-                self.cap.set(cv2.CAP_PROP_POS_FRAMES, float(i))
-                self.pos = i
-            ok = True
-            while ok and self.pos < i:
-                ok = self.cap.grab()
+            frame = kept.get(i)
+            if frame is None:
+                if i < self.pos or i - self.pos >= SEEK_GAP:
+                    self.cap.set(cv2.CAP_PROP_POS_FRAMES, float(i))
+                    self.pos = i
+                ok = True
+                while ok and self.pos < i:
+                    ok = self.cap.grab()
+                    if ok and self.pos in ahead:
+                        ok, passed = self.cap.retrieve()
+                        if ok and passed is not None:
+                            self.kept[self.pos] = passed
+                    self.pos += 1
+                ok, frame = self.cap.read() if ok else (False, None)
+                if not ok or frame is None:
+                    log.warning("%s: cannot read frame %d for the background; skipped", self.source.name, i)
+                    break  # the video ends earlier than it reported
                 self.pos += 1
-            ok, frame = self.cap.read() if ok else (False, None)
-            if not ok or frame is None:
-                log.warning("%s: cannot read frame %d for the background; skipped", self.source.name, i)
-                break  # the video ends earlier than it reported
-            self.pos += 1
+            if i in ahead:
+                self.kept[i] = frame
             if frame.ndim == 3 and frame.shape[2] == 3 and frame.shape[:2] == (self.source.height, self.source.width):
                 out.append(frame)
         return out
 
     def close(self) -> None:
+        self.kept = {}
         if self.cap is not None:
             self.cap.release()
             self.cap = None
 
+
+GAIN_PIXELS = 32768
+"""Most pixels of the subsample a frame's global gain is estimated on (:class:`OfflineBackground`: every 13th
+pixel, thinned further above this), so its cost per frame is bounded at any frame size (at 1920x1080: 32k pixels
+instead of 160k, 1.9 instead of about 8 ms on the CI machine). Frames up to 425,984 pixels are unchanged. Measured
+effect at 1920x1080 (s3-mixed, light-change + sun + noise, frames 55-114 upscaled, window 30, 15 samples): 65 % of
+the masks identical, 13.5 pixels per frame differ on average (of about 60k foreground), mean IoU with the uncapped
+masks 0.9995 (min 0.982), mean IoU with the perfect masks 0.71858 -> 0.71856. The differences come where the
+median of the ratios sits between two quantisation steps of 8-bit values (a gain of 0.988 or 1.0): the uncapped
+estimate jumps between them from one frame to the next as well."""
 
 MIN_GAIN_LEVEL = 16.0
 """Background values below this (8-bit) are left out of gain estimates (dark pixels carry no ratio)."""
@@ -172,11 +216,27 @@ def frame_gain(values: np.ndarray, background: np.ndarray) -> np.ndarray:
         ``(3,)`` gains (1 where no pixel is bright enough). The median ignores a minority of changed pixels
         (the people); a light dimming by 20 % gives 0.8.
     """
-    out = np.ones(3)
+    return channel_gains(np.ascontiguousarray(values.T)[None], np.ascontiguousarray(background.T))[0]
+
+
+def channel_gains(values: np.ndarray, background: np.ndarray) -> np.ndarray:
+    """:func:`frame_gain` of ``K`` frames at once, on channel-major arrays (the same numbers).
+
+    Args:
+        values: ``(K, 3, P)`` uint8 channel values of K frames at P subsampled pixels.
+        background: ``(3, P)`` float64 the background at those pixels (8-bit units).
+
+    Returns:
+        ``(K, 3)`` float64 gains, each the median over the pixels whose background is at least
+        :data:`MIN_GAIN_LEVEL` of their ratio to the background (1 where fewer than 16 such pixels), clipped to
+        ``[0.05, 20]``.
+    """
+    out = np.ones((values.shape[0], 3))
     for c in range(3):
-        ok = background[:, c] >= MIN_GAIN_LEVEL
-        if ok.sum() >= 16:
-            out[c] = float(np.median(values[ok, c] / background[ok, c]))
+        b = background[c]
+        ok = np.flatnonzero(b >= MIN_GAIN_LEVEL)
+        if ok.size >= 16:
+            out[:, c] = median_last(values[:, c, ok] / b[ok])
     return np.clip(out, 0.05, 20.0)
 
 
@@ -190,11 +250,36 @@ def sample_gains(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         ``(gains (K, 3) float32, background (P, 3) float64)``: each sample's gain against the per-pixel median of the
         samples (normalised so that their median gain is 1), and the median of the compensated samples.
     """
-    x = samples.astype(np.float64)
-    ref = np.median(x, axis=0)
-    gains = np.stack([frame_gain(xk, ref) for xk in x])
+    gains, background = sample_gains_channels(np.ascontiguousarray(samples.transpose(0, 2, 1)))
+    return gains, np.ascontiguousarray(background.T)
+
+
+def median_last(x: np.ndarray) -> np.ndarray:
+    """``np.median(x, axis=-1)`` of an array without NaNs, the same numbers and dtype (the mean of the middle value,
+    or of the two middle values, as ``np.median`` takes it), faster: rows sorted (float rows of at most 64 values:
+    NumPy's vectorised sort beats selection there) or partitioned at the middle only (``np.median`` also
+    partitions at the last value, for its NaN check, and costs several times more)."""
+    n = x.shape[-1]
+    h = n // 2
+    lo = h if n % 2 else h - 1
+    if np.issubdtype(x.dtype, np.floating) and n <= 64:
+        part = np.sort(x, axis=-1)
+    else:
+        part = np.partition(x, [lo, h] if lo < h else h, axis=-1)
+    return np.mean(part[..., lo : h + 1], axis=-1)
+
+
+def sample_gains_channels(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`sample_gains` on channel-major samples ``(K, 3, P)`` uint8; the background comes back ``(3, P)``.
+
+    The medians over the samples are taken along a contiguous last axis (a ``(3, P, K)`` copy): the same values as
+    ``np.median`` along a strided first axis, several times faster.
+    """
+    along = np.moveaxis(samples, 0, -1).copy()  # (3, P, K)
+    ref = median_last(along)  # float64: the same as the median of the samples taken as float64
+    gains = channel_gains(samples, ref)
     gains /= np.median(gains, axis=0, keepdims=True)
-    return gains.astype(np.float32), np.median(x / gains[:, None, :], axis=0)
+    return gains.astype(np.float32), median_last(along / gains.T[:, None, :])
 
 
 def hysteresis(levels: np.ndarray) -> np.ndarray:
@@ -205,16 +290,19 @@ def hysteresis(levels: np.ndarray) -> np.ndarray:
 
     Returns:
         ``(H, W)`` uint8 mask with values ``{0, 1}``: the connected components of ``levels > 0`` that hold a
-        strong pixel.
+        strong pixel. (Computed as ``levels > 0`` less the weak pixels of the components without a strong pixel,
+        which hold weak pixels only: sparse work on the few weak pixels instead of a lookup per image pixel.)
     """
     import cv2
 
-    weak = (levels > 0).view(np.uint8)
-    count, labels = cv2.connectedComponents(weak, connectivity=8)
-    keep = np.zeros(count, dtype=np.uint8)
-    keep[labels[levels == 2]] = 1
-    keep[0] = 0
-    return keep[labels]
+    union = (levels > 0).view(np.uint8)
+    count, labels = cv2.connectedComponents(union, connectivity=8)
+    good = np.zeros(count, dtype=bool)
+    good[labels[levels == 2]] = True
+    weak = np.flatnonzero(levels == 1)
+    weak_labels = labels.reshape(-1)[weak]
+    union.reshape(-1)[weak[~good[weak_labels]]] = 0
+    return union
 
 
 PENUMBRA_PX = 3
@@ -283,7 +371,8 @@ def neighbourhood_scale(
     must beat the recording's real neighbourhood noise.
 
     Args:
-        samples: ``(K, H, W, 3)`` uint8 a window's samples. gains: ``(K, 3)`` their global gains.
+        samples: ``(K, H, W, 3)`` uint8 a window's samples (an array or a sequence of K ``(H, W, 3)`` frames).
+            gains: ``(K, 3)`` their global gains.
         median: ``(H, W, 3)`` uint8 the window's background. mad: ``(H, W, 3)`` uint8 its MAD.
         radius: Neighbourhood radius, pixels.
         noise_floor: Smallest noise scale, 8-bit units.
@@ -300,11 +389,14 @@ def neighbourhood_scale(
     pick = np.unique(np.linspace(0, len(samples) - 1, min(max_samples, len(samples))).round().astype(int))
     single, mean = [], []
     for k in pick:
-        d = (samples[k].astype(np.float32) / gains[k].astype(np.float32) - b) / s
+        d = samples[k].astype(np.float32)
+        d /= gains[k].astype(np.float32)
+        d -= b
+        d /= s
         single.append(np.abs(d[radius:-radius:3, radius:-radius:3]).ravel())
         mean.append(np.abs(cv2.blur(d, (2 * radius + 1, 2 * radius + 1))[radius:-radius:3, radius:-radius:3]).ravel())
-    s1 = float(np.median(np.concatenate(single)))
-    sn = float(np.median(np.concatenate(mean)))
+    s1 = float(median_last(np.concatenate(single)))
+    sn = float(median_last(np.concatenate(mean)))
     if sn <= 0:
         return 1.0
     return float(np.clip(s1 / (np.sqrt(n) * sn), 1.0 / np.sqrt(n), 1.0))
@@ -351,11 +443,13 @@ def shadow_ratio(
     votes = []
     for xk, g in zip(samples, gains, strict=True):
         x = xk.astype(np.float64) / g[None, :]
-        ib = (x * b).sum(axis=1)
-        a = ib / np.maximum(bb, 1.0)
-        cd = np.sqrt(np.maximum((x * x).sum(axis=1) - a * ib, 0.0) / np.maximum(bb, 1.0))
         z = np.sqrt(((x - b) ** 2).mean(axis=1)) / s
-        votes.append(a[(z > threshold) & (cd <= chroma_max) & (bb >= 1.0)])
+        fg = np.flatnonzero((z > threshold) & (bb >= 1.0))  # the ratios of the foreground pixels only
+        x, bf, bbf = x[fg], b[fg], bb[fg]
+        ib = (x * bf).sum(axis=1)
+        a = ib / np.maximum(bbf, 1.0)
+        cd = np.sqrt(np.maximum((x * x).sum(axis=1) - a * ib, 0.0) / np.maximum(bbf, 1.0))
+        votes.append(a[cd <= chroma_max])
     a = np.concatenate(votes)
     lo, hi = SHADOW_SEARCH
     edges = np.arange(lo, hi + bin_width / 2, bin_width)
@@ -399,7 +493,16 @@ class OfflineBackground:
         self.centres = [w.centre for w in self.windows]
         self.pixels = source.width * source.height
         n3 = 3 * self.pixels
-        self._frame = wp.zeros(n3, dtype=wp.uint8, device=device)
+        on_cpu = wp.get_device(device).is_cpu
+        # CUDA: the frame goes up and the results come down through pinned host buffers (allocated once, copied
+        # asynchronously, one wait per frame); CPU: the kernel reads the caller's frame and writes arrays that
+        # NumPy views share
+        self._frame = None if on_cpu else wp.zeros(n3, dtype=wp.uint8, device=device)
+        self._stage_in = None if on_cpu else wp.empty(n3, dtype=wp.uint8, device="cpu", pinned=True)
+        self._stage_mask = None if on_cpu else wp.empty(self.pixels, dtype=wp.uint8, device="cpu", pinned=True)
+        self._stage_prob = None if on_cpu else wp.empty(self.pixels, dtype=wp.float32, device="cpu", pinned=True)
+        staged = (self._stage_in, self._stage_mask, self._stage_prob)
+        self._stage_views = None if on_cpu else [a.numpy() for a in staged]  # NumPy views of the pinned buffers
         self._mask = wp.zeros(self.pixels, dtype=wp.uint8, device=device)
         self._prob = wp.zeros(self.pixels, dtype=wp.float32, device=device)
         self._shadow = wp.zeros(self.pixels, dtype=wp.uint8, device=device)
@@ -410,9 +513,16 @@ class OfflineBackground:
         self._scale: dict[int, float] = {}  # image-wide median noise scale of each built window
         self._nb_scale: dict[int, float] = {}  # neighbourhood_scale of each built window
         self._ratio: dict[int, float | None] = {}  # learnt shadow ratio of each built window (None: not learnt)
-        # channel values of a pixel subsample (every 13th pixel) for the global gains (illumination changes)
-        self._sub = (3 * np.arange(0, self.pixels, 13)[:, None] + np.arange(3)[None, :]).reshape(-1)
-        self._bg_sub: dict[int, np.ndarray] = {}
+        # channel values of a pixel subsample (every 13th pixel) for the windows' gains (illumination changes) and
+        # shadow ratios: flat indices pixel-major (3 P',) and channel-major (3, P')
+        pixels = np.arange(0, self.pixels, 13)
+        self._sub = (3 * pixels[:, None] + np.arange(3)[None, :]).reshape(-1)
+        self._sub_channels = np.ascontiguousarray(self._sub.reshape(-1, 3).T)
+        # a frame's gain: every m-th pixel of that subsample, at most GAIN_PIXELS pixels
+        self._gain_step = max(1, math.ceil(len(pixels) / GAIN_PIXELS))
+        self._gain_index = np.ascontiguousarray(self._sub_channels[:, :: self._gain_step])
+        self._bg_sub: dict[int, np.ndarray] = {}  # each window's (3, P') compensated median at the subsample
+        self._bg_gain: dict[int, np.ndarray] = {}  # ... at the frame gain's pixels
         self.last_gain = np.ones(3)  # the global gain of the last frame given to evidence() (B, G, R)
         self._stacks: dict[int, Any] = {}
         self._sampler = _Sampler(source)
@@ -440,19 +550,30 @@ class OfflineBackground:
 
         if i in self._built:
             return self._built[i]
-        frames = self._sampler.read(self.windows[i].samples)
+        ahead = self.windows[i + 1].samples if i + 1 < len(self.windows) else ()
+        frames = self._sampler.read(self.windows[i].samples, ahead)
         if not frames:
             if self._built:
                 log.warning("%s: no frame of background window %d could be read; reusing another", self.source.name, i)
-                return self._built[max(self._built)]
+                m = max(self._built)
+                for stats in (self._bg_sub, self._bg_gain, self._scale, self._nb_scale, self._ratio):
+                    if m in stats:
+                        stats[i] = stats[m]
+                return self._built[m]
             raise FrameError(f"{self.source.name}: no frame of background window {i} could be read")
         k = len(frames)
+        n3 = 3 * self.pixels
         stack = self._stacks.get(k)
         if stack is None:
-            stack = self._stacks[k] = wp.zeros((k, 3 * self.pixels), dtype=wp.uint8, device=self.device)
-        host = np.stack([np.ascontiguousarray(f).reshape(-1) for f in frames])
-        wp.copy(stack, wp.array(host, dtype=wp.uint8, device="cpu", copy=False))
-        gains, self._bg_sub[i] = sample_gains(host[:, self._sub].reshape(k, -1, 3))
+            stack = self._stacks[k] = wp.zeros((k, n3), dtype=wp.uint8, device=self.device)
+        frames = [np.ascontiguousarray(f) for f in frames]
+        sub = np.empty((k, *self._sub_channels.shape), dtype=np.uint8)
+        for r, f in enumerate(frames):
+            flat = f.reshape(-1)
+            sub[r] = flat[self._sub_channels]
+            wp.copy(stack, wp.array(flat, dtype=wp.uint8, device="cpu", copy=False), dest_offset=r * n3, count=n3)
+        gains, self._bg_sub[i] = sample_gains_channels(sub)
+        self._bg_gain[i] = np.ascontiguousarray(self._bg_sub[i][:, :: self._gain_step])
         median = wp.zeros(3 * self.pixels, dtype=wp.uint8, device=self.device)
         mad = wp.zeros(3 * self.pixels, dtype=wp.uint8, device=self.device)
         g = wp.array(gains, dtype=wp.vec3, device=self.device)
@@ -467,7 +588,7 @@ class OfflineBackground:
             if c.neighbourhood > 0:
                 shape = (self.source.height, self.source.width, 3)
                 self._nb_scale[i] = neighbourhood_scale(
-                    host.reshape(k, *shape), gains, median.numpy().reshape(shape), mad_host.reshape(shape),
+                    [f.reshape(shape) for f in frames], gains, median.numpy().reshape(shape), mad_host.reshape(shape),
                     c.neighbourhood, c.noise_floor,
                 )  # fmt: skip
                 log.info(
@@ -476,7 +597,7 @@ class OfflineBackground:
             if self.config.shadow_band > 0 and self.config.detect_shadows:
                 c = self.config
                 ratio = shadow_ratio(
-                    host[:, self._sub].reshape(k, -1, 3), gains, self._bg_sub[i], mad_host[self._sub].reshape(-1, 3),
+                    sub.transpose(0, 2, 1), gains, self._bg_sub[i].T, mad_host[self._sub].reshape(-1, 3),
                     c.fg_threshold, c.noise_floor, c.shadow_chroma,
                 )  # fmt: skip
                 self._ratio[i] = ratio
@@ -532,21 +653,33 @@ class OfflineBackground:
         i, j, w = bracket(self.centres, t)
         for old in [k for k in self._built if k < i]:
             del self._built[old]
+            self._bg_sub.pop(old, None)
+            self._bg_gain.pop(old, None)
         b0, m0 = self._window(i)
         b1, m1 = self._window(j)
-        flat = np.ascontiguousarray(frame).reshape(-1)
-        bg_sub = (1.0 - w) * self._bg_sub[i] + w * self._bg_sub[j]
-        gain = frame_gain(flat[self._sub].reshape(-1, 3), bg_sub)
+        flat = np.ascontiguousarray(frame, dtype=np.uint8).reshape(-1)
+        if flat.size != 3 * self.pixels:  # the kernel reads 3 H W values where the frame is
+            raise FrameError(
+                f"{self.source.name}: frame {t} has shape {np.shape(frame)}, expected "
+                f"({self.source.height}, {self.source.width}, 3) uint8"
+            )
+        if self._stage_in is None:
+            frame_in = wp.array(flat, dtype=wp.uint8, device="cpu", copy=False)
+        else:  # the upload runs while the host computes the gain
+            self._stage_views[0][:] = flat
+            wp.copy(self._frame, self._stage_in)
+            frame_in = self._frame
+        bg = self._bg_gain[i] if w == 0.0 else (1.0 - w) * self._bg_gain[i] + w * self._bg_gain[j]
+        gain = channel_gains(flat[self._gain_index][None], bg)[0]
         self.last_gain = gain
         if self.config.spread_cap > 0:
             self.params.spread_cap = float(self.config.spread_cap * ((1.0 - w) * self._scale[i] + w * self._scale[j]))
         if self.config.shadow_band > 0:
             self.params.shadow_lo, self.params.shadow_hi = self.shadow_bounds(i, j, w)
-        wp.copy(self._frame, wp.array(flat, dtype=wp.uint8, device="cpu", copy=False))
         wp.launch(
             kbg.foreground_kernel,
             dim=self.pixels,
-            inputs=[self._frame, b0, m0, b1, m1, w, wp.vec3(*gain), self.params],
+            inputs=[frame_in, b0, m0, b1, m1, w, wp.vec3(*gain), self.params],
             outputs=[self._mask, self._prob, self._shadow, self._diff],
             device=self.device,
         )
@@ -572,8 +705,15 @@ class OfflineBackground:
             )
             packed = self._packed
         shape = (self.source.height, self.source.width)
-        prob = self._prob.numpy().reshape(shape).copy()
-        return resolve_levels(packed.numpy().reshape(shape), prob), prob
+        if self._stage_mask is None:
+            levels, prob = packed.numpy(), self._prob.numpy()
+        else:
+            wp.copy(self._stage_mask, packed)
+            wp.copy(self._stage_prob, self._prob)
+            wp.synchronize_stream(wp.get_stream(self.device))
+            levels, prob = self._stage_views[1], self._stage_views[2]
+        prob = prob.reshape(shape).copy()  # the caller's own (the buffers are overwritten by the next frame)
+        return resolve_levels(levels.reshape(shape), prob), prob
 
     def close(self) -> None:
         """Release the sampler's video reader."""

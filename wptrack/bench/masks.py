@@ -4,10 +4,15 @@ Per case (frame size), ``frames`` synthetic frames (smooth colour texture, gauss
 moving rectangles) are encoded to a temporary FFV1 ``.avi`` (the project's lossless writer). Measured:
 
 * ``decode``: reading the video with :class:`wptrack.frames.VideoSource`, per frame (median of 3 passes);
-* ``sample+build``: one background window (the sampler's seeks/reads of its ``samples`` frames, the upload and the
-  median/MAD kernel), amortised over the ``window // 2`` frames between window starts (the steady state of a long
-  recording; a window is built every ``window // 2`` frames);
-* ``kernel``: the per-frame step (upload, foreground kernel, mask and probability back), per frame;
+* ``sample+build``: one background window (the sampler's reads of its ``samples`` frames, the upload, the
+  median/MAD kernel and the host statistics: gains, spread, neighbourhood scale, shadow ratio), amortised over the
+  ``window // 2`` frames between window starts (a window is built every ``window // 2`` frames). The video is
+  shorter than ``window``, so its one window samples every other frame of it and the sampler decodes all
+  ``frames`` frames for it, about a third of a decoding pass per frame; in a long video with the default window
+  (a sample every 12 frames) the sampler reads forward and decodes each frame about once (see
+  :mod:`wptrack.background`): add about one ``decode`` for a video source;
+* ``kernel``: the per-frame step (frame gain, upload, foreground and neighbourhood kernels, mask and probability
+  back, hysteresis), per frame;
 * ``clean``: the host morphology (cv2 opening + closing) per frame;
 * ``model``: sample+build + kernel (what the offline model adds to decoding), and ``model / decode``;
 * ``numpy``: the NumPy reference of the per-frame step (:mod:`benchmarks.numpy_masks`), per frame.
