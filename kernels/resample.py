@@ -507,7 +507,8 @@ def block_scan_int64(v: wp.int64, lane: int, bd: int) -> wp.vec2l:
     """``(inclusive prefix sum of v over the block's lanes 0..lane, the block's total)``, exact in int64.
 
     One warp-shuffle scan per warp and one over the warp totals, 3 barriers. It replaced three scans of 20-bit limbs
-    with Warp's 32-bit tile scans (about 20 barriers per round) in the systematic pass (BENCHMARKS.md, issue 13).
+    with Warp's 32-bit tile scans (about 20 barriers per round, counted in Warp 1.19's ``tile_scan.h``) in the
+    systematic pass (BENCHMARKS.md, issue 13).
     CUDA: every lane of the block calls it, ``bd`` (the block size) a multiple of 32, at most 1024. The CPU branch is
     the one-lane block of the CPU backend: the kernels that call it are launched with ``block_dim=1`` there.
     """
