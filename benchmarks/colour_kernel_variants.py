@@ -118,7 +118,7 @@ def make(rounds: int, const_cams: bool, score: bool, moments: bool, gather: bool
             a1 = 6.283185307179586 * u3
             x = xp + s * wp.vec3(r0 * wp.cos(a0), r0 * wp.sin(a0), r1 * wp.cos(a1))
             particles_out[i] = x
-            lw = 0.0
+            lw = float(0.0)  # noqa: UP018 (dynamic variable: the array-cameras variant adds to it in a loop)
             if wp.static(score):
                 if wp.static(const_cams):
                     lw += cam_loglik(c4.c0, window, x)
@@ -143,12 +143,15 @@ def make(rounds: int, const_cams: bool, score: bool, moments: bool, gather: bool
     return k
 
 
-def main():
+def tracker_state(n: int, device: str):
+    """A 4-camera ``ColorTracker`` of ``n`` particles on ``device`` after 5 frames of the benchmark scene, with the
+    predict+score kernels' common inputs (after the observation arguments) and outputs for its next frame.
+
+    Returns:
+        ``(tracker, rig, common_in, outs)``.
+    """
     from wptrack.bench.colour import HUE, INTENSITY, SAT, bench_frames, bench_rig
-    from wptrack.kernels import scoring as kscoring
-    from wptrack.pf import BLOCK
     from wptrack.trackers.colour import ColorTracker, HSITarget
-    from wptrack.warpcams import camera_struct
 
     wp.config.quiet = True
     rig = bench_rig(4)
@@ -156,24 +159,33 @@ def main():
     tr = ColorTracker(
         rig,
         HSITarget(hue=HUE, sat=SAT, intensity=INTENSITY),
-        particles=N,
+        particles=n,
         sigma=0.01,
         init=tuple(balls[0]),
-        device=DEV,
+        device=device,
         seed=0,
     )
     for k in range(5):
         tr.step(images[k])
     wp.synchronize()
+    src, dst = tr.parity, 1 - tr.parity
+    common_in = [tr.x[src], tr.ancestors, tr.logw[src], tr.resampled, tr.sigma, tr.seed, tr.frame, tr.n, tr.chunk]
+    outs = [tr.x[dst], tr.logw[dst], tr.part_max, tr.part_arg, tr.part]
+    return tr, rig, common_in, outs
+
+
+def main():
+    from wptrack.kernels import scoring as kscoring
+    from wptrack.pf import BLOCK
+    from wptrack.warpcams import camera_struct
+
+    tr, rig, common_in, outs = tracker_state(N, DEV)
     c4 = Cams4()
     structs = [
         camera_struct(c, int(tr.drig.pixel_offsets[j]), int(tr.drig.integral_offsets[j]))
         for j, c in enumerate(rig.cameras)
     ]
     c4.c0, c4.c1, c4.c2, c4.c3 = structs
-    src, dst = tr.parity, 1 - tr.parity
-    common_in = [tr.x[src], tr.ancestors, tr.logw[src], tr.resampled, tr.sigma, tr.seed, tr.frame, tr.n, tr.chunk]
-    outs = [tr.x[dst], tr.logw[dst], tr.part_max, tr.part_arg, tr.part]
     is_cuda = wp.get_device(DEV).is_cuda
 
     def timeit(fn):

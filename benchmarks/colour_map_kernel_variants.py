@@ -104,29 +104,13 @@ def make(style, lb=None, maxreg=None):
 
 
 def main():
-    from wptrack.bench.colour import HUE, INTENSITY, SAT, bench_frames, bench_rig
+    from colour_kernel_variants import tracker_state  # the same tracker state (run from benchmarks/)
+
     from wptrack.kernels import scoring as kscoring
     from wptrack.pf import BLOCK
-    from wptrack.trackers.colour import ColorTracker, HSITarget
 
-    wp.config.quiet = True
-    rig = bench_rig(4)
-    images, balls = bench_frames(rig, 6, 0)
-    tr = ColorTracker(
-        rig,
-        HSITarget(hue=HUE, sat=SAT, intensity=INTENSITY),
-        particles=N,
-        sigma=0.01,
-        init=tuple(balls[0]),
-        device=DEV,
-        seed=0,
-    )
-    for k in range(5):
-        tr.step(images[k])
-    wp.synchronize()
-    src, dst = tr.parity, 1 - tr.parity
-    common_in = [tr.x[src], tr.ancestors, tr.logw[src], tr.resampled, tr.sigma, tr.seed, tr.frame, tr.n, tr.chunk]
-    outs = [tr.x[dst], tr.logw[dst], tr.part_max, tr.part_arg, tr.part]
+    tr, _rig, common_in, outs = tracker_state(N, DEV)
+    dst = 1 - tr.parity
 
     def timeit(fn):
         fn()
