@@ -264,14 +264,10 @@ class TemplateConfig:
         if not classes or any(c not in CLASSES for c in classes) or len(set(classes)) != len(classes):
             raise ConfigError(f"classes: expected a non-empty subset of {list(CLASSES)}, got {list(classes)}")
         object.__setattr__(self, "classes", classes)
-        if isinstance(self.vehicle_entry_px, bool) or not isinstance(self.vehicle_entry_px, (int, np.integer)):
-            raise ConfigError(f"vehicle_entry_px: expected an integer >= 0 (pixels), got {self.vehicle_entry_px!r}")
-        if self.vehicle_entry_px < 0:
-            raise ConfigError(f"vehicle_entry_px: expected an integer >= 0 (pixels), got {self.vehicle_entry_px!r}")
-        for name in ("candidate_step_px", "min_candidate_area"):
+        for name, low in (("candidate_step_px", 1), ("min_candidate_area", 1), ("vehicle_entry_px", 0)):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise ConfigError(f"{name}: expected an integer >= 1 (pixels), got {v!r}")
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
+                raise ConfigError(f"{name}: expected an integer >= {low} (pixels), got {v!r}")
         if self.resampling not in SCHEMES:
             raise ConfigError(f"resampling: unknown scheme {self.resampling!r}; expected one of {', '.join(SCHEMES)}")
         if not (isinstance(self.ess_threshold, (int, float)) and 0.0 < self.ess_threshold <= 1.0):
