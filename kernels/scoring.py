@@ -206,9 +206,10 @@ def colour_predict_score_map_kernel(count: int) -> wp.Kernel:
     Same particles and log-weights, bit for bit (the same functions, the cameras summed in the same order). Launch and
     outputs as the general kernel.
 
-    The one factory in ``kernels/``: the camera count is a compile-time constant (``wp.static``), because a count read
-    at run time (``if cams.count > k``) raised the kernel from 72 to 91 registers and lost a third of the occupancy
-    (3.57 vs 2.73 ms at 1e8 particles x 4 cameras, H200; BENCHMARKS.md, issue 13). Without the other scoring modes'
+    One of the two factories in ``kernels/`` (with ``xor.xor_band_kernel``): the camera count is a compile-time
+    constant (``wp.static``), because a count read at run time (``if cams.count > k``) raised the kernel from 72 to
+    91 registers and lost a third of the occupancy (3.57 vs 2.73 ms at 1e8 particles x 4 cameras, H200;
+    BENCHMARKS.md, issue 13). Without the other scoring modes'
     code and the per-particle loads of the camera structs it runs where the general kernel takes 3.5 ms.
     """
     if not 1 <= count <= CAMERA_SET_SIZE:

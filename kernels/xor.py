@@ -8,9 +8,11 @@ spans in a per-row difference array of coverage counts (two atomic adds per span
 which ``kernels.uoh`` builds the Uncovered Object Histogram.
 """
 
+import functools
+
 import warp as wp
 
-from .raster import KIND_HUMAN, PIECES, hull_chain_span, vec32i
+from .raster import KIND_HUMAN, MAX_PIECES, PIECES, hull_chain_span, vec32i
 from .reduce import finite_logw
 
 wp.set_module_options({"enable_backward": False})
@@ -109,6 +111,47 @@ def pair_overlap(ka: int, pa: wp.vec2, ha: float, da: wp.vec3, kb: int, pb: wp.v
     o = disc_in_box(pb, r, pa, ha, half)
     o = wp.max(o, disc_in_box(pb + along, r, pa, ha, half))
     return wp.max(o, disc_in_box(pb - along, r, pa, ha, half))
+
+
+@wp.func
+def particle_score(
+    i: int,
+    covered: int,
+    both: int,
+    kind: wp.array2d(dtype=wp.int32),
+    age: wp.array2d(dtype=wp.float32),
+    pos: wp.array2d(dtype=wp.vec2),
+    heading: wp.array2d(dtype=wp.float32),
+    dims: wp.array2d(dtype=wp.vec3),
+    qtotal: int,
+    cost_a: wp.vec3,
+    cost_b: wp.vec3,
+    scale: float,
+    bg_weight: float,
+    exclusion: float,
+    logw_prior: float,
+):
+    """``(m_i, c_i, logw_i)`` of particle ``i`` from ``covered`` = |v_i| and ``both`` = |q AND v_i| (pixels): eq. 4,
+    eq. 5 with the exclusion prior (see ``xor_score_kernel``) and eq. 6 in log space, in one fixed order of
+    floating-point operations (both score paths call it, so they agree bit for bit)."""
+    slots = kind.shape[1]
+    m = qtotal + covered - 2 * both  # eq. 4 as |q| + |v| - 2 |q AND v|
+    cost = float(0.0)
+    for s in range(slots):
+        kk = kind[i, s]
+        if kk > 0:
+            cost += cost_a[kk] + cost_b[kk] * wp.exp(-age[i, s])  # eq. 5
+            if exclusion > 0.0:
+                for t in range(s + 1, slots):
+                    kt = kind[i, t]
+                    if kt > 0:
+                        o = pair_overlap(
+                            kk, pos[i, s], heading[i, s], dims[i, s], kt, pos[i, t], heading[i, t], dims[i, t]
+                        )
+                        cost += exclusion * o
+    # weighted eq. 4: uncovered foreground + lambda x template pixels on background (= m when lambda = 1)
+    mw = float(qtotal - both) + bg_weight * float(covered - both)
+    return m, cost, finite_logw(logw_prior - (mw + cost) * scale)  # eq. 6 in log space; -inf/NaN -> the floor
 
 
 @wp.kernel
@@ -220,22 +263,154 @@ def xor_score_kernel(
     tc = wp.tile_sum(wp.tile(covered))
     tb = wp.tile_sum(wp.tile(both))
     if lane == 0:
-        m = qtotal[0] + tc[0] - 2 * tb[0]  # eq. 4 as |q| + |v| - 2 |q AND v|
-        cost = float(0.0)
-        for s in range(slots):
-            kk = kind[i, s]
-            if kk > 0:
-                cost += cost_a[kk] + cost_b[kk] * wp.exp(-age[i, s])  # eq. 5
-                if exclusion > 0.0:
-                    for t in range(s + 1, slots):
-                        kt = kind[i, t]
-                        if kt > 0:
-                            o = pair_overlap(
-                                kk, pos[i, s], heading[i, s], dims[i, s], kt, pos[i, t], heading[i, t], dims[i, t]
-                            )
-                            cost += exclusion * o
-        # weighted eq. 4: uncovered foreground + lambda x template pixels on background (= m when lambda = 1)
-        mw = float(qtotal[0] - tb[0]) + bg_weight * float(tc[0] - tb[0])
+        m, cost, lw = particle_score(
+            i, tc[0], tb[0], kind, age, pos, heading, dims, qtotal[0], cost_a, cost_b, scale, bg_weight, exclusion,
+            logw[i],
+        )  # fmt: skip
         penalty[i] = m
         complexity[i] = cost
-        logw[i] = finite_logw(logw[i] - (mw + cost) * scale)  # eq. 6 in log space; -inf/NaN -> the floor
+        logw[i] = lw
+
+
+# --- the XOR sums with a thread per (band of rows, particle) (CUDA) ---------------------------------------------
+#
+# In ``xor_score_kernel`` the lanes of a warp hold different rows of one particle, so they meet different pieces and
+# hull edges and diverge (Nsight Compute, H100, 1e4 particles x 5 objects: 9.6 of 32 threads active per warp
+# instruction, BENCHMARKS.md). ``xor_band_kernel`` puts neighbouring particles in a warp's lanes, all on the same
+# band of image rows: resampling gives a parent's children neighbouring indices, so the lanes meet the same pieces
+# at the same rows. A row's spans are sorted and merged exactly as in ``xor_score_kernel``; the particle's sums
+# over its bands are added up in ``sums`` and ``xor_finish_kernel`` applies eqs. 4-6.
+
+
+PACK = wp.constant(65536)
+"""Packing base of two pixel coordinates in one int32 (``a * PACK + b``; images below 32768 pixels a side)."""
+LOW = wp.constant(65535)
+
+
+@functools.cache
+def xor_band_kernel(cap: int) -> wp.Kernel:
+    """The band kernel for particles of at most ``cap`` pieces (a power of two, 2 to ``MAX_PIECES``), compiled once
+    per ``cap``.
+
+    Launch with ``dim=(ceil(H / band), N)``: thread ``(b, i)`` takes rows ``[b band, (b + 1) band)`` of particle
+    ``i`` (neighbouring threads: neighbouring particles on the same rows) and adds its rows' |v_i| and |q AND v_i|
+    to ``sums[i]`` (one atomic add per band that covers anything) and the merged intervals' coverage adds to
+    ``cov_diff``, as ``xor_score_kernel`` does for the particle's rows.
+
+    The per-piece arrays hold two coordinates per int32 (rows, walk positions, spans) in vectors of ``cap``
+    entries: a thread's run-time indexed arrays live in local memory, and with 32 lanes per warp on 32 particles
+    their footprint decides how much of it stays in L1 (3 x 64 bytes per thread at 5 objects, against 6 x 128
+    bytes with the row kernel's separate ``vec32i`` arrays). Spans are sorted by (start, end) instead of (start,
+    piece): the merged intervals, and so every output, are the same.
+
+    Kernel args:
+        hull_pts, hull_n, hull_rows: the particles' piece hulls from ``raster.template_hulls_kernel``
+            (``hull_n.shape[1] <= cap``).
+        qrow: (H, W+1) row prefix sums of the motion mask (H, W < 32768).
+        band: rows per band.
+        sums: (N,) (|v_i|, |q AND v_i|), pixels; must hold zeros (``xor_finish_kernel`` clears it).
+        cov_diff: (H, W+1) per-row difference array of coverage counts, as in ``xor_score_kernel``.
+    """
+    if cap not in (2, 4, 8, 16, 32):
+        raise ValueError(f"xor_band_kernel: cap {cap} must be a power of two from 2 to {MAX_PIECES}")
+    veci = wp.types.vector(length=cap, dtype=wp.int32)
+
+    @wp.kernel(enable_backward=False, module="unique")
+    def xor_band_kernel(
+        hull_pts: wp.array3d(dtype=wp.vec2),
+        hull_n: wp.array2d(dtype=wp.int32),
+        hull_rows: wp.array2d(dtype=wp.vec2i),
+        qrow: wp.array2d(dtype=wp.int32),
+        band: int,
+        sums: wp.array(dtype=wp.vec2i),
+        cov_diff: wp.array2d(dtype=wp.int32),
+    ):
+        b, i = wp.tid()
+        pieces = hull_n.shape[1]
+        width = qrow.shape[1] - 1
+        ya = b * band
+        yb = wp.min(ya + band, qrow.shape[0]) - 1
+        rows = veci()  # each piece's rows within the band, first * PACK + last (1: none)
+        any_rows = int(0)
+        for q in range(pieces):
+            rows[q] = 1
+            if hull_n[i, q] > 0:
+                r = hull_rows[i, q]
+                lo = wp.max(r[0], ya)
+                hi = wp.min(r[1], yb)
+                if lo <= hi:
+                    rows[q] = lo * PACK + hi
+                    any_rows = 1
+        if any_rows == 0:
+            return
+        covered = int(0)
+        both = int(0)
+        walk = veci()  # the pieces' hull chain walks (raster.hull_chain_span): down * PACK + up
+        span = veci()  # the row's piece spans sorted: u0 * PACK + u1
+        for y in range(ya, yb + 1):
+            yf = float(y)
+            n = int(0)
+            for q in range(pieces):
+                rq = rows[q]
+                if y >= rq / PACK and y <= (rq & LOW):
+                    w = walk[q]
+                    u0, u1, dq, uq = hull_chain_span(hull_pts, i, q, hull_n[i, q], yf, width, w / PACK, w & LOW)
+                    walk[q] = dq * PACK + uq
+                    if u0 <= u1:
+                        key = u0 * PACK + u1
+                        j = n
+                        while j > 0 and span[j - 1] > key:
+                            span[j] = span[j - 1]
+                            j -= 1
+                        span[j] = key
+                        n += 1
+            if n > 0:  # merge into disjoint intervals [a, e] separated by an uncovered pixel, as xor_score_kernel
+                a = span[0] / PACK
+                e = span[0] & LOW
+                for k in range(1, n + 1):
+                    if k < n and span[k] / PACK <= e + 1:
+                        e = wp.max(e, span[k] & LOW)
+                    else:
+                        covered += e - a + 1
+                        both += qrow[y, e + 1] - qrow[y, a]
+                        wp.atomic_add(cov_diff, y, a, 1)
+                        wp.atomic_add(cov_diff, y, e + 1, -1)
+                        if k < n:
+                            a = span[k] / PACK
+                            e = span[k] & LOW
+        if covered > 0:
+            wp.atomic_add(sums, i, wp.vec2i(covered, both))
+
+    return xor_band_kernel
+
+
+@wp.kernel
+def xor_finish_kernel(
+    kind: wp.array2d(dtype=wp.int32),
+    age: wp.array2d(dtype=wp.float32),
+    pos: wp.array2d(dtype=wp.vec2),
+    heading: wp.array2d(dtype=wp.float32),
+    dims: wp.array2d(dtype=wp.vec3),
+    qtotal: wp.array(dtype=wp.int32),
+    cost_a: wp.vec3,
+    cost_b: wp.vec3,
+    scale: float,
+    bg_weight: float,
+    exclusion: float,
+    sums: wp.array(dtype=wp.vec2i),
+    logw: wp.array(dtype=wp.float32),
+    penalty: wp.array(dtype=wp.int32),
+    complexity: wp.array(dtype=wp.float32),
+):
+    """Matching penalty (eq. 4), complexity penalty (eq. 5) and log-weight (eq. 6) of every particle from the sums
+    of ``xor_band_kernel``, which it clears. Launch with ``dim=N``; arguments and outputs as in
+    ``xor_score_kernel`` (``logw`` updated in place)."""
+    i = wp.tid()
+    t = sums[i]
+    sums[i] = wp.vec2i(0, 0)
+    m, cost, lw = particle_score(
+        i, t[0], t[1], kind, age, pos, heading, dims, qtotal[0], cost_a, cost_b, scale, bg_weight, exclusion, logw[i]
+    )
+    penalty[i] = m
+    complexity[i] = cost
+    logw[i] = lw

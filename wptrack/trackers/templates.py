@@ -27,6 +27,7 @@ import logging
 import math
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import warp as wp
@@ -57,7 +58,17 @@ from .template_config import (  # noqa: F401  (HumanPrior, VehiclePrior: the tra
 log = logging.getLogger(__name__)
 
 SCORE_BLOCK = 64
-"""Threads per particle in the XOR scoring kernel (they stride over the particle's image rows)."""
+"""Threads per particle in the XOR scoring kernel of the CPU backend (``kernels.xor.xor_score_kernel``; they
+stride over the particle's image rows; a CPU block has one thread)."""
+
+
+def xor_band(particles: int) -> int:
+    """Image rows per thread of the XOR sums on CUDA (``kernels.xor.xor_band_kernel``: a thread per band and
+    particle): 8 below 50,000 particles, 32 from there (measured on an H100, bench scene, 1e3 to 1e5 particles x 1,
+    5 and 10 objects; BENCHMARKS.md, issue 13)."""
+    return 8 if particles < 50_000 else 32
+
+
 ROW_BLOCK = 128
 """Threads per image row in the row-scan kernels (mask prefix sums, coverage/UOH/gain rows): each owns a segment of
 ceil(W / ROW_BLOCK) pixels."""
@@ -121,9 +132,27 @@ def particle_bytes(max_objects: int, scheme: str) -> int:
 class Hulls:
     """Projected template pieces of a set of one- or multi-slot scenes (device arrays; see ``kernels.raster``)."""
 
-    def __init__(self, n: int, slots: int, device: str) -> None:
+    def __init__(self, n: int, slots: int, device: str, particle_fastest: bool = False) -> None:
+        """``pts`` (n, slots * PIECES, HULL_MAX), ``n``, ``rows`` and ``depth`` (n, slots * PIECES). With
+        ``particle_fastest`` the arrays are views whose storage has the particle index fastest (the same indices,
+        other strides): threads on neighbouring particles at the same piece and vertex then read neighbouring
+        addresses (``kernels.xor.xor_band_kernel`` on CUDA: the loads coalesce)."""
         q = slots * int(kraster.PIECES)
-        self.pts = wp.zeros((n, q, int(kraster.HULL_MAX)), dtype=wp.vec2, device=device)
+        h = int(kraster.HULL_MAX)
+        if particle_fastest:
+            self._storage = (
+                wp.zeros((q, h, n), dtype=wp.vec2, device=device),
+                wp.zeros((q, n), dtype=wp.int32, device=device),
+                wp.zeros((q, n), dtype=wp.vec2i, device=device),
+                wp.zeros((q, n), dtype=wp.float32, device=device),
+            )
+            pts, cnt, rows, depth = self._storage
+            self.pts = pts.transpose((2, 0, 1))
+            self.n = cnt.transpose((1, 0))
+            self.rows = rows.transpose((1, 0))
+            self.depth = depth.transpose((1, 0))
+            return
+        self.pts = wp.zeros((n, q, h), dtype=wp.vec2, device=device)
         self.n = wp.zeros((n, q), dtype=wp.int32, device=device)
         self.rows = wp.zeros((n, q), dtype=wp.vec2i, device=device)
         self.depth = wp.zeros((n, q), dtype=wp.float32, device=device)
@@ -265,6 +294,64 @@ def launch_mask_rows(q: wp.array, qrow: wp.array, qtotal: wp.array, device: str,
     )
 
 
+def group_cap(pieces: int) -> int:
+    """The smallest power of two >= ``pieces``."""
+    c = 1
+    while c < pieces:
+        c *= 2
+    return c
+
+
+def launch_xor_score(
+    hulls: Any,
+    kind: wp.array,
+    age: wp.array,
+    pos: wp.array,
+    heading: wp.array,
+    dims: wp.array,
+    qrow: wp.array,
+    qtotal: wp.array,
+    cost_a: wp.vec3,
+    cost_b: wp.vec3,
+    scale: float,
+    bg_weight: float,
+    exclusion: float,
+    sums: wp.array,
+    logw: wp.array,
+    penalty: wp.array,
+    complexity: wp.array,
+    cov_diff: wp.array,
+    device: str,
+    band: int = 0,
+) -> None:
+    """Eqs. 4-6 for every particle (``kernels.xor``) and the coverage counts: with ``band`` > 0 a thread per band of
+    ``band`` rows and particle (``xor_band_kernel``, then ``xor_finish_kernel``; ``sums`` (N,) vec2i zeros, left
+    zeroed), else a block per particle (``xor_score_kernel``). The same outputs bit for bit either way."""
+    n = kind.shape[0]
+    cost = [kind, age, pos, heading, dims, qtotal, cost_a, cost_b, scale, bg_weight, exclusion]
+    if band > 0:
+        h = qrow.shape[0]
+        wp.launch(
+            kxor.xor_band_kernel(max(2, group_cap(hulls.n.shape[1]))),
+            dim=((h + band - 1) // band, n),
+            inputs=[hulls.pts, hulls.n, hulls.rows, qrow, int(band)],
+            outputs=[sums, cov_diff],
+            device=device,
+        )
+        wp.launch(
+            kxor.xor_finish_kernel, dim=n, inputs=[*cost, sums], outputs=[logw, penalty, complexity], device=device
+        )
+        return
+    wp.launch_tiled(
+        kxor.xor_score_kernel,
+        dim=[n],
+        inputs=[hulls.pts, hulls.n, hulls.rows, kind, age, pos, heading, dims, qrow, *cost[5:]],
+        outputs=[logw, penalty, complexity, cov_diff],
+        block_dim=SCORE_BLOCK,
+        device=device,
+    )
+
+
 class TemplateTracker(FrameChain):
     """The S3 template tracker on one device.
 
@@ -328,7 +415,7 @@ class TemplateTracker(FrameChain):
             d,
         )
         self.state = [_new_state(n, r, d), _new_state(n, r, d)]
-        self.hulls = Hulls(n, r, d)
+        self.hulls = Hulls(n, r, d, particle_fastest=self.is_cuda)
         self.occlusion = wp.zeros((n, r), dtype=wp.float32, device=d)
         self.use_occlusion = config.occlusion_del > 0.0 or config.occlusion_noise > 0.0
         self.q = wp.zeros((h, w), dtype=wp.uint8, device=d)
@@ -341,6 +428,10 @@ class TemplateTracker(FrameChain):
         self.a_sat = wp.zeros((h + 1, w + 1), dtype=wp.int64, device=d)  # UOH summed-area table (candidate bounds)
         self.virtual = wp.zeros((h, w), dtype=wp.uint8, device=d)
         self.penalty = wp.zeros(n, dtype=wp.int32, device=d)
+        self.xor_sums = wp.zeros(n, dtype=wp.vec2i, device=d)  # per-particle (|v|, |q AND v|) of xor_band_kernel
+        # CUDA: a thread per band of rows and particle (the packed coordinates need images below 32768 pixels);
+        # the CPU backend (one lane per block) walks each particle's rows in xor_score_kernel
+        self.xor_band = xor_band(n) if self.is_cuda and max(w, h) < 32768 else 0
         self.complexity = wp.zeros(n, dtype=wp.float32, device=d)
         self.weights = wp.zeros(n, dtype=wp.float64, device=d)
         self.ancestors = wp.array(np.arange(n, dtype=np.int32), device=d)
@@ -428,30 +519,12 @@ class TemplateTracker(FrameChain):
 
     def _score(self, cur: int) -> None:
         s = self.state[cur]
-        wp.launch_tiled(
-            kxor.xor_score_kernel,
-            dim=[self.n],
-            inputs=[
-                self.hulls.pts,
-                self.hulls.n,
-                self.hulls.rows,
-                s.kind,
-                s.age,
-                s.pos,
-                s.heading,
-                s.dims,
-                self.qrow,
-                self.qtotal,
-                self.cost_a,
-                self.cost_b,
-                self.score_scale,
-                float(self.config.bg_weight),
-                float(self.config.exclusion),
-            ],
-            outputs=[s.logw, self.penalty, self.complexity, self.cov_diff],
-            block_dim=SCORE_BLOCK,
-            device=self.device,
-        )
+        cfg = self.config
+        launch_xor_score(
+            self.hulls, s.kind, s.age, s.pos, s.heading, s.dims, self.qrow, self.qtotal, self.cost_a, self.cost_b,
+            self.score_scale, float(cfg.bg_weight), float(cfg.exclusion), self.xor_sums, s.logw, self.penalty,
+            self.complexity, self.cov_diff, self.device, band=self.xor_band,
+        )  # fmt: skip
 
     def _uoh(self) -> None:
         d = self.device
