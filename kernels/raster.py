@@ -192,65 +192,67 @@ def template_hulls_kernel(
 ):
     """Project every object of every particle and store its pieces' image hulls.
 
-    Launch with ``dim=(N, R)``. Inputs are (N, R) per slot: ``kind`` (KIND_*), ``pos`` ground position (metres),
+    Launch with ``dim=(N, R * PIECES)``: thread ``(i, q)`` is piece ``q % PIECES`` of slot ``q / PIECES`` of
+    particle ``i`` (a thread per piece: twice the threads of one per object, for the latency of small N on the GPU).
+    Inputs are (N, R) per slot: ``kind`` (KIND_*), ``pos`` ground position (metres),
     ``heading`` (radians), ``dims`` (metres, see the module docstring). Outputs per piece ``q = slot * PIECES +
     piece``: ``hull_pts`` (N, R * PIECES, HULL_MAX) hull vertices (pixels) in order around the hull, the first
     one topmost (smallest v; ``hull_chain_span`` relies on it), ``hull_n`` vertex count (0: the piece
     does not exist, is partly behind the camera or misses the image), ``hull_rows`` (first, last) image row the
     piece covers (clipped to the image), ``hull_depth`` camera depth of the object's ground point (metres).
     """
-    i, s = wp.tid()
+    i, q = wp.tid()
+    s = q / PIECES
+    piece = q - s * PIECES
     k = kind[i, s]
     p = pos[i, s]
     a = heading[i, s]
     d = dims[i, s]
     ground = plane_point(plane, p[0], p[1], 0.0)
     g = project(cam, ground)
-    for piece in range(PIECES):
-        q = s * PIECES + piece
-        n = piece_vertices(k, piece)
-        xs = vec16()
-        ys = vec16()
-        visible = n > 0
-        for j in range(n):
-            v = piece_vertex(k, piece, j, d, a)
-            uvz = project(cam, plane_point(plane, p[0] + v[0], p[1] + v[1], v[2]))
-            if uvz[2] <= 0.0:
-                visible = False
-            xs[j] = uvz[0]
-            ys[j] = uvz[1]
-        count = int(0)
-        row0 = int(0)
-        row1 = int(-1)
-        if visible:
-            hx, hy, count = convex_hull(xs, ys, n)
-            top = int(0)  # stored from its topmost vertex (the first of smallest v): see hull_chain_span
-            for j in range(1, count):
-                if hy[j] < hy[top]:
-                    top = j
-            xmin = hx[0]
-            xmax = hx[0]
-            ymin = hy[0]
-            ymax = hy[0]
-            for j in range(count):
-                jt = j + top
-                if jt >= count:
-                    jt -= count
-                hull_pts[i, q, j] = wp.vec2(hx[jt], hy[jt])
-                xmin = wp.min(xmin, hx[j])
-                xmax = wp.max(xmax, hx[j])
-                ymin = wp.min(ymin, hy[j])
-                ymax = wp.max(ymax, hy[j])
-            row0 = wp.max(int(wp.ceil(ymin)), 0)
-            row1 = wp.min(int(wp.floor(ymax)), cam.height - 1)
-            if row0 > row1 or xmax < 0.0 or xmin > float(cam.width - 1):
-                count = 0
-        if count == 0:
-            row0 = 0
-            row1 = -1
-        hull_n[i, q] = count
-        hull_rows[i, q] = wp.vec2i(row0, row1)
-        hull_depth[i, q] = g[2]
+    n = piece_vertices(k, piece)
+    xs = vec16()
+    ys = vec16()
+    visible = n > 0
+    for j in range(n):
+        v = piece_vertex(k, piece, j, d, a)
+        uvz = project(cam, plane_point(plane, p[0] + v[0], p[1] + v[1], v[2]))
+        if uvz[2] <= 0.0:
+            visible = False
+        xs[j] = uvz[0]
+        ys[j] = uvz[1]
+    count = int(0)
+    row0 = int(0)
+    row1 = int(-1)
+    if visible:
+        hx, hy, count = convex_hull(xs, ys, n)
+        top = int(0)  # stored from its topmost vertex (the first of smallest v): see hull_chain_span
+        for j in range(1, count):
+            if hy[j] < hy[top]:
+                top = j
+        xmin = hx[0]
+        xmax = hx[0]
+        ymin = hy[0]
+        ymax = hy[0]
+        for j in range(count):
+            jt = j + top
+            if jt >= count:
+                jt -= count
+            hull_pts[i, q, j] = wp.vec2(hx[jt], hy[jt])
+            xmin = wp.min(xmin, hx[j])
+            xmax = wp.max(xmax, hx[j])
+            ymin = wp.min(ymin, hy[j])
+            ymax = wp.max(ymax, hy[j])
+        row0 = wp.max(int(wp.ceil(ymin)), 0)
+        row1 = wp.min(int(wp.floor(ymax)), cam.height - 1)
+        if row0 > row1 or xmax < 0.0 or xmin > float(cam.width - 1):
+            count = 0
+    if count == 0:
+        row0 = 0
+        row1 = -1
+    hull_n[i, q] = count
+    hull_rows[i, q] = wp.vec2i(row0, row1)
+    hull_depth[i, q] = g[2]
 
 
 @wp.func

@@ -160,7 +160,7 @@ class Hulls:
     def launch(self, cam, plane, kind, pos, heading, dims, device: str) -> None:
         wp.launch(
             kraster.template_hulls_kernel,
-            dim=kind.shape,
+            dim=(kind.shape[0], kind.shape[1] * int(kraster.PIECES)),
             inputs=[cam, plane, kind, pos, heading, dims],
             outputs=[self.pts, self.n, self.rows, self.depth],
             device=device,
