@@ -139,14 +139,11 @@ class Hulls:
         addresses (``kernels.xor.xor_band_kernel`` on CUDA: the loads coalesce)."""
         q = slots * int(kraster.PIECES)
         h = int(kraster.HULL_MAX)
-        if particle_fastest:
-            self._storage = (
-                wp.zeros((q, h, n), dtype=wp.vec2, device=device),
-                wp.zeros((q, n), dtype=wp.int32, device=device),
-                wp.zeros((q, n), dtype=wp.vec2i, device=device),
-                wp.zeros((q, n), dtype=wp.float32, device=device),
-            )
-            pts, cnt, rows, depth = self._storage
+        if particle_fastest:  # transposed views (each keeps its storage alive): checkpoints see the same names
+            pts = wp.zeros((q, h, n), dtype=wp.vec2, device=device)
+            cnt = wp.zeros((q, n), dtype=wp.int32, device=device)
+            rows = wp.zeros((q, n), dtype=wp.vec2i, device=device)
+            depth = wp.zeros((q, n), dtype=wp.float32, device=device)
             self.pts = pts.transpose((2, 0, 1))
             self.n = cnt.transpose((1, 0))
             self.rows = rows.transpose((1, 0))
