@@ -52,7 +52,7 @@ class Case:
     e2e: bool = True  # also time the end-to-end mask pass (:func:`end_to_end`)
 
 
-def bench_frames(width: int, height: int, frames: int, seed: int = 0, noise_fields: int = 0) -> Iterator[np.ndarray]:
+def video_frames(width: int, height: int, frames: int, seed: int = 0, noise_fields: int = 0) -> Iterator[np.ndarray]:
     """``(height, width, 3)`` uint8 frames, one at a time: smooth texture + gaussian noise (sigma 3 levels), 4
     rectangles moving 4 px per frame. ``noise_fields > 0``: the noise cycles through that many fields drawn once
     (cheap to make a long video; the decoder and the model see noise all the same), else a fresh field per frame."""
@@ -74,9 +74,9 @@ def bench_frames(width: int, height: int, frames: int, seed: int = 0, noise_fiel
 
 
 def bench_video(width: int, height: int, frames: int, seed: int = 0) -> np.ndarray:
-    """``(frames, height, width, 3)`` uint8: :func:`bench_frames` (a fresh noise field per frame) stacked."""
+    """``(frames, height, width, 3)`` uint8: :func:`video_frames` (a fresh noise field per frame) stacked."""
     out = np.empty((frames, height, width, 3), np.uint8)
-    for t, img in enumerate(bench_frames(width, height, frames, seed)):
+    for t, img in enumerate(video_frames(width, height, frames, seed)):
         out[t] = img
     return out
 
@@ -105,7 +105,7 @@ def end_to_end(case: Case, device: str, frames: int, seed: int = 0, repeats: int
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "e2e.avi"
         with VideoWriter(path, fps=25) as writer:
-            for img in bench_frames(case.width, case.height, frames, seed, noise_fields=8):
+            for img in video_frames(case.width, case.height, frames, seed, noise_fields=8):
                 writer.write(img)
 
         def decode() -> float:
