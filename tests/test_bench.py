@@ -197,3 +197,21 @@ def test_cpu_threads_harness_runs_workers():
     assert r["wall_s"] >= max(r["worker_s"]) > 0 and r["frames_per_s"] == 4 / r["wall_s"]
     r = run_workers("threads", "numpy", 1, 1000, 1, 2)
     assert r["impl"] == "numpy" and r["wall_s"] > 0 and r["cpu_s"] > 0 and r["cpu_ms_per_frame"] > 0
+
+
+def test_bench_masks_end_to_end_tiny(device):
+    """The masks suite's end-to-end case: the default mask pipeline over a video of three default windows, its wall
+    time against decoding, reported as added and added/decode; the 1920x1080 end-to-end case only with a GPU."""
+    from wptrack.bench.masks import Case, MasksSuite
+
+    r = MasksSuite.run_case(Case(64, 48), device, frames=5)
+    assert r["equivalent"] is True
+    assert r["e2e_frames"] == 600 and r["e2e_windows"] == 3 and r["e2e_repeats"] == (1 if device == "cpu" else 2)
+    assert r["e2e_ms"] > r["e2e_decode_ms"] > 0
+    assert abs(r["added_ms"] - (r["e2e_ms"] - r["e2e_decode_ms"])) < 1e-9
+    assert abs(r["added_vs_decode"] - r["added_ms"] / r["e2e_decode_ms"]) < 1e-9
+    row = MasksSuite.format_row(r)
+    assert f"added/decode {r['added_vs_decode']:.2f}" in row and "3 windows" in row
+    assert "end to end: -" in MasksSuite.format_row(MasksSuite.run_case(Case(64, 48, e2e=False), device, frames=3))
+    assert [c.e2e for c in MasksSuite.default_grid(False)] == [True, False]
+    assert [c.e2e for c in MasksSuite.default_grid(True)] == [True, True]

@@ -27,7 +27,10 @@ Design (kernels and formulas: :mod:`wptrack.kernels.background`):
   defaults (a sample every 12 frames) a video costs at most one extra decoding pass (0.6 of the decoding time of
   a 600-frame 640x480 FFV1 video on the CI machine, where seeking to every sample cost 2.9); an image sequence,
   or samples more than :data:`SEEK_GAP` apart, about ``K / (L / 2)`` extra decoded frames per frame. The exact
-  frame a seek lands on does not matter: the median is robust to a sample being a frame off.
+  frame a seek lands on does not matter: the median is robust to a sample being a frame off. That reading runs
+  ahead in one worker thread: when the mask pass builds window ``i``, the worker starts reading (and preparing
+  with NumPy) window ``i + 1``'s samples, so the extra decoding overlaps the per-frame work on another core
+  (:class:`OfflineBackground`; the same reads in the same order, so the same masks).
 * **Gains.** Each window's samples and each frame get a global gain per channel (illumination changes), the median
   of their ratios to the background over a pixel subsample: every 13th pixel for the windows, thinned to at most
   :data:`GAIN_PIXELS` for a frame (the same pixels up to 425,984 pixels per frame, e.g. 640x480; at 1920x1080
@@ -48,8 +51,11 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 from collections.abc import Callable
-from dataclasses import dataclass
+from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import wait as wait_futures
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -123,6 +129,10 @@ def bracket(centres: list[float], t: int) -> tuple[int, int, float]:
     return i, j, float((t - centres[i]) / (centres[j] - centres[i]))
 
 
+class _Stopped(Exception):
+    """A sampler's read stopped by :meth:`OfflineBackground.close` (its result is dropped)."""
+
+
 class _Sampler:
     """Reads given frame indices of a source (increasing within a call), for the window backgrounds.
 
@@ -130,6 +140,10 @@ class _Sampler:
     those of them that the next window samples (``ahead``) are kept, so that window, which overlaps this one by
     half, does not seek back and decode them again (each frame is decoded about once by the sampler instead of
     twice).
+
+    One thread at a time uses it (:class:`OfflineBackground`'s caller or its prefetch worker); with ``notes`` a
+    list, its warnings are kept there for the caller to log, and ``stop`` set by another thread ends a video read
+    at its next frame (:class:`_Stopped`).
     """
 
     def __init__(self, source: FrameSource) -> None:
@@ -137,6 +151,14 @@ class _Sampler:
         self.cap: Any = None
         self.pos = 0  # index of the frame the next read() returns
         self.kept: dict[int, np.ndarray] = {}  # frames passed by an earlier read that a later one samples
+        self.notes: list[tuple[Any, ...]] | None = None  # a list: warnings kept here (for another thread to log)
+        self.stop = threading.Event()  # set (by another thread): a video read stops at its next frame
+
+    def _warn(self, message: str, *args: Any) -> None:
+        if self.notes is None:
+            log.warning(message, *args)
+        else:
+            self.notes.append((message, *args))
 
     def read(self, indices: tuple[int, ...], ahead: tuple[int, ...] = ()) -> list[np.ndarray]:
         """The frames at ``indices`` (fewer when some cannot be read); a video keeps those of ``ahead`` (the next
@@ -160,6 +182,8 @@ class _Sampler:
         kept, self.kept = self.kept, {}
         out = []
         for i in indices:
+            if self.stop.is_set():
+                raise _Stopped(f"{self.source.name}: background read stopped")
             frame = kept.get(i)
             if frame is None:
                 if i < self.pos or i - self.pos >= SEEK_GAP:
@@ -167,6 +191,8 @@ class _Sampler:
                     self.pos = i
                 ok = True
                 while ok and self.pos < i:
+                    if self.stop.is_set():
+                        raise _Stopped(f"{self.source.name}: background read stopped")
                     ok = self.cap.grab()
                     if ok and self.pos in ahead:
                         ok, passed = self.cap.retrieve()
@@ -175,7 +201,7 @@ class _Sampler:
                     self.pos += 1
                 ok, frame = self.cap.read() if ok else (False, None)
                 if not ok or frame is None:
-                    log.warning("%s: cannot read frame %d for the background; skipped", self.source.name, i)
+                    self._warn("%s: cannot read frame %d for the background; skipped", self.source.name, i)
                     break  # the video ends earlier than it reported
                 self.pos += 1
             if i in ahead:
@@ -464,6 +490,30 @@ def shadow_ratio(
     return float(edges[best] + bin_width / 2)
 
 
+@dataclass
+class _WindowRead:
+    """A window's samples as read from the source and prepared on the host (NumPy only, no device work): what
+    :meth:`OfflineBackground._read` returns, in the prefetch worker or in the calling thread.
+
+    Attributes:
+        frames: The K readable samples, ``(H, W, 3)`` uint8 C-contiguous each.
+        sub: ``(K, 3, P')`` uint8 their channel values at the pixel subsample (None when no frame).
+        gains: ``(K, 3)`` float32 their gains (:func:`sample_gains_channels`).
+        bg_sub: ``(3, P')`` float64 the compensated median at the subsample.
+        bg_gain: ``(3, P'')`` float64 it at the frame gain's pixels.
+        notes: The sampler's warnings, ``(message, *args)``, logged by the thread that takes the read.
+        error: The exception the read raised, re-raised by the thread that takes it.
+    """
+
+    frames: list[np.ndarray]
+    sub: np.ndarray | None = None
+    gains: np.ndarray | None = None
+    bg_sub: np.ndarray | None = None
+    bg_gain: np.ndarray | None = None
+    notes: list[tuple[Any, ...]] = field(default_factory=list)
+    error: Exception | None = None
+
+
 class OfflineBackground:
     """Windowed median/MAD background of one source and the per-frame foreground evidence.
 
@@ -479,6 +529,16 @@ class OfflineBackground:
 
     Use :meth:`evidence` frame by frame in time order (a restart at frame 0 is allowed); windows are built when
     first needed and dropped when no later frame needs them.
+
+    Prefetch: when :meth:`evidence` builds window ``i``, one worker thread (created on first use, joined by
+    :meth:`close`) starts reading window ``i + 1``'s samples (decoding: OpenCV releases the GIL) and preparing
+    them with NumPy (subsample, gains, medians), while the frames before it are processed; building ``i + 1``
+    then takes that read. The worker touches only the sampler and NumPy: every Warp launch, allocation and copy
+    stays in the calling thread (trackers capture CUDA graphs there). The sampler is used by one thread at a time
+    and reads the same frames in the same order as without the worker, so the masks are the same; its warnings
+    are logged, and its errors raised, by the calling thread when it takes the read. A request for another window
+    first waits for (or cancels) the pending read and drops it. :meth:`background` and :meth:`spread` do not
+    prefetch.
     """
 
     def __init__(self, source: FrameSource, config: Any, device: str) -> None:
@@ -526,6 +586,9 @@ class OfflineBackground:
         self.last_gain = np.ones(3)  # the global gain of the last frame given to evidence() (B, G, R)
         self._stacks: dict[int, Any] = {}
         self._sampler = _Sampler(source)
+        self._executor: ThreadPoolExecutor | None = None  # the prefetch worker (one thread), made on first use
+        self._pending: tuple[int, Future] | None = None  # (window, its read) submitted to the worker
+        self._prefetch = True  # False: every window read in the calling thread (tests compare the two)
         self.on_build: Callable[[int, float, np.ndarray], None] | None = None
         """Called as ``on_build(window, centre, background)`` when a window is built (in the thread that asked
         for it), with its ``(H, W, 3)`` uint8 BGR background: e.g. a run saving the backgrounds for its report."""
@@ -542,16 +605,61 @@ class OfflineBackground:
         p.chroma_max = float(config.shadow_chroma)
         self.params = p
 
-    def _window(self, i: int) -> tuple[Any, Any]:
-        """``(median, mad)`` device arrays of window ``i`` (built on first use)."""
+    def _read(self, i: int) -> _WindowRead:
+        """Read window ``i``'s samples and prepare them on the host (any thread; no Warp call: see the class)."""
+        ahead = self.windows[i + 1].samples if i + 1 < len(self.windows) else ()
+        notes: list[tuple[Any, ...]] = []
+        self._sampler.notes = notes
+        try:
+            frames = [np.ascontiguousarray(f) for f in self._sampler.read(self.windows[i].samples, ahead)]
+            if not frames:
+                return _WindowRead(frames, notes=notes)
+            sub = np.empty((len(frames), *self._sub_channels.shape), dtype=np.uint8)
+            for r, f in enumerate(frames):
+                sub[r] = f.reshape(-1)[self._sub_channels]
+            gains, bg_sub = sample_gains_channels(sub)
+            bg_gain = np.ascontiguousarray(bg_sub[:, :: self._gain_step])
+            return _WindowRead(frames, sub, gains, bg_sub, bg_gain, notes)
+        except Exception as e:  # noqa: BLE001 - raised by the thread that takes the read, after its warnings
+            return _WindowRead([], notes=notes, error=e)
+        finally:
+            self._sampler.notes = None
+
+    def _take(self, i: int) -> _WindowRead:
+        """Window ``i``'s read: the worker's when it was prefetched, else read now (a pending read of another
+        window is cancelled, or waited for and dropped, first: the sampler serves one thread at a time)."""
+        pending, self._pending = self._pending, None
+        if pending is not None and pending[0] == i:
+            got = pending[1].result()
+        else:
+            if pending is not None and not pending[1].cancel():
+                wait_futures([pending[1]])
+            got = self._read(i)
+        for note in got.notes:
+            log.warning(*note)
+        if got.error is not None:
+            raise got.error
+        return got
+
+    def _submit(self, i: int) -> None:
+        """Start reading window ``i``'s samples in the worker (unless built, pending or past the last)."""
+        if not self._prefetch or i >= len(self.windows) or i in self._built or self._pending is not None:
+            return
+        if self._executor is None:
+            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wptrack-background")
+        self._pending = (i, self._executor.submit(self._read, i))
+
+    def _window(self, i: int, prefetch: bool = False) -> tuple[Any, Any]:
+        """``(median, mad)`` device arrays of window ``i`` (built on first use; with ``prefetch``, building it
+        starts the worker's read of window ``i + 1``)."""
         import warp as wp
 
         from .kernels import background as kbg
 
         if i in self._built:
             return self._built[i]
-        ahead = self.windows[i + 1].samples if i + 1 < len(self.windows) else ()
-        frames = self._sampler.read(self.windows[i].samples, ahead)
+        got = self._take(i)
+        frames = got.frames
         if not frames:
             if self._built:
                 log.warning("%s: no frame of background window %d could be read; reusing another", self.source.name, i)
@@ -561,19 +669,18 @@ class OfflineBackground:
                         stats[i] = stats[m]
                 return self._built[m]
             raise FrameError(f"{self.source.name}: no frame of background window {i} could be read")
+        if prefetch:
+            self._submit(i + 1)  # the worker reads on while this window is built and its frames processed
         k = len(frames)
         n3 = 3 * self.pixels
         stack = self._stacks.get(k)
         if stack is None:
             stack = self._stacks[k] = wp.zeros((k, n3), dtype=wp.uint8, device=self.device)
-        frames = [np.ascontiguousarray(f) for f in frames]
-        sub = np.empty((k, *self._sub_channels.shape), dtype=np.uint8)
         for r, f in enumerate(frames):
             flat = f.reshape(-1)
-            sub[r] = flat[self._sub_channels]
             wp.copy(stack, wp.array(flat, dtype=wp.uint8, device="cpu", copy=False), dest_offset=r * n3, count=n3)
-        gains, self._bg_sub[i] = sample_gains_channels(sub)
-        self._bg_gain[i] = np.ascontiguousarray(self._bg_sub[i][:, :: self._gain_step])
+        sub, gains = got.sub, got.gains
+        self._bg_sub[i], self._bg_gain[i] = got.bg_sub, got.bg_gain
         median = wp.zeros(3 * self.pixels, dtype=wp.uint8, device=self.device)
         mad = wp.zeros(3 * self.pixels, dtype=wp.uint8, device=self.device)
         g = wp.array(gains, dtype=wp.vec3, device=self.device)
@@ -655,8 +762,8 @@ class OfflineBackground:
             del self._built[old]
             self._bg_sub.pop(old, None)
             self._bg_gain.pop(old, None)
-        b0, m0 = self._window(i)
-        b1, m1 = self._window(j)
+        b0, m0 = self._window(i, prefetch=True)
+        b1, m1 = self._window(j, prefetch=True)
         flat = np.ascontiguousarray(frame, dtype=np.uint8).reshape(-1)
         if flat.size != 3 * self.pixels:  # the kernel reads 3 H W values where the frame is
             raise FrameError(
@@ -716,5 +823,16 @@ class OfflineBackground:
         return resolve_levels(levels.reshape(shape), prob), prob
 
     def close(self) -> None:
-        """Release the sampler's video reader."""
+        """Stop and join the prefetch worker (a read in progress stops at its next frame and is dropped) and
+        release the sampler's video reader. The model stays usable: a later call reads again (a new worker)."""
+        pending, self._pending = self._pending, None
+        if pending is not None:
+            pending[1].cancel()
+        if self._executor is not None:
+            self._sampler.stop.set()
+            try:
+                self._executor.shutdown(wait=True, cancel_futures=True)
+            finally:
+                self._executor = None
+                self._sampler.stop.clear()
         self._sampler.close()

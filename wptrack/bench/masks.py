@@ -14,8 +14,19 @@ moving rectangles) are encoded to a temporary FFV1 ``.avi`` (the project's lossl
 * ``kernel``: the per-frame step (frame gain, upload, foreground and neighbourhood kernels, mask and probability
   back, hysteresis), per frame;
 * ``clean``: the host morphology (cv2 opening + closing) per frame;
-* ``model``: sample+build + kernel (what the offline model adds to decoding), and ``model / decode``;
-* ``numpy``: the NumPy reference of the per-frame step (:mod:`benchmarks.numpy_masks`), per frame.
+* ``model``: sample+build + kernel, and ``model / decode``: a sum of the components' times, each timed alone in
+  the calling thread, not the wall time a user waits for (the sampler's decoding runs ahead in a worker thread in
+  the real pipeline, the video's decoding in another, and the clean-up is left out);
+* ``numpy``: the NumPy reference of the per-frame step (:mod:`benchmarks.numpy_masks`), per frame;
+* **end to end** (:func:`end_to_end`; at 1920x1080 with a GPU device only: minutes on a CPU): a second video of
+  ``2 window`` frames (600 with the defaults: three background windows ``window / 2`` apart, as in a long video),
+  made the same way (the noise cycling through 8 fields). ``decode``: reading it; ``e2e``: the wall time of the
+  default mask pipeline a user runs, ``open_masks(video=path, config=MaskConfig(device=...))`` iterated over all
+  frames (offline model with its defaults, decoding, window builds, per-frame step and clean-up), per frame;
+  ``added = e2e - decode``: what making the masks adds to decoding per frame, and ``added / decode``. The target:
+  ``added < decode`` (``added / decode < 1``). Decode and mask passes alternate, two of each on a GPU device
+  (medians), one on the CPU. The kernels are compiled before (by the cases above). With three windows the builds
+  come once per 200 frames, against once per ``window / 2`` = 150 in a long video.
 
 ``equivalent``: the Warp masks equal the NumPy reference's on all timed frames except pixels within 1e-3 robust
 standard deviations of a threshold (float32 vs float64), and probabilities agree to 1e-4.
@@ -25,6 +36,7 @@ from __future__ import annotations
 
 import tempfile
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,25 +49,90 @@ class Case:
 
     width: int
     height: int
+    e2e: bool = True  # also time the end-to-end mask pass (:func:`end_to_end`)
 
 
-def bench_video(width: int, height: int, frames: int, seed: int = 0) -> np.ndarray:
-    """``(frames, height, width, 3)`` uint8 frames: smooth texture + noise, 4 rectangles moving 4 px per frame."""
+def video_frames(width: int, height: int, frames: int, seed: int = 0, noise_fields: int = 0) -> Iterator[np.ndarray]:
+    """``(height, width, 3)`` uint8 frames, one at a time: smooth texture + gaussian noise (sigma 3 levels), 4
+    rectangles moving 4 px per frame. ``noise_fields > 0``: the noise cycles through that many fields drawn once
+    (cheap to make a long video; the decoder and the model see noise all the same), else a fresh field per frame."""
     import cv2
 
     rng = np.random.default_rng(seed)
     base = cv2.resize(rng.uniform(40, 200, (height // 16, width // 16, 3)).astype(np.float32), (width, height))
-    out = np.empty((frames, height, width, 3), np.uint8)
     size = (width // 10, height // 8)
     starts = rng.integers(0, [width - size[0], height - size[1]], (4, 2))
     colours = rng.integers(0, 255, (4, 3))
+    bank = [rng.normal(0, 3, base.shape).astype(np.float32) for _ in range(noise_fields)]
     for t in range(frames):
-        img = np.clip(base + rng.normal(0, 3, base.shape), 0, 255).astype(np.uint8)
+        noise = bank[t % noise_fields] if bank else rng.normal(0, 3, base.shape)
+        img = np.clip(base + noise, 0, 255).astype(np.uint8)
         for (x, y), col in zip(starts, colours, strict=True):
             x = int((x + 4 * t) % (width - size[0]))
             img[y : y + size[1], x : x + size[0]] = col
+        yield img
+
+
+def bench_video(width: int, height: int, frames: int, seed: int = 0) -> np.ndarray:
+    """``(frames, height, width, 3)`` uint8: :func:`video_frames` (a fresh noise field per frame) stacked."""
+    out = np.empty((frames, height, width, 3), np.uint8)
+    for t, img in enumerate(video_frames(width, height, frames, seed)):
         out[t] = img
     return out
+
+
+def e2e_frames(window: int) -> int:
+    """Frames of the end-to-end video: ``2 window``, three background windows ``window / 2`` apart (as in a long
+    video, where the sampler decodes each frame about once)."""
+    return 2 * window
+
+
+def end_to_end(case: Case, device: str, frames: int, seed: int = 0, repeats: int = 1) -> dict:
+    """Wall time of the default mask pipeline over a ``frames``-frame FFV1 video of ``case``'s size against
+    decoding it: ``open_masks(video=path, config=MaskConfig(device=device))`` iterated to the end (the offline
+    model with its defaults, the frames decoded ahead by :func:`wptrack.frames.prefetch`, the windows' samples read
+    ahead by the model's worker, the clean-up), alternating with decode-only passes, ``repeats`` of each.
+
+    Returns:
+        ``e2e_frames``, ``e2e_windows``, ``e2e_repeats``, ``e2e_ms`` (the mask passes' median, ms per frame),
+        ``e2e_decode_ms`` (the decode-only passes' median, ms per frame), ``added_ms`` (their difference: what the
+        masks add to decoding per frame), ``added_vs_decode``.
+    """
+    from wptrack.frames import VideoWriter, open_source
+    from wptrack.masks import MaskConfig, open_masks
+
+    config = MaskConfig(device=device)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "e2e.avi"
+        with VideoWriter(path, fps=25) as writer:
+            for img in video_frames(case.width, case.height, frames, seed, noise_fields=8):
+                writer.write(img)
+
+        def decode() -> float:
+            t0 = time.perf_counter()
+            for _f in open_source(path):
+                pass
+            return time.perf_counter() - t0
+
+        decodes, passes = [], []
+        for _ in range(repeats):
+            decodes.append(decode())
+            t0 = time.perf_counter()
+            masks = open_masks(video=path, config=config)
+            count = sum(1 for _mask in masks)
+            passes.append(time.perf_counter() - t0)
+        windows = len(masks.model.windows)
+    e2e_ms = 1e3 * float(np.median(passes)) / count
+    decode_ms = 1e3 * float(np.median(decodes)) / count
+    return {
+        "e2e_frames": count,
+        "e2e_windows": windows,
+        "e2e_repeats": repeats,
+        "e2e_ms": e2e_ms,
+        "e2e_decode_ms": decode_ms,
+        "added_ms": e2e_ms - decode_ms,
+        "added_vs_decode": (e2e_ms - decode_ms) / decode_ms,
+    }
 
 
 class MasksSuite:
@@ -64,24 +141,35 @@ class MasksSuite:
     name = "masks"
     HEADER = (
         f"{'suite':6s} {'size':>10s} {'frames':>6s} {'decode':>8s} {'smp+bld':>8s} {'kernel':>8s} {'clean':>8s} "
-        f"{'model':>8s} {'numpy':>8s} {'eq':>4s}  (ms per frame; model = smp+bld + kernel)"
+        f"{'model':>8s} {'numpy':>8s} {'eq':>4s}  (ms per frame; model = smp+bld + kernel; end to end: decode, "
+        "e2e = the default mask pass, added = e2e - decode)"
     )
 
     @staticmethod
     def default_grid(is_cuda: bool) -> list[Case]:
-        return [Case(640, 480), Case(1920, 1080)]
+        # the end-to-end pass at 1920x1080 takes minutes on a CPU device: there only with a GPU
+        return [Case(640, 480), Case(1920, 1080, e2e=is_cuda)]
 
     @staticmethod
     def format_row(r: dict) -> str:
         eq = {True: "yes", False: "NO"}.get(r.get("equivalent"), "-")
-        return (
+        row = (
             f"{r['tracker']:6s} {r['width']:>5d}x{r['height']:<4d} {r['frames']:>6d} {r['decode_ms']:8.2f} "
             f"{r['build_ms']:8.2f} {r['kernel_ms']:8.2f} {r['clean_ms']:8.2f} {r['model_ms']:8.2f} "
             f"{r['numpy_ms']:8.2f} {eq:>4s}  model/decode {r['model_vs_decode']:.2f}"
         )
+        if "added_ms" not in r:
+            return row + "  end to end: -"
+        return (
+            f"{row}  end to end ({r['e2e_frames']} frames, {r['e2e_windows']} windows): decode "
+            f"{r['e2e_decode_ms']:.2f} e2e {r['e2e_ms']:.2f} added {r['added_ms']:.2f} "
+            f"added/decode {r['added_vs_decode']:.2f}"
+        )
 
     @staticmethod
-    def run_case(case: Case, device: str, frames: int = 50, numpy_max: int = 0, seed: int = 0) -> dict:
+    def run_case(
+        case: Case, device: str, frames: int = 50, numpy_max: int = 0, seed: int = 0, e2e: int | None = None
+    ) -> dict:
         import cv2
 
         from wptrack.background import OfflineBackground
@@ -109,7 +197,7 @@ class MasksSuite:
             builds = []
             for _ in range(3):
                 model._built.clear()
-                model._sampler.close()
+                model.close()  # a fresh sampler
                 t0 = time.perf_counter()
                 model._window(0)
                 builds.append(time.perf_counter() - t0)
@@ -147,6 +235,8 @@ class MasksSuite:
         decode_ms = 1e3 * float(np.median(decode)) / frames
         build_ms = 1e3 * float(np.median(builds)) / stride
         kernel_ms = 1e3 * float(np.median(kernel))
+        repeats = 1 if device == "cpu" else 2  # 600 frames take about 40 s on a 2-core CPU
+        end = end_to_end(case, device, e2e or e2e_frames(c.window), seed, repeats) if case.e2e else {}
         return {
             "tracker": "masks",
             "width": case.width,
@@ -164,4 +254,5 @@ class MasksSuite:
             "model_vs_decode": (build_ms + kernel_ms) / decode_ms,
             "numpy_ms": 1e3 * float(np.median(ref_t)),
             "equivalent": equivalent,
+            **end,
         }
