@@ -201,7 +201,8 @@ def test_cpu_threads_harness_runs_workers():
 
 def test_bench_masks_end_to_end_tiny(device):
     """The masks suite's end-to-end case: the default mask pipeline over a video of three default windows, its wall
-    time against decoding, reported as added and added/decode; the 1920x1080 end-to-end case only with a GPU."""
+    time against decoding, reported as added and added/decode, whole pass and after the first mask; the 1920x1080
+    end-to-end case only with a GPU."""
     from wptrack.bench.masks import Case, MasksSuite
 
     r = MasksSuite.run_case(Case(64, 48), device, frames=5)
@@ -210,8 +211,16 @@ def test_bench_masks_end_to_end_tiny(device):
     assert r["e2e_ms"] > r["e2e_decode_ms"] > 0
     assert abs(r["added_ms"] - (r["e2e_ms"] - r["e2e_decode_ms"])) < 1e-9
     assert abs(r["added_vs_decode"] - r["added_ms"] / r["e2e_decode_ms"]) < 1e-9
+    # the start-up (the first window read before the first mask) apart from the per-frame cost after it
+    assert 0 < r["e2e_first_ms"] < 600 * r["e2e_ms"] and r["e2e_steady_ms"] > 0
+    total = r["e2e_first_ms"] + 599 * r["e2e_steady_ms"]
+    if r["e2e_repeats"] == 1:  # one pass: first + steady is the pass (medians of several passes need not add up)
+        assert abs(total - 600 * r["e2e_ms"]) < 1e-6 * total
+    assert abs(r["added_steady_ms"] - (r["e2e_steady_ms"] - r["e2e_decode_ms"])) < 1e-9
+    assert abs(r["added_steady_vs_decode"] - r["added_steady_ms"] / r["e2e_decode_ms"]) < 1e-9
     row = MasksSuite.format_row(r)
     assert f"added/decode {r['added_vs_decode']:.2f}" in row and "3 windows" in row
+    assert f"added/decode {r['added_steady_vs_decode']:.2f}" in row and "first mask after" in row
     assert "end to end: -" in MasksSuite.format_row(MasksSuite.run_case(Case(64, 48, e2e=False), device, frames=3))
     assert [c.e2e for c in MasksSuite.default_grid(False)] == [True, False]
     assert [c.e2e for c in MasksSuite.default_grid(True)] == [True, True]
