@@ -192,7 +192,7 @@ def template_hulls_kernel(
 ):
     """Project every object of every particle and store its pieces' image hulls.
 
-    Launch with ``dim=(N, R * PIECES)``: thread ``(i, q)`` is piece ``q % PIECES`` of slot ``q / PIECES`` of
+    Launch with ``dim=(N, R * PIECES)``: thread ``(i, q)`` is piece ``q % PIECES`` of slot ``q // PIECES`` of
     particle ``i`` (a thread per piece: twice the threads of one per object, for the latency of small N on the GPU).
     Inputs are (N, R) per slot: ``kind`` (KIND_*), ``pos`` ground position (metres),
     ``heading`` (radians), ``dims`` (metres, see the module docstring). Outputs per piece ``q = slot * PIECES +

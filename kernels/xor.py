@@ -330,10 +330,10 @@ def xor_band_kernel(cap: int) -> wp.Kernel:
         width = qrow.shape[1] - 1
         ya = b * band
         yb = wp.min(ya + band, qrow.shape[0]) - 1
-        rows = veci()  # each piece's rows within the band, first * PACK + last (1: none)
+        rows = veci()  # each piece's rows within the band, first * PACK + last (PACK: first 1 > last 0, none)
         any_rows = int(0)
         for q in range(pieces):
-            rows[q] = 1
+            rows[q] = PACK
             if hull_n[i, q] > 0:
                 r = hull_rows[i, q]
                 lo = wp.max(r[0], ya)

@@ -64,8 +64,8 @@ stride over the particle's image rows; a CPU block has one thread)."""
 
 def xor_band(particles: int) -> int:
     """Image rows per thread of the XOR sums on CUDA (``kernels.xor.xor_band_kernel``: a thread per band and
-    particle): 8 below 50,000 particles, 32 from there (measured on an H100, bench scene, 1e3 to 1e5 particles x 1,
-    5 and 10 objects; BENCHMARKS.md, issue 13)."""
+    particle): 8 below 50,000 particles, 32 from there (measured on an H100 and an H200, bench scene, 1e3 to 1e5
+    particles x 1, 5 and 10 objects; BENCHMARKS.md, issue 13, round five)."""
     return 8 if particles < 50_000 else 32
 
 
@@ -120,8 +120,8 @@ SLOT_STATE_BYTES = (
     2 * (4 + 4 + 8 + 8 + 4 + 12 + 4) + int(kraster.PIECES) * (int(kraster.HULL_MAX) * 8 + 4 + 8 + 4) + 4  # + occlusion
 )
 """Device bytes per object slot of a particle: two ping-pong state buffers and the piece hulls."""
-PARTICLE_BYTES = 2 * 4 + 4 + 4 + 4 + 8
-"""Device bytes per particle besides the slots: log-weights (2), penalty, complexity, ancestor, weight."""
+PARTICLE_BYTES = 2 * 4 + 4 + 4 + 4 + 8 + 8
+"""Device bytes per particle besides the slots: log-weights (2), penalty, complexity, ancestor, weight, XOR sums."""
 
 
 def particle_bytes(max_objects: int, scheme: str) -> int:
@@ -291,9 +291,10 @@ def launch_mask_rows(q: wp.array, qrow: wp.array, qtotal: wp.array, device: str,
     )
 
 
-def group_cap(pieces: int) -> int:
-    """The smallest power of two >= ``pieces``."""
-    c = 1
+def piece_cap(pieces: int) -> int:
+    """The piece count ``kernels.xor.xor_band_kernel`` is compiled for: the smallest power of two >= ``pieces``
+    (at least 2)."""
+    c = 2
     while c < pieces:
         c *= 2
     return c
@@ -329,7 +330,7 @@ def launch_xor_score(
     if band > 0:
         h = qrow.shape[0]
         wp.launch(
-            kxor.xor_band_kernel(max(2, group_cap(hulls.n.shape[1]))),
+            kxor.xor_band_kernel(piece_cap(hulls.n.shape[1])),
             dim=((h + band - 1) // band, n),
             inputs=[hulls.pts, hulls.n, hulls.rows, qrow, int(band)],
             outputs=[sums, cov_diff],
