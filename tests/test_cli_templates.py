@@ -11,6 +11,7 @@ import pytest
 from wptrack.cli import main
 from wptrack.errors import ConfigError
 from wptrack.frames import write_video
+from wptrack.io import read_tracks
 from wptrack.rig import Camera, Rig
 from wptrack.trackers.templates import HumanPrior, TemplateConfig, TemplateTracker
 
@@ -64,6 +65,11 @@ def test_track_templates_writes_outputs_and_evaluates(scene, capsys):
     run = json.loads((out / "run.json").read_text())
     assert run["status"] == "complete" and run["tracker"] == "templates" and run["summary"]["frames"] == 12
     assert (out / "best.csv").exists() and (out / "virtual.avi").exists()
+    # offline confirmation (min_track_frames 8 by default): tracks.csv keeps the tracks of >= 8 rows of tracks_all.csv
+    kept, every = read_tracks(out / "tracks.csv"), read_tracks(out / "tracks_all.csv")
+    ids, counts = np.unique(every["id"], return_counts=True)
+    assert run["min_track_frames"] == 8 and run["short_tracks_dropped"] == int(np.sum(counts < 8))
+    assert sorted(set(kept["id"].tolist())) == sorted(ids[counts >= 8].tolist()) and len(kept["id"]) > 0
     code, text, err = _run(["evaluate", str(out), "--groundtruth", str(scene / "scene/groundtruth.csv")], capsys)
     assert code == 0 and "IDF1" in text
 
@@ -75,6 +81,7 @@ def test_track_templates_writes_outputs_and_evaluates(scene, capsys):
         (["--particles", "-3"], "positive integer"),
         (["--t-add", "1.5"], "t_add"),
         (["--classes", "dog"], "classes"),
+        (["--min-track-frames", "0"], "min_track_frames"),
     ],
 )
 def test_bad_parameters(tmp_path, capsys, extra, message):

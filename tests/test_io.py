@@ -231,3 +231,44 @@ def test_periodic_flush_while_running(tmp_path, rng):
     with np.load(tmp_path / "particles.npz") as z:
         assert z["positions"].shape == (1, 5, 3)
     rw.close()
+
+
+def test_complete_run_leaves_short_tracks_out(tmp_path):
+    """RunWriter.close('complete', min_track_frames=3): tracks.csv keeps the tracks with >= 3 rows or reported in the
+    last frame (every row of them, from their first frame, in the original order), tracks_all.csv every row, run.json
+    the count left out; an interrupted run keeps every track in tracks.csv and writes no tracks_all.csv."""
+    # 1 and 4 are short; 3 is short but still there at the end (frame 9); 12 must not be taken for 1
+    lives = {0: range(0, 10), 1: range(2, 4), 2: range(5, 8), 3: range(8, 10), 4: range(6, 7), 12: range(0, 3)}
+    rows = [(f, t, 1.0, 2.0, 3.0) for f in range(10) for t in sorted(lives) if f in lives[t]]
+    out = tmp_path / "done"
+    with RunWriter(out, "pf", COLUMNS[:5], {}) as rw:
+        rw.add_rows(rows)
+        rw.close("complete", {"n": 1}, min_track_frames=3)
+    kept = read_tracks(out / "tracks.csv")
+    everything = read_tracks(out / "tracks_all.csv")
+    assert sorted(set(kept["id"].tolist())) == [0, 2, 3, 12]
+    expect = [r for r in rows if len(lives[r[1]]) >= 3 or lives[r[1]][-1] == 9]
+    np.testing.assert_array_equal(kept["frame"], [r[0] for r in expect])
+    np.testing.assert_array_equal(kept["id"], [r[1] for r in expect])
+    np.testing.assert_array_equal(everything["id"], [r[1] for r in rows])
+    run = json.loads((out / "run.json").read_text())
+    assert (run["status"], run["min_track_frames"], run["short_tracks_dropped"]) == ("complete", 3, 2)
+    assert not [p for p in out.iterdir() if p.name.endswith(".tmp")]
+
+    stopped = tmp_path / "stopped"
+    with RunWriter(stopped, "pf", COLUMNS[:5], {}) as rw:
+        rw.add_rows(rows)
+        rw.close("interrupted", min_track_frames=3)
+    np.testing.assert_array_equal(read_tracks(stopped / "tracks.csv")["id"], [r[1] for r in rows])
+    assert not (stopped / "tracks_all.csv").exists()
+
+
+def test_drop_short_tracks_needs_an_id_column(tmp_path):
+    """A tracks file without an id column is refused by name, and left as it was."""
+    from wptrack.io import drop_short_tracks
+
+    path = tmp_path / "t.csv"
+    path.write_text("frame,x\n0,1.0\n")
+    with pytest.raises(OutputError, match="no 'frame' and 'id' columns"):
+        drop_short_tracks(path, tmp_path / "all.csv", 2)
+    assert path.read_text() == "frame,x\n0,1.0\n" and not (tmp_path / "all.csv").exists()

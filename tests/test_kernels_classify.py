@@ -164,7 +164,16 @@ def test_absorb_removes_humans_on_the_added_vehicle(device, absorb):
 
 @pytest.mark.parametrize(
     ("field", "value"),
-    [("vehicle_fit", 1.2), ("vehicle_fit", -0.1), ("absorb", 1), ("vehicle_entry_px", -8), ("vehicle_entry_px", 4.5)],
+    [
+        ("vehicle_fit", 1.2),
+        ("vehicle_fit", -0.1),
+        ("absorb", 1),
+        ("vehicle_entry_px", -8),
+        ("vehicle_entry_px", 4.5),
+        ("min_track_frames", 0),
+        ("min_track_frames", 2.5),
+        ("min_track_frames", True),
+    ],
 )
 def test_config_validated(field, value):
     with pytest.raises(ConfigError, match=field):

@@ -139,7 +139,16 @@ def _template_config_from_args(args, fps: float | None):
         "seed": args.seed,
         "resampling": args.resampling,
     }
-    for name in ("scale", "t_add", "t_del", "add_min_gain", "min_existence", "candidate_step_px", "vehicle_entry_px"):
+    for name in (
+        "scale",
+        "t_add",
+        "t_del",
+        "add_min_gain",
+        "min_existence",
+        "candidate_step_px",
+        "vehicle_entry_px",
+        "min_track_frames",
+    ):
         value = getattr(args, name)
         if value is not None:
             kw[name] = value
@@ -612,6 +621,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=None,
         help="vehicle addition candidates also this far beyond the image border, pixels (cars entering the view)",
+    )
+    tt.add_argument(
+        "--min-track-frames",
+        type=int,
+        default=None,
+        help="leave tracks shorter than this out of tracks.csv when the run completes (default 8; 1: keep all; "
+        "tracks_all.csv keeps every track)",
     )
     tt.add_argument("--resampling", default="systematic", help="systematic, stratified, multinomial or residual")
     tt.add_argument(

@@ -10,7 +10,9 @@ Files of a run directory (see :class:`RunWriter`):
 * ``run.json``: tracker, status (``running`` / ``complete`` / ``interrupted`` / ``failed``), config, versions,
   start/finish times, frames written and the last frame written (``last_frame``), per-stage timings, summary; the
   run loop adds ``stopped_early`` (where a truncated source ended, or None).
-* ``tracks.csv``: one line per (frame, target): ``frame,id,x,y,z`` then tracker-specific columns.
+* ``tracks.csv``: one line per (frame, target): ``frame,id,x,y,z`` then tracker-specific columns. A tracker that
+  confirms tracks offline (the template tracker's ``min_track_frames``) has the completed run's short tracks left
+  out of it, with every row kept in ``tracks_all.csv`` (:func:`drop_short_tracks`: copy, then atomic replace).
 * ``particles.npz``: subsampled particle clouds of some frames.
 
 Memory stays bounded however long the run: rows go to disk as they come, the particle clouds kept for
@@ -46,6 +48,8 @@ from .errors import OutputError, WptrackError
 log = logging.getLogger(__name__)
 
 TRACKS_FILE = "tracks.csv"
+TRACKS_ALL_FILE = "tracks_all.csv"
+"""Every track of a completed run whose tracks.csv left the short ones out (``RunWriter.close``)."""
 RUN_FILE = "run.json"
 PARTICLES_FILE = "particles.npz"
 
@@ -379,6 +383,48 @@ def _format_value(value: Any) -> Any:
     return text
 
 
+def drop_short_tracks(path: Path, all_path: Path, min_frames: int) -> int:
+    """Leave the tracks with fewer than ``min_frames`` rows out of the tracks CSV ``path`` (columns ``frame`` and
+    ``id``), except those still reported in its last frame (the recording ended, not the track: a run of fewer
+    frames keeps its tracks), keeping every row in ``all_path``; returns the number of tracks left out.
+
+    Crash-safe: the full file is copied to ``all_path`` and the filtered one written next to ``path`` before it
+    replaces ``path`` (at every moment ``path`` holds either every row or the filtered rows). Two streaming passes
+    (the row counts and last frames per id, then the copy): memory grows with the number of tracks, not rows.
+    """
+    import shutil
+
+    counts: dict[str, int] = {}
+    last: dict[str, int] = {}
+    end = None
+    with open(path, encoding="utf-8", newline="") as fh:
+        reader = csv.reader(fh)
+        header = next(reader, None)
+        if header is None or "id" not in header or "frame" not in header:
+            raise OutputError(f"{path}: no 'frame' and 'id' columns to count the tracks' rows by")
+        col, fcol = header.index("id"), header.index("frame")
+        for row in reader:
+            k, f = row[col], int(row[fcol])
+            counts[k] = counts.get(k, 0) + 1
+            last[k] = max(last.get(k, f), f)
+            end = f if end is None else max(end, f)
+    keep = {k for k, c in counts.items() if c >= min_frames or last[k] == end}
+    tmp_all = all_path.with_name(all_path.name + ".tmp")
+    tmp = path.with_name(path.name + ".tmp")
+    shutil.copyfile(path, tmp_all)
+    os.replace(tmp_all, all_path)
+    with open(path, encoding="utf-8", newline="") as src, open(tmp, "w", encoding="utf-8", newline="") as dst:
+        lines = iter(src)
+        dst.write(next(lines))
+        for line in lines:
+            if next(csv.reader([line]))[col] in keep:
+                dst.write(line)
+        dst.flush()
+        os.fsync(dst.fileno())
+    os.replace(tmp, path)
+    return len(counts) - len(keep)
+
+
 class RunWriter:
     """Write a run's outputs (``run.json``, ``tracks.csv``, ``particles.npz``) as the run goes.
 
@@ -612,12 +658,17 @@ class RunWriter:
         self._write_run_json()
         self._last_flush = time.monotonic()
 
-    def close(self, status: str = "complete", summary: dict[str, Any] | None = None) -> None:
+    def close(self, status: str = "complete", summary: dict[str, Any] | None = None, min_track_frames: int = 1) -> None:
         """Finish the run: close tracks.csv, write the final particles.npz and run.json (idempotent).
 
         Args:
             status: ``"complete"``, ``"interrupted"``, ``"failed"`` (any string is recorded).
             summary: Tracker summary recorded in run.json (e.g. mean error, frames lost).
+            min_track_frames: With ``"complete"`` and more than 1: every row goes to ``tracks_all.csv`` and
+                ``tracks.csv`` keeps the tracks with at least this many rows or reported in the last frame
+                (:func:`drop_short_tracks`; run.json
+                records ``min_track_frames`` and ``short_tracks_dropped``). Other runs keep every row in
+                ``tracks.csv`` (a resumed run is filtered when it completes).
         """
         if self._closed:
             return
@@ -628,6 +679,9 @@ class RunWriter:
             os.fsync(self._csv_file.fileno())
         finally:
             self._csv_file.close()
+        if status == "complete" and min_track_frames > 1:
+            dropped = drop_short_tracks(self.out_dir / TRACKS_FILE, self.out_dir / TRACKS_ALL_FILE, min_track_frames)
+            self._run.update(min_track_frames=int(min_track_frames), short_tracks_dropped=dropped)
         if len(self._particles):
             self._write_particles()
         self._run.update(status=status, finished=_now())

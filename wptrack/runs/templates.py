@@ -240,6 +240,7 @@ class TemplateRun(TrackerRun):
             "tracker": config.to_dict(),
         }
         self._flood = FloodGuard(name=str(masks if masks is not None else video)) if flood_guard else None
+        self.min_track_frames = int(config.min_track_frames)  # the run loop filters tracks.csv when complete
         self._seen: dict[int, str] = {}
         self._penalty_sum = 0
         self._penalty_frames = 0
