@@ -272,3 +272,30 @@ def test_drop_short_tracks_needs_an_id_column(tmp_path):
     with pytest.raises(OutputError, match="no 'frame' and 'id' columns"):
         drop_short_tracks(path, tmp_path / "all.csv", 2)
     assert path.read_text() == "frame,x\n0,1.0\n" and not (tmp_path / "all.csv").exists()
+
+
+def test_short_tracks_left_in_when_the_filter_cannot_write(tmp_path):
+    """A completed run whose tracks_all.csv cannot be written keeps every row in tracks.csv, completes, and says why
+    in run.json; no temporary file is left."""
+    out = tmp_path / "run"
+    rows = [(f, t, 1.0, 2.0, 3.0) for f in range(6) for t in (0, 1) if t == 0 or f < 2]
+    with RunWriter(out, "pf", COLUMNS[:5], {}) as rw:
+        rw.add_rows(rows)
+        (out / "tracks_all.csv").mkdir()  # a folder in the way
+        rw.close("complete", min_track_frames=3)
+    np.testing.assert_array_equal(read_tracks(out / "tracks.csv")["id"], [r[1] for r in rows])
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "complete" and run["min_track_frames"] == 3 and "short_tracks_dropped" not in run
+    assert "tracks_all.csv" in run["short_tracks_error"]
+    assert not [p for p in out.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_new_run_removes_an_earlier_runs_tracks_all(tmp_path):
+    """A new run in a folder that holds an earlier run's tracks_all.csv removes it (it is not this run's)."""
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "tracks_all.csv").write_text("frame,id,x,y,z\n0,5,1,2,3\n")
+    with RunWriter(out, "pf", COLUMNS[:5], {}) as rw:
+        rw.add_rows([(0, 0, 1.0, 2.0, 3.0)])
+        rw.close("complete")  # min_track_frames 1: no filter, no tracks_all.csv
+    assert not (out / "tracks_all.csv").exists()

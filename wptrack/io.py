@@ -411,17 +411,22 @@ def drop_short_tracks(path: Path, all_path: Path, min_frames: int) -> int:
     keep = {k for k, c in counts.items() if c >= min_frames or last[k] == end}
     tmp_all = all_path.with_name(all_path.name + ".tmp")
     tmp = path.with_name(path.name + ".tmp")
-    shutil.copyfile(path, tmp_all)
-    os.replace(tmp_all, all_path)
-    with open(path, encoding="utf-8", newline="") as src, open(tmp, "w", encoding="utf-8", newline="") as dst:
-        lines = iter(src)
-        dst.write(next(lines))
-        for line in lines:
-            if next(csv.reader([line]))[col] in keep:
-                dst.write(line)
-        dst.flush()
-        os.fsync(dst.fileno())
-    os.replace(tmp, path)
+    try:
+        shutil.copyfile(path, tmp_all)
+        os.replace(tmp_all, all_path)
+        with open(path, encoding="utf-8", newline="") as src, open(tmp, "w", encoding="utf-8", newline="") as dst:
+            lines = iter(src)
+            dst.write(next(lines))
+            for line in lines:
+                if next(csv.reader([line]))[col] in keep:
+                    dst.write(line)
+            dst.flush()
+            os.fsync(dst.fileno())
+        os.replace(tmp, path)
+    finally:  # nothing half-written is left behind
+        for t in (tmp_all, tmp):
+            with contextlib.suppress(OSError):
+                t.unlink(missing_ok=True)
     return len(counts) - len(keep)
 
 
@@ -533,6 +538,7 @@ class RunWriter:
             raise OutputError(f"cannot write {self.tracks_path}: {e.strerror or e}") from None
         if resume_from is None:
             self._csv_file.write(",".join(columns) + "\n")
+            (self.out_dir / TRACKS_ALL_FILE).unlink(missing_ok=True)  # an earlier run's: not this run's tracks
         self._csv_file.flush()
         self._write_run_json()
         log.info("writing run outputs to %s", self.out_dir)
@@ -666,9 +672,9 @@ class RunWriter:
             summary: Tracker summary recorded in run.json (e.g. mean error, frames lost).
             min_track_frames: With ``"complete"`` and more than 1: every row goes to ``tracks_all.csv`` and
                 ``tracks.csv`` keeps the tracks with at least this many rows or reported in the last frame
-                (:func:`drop_short_tracks`; run.json
-                records ``min_track_frames`` and ``short_tracks_dropped``). Other runs keep every row in
-                ``tracks.csv`` (a resumed run is filtered when it completes).
+                (:func:`drop_short_tracks`; run.json records ``min_track_frames`` and ``short_tracks_dropped``, or
+                ``short_tracks_error`` when the files could not be written: ``tracks.csv`` then has every row).
+                Other runs keep every row in ``tracks.csv`` (a resumed run is filtered when it completes).
         """
         if self._closed:
             return
@@ -680,8 +686,13 @@ class RunWriter:
         finally:
             self._csv_file.close()
         if status == "complete" and min_track_frames > 1:
-            dropped = drop_short_tracks(self.out_dir / TRACKS_FILE, self.out_dir / TRACKS_ALL_FILE, min_track_frames)
-            self._run.update(min_track_frames=int(min_track_frames), short_tracks_dropped=dropped)
+            self._run["min_track_frames"] = int(min_track_frames)
+            try:
+                dropped = drop_short_tracks(self.tracks_path, self.out_dir / TRACKS_ALL_FILE, min_track_frames)
+                self._run["short_tracks_dropped"] = dropped
+            except (OSError, OutputError) as e:  # the run is complete: keep every row and say why
+                log.warning("could not leave the short tracks out of %s: %s", self.tracks_path, e)
+                self._run["short_tracks_error"] = str(e)
         if len(self._particles):
             self._write_particles()
         self._run.update(status=status, finished=_now())
