@@ -39,6 +39,7 @@ from wptrack.trackers.templates import (
     ground_rays,
     launch_mask_rows,
     launch_xor_score,
+    xor_band,
 )
 from wptrack.warpcams import camera_struct
 
@@ -707,6 +708,13 @@ def test_xor_band_kernel_equals_row_kernel(device, rng, cpu_blocks, r, band, bg_
     q = case.q != 0
     v = case.virtual.astype(bool)
     np.testing.assert_array_equal(banded[1], np.sum(q[None] ^ v, axis=(1, 2)))
+
+
+def test_xor_band_policy():
+    """The band height: 8 rows below 50,000 particles, 32 from there, doubled while bands x particles would exceed
+    2^31 - 1 threads in one launch."""
+    assert (xor_band(1000, 480), xor_band(49_999, 480), xor_band(50_000, 480)) == (8, 8, 32)
+    assert xor_band(10**8, 1080) == 64 and -(-1080 // 64) * 10**8 <= 2**31 - 1 < -(-1080 // 32) * 10**8
 
 
 def coverage_uoh(device, q, n: int, beta: float, cov_diff, block_dim: int = ROW_BLOCK):

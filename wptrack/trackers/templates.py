@@ -62,11 +62,15 @@ SCORE_BLOCK = 64
 stride over the particle's image rows; a CPU block has one thread)."""
 
 
-def xor_band(particles: int) -> int:
+def xor_band(particles: int, height: int) -> int:
     """Image rows per thread of the XOR sums on CUDA (``kernels.xor.xor_band_kernel``: a thread per band and
     particle): 8 below 50,000 particles, 32 from there (measured on an H100 and an H200, bench scene, 1e3 to 1e5
-    particles x 1, 5 and 10 objects; BENCHMARKS.md, issue 13, round five)."""
-    return 8 if particles < 50_000 else 32
+    particles x 1, 5 and 10 objects; BENCHMARKS.md, issue 13, round five), doubled while the launch would exceed
+    2^31 - 1 threads (``height`` image rows)."""
+    band = 8 if particles < 50_000 else 32
+    while -(-height // band) * particles > 2**31 - 1:
+        band *= 2
+    return band
 
 
 ROW_BLOCK = 128
@@ -429,7 +433,7 @@ class TemplateTracker(FrameChain):
         self.xor_sums = wp.zeros(n, dtype=wp.vec2i, device=d)  # per-particle (|v|, |q AND v|) of xor_band_kernel
         # CUDA: a thread per band of rows and particle (the packed coordinates need images below 32768 pixels);
         # the CPU backend (one lane per block) walks each particle's rows in xor_score_kernel
-        self.xor_band = xor_band(n) if self.is_cuda and max(w, h) < 32768 else 0
+        self.xor_band = xor_band(n, h) if self.is_cuda and max(w, h) < 32768 else 0
         self.complexity = wp.zeros(n, dtype=wp.float32, device=d)
         self.weights = wp.zeros(n, dtype=wp.float64, device=d)
         self.ancestors = wp.array(np.arange(n, dtype=np.int32), device=d)
