@@ -4,7 +4,8 @@ moments (MMSE mean, spread, ESS, likelihood) in one pass with the online ("runni
 Pattern (portable between CUDA and the CPU backend): ``wp.launch_tiled(dim=[blocks], block_dim=B)``; block
 ``b`` owns particles ``[b*chunk, (b+1)*chunk)`` and each of its threads strides through them by
 ``wp.block_dim()`` (B on CUDA, 1 on the CPU, where one thread then covers the whole chunk); the per-thread
-partials are combined with ``wp.tile`` + ``wp.tile_sum``/``tile_max`` and written once per block. A second
+partials are combined by the native block reductions below (:func:`block_argmax`, :func:`block_sum8`) and written
+once per block. A second
 launch with one block combines the per-block partials, so no address is ever hit by more than one writer.
 """
 
@@ -47,17 +48,113 @@ def finite_logw(v: float):
     return float(LOGW_FLOOR)
 
 
+# Block reductions in native CUDA. Warp's ``tile_sum``/``tile_max`` over ``wp.tile(x)`` cost two or three barriers
+# and a serial pass of thread 0 each; the moments took ten of them per block (the max, the argmax and eight float64
+# sums): about 20 microseconds per block on an H100, which made the block reduction, not the particles, most of the
+# predict + score kernel at 1e6 particles (BENCHMARKS.md, issue 13, round six). These do the same arithmetic in one
+# pass: warp shuffles, one barrier per stage. The sums add in exactly the order of ``tile_sum`` (a shuffle-down tree
+# per warp, offsets 16 to 1, then thread 0 adds the warp totals in warp order), so the results are bit-identical to
+# the tile reductions they replace. CUDA: every thread of the block calls them, the block size a multiple of 32. The
+# CPU branches are the one-thread blocks of the CPU backend (``wp.block_dim()`` is 1 there).
+
+vec8d = wp.types.vector(length=8, dtype=wp.float64)
+"""Eight float64 sums reduced together (:func:`block_sum8`)."""
+
+BLOCK_ARGMAX_SNIPPET = """
+#if defined(__CUDA_ARCH__)
+    __shared__ float warp_max[32];
+    __shared__ int warp_arg[32];
+    const int w = threadIdx.x >> 5;
+    const int l = threadIdx.x & 31;
+    const int warps = (blockDim.x + 31) >> 5;
+    float m = best;
+#pragma unroll
+    for (int d = 16; d > 0; d >>= 1) {
+        const float y = __shfl_xor_sync(0xffffffffu, m, d);
+        m = y > m ? y : m;
+    }
+    if (l == 0) warp_max[w] = m;
+    __syncthreads();
+    float mv = warp_max[0];
+    for (int k = 1; k < warps; ++k) mv = warp_max[k] > mv ? warp_max[k] : mv;
+    int a = best == mv ? arg : no_index;
+#pragma unroll
+    for (int d = 16; d > 0; d >>= 1) {
+        const int y = __shfl_xor_sync(0xffffffffu, a, d);
+        a = y < a ? y : a;
+    }
+    if (l == 0) warp_arg[w] = a;
+    __syncthreads();
+    a = warp_arg[0];
+    for (int k = 1; k < warps; ++k) a = warp_arg[k] < a ? warp_arg[k] : a;
+    return wp::vec_t<2, wp::float64>(wp::float64(mv), wp::float64(a));
+#else
+    return wp::vec_t<2, wp::float64>(wp::float64(best), wp::float64(arg));
+#endif
+"""
+
+
+@wp.func_native(BLOCK_ARGMAX_SNIPPET)
+def block_argmax_native(best: float, arg: int, no_index: int) -> wp.vec2d:
+    """``(block max of best, lowest arg among the threads holding it, no_index if none)`` to every thread, as float64
+    (both exact). Use :func:`block_argmax`."""
+    ...
+
+
 @wp.func
 def block_argmax(best: float, arg: int):
     """The block's maximum of the threads' ``best`` and the lowest ``arg`` attaining it (every thread of the block
     must call this; each gets both)."""
-    m = wp.tile_max(wp.tile(best))
-    mv = m[0]
-    cand = int(NO_INDEX)
-    if best == mv:
-        cand = arg
-    a = wp.tile_min(wp.tile(cand))
-    return mv, a[0]
+    r = block_argmax_native(best, arg, NO_INDEX)
+    return wp.float32(r[0]), int(r[1])
+
+
+BLOCK_SUM_SNIPPET = """
+#if defined(__CUDA_ARCH__)
+    __shared__ double warp_sums[32][LENGTH];
+    const int w = threadIdx.x >> 5;
+    const int l = threadIdx.x & 31;
+    const int warps = (blockDim.x + 31) >> 5;
+    wp::vec_t<LENGTH, wp::float64> s = v;
+#pragma unroll
+    for (int d = 16; d > 0; d >>= 1) {
+#pragma unroll
+        for (int k = 0; k < LENGTH; ++k) s.c[k] = s.c[k] + __shfl_down_sync(0xffffffffu, s.c[k], d);
+    }
+    if (l == 0) {
+#pragma unroll
+        for (int k = 0; k < LENGTH; ++k) warp_sums[w][k] = s.c[k];
+    }
+    __syncthreads();
+    if (threadIdx.x == 0) {
+        for (int j = 1; j < warps; ++j) {
+#pragma unroll
+            for (int k = 0; k < LENGTH; ++k) s.c[k] = s.c[k] + warp_sums[j][k];
+        }
+    }
+    __syncthreads();
+    return s;
+#else
+    return v;
+#endif
+"""
+"""Native body of a block sum of a float64 vector of LENGTH components (see the comment above)."""
+
+
+@wp.func_native(BLOCK_SUM_SNIPPET.replace("LENGTH", "8"))
+def block_sum8(v: vec8d) -> vec8d:
+    """The block's sum of ``v``, component by component, valid in thread 0 only (every thread must call it)."""
+    ...
+
+
+vec15d = wp.types.vector(length=15, dtype=wp.float64)
+"""The fifteen per-slot sums of ``kernels.slots`` (:func:`block_sum15`)."""
+
+
+@wp.func_native(BLOCK_SUM_SNIPPET.replace("LENGTH", "15"))
+def block_sum15(v: vec15d) -> vec15d:
+    """:func:`block_sum8` for fifteen components."""
+    ...
 
 
 @wp.func
@@ -177,19 +274,12 @@ def moments_store(
     r = wp.float64(0.0)
     if best > NEG_INF:
         r = wp.exp(wp.float64(best) - wp.float64(mv))
-    t0 = wp.tile_sum(wp.tile(sw * r))
-    t1 = wp.tile_sum(wp.tile(sw2 * r * r))
-    for k in range(3):
-        tk = wp.tile_sum(wp.tile(sx[k] * r))
-        tkk = wp.tile_sum(wp.tile(sxx[k] * r))
-        if lane == 0:
-            part[b, 2 + k] = tk[0]
-            part[b, 5 + k] = tkk[0]
+    t = block_sum8(vec8d(sw * r, sw2 * r * r, sx[0] * r, sx[1] * r, sx[2] * r, sxx[0] * r, sxx[1] * r, sxx[2] * r))
     if lane == 0:
         part_max[b] = mv
         part_arg[b] = a
-        part[b, 0] = t0[0]
-        part[b, 1] = t1[0]
+        for k in range(8):
+            part[b, k] = t[k]
 
 
 @wp.kernel
@@ -248,19 +338,11 @@ def final_moments_kernel(
             sw2 += r * r * part[j, 1]
             sx += r * wp.vec3d(part[j, 2], part[j, 3], part[j, 4])
             sxx += r * wp.vec3d(part[j, 5], part[j, 6], part[j, 7])
-    t0 = wp.tile_sum(wp.tile(sw))
-    t1 = wp.tile_sum(wp.tile(sw2))
-    mean = wp.vec3d()
-    ex2 = wp.vec3d()
-    for k in range(3):
-        tk = wp.tile_sum(wp.tile(sx[k]))
-        tkk = wp.tile_sum(wp.tile(sxx[k]))
-        mean[k] = tk[0]
-        ex2[k] = tkk[0]
+    t = block_sum8(vec8d(sw, sw2, sx[0], sx[1], sx[2], sxx[0], sxx[1], sxx[2]))
     if lane == 0:
-        w = t0[0]
-        mean = mean / w
-        ex2 = ex2 / w
+        w = t[0]
+        mean = wp.vec3d(t[2], t[3], t[4]) / w
+        ex2 = wp.vec3d(t[5], t[6], t[7]) / w
         bi = a
         best_index[0] = bi
         bx = particles[bi]
@@ -269,7 +351,7 @@ def final_moments_kernel(
             est[EST_MEAN + k] = mean[k]
             est[EST_STD + k] = wp.sqrt(wp.max(ex2[k] - mean[k] * mean[k], wp.float64(0.0)))
             est[EST_MAP + k] = wp.float64(bx[k])
-        ess = w * w / t1[0]
+        ess = w * w / t[1]
         est[EST_ESS] = ess
         est[EST_LOGLIK] = wp.float64(mv) + wp.log(w / wp.float64(n))
         flag = int(0)

@@ -10,7 +10,7 @@ import warp as wp
 
 from .dynamics import TemplateState
 from .raster import KIND_NONE, KIND_VEHICLE
-from .reduce import EST_MAXLOGW
+from .reduce import EST_MAXLOGW, block_sum15, vec15d
 
 wp.set_module_options({"enable_backward": False})
 
@@ -47,7 +47,7 @@ def block_slot_moments_kernel(
     start = b * chunk
     stop = wp.min(start + chunk, n)
     mx = est[EST_MAXLOGW]
-    acc = wp.vector(dtype=wp.float64, length=15)
+    acc = vec15d()
     for i in range(start + lane, stop, wp.block_dim()):
         w = wp.exp(wp.float64(state.logw[i]) - mx)
         if s == 0:
@@ -80,10 +80,10 @@ def block_slot_moments_kernel(
             acc[12] += w * wp.float64(d[1])
             acc[13] += w * wp.float64(d[2])
             acc[14] += w * wp.float64(state.age[i, s])
-    for f in range(NS):
-        t = wp.tile_sum(wp.tile(acc[f]))
-        if lane == 0:
-            part[b, s, f] = t[0]
+    t = block_sum15(acc)  # the block's sums, in lane 0
+    if lane == 0:
+        for f in range(NS):
+            part[b, s, f] = t[f]
 
 
 @wp.kernel
@@ -100,14 +100,11 @@ def final_slot_moments_kernel(
     """Combine the per-block sums (launch ``wp.launch_tiled(dim=[R], block_dim=B)``, one block per slot) into
     ``slot_est`` (R, NE) and ``slot_count`` (R,); slot 0 also decides resampling (ESS <= threshold x N)."""
     s, lane = wp.tid()
-    acc = wp.vector(dtype=wp.float64, length=15)
+    acc = vec15d()
     for j in range(lane, blocks, wp.block_dim()):
         for f in range(NS):
             acc[f] += part[j, s, f]
-    tot = wp.vector(dtype=wp.float64, length=15)
-    for f in range(NS):
-        t = wp.tile_sum(wp.tile(acc[f]))
-        tot[f] = t[0]
+    tot = block_sum15(acc)  # valid in lane 0, the only reader
     if lane == 0:
         zero = wp.float64(0.0)
         sw = tot[0]

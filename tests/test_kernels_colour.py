@@ -70,8 +70,9 @@ def upload(frames, device):
 
 
 def mask_and_integral(drig: DeviceRig, target: HSITarget, bgr, device):
-    """Mask and integral image (integral form), and the window map in both forms (per pixel and per row, whatever
-    the device picks for ColourMaps): returns mask, integral, window, window_by_rows."""
+    """Mask and integral image (integral form), and the window map in its three forms (per pixel, per strip of rows
+    as ColourMaps builds it on a GPU, per row as on the CPU; the first two asserted equal here): returns mask,
+    integral, window, window_by_rows."""
     t = target.to_struct(device)
     maps = ColourMaps(drig, device, window=False)
     maps.launch(t, bgr)
@@ -87,6 +88,15 @@ def mask_and_integral(drig: DeviceRig, target: HSITarget, bgr, device):
         outputs=[per_pixel],
         device=device,
     )
+    strips = wp.zeros(drig.total_pixels, dtype=wp.uint8, device=device)
+    wp.launch(
+        kcolour.window_strips_kernel,
+        dim=(m, (drig.max_height + int(kcolour.WINDOW_STRIP) - 1) // int(kcolour.WINDOW_STRIP), drig.max_width),
+        inputs=[drig.cams, maps.mask],
+        outputs=[strips],
+        device=device,
+    )
+    np.testing.assert_array_equal(strips.numpy(), per_pixel.numpy())
     mask2 = wp.zeros(drig.total_pixels, dtype=wp.uint8, device=device)
     hsum = wp.zeros(drig.total_pixels, dtype=wp.uint8, device=device)
     by_rows = wp.zeros(drig.total_pixels, dtype=wp.uint8, device=device)
@@ -211,3 +221,29 @@ def test_window_counts_direct_equals_integral_and_reference(device, rng):
     c = counts[0]
     ref_ll = np.sum(np.where(c < 0, np.log(1 / 25), np.log(np.maximum(c, 1) / 25)), axis=0)
     np.testing.assert_allclose(loglik.numpy(), ref_ll, rtol=1e-5, atol=1e-5)
+
+
+def test_window_strips_on_odd_sizes(device, rng):
+    """The strip form of the window map against the padded NumPy sum on sizes that are no multiple of the strip
+    (and images narrower or shorter than the window)."""
+    sizes = [(1, 1), (5, 3), (3, 9), (13, 21), (40, 17)]
+    cams = [Camera.look_at(f"c{k}", w, h, (0.0, -2.0, 1.0), (0.0, 0.0, 0.5), 50.0) for k, (w, h) in enumerate(sizes)]
+    drig = DeviceRig(Rig(tuple(cams)), device)
+    masks = [(rng.random((h, w)) < 0.4).astype(np.uint8) for w, h in sizes]
+    mask = wp.array(np.concatenate([m.reshape(-1) for m in masks]), dtype=wp.uint8, device=device)
+    out = wp.full(drig.total_pixels, 255, dtype=wp.uint8, device=device)
+    strip = int(kcolour.WINDOW_STRIP)
+    wp.launch(
+        kcolour.window_strips_kernel,
+        dim=(len(sizes), (drig.max_height + strip - 1) // strip, drig.max_width),
+        inputs=[drig.cams, mask],
+        outputs=[out],
+        device=device,
+    )
+    got = out.numpy()
+    assert got.size == sum(w * h for w, h in sizes)
+    for c, ((w, h), m) in enumerate(zip(sizes, masks, strict=True)):
+        padded = np.pad(m.astype(np.int64), 2)
+        ref = sum(padded[dy : dy + h, dx : dx + w] for dy in range(5) for dx in range(5))
+        win = got[drig.pixel_offsets[c] : drig.pixel_offsets[c + 1]].reshape(h, w)
+        np.testing.assert_array_equal(win, ref)

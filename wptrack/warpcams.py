@@ -164,9 +164,10 @@ class ColourMaps:
             k.target_mask_kernel, dim=(m, dr.max_pixels), inputs=[dr.cams, target, bgr], outputs=[self.mask], device=d
         )
         if self.has_window:
+            strips = (dr.max_height + int(k.WINDOW_STRIP) - 1) // int(k.WINDOW_STRIP)
             wp.launch(
-                k.window_from_mask_kernel,
-                dim=(m, dr.max_height, dr.max_width),
+                k.window_strips_kernel,
+                dim=(m, strips, dr.max_width),
                 inputs=[dr.cams, self.mask],
                 outputs=[self.window],
                 device=d,
