@@ -111,20 +111,26 @@ def pixel_matches(target: ColourTarget, bgr: wp.array(dtype=wp.uint8), pixel: in
     return int((target.table[idx >> 5] >> wp.uint32(idx & 31)) & wp.uint32(1))
 
 
+MASK_PIXELS_PER_THREAD = wp.constant(4)
+"""Consecutive pixels classified by one thread of :func:`target_mask_kernel`."""
+
+
 @wp.kernel
 def target_mask_kernel(
-    cams: wp.array(dtype=Camera),
     target: ColourTarget,
     bgr: wp.array(dtype=wp.uint8),
+    total: int,
     mask: wp.array(dtype=wp.uint8),
 ):
-    """Target mask of every camera: launch (M, max W*H); ``mask`` is flat like the frames (1 byte/pixel)."""
-    c, p = wp.tid()
-    cam = cams[c]
-    if p >= cam.width * cam.height:
-        return
-    q = cam.pixel_offset + p
-    mask[q] = wp.uint8(pixel_matches(target, bgr, q))
+    """Target mask of every camera at once: the cameras' frames lie back to back in ``bgr`` (3 bytes per pixel) and
+    the mask is flat like them (1 byte per pixel), so the classification needs no camera: ``total`` pixels in all,
+    :data:`MASK_PIXELS_PER_THREAD` consecutive ones per thread (a thread per pixel of a (cameras, pixels) launch,
+    each loading its camera, took 15 us for 4 x 640 x 480 on an H100). Launch ceil(total / MASK_PIXELS_PER_THREAD).
+    """
+    t = wp.tid()
+    first = t * MASK_PIXELS_PER_THREAD
+    for q in range(first, wp.min(first + MASK_PIXELS_PER_THREAD, total)):
+        mask[q] = wp.uint8(pixel_matches(target, bgr, q))
 
 
 HALF_WINDOW = wp.constant(2)
@@ -279,51 +285,90 @@ def window_from_mask_kernel(
 
 
 WINDOW_STRIP = wp.constant(8)
-"""Output rows per thread of :func:`window_strips_kernel`."""
+"""Output rows per thread of :func:`observe_map_kernel`."""
+STRIP_ROWS = wp.constant(12)
+"""Rows a lane of :func:`observe_map_kernel` classifies: its strip and two above and below (WINDOW_STRIP + 4; at most
+``wp.config.max_unroll`` = 16 so the loops over them unroll)."""
+strip_rows = wp.types.vector(length=12, dtype=wp.int32)
+"""Per-row values of one lane of :func:`observe_map_kernel` (registers: indexed only in unrolled loops)."""
+WARP_COLUMNS = wp.constant(28)
+"""Output columns per warp of :func:`observe_map_kernel`: 32 lanes, 2 halo lanes each side."""
+
+
+@wp.func_native("""
+#if defined(__CUDA_ARCH__)
+    const int l = threadIdx.x & 31;
+    const int a1 = __shfl_up_sync(0xffffffffu, v, 1);
+    const int a2 = __shfl_up_sync(0xffffffffu, v, 2);
+    const int b1 = __shfl_down_sync(0xffffffffu, v, 1);
+    const int b2 = __shfl_down_sync(0xffffffffu, v, 2);
+    int s = v;
+    if (l >= 1) s += a1;
+    if (l >= 2) s += a2;
+    if (l <= 30) s += b1;
+    if (l <= 29) s += b2;
+    return s;
+#else
+    return v;
+#endif
+""")
+def warp_sum5(v: int) -> int:
+    """Sum of ``v`` over lanes l-2 .. l+2 of the calling warp (those that exist). CUDA only: every lane of the warp
+    calls it; the CPU branch (no warps) returns ``v``."""
+    ...
 
 
 @wp.func
-def mask_row_sum(cam: Camera, mask: wp.array(dtype=wp.uint8), y: int, x0: int, x1: int):
-    """Sum of ``mask`` over columns ``[x0, x1]`` of row ``y`` of camera ``cam``; 0 for a row outside the image."""
+def strip_pixel(cam: Camera, target: ColourTarget, bgr: wp.array(dtype=wp.uint8), x: int, y: int):
+    """The target class of pixel (x, y) of camera ``cam``, 0 outside the image."""
     m = int(0)
-    if y >= 0 and y < cam.height:
-        row = cam.pixel_offset + y * cam.width
-        for x in range(x0, x1 + 1):
-            m += int(mask[row + x])
+    if x >= 0 and x < cam.width and y >= 0 and y < cam.height:
+        m = pixel_matches(target, bgr, cam.pixel_offset + y * cam.width + x)
     return m
 
 
 @wp.kernel
-def window_strips_kernel(
+def observe_map_kernel(
     cams: wp.array(dtype=Camera),
+    target: ColourTarget,
+    bgr: wp.array(dtype=wp.uint8),
     mask: wp.array(dtype=wp.uint8),
     window: wp.array(dtype=wp.uint8),
 ):
-    """The 5x5 window-count map of :func:`window_from_mask_kernel` (same values), a thread per column and strip of
-    :data:`WINDOW_STRIP` rows: the horizontal 5-sums of the strip's rows and the two above and below, each read
-    once and summed vertically through five registers (7.5 mask reads per pixel instead of 25, and one camera
-    load per thread instead of per pixel). The GPU form of the map: 37 -> see BENCHMARKS.md, issue 13, round six.
-    Launch (M, ceil(max H / WINDOW_STRIP), max W); flat like the mask."""
-    c, strip, px = wp.tid()
+    """Target mask and 5x5 window-count map in one pass (the GPU form of the observation; CUDA only, the CPU backend
+    builds the map by rows: :func:`mask_rows_kernel`, :func:`window_cols_kernel`). Same values as
+    :func:`target_mask_kernel` + :func:`window_from_mask_kernel`.
+
+    A warp covers :data:`WARP_COLUMNS` columns and a strip of :data:`WINDOW_STRIP` rows: each lane classifies its
+    column on the strip's rows and two more above and below (lanes 0-1 and 30-31 are the neighbouring columns, the
+    halo), the horizontal 5-sums come from the neighbouring lanes by warp shuffles (:func:`warp_sum5`) and are
+    summed vertically in registers. No mask is read back: the two launches it replaces (mask, then 25
+    mask reads per pixel) took 15 + 37 us for 4 x 640 x 480 on an H100 (BENCHMARKS.md, issue 13, round six).
+    Launch (M, ceil(max H / WINDOW_STRIP), 32 ceil(max W / WARP_COLUMNS)) with a block size that is a multiple of
+    32; flat like the frames.
+    """
+    c, strip, t = wp.tid()
     cam = cams[c]
+    lane = t % 32
+    x = (t / 32) * WARP_COLUMNS + lane - 2
     y0 = strip * WINDOW_STRIP
-    if px >= cam.width or y0 >= cam.height:
-        return
-    x0 = wp.max(px - HALF_WINDOW, 0)
-    x1 = wp.min(px + HALF_WINDOW, cam.width - 1)
-    h0 = mask_row_sum(cam, mask, y0 - 2, x0, x1)
-    h1 = mask_row_sum(cam, mask, y0 - 1, x0, x1)
-    h2 = mask_row_sum(cam, mask, y0, x0, x1)
-    h3 = mask_row_sum(cam, mask, y0 + 1, x0, x1)
-    out = cam.pixel_offset + y0 * cam.width + px
-    for y in range(y0, wp.min(y0 + WINDOW_STRIP, cam.height)):
-        h4 = mask_row_sum(cam, mask, y + 2, x0, x1)
-        window[out] = wp.uint8(h0 + h1 + h2 + h3 + h4)
-        out += cam.width
-        h0 = h1
-        h1 = h2
-        h2 = h3
-        h3 = h4
+    if y0 >= cam.height or x - lane + 2 >= cam.width:
+        return  # the whole warp (same camera, strip and first column) leaves together
+    owner = lane >= 2 and lane < 2 + WARP_COLUMNS and x < cam.width
+    # constant trip counts: the loops unroll and the per-row values stay in registers (a row-by-row loop rotating
+    # five registers ran the same: 22.4 vs 22.7 us on an H100)
+    m = strip_rows()
+    for k in range(STRIP_ROWS):
+        m[k] = strip_pixel(cam, target, bgr, x, y0 - 2 + k)
+    h = strip_rows()
+    for k in range(STRIP_ROWS):
+        h[k] = warp_sum5(m[k])
+    for k in range(WINDOW_STRIP):
+        y = y0 + k
+        if owner and y < cam.height:
+            out = cam.pixel_offset + y * cam.width + x
+            mask[out] = wp.uint8(m[k + 2])
+            window[out] = wp.uint8(h[k] + h[k + 1] + h[k + 2] + h[k + 3] + h[k + 4])
 
 
 @wp.kernel

@@ -70,9 +70,9 @@ def upload(frames, device):
 
 
 def mask_and_integral(drig: DeviceRig, target: HSITarget, bgr, device):
-    """Mask and integral image (integral form), and the window map in its three forms (per pixel, per strip of rows
-    as ColourMaps builds it on a GPU, per row as on the CPU; the first two asserted equal here): returns mask,
-    integral, window, window_by_rows."""
+    """Mask and integral image (integral form), and the window map in its forms (per pixel; fused with the mask as
+    ColourMaps builds it on a GPU, asserted equal here; per row as on the CPU): returns mask, integral, window,
+    window_by_rows."""
     t = target.to_struct(device)
     maps = ColourMaps(drig, device, window=False)
     maps.launch(t, bgr)
@@ -88,15 +88,6 @@ def mask_and_integral(drig: DeviceRig, target: HSITarget, bgr, device):
         outputs=[per_pixel],
         device=device,
     )
-    strips = wp.zeros(drig.total_pixels, dtype=wp.uint8, device=device)
-    wp.launch(
-        kcolour.window_strips_kernel,
-        dim=(m, (drig.max_height + int(kcolour.WINDOW_STRIP) - 1) // int(kcolour.WINDOW_STRIP), drig.max_width),
-        inputs=[drig.cams, maps.mask],
-        outputs=[strips],
-        device=device,
-    )
-    np.testing.assert_array_equal(strips.numpy(), per_pixel.numpy())
     mask2 = wp.zeros(drig.total_pixels, dtype=wp.uint8, device=device)
     hsum = wp.zeros(drig.total_pixels, dtype=wp.uint8, device=device)
     by_rows = wp.zeros(drig.total_pixels, dtype=wp.uint8, device=device)
@@ -148,15 +139,15 @@ def test_hue_wraparound_and_intensity_limits(device):
     px = np.array([[[20, 20, 200], [70, 30, 200], [0, 120, 230], [2, 2, 20], [250, 250, 255]]], dtype=np.uint8)
     cam = Camera.look_at("p", 5, 1, (0, 0, 0), (0, 1, 0), 5.0)
     drig = DeviceRig(Rig((cam,)), device)
-    mask = wp.zeros(5, dtype=wp.uint8, device=device)
+    mask = wp.full(6, 7, dtype=wp.uint8, device=device)
     wp.launch(
         kcolour.target_mask_kernel,
-        dim=(1, 5),
-        inputs=[drig.cams, t.to_struct(device), upload([px], device)],
+        dim=2,  # 4 pixels per thread: the second thread classifies the fifth pixel and stops at the total
+        inputs=[t.to_struct(device), upload([px], device), drig.total_pixels],
         outputs=[mask],
         device=device,
     )
-    np.testing.assert_array_equal(mask.numpy(), [1, 1, 0, 0, 0])
+    np.testing.assert_array_equal(mask.numpy(), [1, 1, 0, 0, 0, 7])
 
 
 def window_ref(cam: Camera, mask2d: np.ndarray, pts: np.ndarray):
@@ -223,27 +214,39 @@ def test_window_counts_direct_equals_integral_and_reference(device, rng):
     np.testing.assert_allclose(loglik.numpy(), ref_ll, rtol=1e-5, atol=1e-5)
 
 
-def test_window_strips_on_odd_sizes(device, rng):
-    """The strip form of the window map against the padded NumPy sum on sizes that are no multiple of the strip
-    (and images narrower or shorter than the window)."""
-    sizes = [(1, 1), (5, 3), (3, 9), (13, 21), (40, 17)]
+def test_window_map_on_odd_sizes(device, rng):
+    """ColourMaps' window map (fused with the mask on a GPU, by rows on the CPU) against the padded NumPy sum of its
+    own mask, and that mask against the flat classification kernel, on sizes that are no multiple of the strip or
+    the warp's columns (and images narrower or shorter than the window)."""
+    sizes = [(1, 1), (5, 3), (3, 9), (13, 21), (40, 17), (57, 30)]
     cams = [Camera.look_at(f"c{k}", w, h, (0.0, -2.0, 1.0), (0.0, 0.0, 0.5), 50.0) for k, (w, h) in enumerate(sizes)]
     drig = DeviceRig(Rig(tuple(cams)), device)
-    masks = [(rng.random((h, w)) < 0.4).astype(np.uint8) for w, h in sizes]
-    mask = wp.array(np.concatenate([m.reshape(-1) for m in masks]), dtype=wp.uint8, device=device)
-    out = wp.full(drig.total_pixels, 255, dtype=wp.uint8, device=device)
-    strip = int(kcolour.WINDOW_STRIP)
+    target = HSITarget(hue=(300, 340), sat=(0.3, 1.0), intensity=(30, 230))
+    frames = []
+    for w, h in sizes:
+        img = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+        img[rng.random((h, w)) < 0.4] = (170, 60, 230)  # pink: about 40 % of the pixels in the target class
+        frames.append(img)
+    bgr = upload(frames, device)
+    maps = ColourMaps(drig, device, window=True)
+    maps.launch(target.to_struct(device), bgr)
+    flat = wp.full(drig.total_pixels, 9, dtype=wp.uint8, device=device)
+    per = int(kcolour.MASK_PIXELS_PER_THREAD)
     wp.launch(
-        kcolour.window_strips_kernel,
-        dim=(len(sizes), (drig.max_height + strip - 1) // strip, drig.max_width),
-        inputs=[drig.cams, mask],
-        outputs=[out],
+        kcolour.target_mask_kernel,
+        dim=(drig.total_pixels + per - 1) // per,
+        inputs=[target.to_struct(device), bgr, drig.total_pixels],
+        outputs=[flat],
         device=device,
     )
-    got = out.numpy()
-    assert got.size == sum(w * h for w, h in sizes)
-    for c, ((w, h), m) in enumerate(zip(sizes, masks, strict=True)):
-        padded = np.pad(m.astype(np.int64), 2)
+    mask, window = maps.mask.numpy(), maps.window.numpy()
+    np.testing.assert_array_equal(mask, flat.numpy())
+    for c, (w, h) in enumerate(sizes):
+        m = mask[drig.pixel_offsets[c] : drig.pixel_offsets[c + 1]].reshape(h, w).astype(np.int64)
+        assert m.max() <= 1
+        if m.size >= 100:
+            assert 0.2 < m.mean() < 0.6  # both classes present
+        padded = np.pad(m, 2)
         ref = sum(padded[dy : dy + h, dx : dx + w] for dy in range(5) for dx in range(5))
-        win = got[drig.pixel_offsets[c] : drig.pixel_offsets[c + 1]].reshape(h, w)
+        win = window[drig.pixel_offsets[c] : drig.pixel_offsets[c + 1]].reshape(h, w)
         np.testing.assert_array_equal(win, ref)

@@ -121,12 +121,30 @@ the per-block tile reductions and the final combination cheap (1e5 particles: 39
 systematic pass 3.4 ms, 8 blocks 1.8 ms; measured on the CI box's CPU)."""
 
 
-def block_partition(n: int, is_cpu: bool, block: int = 256, max_blocks: int = 2048) -> tuple[int, int]:
+GPU_BLOCKS_PER_SM = (3, 8)
+"""Block caps per SM of the reduction launches on a GPU, ``(up to GPU_FEW_BLOCKS_PARTICLES per thread, above)``:
+3 blocks of 256 is what the fused predict + score kernel keeps resident per SM (72 registers on sm_90), so up to
+~3e6 particles (H100) one full wave of blocks runs with no tail; above, 8 per SM balance the blocks' uneven finish
+(colour tracker, 4 cameras, H100, graph frame by the cap of blocks: 1e6 0.099 ms at 3/SM, 0.132 at the old fixed
+2048; 1e7 0.465 at 8/SM, 0.479 at 3/SM, 0.488 at 2048; 1e8 3.81 at 8/SM, 4.12 at 3/SM, 3.83 at 2048; a cap of 4
+per SM, 1.33 waves, was slower than both; BENCHMARKS.md, issue 13, round six)."""
+GPU_FEW_BLOCKS_PARTICLES = 32
+"""Particles per thread up to which the reductions use the smaller cap of :data:`GPU_BLOCKS_PER_SM`."""
+
+
+def block_partition(
+    n: int, is_cpu: bool, block: int = 256, max_blocks: int = 2048, sm_count: int = 0
+) -> tuple[int, int]:
     """``(blocks, chunk)``: block ``b`` of a tiled launch owns particles ``[b chunk, (b+1) chunk)``. On a GPU one
-    block per ``block`` particles, at most ``max_blocks`` (past ~2 blocks per SM more blocks only lengthen the final
-    one-block passes); on the CPU one block per ``CPU_CHUNK`` particles."""
+    block per ``block`` particles, at most ``max_blocks`` (more blocks only lengthen the final one-block passes) and,
+    given the device's ``sm_count``, at most a whole number of waves (:data:`GPU_BLOCKS_PER_SM`); on the CPU one
+    block per ``CPU_CHUNK`` particles."""
     per = CPU_CHUNK if is_cpu else block
-    blocks = max(1, min((n + per - 1) // per, max_blocks))
+    cap = max_blocks
+    if not is_cpu and sm_count > 0:
+        few, many = (k * sm_count for k in GPU_BLOCKS_PER_SM)
+        cap = min(max_blocks, few if n <= few * block * GPU_FEW_BLOCKS_PARTICLES else many)
+    blocks = max(1, min((n + per - 1) // per, cap))
     return blocks, (n + blocks - 1) // blocks
 
 

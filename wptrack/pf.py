@@ -39,8 +39,9 @@ log = logging.getLogger(__name__)
 BLOCK = 256
 """Threads per block of the reduction kernels (CUDA; the CPU backend runs one thread per block)."""
 MAX_BLOCKS = 2048
-"""Upper bound on the blocks of a reduction: past ~2 blocks per SM more blocks only lengthen the final
-one-block pass over the per-block partials (at 1e8 particles, 390 625 blocks of 256 made it the slowest stage)."""
+"""Upper bound on the blocks of a reduction: more blocks only lengthen the final one-block pass over the per-block
+partials (at 1e8 particles, 390 625 blocks of 256 made it the slowest stage). On a GPU the cap is lower, a whole
+number of waves per SM (``wptrack.device.GPU_BLOCKS_PER_SM``)."""
 
 
 @dataclass
@@ -344,7 +345,8 @@ class ParticleFilter(FrameChain):
         self.is_cuda = wp.get_device(device).is_cuda
         self.seed = _seed_words(seed)
         self.use_graph = self.is_cuda if use_graph is None else (bool(use_graph) and self.is_cuda)
-        self.blocks, self.chunk = block_partition(n, not self.is_cuda, BLOCK, MAX_BLOCKS)
+        sms = wp.get_device(self.device).sm_count if self.is_cuda else 0
+        self.blocks, self.chunk = block_partition(n, not self.is_cuda, BLOCK, MAX_BLOCKS, sms)
         d = self.device
         self.x = [wp.zeros(n, dtype=wp.vec3, device=d), wp.zeros(n, dtype=wp.vec3, device=d)]
         self.logw = [wp.zeros(n, dtype=wp.float32, device=d), wp.zeros(n, dtype=wp.float32, device=d)]

@@ -93,7 +93,8 @@ class Resampler:
         self._always = wp.ones(1, dtype=wp.int32, device=self.device)
         # systematic from log-weights: exact integer CDF, no per-particle buffer (see kernels.resample)
         self.exact = self.log_weights and scheme == "systematic"
-        self.blocks, self.chunk = block_partition(cap, self.device.is_cpu, BLOCK, MAX_BLOCKS)
+        self.sm_count = 0 if self.device.is_cpu else self.device.sm_count
+        self.blocks, self.chunk = block_partition(cap, self.device.is_cpu, BLOCK, MAX_BLOCKS, self.sm_count)
         self.scale = float(2 ** quantisation_bits(cap))
         # particles per lane and scan round: a few on a GPU (ILP, fewer block-wide scans), a long run on the CPU
         # backend, where a block is one lane and the scans are sequential anyway
@@ -182,7 +183,7 @@ class Resampler:
         w = weights if weights.shape[0] == n else weights[:n]
         buf = self._buffers(n)
         wp.utils.array_scan(w, buf["cdf"], inclusive=True)
-        groups, chunk = block_partition(n, self.device.is_cpu, BLOCK, MAX_BLOCKS)
+        groups, chunk = block_partition(n, self.device.is_cpu, BLOCK, MAX_BLOCKS, self.sm_count)
         if self.long_meta is not None and self.long_range < n:
             self.long_meta.zero_()  # the counters of the groups (the fused log-weight pass zeroes its own)
         if self.scheme in _SEARCH_KERNELS:

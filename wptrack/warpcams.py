@@ -160,19 +160,24 @@ class ColourMaps:
             cols = (m, dr.max_width)
             wp.launch(k.window_cols_kernel, dim=cols, inputs=[dr.cams, self.hsum], outputs=[self.window], device=d)
             return
-        wp.launch(
-            k.target_mask_kernel, dim=(m, dr.max_pixels), inputs=[dr.cams, target, bgr], outputs=[self.mask], device=d
-        )
-        if self.has_window:
+        if self.has_window:  # mask and window map in one pass (warp shuffles: CUDA only)
             strips = (dr.max_height + int(k.WINDOW_STRIP) - 1) // int(k.WINDOW_STRIP)
+            cols = 32 * ((dr.max_width + int(k.WARP_COLUMNS) - 1) // int(k.WARP_COLUMNS))
             wp.launch(
-                k.window_strips_kernel,
-                dim=(m, strips, dr.max_width),
-                inputs=[dr.cams, self.mask],
-                outputs=[self.window],
+                k.observe_map_kernel,
+                dim=(m, strips, cols),
+                inputs=[dr.cams, target, bgr],
+                outputs=[self.mask, self.window],
                 device=d,
             )
             return
+        wp.launch(
+            k.target_mask_kernel,
+            dim=(dr.total_pixels + int(k.MASK_PIXELS_PER_THREAD) - 1) // int(k.MASK_PIXELS_PER_THREAD),
+            inputs=[target, bgr, dr.total_pixels],
+            outputs=[self.mask],
+            device=d,
+        )
         rows = (m, dr.max_height, self.row_segments)
         cols = (m, dr.max_width + 1, self.col_segments)
         wp.launch(k.row_segment_sums_kernel, dim=rows, inputs=[dr.cams, self.mask], outputs=[self.row_seg], device=d)
