@@ -96,7 +96,8 @@ def template_predict_kernel(
     dyn: Dynamics,
     seed: wp.vec2ui,
     frame: wp.array(dtype=wp.int32),
-    ancestors: wp.array(dtype=wp.int32),
+    ancestors: wp.array2d(dtype=wp.int32),
+    slot_group: wp.array(dtype=wp.int32),
     resampled: wp.array(dtype=wp.int32),
     add: wp.array(dtype=wp.int32),
     slot_label: wp.array(dtype=wp.int32),
@@ -113,8 +114,11 @@ def template_predict_kernel(
     Args:
         dyn: motion model parameters.
         seed: the run's 64-bit seed; frame: (1,) filter iteration (keys the random streams).
-        ancestors: (N,) parent of each particle (identity when not resampled); resampled: (1,) 1 when the
-            weights restart from 0.
+        ancestors: (G, N) parents per group of slots (identity when not resampled): slot ``s`` of particle ``j``
+            is gathered from particle ``ancestors[max(slot_group[s], 0), j]``. The paper's joint filter has one
+            row and ``slot_group`` zeros; the partitioned filter (``kernels.partition``) a row per independent
+            group. A slot of group -1 is empty in every particle (any parent will do: row 0).
+        slot_group: (R,) group of each slot. resampled: (1,) 1 when the weights restart from 0.
         add: (2,) this frame's addition ``(slot, candidate)`` or ``slot = -1`` (``uoh.choose_addition_kernel``).
             With ``dyn.absorb``, a vehicle added to a particle removes the particle's humans whose ground disc
             meets the candidate's footprint (a box of the prior's mean length and width; beyond the paper).
@@ -131,7 +135,7 @@ def template_predict_kernel(
         src: state read at the parents. dst: predicted state written for particle j.
     """
     j, s = wp.tid()
-    a = ancestors[j]
+    a = ancestors[wp.max(slot_group[s], 0), j]
     f = frame[0]
     idx = j * MAX_SLOTS + s
     if s == 0:
@@ -162,7 +166,8 @@ def template_predict_kernel(
         # beyond the paper (kernels.classify): a vehicle added to this particle (the same draw as the addition
         # below, keyed by the particle) replaces the humans standing on its footprint, in one move
         cv = add[1]
-        if cand_kind[cv] == KIND_VEHICLE and src.kind[a, add[0]] == KIND_NONE:
+        add_parent = ancestors[wp.max(slot_group[add[0]], 0), j]  # the parent of the slot that receives it
+        if cand_kind[cv] == KIND_VEHICLE and src.kind[add_parent, add[0]] == KIND_NONE:
             if uniform4(seed, j, f, STREAM_TEMPLATE_ADD)[0] < dyn.t_add:
                 half = 0.5 * wp.vec2(dyn.dims_mean_vehicle[0], dyn.dims_mean_vehicle[1])
                 if disc_in_box(p, d[1], cand_pos[cv], cand_heading[cv], half) > 0.0:

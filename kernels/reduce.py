@@ -147,13 +147,13 @@ def block_sum8(v: vec8d) -> vec8d:
     ...
 
 
-vec15d = wp.types.vector(length=15, dtype=wp.float64)
-"""The fifteen per-slot sums of ``kernels.slots`` (:func:`block_sum15`)."""
+vec17d = wp.types.vector(length=17, dtype=wp.float64)
+"""The seventeen per-slot sums of ``kernels.slots`` (:func:`block_sum17`)."""
 
 
-@wp.func_native(BLOCK_SUM_SNIPPET.replace("LENGTH", "15"))
-def block_sum15(v: vec15d) -> vec15d:
-    """:func:`block_sum8` for fifteen components."""
+@wp.func_native(BLOCK_SUM_SNIPPET.replace("LENGTH", "17"))
+def block_sum17(v: vec17d) -> vec17d:
+    """:func:`block_sum8` for seventeen components."""
     ...
 
 

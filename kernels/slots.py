@@ -3,20 +3,23 @@ atomics (same block pattern as ``kernels.reduce``).
 
 Every slot holds one persistent label across all particles (``uoh.choose_addition_kernel``), so the estimate of
 object s is a weighted moment over the particles whose slot s is alive: existence probability
-``sum_i w_i alive_is / sum_i w_i``, weighted means of ground position, speed, heading, dims and age.
+``sum_i w_i alive_is / sum_i w_i``, weighted means of ground position, speed, heading, dims and age. The weights
+are the particles' (eq. 6) in the paper's joint filter, and the factor of the slot's group (``kernels.partition``,
+``xor.group_logw_kernel``) in the partitioned filter: the marginal posterior of the group's objects.
 """
 
 import warp as wp
 
 from .dynamics import TemplateState
 from .raster import KIND_NONE, KIND_VEHICLE
-from .reduce import EST_MAXLOGW, block_sum15, vec15d
+from .reduce import EST_MAXLOGW, NEG_INF, block_argmax, block_sum17, vec17d
 
 wp.set_module_options({"enable_backward": False})
 
-NS = wp.constant(15)
+NS = wp.constant(17)
 """Per-block sums per slot: w, w^2, w a, a, w a x, w a y, w a x^2, w a y^2, w a speed, w a cos(dir), w a sin(dir),
-w a dims (3), w a age (a = slot alive)."""
+w a dims (3), w a age (a = slot alive; w the slot's weight), then W, W^2 with the particle's joint weight W (eq. 6;
+W = w in the joint filter)."""
 
 # Columns of the per-slot estimate (float64, shape (R, NE)).
 SE_EXIST = wp.constant(0)  # existence probability
@@ -27,8 +30,9 @@ SE_SPEED = wp.constant(6)  # weighted mean speed (m/s)
 SE_HEADING = wp.constant(7)  # direction of motion / orientation (radians, circular mean)
 SE_DIMS = wp.constant(8)  # weighted mean dims (3, metres)
 SE_AGE = wp.constant(11)  # weighted mean age (s)
-SE_ESS = wp.constant(12)  # effective sample size (same in every row)
-SE_LOGLIK = wp.constant(13)  # log of the mean weight (same in every row)
+SE_ESS = wp.constant(12)  # effective sample size of the joint weights (same in every row)
+SE_LOGLIK = wp.constant(13)  # log of the mean joint weight (same in every row)
+SE_GROUP_ESS = wp.constant(14)  # effective sample size of the slot's own weights (its group's; = SE_ESS when joint)
 NE = wp.constant(16)
 
 
@@ -38,22 +42,56 @@ def block_slot_moments_kernel(
     n: int,
     chunk: int,
     est: wp.array(dtype=wp.float64),
-    weights: wp.array(dtype=wp.float64),
+    glogw: wp.array2d(dtype=wp.float32),
+    part_gmax: wp.array2d(dtype=wp.float32),
+    gblocks: int,
+    slot_group: wp.array(dtype=wp.int32),
+    group_first: wp.array(dtype=wp.int32),
+    partition: int,
+    weights: wp.array2d(dtype=wp.float64),
     part: wp.array3d(dtype=wp.float64),
 ):
-    """Normalised weights ``w_i = exp(logw_i - max)`` (written by slot 0's blocks, for resampling) and per-block
-    sums of every slot; launch with ``wp.launch_tiled(dim=[blocks, R], block_dim=B)``; part (blocks, R, NS)."""
+    """Normalised weights and per-block sums of every slot; launch with ``wp.launch_tiled(dim=[blocks, R],
+    block_dim=B)``; part (blocks, R, NS).
+
+    Joint filter (``partition`` 0): the weights are ``W_i = exp(logw_i - max)`` (``est[EST_MAXLOGW]``), written to
+    ``weights[0]`` by slot 0's blocks for the resampling. Partitioned filter: slot ``s`` of group ``g =
+    slot_group[s]`` weighs particle ``i`` by its group factor ``exp(glogw[g, i] - max_g)`` (the maximum from the
+    ``gblocks`` per-block maxima ``part_gmax[:, g]``), written to ``weights[g]`` by the blocks of the group's lowest
+    slot (``group_first[g]``); a slot no particle holds (``g`` = -1) uses the joint weights and writes none.
+    """
     b, s, lane = wp.tid()
     start = b * chunk
     stop = wp.min(start + chunk, n)
     mx = est[EST_MAXLOGW]
-    acc = vec15d()
-    for i in range(start + lane, stop, wp.block_dim()):
-        w = wp.exp(wp.float64(state.logw[i]) - mx)
+    g = int(-1)
+    gm = wp.float64(0.0)
+    row = int(-1)  # the weights row this slot's blocks write
+    if partition == 0:
         if s == 0:
-            weights[i] = w
+            row = 0
+    else:
+        g = slot_group[s]
+        if g >= 0:  # uniform over the block: every lane reaches the reduction or none does
+            best = float(NEG_INF)
+            for j in range(lane, gblocks, wp.block_dim()):
+                best = wp.max(best, part_gmax[j, g])
+            m, _arg = block_argmax(best, 0)
+            gm = wp.float64(m)
+            if group_first[g] == s:
+                row = g
+    acc = vec17d()
+    for i in range(start + lane, stop, wp.block_dim()):
+        wj = wp.exp(wp.float64(state.logw[i]) - mx)
+        w = wj
+        if g >= 0:
+            w = wp.exp(wp.float64(glogw[g, i]) - gm)
+        if row >= 0:
+            weights[row, i] = w
         acc[0] += w
         acc[1] += w * w
+        acc[15] += wj
+        acc[16] += wj * wj
         k = state.kind[i, s]
         if k != KIND_NONE:
             p = state.pos[i, s]
@@ -80,7 +118,7 @@ def block_slot_moments_kernel(
             acc[12] += w * wp.float64(d[1])
             acc[13] += w * wp.float64(d[2])
             acc[14] += w * wp.float64(state.age[i, s])
-    t = block_sum15(acc)  # the block's sums, in lane 0
+    t = block_sum17(acc)  # the block's sums, in lane 0
     if lane == 0:
         for f in range(NS):
             part[b, s, f] = t[f]
@@ -98,13 +136,13 @@ def final_slot_moments_kernel(
     resample: wp.array(dtype=wp.int32),
 ):
     """Combine the per-block sums (launch ``wp.launch_tiled(dim=[R], block_dim=B)``, one block per slot) into
-    ``slot_est`` (R, NE) and ``slot_count`` (R,); slot 0 also decides resampling (ESS <= threshold x N)."""
+    ``slot_est`` (R, NE) and ``slot_count`` (R,); slot 0 also decides resampling (joint ESS <= threshold x N)."""
     s, lane = wp.tid()
-    acc = vec15d()
+    acc = vec17d()
     for j in range(lane, blocks, wp.block_dim()):
         for f in range(NS):
             acc[f] += part[j, s, f]
-    tot = block_sum15(acc)  # valid in lane 0, the only reader
+    tot = block_sum17(acc)  # valid in lane 0, the only reader
     if lane == 0:
         zero = wp.float64(0.0)
         sw = tot[0]
@@ -128,9 +166,10 @@ def final_slot_moments_kernel(
         else:
             for f in range(SE_X, SE_ESS):
                 slot_est[s, f] = zero
-        ess = sw * sw / tot[1]
+        slot_est[s, SE_GROUP_ESS] = sw * sw / tot[1]
+        ess = tot[15] * tot[15] / tot[16]
         slot_est[s, SE_ESS] = ess
-        slot_est[s, SE_LOGLIK] = est[EST_MAXLOGW] + wp.log(sw / wp.float64(n))
+        slot_est[s, SE_LOGLIK] = est[EST_MAXLOGW] + wp.log(tot[15] / wp.float64(n))
         if s == 0:
             flag = int(0)
             if ess <= wp.float64(ess_threshold[0]) * wp.float64(n) + wp.float64(1.0e-9):

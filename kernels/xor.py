@@ -12,8 +12,9 @@ import functools
 
 import warp as wp
 
-from .raster import KIND_HUMAN, MAX_PIECES, PIECES, hull_chain_span, vec32i
-from .reduce import finite_logw
+from .partition import group_at, vec16i
+from .raster import KIND_HUMAN, MAX_PIECES, PIECES, hull_chain_span, vec16, vec32i
+from .reduce import NEG_INF, block_argmax, finite_logw
 
 wp.set_module_options({"enable_backward": False})
 
@@ -171,10 +172,13 @@ def xor_score_kernel(
     scale: float,
     bg_weight: float,
     exclusion: float,
+    group_box: wp.array(dtype=wp.vec4i),
+    n_groups: wp.array(dtype=wp.int32),
     logw: wp.array(dtype=wp.float32),
     penalty: wp.array(dtype=wp.int32),
     complexity: wp.array(dtype=wp.float32),
     cov_diff: wp.array2d(dtype=wp.int32),
+    group_sums: wp.array2d(dtype=wp.vec2i),
 ):
     """Matching penalty (eq. 4), complexity penalty (eq. 5) and log-weight (eq. 6) of every particle.
 
@@ -197,11 +201,16 @@ def xor_score_kernel(
             pair_overlap`` for every pair of objects (0: eq. 5 exactly). Solid objects cannot overlap on the
             ground; eq. 5's complexity penalty was introduced against objects placed at very similar positions, and
             this prior says so directly (it keeps two hypotheses off one person and humans off a car).
+        group_box, n_groups: the boxes of the slots' independent groups (``kernels.partition``); with
+            ``n_groups[0]`` = 0 no group sums are kept (the joint filter).
         logw: (N,) log-weight, updated in place: ``logw_i += -(m'_i + c_i) s / (W H)`` (it holds the prior
             log-weight after prediction: 0 after resampling).
         penalty: (N,) m_i, pixels (exact). complexity: (N,) c_i, pixels.
         cov_diff: (H, W+1) per-row difference array of coverage counts; each covered span [u0, u1] adds 1 at
             u0 and -1 at u1 + 1 (zeroed again by ``uoh.coverage_uoh_kernel``).
+        group_sums: (N, R) per group ``(|v_i|, |q AND v_i|)`` inside its box, pixels, added to (it must hold zeros;
+            :func:`group_logw_kernel` clears it). Each merged interval lies in one group's box (the boxes are a
+            column apart), found by :func:`kernels.partition.group_at`; a lane adds its totals once per group.
     """
     i, lane = wp.tid()
     slots = kind.shape[1]
@@ -223,6 +232,9 @@ def xor_score_kernel(
             r1[q] = 0
     covered = int(0)
     both = int(0)
+    groups = n_groups[0]
+    gcov = vec16i()  # per group: this lane's |v| and |q AND v| (partitioned filter only)
+    gboth = vec16i()
     down = vec32i()  # the pieces' hull chain walks (raster.hull_chain_span) over this lane's rows
     up = vec32i()
     s0 = vec32i()  # the row's piece spans sorted by start (raster.row_intervals, written out: no vector copies)
@@ -253,13 +265,23 @@ def xor_score_kernel(
                 if k < n and s0[k] <= b + 1:
                     b = wp.max(b, s1[k])
                 else:
-                    covered += b - a + 1
-                    both += qrow[y, b + 1] - qrow[y, a]
+                    cv = b - a + 1
+                    bo = qrow[y, b + 1] - qrow[y, a]
+                    covered += cv
+                    both += bo
+                    if groups > 0:
+                        g = group_at(group_box, groups, a, y)
+                        if g >= 0:  # always, by construction of the boxes
+                            gcov[g] += cv
+                            gboth[g] += bo
                     wp.atomic_add(cov_diff, y, a, 1)
                     wp.atomic_add(cov_diff, y, b + 1, -1)
                     if k < n:
                         a = s0[k]
                         b = s1[k]
+    for g in range(groups):
+        if gcov[g] > 0:
+            wp.atomic_add(group_sums, i, g, wp.vec2i(gcov[g], gboth[g]))
     tc = wp.tile_sum(wp.tile(covered))
     tb = wp.tile_sum(wp.tile(both))
     if lane == 0:
@@ -288,9 +310,9 @@ LOW = wp.constant(65535)
 
 
 @functools.cache
-def xor_band_kernel(cap: int) -> wp.Kernel:
+def xor_band_kernel(cap: int, grouped: bool = False) -> wp.Kernel:
     """The band kernel for particles of at most ``cap`` pieces (a power of two, 2 to ``MAX_PIECES``), compiled once
-    per ``cap``.
+    per ``cap`` and ``grouped``.
 
     Launch with ``dim=(ceil(H / band), N)``: thread ``(b, i)`` takes rows ``[b band, (b + 1) band)`` of particle
     ``i`` (neighbouring threads: neighbouring particles on the same rows) and adds its rows' |v_i| and |q AND v_i|
@@ -308,8 +330,11 @@ def xor_band_kernel(cap: int) -> wp.Kernel:
             (``hull_n.shape[1] <= cap``).
         qrow: (H, W+1) row prefix sums of the motion mask (H, W < 32768).
         band: rows per band.
+        group_box, n_groups: the groups' boxes (``kernels.partition``); read only when ``grouped``.
         sums: (N,) (|v_i|, |q AND v_i|), pixels; must hold zeros (``xor_finish_kernel`` clears it).
         cov_diff: (H, W+1) per-row difference array of coverage counts, as in ``xor_score_kernel``.
+        group_sums: (N, R) with ``grouped``: the same sums per group, as in ``xor_score_kernel`` (one atomic add
+            per band and group that covers anything); must hold zeros. Not touched otherwise.
     """
     if cap not in (2, 4, 8, 16, 32):
         raise ValueError(f"xor_band_kernel: cap {cap} must be a power of two from 2 to {MAX_PIECES}")
@@ -322,8 +347,11 @@ def xor_band_kernel(cap: int) -> wp.Kernel:
         hull_rows: wp.array2d(dtype=wp.vec2i),
         qrow: wp.array2d(dtype=wp.int32),
         band: int,
+        group_box: wp.array(dtype=wp.vec4i),
+        n_groups: wp.array(dtype=wp.int32),
         sums: wp.array(dtype=wp.vec2i),
         cov_diff: wp.array2d(dtype=wp.int32),
+        group_sums: wp.array2d(dtype=wp.vec2i),
     ):
         b, i = wp.tid()
         pieces = hull_n.shape[1]
@@ -345,6 +373,11 @@ def xor_band_kernel(cap: int) -> wp.Kernel:
             return
         covered = int(0)
         both = int(0)
+        groups = int(0)
+        gcov = vec16i()
+        gboth = vec16i()
+        if wp.static(grouped):
+            groups = n_groups[0]
         walk = veci()  # the pieces' hull chain walks (raster.hull_chain_span): down * PACK + up
         span = veci()  # the row's piece spans sorted: u0 * PACK + u1
         for y in range(ya, yb + 1):
@@ -371,8 +404,15 @@ def xor_band_kernel(cap: int) -> wp.Kernel:
                     if k < n and span[k] / PACK <= e + 1:
                         e = wp.max(e, span[k] & LOW)
                     else:
-                        covered += e - a + 1
-                        both += qrow[y, e + 1] - qrow[y, a]
+                        cv = e - a + 1
+                        bo = qrow[y, e + 1] - qrow[y, a]
+                        covered += cv
+                        both += bo
+                        if wp.static(grouped):
+                            g = group_at(group_box, groups, a, y)
+                            if g >= 0:  # always, by construction of the boxes
+                                gcov[g] += cv
+                                gboth[g] += bo
                         wp.atomic_add(cov_diff, y, a, 1)
                         wp.atomic_add(cov_diff, y, e + 1, -1)
                         if k < n:
@@ -380,6 +420,10 @@ def xor_band_kernel(cap: int) -> wp.Kernel:
                             e = span[k] & LOW
         if covered > 0:
             wp.atomic_add(sums, i, wp.vec2i(covered, both))
+            if wp.static(grouped):
+                for g in range(groups):
+                    if gcov[g] > 0:
+                        wp.atomic_add(group_sums, i, g, wp.vec2i(gcov[g], gboth[g]))
 
     return xor_band_kernel
 
@@ -414,3 +458,77 @@ def xor_finish_kernel(
     penalty[i] = m
     complexity[i] = cost
     logw[i] = lw
+
+
+@wp.kernel
+def group_logw_kernel(
+    kind: wp.array2d(dtype=wp.int32),
+    age: wp.array2d(dtype=wp.float32),
+    pos: wp.array2d(dtype=wp.vec2),
+    heading: wp.array2d(dtype=wp.float32),
+    dims: wp.array2d(dtype=wp.vec3),
+    cost_a: wp.vec3,
+    cost_b: wp.vec3,
+    scale: float,
+    bg_weight: float,
+    exclusion: float,
+    slot_group: wp.array(dtype=wp.int32),
+    n_groups: wp.array(dtype=wp.int32),
+    n: int,
+    chunk: int,
+    group_sums: wp.array2d(dtype=wp.vec2i),
+    glogw: wp.array2d(dtype=wp.float32),
+    part_gmax: wp.array2d(dtype=wp.float32),
+):
+    """The factor of eq. 6 of every independent group of every particle (``kernels.partition``; beyond the paper),
+    from the group sums of ``xor_score_kernel`` / ``xor_band_kernel``, which it clears, and the per-block maxima.
+
+    Group ``g``'s log-factor is ``-(m'_{i,g} + c_{i,g}) s / (W H)`` without the particle-independent count of
+    foreground pixels in its box: ``m'_{i,g} - |q in box_g| = -|q AND v_i| + lambda (|v_i| - |q AND v_i|)`` over the
+    box, and ``c_{i,g}`` holds eq. 5 for the group's objects and the exclusion prior of its pairs (pairs of different
+    groups have disjoint image boxes, hence no ground overlap). Summed over the groups it is the particle's
+    log-weight of eq. 6 up to a constant; each group is resampled on its own factor. Launch
+    ``wp.launch_tiled(dim=[blocks], block_dim=B)``; block ``b`` owns particles ``[b chunk, (b+1) chunk)``.
+
+    Args:
+        kind, age, pos, heading, dims, cost_a, cost_b, scale, bg_weight, exclusion: as ``xor_score_kernel``.
+        slot_group: (R,) group of each slot; n_groups: (1,) number of groups (``kernels.partition``).
+        n, chunk: particles and particles per block.
+        group_sums: (N, R) per group (|v_i|, |q AND v_i|) in its box, pixels; zeroed here.
+        glogw: (R, N) output log-factor of group g (rows ``g >= n_groups`` untouched).
+        part_gmax: (blocks, R) output per-block maximum of each group's log-factor (``NEG_INF`` for unused groups).
+    """
+    b, lane = wp.tid()
+    slots = kind.shape[1]
+    groups = n_groups[0]
+    start = b * chunk
+    stop = wp.min(start + chunk, n)
+    gmax = vec16()
+    for g in range(slots):
+        gmax[g] = NEG_INF
+    for i in range(start + lane, stop, wp.block_dim()):
+        cost = vec16()
+        for s in range(slots):
+            kk = kind[i, s]
+            g = slot_group[s]
+            if kk > 0 and g >= 0:
+                cost[g] += cost_a[kk] + cost_b[kk] * wp.exp(-age[i, s])  # eq. 5
+                if exclusion > 0.0:
+                    for t in range(s + 1, slots):
+                        kt = kind[i, t]
+                        if kt > 0 and slot_group[t] == g:
+                            o = pair_overlap(
+                                kk, pos[i, s], heading[i, s], dims[i, s], kt, pos[i, t], heading[i, t], dims[i, t]
+                            )
+                            cost[g] += exclusion * o
+        for g in range(groups):
+            sums = group_sums[i, g]
+            group_sums[i, g] = wp.vec2i(0, 0)
+            mw = -float(sums[1]) + bg_weight * float(sums[0] - sums[1])
+            lw = finite_logw(-(mw + cost[g]) * scale)  # eq. 6 in log space, the group's factor
+            glogw[g, i] = lw
+            gmax[g] = wp.max(gmax[g], lw)
+    for g in range(slots):  # every lane reaches every block reduction
+        m, _arg = block_argmax(gmax[g], 0)
+        if lane == 0:
+            part_gmax[b, g] = m

@@ -1067,12 +1067,17 @@ def predict(
     frame: int = 3,
     occlusion=None,
     hull_n=None,
+    slot_group=None,
 ) -> dict[str, np.ndarray]:
+    """One ``template_predict_kernel`` launch: ``ancestors`` (N,) for the joint filter (one row, every slot in
+    group 0) or (G, N) with ``slot_group`` (R,) for the partitioned one."""
     dst = make_state(device, n, r, label=np.full((n, r), -99), logw=np.full(n, np.nan))
     pieces = int(kraster.PIECES)
     hn = np.full((n, r * pieces), 4, np.int32) if hull_n is None else np.asarray(hull_n, np.int32).reshape(n, -1)
     occ = np.zeros((n, r), np.float32) if occlusion is None else np.asarray(occlusion, np.float32).reshape(n, r)
     anc = np.arange(n) if ancestors is None else ancestors
+    anc = np.asarray(anc, np.int32).reshape(-1, n)
+    groups = np.zeros(r, np.int32) if slot_group is None else np.asarray(slot_group, np.int32)
     sl = np.arange(r) + 10 if slot_label is None else slot_label
     wp.launch(
         kdyn.template_predict_kernel,
@@ -1081,7 +1086,8 @@ def predict(
             dyn,
             _seed_words(seed),
             wp.array([frame], dtype=wp.int32, device=device),
-            wp.array(np.asarray(anc, np.int32), dtype=wp.int32, device=device),
+            wp.array(anc, dtype=wp.int32, device=device),
+            wp.array(groups, dtype=wp.int32, device=device),
             wp.array([resampled], dtype=wp.int32, device=device),
             wp.array(np.asarray(add, np.int32), dtype=wp.int32, device=device),
             wp.array(np.asarray(sl, np.int32), dtype=wp.int32, device=device),
@@ -1404,8 +1410,10 @@ def slot_moments(device, state: kdyn.TemplateState, n: int, r: int, chunk: int, 
     pa = wp.zeros(blocks, dtype=wp.int32, device=d)
     est = wp.zeros(int(kreduce.EST_SIZE), dtype=wp.float64, device=d)
     best = wp.zeros(1, dtype=wp.int32, device=d)
-    weights = wp.full(n, np.nan, dtype=wp.float64, device=d)
+    weights = wp.full((1, n), np.nan, dtype=wp.float64, device=d)
     part = wp.full((blocks, r, int(kslots.NS)), np.nan, dtype=wp.float64, device=d)
+    none2 = wp.zeros((1, 1), dtype=wp.float32, device=d)  # the joint filter reads no group factor
+    groups = wp.zeros(r, dtype=wp.int32, device=d)
     slot_est = wp.full((r, int(kslots.NE)), np.nan, dtype=wp.float64, device=d)
     slot_count = wp.full(r, -1.0, dtype=wp.float64, device=d)
     flag = wp.full(1, -1, dtype=wp.int32, device=d)
@@ -1424,7 +1432,7 @@ def slot_moments(device, state: kdyn.TemplateState, n: int, r: int, chunk: int, 
     wp.launch_tiled(
         kslots.block_slot_moments_kernel,
         dim=[blocks, r],
-        inputs=[state, n, chunk, est],
+        inputs=[state, n, chunk, est, none2, none2, 1, groups, groups, 0],
         outputs=[weights, part],
         block_dim=BLOCK,
         device=d,
@@ -1437,7 +1445,7 @@ def slot_moments(device, state: kdyn.TemplateState, n: int, r: int, chunk: int, 
         block_dim=BLOCK,
         device=d,
     )
-    return slot_est.numpy(), slot_count.numpy(), int(flag.numpy()[0]), weights.numpy()
+    return slot_est.numpy(), slot_count.numpy(), int(flag.numpy()[0]), weights.numpy()[0]
 
 
 def slot_reference(a: dict, n: int, r: int) -> np.ndarray:
@@ -1539,7 +1547,7 @@ def test_slot_moments_via_tracker_estimate(device, n):
     a = {k: v[:n] for k, v in random_population(rng, max(n, 8), r, p_empty=0.2).items()}
     a["label"] = np.where(a["kind"] > 0, np.arange(r)[None, :] + 40, -1)  # one label per slot, as the tracker keeps
     a["logw"] = rng.normal(-30.0, 2.0, n).astype(np.float32)
-    tr = TemplateTracker(e2e_rig(), TemplateConfig(particles=n, max_objects=r, seed=3), device=device)
+    tr = TemplateTracker(e2e_rig(), TemplateConfig(particles=n, max_objects=r, seed=3, partition=False), device=device)
     tr.set_particles(**a)
     tr._raster(tr.parity)
     tr._estimate(tr.parity)
@@ -1553,7 +1561,7 @@ def test_slot_moments_via_tracker_estimate(device, n):
     np.testing.assert_allclose(se[:, 6], ref[:, 6], rtol=1e-6, atol=1e-7)
     np.testing.assert_allclose(se[:, 8:14], ref[:, 8:14], rtol=1e-9, atol=1e-9)
     l64 = a["logw"].astype(np.float64)
-    np.testing.assert_allclose(tr.weights.numpy(), np.exp(l64 - l64.max()), rtol=1e-12)
+    np.testing.assert_allclose(tr.weights.numpy()[0], np.exp(l64 - l64.max()), rtol=1e-12)
     assert int(tr.resampled.numpy()[0]) == 1
     best = int(np.argmax(a["logw"]))
     assert int(tr.best_index.numpy()[0]) == best

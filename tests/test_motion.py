@@ -439,6 +439,31 @@ def test_learnt_shadow_ratio_removes_deep_shadows_keeps_dark_objects(rng):
     assert shadow_ratio(flat, np.ones((4, 3)), flat[0].astype(float), np.ones((100, 3)), 4.0, 3.0, 0.1) is None
 
 
+def test_learnt_faint_shadow_ratio_keeps_dark_clothes(rng):
+    """Overcast footage (the PETS clip's learnt ratio is 0.91): faint shadows (ratio 0.9) move across a grey floor
+    next to dark neutral clothes (ratio 0.6, jeans on asphalt). The fixed bounds [0.4, 0.95] take both for shadow;
+    the learnt ratio bounds the umbra from below too (r - band = 0.82: nothing darker than this scene's shadows is
+    one of them), so the clothes stay foreground and the shadows go."""
+    grey = np.full((H, W, 3), 140.0, np.float32)
+    frames = 25
+    video = _noisy(rng, grey, frames, noise=2.0)
+    for t in range(frames):
+        img = grey.copy()
+        img[5:35, 4 * t : 4 * t + 14] *= 0.9  # the faint shadow
+        img[45:65, 86 - 3 * t : 86 - 3 * t + 10] *= 0.6  # the dark clothes
+        video[t] = np.clip(img + rng.normal(0, 2.0, img.shape), 0, 255).astype(np.uint8)
+    base = dict(window=frames, samples=frames, device="cpu", fg_low=2.0, neighbourhood=0)
+    fixed = np.stack(list(open_masks(video=video, config=MaskConfig(**base, shadow_band=0.0))))
+    learnt_masks = open_masks(video=video, config=MaskConfig(**base, shadow_band=0.08))
+    learnt = np.stack(list(learnt_masks))
+    ratio = learnt_masks.model._ratio[0]
+    assert ratio is not None and abs(ratio - 0.9) < 0.03
+    t = 12
+    shadow, obj = np.s_[7:33, 4 * t + 2 : 4 * t + 12], np.s_[47:63, 88 - 3 * t : 86 - 3 * t + 8]
+    assert fixed[t][shadow].mean() < 0.05 and fixed[t][obj].mean() < 0.05
+    assert learnt[t][shadow].mean() < 0.05 and learnt[t][obj].mean() > 0.95
+
+
 @pytest.mark.parametrize(("radius", "scale"), [(1, 1.0), (2, 0.7)])
 def test_neighbourhood_kernel_matches_numpy(device, rng, radius, scale):
     h, w = 70, 81  # several runs of RUN pixels per row and column, the last ones partial

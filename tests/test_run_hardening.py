@@ -59,9 +59,12 @@ def test_truncated_video_stops_the_run_at_the_break(tmp_path, videos):
 # ------------------------------------------------------------------------------------------ degenerate weights
 
 
-def test_template_tracker_flags_a_frame_with_zero_likelihood_everywhere(device):
+@pytest.mark.parametrize("partition", [False, True], ids=["joint", "partitioned"])
+def test_template_tracker_flags_a_frame_with_zero_likelihood_everywhere(device, partition):
     """All log-weights NaN (a broken observation): the score kernel floors them, the frame keeps the predicted
-    particles with uniform weights, stays finite and is flagged; the next frame is normal again."""
+    particles with uniform weights, stays finite and is flagged; the next frame is normal again. The partitioned
+    filter resamples every group on its own factor of the observation (the particles' prior weights are uniform
+    after every frame, so it reads none): the frame is flagged, and its groups' weights stay finite."""
     import numpy as np
 
     from wptrack.kernels.reduce import LOGW_FLOOR
@@ -69,7 +72,8 @@ def test_template_tracker_flags_a_frame_with_zero_likelihood_everywhere(device):
     from wptrack.trackers.templates import TemplateConfig, TemplateTracker
 
     cam = Camera.look_at("cam0", 160, 120, position=[0, -4, 10], target=[0, 9, 0], fx=125.0)
-    tr = TemplateTracker(Rig(cameras=(cam,)), TemplateConfig(particles=200, max_objects=4, seed=1), device=device)
+    cfg = TemplateConfig(particles=200, max_objects=4, seed=1, partition=partition)
+    tr = TemplateTracker(Rig(cameras=(cam,)), cfg, device=device)
     mask = np.zeros((120, 160), np.uint8)
     mask[40:80, 60:70] = 1
     for _ in range(3):
@@ -77,8 +81,12 @@ def test_template_tracker_flags_a_frame_with_zero_likelihood_everywhere(device):
     tr.state[tr.parity].logw.fill_(float("nan"))
     lost = tr.step(mask)
     assert lost.degenerate and lost.loglik == pytest.approx(float(LOGW_FLOOR))
-    assert lost.ess == pytest.approx(200, rel=1e-6)  # uniform weights: the prior
-    np.testing.assert_array_equal(tr.weights.numpy(), 1.0)
+    assert lost.ess == pytest.approx(200, rel=1e-6)  # uniform joint weights: the prior
+    if partition:
+        w = tr.weights.numpy()[: lost.groups]
+        assert lost.groups >= 1 and np.all(np.isfinite(w)) and np.all(w.max(axis=1) == 1.0)
+    else:
+        np.testing.assert_array_equal(tr.weights.numpy(), 1.0)
     assert all(np.all(np.isfinite(o.position)) for o in lost.objects + lost.best)
     back = tr.step(mask)
     assert not back.degenerate and np.isfinite(back.loglik) and back.loglik > 0.5 * float(LOGW_FLOOR)

@@ -718,18 +718,23 @@ class OfflineBackground:
     def shadow_bounds(self, i: int, j: int, w: float) -> tuple[float, float]:
         """Brightness-ratio bounds of the cast-shadow (umbra) test between windows ``i`` and ``j`` (weight ``w`` of
         ``j``): the learnt ratio ``r`` (interpolated; a window that learnt none uses the other's) gives
-        ``[max(min(r - band, shadow_lo), 0.05), min(r + band, shadow_hi)]`` (the learnt ratio may lower the
-        configured bound, for deep sun shadows, but does not raise it: a scene's shadows are not all as faint as its
-        most common one; on the PETS clip, ratio 0.91, raising it made shadows foreground); ratios above, up to
-        ``shadow_hi``, are penumbra
-        candidates (shadow only where attached to an umbra, :func:`resolve_levels`). No learnt ratio: the
-        configured ``[shadow_lo, shadow_hi]``."""
+        ``[max(r - band, 0.05), min(r + band, shadow_hi)]``: one sky and one sun darken every cast shadow of the
+        scene by about ``r``, so nothing darker than ``r - band`` is one of them, whatever ``shadow_lo`` says (deep
+        sun shadows below it are removed; under an overcast sky, ``r`` near 0.9 as on the PETS clip, dark neutral
+        clothes at 0.6-0.7, which the fixed bounds took for shadow, stay foreground). Ratios above the band, up to
+        ``shadow_hi``, are penumbra candidates (shadow only where attached to an umbra, :func:`resolve_levels`).
+        No learnt ratio: the configured ``[shadow_lo, shadow_hi]``.
+
+        Until 2026-11-24 the learnt ratio could lower ``shadow_lo`` but not raise it, because raising it on the
+        PETS clip made the darker shadows at the people's feet foreground and the joint template filter then lost
+        MOTA (0.24 -> 0.05); with the partitioned filter (``TemplateConfig.partition``) the fuller legs are worth
+        more than the feet's shadow costs (docs/reproduction.md, round five)."""
         c = self.config
         ri, rj = self._ratio.get(i), self._ratio.get(j)
         if ri is None and rj is None:
             return float(c.shadow_lo), float(c.shadow_hi)
         r = (1.0 - w) * (ri if ri is not None else rj) + w * (rj if rj is not None else ri)
-        lo = max(min(r - c.shadow_band, c.shadow_lo), 0.05)
+        lo = max(r - c.shadow_band, 0.05)
         return float(lo), float(max(min(r + c.shadow_band, c.shadow_hi), lo))
 
     def background(self, i: int = 0) -> np.ndarray:

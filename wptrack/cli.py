@@ -138,6 +138,7 @@ def _template_config_from_args(args, fps: float | None):
         "classes": tuple(args.classes),
         "seed": args.seed,
         "resampling": args.resampling,
+        "partition": not args.joint,
     }
     for name in (
         "scale",
@@ -180,8 +181,10 @@ def cmd_track_templates(args) -> int:
     from .runs.templates import run_template_tracking
 
     fps = None
-    if args.video is not None and args.fps is None:
-        fps = open_source(args.video).fps
+    if args.fps is None:  # the frame rate of the video, or of the given masks when they are a video
+        source = args.video if args.video is not None else args.masks
+        if source is not None:
+            fps = open_source(source).fps
     config = _template_config_from_args(args, fps)
     summary = run_template_tracking(
         args.rig,
@@ -609,7 +612,7 @@ def build_parser() -> argparse.ArgumentParser:
     tt.add_argument("--particles", type=_positive_int, default=1000, help="N (default 1000)")
     tt.add_argument("--max-objects", type=int, default=8, help="R_max objects per particle, 1..16 (default 8)")
     tt.add_argument("--classes", nargs="+", default=["human", "vehicle"], help="classes to add (human vehicle)")
-    tt.add_argument("--fps", type=float, default=None, help="frame rate (default: the video's, else 15)")
+    tt.add_argument("--fps", type=float, default=None, help="frame rate (default: the video's or masks', else 15)")
     tt.add_argument("--scale", type=float, default=None, help="s of eq. 6 (default 5000)")
     tt.add_argument("--t-add", type=float, default=None, help="T_add of eq. 12 (default 0.3)")
     tt.add_argument("--t-del", type=float, default=None, help="T_del of eq. 13 (default 0.02)")
@@ -630,6 +633,12 @@ def build_parser() -> argparse.ArgumentParser:
         "tracks_all.csv keeps every track)",
     )
     tt.add_argument("--resampling", default="systematic", help="systematic, stratified, multinomial or residual")
+    tt.add_argument(
+        "--joint",
+        action="store_true",
+        help="the paper's joint filter: one weight per particle for all its objects (default: objects whose image "
+        "boxes are apart are resampled in independent groups)",
+    )
     tt.add_argument(
         "--mask-method",
         default="offline",

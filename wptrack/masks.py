@@ -108,7 +108,8 @@ class MaskConfig:
         shadow_hi: Offline only: largest brightness ratio of a cast shadow, in ``(shadow_lo, 1]``.
         shadow_band: Offline only: learn the shadows' brightness ratio ``r`` from the recording (the peak of the
             ratios of candidate shadow pixels of each window's samples, see :func:`wptrack.background.shadow_ratio`)
-            and take ``min(r - shadow_band, shadow_lo) <= a <= r + shadow_band`` as cast shadow, and
+            and take ``r - shadow_band <= a <= r + shadow_band`` as cast shadow (``shadow_lo`` then no longer
+            applies: nothing darker than the scene's own shadows is a shadow), and
             ``r + shadow_band < a <= shadow_hi`` as shadow only within 3 px of it (the penumbra); 0 disables (then,
             and where nothing is learnt: ``shadow_lo <= a <= shadow_hi``); else in ``(0, 0.5]``.
         shadow_chroma: Offline only: largest chromaticity distortion ``|I - a B| / |B|`` of a cast shadow (>= 0).

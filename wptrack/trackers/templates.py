@@ -23,6 +23,7 @@ the image.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import time
@@ -36,6 +37,7 @@ from wptrack.errors import ConfigError, FrameError, RigError
 from wptrack.kernels import classify as kcls
 from wptrack.kernels import dynamics as kdyn
 from wptrack.kernels import occlusion as kocc
+from wptrack.kernels import partition as kpart
 from wptrack.kernels import raster as kraster
 from wptrack.kernels import reduce as kreduce
 from wptrack.kernels import slots as kslots
@@ -126,11 +128,16 @@ SLOT_STATE_BYTES = (
 """Device bytes per object slot of a particle: two ping-pong state buffers and the piece hulls."""
 PARTICLE_BYTES = 2 * 4 + 4 + 4 + 4 + 8 + 8
 """Device bytes per particle besides the slots: log-weights (2), penalty, complexity, ancestor, weight, XOR sums."""
+PARTITION_SLOT_BYTES = 8 + 4 + 4 + 8
+"""Device bytes per slot and particle of the partitioned filter (``TemplateConfig.partition``), besides the joint
+filter's: a weight (float64), an ancestor and a log-factor per group (a group per slot at most), and the group sums
+(two int32)."""
 
 
-def particle_bytes(max_objects: int, scheme: str) -> int:
+def particle_bytes(max_objects: int, scheme: str, partition: bool = False) -> int:
     """Device memory per particle of the template tracker, bytes."""
-    return max_objects * SLOT_STATE_BYTES + PARTICLE_BYTES + bytes_per_particle(scheme)  # float64-weight input
+    extra = max_objects * PARTITION_SLOT_BYTES if partition else 0
+    return max_objects * SLOT_STATE_BYTES + PARTICLE_BYTES + extra + bytes_per_particle(scheme)  # float64 weights
 
 
 class Hulls:
@@ -304,6 +311,16 @@ def piece_cap(pieces: int) -> int:
     return c
 
 
+@functools.cache
+def _no_groups(device: str) -> tuple[wp.array, wp.array, wp.array]:
+    """``(group_box, n_groups, group_sums)`` of no groups on ``device`` (the joint filter; allocated once)."""
+    return (
+        wp.zeros(1, dtype=wp.vec4i, device=device),
+        wp.zeros(1, dtype=wp.int32, device=device),
+        wp.zeros((1, 1), dtype=wp.vec2i, device=device),
+    )
+
+
 def launch_xor_score(
     hulls: Any,
     kind: wp.array,
@@ -325,19 +342,25 @@ def launch_xor_score(
     cov_diff: wp.array,
     device: str,
     band: int = 0,
+    groups: tuple[wp.array, wp.array, wp.array] | None = None,
 ) -> None:
     """Eqs. 4-6 for every particle (``kernels.xor``) and the coverage counts: with ``band`` > 0 a thread per band of
     ``band`` rows and particle (``xor_band_kernel``, then ``xor_finish_kernel``; ``sums`` (N,) vec2i zeros, left
-    zeroed), else a block per particle (``xor_score_kernel``). The same outputs bit for bit either way."""
+    zeroed), else a block per particle (``xor_score_kernel``). The same outputs bit for bit either way.
+
+    ``groups`` = ``(group_box, n_groups, group_sums)`` (``kernels.partition``) also sums |v| and |q AND v| per
+    independent group into ``group_sums`` (N, R) vec2i (zeros; ``xor.group_logw_kernel`` reads and clears them)."""
     n = kind.shape[0]
     cost = [kind, age, pos, heading, dims, qtotal, cost_a, cost_b, scale, bg_weight, exclusion]
+    grouped = groups is not None
+    group_box, n_groups, group_sums = groups if grouped else _no_groups(str(device))
     if band > 0:
         h = qrow.shape[0]
         wp.launch(
-            kxor.xor_band_kernel(piece_cap(hulls.n.shape[1])),
+            kxor.xor_band_kernel(piece_cap(hulls.n.shape[1]), grouped),
             dim=((h + band - 1) // band, n),
-            inputs=[hulls.pts, hulls.n, hulls.rows, qrow, int(band)],
-            outputs=[sums, cov_diff],
+            inputs=[hulls.pts, hulls.n, hulls.rows, qrow, int(band), group_box, n_groups],
+            outputs=[sums, cov_diff, group_sums],
             device=device,
         )
         wp.launch(
@@ -347,8 +370,8 @@ def launch_xor_score(
     wp.launch_tiled(
         kxor.xor_score_kernel,
         dim=[n],
-        inputs=[hulls.pts, hulls.n, hulls.rows, kind, age, pos, heading, dims, qrow, *cost[5:]],
-        outputs=[logw, penalty, complexity, cov_diff],
+        inputs=[hulls.pts, hulls.n, hulls.rows, kind, age, pos, heading, dims, qrow, *cost[5:], group_box, n_groups],
+        outputs=[logw, penalty, complexity, cov_diff, group_sums],
         block_dim=SCORE_BLOCK,
         device=device,
     )
@@ -404,7 +427,10 @@ class TemplateTracker(FrameChain):
         self.keep_uoh = bool(keep_uoh)
         h, w = self.height, self.width
         image_bytes = h * (w + 1) * (4 + 4 + 8) + (h + 1) * (w + 1) * 8 + h * w * (1 + 4 + 1)
-        check_fits(n, particle_bytes(r, config.resampling), image_bytes, d, what="template tracker particles")
+        self.partition = bool(config.partition)
+        check_fits(
+            n, particle_bytes(r, config.resampling, self.partition), image_bytes, d, what="template tracker particles"
+        )
         self.candidates = Candidates(self.camera, self.plane, self.cam, self.plane_struct, config, d)
         log.info(
             "template tracker: %d particles x %d slots, %d addition candidates, camera %s %dx%d on %s",
@@ -435,8 +461,10 @@ class TemplateTracker(FrameChain):
         # the CPU backend (one lane per block) walks each particle's rows in xor_score_kernel
         self.xor_band = xor_band(n, h) if self.is_cuda and max(w, h) < 32768 else 0
         self.complexity = wp.zeros(n, dtype=wp.float32, device=d)
-        self.weights = wp.zeros(n, dtype=wp.float64, device=d)
-        self.ancestors = wp.array(np.arange(n, dtype=np.int32), device=d)
+        # one weight and ancestor row per group of slots: one in the paper's joint filter, R in the partitioned one
+        rows = r if self.partition else 1
+        self.weights = wp.zeros((rows, n), dtype=wp.float64, device=d)
+        self.ancestors = wp.array(np.tile(np.arange(n, dtype=np.int32), (rows, 1)), device=d)
         self.resampled = wp.ones(1, dtype=wp.int32, device=d)
         self.frame = wp.zeros(1, dtype=wp.int32, device=d)
         self.ess_threshold = wp.array([config.ess_threshold], dtype=wp.float32, device=d)
@@ -447,6 +475,26 @@ class TemplateTracker(FrameChain):
         self.part = wp.zeros((self.blocks, r, int(kslots.NS)), dtype=wp.float64, device=d)
         self.est = wp.zeros(int(kreduce.EST_SIZE), dtype=wp.float64, device=d)
         self.best_index = wp.zeros(1, dtype=wp.int32, device=d)
+        # independent groups of slots (kernels.partition); the joint filter keeps every slot in group 0
+        self.slot_group = wp.zeros(r, dtype=wp.int32, device=d)
+        self.slot_box = wp.zeros(r, dtype=wp.vec4i, device=d)
+        self.group_box = wp.zeros(r, dtype=wp.vec4i, device=d)
+        self.group_first = wp.full(r, -1, dtype=wp.int32, device=d)
+        self.group_active = wp.zeros(r, dtype=wp.int32, device=d)
+        self.n_groups = wp.zeros(1, dtype=wp.int32, device=d)
+        gn, gr, gb = (n, r, self.blocks) if self.partition else (1, 1, 1)  # unused 1 x 1 stand-ins when joint
+        self.part_box = wp.zeros((gb, gr), dtype=wp.vec4i, device=d)
+        self.part_alive = wp.zeros((gb, gr), dtype=wp.int32, device=d)
+        self.group_sums = wp.zeros((gn, gr), dtype=wp.vec2i, device=d)
+        self.glogw = wp.zeros((gr, gn), dtype=wp.float32, device=d)
+        self.part_gmax = wp.zeros((gb, gr), dtype=wp.float32, device=d)
+        # row views for the resampler (array headers only) and a resampling stream per group
+        self._weight_rows = [self.weights[g] for g in range(rows)]
+        self._ancestor_rows = [self.ancestors[g] for g in range(rows)]
+        self._active_rows = [self.group_active[g : g + 1] for g in range(r)]
+        self._group_seeds = [
+            wp.vec2ui(int(self.seed[0]) ^ ((0x9E3779B9 * g) & 0xFFFFFFFF), int(self.seed[1])) for g in range(rows)
+        ]
         self.slot_est = wp.zeros((r, int(kslots.NE)), dtype=wp.float64, device=d)
         self.slot_count = wp.zeros(r, dtype=wp.float64, device=d)
         self.slot_label = wp.full(r, -1, dtype=wp.int32, device=d)
@@ -467,6 +515,7 @@ class TemplateTracker(FrameChain):
             "add": wp.zeros(2, dtype=wp.int32, device="cpu", pinned=pinned),
             "qtotal": wp.zeros(1, dtype=wp.int32, device="cpu", pinned=pinned),
             "est": wp.zeros(int(kreduce.EST_SIZE), dtype=wp.float64, device="cpu", pinned=pinned),
+            "n_groups": wp.zeros(1, dtype=wp.int32, device="cpu", pinned=pinned),
         }
         if self.keep_virtual:
             self.host["virtual"] = wp.zeros((h, w), dtype=wp.uint8, device="cpu", pinned=pinned)
@@ -510,6 +559,24 @@ class TemplateTracker(FrameChain):
     def _raster(self, cur: int) -> None:
         s = self.state[cur]
         self.hulls.launch(self.cam, self.plane_struct, s.kind, s.pos, s.heading, s.dims, self.device)
+        if self.partition:  # beyond the paper: the slots' boxes and their independent groups (kernels.partition)
+            wp.launch_tiled(
+                kpart.slot_box_partials_kernel,
+                dim=[self.blocks, self.r],
+                inputs=[self.hulls.pts, self.hulls.n, self.hulls.rows, s.kind, self.n, self.chunk, self.width,
+                        self.height],
+                outputs=[self.part_box, self.part_alive],
+                block_dim=BLOCK,
+                device=self.device,
+            )  # fmt: skip
+            wp.launch(
+                kpart.group_slots_kernel,
+                dim=1,
+                inputs=[self.part_box, self.part_alive, self.blocks, 1],
+                outputs=[self.slot_box, self.slot_group, self.group_box, self.group_first, self.group_active,
+                         self.n_groups],
+                device=self.device,
+            )  # fmt: skip
         if self.use_occlusion:  # beyond the paper: per-object occlusion for the prediction (kernels.occlusion)
             wp.launch(
                 kocc.occlusion_kernel,
@@ -526,7 +593,18 @@ class TemplateTracker(FrameChain):
             self.hulls, s.kind, s.age, s.pos, s.heading, s.dims, self.qrow, self.qtotal, self.cost_a, self.cost_b,
             self.score_scale, float(cfg.bg_weight), float(cfg.exclusion), self.xor_sums, s.logw, self.penalty,
             self.complexity, self.cov_diff, self.device, band=self.xor_band,
+            groups=(self.group_box, self.n_groups, self.group_sums) if self.partition else None,
         )  # fmt: skip
+        if self.partition:  # each group's factor of eq. 6 (kernels.xor.group_logw_kernel)
+            wp.launch_tiled(
+                kxor.group_logw_kernel,
+                dim=[self.blocks],
+                inputs=[s.kind, s.age, s.pos, s.heading, s.dims, self.cost_a, self.cost_b, self.score_scale,
+                        float(cfg.bg_weight), float(cfg.exclusion), self.slot_group, self.n_groups, self.n, self.chunk],
+                outputs=[self.group_sums, self.glogw, self.part_gmax],
+                block_dim=BLOCK,
+                device=self.device,
+            )  # fmt: skip
 
     def _uoh(self) -> None:
         d = self.device
@@ -633,7 +711,18 @@ class TemplateTracker(FrameChain):
         wp.launch_tiled(
             kslots.block_slot_moments_kernel,
             dim=[self.blocks, self.r],
-            inputs=[s, self.n, self.chunk, self.est],
+            inputs=[
+                s,
+                self.n,
+                self.chunk,
+                self.est,
+                self.glogw,
+                self.part_gmax,
+                self.blocks,
+                self.slot_group,
+                self.group_first,
+                int(self.partition),
+            ],
             outputs=[self.weights, self.part],
             block_dim=BLOCK,
             device=d,
@@ -679,7 +768,14 @@ class TemplateTracker(FrameChain):
             outputs=[self.next_label, self.slot_label, self.slot_kind, self.add],
             device=d,
         )
-        self.resampler(self.weights, self.seed, self.frame, self.ancestors, enabled=self.resampled)
+        if self.partition:  # each group of slots on its own factor (kernels.partition); unused rows: the identity
+            for g in range(self.r):
+                self.resampler(
+                    self._weight_rows[g], self._group_seeds[g], self.frame, self._ancestor_rows[g],
+                    enabled=self._active_rows[g],
+                )  # fmt: skip
+        else:
+            self.resampler(self._weight_rows[0], self.seed, self.frame, self._ancestor_rows[0], enabled=self.resampled)
         wp.launch(
             kdyn.template_predict_kernel,
             dim=(self.n, self.r),
@@ -688,6 +784,7 @@ class TemplateTracker(FrameChain):
                 self.seed,
                 self.frame,
                 self.ancestors,
+                self.slot_group,
                 self.resampled,
                 self.add,
                 self.slot_label,
@@ -712,6 +809,7 @@ class TemplateTracker(FrameChain):
         wp.copy(h["add"], self.add)
         wp.copy(h["qtotal"], self.qtotal)
         wp.copy(h["est"], self.est)
+        wp.copy(h["n_groups"], self.n_groups)
         if self.keep_virtual:
             wp.copy(h["virtual"], self.virtual)
         if self.keep_uoh:
@@ -810,6 +908,7 @@ class TemplateTracker(FrameChain):
             added=added,
             # every log-weight -inf/NaN (floored in the score kernel): uniform weights, the predicted particles kept
             degenerate=bool(h["est"].numpy()[kreduce.EST_MAXLOGW] <= float(kreduce.LOGW_FLOOR)),
+            groups=int(h["n_groups"].numpy()[0]) if self.partition else 1,
         )
         if self.keep_virtual:
             est.virtual = h["virtual"].numpy().copy()
@@ -855,7 +954,7 @@ class TemplateTracker(FrameChain):
         for name, value in arrays.items():
             target = getattr(s, name)
             target.assign(np.asarray(value).astype(target.numpy().dtype).reshape(target.numpy().shape))
-        self.ancestors.assign(np.arange(self.n, dtype=np.int32))
+        self.ancestors.assign(np.tile(np.arange(self.n, dtype=np.int32), (self.ancestors.shape[0], 1)))
         # one label and kind per slot, as the addition kernel keeps them
         kind, label = s.kind.numpy(), s.label.numpy()
         slot_label = np.full(self.r, -1, dtype=np.int32)
