@@ -708,3 +708,59 @@ def quantised_weights_kernel(
     """The integer weights q_i = floor(exp(logw_i - max) scale) of the systematic passes (tests and diagnostics)."""
     i = wp.tid()
     q[i] = quantised_weight(logw[i], wp.float32(est[max_slot]), scale)
+
+
+# --- one systematic resampling per row of weights, in one launch (the template tracker's independent groups) ----
+
+
+@wp.kernel
+def grouped_systematic_kernel(
+    weights: wp.array2d(dtype=wp.float64),
+    active: wp.array(dtype=wp.int32),
+    scale: wp.float64,
+    seed: wp.vec2ui,
+    frame: wp.array(dtype=wp.int32),
+    n: int,
+    ancestors: wp.array2d(dtype=wp.int32),
+):
+    """Systematic resampling of every row ``g`` of ``weights`` on its own, on the exact integer CDF of
+    :func:`systematic_logw_kernel`: ``q_i = floor(w_i scale)``, parent ``i`` fills the slots ``[slot(C_{i-1}),
+    slot(C_i))`` with ``slot(c) = floor(n c / T + U_g)`` and one uniform per row and frame (Philox counter ``(g,
+    frame, STREAM_RESAMPLE)``: independent draws for the rows; row 0 draws the joint filter's U). Rows with
+    ``active[g] == 0`` get the identity. Launch ``wp.launch_tiled(dim=[G], block_dim=B)``: one block per row, each
+    lane a contiguous run of ``ceil(n / B)`` particles (one lane on the CPU backend). Meant for the template
+    tracker's particle counts (one block walks a row: a few microseconds per thousand particles on a GPU).
+
+    Args:
+        weights: (G, n) float64 non-negative weights, at most 1 (``exp(logw - max)``), with a positive maximum.
+        active: (G,) 1 for the rows to resample.
+        scale: 2^k with ``n 2^k <= 2^60`` (``wptrack.resampling.quantisation_bits``).
+        seed, frame: the run's key and the filter iteration.
+        n: particles per row.
+        ancestors: (G, n) int32 output parents.
+    """
+    g, lane = wp.tid()
+    bd = wp.block_dim()
+    per = (n + bd - 1) // bd
+    first = wp.min(lane * per, n)
+    stop = wp.min(first + per, n)
+    if active[g] == 0:  # uniform over the block
+        for i in range(first, stop):
+            ancestors[g, i] = i
+        return
+    own = wp.int64(0)
+    for i in range(first, stop):
+        own += wp.int64(wp.floor(weights[g, i] * scale))
+    scan = block_scan_int64(own, lane, bd)
+    u = word_to_unit64(random_words(seed, g, frame[0], STREAM_RESAMPLE)[0])
+    ratio = wp.float64(n) / wp.float64(scan[1])
+    c = scan[0] - own  # exact cumulative weight before this lane's first particle
+    lo = systematic_slot_exact(c, ratio, u, n)
+    for i in range(first, stop):
+        c += wp.int64(wp.floor(weights[g, i] * scale))
+        hi = systematic_slot_exact(c, ratio, u, n)
+        if i == n - 1:
+            hi = n
+        for s in range(lo, hi):
+            ancestors[g, s] = i
+        lo = hi

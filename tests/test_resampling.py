@@ -569,3 +569,46 @@ def test_long_ranges_cuda_graph(device, rng):
         wp.capture_launch(capture.graph)
         _, q = _run_log(r, logw, 2, device)
         np.testing.assert_array_equal(anc.numpy(), systematic_exact_reference(q, 2, device))
+
+
+@pytest.mark.parametrize("n", [1, 255, 1000, 4097])
+def test_grouped_systematic_rows_match_numpy(device, rng, n):
+    """grouped_systematic_kernel (the template tracker's independent groups): each active row is systematic
+    resampling of its own weights on the exact integer CDF floor(w 2^k), with the uniform of Philox counter (row,
+    frame, STREAM_RESAMPLE), equal to the NumPy reference; inactive rows get the identity; rows 0 and 1 hold the
+    same weights and differ (independent uniforms). Launched as the tracker does: one lane on the CPU, 256 on CUDA."""
+    from wptrack.resampling import quantisation_bits
+
+    g_rows = 5
+    w = np.exp(rng.normal(0.0, 2.0, (g_rows, n)))
+    w[:, rng.uniform(size=n) < 0.2] = 0.0  # zero weights: no offspring
+    w[:, n // 2] = 1.0
+    w /= w.max(axis=1, keepdims=True)
+    w[1] = w[0]
+    active = np.array([1, 1, 1, 0, 1], np.int32)
+    scale = float(2 ** quantisation_bits(n))
+    anc = wp.full((g_rows, n), -1, dtype=wp.int32, device=device)
+    frame = 9
+    wp.launch_tiled(
+        kres.grouped_systematic_kernel,
+        dim=[g_rows],
+        inputs=[wp.array(w, dtype=wp.float64, device=device), wp.array(active, dtype=wp.int32, device=device), scale,
+                SEED, wp.array([frame], dtype=wp.int32, device=device), n],
+        outputs=[anc],
+        block_dim=1 if wp.get_device(device).is_cpu else 256,
+        device=device,
+    )  # fmt: skip
+    got = anc.numpy()
+    u = _uniforms(SEED, frame, wrand.STREAM_RESAMPLE, g_rows, device)
+    for g in range(g_rows):
+        if not active[g]:
+            np.testing.assert_array_equal(got[g], np.arange(n))
+            continue
+        q = np.floor(w[g] * scale).astype(np.int64)
+        c = np.cumsum(q)
+        bounds = np.clip(np.floor(c.astype(np.float64) * (n / float(c[-1])) + u[g]), 0, n).astype(np.int64)
+        bounds[-1] = n
+        np.testing.assert_array_equal(got[g], np.repeat(np.arange(n), np.diff(np.concatenate([[0], bounds]))))
+        assert not np.any(np.isin(got[g], np.flatnonzero(q == 0)))
+    if n > 100:
+        assert not np.array_equal(got[0], got[1])

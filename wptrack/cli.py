@@ -477,6 +477,12 @@ def cmd_bench(args) -> int:
             raise ConfigError(f"--weights: only the 'color' suite times resampling alone, not {args.tracker!r}")
         extra["weights"] = args.weights
         grid = list({case.particles: case for case in grid}.values())
+    if args.joint:  # the template tracker's joint filter (one weight per particle) instead of the partitioned one
+        if args.tracker != "templates":
+            raise ConfigError(
+                f"--joint: only the 'templates' suite has a joint and a partitioned filter, not {args.tracker!r}"
+            )
+        extra["partition"] = False
     results = []
     row = getattr(suite, "format_row", format_row)
     print(getattr(suite, "HEADER", HEADER))
@@ -814,6 +820,11 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("ordinary", "concentrated"),
         default=None,
         help="color suite: time resampling alone on synthetic log-weights, N(0, 1) or N(0, 5^2)",
+    )
+    b.add_argument(
+        "--joint",
+        action="store_true",
+        help="templates suite: the paper's joint filter (one weight per particle) instead of the partitioned one",
     )
     _add_device(b)
     b.set_defaults(func=cmd_bench)

@@ -190,6 +190,7 @@ class TemplateSuite:
         target = ""
         if "target_fps" in r:
             target = f"  [target {r['target_fps']:g} fps: {'met' if r['meets_target'] else 'NOT met'}]"
+        target += "  (joint filter)" if r.get("filter") == "joint" else ""
         return (
             f"{r['tracker']:9s} {r['particles']:>7d} {r['objects']:>4d} {r['frame_ms']:9.3f} {r['frames_per_s']:8.1f} "
             f"{r['step_ms']:9.3f} {npy} {r['particles_per_s']:9.3g} {eq:>3s} "
@@ -219,6 +220,7 @@ class TemplateSuite:
         numpy_max: int = 100_000,
         numpy_frames: int = 3,
         seed: int = 0,
+        partition: bool = True,
     ) -> dict:
         import warp as wp
 
@@ -237,11 +239,13 @@ class TemplateSuite:
             wp.synchronize_device(dev)
             mem0 = wp.get_mempool_used_mem_current(dev)
             free0 = dev.free_memory
-        tracker = TemplateTracker(rig, TemplateConfig(particles=n, max_objects=k, seed=seed), device=device)
+        config = TemplateConfig(particles=n, max_objects=k, seed=seed, partition=bool(partition))
+        tracker = TemplateTracker(rig, config, device=device)
         result: dict = {
             "tracker": "templates",
             "particles": n,
             "objects": k,
+            "filter": "partitioned" if partition else "joint",
             "cameras": 1,
             "width": WIDTH,
             "height": HEIGHT,

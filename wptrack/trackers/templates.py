@@ -40,11 +40,12 @@ from wptrack.kernels import occlusion as kocc
 from wptrack.kernels import partition as kpart
 from wptrack.kernels import raster as kraster
 from wptrack.kernels import reduce as kreduce
+from wptrack.kernels import resample as kres
 from wptrack.kernels import slots as kslots
 from wptrack.kernels import uoh as kuoh
 from wptrack.kernels import xor as kxor
 from wptrack.pf import BLOCK, MAX_BLOCKS, FrameChain, _seed_words, check_fits
-from wptrack.resampling import Resampler, bytes_per_particle
+from wptrack.resampling import Resampler, bytes_per_particle, quantisation_bits
 from wptrack.rig import Camera, GroundPlane, Rig
 from wptrack.warpcams import camera_struct
 
@@ -492,6 +493,7 @@ class TemplateTracker(FrameChain):
         self._weight_rows = [self.weights[g] for g in range(rows)]
         self._ancestor_rows = [self.ancestors[g] for g in range(rows)]
         self._active_rows = [self.group_active[g : g + 1] for g in range(r)]
+        self.group_scale = float(2 ** quantisation_bits(n))  # the exact integer CDF of grouped_systematic_kernel
         self._group_seeds = [
             wp.vec2ui(int(self.seed[0]) ^ ((0x9E3779B9 * g) & 0xFFFFFFFF), int(self.seed[1])) for g in range(rows)
         ]
@@ -768,7 +770,17 @@ class TemplateTracker(FrameChain):
             outputs=[self.next_label, self.slot_label, self.slot_kind, self.add],
             device=d,
         )
-        if self.partition:  # each group of slots on its own factor (kernels.partition); unused rows: the identity
+        if self.partition and self.config.resampling == "systematic":
+            # each group of slots on its own factor (kernels.partition), one launch; unused rows: the identity
+            wp.launch_tiled(
+                kres.grouped_systematic_kernel,
+                dim=[self.r],
+                inputs=[self.weights, self.group_active, self.group_scale, self.seed, self.frame, self.n],
+                outputs=[self.ancestors],
+                block_dim=1 if not self.is_cuda else BLOCK,
+                device=d,
+            )
+        elif self.partition:  # the other schemes: one resampler call per group
             for g in range(self.r):
                 self.resampler(
                     self._weight_rows[g], self._group_seeds[g], self.frame, self._ancestor_rows[g],
