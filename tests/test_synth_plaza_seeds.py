@@ -275,3 +275,19 @@ def test_accuracy_cache_renders_stale_scenes_again(tmp_path, caplog) -> None:
     assert again.groundtruth_path.read_text() == fresh
     assert not (first.out_dir / "masks-offline").exists()
     assert "stale scene" in caplog.text
+
+
+def test_accuracy_workers_give_the_same_table(tmp_path) -> None:
+    """template_accuracy with two worker processes gives the same per-run evaluations and table as in-process runs
+    (every run is seeded and independent); a worker count below 1 is refused with the field named."""
+    from wptrack.errors import ConfigError
+    from wptrack.experiments import template_accuracy
+
+    kw = dict(scenes=["s3-people"], seeds=[0, 1], frames=6, particles=60, masks="perfect", device="cpu",
+              scenes_dir=tmp_path / "scenes")  # fmt: skip
+    one = template_accuracy(out_dir=tmp_path / "one", **kw)
+    two = template_accuracy(out_dir=tmp_path / "two", workers=2, **kw)
+    assert one["scenes"] == two["scenes"] and len(two["scenes"]["s3-people"]["runs"]) == 2
+    assert (tmp_path / "two" / "s3-people" / "s0" / "seed1" / "tracks.csv").exists()
+    with pytest.raises(ConfigError, match="workers"):
+        template_accuracy(out_dir=tmp_path / "bad", workers=0, **kw)

@@ -395,6 +395,45 @@ def _s3_masks(res, masks: str, mask_config) -> Path:
     return out / "masks.avi"
 
 
+def _template_run(task: dict) -> dict:
+    """One run of :func:`template_accuracy` (a worker process may run it): track, evaluate, return the row."""
+    from .evaluation import evaluate
+    from .runs.templates import run_template_tracking
+    from .trackers.templates import TemplateConfig
+
+    cfg = TemplateConfig(**task["config"])
+    run_template_tracking(
+        task["rig"],
+        task["run_dir"],
+        cfg,
+        video=task["video"],
+        masks=task["masks"],
+        device=task["device"],
+        virtual=False,
+        progress=task["progress"],
+    )
+    return evaluate(task["groundtruth"], Path(task["run_dir"]) / "tracks.csv", threshold=1.0).to_dict()
+
+
+def _template_scene(task: dict) -> tuple[str, str, str, str, str]:
+    """Render one scene and make its masks (a worker process may run it): rig, video, masks, ground truth, hints."""
+    res = _s3_scene(task["name"], Path(task["cache"]), task["frames"], task["scene_seed"], task["progress"])
+    mask_video = _s3_masks(res, task["masks"], task["mask_config"])
+    return str(res.rig_path), str(res.videos[0]), str(mask_video), str(res.groundtruth_path), str(res.scene_json)
+
+
+def _pool_map(fn, tasks: list, workers: int) -> list:
+    """``[fn(t) for t in tasks]``, in ``workers`` spawned processes when more than one (results in task order)."""
+    if workers <= 1 or len(tasks) <= 1:
+        return [fn(t) for t in tasks]
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    ctx = multiprocessing.get_context("spawn")  # no forked Warp/CUDA state in the workers
+    with ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=ctx) as pool:
+        return list(pool.map(fn, tasks))
+
+
 def template_accuracy(
     scenes: Sequence[str] = S3_SCENES,
     seeds: int | Sequence[int] = 6,
@@ -408,6 +447,7 @@ def template_accuracy(
     mask_config=None,
     scene_seeds: Sequence[int] = (0,),
     scenes_dir: str | Path | None = None,
+    workers: int = 1,
 ) -> dict:
     """Section 5 of Juza et al.: run every scene ``seeds`` times with different tracker seeds, evaluate each run
     against the ground truth (paper accuracy, MOTA, IDF1 at 1 m) and average, as the paper does.
@@ -433,13 +473,16 @@ def template_accuracy(
             from ``masks``).
         scene_seeds: scene seeds rendered per scene (``render_scene(seed=...)``).
         scenes_dir: where scenes and their masks are rendered and cached (default: ``out_dir``).
+        workers: processes that render the scenes and run the tracker side by side (1: all in this process). Every
+            run is independent and seeded, so the results do not depend on it. The workers are spawned (they import
+            the calling script): from a script, call this under ``if __name__ == "__main__":``.
 
     Returns:
         ``{"scenes": {name: {"runs": [...], "average": {...}}}, ...}``.
     """
-    from .evaluation import average, evaluate
-    from .runs.templates import run_template_tracking
-    from .trackers.templates import TemplateConfig
+    from types import SimpleNamespace
+
+    from .evaluation import average
 
     if masks not in S3_MASKS:
         raise ConfigError(f"masks: expected one of {', '.join(repr(m) for m in S3_MASKS)}, got {masks!r}")
@@ -457,6 +500,8 @@ def template_accuracy(
     scene_seeds = [int(s) for s in scene_seeds]
     if not scene_seeds or any(s < 0 for s in scene_seeds):
         raise ConfigError(f"scene_seeds: expected non-negative scene seeds, got {scene_seeds!r}")
+    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
+        raise ConfigError(f"workers: expected a positive integer, got {workers!r}")
     out = ensure_writable_dir(out_dir)
     cache = ensure_writable_dir(scenes_dir if scenes_dir is not None else out)
     device = resolve_device(device)
@@ -473,49 +518,46 @@ def template_accuracy(
         "scene,runs,accuracy,accuracy_min,tracking,classification,mota,mota_min,idf1,idf1_min,"
         "id_switches,id_switches_max"
     ]
+    keys = [(name, ss) for name in scenes for ss in scene_seeds]
+    rendered = _pool_map(
+        _template_scene,
+        [
+            {"name": name, "cache": str(cache), "frames": frames, "scene_seed": ss, "progress": progress,
+             "masks": masks, "mask_config": mask_config}
+            for name, ss in keys
+        ],
+        workers,
+    )  # fmt: skip
+    tasks, labels = [], []
+    for (name, scene_seed), (rig, video, mask_video, gt, scene_json) in zip(keys, rendered, strict=True):
+        hints = json.loads(Path(scene_json).read_text())
+        for seed in tracker_seeds:
+            config = {
+                "particles": particles,
+                "seed": seed,
+                "fps": float(hints.get("fps", 15.0)),
+                "max_objects": max(8, int(hints.get("max_objects", 8)) + 3),
+                **(config_overrides or {}),
+            }
+            run_dir = out / name / f"s{scene_seed}" / f"seed{seed}"
+            tasks.append({"rig": rig, "run_dir": str(run_dir), "config": config, "video": video, "masks": mask_video,
+                          "device": device, "progress": progress, "groundtruth": gt})  # fmt: skip
+            labels.append((name, {"scene_seed": scene_seed, "seed": seed}))
+    results = _pool_map(_template_run, tasks, workers)
     for name in scenes:
-        runs = []
-        labels = []
-        for scene_seed in scene_seeds:
-            res = _s3_scene(name, cache, frames, scene_seed, progress)
-            mask_video = _s3_masks(res, masks, mask_config)
-            hints = json.loads(Path(res.scene_json).read_text())
-            for seed in tracker_seeds:
-                cfg = TemplateConfig(
-                    particles=particles,
-                    seed=seed,
-                    fps=float(hints.get("fps", 15.0)),
-                    max_objects=max(8, int(hints.get("max_objects", 8)) + 3),
-                    **(config_overrides or {}),
-                )
-                run_dir = out / name / f"s{scene_seed}" / f"seed{seed}"
-                run_template_tracking(
-                    res.rig_path,
-                    run_dir,
-                    cfg,
-                    video=res.videos[0],
-                    masks=mask_video,
-                    device=device,
-                    virtual=False,
-                    progress=progress,
-                )
-                runs.append(evaluate(res.groundtruth_path, run_dir / "tracks.csv", threshold=1.0))
-                labels.append({"scene_seed": scene_seed, "seed": seed})
-        avg = average(runs)
-        table["scenes"][name] = {
-            "runs": [lab | r.to_dict() for lab, r in zip(labels, runs, strict=True)],
-            "average": avg,
-        }
+        mine = [(lab, r) for (n, lab), r in zip(labels, results, strict=True) if n == name]
+        avg = average([SimpleNamespace(**r) for _, r in mine])  # the evaluations' dicts (from the workers)
+        table["scenes"][name] = {"runs": [lab | r for lab, r in mine], "average": avg}
 
         def m(key: str, stat: str = "mean", avg=avg) -> float:
             v = avg.get(key, {}).get(stat)
             return float("nan") if v is None else float(v)
 
         rows.append(
-            f"{name},{len(runs)},{m('accuracy'):.3f},{m('accuracy', 'min'):.3f},{m('tracking_accuracy'):.3f},"
+            f"{name},{len(mine)},{m('accuracy'):.3f},{m('accuracy', 'min'):.3f},{m('tracking_accuracy'):.3f},"
             f"{m('classification_accuracy'):.3f},{m('mota'):.3f},{m('mota', 'min'):.3f},{m('idf1'):.3f},"
             f"{m('idf1', 'min'):.3f},{m('id_switches'):.1f},{m('id_switches', 'max'):.0f}"
         )
-        atomic_write_json(out / "accuracy.json", table)
-        atomic_write_text(out / "accuracy.csv", "\n".join(rows) + "\n")
+    atomic_write_json(out / "accuracy.json", table)
+    atomic_write_text(out / "accuracy.csv", "\n".join(rows) + "\n")
     return table
