@@ -25,9 +25,9 @@ particles survive. The factorisation holds exactly for the boxes of the frame be
 the paper. A slot held by some particle but drawn by none (its object out of view everywhere) is a group of its own
 with an empty box (its factor is its complexity alone).
 
-Kernels (launch order): :func:`slot_box_partials_kernel` (per block of particles and slot), then
-:func:`group_slots_kernel` (one thread). The groups' factors are summed by ``kernels.xor`` and weighed by
-``kernels.xor.group_logw_kernel``.
+Kernels (launch order): :func:`slot_box_partials_kernel` (per block of particles and slot),
+:func:`slot_box_final_kernel` (per slot), then :func:`group_slots_kernel` (one thread). The groups' factors are
+summed by ``kernels.xor`` and weighed by ``kernels.xor.group_logw_kernel``.
 """
 
 import warp as wp
@@ -140,29 +140,60 @@ def root_of(parent: vec16i, s: int):
 
 
 @wp.kernel
-def group_slots_kernel(
+def slot_box_final_kernel(
     part_box: wp.array2d(dtype=wp.vec4i),
     part_alive: wp.array2d(dtype=wp.int32),
     blocks: int,
-    partition: int,
     slot_box: wp.array(dtype=wp.vec4i),
+    slot_alive: wp.array(dtype=wp.int32),
+):
+    """The slot boxes from the per-block partials: launch ``wp.launch_tiled(dim=[R], block_dim=B)``, a block per
+    slot whose lanes stride over the ``blocks`` partials.
+
+    Args:
+        part_box, part_alive: (blocks, R) from :func:`slot_box_partials_kernel`.
+        blocks: blocks of the partials.
+        slot_box: (R,) ``(x0, y0, x1, y1)`` pixels per slot (``(0, 0, -1, -1)``: drawn by no particle).
+        slot_alive: (R,) 1 where some particle holds the slot.
+    """
+    s, lane = wp.tid()
+    m = wp.vec4i(BOX_NONE, BOX_NONE, BOX_NONE, BOX_NONE)
+    a = int(0)
+    for b in range(lane, blocks, wp.block_dim()):
+        m = max4(m, part_box[b, s])
+        a = wp.max(a, part_alive[b, s])
+    m0, _a0 = block_argmax(float(m[0]), 0)
+    m1, _a1 = block_argmax(float(m[1]), 0)
+    m2, _a2 = block_argmax(float(m[2]), 0)
+    m3, _a3 = block_argmax(float(m[3]), 0)
+    ma, _a4 = block_argmax(float(a), 0)
+    if lane == 0:
+        box = wp.vec4i(0, 0, -1, -1)
+        if int(m2) != BOX_NONE:
+            box = wp.vec4i(-int(m0), -int(m1), int(m2), int(m3))
+        slot_box[s] = box
+        slot_alive[s] = int(ma)
+
+
+@wp.kernel
+def group_slots_kernel(
+    slot_box: wp.array(dtype=wp.vec4i),
+    slot_alive: wp.array(dtype=wp.int32),
+    partition: int,
     slot_group: wp.array(dtype=wp.int32),
     group_box: wp.array(dtype=wp.vec4i),
     group_first: wp.array(dtype=wp.int32),
     group_active: wp.array(dtype=wp.int32),
     n_groups: wp.array(dtype=wp.int32),
 ):
-    """The slot boxes from the per-block partials and the slots' groups (see the module docstring). One thread
-    (``dim=1``); R <= 16 slots.
+    """The slots' groups (see the module docstring). One thread (``dim=1``); R <= 16 slots.
 
     Groups are numbered by their lowest slot, in slot order. With ``partition`` 0 every alive slot is put in group
     0 (the joint filter of the paper: one factor, one resampling).
 
     Args:
-        part_box, part_alive: (blocks, R) from :func:`slot_box_partials_kernel`.
-        blocks: blocks of the partials.
+        slot_box, slot_alive: (R,) from :func:`slot_box_final_kernel`.
         partition: 1 to split the slots into independent groups, 0 for one group.
-        slot_box: (R,) ``(x0, y0, x1, y1)`` pixels per slot (``x1 < x0``: drawn by no particle).
         slot_group: (R,) group of each slot, -1 for a slot no particle holds.
         group_box: (R,) box of each group (the union of its slots' boxes; empty for a group of undrawn slots).
         group_first: (R,) lowest slot of each group (-1 past the last group).
@@ -177,21 +208,13 @@ def group_slots_kernel(
     y1 = vec16i()
     alive = vec16i()
     for s in range(r):
-        m = wp.vec4i(BOX_NONE, BOX_NONE, BOX_NONE, BOX_NONE)
-        a = int(0)
-        for b in range(blocks):
-            m = max4(m, part_box[b, s])
-            a = wp.max(a, part_alive[b, s])
-        box = wp.vec4i(-m[0], -m[1], m[2], m[3])
-        if m[2] == BOX_NONE:
-            box = wp.vec4i(0, 0, -1, -1)
-        slot_box[s] = box
+        box = slot_box[s]
         parent[s] = s
         x0[s] = box[0]
         y0[s] = box[1]
         x1[s] = box[2]
         y1[s] = box[3]
-        alive[s] = a
+        alive[s] = slot_alive[s]
     if partition != 0:
         changed = int(1)
         while changed != 0:

@@ -721,15 +721,18 @@ def grouped_systematic_kernel(
     seed: wp.vec2ui,
     frame: wp.array(dtype=wp.int32),
     n: int,
+    per_lane: int,
     ancestors: wp.array2d(dtype=wp.int32),
 ):
     """Systematic resampling of every row ``g`` of ``weights`` on its own, on the exact integer CDF of
     :func:`systematic_logw_kernel`: ``q_i = floor(w_i scale)``, parent ``i`` fills the slots ``[slot(C_{i-1}),
     slot(C_i))`` with ``slot(c) = floor(n c / T + U_g)`` and one uniform per row and frame (Philox counter ``(g,
     frame, STREAM_RESAMPLE)``: independent draws for the rows; row 0 draws the joint filter's U). Rows with
-    ``active[g] == 0`` get the identity. Launch ``wp.launch_tiled(dim=[G], block_dim=B)``: one block per row, each
-    lane a contiguous run of ``ceil(n / B)`` particles (one lane on the CPU backend). Meant for the template
-    tracker's particle counts (one block walks a row: a few microseconds per thousand particles on a GPU).
+    ``active[g] == 0`` get the identity. Launch ``wp.launch_tiled(dim=[G], block_dim=B)``: one block per row; a
+    first pass sums the row (lanes strided), then the block walks it in rounds of ``B per_lane`` particles,
+    ``per_lane`` contiguous ones per lane, scanned exactly (int64 warp shuffles), as :func:`systematic_logw_kernel`
+    (the CPU backend: one lane, ``per_lane`` = n). Meant for the template tracker's particle counts (one block
+    per row).
 
     Args:
         weights: (G, n) float64 non-negative weights, at most 1 (``exp(logw - max)``), with a positive maximum.
@@ -737,30 +740,39 @@ def grouped_systematic_kernel(
         scale: 2^k with ``n 2^k <= 2^60`` (``wptrack.resampling.quantisation_bits``).
         seed, frame: the run's key and the filter iteration.
         n: particles per row.
+        per_lane: contiguous particles per lane and round (any value >= 1 gives the same ancestors).
         ancestors: (G, n) int32 output parents.
     """
     g, lane = wp.tid()
     bd = wp.block_dim()
-    per = (n + bd - 1) // bd
-    first = wp.min(lane * per, n)
-    stop = wp.min(first + per, n)
     if active[g] == 0:  # uniform over the block
-        for i in range(first, stop):
+        for i in range(lane, n, bd):
             ancestors[g, i] = i
         return
-    own = wp.int64(0)
-    for i in range(first, stop):
-        own += wp.int64(wp.floor(weights[g, i] * scale))
-    scan = block_scan_int64(own, lane, bd)
+    every = wp.int64(0)
+    for i in range(lane, n, bd):
+        every += wp.int64(wp.floor(weights[g, i] * scale))
+    total = block_scan_int64(every, lane, bd)[1]
     u = word_to_unit64(random_words(seed, g, frame[0], STREAM_RESAMPLE)[0])
-    ratio = wp.float64(n) / wp.float64(scan[1])
-    c = scan[0] - own  # exact cumulative weight before this lane's first particle
-    lo = systematic_slot_exact(c, ratio, u, n)
-    for i in range(first, stop):
-        c += wp.int64(wp.floor(weights[g, i] * scale))
-        hi = systematic_slot_exact(c, ratio, u, n)
-        if i == n - 1:
-            hi = n
-        for s in range(lo, hi):
-            ancestors[g, s] = i
-        lo = hi
+    ratio = wp.float64(n) / wp.float64(total)
+    carry = wp.int64(0)
+    for base in range(0, n, bd * per_lane):
+        first = base + lane * per_lane
+        own = wp.int64(0)
+        for k in range(per_lane):
+            if first + k < n:
+                own += wp.int64(wp.floor(weights[g, first + k] * scale))
+        scan = block_scan_int64(own, lane, bd)
+        c = carry + scan[0] - own  # exact cumulative weight before this lane's first particle
+        lo = systematic_slot_exact(c, ratio, u, n)
+        for k in range(per_lane):
+            i = first + k
+            if i < n:
+                c += wp.int64(wp.floor(weights[g, i] * scale))
+                hi = systematic_slot_exact(c, ratio, u, n)
+                if i == n - 1:
+                    hi = n
+                for s in range(lo, hi):
+                    ancestors[g, s] = i
+                lo = hi
+        carry += scan[1]

@@ -319,6 +319,13 @@ def xor_band_kernel(cap: int, grouped: bool = False) -> wp.Kernel:
     to ``sums[i]`` (one atomic add per band that covers anything) and the merged intervals' coverage adds to
     ``cov_diff``, as ``xor_score_kernel`` does for the particle's rows.
 
+    ``grouped`` (the partitioned filter, ``kernels.partition``): launch with ``dim=(G, ceil(H / band), N)`` for up
+    to G groups; thread ``(g, b, i)`` takes the pieces of group ``g``'s slots only, on the rows of band ``b`` inside
+    the group's box (threads of unused groups and bands outside the box return at once), and adds its sums to
+    ``sums[i]`` and ``group_sums[i, g]``. The groups' boxes are at least a column apart, so no merged interval mixes
+    two groups: the per-group merging gives the same intervals, hence the same ``sums`` and ``cov_diff``, as the
+    ungrouped launch (integer sums: bit for bit), with no per-thread table of groups.
+
     The per-piece arrays hold two coordinates per int32 (rows, walk positions, spans) in vectors of ``cap``
     entries: a thread's run-time indexed arrays live in local memory, and with 32 lanes per warp on 32 particles
     their footprint decides how much of it stays in L1 (3 x 64 bytes per thread at 5 objects, against 6 x 128
@@ -330,54 +337,49 @@ def xor_band_kernel(cap: int, grouped: bool = False) -> wp.Kernel:
             (``hull_n.shape[1] <= cap``).
         qrow: (H, W+1) row prefix sums of the motion mask (H, W < 32768).
         band: rows per band.
-        group_box, n_groups: the groups' boxes (``kernels.partition``); read only when ``grouped``.
+        group_box, n_groups, slot_group: the groups' boxes, their count and each slot's group
+            (``kernels.partition``); read only when ``grouped``.
         sums: (N,) (|v_i|, |q AND v_i|), pixels; must hold zeros (``xor_finish_kernel`` clears it).
         cov_diff: (H, W+1) per-row difference array of coverage counts, as in ``xor_score_kernel``.
-        group_sums: (N, R) with ``grouped``: the same sums per group, as in ``xor_score_kernel`` (one atomic add
-            per band and group that covers anything); must hold zeros. Not touched otherwise.
+        group_sums: (N, R) with ``grouped``: the same sums per group (one atomic add per band and group that covers
+            anything); must hold zeros. Not touched otherwise.
     """
     if cap not in (2, 4, 8, 16, 32):
         raise ValueError(f"xor_band_kernel: cap {cap} must be a power of two from 2 to {MAX_PIECES}")
     veci = wp.types.vector(length=cap, dtype=wp.int32)
 
-    @wp.kernel(enable_backward=False, module="unique")
-    def xor_band_kernel(
+    @wp.func
+    def band_sums(
         hull_pts: wp.array3d(dtype=wp.vec2),
         hull_n: wp.array2d(dtype=wp.int32),
         hull_rows: wp.array2d(dtype=wp.vec2i),
         qrow: wp.array2d(dtype=wp.int32),
-        band: int,
-        group_box: wp.array(dtype=wp.vec4i),
-        n_groups: wp.array(dtype=wp.int32),
-        sums: wp.array(dtype=wp.vec2i),
+        i: int,
+        ya: int,
+        yb: int,
+        slot_group: wp.array(dtype=wp.int32),
+        g: int,
         cov_diff: wp.array2d(dtype=wp.int32),
-        group_sums: wp.array2d(dtype=wp.vec2i),
     ):
-        b, i = wp.tid()
+        """(|v_i|, |q AND v_i|) over rows [ya, yb] of the pieces of particle ``i`` (of group ``g``'s slots only when
+        ``g`` >= 0), with the merged intervals' coverage adds to ``cov_diff``."""
         pieces = hull_n.shape[1]
         width = qrow.shape[1] - 1
-        ya = b * band
-        yb = wp.min(ya + band, qrow.shape[0]) - 1
         rows = veci()  # each piece's rows within the band, first * PACK + last (PACK: first 1 > last 0, none)
         any_rows = int(0)
         for q in range(pieces):
             rows[q] = PACK
-            if hull_n[i, q] > 0:
+            if hull_n[i, q] > 0 and (g < 0 or slot_group[q // PIECES] == g):
                 r = hull_rows[i, q]
                 lo = wp.max(r[0], ya)
                 hi = wp.min(r[1], yb)
                 if lo <= hi:
                     rows[q] = lo * PACK + hi
                     any_rows = 1
-        if any_rows == 0:
-            return
         covered = int(0)
         both = int(0)
-        groups = int(0)
-        gcov = vec16i()
-        gboth = vec16i()
-        if wp.static(grouped):
-            groups = n_groups[0]
+        if any_rows == 0:
+            return covered, both
         walk = veci()  # the pieces' hull chain walks (raster.hull_chain_span): down * PACK + up
         span = veci()  # the row's piece spans sorted: u0 * PACK + u1
         for y in range(ya, yb + 1):
@@ -404,28 +406,68 @@ def xor_band_kernel(cap: int, grouped: bool = False) -> wp.Kernel:
                     if k < n and span[k] / PACK <= e + 1:
                         e = wp.max(e, span[k] & LOW)
                     else:
-                        cv = e - a + 1
-                        bo = qrow[y, e + 1] - qrow[y, a]
-                        covered += cv
-                        both += bo
-                        if wp.static(grouped):
-                            g = group_at(group_box, groups, a, y)
-                            if g >= 0:  # always, by construction of the boxes
-                                gcov[g] += cv
-                                gboth[g] += bo
+                        covered += e - a + 1
+                        both += qrow[y, e + 1] - qrow[y, a]
                         wp.atomic_add(cov_diff, y, a, 1)
                         wp.atomic_add(cov_diff, y, e + 1, -1)
                         if k < n:
                             a = span[k] / PACK
                             e = span[k] & LOW
+        return covered, both
+
+    if not grouped:
+
+        @wp.kernel(enable_backward=False, module="unique")
+        def xor_band_kernel(
+            hull_pts: wp.array3d(dtype=wp.vec2),
+            hull_n: wp.array2d(dtype=wp.int32),
+            hull_rows: wp.array2d(dtype=wp.vec2i),
+            qrow: wp.array2d(dtype=wp.int32),
+            band: int,
+            group_box: wp.array(dtype=wp.vec4i),
+            n_groups: wp.array(dtype=wp.int32),
+            slot_group: wp.array(dtype=wp.int32),
+            sums: wp.array(dtype=wp.vec2i),
+            cov_diff: wp.array2d(dtype=wp.int32),
+            group_sums: wp.array2d(dtype=wp.vec2i),
+        ):
+            b, i = wp.tid()
+            ya = b * band
+            yb = wp.min(ya + band, qrow.shape[0]) - 1
+            covered, both = band_sums(hull_pts, hull_n, hull_rows, qrow, i, ya, yb, slot_group, -1, cov_diff)
+            if covered > 0:
+                wp.atomic_add(sums, i, wp.vec2i(covered, both))
+
+        return xor_band_kernel
+
+    @wp.kernel(enable_backward=False, module="unique")
+    def xor_band_group_kernel(
+        hull_pts: wp.array3d(dtype=wp.vec2),
+        hull_n: wp.array2d(dtype=wp.int32),
+        hull_rows: wp.array2d(dtype=wp.vec2i),
+        qrow: wp.array2d(dtype=wp.int32),
+        band: int,
+        group_box: wp.array(dtype=wp.vec4i),
+        n_groups: wp.array(dtype=wp.int32),
+        slot_group: wp.array(dtype=wp.int32),
+        sums: wp.array(dtype=wp.vec2i),
+        cov_diff: wp.array2d(dtype=wp.int32),
+        group_sums: wp.array2d(dtype=wp.vec2i),
+    ):
+        g, b, i = wp.tid()
+        if g >= n_groups[0]:
+            return
+        box = group_box[g]
+        ya = wp.max(b * band, box[1])
+        yb = wp.min(wp.min(b * band + band, qrow.shape[0]) - 1, box[3])
+        if ya > yb:
+            return
+        covered, both = band_sums(hull_pts, hull_n, hull_rows, qrow, i, ya, yb, slot_group, g, cov_diff)
         if covered > 0:
             wp.atomic_add(sums, i, wp.vec2i(covered, both))
-            if wp.static(grouped):
-                for g in range(groups):
-                    if gcov[g] > 0:
-                        wp.atomic_add(group_sums, i, g, wp.vec2i(gcov[g], gboth[g]))
+            wp.atomic_add(group_sums, i, g, wp.vec2i(covered, both))
 
-    return xor_band_kernel
+    return xor_band_group_kernel
 
 
 @wp.kernel

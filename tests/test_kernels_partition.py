@@ -153,19 +153,27 @@ class Groups:
             device=d,
         )
         self.slot_box = wp.full(r, wp.vec4i(9, 9, 9, 9), dtype=wp.vec4i, device=d)
+        self.slot_alive = wp.full(r, -7, dtype=wp.int32, device=d)
         self.slot_group = wp.full(r, -7, dtype=wp.int32, device=d)
         self.group_box = wp.full(r, wp.vec4i(9, 9, 9, 9), dtype=wp.vec4i, device=d)
         self.group_first = wp.full(r, -7, dtype=wp.int32, device=d)
         self.group_active = wp.full(r, -7, dtype=wp.int32, device=d)
         self.n_groups = wp.full(1, -7, dtype=wp.int32, device=d)
+        wp.launch_tiled(
+            kpart.slot_box_final_kernel,
+            dim=[r],
+            inputs=[part_box, part_alive, blocks],
+            outputs=[self.slot_box, self.slot_alive],
+            block_dim=BLOCK,
+            device=d,
+        )
         wp.launch(
             kpart.group_slots_kernel,
             dim=1,
-            inputs=[part_box, part_alive, blocks, partition],
-            outputs=[self.slot_box, self.slot_group, self.group_box, self.group_first, self.group_active,
-                     self.n_groups],
+            inputs=[self.slot_box, self.slot_alive, partition],
+            outputs=[self.slot_group, self.group_box, self.group_first, self.group_active, self.n_groups],
             device=d,
-        )  # fmt: skip
+        )
         self.count = int(self.n_groups.numpy()[0])
 
 
@@ -183,6 +191,7 @@ def test_slot_boxes_and_groups_match_numpy(device, rng, chunk):
     boxes, alive = reference_slot_boxes(hulls, kind)
     got = g.slot_box.numpy()
     np.testing.assert_array_equal(got, boxes)
+    np.testing.assert_array_equal(g.slot_alive.numpy(), alive)
     for s in range(kind.shape[1]):  # containment: the slot's own pixels, rendered alone
         only = np.where(np.arange(kind.shape[1])[None] == s, kind, 0)
         img = render(device, raster(device, cam, GroundPlane(), only, pos, heading, dims), kind.shape[1], W, H,
@@ -260,7 +269,7 @@ class GroupScore:
         launch_xor_score(
             self.hulls, *self.arrays, self.qrow, self.qtotal, wp.vec3(*self.cost_a), wp.vec3(*self.cost_b),
             self.scale, bg_weight, exclusion, sums, logw, penalty, complexity, cov_diff, d, band=band,
-            groups=(g.group_box, g.n_groups, group_sums) if grouped else None,
+            groups=(g.group_box, g.n_groups, g.slot_group, group_sums) if grouped else None,
         )  # fmt: skip
         return logw.numpy(), penalty.numpy(), complexity.numpy(), cov_diff.numpy(), group_sums
 

@@ -571,12 +571,13 @@ def test_long_ranges_cuda_graph(device, rng):
         np.testing.assert_array_equal(anc.numpy(), systematic_exact_reference(q, 2, device))
 
 
-@pytest.mark.parametrize("n", [1, 255, 1000, 4097])
-def test_grouped_systematic_rows_match_numpy(device, rng, n):
+@pytest.mark.parametrize(("n", "per_lane"), [(1, 4), (255, 4), (1000, 4), (4097, 4), (4097, 3), (1000, 1000)])
+def test_grouped_systematic_rows_match_numpy(device, rng, n, per_lane):
     """grouped_systematic_kernel (the template tracker's independent groups): each active row is systematic
     resampling of its own weights on the exact integer CDF floor(w 2^k), with the uniform of Philox counter (row,
     frame, STREAM_RESAMPLE), equal to the NumPy reference; inactive rows get the identity; rows 0 and 1 hold the
-    same weights and differ (independent uniforms). Launched as the tracker does: one lane on the CPU, 256 on CUDA."""
+    same weights and differ (independent uniforms). One lane on the CPU, 256 on CUDA (the tracker's launch), rounds of
+    4, 3 (not dividing the row) and all particles per lane."""
     from wptrack.resampling import quantisation_bits
 
     g_rows = 5
@@ -593,7 +594,7 @@ def test_grouped_systematic_rows_match_numpy(device, rng, n):
         kres.grouped_systematic_kernel,
         dim=[g_rows],
         inputs=[wp.array(w, dtype=wp.float64, device=device), wp.array(active, dtype=wp.int32, device=device), scale,
-                SEED, wp.array([frame], dtype=wp.int32, device=device), n],
+                SEED, wp.array([frame], dtype=wp.int32, device=device), n, per_lane],
         outputs=[anc],
         block_dim=1 if wp.get_device(device).is_cpu else 256,
         device=device,

@@ -45,7 +45,7 @@ from wptrack.kernels import slots as kslots
 from wptrack.kernels import uoh as kuoh
 from wptrack.kernels import xor as kxor
 from wptrack.pf import BLOCK, MAX_BLOCKS, FrameChain, _seed_words, check_fits
-from wptrack.resampling import Resampler, bytes_per_particle, quantisation_bits
+from wptrack.resampling import PER_LANE_GPU, Resampler, bytes_per_particle, quantisation_bits
 from wptrack.rig import Camera, GroundPlane, Rig
 from wptrack.warpcams import camera_struct
 
@@ -313,10 +313,12 @@ def piece_cap(pieces: int) -> int:
 
 
 @functools.cache
-def _no_groups(device: str) -> tuple[wp.array, wp.array, wp.array]:
-    """``(group_box, n_groups, group_sums)`` of no groups on ``device`` (the joint filter; allocated once)."""
+def _no_groups(device: str) -> tuple[wp.array, wp.array, wp.array, wp.array]:
+    """``(group_box, n_groups, slot_group, group_sums)`` of no groups on ``device`` (the joint filter; allocated
+    once)."""
     return (
         wp.zeros(1, dtype=wp.vec4i, device=device),
+        wp.zeros(1, dtype=wp.int32, device=device),
         wp.zeros(1, dtype=wp.int32, device=device),
         wp.zeros((1, 1), dtype=wp.vec2i, device=device),
     )
@@ -343,24 +345,26 @@ def launch_xor_score(
     cov_diff: wp.array,
     device: str,
     band: int = 0,
-    groups: tuple[wp.array, wp.array, wp.array] | None = None,
+    groups: tuple[wp.array, wp.array, wp.array, wp.array] | None = None,
 ) -> None:
     """Eqs. 4-6 for every particle (``kernels.xor``) and the coverage counts: with ``band`` > 0 a thread per band of
     ``band`` rows and particle (``xor_band_kernel``, then ``xor_finish_kernel``; ``sums`` (N,) vec2i zeros, left
     zeroed), else a block per particle (``xor_score_kernel``). The same outputs bit for bit either way.
 
-    ``groups`` = ``(group_box, n_groups, group_sums)`` (``kernels.partition``) also sums |v| and |q AND v| per
-    independent group into ``group_sums`` (N, R) vec2i (zeros; ``xor.group_logw_kernel`` reads and clears them)."""
+    ``groups`` = ``(group_box, n_groups, slot_group, group_sums)`` (``kernels.partition``) also sums |v| and |q AND
+    v| per independent group into ``group_sums`` (N, R) vec2i (zeros; ``xor.group_logw_kernel`` reads and clears
+    them); the band kernel then runs a thread per (group, band, particle)."""
     n = kind.shape[0]
     cost = [kind, age, pos, heading, dims, qtotal, cost_a, cost_b, scale, bg_weight, exclusion]
     grouped = groups is not None
-    group_box, n_groups, group_sums = groups if grouped else _no_groups(str(device))
+    group_box, n_groups, slot_group, group_sums = groups if grouped else _no_groups(str(device))
     if band > 0:
         h = qrow.shape[0]
+        bands = (h + band - 1) // band
         wp.launch(
             kxor.xor_band_kernel(piece_cap(hulls.n.shape[1]), grouped),
-            dim=((h + band - 1) // band, n),
-            inputs=[hulls.pts, hulls.n, hulls.rows, qrow, int(band), group_box, n_groups],
+            dim=(group_sums.shape[1], bands, n) if grouped else (bands, n),
+            inputs=[hulls.pts, hulls.n, hulls.rows, qrow, int(band), group_box, n_groups, slot_group],
             outputs=[sums, cov_diff, group_sums],
             device=device,
         )
@@ -479,6 +483,7 @@ class TemplateTracker(FrameChain):
         # independent groups of slots (kernels.partition); the joint filter keeps every slot in group 0
         self.slot_group = wp.zeros(r, dtype=wp.int32, device=d)
         self.slot_box = wp.zeros(r, dtype=wp.vec4i, device=d)
+        self.slot_alive = wp.zeros(r, dtype=wp.int32, device=d)
         self.group_box = wp.zeros(r, dtype=wp.vec4i, device=d)
         self.group_first = wp.full(r, -1, dtype=wp.int32, device=d)
         self.group_active = wp.zeros(r, dtype=wp.int32, device=d)
@@ -571,14 +576,21 @@ class TemplateTracker(FrameChain):
                 block_dim=BLOCK,
                 device=self.device,
             )  # fmt: skip
+            wp.launch_tiled(
+                kpart.slot_box_final_kernel,
+                dim=[self.r],
+                inputs=[self.part_box, self.part_alive, self.blocks],
+                outputs=[self.slot_box, self.slot_alive],
+                block_dim=BLOCK,
+                device=self.device,
+            )
             wp.launch(
                 kpart.group_slots_kernel,
                 dim=1,
-                inputs=[self.part_box, self.part_alive, self.blocks, 1],
-                outputs=[self.slot_box, self.slot_group, self.group_box, self.group_first, self.group_active,
-                         self.n_groups],
+                inputs=[self.slot_box, self.slot_alive, 1],
+                outputs=[self.slot_group, self.group_box, self.group_first, self.group_active, self.n_groups],
                 device=self.device,
-            )  # fmt: skip
+            )
         if self.use_occlusion:  # beyond the paper: per-object occlusion for the prediction (kernels.occlusion)
             wp.launch(
                 kocc.occlusion_kernel,
@@ -595,7 +607,7 @@ class TemplateTracker(FrameChain):
             self.hulls, s.kind, s.age, s.pos, s.heading, s.dims, self.qrow, self.qtotal, self.cost_a, self.cost_b,
             self.score_scale, float(cfg.bg_weight), float(cfg.exclusion), self.xor_sums, s.logw, self.penalty,
             self.complexity, self.cov_diff, self.device, band=self.xor_band,
-            groups=(self.group_box, self.n_groups, self.group_sums) if self.partition else None,
+            groups=(self.group_box, self.n_groups, self.slot_group, self.group_sums) if self.partition else None,
         )  # fmt: skip
         if self.partition:  # each group's factor of eq. 6 (kernels.xor.group_logw_kernel)
             wp.launch_tiled(
@@ -775,7 +787,15 @@ class TemplateTracker(FrameChain):
             wp.launch_tiled(
                 kres.grouped_systematic_kernel,
                 dim=[self.r],
-                inputs=[self.weights, self.group_active, self.group_scale, self.seed, self.frame, self.n],
+                inputs=[
+                    self.weights,
+                    self.group_active,
+                    self.group_scale,
+                    self.seed,
+                    self.frame,
+                    self.n,
+                    self.n if not self.is_cuda else PER_LANE_GPU,
+                ],
                 outputs=[self.ancestors],
                 block_dim=1 if not self.is_cuda else BLOCK,
                 device=d,
