@@ -713,6 +713,29 @@ def quantised_weights_kernel(
 # --- one systematic resampling per row of weights, in one launch (the template tracker's independent groups) ----
 
 
+@wp.func
+def slot_at(cdf: wp.array2d(dtype=wp.int64), g: int, ratio: wp.float64, u: wp.float64, n: int, i: int):
+    """``slot(C_i)`` of row ``g`` (:func:`systematic_slot_exact`), ``n`` for the last parent (as the scatter)."""
+    s = n
+    if i < n - 1:
+        s = systematic_slot_exact(cdf[g, i], ratio, u, n)
+    return s
+
+
+@wp.func
+def first_above(cdf: wp.array2d(dtype=wp.int64), g: int, ratio: wp.float64, u: wp.float64, n: int, j: int, lo: int,
+                hi: int):  # fmt: skip
+    """The smallest parent ``i`` in ``[lo, hi]`` with ``slot(C_i) > j`` (``hi`` is one, or the last parent): the
+    parent of output slot ``j`` when ``lo`` is at or below it."""
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if slot_at(cdf, g, ratio, u, n, mid) > j:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
 @wp.kernel
 def grouped_systematic_kernel(
     weights: wp.array2d(dtype=wp.float64),
@@ -722,17 +745,24 @@ def grouped_systematic_kernel(
     frame: wp.array(dtype=wp.int32),
     n: int,
     per_lane: int,
+    cdf: wp.array2d(dtype=wp.int64),
     ancestors: wp.array2d(dtype=wp.int32),
 ):
     """Systematic resampling of every row ``g`` of ``weights`` on its own, on the exact integer CDF of
-    :func:`systematic_logw_kernel`: ``q_i = floor(w_i scale)``, parent ``i`` fills the slots ``[slot(C_{i-1}),
-    slot(C_i))`` with ``slot(c) = floor(n c / T + U_g)`` and one uniform per row and frame (Philox counter ``(g,
-    frame, STREAM_RESAMPLE)``: independent draws for the rows; row 0 draws the joint filter's U). Rows with
-    ``active[g] == 0`` get the identity. Launch ``wp.launch_tiled(dim=[G], block_dim=B)``: one block per row; a
-    first pass sums the row (lanes strided), then the block walks it in rounds of ``B per_lane`` particles,
-    ``per_lane`` contiguous ones per lane, scanned exactly (int64 warp shuffles), as :func:`systematic_logw_kernel`
-    (the CPU backend: one lane, ``per_lane`` = n). Meant for the template tracker's particle counts (one block
-    per row).
+    :func:`systematic_logw_kernel`: ``q_i = floor(w_i scale)``, ``C_i = q_0 + ... + q_i``, and output slot ``j`` takes
+    the parent ``min{i : slot(C_i) > j}`` with ``slot(c) = floor(n c / T + U_g)`` (clamped to [0, n], ``slot(C_{n-1})
+    = n``): parent ``i`` fills ``[slot(C_{i-1}), slot(C_i))``, as in the scatter of :func:`systematic_logw_kernel`. One
+    uniform per row and frame (Philox counter ``(g, frame, STREAM_RESAMPLE)``: independent draws for the rows; row 0
+    draws the joint filter's U). Rows with ``active[g] == 0`` get the identity.
+
+    Launch ``wp.launch_tiled(dim=[G], block_dim=B)``, one block per row: the lanes sum the row (strided), write the
+    exact CDF in rounds of ``B per_lane`` particles (``per_lane`` contiguous ones per lane, int64 warp-shuffle scans),
+    then each lane takes a contiguous run of output slots: a binary search for the first one's parent, then a galloping
+    search forward from parent to parent (one or two CDF reads a slot when the weights are spread, a few searches when
+    they are concentrated): no lane writes a long offspring range alone, so weights concentrated on one parent cost no
+    more than spread ones. The block scan between the passes is the
+    barrier that makes the CDF visible to every lane. CPU backend: one lane, ``per_lane`` = n. Meant for the template
+    tracker's particle counts (one block per row).
 
     Args:
         weights: (G, n) float64 non-negative weights, at most 1 (``exp(logw - max)``), with a positive maximum.
@@ -740,7 +770,8 @@ def grouped_systematic_kernel(
         scale: 2^k with ``n 2^k <= 2^60`` (``wptrack.resampling.quantisation_bits``).
         seed, frame: the run's key and the filter iteration.
         n: particles per row.
-        per_lane: contiguous particles per lane and round (any value >= 1 gives the same ancestors).
+        per_lane: contiguous particles per lane and round of the CDF pass (any value >= 1 gives the same CDF).
+        cdf: (G, n) int64 scratch: the rows' exact CDFs.
         ancestors: (G, n) int32 output parents.
     """
     g, lane = wp.tid()
@@ -753,8 +784,6 @@ def grouped_systematic_kernel(
     for i in range(lane, n, bd):
         every += wp.int64(wp.floor(weights[g, i] * scale))
     total = block_scan_int64(every, lane, bd)[1]
-    u = word_to_unit64(random_words(seed, g, frame[0], STREAM_RESAMPLE)[0])
-    ratio = wp.float64(n) / wp.float64(total)
     carry = wp.int64(0)
     for base in range(0, n, bd * per_lane):
         first = base + lane * per_lane
@@ -764,15 +793,29 @@ def grouped_systematic_kernel(
                 own += wp.int64(wp.floor(weights[g, first + k] * scale))
         scan = block_scan_int64(own, lane, bd)
         c = carry + scan[0] - own  # exact cumulative weight before this lane's first particle
-        lo = systematic_slot_exact(c, ratio, u, n)
         for k in range(per_lane):
             i = first + k
             if i < n:
                 c += wp.int64(wp.floor(weights[g, i] * scale))
-                hi = systematic_slot_exact(c, ratio, u, n)
-                if i == n - 1:
-                    hi = n
-                for s in range(lo, hi):
-                    ancestors[g, s] = i
-                lo = hi
+                cdf[g, i] = c
         carry += scan[1]
+    block_scan_int64(wp.int64(0), lane, bd)  # a block barrier: every lane's CDF entries are written
+    u = word_to_unit64(random_words(seed, g, frame[0], STREAM_RESAMPLE)[0])
+    ratio = wp.float64(n) / wp.float64(total)
+    # each lane a contiguous run of output slots: a binary search for the first one's parent, then gallop forward
+    per = (n + bd - 1) // bd
+    j0 = wp.min(lane * per, n)
+    j1 = wp.min(j0 + per, n)
+    if j0 < j1:
+        i = first_above(cdf, g, ratio, u, n, j0, 0, n - 1)
+        for j in range(j0, j1):
+            if slot_at(cdf, g, ratio, u, n, i) <= j:
+                lo = i + 1
+                step = int(1)
+                hi = wp.min(i + 1, n - 1)
+                while hi < n - 1 and slot_at(cdf, g, ratio, u, n, hi) <= j:
+                    lo = hi + 1
+                    step = step * 2
+                    hi = wp.min(i + step, n - 1)
+                i = first_above(cdf, g, ratio, u, n, j, lo, hi)
+            ancestors[g, j] = i

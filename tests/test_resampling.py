@@ -571,13 +571,17 @@ def test_long_ranges_cuda_graph(device, rng):
         np.testing.assert_array_equal(anc.numpy(), systematic_exact_reference(q, 2, device))
 
 
-@pytest.mark.parametrize(("n", "per_lane"), [(1, 4), (255, 4), (1000, 4), (4097, 4), (4097, 3), (1000, 1000)])
-def test_grouped_systematic_rows_match_numpy(device, rng, n, per_lane):
+@pytest.mark.parametrize(
+    ("n", "per_lane", "block"), [(1, 4, 1024), (255, 4, 1024), (1000, 4, 256), (4097, 4, 1024), (4097, 3, 64),
+                                 (1000, 1000, 1024)]
+)  # fmt: skip
+def test_grouped_systematic_rows_match_numpy(device, rng, n, per_lane, block):
     """grouped_systematic_kernel (the template tracker's independent groups): each active row is systematic
     resampling of its own weights on the exact integer CDF floor(w 2^k), with the uniform of Philox counter (row,
     frame, STREAM_RESAMPLE), equal to the NumPy reference; inactive rows get the identity; rows 0 and 1 hold the
-    same weights and differ (independent uniforms). One lane on the CPU, 256 on CUDA (the tracker's launch), rounds of
-    4, 3 (not dividing the row) and all particles per lane."""
+    same weights and differ (independent uniforms); a row whose weight is on one parent. One lane on the CPU, blocks
+    of 1024 (the tracker's launch), 256 and 64 on CUDA, rounds of 4, 3 (not dividing the row) and all particles per
+    lane."""
     from wptrack.resampling import quantisation_bits
 
     g_rows = 5
@@ -586,6 +590,8 @@ def test_grouped_systematic_rows_match_numpy(device, rng, n, per_lane):
     w[:, n // 2] = 1.0
     w /= w.max(axis=1, keepdims=True)
     w[1] = w[0]
+    w[2] = 0.0  # weights concentrated on one parent: every slot of row 2 searches its way to it
+    w[2, n // 3] = 1.0
     active = np.array([1, 1, 1, 0, 1], np.int32)
     scale = float(2 ** quantisation_bits(n))
     anc = wp.full((g_rows, n), -1, dtype=wp.int32, device=device)
@@ -594,9 +600,10 @@ def test_grouped_systematic_rows_match_numpy(device, rng, n, per_lane):
         kres.grouped_systematic_kernel,
         dim=[g_rows],
         inputs=[wp.array(w, dtype=wp.float64, device=device), wp.array(active, dtype=wp.int32, device=device), scale,
-                SEED, wp.array([frame], dtype=wp.int32, device=device), n, per_lane],
+                SEED, wp.array([frame], dtype=wp.int32, device=device), n, per_lane,
+                wp.zeros((g_rows, n), dtype=wp.int64, device=device)],
         outputs=[anc],
-        block_dim=1 if wp.get_device(device).is_cpu else 256,
+        block_dim=1 if wp.get_device(device).is_cpu else block,
         device=device,
     )  # fmt: skip
     got = anc.numpy()

@@ -76,6 +76,9 @@ def xor_band(particles: int, height: int) -> int:
     return band
 
 
+GROUP_RESAMPLE_BLOCK = 1024
+"""Threads of the block that resamples one group on CUDA (``kernels.resample.grouped_systematic_kernel``; one block
+per group: its passes are latency-bound, so the widest block)."""
 ROW_BLOCK = 128
 """Threads per image row in the row-scan kernels (mask prefix sums, coverage/UOH/gain rows): each owns a segment of
 ceil(W / ROW_BLOCK) pixels."""
@@ -129,10 +132,10 @@ SLOT_STATE_BYTES = (
 """Device bytes per object slot of a particle: two ping-pong state buffers and the piece hulls."""
 PARTICLE_BYTES = 2 * 4 + 4 + 4 + 4 + 8 + 8
 """Device bytes per particle besides the slots: log-weights (2), penalty, complexity, ancestor, weight, XOR sums."""
-PARTITION_SLOT_BYTES = 8 + 4 + 4 + 8
+PARTITION_SLOT_BYTES = 8 + 4 + 4 + 8 + 8
 """Device bytes per slot and particle of the partitioned filter (``TemplateConfig.partition``), besides the joint
-filter's: a weight (float64), an ancestor and a log-factor per group (a group per slot at most), and the group sums
-(two int32)."""
+filter's: a weight (float64), an ancestor, a log-factor and an exact CDF entry (int64) per group (a group per slot at
+most), and the group sums (two int32)."""
 
 
 def particle_bytes(max_objects: int, scheme: str, partition: bool = False) -> int:
@@ -499,6 +502,7 @@ class TemplateTracker(FrameChain):
         self._ancestor_rows = [self.ancestors[g] for g in range(rows)]
         self._active_rows = [self.group_active[g : g + 1] for g in range(r)]
         self.group_scale = float(2 ** quantisation_bits(n))  # the exact integer CDF of grouped_systematic_kernel
+        self.group_cdf = wp.zeros((gr, gn), dtype=wp.int64, device=d)
         self._group_seeds = [
             wp.vec2ui(int(self.seed[0]) ^ ((0x9E3779B9 * g) & 0xFFFFFFFF), int(self.seed[1])) for g in range(rows)
         ]
@@ -795,9 +799,10 @@ class TemplateTracker(FrameChain):
                     self.frame,
                     self.n,
                     self.n if not self.is_cuda else PER_LANE_GPU,
+                    self.group_cdf,
                 ],
                 outputs=[self.ancestors],
-                block_dim=1 if not self.is_cuda else BLOCK,
+                block_dim=1 if not self.is_cuda else GROUP_RESAMPLE_BLOCK,
                 device=d,
             )
         elif self.partition:  # the other schemes: one resampler call per group
