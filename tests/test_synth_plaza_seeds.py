@@ -280,6 +280,7 @@ def test_accuracy_cache_renders_stale_scenes_again(tmp_path, caplog) -> None:
 def test_accuracy_workers_give_the_same_table(tmp_path) -> None:
     """template_accuracy with two worker processes gives the same per-run evaluations and table as in-process runs
     (every run is seeded and independent); a worker count below 1 is refused with the field named."""
+    pytest.importorskip("motmetrics")
     from wptrack.errors import ConfigError
     from wptrack.experiments import template_accuracy
 
