@@ -314,9 +314,9 @@ def xor_band_kernel(cap: int, grouped: bool = False) -> wp.Kernel:
     """The band kernel for particles of at most ``cap`` pieces (a power of two, 2 to ``MAX_PIECES``), compiled once
     per ``cap`` and ``grouped``.
 
-    Launch with ``dim=(ceil(H / band), N)``: thread ``(b, i)`` takes rows ``[b band, (b + 1) band)`` of particle
-    ``i`` (neighbouring threads: neighbouring particles on the same rows) and adds its rows' |v_i| and |q AND v_i|
-    to ``sums[i]`` (one atomic add per band that covers anything) and the merged intervals' coverage adds to
+    Launch with ``dim=(1, ceil(H / band), N)``: thread ``(0, b, i)`` takes rows ``[b band, (b + 1) band)`` of
+    particle ``i`` (neighbouring threads: neighbouring particles on the same rows) and adds its rows' |v_i| and |q AND
+    v_i| to ``sums[i]`` (one atomic add per band that covers anything) and the merged intervals' coverage adds to
     ``cov_diff``, as ``xor_score_kernel`` does for the particle's rows.
 
     ``grouped`` (the partitioned filter, ``kernels.partition``): launch with ``dim=(G, ceil(H / band), N)`` for up
@@ -415,33 +415,8 @@ def xor_band_kernel(cap: int, grouped: bool = False) -> wp.Kernel:
                             e = span[k] & LOW
         return covered, both
 
-    if not grouped:
-
-        @wp.kernel(enable_backward=False, module="unique")
-        def xor_band_kernel(
-            hull_pts: wp.array3d(dtype=wp.vec2),
-            hull_n: wp.array2d(dtype=wp.int32),
-            hull_rows: wp.array2d(dtype=wp.vec2i),
-            qrow: wp.array2d(dtype=wp.int32),
-            band: int,
-            group_box: wp.array(dtype=wp.vec4i),
-            n_groups: wp.array(dtype=wp.int32),
-            slot_group: wp.array(dtype=wp.int32),
-            sums: wp.array(dtype=wp.vec2i),
-            cov_diff: wp.array2d(dtype=wp.int32),
-            group_sums: wp.array2d(dtype=wp.vec2i),
-        ):
-            b, i = wp.tid()
-            ya = b * band
-            yb = wp.min(ya + band, qrow.shape[0]) - 1
-            covered, both = band_sums(hull_pts, hull_n, hull_rows, qrow, i, ya, yb, slot_group, -1, cov_diff)
-            if covered > 0:
-                wp.atomic_add(sums, i, wp.vec2i(covered, both))
-
-        return xor_band_kernel
-
     @wp.kernel(enable_backward=False, module="unique")
-    def xor_band_group_kernel(
+    def xor_band_kernel(
         hull_pts: wp.array3d(dtype=wp.vec2),
         hull_n: wp.array2d(dtype=wp.int32),
         hull_rows: wp.array2d(dtype=wp.vec2i),
@@ -455,19 +430,25 @@ def xor_band_kernel(cap: int, grouped: bool = False) -> wp.Kernel:
         group_sums: wp.array2d(dtype=wp.vec2i),
     ):
         g, b, i = wp.tid()
-        if g >= n_groups[0]:
-            return
-        box = group_box[g]
-        ya = wp.max(b * band, box[1])
-        yb = wp.min(wp.min(b * band + band, qrow.shape[0]) - 1, box[3])
-        if ya > yb:
-            return
-        covered, both = band_sums(hull_pts, hull_n, hull_rows, qrow, i, ya, yb, slot_group, g, cov_diff)
+        ya = b * band
+        yb = wp.min(ya + band, qrow.shape[0]) - 1
+        only = int(-1)  # every piece of the particle, or (grouped) those of group g's slots
+        if wp.static(grouped):
+            if g >= n_groups[0]:
+                return
+            box = group_box[g]
+            ya = wp.max(ya, box[1])
+            yb = wp.min(yb, box[3])
+            if ya > yb:
+                return
+            only = g
+        covered, both = band_sums(hull_pts, hull_n, hull_rows, qrow, i, ya, yb, slot_group, only, cov_diff)
         if covered > 0:
             wp.atomic_add(sums, i, wp.vec2i(covered, both))
-            wp.atomic_add(group_sums, i, g, wp.vec2i(covered, both))
+            if wp.static(grouped):
+                wp.atomic_add(group_sums, i, g, wp.vec2i(covered, both))
 
-    return xor_band_group_kernel
+    return xor_band_kernel
 
 
 @wp.kernel

@@ -411,30 +411,37 @@ def test_resolve_levels_penumbra_near_shadow_only():
     assert resolve_levels(far.copy()).sum() == 20 * (15 - PENUMBRA_PX - 1)
 
 
+def _shadow_and_object(rng, shadow: float, dark: float):
+    """Masks of a grey floor (140) crossed by a moving cast shadow (brightness ratio ``shadow``) and a moving neutral
+    dark object (ratio ``dark``), with the fixed shadow bounds and with the learnt band: ``(fixed, learnt, learnt
+    ratio, shadow region, object region)`` at frame 12."""
+    grey = np.full((H, W, 3), 140.0, np.float32)
+    frames = 25
+    video = _noisy(rng, grey, frames, noise=2.0)
+    for t in range(frames):
+        img = grey.copy()
+        img[5:35, 4 * t : 4 * t + 14] *= shadow
+        img[45:65, 86 - 3 * t : 86 - 3 * t + 10] *= dark
+        video[t] = np.clip(img + rng.normal(0, 2.0, img.shape), 0, 255).astype(np.uint8)
+    base = dict(window=frames, samples=frames, device="cpu", fg_low=2.0, neighbourhood=0)
+    fixed = np.stack(list(open_masks(video=video, config=MaskConfig(**base, shadow_band=0.0))))
+    learnt_masks = open_masks(video=video, config=MaskConfig(**base, shadow_band=0.08))
+    learnt = np.stack(list(learnt_masks))
+    t = 12
+    shadow_px, obj_px = np.s_[7:33, 4 * t + 2 : 4 * t + 12], np.s_[47:63, 88 - 3 * t : 86 - 3 * t + 8]
+    return fixed[t], learnt[t], learnt_masks.model._ratio[0], shadow_px, obj_px
+
+
 def test_learnt_shadow_ratio_removes_deep_shadows_keeps_dark_objects(rng):
     """Hard shadows darker than shadow_lo (ratio 0.36) move across a grey floor next to a dark grey object
     (ratio 0.7, neutral: the fixed test takes it for a shadow). The learnt ratio removes the shadows and keeps the
     object; the fixed bounds do the opposite."""
     from wptrack.background import shadow_ratio
 
-    grey = np.full((H, W, 3), 140.0, np.float32)
-    frames = 25
-    video = _noisy(rng, grey, frames, noise=2.0)
-    for t in range(frames):
-        img = grey.copy()
-        img[5:35, 4 * t : 4 * t + 14] *= 0.36  # the shadow
-        img[45:65, 86 - 3 * t : 86 - 3 * t + 10] *= 0.7  # the dark object
-        video[t] = np.clip(img + rng.normal(0, 2.0, img.shape), 0, 255).astype(np.uint8)
-    base = dict(window=frames, samples=frames, device="cpu", fg_low=2.0, neighbourhood=0)
-    fixed = np.stack(list(open_masks(video=video, config=MaskConfig(**base, shadow_band=0.0))))
-    learnt_masks = open_masks(video=video, config=MaskConfig(**base, shadow_band=0.08))
-    learnt = np.stack(list(learnt_masks))
-    ratio = learnt_masks.model._ratio[0]
+    fixed, learnt, ratio, shadow, obj = _shadow_and_object(rng, 0.36, 0.7)
     assert ratio is not None and abs(ratio - 0.36) < 0.03
-    t = 12
-    shadow, obj = np.s_[7:33, 4 * t + 2 : 4 * t + 12], np.s_[47:63, 88 - 3 * t : 86 - 3 * t + 8]
-    assert fixed[t][shadow].mean() > 0.95 and fixed[t][obj].mean() < 0.05
-    assert learnt[t][shadow].mean() < 0.01 and learnt[t][obj].mean() > 0.95
+    assert fixed[shadow].mean() > 0.95 and fixed[obj].mean() < 0.05
+    assert learnt[shadow].mean() < 0.01 and learnt[obj].mean() > 0.95
     flat = np.full((4, 100, 3), 100, np.uint8)
     assert shadow_ratio(flat, np.ones((4, 3)), flat[0].astype(float), np.ones((100, 3)), 4.0, 3.0, 0.1) is None
 
@@ -444,24 +451,10 @@ def test_learnt_faint_shadow_ratio_keeps_dark_clothes(rng):
     next to dark neutral clothes (ratio 0.6, jeans on asphalt). The fixed bounds [0.4, 0.95] take both for shadow;
     the learnt ratio bounds the umbra from below too (r - band = 0.82: nothing darker than this scene's shadows is
     one of them), so the clothes stay foreground and the shadows go."""
-    grey = np.full((H, W, 3), 140.0, np.float32)
-    frames = 25
-    video = _noisy(rng, grey, frames, noise=2.0)
-    for t in range(frames):
-        img = grey.copy()
-        img[5:35, 4 * t : 4 * t + 14] *= 0.9  # the faint shadow
-        img[45:65, 86 - 3 * t : 86 - 3 * t + 10] *= 0.6  # the dark clothes
-        video[t] = np.clip(img + rng.normal(0, 2.0, img.shape), 0, 255).astype(np.uint8)
-    base = dict(window=frames, samples=frames, device="cpu", fg_low=2.0, neighbourhood=0)
-    fixed = np.stack(list(open_masks(video=video, config=MaskConfig(**base, shadow_band=0.0))))
-    learnt_masks = open_masks(video=video, config=MaskConfig(**base, shadow_band=0.08))
-    learnt = np.stack(list(learnt_masks))
-    ratio = learnt_masks.model._ratio[0]
+    fixed, learnt, ratio, shadow, obj = _shadow_and_object(rng, 0.9, 0.6)
     assert ratio is not None and abs(ratio - 0.9) < 0.03
-    t = 12
-    shadow, obj = np.s_[7:33, 4 * t + 2 : 4 * t + 12], np.s_[47:63, 88 - 3 * t : 86 - 3 * t + 8]
-    assert fixed[t][shadow].mean() < 0.05 and fixed[t][obj].mean() < 0.05
-    assert learnt[t][shadow].mean() < 0.05 and learnt[t][obj].mean() > 0.95
+    assert fixed[shadow].mean() < 0.05 and fixed[obj].mean() < 0.05
+    assert learnt[shadow].mean() < 0.05 and learnt[obj].mean() > 0.95
 
 
 @pytest.mark.parametrize(("radius", "scale"), [(1, 1.0), (2, 0.7)])

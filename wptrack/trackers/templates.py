@@ -366,7 +366,7 @@ def launch_xor_score(
         bands = (h + band - 1) // band
         wp.launch(
             kxor.xor_band_kernel(piece_cap(hulls.n.shape[1]), grouped),
-            dim=(group_sums.shape[1], bands, n) if grouped else (bands, n),
+            dim=(group_sums.shape[1] if grouped else 1, bands, n),
             inputs=[hulls.pts, hulls.n, hulls.rows, qrow, int(band), group_box, n_groups, slot_group],
             outputs=[sums, cov_diff, group_sums],
             device=device,
