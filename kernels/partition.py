@@ -25,8 +25,8 @@ particles survive. The factorisation holds exactly for the boxes of the frame be
 the paper. A slot held by some particle but drawn by none (its object out of view everywhere) is a group of its own
 with an empty box (its factor is its complexity alone).
 
-Kernels (launch order): :func:`slot_box_partials_kernel` (per block of particles and slot),
-:func:`slot_box_final_kernel` (per slot), then :func:`group_slots_kernel` (one thread). The groups' factors are
+Kernels (launch order): :func:`slot_box_kernel` (per block of particles and slot, one atomic maximum per block),
+then :func:`group_slots_kernel` (one thread). The groups' factors are
 summed by ``kernels.xor`` and weighed by ``kernels.xor.group_logw_kernel``.
 """
 
@@ -38,7 +38,7 @@ from .reduce import block_argmax
 wp.set_module_options({"enable_backward": False})
 
 BOX_NONE = wp.constant(-1073741824)
-"""Sentinel of the box partials: ``-x0``, ``-y0``, ``x1``, ``y1`` are reduced by max, and an empty box is this in
+"""Sentinel of the box maxima: ``-x0``, ``-y0``, ``x1``, ``y1`` are reduced by max, and an empty box is this in
 all four (``x1 < x0``)."""
 
 vec16i = wp.types.vector(length=16, dtype=wp.int32)
@@ -75,7 +75,7 @@ def max4(a: wp.vec4i, b: wp.vec4i):
 
 
 @wp.kernel
-def slot_box_partials_kernel(
+def slot_box_kernel(
     hull_pts: wp.array3d(dtype=wp.vec2),
     hull_n: wp.array2d(dtype=wp.int32),
     hull_rows: wp.array2d(dtype=wp.vec2i),
@@ -84,20 +84,20 @@ def slot_box_partials_kernel(
     chunk: int,
     width: int,
     height: int,
-    part_box: wp.array2d(dtype=wp.vec4i),
-    part_alive: wp.array2d(dtype=wp.int32),
+    slot_acc: wp.array2d(dtype=wp.int32),
 ):
     """Per block of particles and slot: the union of the slot's drawn pieces' boxes and whether any particle of
-    the block holds the slot. Launch ``wp.launch_tiled(dim=[blocks, R], block_dim=B)``; block ``b`` owns particles
-    ``[b chunk, (b+1) chunk)`` (one lane on the CPU backend).
+    the block holds the slot, reduced by the block, then merged into ``slot_acc`` by one atomic maximum per block and
+    component (no per-particle atomics). Launch ``wp.launch_tiled(dim=[blocks, R], block_dim=B)``; block ``b`` owns
+    particles ``[b chunk, (b+1) chunk)`` (one lane on the CPU backend).
 
     Args:
         hull_pts, hull_n, hull_rows: the particles' piece hulls (``raster.template_hulls_kernel``), (N, R PIECES).
         kind: (N, R) KIND_* per slot.
         n, chunk: particles and particles per block.
         width, height: image size, pixels.
-        part_box: (blocks, R) ``(-x0, -y0, x1, y1)`` pixels, :data:`BOX_NONE` in all four where nothing is drawn.
-        part_alive: (blocks, R) 1 where some particle of the block holds the slot.
+        slot_acc: (R, 5) ``(-x0, -y0, x1, y1, alive)`` pixels, maxima over the particles; on entry :data:`BOX_NONE` in
+            the first four columns and 0 in the last (as :func:`group_slots_kernel` leaves it).
     """
     b, s, lane = wp.tid()
     start = b * chunk
@@ -118,9 +118,12 @@ def slot_box_partials_kernel(
     m2, _a2 = block_argmax(float(box[2]), 0)
     m3, _a3 = block_argmax(float(box[3]), 0)
     ma, _a4 = block_argmax(float(alive), 0)
-    if lane == 0:
-        part_box[b, s] = wp.vec4i(int(m0), int(m1), int(m2), int(m3))
-        part_alive[b, s] = int(ma)
+    if lane == 0 and int(ma) != 0:  # a block holding no particle of the slot changes nothing
+        wp.atomic_max(slot_acc, s, 0, int(m0))
+        wp.atomic_max(slot_acc, s, 1, int(m1))
+        wp.atomic_max(slot_acc, s, 2, int(m2))
+        wp.atomic_max(slot_acc, s, 3, int(m3))
+        wp.atomic_max(slot_acc, s, 4, 1)
 
 
 @wp.func
@@ -140,60 +143,28 @@ def root_of(parent: vec16i, s: int):
 
 
 @wp.kernel
-def slot_box_final_kernel(
-    part_box: wp.array2d(dtype=wp.vec4i),
-    part_alive: wp.array2d(dtype=wp.int32),
-    blocks: int,
-    slot_box: wp.array(dtype=wp.vec4i),
-    slot_alive: wp.array(dtype=wp.int32),
-):
-    """The slot boxes from the per-block partials: launch ``wp.launch_tiled(dim=[R], block_dim=B)``, a block per
-    slot whose lanes stride over the ``blocks`` partials.
-
-    Args:
-        part_box, part_alive: (blocks, R) from :func:`slot_box_partials_kernel`.
-        blocks: blocks of the partials.
-        slot_box: (R,) ``(x0, y0, x1, y1)`` pixels per slot (``(0, 0, -1, -1)``: drawn by no particle).
-        slot_alive: (R,) 1 where some particle holds the slot.
-    """
-    s, lane = wp.tid()
-    m = wp.vec4i(BOX_NONE, BOX_NONE, BOX_NONE, BOX_NONE)
-    a = int(0)
-    for b in range(lane, blocks, wp.block_dim()):
-        m = max4(m, part_box[b, s])
-        a = wp.max(a, part_alive[b, s])
-    m0, _a0 = block_argmax(float(m[0]), 0)
-    m1, _a1 = block_argmax(float(m[1]), 0)
-    m2, _a2 = block_argmax(float(m[2]), 0)
-    m3, _a3 = block_argmax(float(m[3]), 0)
-    ma, _a4 = block_argmax(float(a), 0)
-    if lane == 0:
-        box = wp.vec4i(0, 0, -1, -1)
-        if int(m2) != BOX_NONE:
-            box = wp.vec4i(-int(m0), -int(m1), int(m2), int(m3))
-        slot_box[s] = box
-        slot_alive[s] = int(ma)
-
-
-@wp.kernel
 def group_slots_kernel(
+    slot_acc: wp.array2d(dtype=wp.int32),
+    partition: int,
     slot_box: wp.array(dtype=wp.vec4i),
     slot_alive: wp.array(dtype=wp.int32),
-    partition: int,
     slot_group: wp.array(dtype=wp.int32),
     group_box: wp.array(dtype=wp.vec4i),
     group_first: wp.array(dtype=wp.int32),
     group_active: wp.array(dtype=wp.int32),
     n_groups: wp.array(dtype=wp.int32),
 ):
-    """The slots' groups (see the module docstring). One thread (``dim=1``); R <= 16 slots.
+    """The slot boxes from :func:`slot_box_kernel`'s maxima, which it resets for the next frame, then the slots'
+    groups (see the module docstring). One thread (``dim=1``); R <= 16 slots.
 
     Groups are numbered by their lowest slot, in slot order. With ``partition`` 0 every alive slot is put in group
     0 (the joint filter of the paper: one factor, one resampling).
 
     Args:
-        slot_box, slot_alive: (R,) from :func:`slot_box_final_kernel`.
+        slot_acc: (R, 5) from :func:`slot_box_kernel`; left as it expects it (:data:`BOX_NONE`, 0).
         partition: 1 to split the slots into independent groups, 0 for one group.
+        slot_box: (R,) ``(x0, y0, x1, y1)`` pixels per slot (``(0, 0, -1, -1)``: drawn by no particle).
+        slot_alive: (R,) 1 where some particle holds the slot.
         slot_group: (R,) group of each slot, -1 for a slot no particle holds.
         group_box: (R,) box of each group (the union of its slots' boxes; empty for a group of undrawn slots).
         group_first: (R,) lowest slot of each group (-1 past the last group).
@@ -208,13 +179,20 @@ def group_slots_kernel(
     y1 = vec16i()
     alive = vec16i()
     for s in range(r):
-        box = slot_box[s]
+        box = wp.vec4i(0, 0, -1, -1)
+        if slot_acc[s, 2] != BOX_NONE:
+            box = wp.vec4i(-slot_acc[s, 0], -slot_acc[s, 1], slot_acc[s, 2], slot_acc[s, 3])
+        slot_box[s] = box
+        slot_alive[s] = slot_acc[s, 4]
         parent[s] = s
         x0[s] = box[0]
         y0[s] = box[1]
         x1[s] = box[2]
         y1[s] = box[3]
-        alive[s] = slot_alive[s]
+        alive[s] = slot_acc[s, 4]
+        for c in range(4):
+            slot_acc[s, c] = BOX_NONE
+        slot_acc[s, 4] = 0
     if partition != 0:
         changed = int(1)
         while changed != 0:

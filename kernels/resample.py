@@ -740,11 +740,13 @@ def first_above(cdf: wp.array2d(dtype=wp.int64), g: int, ratio: wp.float64, u: w
 def grouped_systematic_kernel(
     weights: wp.array2d(dtype=wp.float64),
     active: wp.array(dtype=wp.int32),
+    part_q: wp.array2d(dtype=wp.int64),
+    blocks: int,
+    chunk: int,
     scale: wp.float64,
     seed: wp.vec2ui,
     frame: wp.array(dtype=wp.int32),
     n: int,
-    per_lane: int,
     cdf: wp.array2d(dtype=wp.int64),
     ancestors: wp.array2d(dtype=wp.int32),
 ):
@@ -755,67 +757,74 @@ def grouped_systematic_kernel(
     uniform per row and frame (Philox counter ``(g, frame, STREAM_RESAMPLE)``: independent draws for the rows; row 0
     draws the joint filter's U). Rows with ``active[g] == 0`` get the identity.
 
-    Launch ``wp.launch_tiled(dim=[G], block_dim=B)``, one block per row: the lanes sum the row (strided), write the
-    exact CDF in rounds of ``B per_lane`` particles (``per_lane`` contiguous ones per lane, int64 warp-shuffle scans),
-    then each lane takes a contiguous run of output slots: a binary search for the first one's parent, then a galloping
-    search forward from parent to parent (one or two CDF reads a slot when the weights are spread, a few searches when
-    they are concentrated): no lane writes a long offspring range alone, so weights concentrated on one parent cost no
-    more than spread ones. The block scan between the passes is the
-    barrier that makes the CDF visible to every lane. CPU backend: one lane, ``per_lane`` = n. Meant for the template
-    tracker's particle counts (one block per row).
+    Launch ``wp.launch_tiled(dim=[G, blocks], block_dim=B)``: block ``(g, b)`` owns the parents ``[b chunk, (b+1)
+    chunk)`` of row ``g`` and, because ``slot`` is monotone, the contiguous output slots ``[slot(C_{start-1}),
+    slot(C_{stop-1}))`` they fill. Its offset ``C_{start-1}`` and the row total ``T`` come from the per-block sums
+    ``part_q`` (``kernels.slots.block_slot_moments_kernel`` writes them beside the weights); the block writes its
+    parents' CDF (int64 warp-shuffle scans), then each lane takes a contiguous run of the block's output slots: a
+    binary search inside the block's parents for the first one, then a galloping search forward from parent to
+    parent. No lane writes a long offspring range alone, so weights concentrated on one parent cost no more than
+    spread ones, and every row's work spreads over ``blocks`` blocks. CPU backend: one lane per block.
 
     Args:
         weights: (G, n) float64 non-negative weights, at most 1 (``exp(logw - max)``), with a positive maximum.
         active: (G,) 1 for the rows to resample.
+        part_q: (blocks, G) int64 sums of ``q_i`` over each block's parents (rows of inactive groups unread).
+        blocks, chunk: blocks per row and parents per block (``blocks chunk >= n``).
         scale: 2^k with ``n 2^k <= 2^60`` (``wptrack.resampling.quantisation_bits``).
         seed, frame: the run's key and the filter iteration.
         n: particles per row.
-        per_lane: contiguous particles per lane and round of the CDF pass (any value >= 1 gives the same CDF).
         cdf: (G, n) int64 scratch: the rows' exact CDFs.
         ancestors: (G, n) int32 output parents.
     """
-    g, lane = wp.tid()
+    g, b, lane = wp.tid()
     bd = wp.block_dim()
-    if active[g] == 0:  # uniform over the block
-        for i in range(lane, n, bd):
+    start = b * chunk
+    stop = wp.min(start + chunk, n)
+    if stop <= start:  # uniform over the block: no parents, no output slots
+        return
+    if active[g] == 0:
+        for i in range(start + lane, stop, bd):
             ancestors[g, i] = i
         return
+    before = wp.int64(0)
     every = wp.int64(0)
-    for i in range(lane, n, bd):
-        every += wp.int64(wp.floor(weights[g, i] * scale))
+    for k in range(lane, blocks, bd):
+        v = part_q[k, g]
+        every += v
+        if k < b:
+            before += v
     total = block_scan_int64(every, lane, bd)[1]
-    carry = wp.int64(0)
-    for base in range(0, n, bd * per_lane):
-        first = base + lane * per_lane
-        own = wp.int64(0)
-        for k in range(per_lane):
-            if first + k < n:
-                own += wp.int64(wp.floor(weights[g, first + k] * scale))
-        scan = block_scan_int64(own, lane, bd)
-        c = carry + scan[0] - own  # exact cumulative weight before this lane's first particle
-        for k in range(per_lane):
-            i = first + k
-            if i < n:
-                c += wp.int64(wp.floor(weights[g, i] * scale))
-                cdf[g, i] = c
-        carry += scan[1]
-    block_scan_int64(wp.int64(0), lane, bd)  # a block barrier: every lane's CDF entries are written
+    carry = block_scan_int64(before, lane, bd)[1]  # C_{start-1}
     u = word_to_unit64(random_words(seed, g, frame[0], STREAM_RESAMPLE)[0])
     ratio = wp.float64(n) / wp.float64(total)
-    # each lane a contiguous run of output slots: a binary search for the first one's parent, then gallop forward
-    per = (n + bd - 1) // bd
-    j0 = wp.min(lane * per, n)
-    j1 = wp.min(j0 + per, n)
-    if j0 < j1:
-        i = first_above(cdf, g, ratio, u, n, j0, 0, n - 1)
-        for j in range(j0, j1):
+    j0 = systematic_slot_exact(carry, ratio, u, n)  # slot(C_{start-1}); 0 for the first block (U < 1)
+    for base in range(start, stop, bd):  # the block's parents' CDF, a round of bd parents at a time
+        i = base + lane
+        own = wp.int64(0)
+        if i < stop:
+            own = wp.int64(wp.floor(weights[g, i] * scale))
+        scan = block_scan_int64(own, lane, bd)
+        if i < stop:
+            cdf[g, i] = carry + scan[0]
+        carry += scan[1]
+    block_scan_int64(wp.int64(0), lane, bd)  # a block barrier: every lane's CDF entries are written
+    last = stop - 1
+    j1 = slot_at(cdf, g, ratio, u, n, last)
+    # each lane a contiguous run of the block's output slots: a binary search for the first one's parent, then gallop
+    per = (j1 - j0 + bd - 1) // bd
+    k0 = wp.min(j0 + lane * per, j1)
+    k1 = wp.min(k0 + per, j1)
+    if k0 < k1:
+        i = first_above(cdf, g, ratio, u, n, k0, start, last)
+        for j in range(k0, k1):
             if slot_at(cdf, g, ratio, u, n, i) <= j:
                 lo = i + 1
                 step = int(1)
-                hi = wp.min(i + 1, n - 1)
-                while hi < n - 1 and slot_at(cdf, g, ratio, u, n, hi) <= j:
+                hi = wp.min(i + 1, last)
+                while hi < last and slot_at(cdf, g, ratio, u, n, hi) <= j:
                     lo = hi + 1
                     step = step * 2
-                    hi = wp.min(i + step, n - 1)
+                    hi = wp.min(i + step, last)
                 i = first_above(cdf, g, ratio, u, n, j, lo, hi)
             ancestors[g, j] = i

@@ -13,6 +13,7 @@ import warp as wp
 from .dynamics import TemplateState
 from .raster import KIND_NONE, KIND_VEHICLE
 from .reduce import EST_MAXLOGW, NEG_INF, block_argmax, block_sum17, vec17d
+from .resample import block_scan_int64
 
 wp.set_module_options({"enable_backward": False})
 
@@ -48,8 +49,10 @@ def block_slot_moments_kernel(
     slot_group: wp.array(dtype=wp.int32),
     group_first: wp.array(dtype=wp.int32),
     partition: int,
+    scale: wp.float64,
     weights: wp.array2d(dtype=wp.float64),
     part: wp.array3d(dtype=wp.float64),
+    part_q: wp.array2d(dtype=wp.int64),
 ):
     """Normalised weights and per-block sums of every slot; launch with ``wp.launch_tiled(dim=[blocks, R],
     block_dim=B)``; part (blocks, R, NS).
@@ -58,7 +61,9 @@ def block_slot_moments_kernel(
     ``weights[0]`` by slot 0's blocks for the resampling. Partitioned filter: slot ``s`` of group ``g =
     slot_group[s]`` weighs particle ``i`` by its group factor ``exp(glogw[g, i] - max_g)`` (the maximum from the
     ``gblocks`` per-block maxima ``part_gmax[:, g]``), written to ``weights[g]`` by the blocks of the group's lowest
-    slot (``group_first[g]``); a slot no particle holds (``g`` = -1) uses the joint weights and writes none.
+    slot (``group_first[g]``); a slot no particle holds (``g`` = -1) uses the joint weights and writes none. The
+    blocks that write row ``g`` also write ``part_q[b, g]``, the block's sum of the integer weights ``floor(w_i
+    scale)`` of ``kernels.resample.grouped_systematic_kernel`` (its per-block offsets; partitioned filter only).
     """
     b, s, lane = wp.tid()
     start = b * chunk
@@ -81,6 +86,7 @@ def block_slot_moments_kernel(
             if group_first[g] == s:
                 row = g
     acc = vec17d()
+    qsum = wp.int64(0)
     for i in range(start + lane, stop, wp.block_dim()):
         wj = wp.exp(wp.float64(state.logw[i]) - mx)
         w = wj
@@ -88,6 +94,7 @@ def block_slot_moments_kernel(
             w = wp.exp(wp.float64(glogw[g, i]) - gm)
         if row >= 0:
             weights[row, i] = w
+            qsum += wp.int64(wp.floor(w * scale))
         acc[0] += w
         acc[1] += w * w
         acc[15] += wj
@@ -118,6 +125,10 @@ def block_slot_moments_kernel(
             acc[12] += w * wp.float64(d[1])
             acc[13] += w * wp.float64(d[2])
             acc[14] += w * wp.float64(state.age[i, s])
+    if g >= 0 and row >= 0:  # uniform over the block
+        qt = block_scan_int64(qsum, lane, wp.block_dim())[1]
+        if lane == 0:
+            part_q[b, row] = qt
     t = block_sum17(acc)  # the block's sums, in lane 0
     if lane == 0:
         for f in range(NS):

@@ -490,6 +490,7 @@ def group_logw_kernel(
     pos: wp.array2d(dtype=wp.vec2),
     heading: wp.array2d(dtype=wp.float32),
     dims: wp.array2d(dtype=wp.vec3),
+    qtotal: wp.array(dtype=wp.int32),
     cost_a: wp.vec3,
     cost_b: wp.vec3,
     scale: float,
@@ -499,9 +500,14 @@ def group_logw_kernel(
     n_groups: wp.array(dtype=wp.int32),
     n: int,
     chunk: int,
+    finish: int,
+    sums: wp.array(dtype=wp.vec2i),
     group_sums: wp.array2d(dtype=wp.vec2i),
     glogw: wp.array2d(dtype=wp.float32),
     part_gmax: wp.array2d(dtype=wp.float32),
+    logw: wp.array(dtype=wp.float32),
+    penalty: wp.array(dtype=wp.int32),
+    complexity: wp.array(dtype=wp.float32),
 ):
     """The factor of eq. 6 of every independent group of every particle (``kernels.partition``; beyond the paper),
     from the group sums of ``xor_score_kernel`` / ``xor_band_kernel``, which it clears, and the per-block maxima.
@@ -513,13 +519,20 @@ def group_logw_kernel(
     log-weight of eq. 6 up to a constant; each group is resampled on its own factor. Launch
     ``wp.launch_tiled(dim=[blocks], block_dim=B)``; block ``b`` owns particles ``[b chunk, (b+1) chunk)``.
 
+    With ``finish`` 1 it also does the work of :func:`xor_finish_kernel` after ``xor_band_kernel`` (one launch less
+    per frame): the joint penalty, complexity and log-weight from ``sums``, which it clears, bit for bit as there.
+
     Args:
-        kind, age, pos, heading, dims, cost_a, cost_b, scale, bg_weight, exclusion: as ``xor_score_kernel``.
+        kind, age, pos, heading, dims, qtotal, cost_a, cost_b, scale, bg_weight, exclusion: as ``xor_score_kernel``.
         slot_group: (R,) group of each slot; n_groups: (1,) number of groups (``kernels.partition``).
         n, chunk: particles and particles per block.
+        finish: 1 to finish the joint scores from ``sums`` (the band kernel's), 0 when they are final already.
+        sums: (N,) joint (|v_i|, |q AND v_i|) of ``xor_band_kernel`` (read and zeroed with ``finish`` 1).
         group_sums: (N, R) per group (|v_i|, |q AND v_i|) in its box, pixels; zeroed here.
         glogw: (R, N) output log-factor of group g (rows ``g >= n_groups`` untouched).
         part_gmax: (blocks, R) output per-block maximum of each group's log-factor (``NEG_INF`` for unused groups).
+        logw, penalty, complexity: (N,) the joint scores as ``xor_finish_kernel`` writes them (``finish`` 1 only;
+            ``logw`` updated in place).
     """
     b, lane = wp.tid()
     slots = kind.shape[1]
@@ -530,6 +543,16 @@ def group_logw_kernel(
     for g in range(slots):
         gmax[g] = NEG_INF
     for i in range(start + lane, stop, wp.block_dim()):
+        if finish != 0:
+            joint = sums[i]
+            sums[i] = wp.vec2i(0, 0)
+            mi, jc, jlw = particle_score(
+                i, joint[0], joint[1], kind, age, pos, heading, dims, qtotal[0], cost_a, cost_b, scale, bg_weight,
+                exclusion, logw[i],
+            )  # fmt: skip
+            penalty[i] = mi
+            complexity[i] = jc
+            logw[i] = jlw
         cost = vec16()
         for s in range(slots):
             kk = kind[i, s]
@@ -545,9 +568,9 @@ def group_logw_kernel(
                             )
                             cost[g] += exclusion * o
         for g in range(groups):
-            sums = group_sums[i, g]
+            gs = group_sums[i, g]
             group_sums[i, g] = wp.vec2i(0, 0)
-            mw = -float(sums[1]) + bg_weight * float(sums[0] - sums[1])
+            mw = -float(gs[1]) + bg_weight * float(gs[0] - gs[1])
             lw = finite_logw(-(mw + cost[g]) * scale)  # eq. 6 in log space, the group's factor
             glogw[g, i] = lw
             gmax[g] = wp.max(gmax[g], lw)

@@ -44,7 +44,17 @@ from wptrack.kernels import slots as kslots
 from wptrack.kernels import xor as kxor
 from wptrack.pf import BLOCK
 from wptrack.rig import Camera, GroundPlane
-from wptrack.trackers.templates import TemplateConfig, TemplateTracker, ground_rays, launch_mask_rows, launch_xor_score
+from wptrack.trackers.templates import (
+    TemplateConfig,
+    TemplateTracker,
+    empty_slot_acc,
+    ground_rays,
+    launch_mask_rows,
+    launch_xor_score,
+)
+
+Q_SCALE = 2.0**40
+"""The integer-weight scale of the moments test (``floor(w 2^40)``; any power of two does)."""
 
 W, H = 200, 150
 
@@ -135,20 +145,19 @@ def reference_groups(boxes: np.ndarray, alive: np.ndarray) -> tuple[np.ndarray, 
 
 
 class Groups:
-    """slot_box_partials_kernel + group_slots_kernel over a scene, as the tracker launches them."""
+    """slot_box_kernel + group_slots_kernel over a scene, as the tracker launches them."""
 
     def __init__(self, device, hulls, kind: np.ndarray, chunk: int, partition: int = 1) -> None:
         n, r = kind.shape
         d = device
         blocks = (n + chunk - 1) // chunk
         self.kind_d = wp.array(kind, dtype=wp.int32, device=d)
-        part_box = wp.full((blocks, r), wp.vec4i(7, 7, 7, 7), dtype=wp.vec4i, device=d)
-        part_alive = wp.full((blocks, r), -3, dtype=wp.int32, device=d)
+        acc = empty_slot_acc(r, d)
         wp.launch_tiled(
-            kpart.slot_box_partials_kernel,
+            kpart.slot_box_kernel,
             dim=[blocks, r],
             inputs=[hulls.pts, hulls.n, hulls.rows, self.kind_d, n, chunk, W, H],
-            outputs=[part_box, part_alive],
+            outputs=[acc],
             block_dim=BLOCK,
             device=d,
         )
@@ -159,21 +168,16 @@ class Groups:
         self.group_first = wp.full(r, -7, dtype=wp.int32, device=d)
         self.group_active = wp.full(r, -7, dtype=wp.int32, device=d)
         self.n_groups = wp.full(1, -7, dtype=wp.int32, device=d)
-        wp.launch_tiled(
-            kpart.slot_box_final_kernel,
-            dim=[r],
-            inputs=[part_box, part_alive, blocks],
-            outputs=[self.slot_box, self.slot_alive],
-            block_dim=BLOCK,
-            device=d,
-        )
         wp.launch(
             kpart.group_slots_kernel,
             dim=1,
-            inputs=[self.slot_box, self.slot_alive, partition],
-            outputs=[self.slot_group, self.group_box, self.group_first, self.group_active, self.n_groups],
+            inputs=[acc, partition],
+            outputs=[self.slot_box, self.slot_alive, self.slot_group, self.group_box, self.group_first,
+                     self.group_active, self.n_groups],
             device=d,
-        )
+        )  # fmt: skip
+        # the maxima are left as the next frame's slot_box_kernel expects them
+        np.testing.assert_array_equal(acc.numpy(), empty_slot_acc(r, d).numpy())
         self.count = int(self.n_groups.numpy()[0])
 
 
@@ -257,7 +261,7 @@ class GroupScore:
             wp.array(self.dims, dtype=wp.vec3, device=d),
         ]
 
-    def score(self, band: int, grouped: bool, bg_weight: float = 0.6, exclusion: float = 300.0):
+    def score(self, band: int, grouped: bool, bg_weight: float = 0.6, exclusion: float = 300.0, finish: bool = True):
         d, n = self.device, self.n
         logw = wp.zeros(n, dtype=wp.float32, device=d)
         penalty = wp.zeros(n, dtype=wp.int32, device=d)
@@ -269,9 +273,9 @@ class GroupScore:
         launch_xor_score(
             self.hulls, *self.arrays, self.qrow, self.qtotal, wp.vec3(*self.cost_a), wp.vec3(*self.cost_b),
             self.scale, bg_weight, exclusion, sums, logw, penalty, complexity, cov_diff, d, band=band,
-            groups=(g.group_box, g.n_groups, g.slot_group, group_sums) if grouped else None,
+            groups=(g.group_box, g.n_groups, g.slot_group, group_sums) if grouped else None, finish=finish,
         )  # fmt: skip
-        return logw.numpy(), penalty.numpy(), complexity.numpy(), cov_diff.numpy(), group_sums
+        return logw, penalty, complexity, cov_diff, group_sums, sums
 
     def reference_sums(self) -> np.ndarray:
         """(N, G, 2) |v| and |q AND v| of each group's objects rendered alone."""
@@ -296,7 +300,7 @@ def test_group_sums_match_numpy_and_leave_the_joint_scores_unchanged(device, rng
     plain = case.score(band, grouped=False)
     grouped = case.score(band, grouped=True)
     for a, b in zip(plain[:4], grouped[:4], strict=True):
-        np.testing.assert_array_equal(b, a)
+        np.testing.assert_array_equal(b.numpy(), a.numpy())
     got = grouped[4].numpy()[:, : case.groups.count]
     ref = case.reference_sums()
     assert case.groups.count >= 4 and ref[:, :, 0].min() >= 0 and ref[:, :, 1].max() > 0
@@ -305,17 +309,25 @@ def test_group_sums_match_numpy_and_leave_the_joint_scores_unchanged(device, rng
     assert not grouped[4].numpy()[:, case.groups.count :].any()
     q = case.q != 0
     covered = ref[..., 0].sum(axis=1)
-    np.testing.assert_array_equal(grouped[1], q.sum() + covered - 2 * ref[..., 1].sum(axis=1))  # eq. 4
+    np.testing.assert_array_equal(grouped[1].numpy(), q.sum() + covered - 2 * ref[..., 1].sum(axis=1))  # eq. 4
 
 
-def test_group_factors_match_numpy(device, rng):
+@pytest.mark.parametrize("band", [0, 8])
+def test_group_factors_match_numpy(device, rng, band):
     """group_logw_kernel: per group, -(-|q AND v| + lambda (|v| - |q AND v|) + c_g) s with c_g the group's eq. 5 and
     the exclusion prior of its pairs; the group sums are cleared; the per-block maxima (blocks of 7 particles) are
     the maxima of the factors, NEG_INF for unused groups; summed over the groups, the factors differ from the joint
-    log-weight by a constant minus the cross-group exclusion (none here: such pairs cannot overlap)."""
+    log-weight by a constant minus the cross-group exclusion (none here: such pairs cannot overlap). After the band
+    kernel (``finish`` 1) it also finishes the joint scores: the same log-weights, penalties and complexities as
+    ``xor_finish_kernel`` bit for bit, and the joint sums cleared."""
     case = GroupScore(device, rng, n=30)
     bg_weight, exclusion = 0.6, 300.0
-    logw, _, _, _, group_sums = case.score(8, grouped=True, bg_weight=bg_weight, exclusion=exclusion)
+    plain = case.score(band, grouped=False, bg_weight=bg_weight, exclusion=exclusion)
+    finish = band > 0
+    lw_d, pen_d, cx_d, _, group_sums, sums = case.score(band, grouped=True, bg_weight=bg_weight, exclusion=exclusion,
+                                                        finish=not finish)  # fmt: skip
+    if finish:
+        assert sums.numpy().any() and not pen_d.numpy().any()  # left for group_logw_kernel
     d, n, r = device, case.n, case.r
     chunk = 7
     blocks = (n + chunk - 1) // chunk
@@ -325,13 +337,16 @@ def test_group_factors_match_numpy(device, rng):
     wp.launch_tiled(
         kxor.group_logw_kernel,
         dim=[blocks],
-        inputs=[*case.arrays, wp.vec3(*case.cost_a), wp.vec3(*case.cost_b), case.scale, bg_weight, exclusion,
-                g.slot_group, g.n_groups, n, chunk],
-        outputs=[group_sums, glogw, part_gmax],
+        inputs=[*case.arrays, case.qtotal, wp.vec3(*case.cost_a), wp.vec3(*case.cost_b), case.scale, bg_weight,
+                exclusion, g.slot_group, g.n_groups, n, chunk, int(finish), sums],
+        outputs=[group_sums, glogw, part_gmax, lw_d, pen_d, cx_d],
         block_dim=BLOCK,
         device=d,
     )  # fmt: skip
-    assert not group_sums.numpy().any()
+    assert not group_sums.numpy().any() and not sums.numpy().any()
+    for a, b in zip(plain[:3], (lw_d, pen_d, cx_d), strict=True):
+        np.testing.assert_array_equal(b.numpy(), a.numpy())
+    logw = lw_d.numpy()
     ref_sums = case.reference_sums()
     sg = g.slot_group.numpy()
     k = case.kind
@@ -381,13 +396,14 @@ def group_moments(device, state, n: int, r: int, chunk: int, glogw: np.ndarray, 
     part = wp.full((blocks, r, int(kslots.NS)), np.nan, dtype=wp.float64, device=d)
     gl = np.zeros((r, n), np.float32)
     gl[: glogw.shape[0]] = glogw
+    part_q = wp.full((blocks, r), -1, dtype=wp.int64, device=d)
     wp.launch_tiled(
         kslots.block_slot_moments_kernel,
         dim=[blocks, r],
         inputs=[state, n, chunk, est, wp.array(gl, dtype=wp.float32, device=d),
                 wp.array(gmax, dtype=wp.float32, device=d), blocks, wp.array(slot_group, dtype=wp.int32, device=d),
-                wp.array(group_first, dtype=wp.int32, device=d), 1],
-        outputs=[weights, part],
+                wp.array(group_first, dtype=wp.int32, device=d), 1, Q_SCALE],
+        outputs=[weights, part, part_q],
         block_dim=BLOCK,
         device=d,
     )  # fmt: skip
@@ -402,7 +418,7 @@ def group_moments(device, state, n: int, r: int, chunk: int, glogw: np.ndarray, 
         block_dim=BLOCK,
         device=d,
     )
-    return slot_est.numpy(), weights.numpy(), int(flag.numpy()[0])
+    return slot_est.numpy(), weights.numpy(), int(flag.numpy()[0]), part_q.numpy()
 
 
 @pytest.mark.parametrize(("n", "chunk"), [(1000, 256), (37, 5)])
@@ -423,11 +439,15 @@ def test_slot_moments_under_group_weights(device, rng, n, chunk):
     group_first = np.array([0, 1, 3, -1, -1], np.int32)
     glogw = rng.normal(-5.0, 1.5, (3, n)).astype(np.float32)
     state = make_state(device, n, r, kind=kind, pos=pos, vel=vel, dims=dims, age=age, heading=heading, logw=logw)
-    se, weights, flag = group_moments(device, state, n, r, chunk, glogw, slot_group, group_first)
+    se, weights, flag, part_q = group_moments(device, state, n, r, chunk, glogw, slot_group, group_first)
     assert flag == 1
+    blocks = part_q.shape[0]
     for g in range(3):
         w = np.exp(glogw[g].astype(np.float64) - glogw[g].max())
         np.testing.assert_allclose(weights[g], w, rtol=1e-12)
+        # the per-block sums of the integer weights of the grouped resampling, from the weights as written
+        q = np.floor(weights[g] * Q_SCALE).astype(np.int64)
+        np.testing.assert_array_equal(part_q[:, g], [q[b * chunk : (b + 1) * chunk].sum() for b in range(blocks)])
         for s in np.flatnonzero(slot_group == g):
             a = kind[:, s] > 0
             wa = w * a
@@ -443,6 +463,7 @@ def test_slot_moments_under_group_weights(device, rng, n, chunk):
             np.testing.assert_allclose(se[s, kslots.SE_AGE], (wa * age[:, s]).sum() / wa.sum(), rtol=1e-6)
             np.testing.assert_allclose(se[s, kslots.SE_GROUP_ESS], w.sum() ** 2 / (w * w).sum(), rtol=1e-9)
     assert np.all(np.isnan(weights[3:]))  # rows of no group are not written
+    assert np.all(part_q[:, 3:] == -1)
     wj = np.exp(logw.astype(np.float64) - logw.max())
     for s in range(r):
         np.testing.assert_allclose(se[s, kslots.SE_ESS], wj.sum() ** 2 / (wj * wj).sum(), rtol=1e-9)

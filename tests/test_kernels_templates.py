@@ -711,10 +711,12 @@ def test_xor_band_kernel_equals_row_kernel(device, rng, cpu_blocks, r, band, bg_
 
 
 def test_xor_band_policy():
-    """The band height: 8 rows below 50,000 particles, 32 from there, doubled while bands x particles would exceed
-    2^31 - 1 threads in one launch."""
-    assert (xor_band(1000, 480), xor_band(49_999, 480), xor_band(50_000, 480)) == (8, 8, 32)
-    assert xor_band(10**8, 1080) == 64 and -(-1080 // 64) * 10**8 <= 2**31 - 1 < -(-1080 // 32) * 10**8
+    """The band height: joint 2 / 8 / 64 rows and grouped 4 / 16 / 64 rows up to 3,000, below 30,000 and from
+    30,000 particles, doubled while (groups x) bands x particles would exceed 2^31 - 1 threads in one launch."""
+    assert [xor_band(n, 480) for n in (1000, 3000, 3001, 29_999, 30_000)] == [2, 2, 8, 8, 64]
+    assert [xor_band(n, 480, 5) for n in (1000, 3000, 3001, 29_999, 30_000)] == [4, 4, 16, 16, 64]
+    assert xor_band(10**8, 2160) == 128 and -(-2160 // 128) * 10**8 <= 2**31 - 1 < -(-2160 // 64) * 10**8
+    assert xor_band(10**7, 1080, 16) == 128 and 16 * -(-1080 // 128) * 10**7 <= 2**31 - 1 < 16 * -(-1080 // 64) * 10**7
 
 
 def coverage_uoh(device, q, n: int, beta: float, cov_diff, block_dim: int = ROW_BLOCK):
@@ -1432,8 +1434,8 @@ def slot_moments(device, state: kdyn.TemplateState, n: int, r: int, chunk: int, 
     wp.launch_tiled(
         kslots.block_slot_moments_kernel,
         dim=[blocks, r],
-        inputs=[state, n, chunk, est, none2, none2, 1, groups, groups, 0],
-        outputs=[weights, part],
+        inputs=[state, n, chunk, est, none2, none2, 1, groups, groups, 0, 1.0],
+        outputs=[weights, part, wp.zeros((1, 1), dtype=wp.int64, device=d)],
         block_dim=BLOCK,
         device=d,
     )

@@ -572,16 +572,16 @@ def test_long_ranges_cuda_graph(device, rng):
 
 
 @pytest.mark.parametrize(
-    ("n", "per_lane", "block"), [(1, 4, 1024), (255, 4, 1024), (1000, 4, 256), (4097, 4, 1024), (4097, 3, 64),
-                                 (1000, 1000, 1024)]
+    ("n", "chunk", "blocks", "block"), [(1, 256, 1, 256), (255, 256, 1, 256), (1000, 250, 4, 256),
+                                        (4097, 300, 14, 64), (1000, 7, 143, 32), (5, 2, 4, 32)]
 )  # fmt: skip
-def test_grouped_systematic_rows_match_numpy(device, rng, n, per_lane, block):
+def test_grouped_systematic_rows_match_numpy(device, rng, n, chunk, blocks, block):
     """grouped_systematic_kernel (the template tracker's independent groups): each active row is systematic
     resampling of its own weights on the exact integer CDF floor(w 2^k), with the uniform of Philox counter (row,
     frame, STREAM_RESAMPLE), equal to the NumPy reference; inactive rows get the identity; rows 0 and 1 hold the
-    same weights and differ (independent uniforms); a row whose weight is on one parent. One lane on the CPU, blocks
-    of 1024 (the tracker's launch), 256 and 64 on CUDA, rounds of 4, 3 (not dividing the row) and all particles per
-    lane."""
+    same weights and differ (independent uniforms); a row whose weight is on one parent. Blocks of parents as the
+    tracker's (256 of 256 lanes), more parents than lanes (several CDF rounds), many small blocks, and a last block
+    with no parents (5 in blocks of 2, 4 blocks); one lane per block on the CPU."""
     from wptrack.resampling import quantisation_bits
 
     g_rows = 5
@@ -594,13 +594,19 @@ def test_grouped_systematic_rows_match_numpy(device, rng, n, per_lane, block):
     w[2, n // 3] = 1.0
     active = np.array([1, 1, 1, 0, 1], np.int32)
     scale = float(2 ** quantisation_bits(n))
+    q_all = np.floor(w * scale).astype(np.int64)
+    part_q = np.zeros((blocks, g_rows), np.int64)  # as kernels.slots.block_slot_moments_kernel writes them
+    for b in range(blocks):
+        part_q[b] = q_all[:, b * chunk : (b + 1) * chunk].sum(axis=1)
+    part_q[:, 3] = -(2**50)  # an inactive row's sums are never read
     anc = wp.full((g_rows, n), -1, dtype=wp.int32, device=device)
     frame = 9
     wp.launch_tiled(
         kres.grouped_systematic_kernel,
-        dim=[g_rows],
-        inputs=[wp.array(w, dtype=wp.float64, device=device), wp.array(active, dtype=wp.int32, device=device), scale,
-                SEED, wp.array([frame], dtype=wp.int32, device=device), n, per_lane,
+        dim=[g_rows, blocks],
+        inputs=[wp.array(w, dtype=wp.float64, device=device), wp.array(active, dtype=wp.int32, device=device),
+                wp.array(part_q, dtype=wp.int64, device=device), blocks, chunk, scale, SEED,
+                wp.array([frame], dtype=wp.int32, device=device), n,
                 wp.zeros((g_rows, n), dtype=wp.int64, device=device)],
         outputs=[anc],
         block_dim=1 if wp.get_device(device).is_cpu else block,

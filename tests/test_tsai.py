@@ -219,7 +219,7 @@ def test_cli_evaluate_xml(tmp_path):
     (tmp_path / "tracks.csv").write_text("\n".join(rows) + "\n")
     pytest.importorskip("motmetrics")
     cmd = [sys.executable, "-m", "wptrack.cli", "evaluate", str(tmp_path / "tracks.csv"), "--groundtruth", str(BOXES)]
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(REPO), os.environ.get("PYTHONPATH")) if p)}
     res = subprocess.run([*cmd, "--rig", str(rig_file)], capture_output=True, text=True, env=env, timeout=120)
     assert res.returncode == 0, res.stderr
     n = len(gt["x"])

@@ -45,7 +45,7 @@ from wptrack.kernels import slots as kslots
 from wptrack.kernels import uoh as kuoh
 from wptrack.kernels import xor as kxor
 from wptrack.pf import BLOCK, MAX_BLOCKS, FrameChain, _seed_words, check_fits
-from wptrack.resampling import PER_LANE_GPU, Resampler, bytes_per_particle, quantisation_bits
+from wptrack.resampling import Resampler, bytes_per_particle, quantisation_bits
 from wptrack.rig import Camera, GroundPlane, Rig
 from wptrack.warpcams import camera_struct
 
@@ -65,20 +65,21 @@ SCORE_BLOCK = 64
 stride over the particle's image rows; a CPU block has one thread)."""
 
 
-def xor_band(particles: int, height: int) -> int:
+def xor_band(particles: int, height: int, groups: int = 0) -> int:
     """Image rows per thread of the XOR sums on CUDA (``kernels.xor.xor_band_kernel``: a thread per band and
-    particle): 8 below 50,000 particles, 32 from there (measured on an H100 and an H200, bench scene, 1e3 to 1e5
-    particles x 1, 5 and 10 objects; BENCHMARKS.md, issue 13, round five), doubled while the launch would exceed
-    2^31 - 1 threads (``height`` image rows)."""
-    band = 8 if particles < 50_000 else 32
-    while -(-height // band) * particles > 2**31 - 1:
+    particle, and per group with ``groups`` > 0, the partitioned filter's R rows of group sums).
+
+    Joint launch: 2 rows up to 3,000 particles, 8 below 30,000, 64 from there; grouped launch: 4, 16 and 64 (each of
+    its threads walks one group's pieces only, so its bands are taller for the same work per thread). Measured on an
+    H100 (bench scene, 1e3 / 1e4 / 1e5 particles x 5 and 10 objects, bands of 2 to 64 rows: BENCHMARKS.md, issue 13,
+    round six). Doubled while the launch would exceed 2^31 - 1 threads (``height`` image rows)."""
+    small, mid = (4, 16) if groups > 0 else (2, 8)
+    band = small if particles <= 3000 else mid if particles < 30_000 else 64
+    while -(-height // band) * particles * max(groups, 1) > 2**31 - 1:
         band *= 2
     return band
 
 
-GROUP_RESAMPLE_BLOCK = 1024
-"""Threads of the block that resamples one group on CUDA (``kernels.resample.grouped_systematic_kernel``; one block
-per group: its passes are latency-bound, so the widest block)."""
 ROW_BLOCK = 128
 """Threads per image row in the row-scan kernels (mask prefix sums, coverage/UOH/gain rows): each owns a segment of
 ceil(W / ROW_BLOCK) pixels."""
@@ -306,6 +307,14 @@ def launch_mask_rows(q: wp.array, qrow: wp.array, qtotal: wp.array, device: str,
     )
 
 
+def empty_slot_acc(slots: int, device: str) -> wp.array:
+    """The (R, 5) int32 box maxima of ``kernels.partition.slot_box_kernel`` as it expects them: ``BOX_NONE`` in the
+    four box columns, 0 in the alive column (``group_slots_kernel`` leaves them so after reading)."""
+    acc = np.zeros((slots, 5), np.int32)
+    acc[:, :4] = int(kpart.BOX_NONE)
+    return wp.array(acc, dtype=wp.int32, device=device)
+
+
 def piece_cap(pieces: int) -> int:
     """The piece count ``kernels.xor.xor_band_kernel`` is compiled for: the smallest power of two >= ``pieces``
     (at least 2)."""
@@ -349,6 +358,7 @@ def launch_xor_score(
     device: str,
     band: int = 0,
     groups: tuple[wp.array, wp.array, wp.array, wp.array] | None = None,
+    finish: bool = True,
 ) -> None:
     """Eqs. 4-6 for every particle (``kernels.xor``) and the coverage counts: with ``band`` > 0 a thread per band of
     ``band`` rows and particle (``xor_band_kernel``, then ``xor_finish_kernel``; ``sums`` (N,) vec2i zeros, left
@@ -356,7 +366,8 @@ def launch_xor_score(
 
     ``groups`` = ``(group_box, n_groups, slot_group, group_sums)`` (``kernels.partition``) also sums |v| and |q AND
     v| per independent group into ``group_sums`` (N, R) vec2i (zeros; ``xor.group_logw_kernel`` reads and clears
-    them); the band kernel then runs a thread per (group, band, particle)."""
+    them); the band kernel then runs a thread per (group, band, particle). ``finish`` False leaves the band path's
+    ``sums`` unfinished for ``xor.group_logw_kernel`` (its ``finish`` 1: the same outputs, one launch less)."""
     n = kind.shape[0]
     cost = [kind, age, pos, heading, dims, qtotal, cost_a, cost_b, scale, bg_weight, exclusion]
     grouped = groups is not None
@@ -371,9 +382,10 @@ def launch_xor_score(
             outputs=[sums, cov_diff, group_sums],
             device=device,
         )
-        wp.launch(
-            kxor.xor_finish_kernel, dim=n, inputs=[*cost, sums], outputs=[logw, penalty, complexity], device=device
-        )
+        if finish:
+            wp.launch(
+                kxor.xor_finish_kernel, dim=n, inputs=[*cost, sums], outputs=[logw, penalty, complexity], device=device
+            )
         return
     wp.launch_tiled(
         kxor.xor_score_kernel,
@@ -467,7 +479,7 @@ class TemplateTracker(FrameChain):
         self.xor_sums = wp.zeros(n, dtype=wp.vec2i, device=d)  # per-particle (|v|, |q AND v|) of xor_band_kernel
         # CUDA: a thread per band of rows and particle (the packed coordinates need images below 32768 pixels);
         # the CPU backend (one lane per block) walks each particle's rows in xor_score_kernel
-        self.xor_band = xor_band(n, h) if self.is_cuda and max(w, h) < 32768 else 0
+        self.xor_band = xor_band(n, h, r if self.partition else 0) if self.is_cuda and max(w, h) < 32768 else 0
         self.complexity = wp.zeros(n, dtype=wp.float32, device=d)
         # one weight and ancestor row per group of slots: one in the paper's joint filter, R in the partitioned one
         rows = r if self.partition else 1
@@ -492,8 +504,7 @@ class TemplateTracker(FrameChain):
         self.group_active = wp.zeros(r, dtype=wp.int32, device=d)
         self.n_groups = wp.zeros(1, dtype=wp.int32, device=d)
         gn, gr, gb = (n, r, self.blocks) if self.partition else (1, 1, 1)  # unused 1 x 1 stand-ins when joint
-        self.part_box = wp.zeros((gb, gr), dtype=wp.vec4i, device=d)
-        self.part_alive = wp.zeros((gb, gr), dtype=wp.int32, device=d)
+        self.slot_acc = empty_slot_acc(r, d)  # the slots' box maxima (kernels.partition), reset by group_slots_kernel
         self.group_sums = wp.zeros((gn, gr), dtype=wp.vec2i, device=d)
         self.glogw = wp.zeros((gr, gn), dtype=wp.float32, device=d)
         self.part_gmax = wp.zeros((gb, gr), dtype=wp.float32, device=d)
@@ -503,6 +514,7 @@ class TemplateTracker(FrameChain):
         self._active_rows = [self.group_active[g : g + 1] for g in range(r)]
         self.group_scale = float(2 ** quantisation_bits(n))  # the exact integer CDF of grouped_systematic_kernel
         self.group_cdf = wp.zeros((gr, gn), dtype=wp.int64, device=d)
+        self.part_q = wp.zeros((gb, gr), dtype=wp.int64, device=d)  # per-block sums of the groups' integer weights
         self._group_seeds = [
             wp.vec2ui(int(self.seed[0]) ^ ((0x9E3779B9 * g) & 0xFFFFFFFF), int(self.seed[1])) for g in range(rows)
         ]
@@ -572,29 +584,22 @@ class TemplateTracker(FrameChain):
         self.hulls.launch(self.cam, self.plane_struct, s.kind, s.pos, s.heading, s.dims, self.device)
         if self.partition:  # beyond the paper: the slots' boxes and their independent groups (kernels.partition)
             wp.launch_tiled(
-                kpart.slot_box_partials_kernel,
+                kpart.slot_box_kernel,
                 dim=[self.blocks, self.r],
                 inputs=[self.hulls.pts, self.hulls.n, self.hulls.rows, s.kind, self.n, self.chunk, self.width,
                         self.height],
-                outputs=[self.part_box, self.part_alive],
+                outputs=[self.slot_acc],
                 block_dim=BLOCK,
                 device=self.device,
             )  # fmt: skip
-            wp.launch_tiled(
-                kpart.slot_box_final_kernel,
-                dim=[self.r],
-                inputs=[self.part_box, self.part_alive, self.blocks],
-                outputs=[self.slot_box, self.slot_alive],
-                block_dim=BLOCK,
-                device=self.device,
-            )
             wp.launch(
                 kpart.group_slots_kernel,
                 dim=1,
-                inputs=[self.slot_box, self.slot_alive, 1],
-                outputs=[self.slot_group, self.group_box, self.group_first, self.group_active, self.n_groups],
+                inputs=[self.slot_acc, 1],
+                outputs=[self.slot_box, self.slot_alive, self.slot_group, self.group_box, self.group_first,
+                         self.group_active, self.n_groups],
                 device=self.device,
-            )
+            )  # fmt: skip
         if self.use_occlusion:  # beyond the paper: per-object occlusion for the prediction (kernels.occlusion)
             wp.launch(
                 kocc.occlusion_kernel,
@@ -607,19 +612,23 @@ class TemplateTracker(FrameChain):
     def _score(self, cur: int) -> None:
         s = self.state[cur]
         cfg = self.config
+        # partitioned on CUDA: the band kernel's joint sums are finished by group_logw_kernel (one launch less)
+        finish_here = not (self.partition and self.xor_band > 0)
         launch_xor_score(
             self.hulls, s.kind, s.age, s.pos, s.heading, s.dims, self.qrow, self.qtotal, self.cost_a, self.cost_b,
             self.score_scale, float(cfg.bg_weight), float(cfg.exclusion), self.xor_sums, s.logw, self.penalty,
             self.complexity, self.cov_diff, self.device, band=self.xor_band,
             groups=(self.group_box, self.n_groups, self.slot_group, self.group_sums) if self.partition else None,
+            finish=finish_here,
         )  # fmt: skip
         if self.partition:  # each group's factor of eq. 6 (kernels.xor.group_logw_kernel)
             wp.launch_tiled(
                 kxor.group_logw_kernel,
                 dim=[self.blocks],
-                inputs=[s.kind, s.age, s.pos, s.heading, s.dims, self.cost_a, self.cost_b, self.score_scale,
-                        float(cfg.bg_weight), float(cfg.exclusion), self.slot_group, self.n_groups, self.n, self.chunk],
-                outputs=[self.group_sums, self.glogw, self.part_gmax],
+                inputs=[s.kind, s.age, s.pos, s.heading, s.dims, self.qtotal, self.cost_a, self.cost_b,
+                        self.score_scale, float(cfg.bg_weight), float(cfg.exclusion), self.slot_group, self.n_groups,
+                        self.n, self.chunk, int(not finish_here), self.xor_sums],
+                outputs=[self.group_sums, self.glogw, self.part_gmax, s.logw, self.penalty, self.complexity],
                 block_dim=BLOCK,
                 device=self.device,
             )  # fmt: skip
@@ -740,8 +749,9 @@ class TemplateTracker(FrameChain):
                 self.slot_group,
                 self.group_first,
                 int(self.partition),
+                self.group_scale,
             ],
-            outputs=[self.weights, self.part],
+            outputs=[self.weights, self.part, self.part_q],
             block_dim=BLOCK,
             device=d,
         )
@@ -790,21 +800,13 @@ class TemplateTracker(FrameChain):
             # each group of slots on its own factor (kernels.partition), one launch; unused rows: the identity
             wp.launch_tiled(
                 kres.grouped_systematic_kernel,
-                dim=[self.r],
-                inputs=[
-                    self.weights,
-                    self.group_active,
-                    self.group_scale,
-                    self.seed,
-                    self.frame,
-                    self.n,
-                    self.n if not self.is_cuda else PER_LANE_GPU,
-                    self.group_cdf,
-                ],
+                dim=[self.r, self.blocks],
+                inputs=[self.weights, self.group_active, self.part_q, self.blocks, self.chunk, self.group_scale,
+                        self.seed, self.frame, self.n, self.group_cdf],
                 outputs=[self.ancestors],
-                block_dim=1 if not self.is_cuda else GROUP_RESAMPLE_BLOCK,
+                block_dim=BLOCK,
                 device=d,
-            )
+            )  # fmt: skip
         elif self.partition:  # the other schemes: one resampler call per group
             for g in range(self.r):
                 self.resampler(
