@@ -95,19 +95,3 @@ def vehicle_fit_kernel(
             fit[c] = float(ft[0]) / float(px)
         else:
             fit[c] = NEG_INF
-
-
-@wp.kernel
-def prefer_vehicle_kernel(
-    fit_best: wp.array(dtype=wp.int32),
-    fit_est: wp.array(dtype=wp.float64),
-    fit_slot: int,
-    min_fit: float,
-    best: wp.array(dtype=wp.int32),
-):
-    """Replace the chosen human candidate ``best[0]`` by the best-fitting vehicle candidate ``fit_best[0]`` when its
-    fit ``fit_est[fit_slot]`` (``reduce.final_max_kernel`` over ``vehicle_fit_kernel``'s output) is at least
-    ``min_fit``. Launch with ``dim=1``."""
-    f = fit_est[fit_slot]
-    if f > wp.float64(-1.0e37) and f >= wp.float64(min_fit) and fit_best[0] >= 0:
-        best[0] = fit_best[0]

@@ -176,6 +176,20 @@ def moments_zero():
     return float(NEG_INF), int(NO_INDEX), wp.float64(0.0), wp.float64(0.0), wp.vec3d(), wp.vec3d()
 
 
+@wp.func
+def strided_argmax(values: wp.array(dtype=wp.float32), start: int, stop: int, lane: int):
+    """The block's maximum of ``values[start:stop]`` and the lowest index attaining it (``NO_INDEX`` when empty or
+    all ``NEG_INF``); every lane of the block calls it."""
+    best = float(NEG_INF)
+    arg = int(NO_INDEX)
+    for i in range(start + lane, stop, wp.block_dim()):
+        v = values[i]
+        if v > best:
+            best = v
+            arg = i
+    return block_argmax(best, arg)
+
+
 @wp.kernel
 def block_max_kernel(
     logw: wp.array(dtype=wp.float32),
@@ -187,18 +201,27 @@ def block_max_kernel(
     """Per-block max log-weight and the lowest index attaining it."""
     b, lane = wp.tid()
     start = b * chunk
-    stop = wp.min(start + chunk, n)
-    best = float(NEG_INF)
-    arg = int(NO_INDEX)
-    for i in range(start + lane, stop, wp.block_dim()):
-        v = logw[i]
-        if v > best:
-            best = v
-            arg = i
-    mv, a = block_argmax(best, arg)
+    mv, a = strided_argmax(logw, start, wp.min(start + chunk, n), lane)
     if lane == 0:
         part_max[b] = mv
         part_arg[b] = a
+
+
+@wp.kernel
+def single_max_kernel(
+    logw: wp.array(dtype=wp.float32),
+    n: int,
+    est: wp.array(dtype=wp.float64),
+    best_index: wp.array(dtype=wp.int32),
+):
+    """:func:`block_max_kernel` and :func:`final_max_kernel` in one block, for small ``n`` (one launch instead of
+    two): launch ``wp.launch_tiled(dim=[1], block_dim=B)``; writes ``est[EST_MAXLOGW]`` and ``best_index[0]`` (the
+    lowest index attaining the maximum, as the two-pass reduction)."""
+    _b, lane = wp.tid()
+    mv, a = strided_argmax(logw, 0, n, lane)
+    if lane == 0:
+        est[EST_MAXLOGW] = wp.float64(mv)
+        best_index[0] = a
 
 
 @wp.kernel

@@ -142,12 +142,17 @@ def final_slot_moments_kernel(
     n: int,
     est: wp.array(dtype=wp.float64),
     ess_threshold: wp.array(dtype=wp.float32),
+    state: TemplateState,
+    best: wp.array(dtype=wp.int32),
+    penalty: wp.array(dtype=wp.int32),
     slot_est: wp.array2d(dtype=wp.float64),
     slot_count: wp.array(dtype=wp.float64),
     resample: wp.array(dtype=wp.int32),
+    best_state: wp.array2d(dtype=wp.float32),
 ):
     """Combine the per-block sums (launch ``wp.launch_tiled(dim=[R], block_dim=B)``, one block per slot) into
-    ``slot_est`` (R, NE) and ``slot_count`` (R,); slot 0 also decides resampling (joint ESS <= threshold x N)."""
+    ``slot_est`` (R, NE) and ``slot_count`` (R,); slot 0 also decides resampling (joint ESS <= threshold x N). Block
+    ``s`` also copies slot ``s`` of the best particle ``best[0]`` into ``best_state`` (R, 11; :func:`copy_slot`)."""
     s, lane = wp.tid()
     acc = vec17d()
     for j in range(lane, blocks, wp.block_dim()):
@@ -155,6 +160,7 @@ def final_slot_moments_kernel(
             acc[f] += part[j, s, f]
     tot = block_sum17(acc)  # valid in lane 0, the only reader
     if lane == 0:
+        copy_slot(state, best[0], s, penalty, best_state)
         zero = wp.float64(0.0)
         sw = tot[0]
         wa = tot[2]
@@ -188,17 +194,16 @@ def final_slot_moments_kernel(
             resample[0] = flag
 
 
-@wp.kernel
-def gather_particle_kernel(
+@wp.func
+def copy_slot(
     state: TemplateState,
-    best: wp.array(dtype=wp.int32),
+    i: int,
+    s: int,
     penalty: wp.array(dtype=wp.int32),
     out: wp.array2d(dtype=wp.float32),
 ):
-    """Copy particle ``best[0]``'s slots into ``out`` (R, 11): kind, label, x, y, heading, vel (2), dims (3),
-    penalty m (pixels, every row). Launch ``dim=R``."""
-    s = wp.tid()
-    i = best[0]
+    """Copy slot ``s`` of particle ``i`` into ``out[s]`` (R, 11): kind, label, x, y, heading, vel (2), dims (3),
+    penalty m (pixels, every row)."""
     out[s, 0] = float(state.kind[i, s])
     out[s, 1] = float(state.label[i, s])
     p = state.pos[i, s]

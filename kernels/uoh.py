@@ -315,6 +315,9 @@ def choose_addition_kernel(
     cand_kind: wp.array(dtype=wp.int32),
     slot_count: wp.array(dtype=wp.float64),
     slots: int,
+    fit_best: wp.array(dtype=wp.int32),
+    fit_est: wp.array(dtype=wp.float64),
+    min_fit: float,
     next_label: wp.array(dtype=wp.int32),
     slot_label: wp.array(dtype=wp.int32),
     slot_kind: wp.array(dtype=wp.int32),
@@ -326,9 +329,17 @@ def choose_addition_kernel(
     in every particle (``slot_count[s] == 0``), the lowest such slot gets a new persistent label
     (``next_label``, then incremented) and the candidate's kind; ``add = (slot, candidate)``; otherwise
     ``add[0] = -1``. ``best_score[best_slot]`` is the candidate argmax's score (``reduce.final_max_kernel``).
+
+    Beyond the paper (class-aware addition, ``kernels.classify``): first the chosen candidate ``best[0]`` (a human)
+    is replaced by the best-fitting vehicle candidate ``fit_best[0]`` when its fit ``fit_est[best_slot]`` (the
+    argmax over ``classify.vehicle_fit_kernel``'s output) is at least ``min_fit`` (``inf``: never; ``best`` is
+    updated).
     """
     add[0] = -1
     add[1] = -1
+    f = fit_est[best_slot]
+    if f > wp.float64(-1.0e37) and f >= wp.float64(min_fit) and fit_best[0] >= 0:
+        best[0] = fit_best[0]
     c = best[0]
     if best_score[best_slot] < wp.float64(-1.0e37) or c < 0 or c >= cand_kind.shape[0]:
         return

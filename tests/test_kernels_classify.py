@@ -2,7 +2,7 @@
 move of ``dynamics.template_predict_kernel``), on every device.
 
 * ``vehicle_fit_kernel`` on the tracker's candidate set against each candidate's rendered one-slot silhouette;
-* ``prefer_vehicle_kernel``'s threshold rule;
+* the replacement's threshold rule (in ``uoh.choose_addition_kernel``);
 * the absorb move: in the particles that receive an added vehicle (the same draw as the addition), the humans on its
   footprint are removed, the others kept; off, nothing is removed.
 """
@@ -33,6 +33,7 @@ from wptrack.errors import ConfigError
 from wptrack.kernels import classify as kcls
 from wptrack.kernels import reduce as kreduce
 from wptrack.kernels import slots as kslots
+from wptrack.kernels import uoh as kuoh
 from wptrack.rig import GroundPlane
 from wptrack.trackers.templates import Candidates, TemplateConfig, VehiclePrior, _plane_struct
 from wptrack.warpcams import camera_struct
@@ -119,24 +120,34 @@ def test_vehicle_fit_matches_silhouettes(device, block_dim):
     np.testing.assert_array_equal(run(b, est, (HUMAN, 0)), got)
 
 
-@pytest.mark.parametrize(("fit", "min_fit", "expect"), [(0.8, 0.7, 9), (0.7, 0.7, 9), (0.6, 0.7, 3), (-3e38, 0.5, 3)])
+@pytest.mark.parametrize(
+    ("fit", "min_fit", "expect"), [(0.8, 0.7, 9), (0.7, 0.7, 9), (0.6, 0.7, 3), (-3e38, 0.5, 3), (0.8, math.inf, 3)]
+)
 def test_prefer_vehicle_threshold(device, fit, min_fit, expect):
-    est = np.zeros(int(kreduce.EST_SIZE))
-    est[int(kreduce.EST_MAXLOGW)] = fit
+    """choose_addition_kernel's class-aware replacement: the chosen human 3 becomes the best-fitting vehicle 9 when
+    its fit reaches ``min_fit`` (never with inf, never without a fit); the addition then takes the vehicle's kind."""
+    fit_est = np.zeros(int(kreduce.EST_SIZE))
+    fit_est[int(kreduce.EST_MAXLOGW)] = fit
+    score = np.zeros(int(kreduce.EST_SIZE))
     best = wp.array([3], dtype=wp.int32, device=device)
+    kind = np.full(10, HUMAN, np.int32)
+    kind[9] = VEHICLE
+    slot_kind = wp.zeros(2, dtype=wp.int32, device=device)
+    add = wp.zeros(2, dtype=wp.int32, device=device)
     wp.launch(
-        kcls.prefer_vehicle_kernel,
+        kuoh.choose_addition_kernel,
         dim=1,
-        inputs=[
-            wp.array([9], dtype=wp.int32, device=device),
-            wp.array(est, dtype=wp.float64, device=device),
-            int(kreduce.EST_MAXLOGW),
-            min_fit,
-        ],
-        outputs=[best],
+        inputs=[best, wp.array(score, dtype=wp.float64, device=device), int(kreduce.EST_MAXLOGW),
+                wp.array(kind, dtype=wp.int32, device=device), wp.array([1.0, 0.0], dtype=wp.float64, device=device),
+                2, wp.array([9], dtype=wp.int32, device=device), wp.array(fit_est, dtype=wp.float64, device=device),
+                min_fit],
+        outputs=[wp.zeros(1, dtype=wp.int32, device=device), wp.zeros(2, dtype=wp.int32, device=device), slot_kind,
+                 add],
         device=device,
-    )
+    )  # fmt: skip
     assert int(best.numpy()[0]) == expect
+    np.testing.assert_array_equal(add.numpy(), [1, expect])
+    assert int(slot_kind.numpy()[1]) == kind[expect]
 
 
 @pytest.mark.parametrize("absorb", [1, 0])

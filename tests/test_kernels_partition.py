@@ -413,11 +413,12 @@ def group_moments(device, state, n: int, r: int, chunk: int, glogw: np.ndarray, 
     wp.launch_tiled(
         kslots.final_slot_moments_kernel,
         dim=[r],
-        inputs=[part, blocks, n, est, wp.array([1.0], dtype=wp.float32, device=d)],
-        outputs=[slot_est, slot_count, flag],
+        inputs=[part, blocks, n, est, wp.array([1.0], dtype=wp.float32, device=d), state, best,
+                wp.zeros(n, dtype=wp.int32, device=d)],
+        outputs=[slot_est, slot_count, flag, wp.zeros((r, 11), dtype=wp.float32, device=d)],
         block_dim=BLOCK,
         device=d,
-    )
+    )  # fmt: skip
     return slot_est.numpy(), weights.numpy(), int(flag.numpy()[0]), part_q.numpy()
 
 

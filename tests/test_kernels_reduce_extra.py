@@ -1,8 +1,9 @@
 """Reduction kernels not compared with NumPy elsewhere, on every device: ``block_max_kernel`` + ``final_max_kernel``
-(the max log-weight and the lowest index attaining it, as the template tracker launches them; test_kernels_templates
-only reads the max back through the normalised weights) at sizes that are not multiples of the block, with ties across
-blocks; and ``increment_kernel``: the device frame counter that seeds the random streams advances by one per launch
-(and only element 0), also when replayed from a captured CUDA graph, where a scalar argument would be frozen."""
+and ``single_max_kernel``, the same in one block (the max log-weight and the lowest index attaining it, as the
+template tracker launches them; test_kernels_templates only reads the max back through the normalised weights) at
+sizes that are not multiples of the block, with ties across blocks; and ``increment_kernel``: the device frame counter
+that seeds the random streams advances by one per launch (and only element 0), also when replayed from a captured CUDA
+graph, where a scalar argument would be frozen."""
 
 from __future__ import annotations
 
@@ -61,3 +62,30 @@ def test_block_and_final_max_match_numpy(device, rng, n, chunk):
     assert est[kreduce.EST_MAXLOGW] == np.float64(logw.max())
     assert best == int(np.argmax(logw == logw.max()))
     assert np.all(np.delete(est, kreduce.EST_MAXLOGW) == 7.0)  # no other entry written
+
+
+@pytest.mark.parametrize("n", [1, 300, 4096])
+def test_single_max_matches_two_passes(device, rng, n):
+    """single_max_kernel (the template tracker's argmax up to SINGLE_MAX values, one block of 1024 threads): the
+    maximum and the lowest index attaining it (ties, -inf entries), nothing else of ``est`` written; the same as
+    block_max_kernel + final_max_kernel."""
+    logw = rng.normal(-50.0, 10.0, n).astype(np.float32)
+    if n > 10:
+        logw[np.sort(rng.choice(n, 3, replace=False))] = logw.max() + 1.0
+        logw[rng.integers(0, n, 5)] = -np.inf
+    est = wp.full(int(kreduce.EST_SIZE), 7.0, dtype=wp.float64, device=device)
+    best = wp.full(1, -7, dtype=wp.int32, device=device)
+    wp.launch_tiled(
+        kreduce.single_max_kernel,
+        dim=[1],
+        inputs=[wp.array(logw, dtype=wp.float32, device=device), n],
+        outputs=[est, best],
+        block_dim=1024,
+        device=device,
+    )
+    got = est.numpy()
+    assert got[kreduce.EST_MAXLOGW] == np.float64(logw.max())
+    assert int(best.numpy()[0]) == int(np.argmax(logw == logw.max()))
+    assert np.all(np.delete(got, kreduce.EST_MAXLOGW) == 7.0)
+    _, _, est2, best2 = run_max(device, logw, 256)
+    assert est2[kreduce.EST_MAXLOGW] == got[kreduce.EST_MAXLOGW] and best2 == int(best.numpy()[0])

@@ -952,6 +952,9 @@ def choose(device, best: int, best_score: float, slot_count, cand_kind=(1, 2, 2,
             wp.array(np.asarray(cand_kind, np.int32), dtype=wp.int32, device=device),
             wp.array(np.asarray(slot_count, np.float64), dtype=wp.float64, device=device),
             r,
+            wp.array([-1], dtype=wp.int32, device=device),
+            wp.zeros(int(kreduce.EST_SIZE), dtype=wp.float64, device=device),
+            float("inf"),  # no class-aware replacement (test_kernels_classify)
         ],
         outputs=list(arrays.values()),
         device=device,
@@ -1442,8 +1445,8 @@ def slot_moments(device, state: kdyn.TemplateState, n: int, r: int, chunk: int, 
     wp.launch_tiled(
         kslots.final_slot_moments_kernel,
         dim=[r],
-        inputs=[part, blocks, n, est, thr],
-        outputs=[slot_est, slot_count, flag],
+        inputs=[part, blocks, n, est, thr, state, best, wp.zeros(n, dtype=wp.int32, device=d)],
+        outputs=[slot_est, slot_count, flag, wp.zeros((r, 11), dtype=wp.float32, device=d)],
         block_dim=BLOCK,
         device=d,
     )
@@ -1543,7 +1546,8 @@ def test_slot_moments_match_numpy(device, n, chunk):
 def test_slot_moments_via_tracker_estimate(device, n):
     """TemplateTracker._estimate on a set particle state (its own block layout: N = 1000 -> 4 blocks of 250, N = 3
     -> one block): slot_est, slot_count, normalised weights, the resample flag (threshold 1: always) and the best
-    particle's row copy (gather_particle_kernel: kind, label, x, y, heading, velocity, dims) match NumPy."""
+    particle's row copy (``final_slot_moments_kernel``'s ``copy_slot``: kind, label, x, y, heading, velocity, dims)
+    match NumPy."""
     rng = np.random.default_rng(n)
     r = 3
     a = {k: v[:n] for k, v in random_population(rng, max(n, 8), r, p_empty=0.2).items()}

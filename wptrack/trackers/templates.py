@@ -80,6 +80,10 @@ def xor_band(particles: int, height: int, groups: int = 0) -> int:
     return band
 
 
+SINGLE_MAX = 4096
+"""Up to this many values an argmax runs in one block of :data:`SINGLE_MAX_BLOCK` threads (``kernels.reduce.
+single_max_kernel``), beyond in blocks and a combining block (``block_max_kernel``, ``final_max_kernel``)."""
+SINGLE_MAX_BLOCK = 1024
 ROW_BLOCK = 128
 """Threads per image row in the row-scan kernels (mask prefix sums, coverage/UOH/gain rows): each owns a segment of
 ceil(W / ROW_BLOCK) pixels."""
@@ -512,6 +516,9 @@ class TemplateTracker(FrameChain):
         self._weight_rows = [self.weights[g] for g in range(rows)]
         self._ancestor_rows = [self.ancestors[g] for g in range(rows)]
         self._active_rows = [self.group_active[g : g + 1] for g in range(r)]
+        # the class-aware addition's threshold (kernels.classify; inf: off)
+        on = config.vehicle_fit > 0.0 and "vehicle" in config.classes and "human" in config.classes
+        self.min_fit = float(config.vehicle_fit) if on else math.inf
         self.group_scale = float(2 ** quantisation_bits(n))  # the exact integer CDF of grouped_systematic_kernel
         self.group_cdf = wp.zeros((gr, gn), dtype=wp.int64, device=d)
         self.part_q = wp.zeros((gb, gr), dtype=wp.int64, device=d)  # per-block sums of the groups' integer weights
@@ -676,8 +683,9 @@ class TemplateTracker(FrameChain):
             device=d,
         )
         self._argmax(c.score, c.count, c.blocks, c.chunk, c.part_max, c.part_arg, c.est, c.best)
-        if cfg.vehicle_fit > 0.0 and "vehicle" in cfg.classes and "human" in cfg.classes:
-            # beyond the paper: a vehicle that fits the blob replaces a chosen human (kernels.classify)
+        if self.min_fit < math.inf:
+            # beyond the paper: a vehicle that fits the blob replaces a chosen human (kernels.classify; the
+            # replacement itself is made by uoh.choose_addition_kernel)
             wp.launch_tiled(
                 kcls.vehicle_fit_kernel,
                 dim=[c.count],
@@ -705,15 +713,18 @@ class TemplateTracker(FrameChain):
                 device=d,
             )
             self._argmax(c.fit, c.count, c.blocks, c.chunk, c.fit_max, c.fit_arg, c.fit_est, c.fit_best)
-            wp.launch(
-                kcls.prefer_vehicle_kernel,
-                dim=1,
-                inputs=[c.fit_best, c.fit_est, int(kreduce.EST_MAXLOGW), float(cfg.vehicle_fit)],
-                outputs=[c.best],
-                device=d,
-            )
 
     def _argmax(self, values, n, blocks, chunk, part_max, part_arg, est, best) -> None:
+        if n <= SINGLE_MAX:  # one block over all values: one launch instead of two, the same result
+            wp.launch_tiled(
+                kreduce.single_max_kernel,
+                dim=[1],
+                inputs=[values, n],
+                outputs=[est, best],
+                block_dim=SINGLE_MAX_BLOCK,
+                device=self.device,
+            )
+            return
         wp.launch_tiled(
             kreduce.block_max_kernel,
             dim=[blocks],
@@ -758,16 +769,9 @@ class TemplateTracker(FrameChain):
         wp.launch_tiled(
             kslots.final_slot_moments_kernel,
             dim=[self.r],
-            inputs=[self.part, self.blocks, self.n, self.est, self.ess_threshold],
-            outputs=[self.slot_est, self.slot_count, self.resampled],
+            inputs=[self.part, self.blocks, self.n, self.est, self.ess_threshold, s, self.best_index, self.penalty],
+            outputs=[self.slot_est, self.slot_count, self.resampled, self.best_state],
             block_dim=BLOCK,
-            device=d,
-        )
-        wp.launch(
-            kslots.gather_particle_kernel,
-            dim=self.r,
-            inputs=[s, self.best_index, self.penalty],
-            outputs=[self.best_state],
             device=d,
         )
         if self.keep_virtual:
@@ -792,7 +796,17 @@ class TemplateTracker(FrameChain):
         wp.launch(
             kuoh.choose_addition_kernel,
             dim=1,
-            inputs=[c.best, c.est, int(kreduce.EST_MAXLOGW), c.kind, self.slot_count, self.r],
+            inputs=[
+                c.best,
+                c.est,
+                int(kreduce.EST_MAXLOGW),
+                c.kind,
+                self.slot_count,
+                self.r,
+                c.fit_best,
+                c.fit_est,
+                self.min_fit,
+            ],
             outputs=[self.next_label, self.slot_label, self.slot_kind, self.add],
             device=d,
         )
