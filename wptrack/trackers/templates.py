@@ -72,7 +72,7 @@ def xor_band(particles: int, height: int, groups: int = 0) -> int:
     Joint launch: 2 rows up to 3,000 particles, 8 below 30,000, 64 from there; grouped launch: 4, 16 and 64 (each of
     its threads walks one group's pieces only, so its bands are taller for the same work per thread). Measured on an
     H100 (bench scene, 1e3 / 1e4 / 1e5 particles x 5 and 10 objects, bands of 2 to 64 rows: BENCHMARKS.md, issue 13,
-    round six). Doubled while the launch would exceed 2^31 - 1 threads (``height`` image rows)."""
+    round seven). Doubled while the launch would exceed 2^31 - 1 threads (``height`` image rows)."""
     small, mid = (4, 16) if groups > 0 else (2, 8)
     band = small if particles <= 3000 else mid if particles < 30_000 else 64
     while -(-height // band) * particles * max(groups, 1) > 2**31 - 1:
