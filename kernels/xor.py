@@ -451,6 +451,37 @@ def xor_band_kernel(cap: int, grouped: bool = False) -> wp.Kernel:
     return xor_band_kernel
 
 
+@wp.func
+def finish_particle(
+    i: int,
+    kind: wp.array2d(dtype=wp.int32),
+    age: wp.array2d(dtype=wp.float32),
+    pos: wp.array2d(dtype=wp.vec2),
+    heading: wp.array2d(dtype=wp.float32),
+    dims: wp.array2d(dtype=wp.vec3),
+    qtotal: wp.array(dtype=wp.int32),
+    cost_a: wp.vec3,
+    cost_b: wp.vec3,
+    scale: float,
+    bg_weight: float,
+    exclusion: float,
+    sums: wp.array(dtype=wp.vec2i),
+    logw: wp.array(dtype=wp.float32),
+    penalty: wp.array(dtype=wp.int32),
+    complexity: wp.array(dtype=wp.float32),
+):
+    """Particle ``i``'s penalty, complexity and log-weight (:func:`particle_score`) from the band kernel's ``sums[i]``,
+    which it clears; ``logw[i]`` is updated in place."""
+    t = sums[i]
+    sums[i] = wp.vec2i(0, 0)
+    m, cost, lw = particle_score(
+        i, t[0], t[1], kind, age, pos, heading, dims, qtotal[0], cost_a, cost_b, scale, bg_weight, exclusion, logw[i]
+    )
+    penalty[i] = m
+    complexity[i] = cost
+    logw[i] = lw
+
+
 @wp.kernel
 def xor_finish_kernel(
     kind: wp.array2d(dtype=wp.int32),
@@ -473,14 +504,10 @@ def xor_finish_kernel(
     of ``xor_band_kernel``, which it clears. Launch with ``dim=N``; arguments and outputs as in
     ``xor_score_kernel`` (``logw`` updated in place)."""
     i = wp.tid()
-    t = sums[i]
-    sums[i] = wp.vec2i(0, 0)
-    m, cost, lw = particle_score(
-        i, t[0], t[1], kind, age, pos, heading, dims, qtotal[0], cost_a, cost_b, scale, bg_weight, exclusion, logw[i]
-    )
-    penalty[i] = m
-    complexity[i] = cost
-    logw[i] = lw
+    finish_particle(
+        i, kind, age, pos, heading, dims, qtotal, cost_a, cost_b, scale, bg_weight, exclusion, sums, logw, penalty,
+        complexity,
+    )  # fmt: skip
 
 
 @wp.kernel
@@ -544,15 +571,10 @@ def group_logw_kernel(
         gmax[g] = NEG_INF
     for i in range(start + lane, stop, wp.block_dim()):
         if finish != 0:
-            joint = sums[i]
-            sums[i] = wp.vec2i(0, 0)
-            mi, jc, jlw = particle_score(
-                i, joint[0], joint[1], kind, age, pos, heading, dims, qtotal[0], cost_a, cost_b, scale, bg_weight,
-                exclusion, logw[i],
+            finish_particle(
+                i, kind, age, pos, heading, dims, qtotal, cost_a, cost_b, scale, bg_weight, exclusion, sums, logw,
+                penalty, complexity,
             )  # fmt: skip
-            penalty[i] = mi
-            complexity[i] = jc
-            logw[i] = jlw
         cost = vec16()
         for s in range(slots):
             kk = kind[i, s]
