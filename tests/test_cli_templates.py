@@ -82,6 +82,7 @@ def test_track_templates_writes_outputs_and_evaluates(scene, capsys):
         (["--t-add", "1.5"], "t_add"),
         (["--classes", "dog"], "classes"),
         (["--min-track-frames", "0"], "min_track_frames"),
+        (["--min-in-image", "1.5"], "min_in_image"),
     ],
 )
 def test_bad_parameters(tmp_path, capsys, extra, message):

@@ -1139,11 +1139,12 @@ def random_population(rng, n: int, r: int, p_empty: float = 0.25):
         "age": rng.uniform(0, 5, (n, r)),
         "logw": rng.normal(-3, 2, n),
     }
-    # limits: a human at 5 m/s (max 3), a vehicle at 25 m/s turning 1.5 rad/s (max 20 and 1), human dims over the max
+    # limits: a human at 5 m/s (max 3), a vehicle at 25 m/s turning 3.5 rad/s (max 20 and 2.5), human dims over the max
     arrays["kind"][0, :3] = (HUMAN, VEHICLE, HUMAN)
     arrays["label"][0, :3] = (1, 2, 3)
     arrays["vel"][0, 0] = (4.0, -3.0)
-    arrays["vel"][0, 1] = (25.0, 1.5)
+    arrays["vel"][0, 1] = (25.0, 3.5)
+    assert 3.5 > cfg.vehicle.turn_max and 25.0 > cfg.vehicle.speed_max and 5.0 > cfg.human.speed_max
     arrays["dims"][0, :3] = (mid_h, mid_v, 1.2 * np.array(cfg.human.dims_max))
     return {k: np.asarray(v).astype(np.float32) if k not in ("kind", "label") else v for k, v in arrays.items()}
 
@@ -1204,7 +1205,7 @@ def test_predict_deterministic_drift_matches_eqs_8_9(device, rng, resampled):
     np.testing.assert_allclose(got["dims"][alive], ref["dims"][alive], rtol=1e-6, err_msg="dims")
     # the limit cases of particle 0 (copied into particles 0-2)
     np.testing.assert_allclose(np.linalg.norm(got["vel"][:3, 0], axis=-1), 3.0, rtol=1e-6)
-    np.testing.assert_allclose(got["vel"][:3, 1], [[20.0, 1.0]] * 3, rtol=1e-6)
+    np.testing.assert_allclose(got["vel"][:3, 1], [[dyn.speed_max[VEHICLE], dyn.turn_max]] * 3, rtol=1e-6)
     np.testing.assert_allclose(got["dims"][:3, 2], [list(dyn.dims_max_human)] * 3, rtol=1e-6)
     assert np.all(got["pos"][~alive] == 0) and np.all(got["age"][~alive] == 0)
 

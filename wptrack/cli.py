@@ -146,6 +146,7 @@ def _template_config_from_args(args, fps: float | None):
         "t_del",
         "add_min_gain",
         "min_existence",
+        "min_in_image",
         "candidate_step_px",
         "vehicle_entry_px",
         "min_track_frames",
@@ -624,6 +625,12 @@ def build_parser() -> argparse.ArgumentParser:
     tt.add_argument("--t-del", type=float, default=None, help="T_del of eq. 13 (default 0.02)")
     tt.add_argument("--add-min-gain", type=float, default=None, help="candidate gain / area to add (default 0.2)")
     tt.add_argument("--min-existence", type=float, default=None, help="report objects above this (default 0.5)")
+    tt.add_argument(
+        "--min-in-image",
+        type=float,
+        default=None,
+        help="report objects with at least this fraction of their image box inside the image (default 0.25; 0: all)",
+    )
     tt.add_argument("--candidate-step-px", type=int, default=None, help="addition grid pitch, pixels (default 8)")
     tt.add_argument(
         "--vehicle-entry-px",

@@ -3,7 +3,8 @@
 Outputs (all written incrementally or atomically, so an interrupted run leaves valid partial results)::
 
     out_dir/tracks.csv     frame,id,x,y,z,class,length,width,height,orientation,speed,existence,gx,gy,sx,sy,degenerate
-                           (objects with existence >= min_existence; x,y,z the ground-contact point in the world
+                           (objects with existence >= min_existence and >= min_in_image of their image box
+                           inside the image; x,y,z the ground-contact point in the world
                            frame and gx,gy on the ground plane, metres; orientation radians; speed m/s; degenerate 1
                            when every particle's log-weight was -inf/NaN that frame: the predicted particles were
                            kept with uniform weights, the prior; run.json's summary counts such frames)

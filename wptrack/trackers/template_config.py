@@ -90,14 +90,18 @@ class VehiclePrior:
     sigma_dims: tuple[float, float, float] = (0.03, 0.01, 0.01)
     sigma_speed: float = 0.6
     """sigma_v of eq. 9, m/s per frame."""
-    sigma_turn: float = 0.15
-    """sigma_theta of eq. 9, rad/s per frame."""
+    sigma_turn: float = 0.3
+    """sigma_theta of eq. 9, rad/s per frame. 0.3 lets the turn rate reach 1 rad/s within one second of turning in
+    (15 frames, one deviation); was 0.15 (docs/reproduction.md, round six)."""
     init_speed_sd: float = 3.0
     init_heading_sd: float = 0.2
     """Heading deviation of an added vehicle around the candidate's orientation, rad."""
     speed_max: float = 20.0
-    turn_max: float = 1.0
-    """|theta| limit, rad/s."""
+    turn_max: float = 2.5
+    """|theta| limit, rad/s. A car's yaw rate is its speed over its turning radius: 2.5 rad/s is a 1.6 m radius at
+    4 m/s, beyond any road car; the U-turns of ``wptrack synth s3-cars`` reach 2.4 rad/s. The former limit, 1 rad/s,
+    held every hypothesis of a U-turning car outside its turn, and humans were added on the part it left uncovered
+    (docs/reproduction.md, round six)."""
     orientations: int = 4
     """Candidate orientations in [0, pi) (a box is symmetric under a half turn)."""
     cost_a: float = 40.0
@@ -247,6 +251,14 @@ class TemplateConfig:
     """Smallest candidate silhouette, pixels."""
     min_existence: float = 0.5
     """Objects are reported when the weight of the particles holding them reaches this fraction."""
+    min_in_image: float = 0.25
+    """Objects are reported when at least this fraction of their image bounding box (the box around the image of
+    their 3D bounding box: a vehicle's length x width x height, a human's body diameter square x height) lies inside
+    the image (0: wherever they are). The filter keeps an object that has left the view until eq. 13 deletes it
+    (nothing contradicts it there), and it keeps one that is entering from its first pixels; neither is in view in
+    the sense of a labelled ground truth. 0.25 is the convention of our synthetic ground truth (``wptrack.synth``:
+    an object is labelled while >= 25 % of its image box is inside the image); set 0 when your labels include
+    objects mostly outside the image. Only the report changes: the particles keep every object."""
     resampling: str = "systematic"
     ess_threshold: float = 1.0
     """Resample when ESS <= threshold x N (1: every frame, as in the paper)."""
@@ -276,6 +288,7 @@ class TemplateConfig:
         _nonneg(self.add_min_gain, "add_min_gain", "fraction")
         _nonneg(self.add_beta, "add_beta", "weight")
         _nonneg(self.min_existence, "min_existence", "fraction", upper=1.0)
+        _nonneg(self.min_in_image, "min_in_image", "fraction of the image box", upper=1.0)
         if not isinstance(self.human, HumanPrior):
             raise ConfigError("human: expected a HumanPrior")
         if not isinstance(self.vehicle, VehiclePrior):
@@ -333,6 +346,8 @@ class TrackedObject:
     """m/s."""
     existence: float = 1.0
     """Weight of the particles that hold the object (1 for the best particle's objects)."""
+    in_image: float = 1.0
+    """Fraction of the object's image bounding box inside the image (``TemplateConfig.min_in_image``)."""
     std: np.ndarray = field(default_factory=lambda: np.zeros(2))
     """(2,) spread of the ground position over the particles, metres."""
     age: float = 0.0

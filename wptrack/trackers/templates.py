@@ -15,7 +15,8 @@ device launches (CUDA graph on GPUs)::
 
 Every slot holds one persistent label in all particles, so an object's estimate is a weighted moment over the
 particles that hold it, and labels survive resampling. Objects are reported when their existence probability (the
-weight of the particles holding them) is at least ``min_existence``.
+weight of the particles holding them) is at least ``min_existence`` and at least ``min_in_image`` of their image
+bounding box is inside the image.
 
 Units: metres, seconds, radians on the ground plane (its own 2D frame, see ``wptrack.rig.GroundPlane``); pixels in
 the image.
@@ -147,6 +148,42 @@ def particle_bytes(max_objects: int, scheme: str, partition: bool = False) -> in
     """Device memory per particle of the template tracker, bytes."""
     extra = max_objects * PARTITION_SLOT_BYTES if partition else 0
     return max_objects * SLOT_STATE_BYTES + PARTICLE_BYTES + extra + bytes_per_particle(scheme)  # float64 weights
+
+
+_BOX_CORNERS = np.array([[sx, sy, sz] for sx in (-0.5, 0.5) for sy in (-0.5, 0.5) for sz in (0.0, 1.0)])
+
+
+def image_box_fraction(camera: Camera, plane: GroundPlane, objects: list[TrackedObject]) -> np.ndarray:
+    """Fraction of each object's image bounding box that lies inside the image (``TemplateConfig.min_in_image``).
+
+    The image bounding box is the box around the 8 projected corners of the object's 3D bounding box (``size``:
+    length x width x height, metres, turned by its heading, standing on the ground plane), lens distortion included.
+    An object with a corner behind the camera counts as outside (0).
+
+    Args:
+        camera: The tracker's ``wptrack.rig.Camera`` (its ``width`` x ``height`` pixels is the image).
+        plane: The ``wptrack.rig.GroundPlane``.
+        objects: ``TrackedObject`` s.
+
+    Returns:
+        (len(objects),) fractions in [0, 1].
+    """
+    if not objects:
+        return np.zeros(0)
+    size = np.array([o.size for o in objects], dtype=np.float64)  # (n, 3) m
+    ground = np.array([o.ground for o in objects], dtype=np.float64)  # (n, 2) m
+    c = np.cos([o.heading for o in objects])[:, None]
+    s = np.sin([o.heading for o in objects])[:, None]
+    local = _BOX_CORNERS[None] * size[:, None, :]  # (n, 8, 3)
+    gx = ground[:, :1] + c * local[..., 0] - s * local[..., 1]
+    gy = ground[:, 1:] + s * local[..., 0] + c * local[..., 1]
+    world = plane.to_world(np.stack([gx, gy], axis=-1), local[..., 2])  # (n, 8, 3)
+    uv, depth = camera.project(world.reshape(-1, 3))
+    uv = uv.reshape(len(objects), 8, 2)
+    lo, hi = uv.min(axis=1), uv.max(axis=1)
+    area = np.prod(np.maximum(hi - lo, 1e-9), axis=1)
+    inside = np.prod(np.clip(np.minimum(hi, [camera.width, camera.height]) - np.maximum(lo, 0.0), 0.0, None), axis=1)
+    return np.where(np.all(depth.reshape(len(objects), 8) > 0.0, axis=1), inside / area, 0.0)
 
 
 class Hulls:
@@ -936,6 +973,9 @@ class TemplateTracker(FrameChain):
                 o.std = se[s, kslots.SE_STD : kslots.SE_STD + 2].copy()
                 o.age = float(se[s, kslots.SE_AGE])
                 objects.append(o)
+        for o, f in zip(objects, image_box_fraction(self.camera, self.plane, objects), strict=True):
+            o.in_image = float(f)
+        objects = [o for o in objects if o.in_image >= self.config.min_in_image]
         objects.sort(key=lambda o: o.id)
         bs = h["best_state"].numpy()
         best = []
