@@ -254,9 +254,9 @@ class TemplateConfig:
     min_in_image: float = 0.25
     """Objects are reported when at least this fraction of their image bounding box (the box around the image of
     their 3D bounding box: a vehicle's length x width x height, a human's body diameter square x height) lies inside
-    the image (0: wherever they are). The filter keeps an object that has left the view until eq. 13 deletes it
-    (nothing contradicts it there), and it keeps one that is entering from its first pixels; neither is in view in
-    the sense of a labelled ground truth. 0.25 is the convention of our synthetic ground truth (``wptrack.synth``:
+    the image (0: wherever they are). The particles hold an object that has left the view until eq. 13 deletes it
+    (no pixel contradicts it there) and one that is entering from its first pixels; neither is in view in the sense
+    of a labelled ground truth. 0.25 is the convention of our synthetic ground truth (``wptrack.synth``:
     an object is labelled while >= 25 % of its image box is inside the image); set 0 when your labels include
     objects mostly outside the image. Only the report changes: the particles keep every object."""
     resampling: str = "systematic"
@@ -367,7 +367,7 @@ class TemplateEstimate:
 
     frame: int
     objects: list[TrackedObject]
-    """Objects whose existence >= min_existence, by id."""
+    """Objects whose existence >= min_existence and with >= min_in_image of their image box in the image, by id."""
     best: list[TrackedObject]
     """The objects of the best (MAP) particle."""
     penalty: int
