@@ -49,7 +49,9 @@ def test_vehicle_fit_matches_silhouettes(device, block_dim):
     rng = np.random.default_rng(11)
     cam = random_camera(rng)
     plane = GroundPlane()
-    config = TemplateConfig(candidate_step_px=16, max_range=40.0, vehicle=VehiclePrior(orientations=2))
+    config = TemplateConfig(  # the human candidates under the image only: b below is one of them
+        candidate_step_px=16, max_range=40.0, vehicle=VehiclePrior(orientations=2), human_entry_px=0
+    )
     cands = Candidates(cam, plane, camera_struct(cam), _plane_struct(plane), config, device)
     h, w = cam.height, cam.width
     q = random_mask(rng, w, h) != 0
@@ -181,6 +183,8 @@ def test_absorb_removes_humans_on_the_added_vehicle(device, absorb):
         ("absorb", 1),
         ("vehicle_entry_px", -8),
         ("vehicle_entry_px", 4.5),
+        ("human_entry_px", -8),
+        ("human_entry_px", True),
         ("min_track_frames", 0),
         ("min_track_frames", 2.5),
         ("min_track_frames", True),
@@ -191,32 +195,36 @@ def test_config_validated(field, value):
         TemplateConfig(**{field: value})
 
 
-def test_vehicle_candidates_beyond_the_border():
-    """vehicle_entry_px widens the vehicle candidates' pixel grid left, right and below the image (objects entering
-    the view); the human candidates and, with 0, the vehicle ones stay under the image's pixels."""
+@pytest.mark.parametrize("widened", ["vehicle", "human"])
+def test_candidates_beyond_the_border(widened: str):
+    """vehicle_entry_px (human_entry_px) widens the vehicle (human) candidates' pixel grid left, right and below the
+    image (objects entering the view); the other class's candidates and, with 0, its own stay under the image's
+    pixels."""
     rng = np.random.default_rng(5)
     cam = random_camera(rng)
     plane = GroundPlane()
     base = TemplateConfig(
-        candidate_step_px=16, max_range=60.0, vehicle=VehiclePrior(orientations=1), vehicle_entry_px=0
-    )
+        candidate_step_px=16, max_range=60.0, vehicle=VehiclePrior(orientations=1), vehicle_entry_px=0,
+        human_entry_px=0,
+    )  # fmt: skip
     margin = 48
+    kind, other = (VEHICLE, HUMAN) if widened == "vehicle" else (HUMAN, VEHICLE)
 
-    def image_coords(c: Candidates, kind: int) -> np.ndarray:
-        g = c.pos_np[c.kind_np == kind].astype(np.float64)
+    def image_coords(c: Candidates, k: int) -> np.ndarray:
+        g = c.pos_np[c.kind_np == k].astype(np.float64)
         world = plane.origin + g[:, :1] * plane.x_axis + g[:, 1:] * plane.y_axis
         uv, _ = cam.project(world)
         return uv
 
     inside = Candidates(cam, plane, camera_struct(cam), _plane_struct(plane), base, "cpu")
-    wide_cfg = dataclasses.replace(base, vehicle_entry_px=margin)
+    wide_cfg = dataclasses.replace(base, **{f"{widened}_entry_px": margin})
     wide = Candidates(cam, plane, camera_struct(cam), _plane_struct(plane), wide_cfg, "cpu")
     for c in (inside, wide):
-        uv = image_coords(c, HUMAN)
+        uv = image_coords(c, other)
         assert np.all((uv >= -0.5) & (uv <= [cam.width + 0.5, cam.height + 0.5]))
-    uv0 = image_coords(inside, VEHICLE)
+    uv0 = image_coords(inside, kind)
     assert np.all((uv0 >= -0.5) & (uv0 <= [cam.width + 0.5, cam.height + 0.5]))
-    uv = image_coords(wide, VEHICLE)
+    uv = image_coords(wide, kind)
     outside = (uv[:, 0] < 0) | (uv[:, 0] > cam.width) | (uv[:, 1] > cam.height)
     assert outside.sum() > 0 and len(uv) > len(uv0)
     assert np.all(uv[:, 0] > -margin - 1) and np.all(uv[:, 0] < cam.width + margin + 1)

@@ -830,7 +830,7 @@ def candidate_case(device, rng, min_gain: float, min_area: int, beta: float = 0.
     cam = random_camera(rng)
     plane = GroundPlane()
     config = TemplateConfig(
-        candidate_step_px=20, max_range=40.0, vehicle=VehiclePrior(orientations=2), vehicle_entry_px=0
+        candidate_step_px=20, max_range=40.0, vehicle=VehiclePrior(orientations=2), vehicle_entry_px=0, human_entry_px=0
     )
     cands = Candidates(cam, plane, camera_struct(cam), _plane_struct(plane), config, device)
     h, w, n = cam.height, cam.width, 37

@@ -248,11 +248,13 @@ class Candidates:
         margin = int(config.vehicle_entry_px)
         ground_v = ground if margin == 0 else self._grid(camera, plane, step, margin, config.max_range)
         kinds, pos, heading, dims = [], [], [], []
+        margin_h = int(config.human_entry_px)
+        ground_h = ground if margin_h == 0 else self._grid(camera, plane, step, margin_h, config.max_range)
         if "human" in config.classes:
-            kinds.append(np.full(len(ground), int(kraster.KIND_HUMAN)))
-            pos.append(ground)
-            heading.append(np.zeros(len(ground)))
-            dims.append(np.tile(config.human.dims_mean, (len(ground), 1)))
+            kinds.append(np.full(len(ground_h), int(kraster.KIND_HUMAN)))
+            pos.append(ground_h)
+            heading.append(np.zeros(len(ground_h)))
+            dims.append(np.tile(config.human.dims_mean, (len(ground_h), 1)))
         if "vehicle" in config.classes:
             for k in range(config.vehicle.orientations):
                 kinds.append(np.full(len(ground_v), int(kraster.KIND_VEHICLE)))
