@@ -83,6 +83,7 @@ def test_track_templates_writes_outputs_and_evaluates(scene, capsys):
         (["--classes", "dog"], "classes"),
         (["--min-track-frames", "0"], "min_track_frames"),
         (["--min-in-image", "1.5"], "min_in_image"),
+        (["--human-entry-px", "-1"], "human_entry_px"),
     ],
 )
 def test_bad_parameters(tmp_path, capsys, extra, message):

@@ -149,6 +149,7 @@ def _template_config_from_args(args, fps: float | None):
         "min_in_image",
         "candidate_step_px",
         "vehicle_entry_px",
+        "human_entry_px",
         "min_track_frames",
     ):
         value = getattr(args, name)
@@ -637,6 +638,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=None,
         help="vehicle addition candidates also this far beyond the image border, pixels (cars entering the view)",
+    )
+    tt.add_argument(
+        "--human-entry-px",
+        type=int,
+        default=None,
+        help="human addition candidates also this far beyond the image border, pixels (people walking in; default 64)",
     )
     tt.add_argument(
         "--min-track-frames",
