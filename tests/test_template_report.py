@@ -23,7 +23,8 @@ def _vehicle(plane: GroundPlane, ground, dims, heading: float) -> TrackedObject:
 
 def test_image_box_fraction_matches_the_ground_truth_rule() -> None:
     """For a car's box, the tracker's fraction equals the one the synthetic ground truth labels by
-    (``wptrack.synth.plaza.image_box_cover``, written separately), inside, across the edges of and outside the
+    (``wptrack.synth.plaza.image_box_cover``, which builds the corners from the scene's own shapes in world
+    coordinates; both project them with ``Camera.image_box_cover``), inside, across the edges of and outside the
     image."""
     cam, plane = plaza_camera(), GroundPlane()
     car = next(a.shape for a in SCENES["s3-cars"].build().actors if isinstance(a.shape, P.Car))

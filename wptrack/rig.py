@@ -229,6 +229,26 @@ class Camera:
         )
         return np.asarray(uv, dtype=np.float64).reshape(-1, 2), depth
 
+    def image_box_cover(self, corners: np.ndarray, min_depth: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """How much of each object's image bounding box lies inside the image.
+
+        Args:
+            corners: (N, K, 3) world points per object (e.g. the 8 corners of its 3D box), metres.
+            min_depth: a corner at this depth or nearer (metres) makes the object not ``ok``.
+
+        Returns:
+            ``(ok, area, inside)``: (N,) bool, every corner deeper than ``min_depth``; (N,) area of the bounding box
+            of the projected corners and (N,) the part of it inside the ``width`` x ``height`` image, square pixels.
+        """
+        pts = np.asarray(corners, dtype=np.float64)
+        n, k = pts.shape[:2]
+        uv, depth = self.project(pts.reshape(-1, 3))
+        uv = uv.reshape(n, k, 2)
+        lo, hi = uv.min(axis=1), uv.max(axis=1)
+        area = np.prod(np.maximum(hi - lo, 1e-6), axis=1)
+        inside = np.prod(np.clip(np.minimum(hi, [self.width, self.height]) - np.maximum(lo, 0.0), 0.0, None), axis=1)
+        return np.all(depth.reshape(n, k) > min_depth, axis=1), area, inside
+
     def pixel_rays(self, uv: Sequence[Sequence[float]] | np.ndarray) -> np.ndarray:
         """World directions of the viewing rays through pixels (distortion removed, via ``cv2.undistortPoints``).
 

@@ -166,20 +166,13 @@ def image_box_cover(
         ``(ok, area, inside)``: (N,) bool, all box corners in front of the camera; (N,) area of the image bounding
         box of the 8 box corners and (N,) the part of it inside the image, square pixels.
     """
-    n = len(pos)
     half, height = shape.box()
     c, s = np.cos(heading), np.sin(heading)
     local = _BOX_SIGNS * half[None, :] + np.array([0.0, 0.0, 0.5 * height])
     wx = pos[:, 0, None] + c[:, None] * local[None, :, 0] - s[:, None] * local[None, :, 1]
     wy = pos[:, 1, None] + s[:, None] * local[None, :, 0] + c[:, None] * local[None, :, 1]
     wz = np.broadcast_to(local[None, :, 2], wx.shape)
-    uv, depth = cam.project(np.stack([wx, wy, wz], axis=-1).reshape(-1, 3))
-    uv = uv.reshape(n, 8, 2)
-    ok = np.all(depth.reshape(n, 8) > 0.1, axis=1)
-    lo, hi = uv.min(axis=1), uv.max(axis=1)
-    area = np.prod(np.maximum(hi - lo, 1e-6), axis=1)
-    inside = np.prod(np.clip(np.minimum(hi, [cam.width, cam.height]) - np.maximum(lo, 0.0), 0.0, None), axis=1)
-    return ok, area, inside
+    return cam.image_box_cover(np.stack([wx, wy, wz], axis=-1), min_depth=0.1)
 
 
 class PlazaScene(Scene):

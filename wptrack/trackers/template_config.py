@@ -354,7 +354,8 @@ class TrackedObject:
     existence: float = 1.0
     """Weight of the particles that hold the object (1 for the best particle's objects)."""
     in_image: float = 1.0
-    """Fraction of the object's image bounding box inside the image (``TemplateConfig.min_in_image``)."""
+    """Fraction of the object's image bounding box inside the image (``TemplateConfig.min_in_image``; not computed for
+    the best particle's objects, which are not filtered: 1)."""
     std: np.ndarray = field(default_factory=lambda: np.zeros(2))
     """(2,) spread of the ground position over the particles, metres."""
     age: float = 0.0

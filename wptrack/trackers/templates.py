@@ -177,13 +177,8 @@ def image_box_fraction(camera: Camera, plane: GroundPlane, objects: list[Tracked
     local = _BOX_CORNERS[None] * size[:, None, :]  # (n, 8, 3)
     gx = ground[:, :1] + c * local[..., 0] - s * local[..., 1]
     gy = ground[:, 1:] + s * local[..., 0] + c * local[..., 1]
-    world = plane.to_world(np.stack([gx, gy], axis=-1), local[..., 2])  # (n, 8, 3)
-    uv, depth = camera.project(world.reshape(-1, 3))
-    uv = uv.reshape(len(objects), 8, 2)
-    lo, hi = uv.min(axis=1), uv.max(axis=1)
-    area = np.prod(np.maximum(hi - lo, 1e-9), axis=1)
-    inside = np.prod(np.clip(np.minimum(hi, [camera.width, camera.height]) - np.maximum(lo, 0.0), 0.0, None), axis=1)
-    return np.where(np.all(depth.reshape(len(objects), 8) > 0.0, axis=1), inside / area, 0.0)
+    ok, area, inside = camera.image_box_cover(plane.to_world(np.stack([gx, gy], axis=-1), local[..., 2]))
+    return np.where(ok, inside / area, 0.0)
 
 
 class Hulls:
@@ -245,11 +240,11 @@ class Candidates:
                 f"{plane.normal.tolist()}) within {config.max_range} m: no image pixel's ray meets it in front of "
                 "the camera; check the rig's pose and its 'ground' entry"
             )
-        margin = int(config.vehicle_entry_px)
-        ground_v = ground if margin == 0 else self._grid(camera, plane, step, margin, config.max_range)
+        grids = {0: ground}  # by margin beyond the border, pixels (the two classes' margins are often equal)
+        for margin in {int(config.human_entry_px), int(config.vehicle_entry_px)} - {0}:
+            grids[margin] = self._grid(camera, plane, step, margin, config.max_range)
+        ground_h, ground_v = grids[int(config.human_entry_px)], grids[int(config.vehicle_entry_px)]
         kinds, pos, heading, dims = [], [], [], []
-        margin_h = int(config.human_entry_px)
-        ground_h = ground if margin_h == 0 else self._grid(camera, plane, step, margin_h, config.max_range)
         if "human" in config.classes:
             kinds.append(np.full(len(ground_h), int(kraster.KIND_HUMAN)))
             pos.append(ground_h)
