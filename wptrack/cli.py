@@ -151,6 +151,8 @@ def _template_config_from_args(args, fps: float | None):
         "vehicle_entry_px",
         "human_entry_px",
         "min_track_frames",
+        "backfill_seconds",
+        "backfill_min_frames",
     ):
         value = getattr(args, name)
         if value is not None:
@@ -651,6 +653,19 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="leave tracks shorter than this out of tracks.csv when the run completes (default 8; 1: keep all; "
         "tracks_all.csv keeps every track)",
+    )
+    tt.add_argument(
+        "--backfill-seconds",
+        type=float,
+        default=None,
+        help="when the run completes, extend each lasting track back over up to this long before it was first "
+        "reported, while in view (default 1.35; 0: off; rows with existence 0)",
+    )
+    tt.add_argument(
+        "--backfill-min-frames",
+        type=int,
+        default=None,
+        help="backfill only tracks with at least this many rows (default 15)",
     )
     tt.add_argument("--resampling", default="systematic", help="systematic, stratified, multinomial or residual")
     tt.add_argument(

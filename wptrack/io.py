@@ -36,7 +36,7 @@ import platform
 import random
 import tempfile
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -383,6 +383,20 @@ def _format_value(value: Any) -> Any:
     return text
 
 
+def _copy_atomic(src: Path, dst: Path) -> None:
+    """Copy ``src`` to ``dst`` through a temporary file beside ``dst`` (``dst`` is never half-written)."""
+    import shutil
+
+    tmp = dst.with_name(dst.name + ".tmp")
+    try:
+        shutil.copyfile(src, tmp)
+        with open(tmp, "rb") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, dst)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
 def drop_short_tracks(path: Path, all_path: Path, min_frames: int) -> int:
     """Leave the tracks with fewer than ``min_frames`` rows out of the tracks CSV ``path`` (columns ``frame`` and
     ``id``), except those still reported in its last frame (the recording ended, not the track: a run of fewer
@@ -392,7 +406,6 @@ def drop_short_tracks(path: Path, all_path: Path, min_frames: int) -> int:
     replaces ``path`` (at every moment ``path`` holds either every row or the filtered rows). Two streaming passes
     (the row counts and last frames per id, then the copy): memory grows with the number of tracks, not rows.
     """
-    import shutil
 
     counts: dict[str, int] = {}
     last: dict[str, int] = {}
@@ -409,11 +422,9 @@ def drop_short_tracks(path: Path, all_path: Path, min_frames: int) -> int:
             last[k] = max(last.get(k, f), f)
             end = f if end is None else max(end, f)
     keep = {k for k, c in counts.items() if c >= min_frames or last[k] == end}
-    tmp_all = all_path.with_name(all_path.name + ".tmp")
     tmp = path.with_name(path.name + ".tmp")
     try:
-        shutil.copyfile(path, tmp_all)
-        os.replace(tmp_all, all_path)
+        _copy_atomic(path, all_path)
         with open(path, encoding="utf-8", newline="") as src, open(tmp, "w", encoding="utf-8", newline="") as dst:
             lines = iter(src)
             dst.write(next(lines))
@@ -424,9 +435,8 @@ def drop_short_tracks(path: Path, all_path: Path, min_frames: int) -> int:
             os.fsync(dst.fileno())
         os.replace(tmp, path)
     finally:  # nothing half-written is left behind
-        for t in (tmp_all, tmp):
-            with contextlib.suppress(OSError):
-                t.unlink(missing_ok=True)
+        with contextlib.suppress(OSError):
+            tmp.unlink(missing_ok=True)
     return len(counts) - len(keep)
 
 
@@ -664,7 +674,13 @@ class RunWriter:
         self._write_run_json()
         self._last_flush = time.monotonic()
 
-    def close(self, status: str = "complete", summary: dict[str, Any] | None = None, min_track_frames: int = 1) -> None:
+    def close(
+        self,
+        status: str = "complete",
+        summary: dict[str, Any] | None = None,
+        min_track_frames: int = 1,
+        finish_tracks: Callable[[Path], dict[str, Any]] | None = None,
+    ) -> None:
         """Finish the run: close tracks.csv, write the final particles.npz and run.json (idempotent).
 
         Args:
@@ -675,6 +691,11 @@ class RunWriter:
                 (:func:`drop_short_tracks`; run.json records ``min_track_frames`` and ``short_tracks_dropped``, or
                 ``short_tracks_error`` when the files could not be written: ``tracks.csv`` then has every row).
                 Other runs keep every row in ``tracks.csv`` (a resumed run is filtered when it completes).
+            finish_tracks: With ``"complete"``: called with the path of ``tracks.csv`` after the short tracks are
+                left out (it rewrites the file atomically, e.g. ``wptrack.backfill``); the dict it returns goes into
+                run.json, or ``finish_tracks_error`` when it raised ``OSError`` or ``OutputError`` (``tracks.csv``
+                then holds the rows it had before). ``tracks_all.csv`` is written before it, with every row, when
+                it is not yet there.
         """
         if self._closed:
             return
@@ -693,6 +714,15 @@ class RunWriter:
             except (OSError, OutputError) as e:  # the run is complete: keep every row and say why
                 log.warning("could not leave the short tracks out of %s: %s", self.tracks_path, e)
                 self._run["short_tracks_error"] = str(e)
+        if status == "complete" and finish_tracks is not None:
+            try:
+                all_path = self.out_dir / TRACKS_ALL_FILE
+                if not all_path.exists():  # the tracker's own rows stay in tracks_all.csv
+                    _copy_atomic(self.tracks_path, all_path)
+                self._run.update(finish_tracks(self.tracks_path))
+            except (OSError, OutputError) as e:  # the run is complete: keep the rows as they are and say why
+                log.warning("could not finish the tracks of %s: %s", self.tracks_path, e)
+                self._run["finish_tracks_error"] = str(e)
         if len(self._particles):
             self._write_particles()
         self._run.update(status=status, finished=_now())

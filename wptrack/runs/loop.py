@@ -319,6 +319,11 @@ def run_tracker(
                     stopped["reason"],
                 )
         summary = job.summary()
-        out.close("complete", summary, min_track_frames=getattr(job, "min_track_frames", 1))
+        out.close(
+            "complete",
+            summary,
+            min_track_frames=getattr(job, "min_track_frames", 1),
+            finish_tracks=getattr(job, "finish_tracks", None),
+        )
     (out_dir / CHECKPOINT_FILE).unlink(missing_ok=True)
     return summary

@@ -170,10 +170,37 @@ def image_box_fraction(camera: Camera, plane: GroundPlane, objects: list[Tracked
     """
     if not objects:
         return np.zeros(0)
-    size = np.array([o.size for o in objects], dtype=np.float64)  # (n, 3) m
-    ground = np.array([o.ground for o in objects], dtype=np.float64)  # (n, 2) m
-    c = np.cos([o.heading for o in objects])[:, None]
-    s = np.sin([o.heading for o in objects])[:, None]
+    return box_fraction_in_image(
+        camera,
+        plane,
+        np.array([o.ground for o in objects], dtype=np.float64),
+        np.array([o.size for o in objects], dtype=np.float64),
+        np.array([o.heading for o in objects], dtype=np.float64),
+    )
+
+
+def box_fraction_in_image(
+    camera: Camera, plane: GroundPlane, ground: np.ndarray, size: np.ndarray, heading: np.ndarray
+) -> np.ndarray:
+    """:func:`image_box_fraction` of objects given as arrays.
+
+    Args:
+        camera: The camera (its ``width`` x ``height`` pixels is the image).
+        plane: The ground plane.
+        ground: (n, 2) ground-plane positions of the objects' footprint centres, metres.
+        size: (n, 3) length, width, height, metres.
+        heading: (n,) headings on the ground plane, radians.
+
+    Returns:
+        (n,) fractions in [0, 1].
+    """
+    ground = np.asarray(ground, dtype=np.float64).reshape(-1, 2)
+    if len(ground) == 0:
+        return np.zeros(0)
+    size = np.asarray(size, dtype=np.float64).reshape(-1, 3)
+    heading = np.asarray(heading, dtype=np.float64).reshape(-1)
+    c = np.cos(heading)[:, None]
+    s = np.sin(heading)[:, None]
     local = _BOX_CORNERS[None] * size[:, None, :]  # (n, 8, 3)
     gx = ground[:, :1] + c * local[..., 0] - s * local[..., 1]
     gy = ground[:, 1:] + s * local[..., 0] + c * local[..., 1]
