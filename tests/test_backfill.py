@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from wptrack.backfill import backfill_rows, backfill_tracks_file
+from wptrack.backfill import backfill_rows, backfill_tracks_file, stitch_tracks_file
 from wptrack.errors import ConfigError, OutputError
 from wptrack.trackers.templates import TemplateConfig
 
@@ -149,16 +149,31 @@ def test_backfill_tracks_file_errors_name_the_file(tmp_path):
     path.write_text("frame,id,x,y\n0,1,0.0,0.0\n")
     with pytest.raises(OutputError, match=r"tracks\.csv: no z, gx, gy"):
         backfill_tracks_file(path, _to_world, _always, frames=4, min_rows=1)
-    path.write_text(HEADER + "\n0,1,a,0,0,human,0.4,0.4,1.7,0,0,1,0,0,0,0,0\n")
-    with pytest.raises(OutputError, match=r"tracks\.csv: column 'x' holds a value that is not a number"):
+    bad = HEADER + "\n0,1,0,0,0,human,0.4,0.4,1.7,0,0,1,a,0,0,0,0\n"
+    path.write_text(bad)
+    with pytest.raises(OutputError, match=r"tracks\.csv: column 'gx' holds a value that is not a number"):
         backfill_tracks_file(path, _to_world, _always, frames=4, min_rows=1)
-    assert path.read_text().startswith(HEADER)  # left as it was
+    assert path.read_text() == bad  # left as it was
+    row = "{},1,0,0,0,human,0.4,0.4,1.7,0,0,1,0,0,0,0,0"
+    unordered = "\n".join([HEADER, row.format(5), row.format(3)]) + "\n"
+    path.write_text(unordered)
+    with pytest.raises(OutputError, match=r"tracks\.csv: rows are not in frame order \(frame 3 after 5\)"):
+        backfill_tracks_file(path, _to_world, _always, frames=4, min_rows=1)
+    assert path.read_text() == unordered and not list(tmp_path.glob("*.tmp"))
+    path.write_text("")
+    with pytest.raises(OutputError, match=r"tracks\.csv: empty file"):
+        backfill_tracks_file(path, _to_world, _always, frames=4, min_rows=1)
+    path.write_text(HEADER + "\n")  # no rows: nothing to do
+    assert backfill_tracks_file(path, _to_world, _always, frames=4, min_rows=1) == 0
 
 
 def test_config_backfill():
     c = TemplateConfig()
     assert c.backfill_frames == 20 and TemplateConfig(fps=7.0).backfill_frames == 9
     assert TemplateConfig(backfill_seconds=0).backfill_frames == 0
+    assert c.stitch_frames == 30 and TemplateConfig(fps=10.0).stitch_frames == 20 and c.stitch_distance == 2.0
+    with pytest.raises(ConfigError, match="stitch_distance"):
+        TemplateConfig(stitch_distance=-0.5)
     assert c.to_dict()["backfill_seconds"] == 1.35 and "backfill_frames" not in c.to_dict()
     with pytest.raises(ConfigError, match="backfill_seconds"):
         TemplateConfig(backfill_seconds=-1)
@@ -185,12 +200,14 @@ def test_a_completed_template_run_is_backfilled(tmp_path, capsys):
     kept, every = read_tracks(out / "tracks.csv"), read_tracks(out / "tracks_all.csv")
     filled = kept["existence"] == 0
     assert run["backfill_frames"] == 20 and run["backfill_min_frames"] == 8
+    assert run["stitch_frames"] == 30 and run["stitch_distance"] == 2.0 and run["stitched_tracks"] >= 0
     assert run["backfilled_rows"] == int(filled.sum()) > 0  # the people entering the scene are first seen late
     assert not np.any(every["existence"] == 0)
     for tid in np.unique(kept["id"][filled]):  # backfilled rows come before the track's first own row
         own = every["frame"][every["id"] == tid]
         assert kept["frame"][filled & (kept["id"] == tid)].max() < own.min()
-    assert len(kept["frame"]) - int(filled.sum()) == int(np.isin(every["id"], kept["id"]).sum())
+    if run["stitched_tracks"] == 0:
+        assert len(kept["frame"]) - int(filled.sum()) == int(np.isin(every["id"], kept["id"]).sum())
 
 
 def test_run_writer_finish_tracks(tmp_path):
@@ -232,3 +249,83 @@ def test_run_writer_finish_tracks(tmp_path):
         rw.add_rows(rows)
         rw.close("interrupted", finish_tracks=finish)
     assert len(seen) == 2 and not (tmp_path / "d" / "tracks_all.csv").exists()
+
+
+def _write(path, rows):
+    """rows: (frame, id, gx, gy, class) -> a tracks CSV in frame order."""
+    lines = [HEADER]
+    for f, tid, gx, gy, cls in sorted(rows, key=lambda r: (r[0], r[1])):
+        lines.append(f"{f},{tid},{gx:.6f},{gy:.6f},0.000000,{cls},0.4,0.4,1.7,0.0,1.0,0.9,{gx:.6f},{gy:.6f},0,0,0")
+    path.write_text("\n".join(lines) + "\n")
+    return lines
+
+
+def test_stitch_gives_a_continuing_track_its_predecessors_id(tmp_path):
+    # id 4 walks along x at 0.1 m/frame in frames 0-19 and is lost; id 9 starts at frame 25 where 4 was heading
+    # (2.5 m on, 0.3 m off its line); id 6 starts at frame 25 too, 3 m away; id 2 lasts to the last frame (frame 49)
+    rows = [(f, 4, 0.1 * f, 0.0, "human") for f in range(20)]
+    rows += [(f, 9, 0.1 * f, 0.3, "human") for f in range(25, 45)]
+    rows += [(f, 6, 0.1 * f, 3.0, "human") for f in range(25, 40)]
+    rows += [(f, 2, -10.0, 0.0, "human") for f in range(50)]
+    path = tmp_path / "tracks.csv"
+    lines = _write(path, rows)
+    assert stitch_tracks_file(path, gap=10, distance=1.0) == 1
+    out = path.read_text().splitlines()
+    assert len(out) == len(lines) and out[0] == HEADER
+    ids = [int(ln.split(",")[1]) for ln in out[1:]]
+    frames = [int(ln.split(",")[0]) for ln in out[1:]]
+    assert sorted(set(ids)) == [2, 4, 6] and frames == sorted(frames)
+    assert [f for f, i in zip(frames, ids, strict=True) if i == 4] == list(range(20)) + list(range(25, 45))
+    # the changed lines differ only in the id
+    assert [ln.split(",", 2)[2] for ln in out[1:]] == [ln.split(",", 2)[2] for ln in lines[1:]]
+    assert not list(tmp_path.glob("*.tmp"))
+
+
+@pytest.mark.parametrize(
+    "gap, distance, cls, expect",
+    [
+        (4, 1.0, "human", 0),  # 5 frames apart, over the gap
+        (10, 0.2, "human", 0),  # 0.3 m off the line, over the distance
+        (10, 1.0, "vehicle", 0),  # another class
+        (0, 1.0, "human", 0),  # off
+        (5, 1.0, "human", 1),
+    ],
+)
+def test_stitch_limits(tmp_path, gap, distance, cls, expect):
+    rows = [(f, 4, 0.1 * f, 0.0, "human") for f in range(20)] + [(f, 2, -10.0, 0.0, "human") for f in range(50)]
+    rows += [(f, 9, 0.1 * f, 0.3, cls) for f in range(24, 45)]
+    path = tmp_path / "tracks.csv"
+    _write(path, rows)
+    assert stitch_tracks_file(path, gap=gap, distance=distance) == expect
+
+
+def test_stitch_nearest_first_and_chains(tmp_path):
+    # two candidates for id 1's successor: 5 (0.5 m off) and 7 (0.2 m off): 7 wins, and 5 stays; 7 ends and 8
+    # continues it: 8 takes id 1 too (a chain); a track ending in the last frame has no successor
+    rows = [(f, 1, 0.1 * f, 0.0, "human") for f in range(10)]
+    rows += [(f, 5, 0.1 * f, 0.5, "human") for f in range(12, 30)]
+    rows += [(f, 7, 0.1 * f, 0.2, "human") for f in range(12, 20)]
+    rows += [(f, 8, 0.1 * f, 0.2, "human") for f in range(22, 40)]
+    path = tmp_path / "tracks.csv"
+    _write(path, rows)
+    assert stitch_tracks_file(path, gap=5, distance=1.0) == 2
+    got = {}
+    for ln in path.read_text().splitlines()[1:]:
+        f, tid = (int(v) for v in ln.split(",")[:2])
+        got.setdefault(tid, []).append(f)
+    assert sorted(got) == [1, 5] and got[1] == list(range(10)) + list(range(12, 20)) + list(range(22, 40))
+
+
+def test_stitch_errors_name_the_file(tmp_path):
+    path = tmp_path / "tracks.csv"
+    path.write_text("frame,id,x,y\n0,1,0.0,0.0\n")
+    with pytest.raises(OutputError, match=r"tracks\.csv: no gx, gy column\(s\) to stitch"):
+        stitch_tracks_file(path, gap=5, distance=1.0)
+    row = "{},1,0,0,0,human,0.4,0.4,1.7,0,0,1,0,0,0,0,0"
+    unordered = "\n".join([HEADER, row.format(5), row.format(3)]) + "\n"
+    path.write_text(unordered)
+    with pytest.raises(OutputError, match=r"not in frame order"):
+        stitch_tracks_file(path, gap=5, distance=1.0)
+    assert path.read_text() == unordered
+    with pytest.raises(OutputError, match=r"cannot read .*missing\.csv"):
+        stitch_tracks_file(tmp_path / "missing.csv", gap=5, distance=1.0)

@@ -1,4 +1,5 @@
-"""Offline backfill: a confirmed track is extended backwards over the frames before it was first reported.
+"""Offline completion of a finished run's tracks: backfill (a confirmed track is extended backwards over the frames
+before it was first reported) and stitching (a track that ends and one that starts where it was heading get one id).
 
 A filter reports an object some frames after it came into view: the addition step (eq. 11 of Juza et al.) needs
 enough uncovered pixels, a new object must win the weight of enough particles (``min_existence``), and an object
@@ -23,13 +24,22 @@ prolong (docs/reproduction.md, round seven).
 :func:`backfill_tracks_file` applies it to a completed run's ``tracks.csv``: every line of the file is kept as
 written, the new ones are added in frame order, and the file is replaced atomically (write to a temporary file,
 fsync, rename), so it holds either the old rows or the new ones at every moment.
+
+:func:`stitch_tracks_file` gives one id to a track A that ends (before the run's last frame) and a track B of the
+same class that starts at most ``gap`` frames later within ``distance`` metres of where A was heading (A's last
+position moved on at the velocity fitted to its last ``fit_rows`` rows): the filter lost the object (deleted by
+eq. 13, or its hypothesis absorbed by a neighbour's) and added it again under a new label, an identity switch. Pairs
+are taken greedily, nearest first, each track with at most one successor and one predecessor; chains take the id of
+their first track. Only the ``id`` cells change (in place and atomically, as above).
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import math
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +60,74 @@ def _velocity(frames: np.ndarray, ground: np.ndarray) -> np.ndarray:
     if den == 0.0:
         return np.zeros(2)
     return (t @ (ground - ground.mean(axis=0))) / den
+
+
+class _Track:
+    """What the backfill needs of one track: its row count and its first rows (frame, ground, size, heading)."""
+
+    __slots__ = ("count", "frames", "ground", "size", "heading", "first")
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.frames: list[int] = []
+        self.ground: list[tuple[float, float]] = []
+        self.size: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self.heading = 0.0
+        self.first: object = None  # the first row, as the caller keeps it (an index, a list of cells)
+
+    def add(self, frame: int, ground: tuple[float, float], fit_rows: int) -> None:
+        """Count a row (rows in frame order); the first ``fit_rows`` are kept for the velocity fit."""
+        self.count += 1
+        if len(self.frames) < fit_rows:
+            self.frames.append(frame)
+            self.ground.append(ground)
+
+
+def _windows(tracks: dict[int, _Track], start: int, frames: int, min_rows: int) -> dict[int, tuple[int, int]]:
+    """Frames ``[lo, f0)`` each lasting track may be extended over, by id (ids in ascending order)."""
+    out = {}
+    for tid in sorted(tracks):
+        t = tracks[tid]
+        f0 = t.frames[0]
+        lo = max(start, f0 - frames)
+        if t.count >= min_rows and lo < f0:
+            out[tid] = (lo, f0)
+    return out
+
+
+def _plan(
+    tracks: dict[int, _Track],
+    windows: dict[int, tuple[int, int]],
+    occupied: dict[int, list[tuple[float, float, float]]],
+    in_view: InView,
+    guard: float,
+) -> list[tuple[int, int, float, float, float]]:
+    """The added rows ``(id, frame, gx, gy, speed m/frame)``, tracks by id, frames backwards from each start.
+
+    ``occupied`` (frame -> ``(gx, gy, length)`` of every row there) gets the accepted rows too, so a later track
+    keeps off an earlier one's backfilled rows.
+    """
+    added = []
+    for tid, (lo, f0) in windows.items():
+        t = tracks[tid]
+        v = _velocity(np.asarray(t.frames, dtype=np.float64), np.asarray(t.ground, dtype=np.float64))
+        k = np.arange(1, f0 - lo + 1)
+        pos = np.asarray(t.ground[0])[None, :] - k[:, None] * v[None, :]
+        seen = np.asarray(
+            in_view(pos, np.repeat(np.asarray(t.size, dtype=np.float64)[None], len(k), 0), np.full(len(k), t.heading)),
+            dtype=bool,
+        )
+        ln = float(t.size[0])
+        speed = float(np.hypot(v[0], v[1]))
+        for j in range(len(k)):
+            f = f0 - int(k[j])
+            gx, gy = float(pos[j, 0]), float(pos[j, 1])
+            others = occupied.setdefault(f, [])
+            if not seen[j] or any(math.hypot(ox - gx, oy - gy) < max(guard, 0.5 * (ol + ln)) for ox, oy, ol in others):
+                break
+            others.append((gx, gy, ln))
+            added.append((tid, f, gx, gy, speed))
+    return added
 
 
 def backfill_rows(
@@ -79,86 +157,67 @@ def backfill_rows(
         fps: Frame rate, for the ``speed`` column of the added rows (m/s).
 
     Returns:
-        ``(rows, source)``: the added rows as columns (same keys and dtypes as ``table``, frame order within each
-        track, tracks by id) and, per added row, the index in ``table`` of the first row of its track.
+        ``(rows, source)``: the added rows as columns (same keys as ``table``; tracks by id, frames backwards from
+        each track's start) and, per added row, the index in ``table`` of the first row of its track.
     """
     missing = [c for c in NEEDED if c not in table]
     if missing:
         raise OutputError(f"tracks: no {', '.join(missing)} column(s) to backfill from")
     frame = np.asarray(table["frame"], dtype=np.int64)
-    ids = np.asarray(table["id"], dtype=np.int64)
-    ground = np.stack([np.asarray(table["gx"], dtype=np.float64), np.asarray(table["gy"], dtype=np.float64)], 1)
-    length = np.asarray(table["length"], dtype=np.float64)
     empty = {k: np.asarray(v)[:0] for k, v in table.items()}
     if frames <= 0 or len(frame) == 0:
         return empty, np.zeros(0, dtype=np.int64)
-    start = int(frame.min())
-    # rows per frame, for the guard: ground positions and lengths (the added rows join as they are accepted)
-    by_frame: dict[int, list[tuple[float, float, float]]] = {}
-    for f, g, ln in zip(frame.tolist(), ground.tolist(), length.tolist(), strict=True):
-        by_frame.setdefault(f, []).append((g[0], g[1], ln))
-    out_src: list[int] = []
-    out_frame: list[int] = []
-    out_ground: list[np.ndarray] = []
-    out_speed: list[float] = []
-    for tid in np.unique(ids):
-        rows = np.flatnonzero(ids == tid)
-        if len(rows) < min_rows:
-            continue
-        rows = rows[np.argsort(frame[rows], kind="stable")]
-        first = int(rows[0])
-        f0 = int(frame[first])
-        fit = rows[:fit_rows]
-        v = _velocity(frame[fit].astype(np.float64), ground[fit])  # m per frame
-        k = np.arange(1, min(frames, f0 - start) + 1)
-        if len(k) == 0:
-            continue
-        pos = ground[first][None, :] - k[:, None] * v[None, :]
-        size = np.array([length[first], table["width"][first], table["height"][first]], dtype=np.float64)
-        seen = np.asarray(
-            in_view(pos, np.repeat(size[None], len(k), axis=0), np.full(len(k), float(table["orientation"][first]))),
-            dtype=bool,
-        )
-        for j in range(len(k)):
-            f = f0 - int(k[j])
-            if not seen[j]:
-                break
-            others = by_frame.get(f, [])
-            if any(
-                np.hypot(ox - pos[j, 0], oy - pos[j, 1]) < max(guard, 0.5 * (ol + length[first]))
-                for ox, oy, ol in others
-            ):
-                break
-            others.append((float(pos[j, 0]), float(pos[j, 1]), float(length[first])))
-            by_frame[f] = others
-            out_src.append(first)
-            out_frame.append(f)
-            out_ground.append(pos[j])
-            out_speed.append(float(np.hypot(*v)) * fps)
-    if not out_src:
+    ids = np.asarray(table["id"], dtype=np.int64)
+    gx, gy = (np.asarray(table[c], dtype=np.float64) for c in ("gx", "gy"))
+    length, width, height = (np.asarray(table[c], dtype=np.float64) for c in ("length", "width", "height"))
+    heading = np.asarray(table["orientation"], dtype=np.float64)
+    tracks: dict[int, _Track] = {}
+    occupied: dict[int, list[tuple[float, float, float]]] = {}
+    for i in np.argsort(frame, kind="stable").tolist():
+        g = (float(gx[i]), float(gy[i]))
+        size = (float(length[i]), float(width[i]), float(height[i]))
+        t = tracks.setdefault(int(ids[i]), _Track())
+        if t.count == 0:
+            t.first, t.size, t.heading = i, size, float(heading[i])
+        t.add(int(frame[i]), g, fit_rows)
+        occupied.setdefault(int(frame[i]), []).append((g[0], g[1], size[0]))
+    plan = _plan(tracks, _windows(tracks, int(frame.min()), frames, min_rows), occupied, in_view, guard)
+    if not plan:
         return empty, np.zeros(0, dtype=np.int64)
-    src = np.asarray(out_src, dtype=np.int64)
-    g = np.asarray(out_ground)
+    src = np.array([tracks[tid].first for tid, *_ in plan], dtype=np.int64)
+    g = np.array([(p[2], p[3]) for p in plan], dtype=np.float64)
     world = np.asarray(to_world(g), dtype=np.float64).reshape(-1, 3)
     added: dict[str, np.ndarray] = {k: np.asarray(v)[src] for k, v in table.items()}
-    added["frame"] = np.asarray(out_frame, dtype=np.asarray(table["frame"]).dtype)
+    added["frame"] = np.array([p[1] for p in plan], dtype=np.asarray(table["frame"]).dtype)
     added["gx"], added["gy"] = g[:, 0], g[:, 1]
     added["x"], added["y"], added["z"] = world[:, 0], world[:, 1], world[:, 2]
     if "speed" in table:
-        added["speed"] = np.asarray(out_speed)
+        added["speed"] = np.array([p[4] * fps for p in plan])
     if "existence" in table:
-        added["existence"] = np.zeros(len(src))
+        added["existence"] = np.zeros(len(plan))
     if "degenerate" in table:
-        added["degenerate"] = np.zeros(len(src), dtype=np.asarray(table["degenerate"]).dtype)
+        added["degenerate"] = np.zeros(len(plan), dtype=np.asarray(table["degenerate"]).dtype)
     return added, src
 
 
-def _cell(value) -> str:
-    if isinstance(value, (np.floating, float)):
-        return f"{float(value):.6f}"
-    if isinstance(value, (np.integer, int)):
-        return str(int(value))
-    return str(value)
+def _header(path: Path) -> tuple[str, list[str]]:
+    """The header line of a CSV file and its cells."""
+    with open(path, encoding="utf-8", newline="") as fh:
+        line = fh.readline()
+    if not line.strip():
+        raise OutputError(f"{path}: empty file, expected a header line")
+    return (line if line.endswith("\n") else line + "\n"), next(csv.reader([line]))
+
+
+def _body(path: Path) -> Iterator[tuple[str, list[str]]]:
+    """The (line, cells) of a CSV file after its header, lines newline-terminated (the file is opened on the first
+    item and closed when the iterator ends or is closed)."""
+    with open(path, encoding="utf-8", newline="") as fh:
+        fh.readline()
+        for line in fh:
+            if not line.endswith("\n"):
+                line += "\n"
+            yield line, next(csv.reader([line]))
 
 
 def backfill_tracks_file(
@@ -171,63 +230,94 @@ def backfill_tracks_file(
     guard: float = 1.0,
     fps: float = 1.0,
 ) -> int:
-    """Extend the lasting tracks of a tracks CSV back in time (:func:`backfill_rows`), in place and atomically.
+    """Extend the lasting tracks of a tracks CSV back in time (as :func:`backfill_rows`), in place and atomically.
 
-    Every existing line is kept as written; the added ones (floats as ``%.6f``, like ``wptrack.io.RunWriter``)
-    follow the existing lines of their frame, so the file stays in frame order. Returns the number of rows added.
+    Every existing line is kept as written; an added line copies the cells of its track's first line, with the
+    new ``frame, x, y, z, gx, gy``, ``speed`` (m/s), ``existence`` 0 and ``degenerate`` 0 (floats as ``%.6f``), and
+    follows the existing lines of its frame. Three streaming passes (the tracks' counts and first rows; the rows
+    in the frames a track may be extended over; the copy), so memory grows with the tracks and the backfilled
+    frames, not with the length of the run. Returns the number of rows added.
 
     Raises:
-        OutputError: The file lacks a needed column, holds a value that is not a number where one is needed, or
-            cannot be written (the old file is then left as it was).
+        OutputError: The file lacks a needed column, holds a value that is not a number where one is needed, is
+            not in frame order, or cannot be read or written (the old file is then left as it was).
     """
     path = Path(path)
+    if frames <= 0:
+        return 0
     try:
-        with open(path, encoding="utf-8", newline="") as fh:
-            lines = fh.read().splitlines(keepends=True)
+        header_line, header = _header(path)
+        missing = [c for c in NEEDED if c not in header]
+        if missing:
+            raise OutputError(f"{path}: no {', '.join(missing)} column(s) to backfill from")
+        col = {c: header.index(c) for c in header}
+
+        def number(cells: list[str], name: str, kind=float):
+            try:
+                return kind(cells[col[name]])
+            except (ValueError, IndexError):
+                what = "an integer" if kind is int else "a number"
+                raise OutputError(f"{path}: column {name!r} holds a value that is not {what}") from None
+
+        tracks: dict[int, _Track] = {}
+        start = last = None
+        with contextlib.closing(_body(path)) as rows:
+            for _, cells in rows:  # pass 1: counts and first rows per track
+                f = number(cells, "frame", int)
+                if last is not None and f < last:
+                    raise OutputError(f"{path}: rows are not in frame order (frame {f} after {last})")
+                start = f if start is None else start
+                last = f
+                t = tracks.setdefault(number(cells, "id", int), _Track())
+                if t.count == 0:
+                    t.first, t.heading = cells, number(cells, "orientation")
+                    t.size = (number(cells, "length"), number(cells, "width"), number(cells, "height"))
+                t.add(f, (number(cells, "gx"), number(cells, "gy")), fit_rows)
+        if start is None:
+            return 0
+        windows = _windows(tracks, start, frames, min_rows)
+        if not windows:
+            return 0
+        wanted = set()
+        for lo, hi in windows.values():
+            wanted.update(range(lo, hi))
+        occupied: dict[int, list[tuple[float, float, float]]] = {}
+        with contextlib.closing(_body(path)) as rows:
+            for _, cells in rows:  # pass 2: the rows of the frames the tracks may be extended over
+                f = number(cells, "frame", int)
+                if f in wanted:
+                    ground = (number(cells, "gx"), number(cells, "gy"), number(cells, "length"))
+                    occupied.setdefault(f, []).append(ground)
+        plan = _plan(tracks, windows, occupied, in_view, guard)
     except OSError as e:
         raise OutputError(f"cannot read {path}: {e.strerror or e}") from None
-    if not lines:
-        raise OutputError(f"{path}: empty file, expected a header line")
-    header = next(csv.reader([lines[0]]))
-    body = lines[1:]
-    if body and not body[-1].endswith("\n"):
-        body[-1] += "\n"
-    cells = list(csv.reader(body))
-    missing = [c for c in NEEDED if c not in header]
-    if missing:
-        raise OutputError(f"{path}: no {', '.join(missing)} column(s) to backfill from")
-    table: dict[str, np.ndarray] = {}
-    for j, name in enumerate(header):
-        col = [r[j] if j < len(r) else "" for r in cells]
-        if name in ("frame", "id", "degenerate"):
-            try:
-                table[name] = np.array([int(v) for v in col], dtype=np.int64)
-            except ValueError:
-                raise OutputError(f"{path}: column {name!r} holds a value that is not an integer") from None
-        elif name == "class":
-            table[name] = np.array(col, dtype=object)
-        else:
-            try:
-                table[name] = np.array([float(v) if v != "" else np.nan for v in col], dtype=np.float64)
-            except ValueError:
-                if name in NEEDED:
-                    raise OutputError(f"{path}: column {name!r} holds a value that is not a number") from None
-                table[name] = np.array(col, dtype=object)
-    added, _ = backfill_rows(table, to_world, in_view, frames, min_rows, fit_rows=fit_rows, guard=guard, fps=fps)
-    n = len(added["frame"]) if added else 0
-    if n == 0:
+    if not plan:
         return 0
-    new_lines = [",".join(_cell(added[c][i]) for c in header) + "\n" for i in range(n)]
-    # merge by frame: every old line keeps its place among the old ones, new lines follow their frame's old lines
-    keys = np.concatenate([table["frame"], added["frame"]])
-    order = np.lexsort((np.arange(len(keys)), np.r_[np.zeros(len(body)), np.ones(n)], keys))
-    everything = body + new_lines
+    world = np.asarray(to_world(np.array([(p[2], p[3]) for p in plan])), dtype=np.float64).reshape(-1, 3)
+    new: list[tuple[int, str]] = []
+    for (tid, f, gx, gy, speed), w in zip(plan, world, strict=True):
+        cells = list(tracks[tid].first)
+        values = {"frame": f, "x": w[0], "y": w[1], "z": w[2], "gx": gx, "gy": gy, "speed": speed * fps}
+        values |= {"existence": 0.0, "degenerate": 0}
+        for name, value in values.items():
+            if name in col:
+                cells[col[name]] = str(value) if isinstance(value, int) else f"{float(value):.6f}"
+        new.append((f, ",".join(cells) + "\n"))
+    new.sort(key=lambda r: r[0])  # stable: tracks by id within a frame
     tmp = path.with_name(path.name + ".tmp")
-    try:
+    try:  # pass 3: the copy, each added line after the existing lines of its frame
         with open(tmp, "w", encoding="utf-8", newline="") as dst:
-            dst.write(lines[0])
-            for i in order:
-                dst.write(everything[i])
+            dst.write(header_line)
+            j = 0
+            with contextlib.closing(_body(path)) as rows:
+                for line, cells in rows:
+                    f = int(cells[col["frame"]])
+                    while j < len(new) and new[j][0] < f:
+                        dst.write(new[j][1])
+                        j += 1
+                    dst.write(line)
+            for _, line in new[j:]:
+                dst.write(line)
             dst.flush()
             os.fsync(dst.fileno())
         os.replace(tmp, path)
@@ -235,4 +325,107 @@ def backfill_tracks_file(
         raise OutputError(f"cannot write {path}: {e.strerror or e}") from None
     finally:
         tmp.unlink(missing_ok=True)
-    return n
+    return len(new)
+
+
+def stitch_tracks_file(path: Path, gap: int, distance: float, fit_rows: int = 8) -> int:
+    """Give one id to the tracks that continue each other (see the module docstring), in place and atomically.
+
+    Args:
+        path: A tracks CSV in frame order with at least ``frame, id, gx, gy`` (and ``class`` when present: only
+            tracks of one class are stitched).
+        gap: Largest number of frames from a track's last row to its successor's first (0: off).
+        distance: Largest ground distance between the successor's first position and the predicted one, metres.
+        fit_rows: The end velocity is fitted to this many last rows of a track.
+
+    Returns:
+        The number of tracks that got their predecessor's id.
+
+    Raises:
+        OutputError: The file lacks a needed column, holds a value that is not a number where one is needed, is
+            not in frame order, or cannot be read or written (the old file is then left as it was).
+    """
+    import collections
+
+    path = Path(path)
+    if gap <= 0:
+        return 0
+    try:
+        header_line, header = _header(path)
+        missing = [c for c in ("frame", "id", "gx", "gy") if c not in header]
+        if missing:
+            raise OutputError(f"{path}: no {', '.join(missing)} column(s) to stitch tracks by")
+        col = {c: header.index(c) for c in header}
+        kind = col.get("class")
+
+        def number(cells: list[str], name: str, cast=float):
+            try:
+                return cast(cells[col[name]])
+            except (ValueError, IndexError):
+                what = "an integer" if cast is int else "a number"
+                raise OutputError(f"{path}: column {name!r} holds a value that is not {what}") from None
+
+        first: dict[int, tuple[int, float, float, str]] = {}
+        tail: dict[int, collections.deque] = {}
+        last = None
+        with contextlib.closing(_body(path)) as rows:
+            for _, cells in rows:
+                f = number(cells, "frame", int)
+                if last is not None and f < last:
+                    raise OutputError(f"{path}: rows are not in frame order (frame {f} after {last})")
+                last = f
+                tid = number(cells, "id", int)
+                g = (number(cells, "gx"), number(cells, "gy"))
+                if tid not in first:
+                    first[tid] = (f, g[0], g[1], cells[kind] if kind is not None and kind < len(cells) else "")
+                    tail[tid] = collections.deque(maxlen=max(fit_rows, 1))
+                tail[tid].append((f, g[0], g[1]))
+    except OSError as e:
+        raise OutputError(f"cannot read {path}: {e.strerror or e}") from None
+    pairs = []
+    for a, rows_a in tail.items():
+        end = np.asarray(rows_a, dtype=np.float64)
+        f1 = int(end[-1, 0])
+        if f1 == last:
+            continue
+        v = _velocity(end[:, 0], end[:, 1:])
+        for b, (f0, bx, by, cls) in first.items():
+            if b == a or not 0 < f0 - f1 <= gap or cls != first[a][3]:
+                continue
+            d = math.hypot(end[-1, 1] + v[0] * (f0 - f1) - bx, end[-1, 2] + v[1] * (f0 - f1) - by)
+            if d < distance:
+                pairs.append((d, a, b))
+    pairs.sort()
+    succ: dict[int, int] = {}
+    pred: dict[int, int] = {}
+    for _, a, b in pairs:
+        if a not in succ and b not in pred:
+            succ[a], pred[b] = b, a
+    if not pred:
+        return 0
+    root = {}
+    for b in pred:
+        r = b
+        while r in pred:
+            r = pred[r]
+        root[b] = r
+    tmp = path.with_name(path.name + ".tmp")
+    c = col["id"]
+    try:
+        with open(tmp, "w", encoding="utf-8", newline="") as dst:
+            dst.write(header_line)
+            with contextlib.closing(_body(path)) as rows:
+                for line, cells in rows:
+                    tid = int(cells[c])
+                    if tid in root:
+                        cells[c] = str(root[tid])
+                        line = ",".join(cells) + "\n"
+                    dst.write(line)
+            dst.flush()
+            os.fsync(dst.fileno())
+        os.replace(tmp, path)
+    except OSError as e:
+        raise OutputError(f"cannot write {path}: {e.strerror or e}") from None
+    finally:
+        tmp.unlink(missing_ok=True)
+    return len(root)

@@ -153,6 +153,8 @@ def _template_config_from_args(args, fps: float | None):
         "min_track_frames",
         "backfill_seconds",
         "backfill_min_frames",
+        "stitch_seconds",
+        "stitch_distance",
     ):
         value = getattr(args, name)
         if value is not None:
@@ -666,6 +668,16 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=None,
         help="backfill only tracks with at least this many rows (default 15)",
+    )
+    tt.add_argument(
+        "--stitch-seconds",
+        type=float,
+        default=None,
+        help="when the run completes, give a track that starts up to this long after another ended, where that one "
+        "was heading, the other's id (default 2; 0: off)",
+    )
+    tt.add_argument(
+        "--stitch-distance", type=float, default=None, help="metres from where the ended track was heading (default 2)"
     )
     tt.add_argument("--resampling", default="systematic", help="systematic, stratified, multinomial or residual")
     tt.add_argument(

@@ -5,8 +5,9 @@ Outputs (all written incrementally or atomically, so an interrupted run leaves v
     out_dir/tracks.csv     frame,id,x,y,z,class,length,width,height,orientation,speed,existence,gx,gy,sx,sy,degenerate
                            (objects with existence >= min_existence and >= min_in_image of their image box
                            inside the image; once the run completes, tracks shorter than min_track_frames are left
-                           out and the others backfilled (backfill_seconds; rows with existence 0), the tracker's
-                           own rows staying in tracks_all.csv; x,y,z the ground-contact point in the world
+                           out, the others backfilled (backfill_seconds; rows with existence 0) and stitched
+                           (stitch_seconds: a track continuing another gets its id), the tracker's own rows
+                           staying in tracks_all.csv; x,y,z the ground-contact point in the world
                            frame and gx,gy on the ground plane, metres; orientation radians; speed m/s; degenerate 1
                            when every particle's log-weight was -inf/NaN that frame: the predicted particles were
                            kept with uniform weights, the prior; run.json's summary counts such frames)
@@ -325,22 +326,16 @@ class TemplateRun(TrackerRun):
                 writer.close()
 
     def finish_tracks(self, path: Path) -> dict[str, Any]:
-        """Backfill the completed run's ``tracks.csv`` (``TemplateConfig.backfill_seconds``, ``wptrack.backfill``).
+        """Complete the finished run's ``tracks.csv`` offline (``wptrack.backfill``): backfill the lasting tracks
+        (``TemplateConfig.backfill_seconds``), then stitch the tracks that continue each other (``stitch_seconds``).
 
-        Returns the run.json record: ``{"backfill_seconds", "backfill_frames", "backfill_min_frames",
-        "backfilled_rows"}``.
+        Returns the run.json record: ``backfill_seconds, backfill_frames, backfill_min_frames, backfilled_rows,
+        stitch_seconds, stitch_frames, stitch_distance, stitched_tracks``.
         """
-        from ..backfill import backfill_tracks_file
+        from ..backfill import backfill_tracks_file, stitch_tracks_file
         from ..trackers.templates import box_fraction_in_image
 
         cfg = self.tracker.config
-        record = {
-            "backfill_seconds": float(cfg.backfill_seconds),
-            "backfill_frames": cfg.backfill_frames,
-            "backfill_min_frames": int(cfg.backfill_min_frames),
-        }
-        if cfg.backfill_frames <= 0:
-            return record | {"backfilled_rows": 0}
         camera, plane = self.tracker.camera, self.tracker.plane
         least = max(float(cfg.min_in_image), 1e-9)  # min_in_image 0: some part of the box in the image
 
@@ -348,10 +343,20 @@ class TemplateRun(TrackerRun):
             return box_fraction_in_image(camera, plane, ground, size, heading) >= least
 
         added = backfill_tracks_file(
-            path, plane.to_world, in_view, int(cfg.backfill_frames), int(cfg.backfill_min_frames), fps=float(cfg.fps)
+            path, plane.to_world, in_view, cfg.backfill_frames, int(cfg.backfill_min_frames), fps=float(cfg.fps)
         )
-        log.info("backfill: %d rows added to %s", added, path)
-        return record | {"backfilled_rows": added}
+        stitched = stitch_tracks_file(path, cfg.stitch_frames, float(cfg.stitch_distance))
+        log.info("%s: %d rows backfilled, %d tracks stitched to their predecessors", path, added, stitched)
+        return {
+            "backfill_seconds": float(cfg.backfill_seconds),
+            "backfill_frames": cfg.backfill_frames,
+            "backfill_min_frames": int(cfg.backfill_min_frames),
+            "backfilled_rows": added,
+            "stitch_seconds": float(cfg.stitch_seconds),
+            "stitch_frames": cfg.stitch_frames,
+            "stitch_distance": float(cfg.stitch_distance),
+            "stitched_tracks": stitched,
+        }
 
     def summary(self) -> dict[str, Any]:
         seen = self._seen
