@@ -382,6 +382,9 @@ def stitch_tracks_file(path: Path, gap: int, distance: float, fit_rows: int = 8)
                 tail[tid].append((f, g[0], g[1]))
     except OSError as e:
         raise OutputError(f"cannot read {path}: {e.strerror or e}") from None
+    starts: dict[int, list[int]] = {}
+    for b, (f0, *_) in first.items():
+        starts.setdefault(f0, []).append(b)
     pairs = []
     for a, rows_a in tail.items():
         end = np.asarray(rows_a, dtype=np.float64)
@@ -389,12 +392,14 @@ def stitch_tracks_file(path: Path, gap: int, distance: float, fit_rows: int = 8)
         if f1 == last:
             continue
         v = _velocity(end[:, 0], end[:, 1:])
-        for b, (f0, bx, by, cls) in first.items():
-            if b == a or not 0 < f0 - f1 <= gap or cls != first[a][3]:
-                continue
-            d = math.hypot(end[-1, 1] + v[0] * (f0 - f1) - bx, end[-1, 2] + v[1] * (f0 - f1) - by)
-            if d < distance:
-                pairs.append((d, a, b))
+        for f0 in range(f1 + 1, f1 + gap + 1):  # the tracks starting in the gap only
+            for b in starts.get(f0, ()):
+                _, bx, by, cls = first[b]
+                if cls != first[a][3]:
+                    continue
+                d = math.hypot(end[-1, 1] + v[0] * (f0 - f1) - bx, end[-1, 2] + v[1] * (f0 - f1) - by)
+                if d < distance:
+                    pairs.append((d, a, b))
     pairs.sort()
     succ: dict[int, int] = {}
     pred: dict[int, int] = {}
