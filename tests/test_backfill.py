@@ -226,6 +226,8 @@ def test_run_writer_finish_tracks(tmp_path):
             fh.write("5,1,1.000000,2.000000,0.000000\n")
         return {"filled": 1}
 
+    (tmp_path / "a").mkdir()
+    (tmp_path / "a" / "tracks_all.csv").write_text("frame,id\n99,99\n")  # a stale file from an earlier run
     for name, min_frames in (("a", 1), ("b", 3)):
         with RunWriter(tmp_path / name, "pf", cols, {}) as rw:
             rw.add_rows(rows)

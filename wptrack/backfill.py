@@ -50,7 +50,8 @@ InView = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 """``in_view(ground (n, 2) m, size (n, 3) m, heading (n,) rad) -> (n,) bool``."""
 
 NEEDED = ("frame", "id", "x", "y", "z", "gx", "gy", "length", "width", "height", "orientation")
-"""Columns :func:`backfill_rows` reads."""
+"""Columns the backfill needs (it reads ``frame, id, gx, gy, length, width, height, orientation`` and writes ``x, y,
+z`` too)."""
 
 
 def _velocity(frames: np.ndarray, ground: np.ndarray) -> np.ndarray:
@@ -78,7 +79,7 @@ class _Track:
     def add(self, frame: int, ground: tuple[float, float], fit_rows: int) -> None:
         """Count a row (rows in frame order); the first ``fit_rows`` are kept for the velocity fit."""
         self.count += 1
-        if len(self.frames) < fit_rows:
+        if len(self.frames) < max(fit_rows, 1):
             self.frames.append(frame)
             self.ground.append(ground)
 
@@ -220,6 +221,53 @@ def _body(path: Path) -> Iterator[tuple[str, list[str]]]:
             yield line, next(csv.reader([line]))
 
 
+class _Table:
+    """A tracks CSV read in streaming passes: its header, column indices and checked cell parsing."""
+
+    def __init__(self, path: Path, needed: tuple[str, ...], purpose: str) -> None:
+        self.path = path
+        self.header_line, header = _header(path)
+        missing = [c for c in needed if c not in header]
+        if missing:
+            raise OutputError(f"{path}: no {', '.join(missing)} column(s) to {purpose}")
+        self.col = {c: header.index(c) for c in header}
+
+    def number(self, cells: list[str], name: str, cast: type = float):
+        """The cell of column ``name`` as ``cast`` (float or int); an error names the file and the column."""
+        try:
+            return cast(cells[self.col[name]])
+        except (ValueError, IndexError):
+            what = "an integer" if cast is int else "a number"
+            raise OutputError(f"{self.path}: column {name!r} holds a value that is not {what}") from None
+
+    def rows(self, check_order: bool = False) -> Iterator[tuple[int, str, list[str]]]:
+        """``(frame, line, cells)`` of every row (``check_order``: an error when the frames go back)."""
+        last = None
+        with contextlib.closing(_body(self.path)) as rows:
+            for line, cells in rows:
+                f = self.number(cells, "frame", int)
+                if check_order and last is not None and f < last:
+                    raise OutputError(f"{self.path}: rows are not in frame order (frame {f} after {last})")
+                last = f
+                yield f, line, cells
+
+    def rewrite(self, lines: Iterator[str]) -> None:
+        """Replace the file by the header and ``lines`` atomically (temporary file, fsync, rename)."""
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        try:
+            with open(tmp, "w", encoding="utf-8", newline="") as dst:
+                dst.write(self.header_line)
+                for line in lines:
+                    dst.write(line)
+                dst.flush()
+                os.fsync(dst.fileno())
+            os.replace(tmp, self.path)
+        except OSError as e:
+            raise OutputError(f"cannot write {self.path}: {e.strerror or e}") from None
+        finally:
+            tmp.unlink(missing_ok=True)
+
+
 def backfill_tracks_file(
     path: Path,
     to_world: Callable[[np.ndarray], np.ndarray],
@@ -246,33 +294,17 @@ def backfill_tracks_file(
     if frames <= 0:
         return 0
     try:
-        header_line, header = _header(path)
-        missing = [c for c in NEEDED if c not in header]
-        if missing:
-            raise OutputError(f"{path}: no {', '.join(missing)} column(s) to backfill from")
-        col = {c: header.index(c) for c in header}
-
-        def number(cells: list[str], name: str, kind=float):
-            try:
-                return kind(cells[col[name]])
-            except (ValueError, IndexError):
-                what = "an integer" if kind is int else "a number"
-                raise OutputError(f"{path}: column {name!r} holds a value that is not {what}") from None
-
+        table = _Table(path, NEEDED, "backfill from")
+        number, col = table.number, table.col
         tracks: dict[int, _Track] = {}
-        start = last = None
-        with contextlib.closing(_body(path)) as rows:
-            for _, cells in rows:  # pass 1: counts and first rows per track
-                f = number(cells, "frame", int)
-                if last is not None and f < last:
-                    raise OutputError(f"{path}: rows are not in frame order (frame {f} after {last})")
-                start = f if start is None else start
-                last = f
-                t = tracks.setdefault(number(cells, "id", int), _Track())
-                if t.count == 0:
-                    t.first, t.heading = cells, number(cells, "orientation")
-                    t.size = (number(cells, "length"), number(cells, "width"), number(cells, "height"))
-                t.add(f, (number(cells, "gx"), number(cells, "gy")), fit_rows)
+        start = None
+        for f, _, cells in table.rows(check_order=True):  # pass 1: counts and first rows per track
+            start = f if start is None else start
+            t = tracks.setdefault(number(cells, "id", int), _Track())
+            if t.count == 0:
+                t.first, t.heading = cells, number(cells, "orientation")
+                t.size = (number(cells, "length"), number(cells, "width"), number(cells, "height"))
+            t.add(f, (number(cells, "gx"), number(cells, "gy")), fit_rows)
         if start is None:
             return 0
         windows = _windows(tracks, start, frames, min_rows)
@@ -282,12 +314,9 @@ def backfill_tracks_file(
         for lo, hi in windows.values():
             wanted.update(range(lo, hi))
         occupied: dict[int, list[tuple[float, float, float]]] = {}
-        with contextlib.closing(_body(path)) as rows:
-            for _, cells in rows:  # pass 2: the rows of the frames the tracks may be extended over
-                f = number(cells, "frame", int)
-                if f in wanted:
-                    ground = (number(cells, "gx"), number(cells, "gy"), number(cells, "length"))
-                    occupied.setdefault(f, []).append(ground)
+        for f, _, cells in table.rows():  # pass 2: the rows of the frames the tracks may be extended over
+            if f in wanted:
+                occupied.setdefault(f, []).append((number(cells, "gx"), number(cells, "gy"), number(cells, "length")))
         plan = _plan(tracks, windows, occupied, in_view, guard)
     except OSError as e:
         raise OutputError(f"cannot read {path}: {e.strerror or e}") from None
@@ -304,27 +333,18 @@ def backfill_tracks_file(
                 cells[col[name]] = str(value) if isinstance(value, int) else f"{float(value):.6f}"
         new.append((f, ",".join(cells) + "\n"))
     new.sort(key=lambda r: r[0])  # stable: tracks by id within a frame
-    tmp = path.with_name(path.name + ".tmp")
-    try:  # pass 3: the copy, each added line after the existing lines of its frame
-        with open(tmp, "w", encoding="utf-8", newline="") as dst:
-            dst.write(header_line)
-            j = 0
-            with contextlib.closing(_body(path)) as rows:
-                for line, cells in rows:
-                    f = int(cells[col["frame"]])
-                    while j < len(new) and new[j][0] < f:
-                        dst.write(new[j][1])
-                        j += 1
-                    dst.write(line)
-            for _, line in new[j:]:
-                dst.write(line)
-            dst.flush()
-            os.fsync(dst.fileno())
-        os.replace(tmp, path)
-    except OSError as e:
-        raise OutputError(f"cannot write {path}: {e.strerror or e}") from None
-    finally:
-        tmp.unlink(missing_ok=True)
+
+    def merged() -> Iterator[str]:  # pass 3: each added line after the existing lines of its frame
+        j = 0
+        for f, line, _ in table.rows():
+            while j < len(new) and new[j][0] < f:
+                yield new[j][1]
+                j += 1
+            yield line
+        for _, line in new[j:]:
+            yield line
+
+    table.rewrite(merged())
     return len(new)
 
 
@@ -351,35 +371,19 @@ def stitch_tracks_file(path: Path, gap: int, distance: float, fit_rows: int = 8)
     if gap <= 0:
         return 0
     try:
-        header_line, header = _header(path)
-        missing = [c for c in ("frame", "id", "gx", "gy") if c not in header]
-        if missing:
-            raise OutputError(f"{path}: no {', '.join(missing)} column(s) to stitch tracks by")
-        col = {c: header.index(c) for c in header}
-        kind = col.get("class")
-
-        def number(cells: list[str], name: str, cast=float):
-            try:
-                return cast(cells[col[name]])
-            except (ValueError, IndexError):
-                what = "an integer" if cast is int else "a number"
-                raise OutputError(f"{path}: column {name!r} holds a value that is not {what}") from None
-
+        table = _Table(path, ("frame", "id", "gx", "gy"), "stitch tracks by")
+        kind = table.col.get("class")
         first: dict[int, tuple[int, float, float, str]] = {}
         tail: dict[int, collections.deque] = {}
         last = None
-        with contextlib.closing(_body(path)) as rows:
-            for _, cells in rows:
-                f = number(cells, "frame", int)
-                if last is not None and f < last:
-                    raise OutputError(f"{path}: rows are not in frame order (frame {f} after {last})")
-                last = f
-                tid = number(cells, "id", int)
-                g = (number(cells, "gx"), number(cells, "gy"))
-                if tid not in first:
-                    first[tid] = (f, g[0], g[1], cells[kind] if kind is not None and kind < len(cells) else "")
-                    tail[tid] = collections.deque(maxlen=max(fit_rows, 1))
-                tail[tid].append((f, g[0], g[1]))
+        for f, _, cells in table.rows(check_order=True):
+            last = f
+            tid = table.number(cells, "id", int)
+            g = (table.number(cells, "gx"), table.number(cells, "gy"))
+            if tid not in first:
+                first[tid] = (f, g[0], g[1], cells[kind] if kind is not None and kind < len(cells) else "")
+                tail[tid] = collections.deque(maxlen=max(fit_rows, 1))
+            tail[tid].append((f, g[0], g[1]))
     except OSError as e:
         raise OutputError(f"cannot read {path}: {e.strerror or e}") from None
     starts: dict[int, list[int]] = {}
@@ -414,23 +418,15 @@ def stitch_tracks_file(path: Path, gap: int, distance: float, fit_rows: int = 8)
         while r in pred:
             r = pred[r]
         root[b] = r
-    tmp = path.with_name(path.name + ".tmp")
-    c = col["id"]
-    try:
-        with open(tmp, "w", encoding="utf-8", newline="") as dst:
-            dst.write(header_line)
-            with contextlib.closing(_body(path)) as rows:
-                for line, cells in rows:
-                    tid = int(cells[c])
-                    if tid in root:
-                        cells[c] = str(root[tid])
-                        line = ",".join(cells) + "\n"
-                    dst.write(line)
-            dst.flush()
-            os.fsync(dst.fileno())
-        os.replace(tmp, path)
-    except OSError as e:
-        raise OutputError(f"cannot write {path}: {e.strerror or e}") from None
-    finally:
-        tmp.unlink(missing_ok=True)
+    c = table.col["id"]
+
+    def relabelled() -> Iterator[str]:
+        for _, line, cells in table.rows():
+            tid = int(cells[c])
+            if tid in root:
+                cells[c] = str(root[tid])
+                line = ",".join(cells) + "\n"
+            yield line
+
+    table.rewrite(relabelled())
     return len(root)

@@ -694,8 +694,8 @@ class RunWriter:
             finish_tracks: With ``"complete"``: called with the path of ``tracks.csv`` after the short tracks are
                 left out (it rewrites the file atomically, e.g. ``wptrack.backfill``); the dict it returns goes into
                 run.json, or ``finish_tracks_error`` when it raised ``OSError`` or ``OutputError`` (``tracks.csv``
-                then holds the rows it had before). ``tracks_all.csv`` is written before it, with every row, when
-                it is not yet there.
+                then holds the rows it had before). ``tracks_all.csv`` gets every row before it (by the short-track
+                filter, or as a copy).
         """
         if self._closed:
             return
@@ -706,19 +706,20 @@ class RunWriter:
             os.fsync(self._csv_file.fileno())
         finally:
             self._csv_file.close()
+        all_written = False
         if status == "complete" and min_track_frames > 1:
             self._run["min_track_frames"] = int(min_track_frames)
             try:
                 dropped = drop_short_tracks(self.tracks_path, self.out_dir / TRACKS_ALL_FILE, min_track_frames)
                 self._run["short_tracks_dropped"] = dropped
+                all_written = True
             except (OSError, OutputError) as e:  # the run is complete: keep every row and say why
                 log.warning("could not leave the short tracks out of %s: %s", self.tracks_path, e)
                 self._run["short_tracks_error"] = str(e)
         if status == "complete" and finish_tracks is not None:
             try:
-                all_path = self.out_dir / TRACKS_ALL_FILE
-                if not all_path.exists():  # the tracker's own rows stay in tracks_all.csv
-                    _copy_atomic(self.tracks_path, all_path)
+                if not all_written:  # the tracker's own rows stay in tracks_all.csv
+                    _copy_atomic(self.tracks_path, self.out_dir / TRACKS_ALL_FILE)
                 self._run.update(finish_tracks(self.tracks_path))
             except (OSError, OutputError) as e:  # the run is complete: keep the rows as they are and say why
                 log.warning("could not finish the tracks of %s: %s", self.tracks_path, e)
