@@ -287,6 +287,11 @@ def _load(source: TableLike, role: str, ground_truth: bool) -> _Table:
             columns: Mapping[str, Any] = read_tracks(source)
         except WptrackError as e:
             raise ConfigError(f"{role}: {e}") from None
+        if ground_truth:
+            from .groundtruth import box_ground_table, is_box_ground_table
+
+            if is_box_ground_table(columns):  # a box table with ground positions (TownCentre): valid bodies
+                columns = box_ground_table(columns, label)
     elif isinstance(source, Mapping):
         label = f"{role} <table>"
         columns = source
@@ -386,7 +391,10 @@ def evaluate(
 
     Args:
         groundtruth: Ground truth: a dict of columns as returned by :func:`wptrack.io.read_tracks`, or the path of
-            a CSV file. Columns ``frame,id,x,y,z`` required; ``class`` optional; other columns ignored.
+            a CSV file. Columns ``frame,id,x,y,z`` required; ``class`` optional; other columns ignored. A CSV file
+            of image boxes with ground positions (columns ``frame,id,body_valid,x,y`` and no ``z``: the Oxford
+            TownCentre labels) is read as its rows with a valid body box at their ``x, y``
+            (:func:`wptrack.groundtruth.box_ground_table`).
         tracks: Tracker output (e.g. a run's ``tracks.csv``), same forms and columns. Rows with a non-finite
             ``x`` or ``y`` are dropped.
         threshold: Largest ground-plane distance (metres) at which an object and a hypothesis may be matched.
