@@ -4,8 +4,9 @@ Each particle is a whole scene: R slots, each empty or holding one object (struc
 Prediction per slot: gather from the resampled parent, stochastic diffusion (deletion, eq. 13; addition of the
 frame's chosen candidate, eq. 12; then noise) and deterministic drift (human eq. 8, vehicle eq. 9).
 
-Random numbers come from counter-based streams keyed by ``(particle * MAX_SLOTS + slot, frame, STREAM_*)``:
-reproducible on every device and under CUDA graph replay.
+Random numbers come from counter-based streams keyed by ``(particle * SLOT_KEY + slot % SLOT_KEY, frame, STREAM_*,
+slot / SLOT_KEY)`` (the last in the Philox counter's fourth word): reproducible on every device and under CUDA graph
+replay, and the streams of slots below 16 are those of R_max <= 16 before issue 26 (same runs bit for bit).
 """
 
 import warp as wp
@@ -17,13 +18,19 @@ from .random import (
     STREAM_TEMPLATE_INIT2,
     STREAM_TEMPLATE_NOISE,
     STREAM_TEMPLATE_NOISE2,
-    normal4,
+    normal4_at,
     uniform4,
+    uniform4_at,
 )
-from .raster import KIND_HUMAN, KIND_NONE, KIND_VEHICLE, MAX_SLOTS, PIECES
+from .raster import KIND_HUMAN, KIND_NONE, KIND_VEHICLE, PIECES
 from .xor import disc_in_box
 
 wp.set_module_options({"enable_backward": False})
+
+
+SLOT_KEY = wp.constant(16)
+"""Slots per particle in the index of the random streams (the former ``MAX_SLOTS``): slot ``s`` of particle ``j``
+draws from index ``j SLOT_KEY + s % SLOT_KEY`` and counter word ``s / SLOT_KEY``."""
 
 
 @wp.struct
@@ -137,7 +144,8 @@ def template_predict_kernel(
     j, s = wp.tid()
     a = ancestors[wp.max(slot_group[s], 0), j]
     f = frame[0]
-    idx = j * MAX_SLOTS + s
+    idx = j * SLOT_KEY + s % SLOT_KEY
+    word = s / SLOT_KEY
     if s == 0:
         if resampled[0] != 0:
             dst.logw[j] = 0.0
@@ -152,7 +160,7 @@ def template_predict_kernel(
     age = src.age[a, s]
     occ = occlusion[a, s]
     # stochastic diffusion: deletion (eq. 13, T_del lowered for hidden objects), then addition (eq. 12)
-    u = uniform4(seed, idx, f, STREAM_TEMPLATE_EVENT)
+    u = uniform4_at(seed, idx, f, STREAM_TEMPLATE_EVENT, word)
     if k != KIND_NONE and u[0] < dyn.t_del * (1.0 - dyn.occlusion_del * occ):
         k = KIND_NONE
     if k != KIND_NONE and dyn.unseen_del > 0.0:
@@ -181,22 +189,22 @@ def template_predict_kernel(
             p = cand_pos[c]
             alpha = cand_heading[c]
             age = 0.0
-            z = normal4(seed, idx, f, STREAM_TEMPLATE_INIT)
+            z = normal4_at(seed, idx, f, STREAM_TEMPLATE_INIT, word)
             if k == KIND_HUMAN:
                 d = dyn.dims_mean_human + wp.cw_mul(dyn.dims_sd_human, wp.vec3(z[0], z[1], z[2]))
                 d = clamp3(d, dyn.dims_min_human, dyn.dims_max_human)
-                z2 = normal4(seed, idx, f, STREAM_TEMPLATE_INIT2)
+                z2 = normal4_at(seed, idx, f, STREAM_TEMPLATE_INIT2, word)
                 v = dyn.init_speed_sd[KIND_HUMAN] * wp.vec2(z2[0], z2[1])
                 alpha = 0.0
             else:
                 d = dyn.dims_mean_vehicle + wp.cw_mul(dyn.dims_sd_vehicle, wp.vec3(z[0], z[1], z[2]))
                 d = clamp3(d, dyn.dims_min_vehicle, dyn.dims_max_vehicle)
-                z2 = normal4(seed, idx, f, STREAM_TEMPLATE_INIT2)
+                z2 = normal4_at(seed, idx, f, STREAM_TEMPLATE_INIT2, word)
                 v = wp.vec2(dyn.init_speed_sd[KIND_VEHICLE] * z2[0], 0.0)
                 alpha = alpha + dyn.init_heading_sd * z[3]
     if k != KIND_NONE:
-        n1 = normal4(seed, idx, f, STREAM_TEMPLATE_NOISE)
-        n2 = normal4(seed, idx, f, STREAM_TEMPLATE_NOISE2)
+        n1 = normal4_at(seed, idx, f, STREAM_TEMPLATE_NOISE, word)
+        n2 = normal4_at(seed, idx, f, STREAM_TEMPLATE_NOISE2, word)
         # beyond the paper: a hidden object keeps its motion (no evidence to correct a diffused velocity); an object
         # added this frame is not hidden in its parent (its slot was empty there: occ = 0)
         ns = 1.0 - dyn.occlusion_noise * occ

@@ -28,12 +28,13 @@ from .camera import Camera, project
 
 wp.set_module_options({"enable_backward": False})
 
-MAX_SLOTS = wp.constant(16)
-"""Largest R_max (objects per particle) the kernels support."""
+MAX_SLOTS = wp.constant(64)
+"""Largest R_max (objects per particle) the kernels support (the length of their per-slot local vectors,
+:data:`vec_slots` and :data:`vec_slots_i`; was 16 before issue 26)."""
 PIECES = wp.constant(2)
 """Convex pieces per object."""
-MAX_PIECES = wp.constant(32)
-"""MAX_SLOTS * PIECES: the most pieces a particle can have."""
+MAX_PIECES = wp.constant(128)
+"""MAX_SLOTS * PIECES: the most pieces a particle can have (the length of :data:`vec_pieces`)."""
 HULL_MAX = wp.constant(16)
 """Most vertices per piece (and per projected hull)."""
 
@@ -52,7 +53,13 @@ HIP = wp.constant(0.5)  # human: hip height / height
 SHOULDER = wp.constant(2.5)  # human: shoulders this many head radii below the top of the head
 
 vec16 = wp.types.vector(length=16, dtype=wp.float32)
-vec32i = wp.types.vector(length=32, dtype=wp.int32)
+"""HULL_MAX floats: a piece's projected vertices."""
+vec_pieces = wp.types.vector(length=128, dtype=wp.int32)
+"""MAX_PIECES int32: per-piece local arrays of a particle (rows, chain walks, spans)."""
+vec_slots = wp.types.vector(length=64, dtype=wp.float32)
+"""MAX_SLOTS float32: per-slot (or per-group: at most one group per slot) local arrays."""
+vec_slots_i = wp.types.vector(length=64, dtype=wp.int32)
+"""MAX_SLOTS int32: per-slot (or per-group) local arrays."""
 
 
 @wp.struct
@@ -367,8 +374,8 @@ def row_intervals(
     pieces: int,
     y: int,
     width: int,
-    down: vec32i,
-    up: vec32i,
+    down: vec_pieces,
+    up: vec_pieces,
 ):
     """The covered columns of row ``y`` of particle ``i``'s virtual scene as disjoint sorted intervals.
 
@@ -377,8 +384,8 @@ def row_intervals(
     merged intervals ``[starts[k], ends[k]]`` (inclusive columns), sorted, separated by at least one uncovered
     pixel, and the walks after this row.
     """
-    s0 = vec32i()
-    s1 = vec32i()
+    s0 = vec_pieces()
+    s1 = vec_pieces()
     n = int(0)
     yf = float(y)
     for q in range(pieces):
@@ -428,7 +435,9 @@ def render_virtual_kernel(
     width = out.shape[2]
     for x in range(width):
         out[k, y, x] = wp.uint8(0)
-    count, m0, m1, _down, _up = row_intervals(hull_pts, hull_n, hull_rows, i, pieces, y, width, vec32i(), vec32i())
+    count, m0, m1, _down, _up = row_intervals(
+        hull_pts, hull_n, hull_rows, i, pieces, y, width, vec_pieces(), vec_pieces()
+    )
     for c in range(count):
         for x in range(m0[c], m1[c] + 1):
             out[k, y, x] = wp.uint8(1)
@@ -455,7 +464,7 @@ def render_labels_kernel(
     for x in range(width):
         out[y, x] = wp.uint8(0)
     yf = float(y)
-    drawn = vec32i()
+    drawn = vec_pieces()
     for _pass in range(pieces):
         # the farthest piece not drawn yet
         far = int(-1)

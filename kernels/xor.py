@@ -12,8 +12,8 @@ import functools
 
 import warp as wp
 
-from .partition import group_at, vec16i
-from .raster import KIND_HUMAN, MAX_PIECES, PIECES, hull_chain_span, vec16, vec32i
+from .partition import group_at
+from .raster import KIND_HUMAN, MAX_PIECES, PIECES, hull_chain_span, vec_pieces, vec_slots, vec_slots_i
 from .reduce import NEG_INF, block_argmax, finite_logw
 
 wp.set_module_options({"enable_backward": False})
@@ -184,8 +184,9 @@ def xor_score_kernel(
 
     Launch with ``wp.launch_tiled(dim=[N], block_dim=B)``: block ``i`` is particle ``i`` and each of its threads
     takes a contiguous run of the rows its templates cover (``row_segment``; one thread per block on the CPU
-    backend). Along its rows a thread walks each piece's hull chains (``raster.hull_chain_span``), keeps the pieces'
-    spans sorted and merges them into the row's disjoint intervals (as ``raster.row_intervals``).
+    backend). Along its rows a thread walks the hull chains (``raster.hull_chain_span``) of the pieces drawn on the
+    row (an active list of the pieces sorted by first row: a row costs the pieces it meets, not ``R_max``), keeps
+    their spans sorted and merges them into the row's disjoint intervals (as ``raster.row_intervals``).
 
     Args:
         hull_pts, hull_n, hull_rows: the particles' piece hulls from ``raster.template_hulls_kernel``.
@@ -218,8 +219,8 @@ def xor_score_kernel(
     width = qrow.shape[1] - 1
     y0 = qrow.shape[0]  # empty row range unless a piece is visible
     y1 = int(-1)
-    r0 = vec32i()  # each piece's rows (an empty range for pieces not drawn), read once
-    r1 = vec32i()
+    r0 = vec_pieces()  # each piece's rows (an empty range for pieces not drawn), read once
+    r1 = vec_pieces()
     for q in range(pieces):
         r = hull_rows[i, q]
         if hull_n[i, q] > 0:
@@ -233,30 +234,56 @@ def xor_score_kernel(
     covered = int(0)
     both = int(0)
     groups = n_groups[0]
-    gcov = vec16i()  # per group: this lane's |v| and |q AND v| (partitioned filter only)
-    gboth = vec16i()
-    down = vec32i()  # the pieces' hull chain walks (raster.hull_chain_span) over this lane's rows
-    up = vec32i()
-    s0 = vec32i()  # the row's piece spans sorted by start (raster.row_intervals, written out: no vector copies)
-    s1 = vec32i()
+    gcov = vec_slots_i()  # per group: this lane's |v| and |q AND v| (partitioned filter only)
+    gboth = vec_slots_i()
+    down = vec_pieces()  # the pieces' hull chain walks (raster.hull_chain_span) over this lane's rows
+    up = vec_pieces()
+    s0 = vec_pieces()  # the row's piece spans sorted by start (raster.row_intervals, written out: no vector copies)
+    s1 = vec_pieces()
+    # the drawn pieces in order of their first row, then a list of the pieces drawn on the current row (a row costs
+    # the pieces it meets, not R_max; the merged intervals do not depend on the order the pieces are visited in)
+    order = vec_pieces()
+    drawn = int(0)
+    for q in range(pieces):
+        if r0[q] <= r1[q]:
+            j = drawn
+            while j > 0 and r0[order[j - 1]] > r0[q]:
+                order[j] = order[j - 1]
+                j -= 1
+            order[j] = q
+            drawn += 1
+    active = vec_pieces()
+    n_active = int(0)
+    next_piece = int(0)
     ya, yb = row_segment(wp.max(y1 - y0 + 1, 0), lane)  # this lane's run of rows: the walks move forward row by row
     for y in range(y0 + ya, y0 + yb):
         yf = float(y)
+        while next_piece < drawn and r0[order[next_piece]] <= y:
+            if r1[order[next_piece]] >= y:
+                active[n_active] = order[next_piece]
+                n_active += 1
+            next_piece += 1
         n = int(0)
-        for q in range(pieces):
-            if y >= r0[q] and y <= r1[q]:
-                u0, u1, dq, uq = hull_chain_span(hull_pts, i, q, hull_n[i, q], yf, width, down[q], up[q])
-                down[q] = dq
-                up[q] = uq
-                if u0 <= u1:
-                    j = n
-                    while j > 0 and s0[j - 1] > u0:
-                        s0[j] = s0[j - 1]
-                        s1[j] = s1[j - 1]
-                        j -= 1
-                    s0[j] = u0
-                    s1[j] = u1
-                    n += 1
+        k = int(0)
+        while k < n_active:
+            q = active[k]
+            if y > r1[q]:  # the piece ended above this row: drop it (the last one takes its place)
+                n_active -= 1
+                active[k] = active[n_active]
+                continue
+            k += 1
+            u0, u1, dq, uq = hull_chain_span(hull_pts, i, q, hull_n[i, q], yf, width, down[q], up[q])
+            down[q] = dq
+            up[q] = uq
+            if u0 <= u1:
+                j = n
+                while j > 0 and s0[j - 1] > u0:
+                    s0[j] = s0[j - 1]
+                    s1[j] = s1[j - 1]
+                    j -= 1
+                s0[j] = u0
+                s1[j] = u1
+                n += 1
         # merge the sorted spans into disjoint intervals [a, b] (separated by an uncovered pixel) and count them
         if n > 0:
             a = s0[0]
@@ -329,7 +356,7 @@ def xor_band_kernel(cap: int, grouped: bool = False) -> wp.Kernel:
     The per-piece arrays hold two coordinates per int32 (rows, walk positions, spans) in vectors of ``cap``
     entries: a thread's run-time indexed arrays live in local memory, and with 32 lanes per warp on 32 particles
     their footprint decides how much of it stays in L1 (3 x 64 bytes per thread at 5 objects, against 6 x 128
-    bytes with the row kernel's separate ``vec32i`` arrays). Spans are sorted by (start, end) instead of (start,
+    bytes with the row kernel's separate per-piece arrays). Spans are sorted by (start, end) instead of (start,
     piece): the merged intervals, and so every output, are the same.
 
     Kernel args:
@@ -344,7 +371,7 @@ def xor_band_kernel(cap: int, grouped: bool = False) -> wp.Kernel:
         group_sums: (N, R) with ``grouped``: the same sums per group (one atomic add per band and group that covers
             anything); must hold zeros. Not touched otherwise.
     """
-    if cap not in (2, 4, 8, 16, 32):
+    if cap not in (2, 4, 8, 16, 32, 64, 128):
         raise ValueError(f"xor_band_kernel: cap {cap} must be a power of two from 2 to {MAX_PIECES}")
     veci = wp.types.vector(length=cap, dtype=wp.int32)
 
@@ -566,7 +593,7 @@ def group_logw_kernel(
     groups = n_groups[0]
     start = b * chunk
     stop = wp.min(start + chunk, n)
-    gmax = vec16()
+    gmax = vec_slots()
     for g in range(slots):
         gmax[g] = NEG_INF
     for i in range(start + lane, stop, wp.block_dim()):
@@ -575,7 +602,7 @@ def group_logw_kernel(
                 i, kind, age, pos, heading, dims, qtotal, cost_a, cost_b, scale, bg_weight, exclusion, sums, logw,
                 penalty, complexity,
             )  # fmt: skip
-        cost = vec16()
+        cost = vec_slots()
         for s in range(slots):
             kk = kind[i, s]
             g = slot_group[s]

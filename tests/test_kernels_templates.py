@@ -683,14 +683,15 @@ def test_xor_penalty_complexity_logw_and_coverage_exact(device, rng, cpu_blocks,
     assert 0 < v.sum() and np.any(v.sum(axis=0) > 1), "particles must overlap somewhere"
 
 
-@pytest.mark.parametrize(("r", "band"), [(1, 16), (4, 16), (4, 7), (16, 1), (4, 1000)])
+@pytest.mark.parametrize(("r", "band"), [(1, 16), (4, 16), (4, 7), (16, 1), (4, 1000), (64, 8)])
 @pytest.mark.parametrize(("bg_weight", "exclusion"), [(1.0, 0.0), (0.375, 250.0)])
 def test_xor_band_kernel_equals_row_kernel(device, rng, cpu_blocks, r, band, bg_weight, exclusion):
     """xor_band_kernel + xor_finish_kernel (a thread per band of rows and particle; bands of 16 rows, 7 (not dividing
     the image height), 1 and one band over the whole image) on hulls stored particle index fastest (the tracker's
     CUDA layout) give xor_score_kernel's log-weights, penalties and complexities on the contiguous hulls bit for
-    bit and the same cov_diff entry by entry (the same merged intervals per row), for 1, 4 and 16 objects per
-    particle; the penalties are sum(q XOR v_i) of the rendered scenes."""
+    bit and the same cov_diff entry by entry (the same merged intervals per row), for 1, 4, 16 and 64 objects per
+    particle (64: the kernels' limit, the band kernel compiled for 128 pieces); the penalties are sum(q XOR v_i) of
+    the rendered scenes."""
     case = XorCase(device, rng, n=37, r=r)
     rows = case.score(bg_weight, exclusion)
     cov_rows = case.cov_diff.numpy().copy()
@@ -1403,6 +1404,27 @@ def test_predict_reproducible_streams(device, rng):
         both = (other["kind"] > 0) & (a["kind"] > 0)
         for name in ("pos", "vel", "dims"):
             assert np.mean(np.all(other[name][both] != a[name][both], axis=-1)) > 0.95, name
+
+
+def test_predict_streams_beyond_16_slots(device, rng):
+    """R_max above 16 (the kernels' limit is 64): the first 16 slots draw the same numbers as with R_max 16 (runs of
+    R_max <= 16 are those of before), and slot 16 + k draws its own stream, not slot k's: the same object in slots
+    k and 16 + k gets different noise and deletion draws."""
+    n, r = 400, 40
+    arrays = random_population(rng, n, 16)
+    dyn = _dynamics_struct(TemplateConfig(t_del=0.2))
+    kw = {"ancestors": rng.integers(0, n, n), "resampled": 0}
+    small = predict(device, dyn, make_state(device, n, 16, **arrays), n, 16, **kw)
+    wide = {k: np.concatenate([v] * 3, axis=1)[:, :r] if v.ndim >= 2 else v for k, v in arrays.items()}
+    big = predict(device, dyn, make_state(device, n, r, **wide), n, r, slot_label=np.arange(r) % 16 + 10, **kw)
+    for name in small:
+        if name != "logw":
+            np.testing.assert_array_equal(big[name][:, :16], small[name], err_msg=name)
+    for k in range(8):  # slots 16 + k and 32 + k hold the objects of slot k: other draws
+        for other in (16 + k, 32 + k):
+            assert np.mean(big["kind"][:, other] != big["kind"][:, k]) > 0.05
+            both = (big["kind"][:, other] > 0) & (big["kind"][:, k] > 0)
+            assert np.all(np.any(big["pos"][both, other] != big["pos"][both, k], axis=-1))
 
 
 # ------------------------------------------------------------------------------------------ 7. slot estimates

@@ -166,3 +166,37 @@ def test_shake_moves_only_the_chosen_frames(rng) -> None:
             assert len(shifts) == 1 and max(abs(v) for v in shifts[0]) >= 2, (t, shifts)
         else:
             np.testing.assert_array_equal(out[t], frames[t])
+
+
+def test_max_objects_beyond_memory_is_a_clear_error_before_allocation(tmp_path, capsys, monkeypatch) -> None:
+    """--max-objects that the device's free memory cannot hold (here 8 MiB pretended free): one line naming
+    max_objects, the memory and the limits (R_max at these particles, particles at this R_max), exit 2, nothing
+    written; the R_max it names fits."""
+    import re
+
+    import wptrack.pf as pf
+    from wptrack.trackers.templates import TemplateTracker, particle_bytes
+
+    monkeypatch.setattr(pf, "available_bytes", lambda dev: 8 * 2**20)
+    rig = _rig(tmp_path)
+    src = tmp_path / "masks.avi"
+    write_video(src, [np.zeros((H, W, 3), np.uint8)] * 3, fps=15)
+    out = tmp_path / "out"
+    args = ["track", "templates", "--rig", rig, "--masks", str(src), "--out", str(out), "--device", "cpu", "-q"]
+    code = main([*args, "--max-objects", "64", "--particles", "2000"])
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.strip().splitlines() if not ln.startswith("Warp CUDA warning")]
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("wptrack: error: max_objects: 64 objects x 2000"), err
+    found = re.search(
+        r"the limit here is max_objects (\d+) at 2000 particles, or (\d+) particles at max_objects 64", err
+    )
+    assert found, err
+    fit_r, fit_n = int(found.group(1)), int(found.group(2))
+    assert 1 <= fit_r < 64 and 1 <= fit_n < 2000
+    images = H * (W + 1) * (4 + 4 + 8) + (H + 1) * (W + 1) * 8 + H * W * (1 + 4 + 1)  # the tracker's image buffers
+    usable = int(0.9 * 8 * 2**20) - images
+    per = [particle_bytes(r, "systematic", True) for r in (fit_r, fit_r + 1, 64)]
+    assert 2000 * per[0] <= usable < 2000 * per[1] and fit_n * per[2] <= usable < (fit_n + 1) * per[2]
+    assert not out.exists()
+    TemplateTracker(Rig.load(rig), TemplateConfig(particles=2000, max_objects=fit_r), device="cpu")
+    TemplateTracker(Rig.load(rig), TemplateConfig(particles=fit_n, max_objects=64), device="cpu")

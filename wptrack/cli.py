@@ -622,7 +622,7 @@ def build_parser() -> argparse.ArgumentParser:
     tt.add_argument("--masks", default=None, help="binary motion masks (video or image folder) instead of --video")
     tt.add_argument("--camera", default="0", help="rig camera name or index (default 0)")
     tt.add_argument("--particles", type=_positive_int, default=1000, help="N (default 1000)")
-    tt.add_argument("--max-objects", type=int, default=8, help="R_max objects per particle, 1..16 (default 8)")
+    tt.add_argument("--max-objects", type=int, default=8, help="R_max objects per particle, 1..64 (default 8)")
     tt.add_argument("--classes", nargs="+", default=["human", "vehicle"], help="classes to add (human vehicle)")
     tt.add_argument("--fps", type=float, default=None, help="frame rate (default: the video's or masks', else 15)")
     tt.add_argument("--scale", type=float, default=None, help="s of eq. 6 (default 5000)")

@@ -140,7 +140,8 @@ class TemplateConfig:
     particles: int = 1000
     """N, particles (each a whole scene)."""
     max_objects: int = 8
-    """R_max, objects per particle (at most 16)."""
+    """R_max, objects per particle (at most ``kernels.raster.MAX_SLOTS`` = 64; the device memory it needs is checked
+    before allocation)."""
     camera: str | int = 0
     """The rig camera that sees the scene (name or index)."""
     fps: float = 15.0
@@ -301,7 +302,9 @@ class TemplateConfig:
     def __post_init__(self) -> None:
         check_particles(self.particles)
         if isinstance(self.max_objects, bool) or not isinstance(self.max_objects, (int, np.integer)):
-            raise ConfigError(f"max_objects: expected an integer R_max in [1, 16], got {self.max_objects!r}")
+            raise ConfigError(
+                f"max_objects: expected an integer R_max in [1, {int(kraster.MAX_SLOTS)}], got {self.max_objects!r}"
+            )
         if not 1 <= int(self.max_objects) <= int(kraster.MAX_SLOTS):
             raise ConfigError(f"max_objects: R_max must be in [1, {int(kraster.MAX_SLOTS)}], got {self.max_objects}")
         _nonneg(self.fps, "fps", "frames/s", strict=True)

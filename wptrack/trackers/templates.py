@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from wptrack import pf as _pf
 from wptrack.errors import ConfigError, FrameError, RigError
 from wptrack.kernels import classify as kcls
 from wptrack.kernels import dynamics as kdyn
@@ -148,6 +149,28 @@ def particle_bytes(max_objects: int, scheme: str, partition: bool = False) -> in
     """Device memory per particle of the template tracker, bytes."""
     extra = max_objects * PARTITION_SLOT_BYTES if partition else 0
     return max_objects * SLOT_STATE_BYTES + PARTICLE_BYTES + extra + bytes_per_particle(scheme)  # float64 weights
+
+
+def check_template_fits(n: int, r: int, scheme: str, partition: bool, fixed: int, device: str) -> None:
+    """Raise ConfigError before any allocation when ``n`` particles of ``r`` object slots (``particle_bytes``) and
+    ``fixed`` bytes of images do not fit in the device's free memory (``wptrack.pf.check_fits``: a 10 % margin); the
+    message names ``max_objects`` and ``particles`` and gives the largest R_max that fits at ``n`` particles and the
+    most particles that fit at ``r`` slots."""
+    try:
+        check_fits(n, particle_bytes(r, scheme, partition), fixed, device, what="template tracker particles")
+    except ConfigError:
+        free = _pf.available_bytes(device)
+        usable = int(0.9 * free) - fixed
+        fit_r = 0
+        while fit_r < r and n * particle_bytes(fit_r + 1, scheme, partition) <= usable:
+            fit_r += 1
+        fit_n = max(usable, 0) // particle_bytes(r, scheme, partition)
+        need = n * particle_bytes(r, scheme, partition) + fixed
+        raise ConfigError(
+            f"max_objects: {r} objects x {n} particles need {need / 2**30:.2f} GiB on {device} but only "
+            f"{free / 2**30:.2f} GiB is free; the limit here is max_objects {fit_r} at {n} "
+            f"particles, or {fit_n} particles at max_objects {r}"
+        ) from None
 
 
 _BOX_CORNERS = np.array([[sx, sy, sz] for sx in (-0.5, 0.5) for sy in (-0.5, 0.5) for sz in (0.0, 1.0)])
@@ -513,9 +536,7 @@ class TemplateTracker(FrameChain):
         h, w = self.height, self.width
         image_bytes = h * (w + 1) * (4 + 4 + 8) + (h + 1) * (w + 1) * 8 + h * w * (1 + 4 + 1)
         self.partition = bool(config.partition)
-        check_fits(
-            n, particle_bytes(r, config.resampling, self.partition), image_bytes, d, what="template tracker particles"
-        )
+        check_template_fits(n, r, config.resampling, self.partition, image_bytes, d)
         self.candidates = Candidates(self.camera, self.plane, self.cam, self.plane_struct, config, d)
         log.info(
             "template tracker: %d particles x %d slots, %d addition candidates, camera %s %dx%d on %s",
