@@ -19,7 +19,6 @@ from .random import (
     STREAM_TEMPLATE_NOISE,
     STREAM_TEMPLATE_NOISE2,
     normal4_at,
-    uniform4,
     uniform4_at,
 )
 from .raster import KIND_HUMAN, KIND_NONE, KIND_VEHICLE, PIECES
@@ -98,6 +97,14 @@ def clamp3(v: wp.vec3, lo: wp.vec3, hi: wp.vec3):
     return wp.vec3(wp.clamp(v[0], lo[0], hi[0]), wp.clamp(v[1], lo[1], hi[1]), wp.clamp(v[2], lo[2], hi[2]))
 
 
+@wp.func
+def add_draw(seed: wp.vec2ui, j: int, f: int, r: int):
+    """The U(0, 1) draw of particle ``j`` for the frame's addition ``r`` (eq. 12: added when below T_add): component
+    ``r % 4`` of the particle's ``STREAM_TEMPLATE_ADD`` block with counter word ``r / 4`` (addition 0: the draw of the
+    paper's single addition, as before)."""
+    return uniform4_at(seed, j, f, STREAM_TEMPLATE_ADD, r / 4)[r % 4]
+
+
 @wp.kernel
 def template_predict_kernel(
     dyn: Dynamics,
@@ -126,9 +133,11 @@ def template_predict_kernel(
             row and ``slot_group`` zeros; the partitioned filter (``kernels.partition``) a row per independent
             group. A slot of group -1 is empty in every particle (any parent will do: row 0).
         slot_group: (R,) group of each slot. resampled: (1,) 1 when the weights restart from 0.
-        add: (2,) this frame's addition ``(slot, candidate)`` or ``slot = -1`` (``uoh.choose_addition_kernel``).
-            With ``dyn.absorb``, a vehicle added to a particle removes the particle's humans whose ground disc
-            meets the candidate's footprint (a box of the prior's mean length and width; beyond the paper).
+        add: (2K,) this frame's K additions ``(slot, candidate)`` or ``slot = -1`` (``uoh.choose_addition_kernel``,
+            ``uoh.choose_more_additions_kernel``; K = 1: eq. 12); each is added to a particle with its own draw
+            (:func:`add_draw`). With ``dyn.absorb``, a vehicle added to a particle removes the particle's humans
+            whose ground disc meets the candidate's footprint (a box of the prior's mean length and width; beyond
+            the paper).
         slot_label: (R,) label of each slot. cand_kind, cand_pos, cand_heading: (C,) candidate objects.
         occlusion: (N, R) fraction of each object hidden by nearer objects of its particle, read at the parent
             (``occlusion.occlusion_kernel``; zeros: the paper's prediction). Beyond the paper: an object hidden a
@@ -170,20 +179,26 @@ def template_predict_kernel(
                 seen = True
         if not seen and u[1] < dyn.unseen_del:
             k = KIND_NONE
-    if k == KIND_HUMAN and dyn.absorb != 0 and add[0] >= 0:
+    rounds = add.shape[0] / 2  # the frame's additions (beyond the paper: TemplateConfig.additions; eq. 12: one)
+    if k == KIND_HUMAN and dyn.absorb != 0:
         # beyond the paper (kernels.classify): a vehicle added to this particle (the same draw as the addition
         # below, keyed by the particle) replaces the humans standing on its footprint, in one move
-        cv = add[1]
-        add_parent = ancestors[wp.max(slot_group[add[0]], 0), j]  # the parent of the slot that receives it
-        if cand_kind[cv] == KIND_VEHICLE and src.kind[add_parent, add[0]] == KIND_NONE:
-            if uniform4(seed, j, f, STREAM_TEMPLATE_ADD)[0] < dyn.t_add:
-                half = 0.5 * wp.vec2(dyn.dims_mean_vehicle[0], dyn.dims_mean_vehicle[1])
-                if disc_in_box(p, d[1], cand_pos[cv], cand_heading[cv], half) > 0.0:
-                    k = KIND_NONE
-    if k == KIND_NONE and s == add[0]:
-        ua = uniform4(seed, j, f, STREAM_TEMPLATE_ADD)
-        if ua[0] < dyn.t_add:
-            c = add[1]
+        for r in range(rounds):
+            if add[2 * r] >= 0 and k == KIND_HUMAN:
+                cv = add[2 * r + 1]
+                add_parent = ancestors[wp.max(slot_group[add[2 * r]], 0), j]  # the parent of the receiving slot
+                if cand_kind[cv] == KIND_VEHICLE and src.kind[add_parent, add[2 * r]] == KIND_NONE:
+                    if add_draw(seed, j, f, r) < dyn.t_add:
+                        half = 0.5 * wp.vec2(dyn.dims_mean_vehicle[0], dyn.dims_mean_vehicle[1])
+                        if disc_in_box(p, d[1], cand_pos[cv], cand_heading[cv], half) > 0.0:
+                            k = KIND_NONE
+    mine = int(-1)  # the addition that targets this slot
+    for r in range(rounds):
+        if add[2 * r] == s:
+            mine = r
+    if k == KIND_NONE and mine >= 0:
+        if add_draw(seed, j, f, mine) < dyn.t_add:
+            c = add[2 * mine + 1]
             k = cand_kind[c]
             label = slot_label[s]
             p = cand_pos[c]

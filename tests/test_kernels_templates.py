@@ -996,6 +996,95 @@ def test_choose_addition_nothing_to_add(device, best, best_score, slot_count):
     assert out["slot_kind"].tolist() == [9, 9]
 
 
+def test_suppress_candidates_around_the_choice(device, rng):
+    """suppress_candidates_kernel: after a choice, exactly the candidates whose boxes share a pixel with the chosen
+    one's (and the chosen one) get -3e38, the others keep their scores; with the class-aware replacement on
+    (fit >= min_fit), the box of the replacing vehicle candidate counts; nothing changes when nothing was chosen."""
+    c = 300
+    x0 = rng.integers(0, 200, c)
+    y0 = rng.integers(0, 150, c)
+    box = np.stack([x0, y0, x0 + rng.integers(0, 40, c), y0 + rng.integers(0, 60, c)], axis=1).astype(np.int32)
+    box[7] = (10, 10, 5, 5)  # an empty box (no pixel): never shares one
+    score = rng.uniform(1.0, 50.0, c).astype(np.float32)
+
+    def run(best: int, best_score: float, fit_best: int = -1, fit: float = -3e38, min_fit: float = math.inf):
+        est = np.zeros(int(kreduce.EST_SIZE))
+        est[int(kreduce.EST_MAXLOGW)] = best_score
+        fit_est = np.zeros(int(kreduce.EST_SIZE))
+        fit_est[int(kreduce.EST_MAXLOGW)] = fit
+        out = wp.array(score, dtype=wp.float32, device=device)
+        wp.launch(
+            kuoh.suppress_candidates_kernel,
+            dim=c,
+            inputs=[wp.array([best], dtype=wp.int32, device=device), wp.array(est, dtype=wp.float64, device=device),
+                    int(kreduce.EST_MAXLOGW), wp.array([fit_best], dtype=wp.int32, device=device),
+                    wp.array(fit_est, dtype=wp.float64, device=device), min_fit,
+                    wp.array(box, dtype=wp.vec4i, device=device)],
+            outputs=[out],
+            device=device,
+        )  # fmt: skip
+        return out.numpy()
+
+    def shares(a: int) -> np.ndarray:
+        b = box[a]
+        return (b[0] <= box[:, 2]) & (box[:, 0] <= b[2]) & (b[1] <= box[:, 3]) & (box[:, 1] <= b[3])
+
+    for chosen, kw in ((3, {}), (11, {"fit_best": 11, "fit": 0.9, "min_fit": 0.85})):
+        got = run(3, 40.0, **kw)
+        gone = shares(chosen)
+        gone[chosen] = True
+        assert 1 < gone.sum() < c - 10 and not gone[7]
+        np.testing.assert_array_equal(got[gone], NEG_INF32)
+        np.testing.assert_array_equal(got[~gone], score[~gone])
+    np.testing.assert_array_equal(run(3, 40.0, fit_best=11, fit=0.8, min_fit=0.85), run(3, 40.0))  # fit too low
+    for best, best_score in ((3, float(NEG_INF32)), (-1, 10.0), (c, 10.0)):  # nothing eligible, invalid indices
+        np.testing.assert_array_equal(run(best, best_score), score)
+
+
+def choose_more(device, best, best_score, slot_count, add0=(-1, -1), cand_kind=(1, 2, 2, 1), next_label=5):
+    """choose_more_additions_kernel for K = len(best) rounds after addition 0 ``add0``."""
+    r, k = len(slot_count), len(best)
+    est = np.zeros((k, int(kreduce.EST_SIZE)))
+    est[:, int(kreduce.EST_MAXLOGW)] = best_score
+    add = np.full(2 * k, 42, np.int32)
+    add[:2] = add0
+    arrays = {
+        "next_label": wp.array([next_label], dtype=wp.int32, device=device),
+        "slot_label": wp.array(np.arange(r, dtype=np.int32) + 100, dtype=wp.int32, device=device),
+        "slot_kind": wp.array(np.full(r, 9, np.int32), dtype=wp.int32, device=device),
+        "add": wp.array(add, dtype=wp.int32, device=device),
+    }
+    wp.launch(
+        kuoh.choose_more_additions_kernel,
+        dim=1,
+        inputs=[wp.array(np.asarray(best, np.int32), dtype=wp.int32, device=device),
+                wp.array(est, dtype=wp.float64, device=device), int(kreduce.EST_MAXLOGW),
+                wp.array(np.asarray(cand_kind, np.int32), dtype=wp.int32, device=device),
+                wp.array(np.asarray(slot_count, np.float64), dtype=wp.float64, device=device), r],
+        outputs=list(arrays.values()),
+        device=device,
+    )  # fmt: skip
+    return {k: v.numpy() for k, v in arrays.items()}
+
+
+def test_choose_more_additions_takes_the_next_free_slots(device):
+    """Rounds 1.. K-1: each eligible round's candidate goes to the lowest slot empty in every particle that this
+    frame has not given yet (round 0's included), with the next label and its kind; ineligible rounds (score -3e38,
+    invalid index) and rounds without a free slot give (-1, -1); addition 0 is left as it is."""
+    out = choose_more(device, best=[0, 1, 3, 2], best_score=[9.0, 8.0, 7.0, 6.0], slot_count=[0.0, 0.0, 3.0, 0.0, 0.0],
+                      add0=(0, 0))  # fmt: skip
+    assert out["add"].tolist() == [0, 0, 1, 1, 3, 3, 4, 2]
+    assert out["slot_label"].tolist() == [100, 5, 102, 6, 7] and out["slot_kind"].tolist() == [9, 2, 9, 1, 2]
+    assert out["next_label"].tolist() == [8]
+    out = choose_more(device, best=[0, 1, -1, 3], best_score=[9.0, float(NEG_INF32), 7.0, 6.0],
+                      slot_count=[0.0, 1.0, 0.0, 0.0], add0=(-1, -1))  # fmt: skip
+    assert out["add"].tolist() == [-1, -1, -1, -1, -1, -1, 0, 3]  # round 0 gave nothing: slot 0 is free
+    assert out["next_label"].tolist() == [6]
+    out = choose_more(device, best=[0, 1, 2], best_score=[9.0, 8.0, 7.0], slot_count=[0.0, 4.0], add0=(0, 2))
+    assert out["add"].tolist() == [0, 2, -1, -1, -1, -1]  # no free slot left
+    assert out["next_label"].tolist() == [5] and out["slot_label"].tolist() == [100, 101]
+
+
 # ------------------------------------------------------------------------------------------ 6. prediction
 
 FIELDS = ("kind", "label", "pos", "vel", "heading", "dims", "age")
@@ -1317,6 +1406,29 @@ def test_predict_addition(device, cand):
     # no addition decided: nothing is added even with T_add = 1
     none = predict(device, quiet_dynamics(t_add=1.0), src, n, r, add=(-1, -1), slot_label=slot_label)
     np.testing.assert_array_equal(none["kind"], kind)
+
+
+def test_predict_several_additions(device):
+    """K = 3 additions in one frame: each goes to its own slot in a share T_add of the free particles, with its own
+    draw (addition r: component r of the particle's addition block), so the three are independent; addition 0 is
+    the single addition of eq. 12 bit for bit (the same particles as with K = 1)."""
+    n, r = 6000, 4
+    src = make_state(device, n, r)
+    dyn = quiet_dynamics(t_add=0.4)
+    slot_label = np.array([20, 21, 22, 23], np.int32)
+    got = predict(device, dyn, src, n, r, add=(1, 0, 3, 2, 0, 1), slot_label=slot_label)
+    one = predict(device, dyn, src, n, r, add=(1, 0), slot_label=slot_label)
+    np.testing.assert_array_equal(got["kind"][:, 1], one["kind"][:, 1])
+    np.testing.assert_array_equal(got["pos"][:, 1], one["pos"][:, 1])
+    added = got["kind"] != 0
+    assert not added[:, 2].any()
+    p = 0.4
+    for slot, cand in ((1, 0), (3, 2), (0, 1)):
+        assert abs(added[:, slot].mean() - p) < 4 * math.sqrt(p * (1 - p) / n), slot
+        np.testing.assert_array_equal(got["kind"][added[:, slot], slot], CANDS["kind"][cand])
+        np.testing.assert_array_equal(got["label"][added[:, slot], slot], slot_label[slot])
+    both = (added[:, 1] & added[:, 3]).mean()  # independent draws: P(both) = p^2
+    assert abs(both - p * p) < 4 * math.sqrt(p * p * (1 - p * p) / n)
 
 
 def test_predict_noise_statistics(device):
@@ -1716,3 +1828,42 @@ def test_tracker_full_masks_stay_finite(device):
     p = tr.particles()
     for name in ("pos", "vel", "heading", "dims", "age", "logw"):
         assert np.all(np.isfinite(p[name])), name
+
+
+def test_tracker_pixel_costs_scale_with_image_area(device):
+    """eq. 5's a_r, b_r, the exclusion prior and the smallest candidate area are given at ``reference_area`` pixels
+    and scale with the image's area (320x240: a quarter of 640x480); ``reference_area`` 0 keeps raw pixels."""
+    rig = e2e_rig()
+    cfg = TemplateConfig(particles=10, max_objects=2)
+    tr = TemplateTracker(rig, cfg, device=device)
+    a = 320 * 240 / (640 * 480)
+    assert tr.area_scale == a
+    assert tuple(tr.cost_a) == pytest.approx((0.0, cfg.human.cost_a * a, cfg.vehicle.cost_a * a))
+    assert tuple(tr.cost_b) == pytest.approx((0.0, cfg.human.cost_b * a, cfg.vehicle.cost_b * a))
+    assert tr.exclusion == pytest.approx(cfg.exclusion * a) and tr.min_area == round(cfg.min_candidate_area * a)
+    raw = TemplateTracker(rig, TemplateConfig(particles=10, max_objects=2, reference_area=0), device=device)
+    assert raw.area_scale == 1.0 and raw.exclusion == cfg.exclusion and tuple(raw.cost_a)[1] == cfg.human.cost_a
+
+
+def test_tracker_several_additions_on_the_first_frame(device):
+    """additions 3 on the rendered scene (two walkers and a car in view): the first frame proposes the car and the
+    near walker to two slots with new labels, on disjoint image boxes (the far walker, 8 pixels wide, fills no
+    candidate of the 8-pixel grid well enough for eq. 11's threshold yet: the third round finds nothing eligible and
+    proposes nothing); additions 1 proposes one."""
+    rig = e2e_rig()
+    masks = rendered_masks(device, rig, 1)
+    tr = TemplateTracker(rig, TemplateConfig(particles=200, max_objects=8, additions=3), device=device)
+    tr.step(masks[0])
+    add = tr.host["add"].numpy().reshape(3, 2)
+    assert np.all(add[:2, 0] >= 0) and add[0, 0] != add[1, 0] and add[2].tolist() == [-1, -1], add
+    assert sorted(tr.candidates.kind_np[add[:2, 1]]) == [HUMAN, VEHICLE]
+    labels = tr.host["slot_label"].numpy()[add[:2, 0]]
+    assert sorted(labels) == [0, 1]
+    box = tr.candidates.box.numpy()[add[:2, 1]]
+    for i in range(2):
+        for j in range(i + 1, 2):
+            a, b = box[i], box[j]
+            assert a[2] < b[0] or b[2] < a[0] or a[3] < b[1] or b[3] < a[1], (a, b)
+    one = TemplateTracker(rig, TemplateConfig(particles=200, max_objects=8), device=device)
+    one.step(masks[0])
+    assert one.host["add"].numpy().shape == (2,) and one.host["add"].numpy()[0] >= 0

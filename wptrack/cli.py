@@ -133,7 +133,6 @@ def _template_config_from_args(args, fps: float | None):
 
     kw = {
         "particles": args.particles,
-        "max_objects": args.max_objects,
         "camera": int(args.camera) if args.camera.isdigit() else args.camera,
         "classes": tuple(args.classes),
         "seed": args.seed,
@@ -141,9 +140,11 @@ def _template_config_from_args(args, fps: float | None):
         "partition": not args.joint,
     }
     for name in (
+        "max_objects",
         "scale",
         "t_add",
         "t_del",
+        "additions",
         "add_min_gain",
         "min_existence",
         "min_in_image",
@@ -551,7 +552,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--conditions",
         default=None,
         help="s3 scenes only: comma-separated hard conditions, each alone measurable: static-start, stop-and-go, sun, "
-        "light-change, noise, compression, dark-car; or all (default: none; see wptrack.synth.conditions)",
+        "light-change, noise, compression, dark-car, crowd, cyclists; or all (default: none; see "
+        "wptrack.synth.conditions)",
     )
     s.set_defaults(func=cmd_synth)
 
@@ -622,12 +624,17 @@ def build_parser() -> argparse.ArgumentParser:
     tt.add_argument("--masks", default=None, help="binary motion masks (video or image folder) instead of --video")
     tt.add_argument("--camera", default="0", help="rig camera name or index (default 0)")
     tt.add_argument("--particles", type=_positive_int, default=1000, help="N (default 1000)")
-    tt.add_argument("--max-objects", type=int, default=8, help="R_max objects per particle, 1..64 (default 8)")
+    tt.add_argument(
+        "--max-objects", type=int, default=None, help="R_max objects per particle, 1..64 (default 64; memory checked)"
+    )
     tt.add_argument("--classes", nargs="+", default=["human", "vehicle"], help="classes to add (human vehicle)")
     tt.add_argument("--fps", type=float, default=None, help="frame rate (default: the video's or masks', else 15)")
     tt.add_argument("--scale", type=float, default=None, help="s of eq. 6 (default 5000)")
     tt.add_argument("--t-add", type=float, default=None, help="T_add of eq. 12 (default 0.3)")
     tt.add_argument("--t-del", type=float, default=None, help="T_del of eq. 13 (default 0.02)")
+    tt.add_argument(
+        "--additions", type=int, default=None, help="objects proposed per frame on disjoint pixels (default 1)"
+    )
     tt.add_argument("--add-min-gain", type=float, default=None, help="candidate gain / area to add (default 0.2)")
     tt.add_argument("--min-existence", type=float, default=None, help="report objects above this (default 0.5)")
     tt.add_argument(

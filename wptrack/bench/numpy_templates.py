@@ -111,17 +111,18 @@ class NumpyTemplateScorer:
 
     @classmethod
     def for_tracker(cls, tracker) -> NumpyTemplateScorer:
-        """The reference for a ``TemplateTracker``'s camera, ground plane, eq. 5 costs, eq. 6 scale and fold radius."""
+        """The reference for a ``TemplateTracker``'s camera, ground plane, eq. 5 costs and exclusion prior (scaled to
+        the image's area as the tracker does, ``TemplateConfig.reference_area``), eq. 6 scale and fold radius."""
         cfg = tracker.config
         return cls(
             tracker.camera,
             tracker.plane,
-            (0.0, cfg.human.cost_a, cfg.vehicle.cost_a),
-            (0.0, cfg.human.cost_b, cfg.vehicle.cost_b),
+            tuple(float(v) for v in tracker.cost_a),
+            tuple(float(v) for v in tracker.cost_b),
             cfg.scale,
             r2_max=float(tracker.cam.r2_max),
             bg_weight=cfg.bg_weight,
-            exclusion=cfg.exclusion,
+            exclusion=tracker.exclusion,
         )
 
     # --- geometry ------------------------------------------------------------------------------------------

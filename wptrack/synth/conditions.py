@@ -23,6 +23,11 @@ truth as without this module). The conditions:
   (blocking, ringing and chroma subsampling around edges); the written video stays lossless.
 - ``dark-car``: the first car of the scene (lowest id) is painted in the road's asphalt colour, so its roof shows the
   road's radiance and its sides are darker still; scenes without a car are unchanged (a warning says so).
+- ``crowd``: 20-40 more people in view at once, singles, pairs side by side and groups of three walking along the
+  street both ways, some crossing in from below, a few small and half hidden on the far sidewalk (issue 26;
+  :mod:`wptrack.synth.plaza_crowd`).
+- ``cyclists``: 2-4 people riding bicycles at 3.5-6 m/s along the road and across the plaza, each one object of
+  class ``cyclist`` (issue 26; :mod:`wptrack.synth.plaza_crowd`).
 
 The chosen conditions and their parameters are written to ``scene.json`` under ``conditions`` (absent when none).
 """
@@ -77,6 +82,8 @@ CONDITION_NAMES: dict[str, str] = {
     "noise": "sensor_noise",
     "compression": "compression",
     "dark-car": "dark_car",
+    "crowd": "crowd",
+    "cyclists": "cyclists",
 }
 """Command-line name -> :class:`PlazaConditions` field."""
 
@@ -93,6 +100,8 @@ class PlazaConditions:
         sensor_noise: Stronger signal-dependent sensor noise.
         compression: JPEG quality :data:`JPEG_QUALITY` on every frame.
         dark_car: The first car painted in the asphalt's colour.
+        crowd: 20-40 more people at once, in pairs and small groups (:mod:`wptrack.synth.plaza_crowd`).
+        cyclists: 2-4 cyclists (:mod:`wptrack.synth.plaza_crowd`).
     """
 
     static_start: bool = False
@@ -102,6 +111,8 @@ class PlazaConditions:
     sensor_noise: bool = False
     compression: bool = False
     dark_car: bool = False
+    crowd: bool = False
+    cyclists: bool = False
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -147,8 +158,23 @@ class PlazaConditions:
             "noise": {"read_dn": READ_NOISE, "shot_gain_dn": SHOT_GAIN},
             "compression": {"codec": "jpeg", "quality": JPEG_QUALITY},
             "dark-car": {"albedo": "asphalt"},
+            "crowd": _crowd_params(),
+            "cyclists": _cyclist_params(),
         }
         return {name: params[name] for name in self.names}
+
+
+def _crowd_params() -> dict[str, Any]:
+    from wptrack.synth import plaza_crowd as PC
+
+    return {"at_once": list(PC.CROWD_AT_ONCE), "group_sizes": [list(g) for g in PC.GROUP_SIZES],
+            "side_by_side_m": list(PC.SIDE_BY_SIDE), "speeds": list(PC.WALK_SPEEDS)}  # fmt: skip
+
+
+def _cyclist_params() -> dict[str, Any]:
+    from wptrack.synth import plaza_crowd as PC
+
+    return {"count": list(PC.CYCLISTS), "speeds": list(PC.CYCLE_SPEEDS), "class": PC.CYCLIST_CLASS}
 
 
 def parse_conditions(text: str | Sequence[str] | None) -> PlazaConditions:

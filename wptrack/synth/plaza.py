@@ -54,7 +54,7 @@ over the scene's default length (180 frames at 15 fps).
 
 Hard conditions, each a switch off by default (objects standing in view at frame 0, people stopping and walking
 on, a low sun with hard shadows, a global illumination change, stronger sensor noise, JPEG compression, a car as
-dark as the road): :mod:`wptrack.synth.conditions`, ``wptrack synth s3-... --conditions ...``.
+dark as the road, a crowd, cyclists): :mod:`wptrack.synth.conditions`, ``wptrack synth s3-... --conditions ...``.
 """
 
 from __future__ import annotations
@@ -205,6 +205,13 @@ class PlazaScene(Scene):
         self.conditions = PlazaConditions() if conditions is None else conditions
         if not isinstance(self.conditions, PlazaConditions):
             raise TypeError(f"conditions must be a PlazaConditions, got {type(self.conditions).__name__}")
+        if self.conditions.crowd or self.conditions.cyclists:  # more objects (issue 26)
+            from wptrack.synth import plaza_crowd
+
+            if self.conditions.crowd:
+                self.actors = plaza_crowd.add_crowd(self.actors)
+            if self.conditions.cyclists:
+                self.actors = plaza_crowd.add_cyclists(self.actors)
         if self.conditions.dark_car:
             self.actors = _dark_car(self.actors)
         if self.conditions.static_start:

@@ -343,8 +343,15 @@ class Candidates:
         self.chunk = (c + self.blocks - 1) // self.blocks
         self.part_max = wp.zeros(self.blocks, dtype=wp.float32, device=d)
         self.part_arg = wp.zeros(self.blocks, dtype=wp.int32, device=d)
-        self.est = wp.zeros(int(kreduce.EST_SIZE), dtype=wp.float64, device=d)
-        self.best = wp.zeros(1, dtype=wp.int32, device=d)
+        # one argmax per addition of the frame (TemplateConfig.additions): rows of est_k and entries of best_k;
+        # round 0's are est and best (the paper's single addition, eq. 11)
+        rounds = int(config.additions)
+        self.est_k = wp.zeros((rounds, int(kreduce.EST_SIZE)), dtype=wp.float64, device=d)
+        self.best_k = wp.zeros(rounds, dtype=wp.int32, device=d)
+        self.est = self.est_k[0]
+        self.best = self.best_k[0:1]
+        self.round_est = [self.est_k[k] for k in range(rounds)]
+        self.round_best = [self.best_k[k : k + 1] for k in range(rounds)]
         # class-aware addition (kernels.classify): vehicle fits near a chosen human and their argmax
         self.fit = wp.zeros(c, dtype=wp.float32, device=d)
         self.fit_max = wp.zeros(self.blocks, dtype=wp.float32, device=d)
@@ -612,11 +619,16 @@ class TemplateTracker(FrameChain):
         self.slot_label = wp.full(r, -1, dtype=wp.int32, device=d)
         self.slot_kind = wp.zeros(r, dtype=wp.int32, device=d)
         self.next_label = wp.zeros(1, dtype=wp.int32, device=d)
-        self.add = wp.full(2, -1, dtype=wp.int32, device=d)
+        self.add = wp.full(2 * int(config.additions), -1, dtype=wp.int32, device=d)
         self.best_state = wp.zeros((r, 11), dtype=wp.float32, device=d)
         self.resampler = Resampler(config.resampling, n, d)
-        self.cost_a = wp.vec3(0.0, config.human.cost_a, config.vehicle.cost_a)
-        self.cost_b = wp.vec3(0.0, config.human.cost_b, config.vehicle.cost_b)
+        # the pixel costs are given for an image of reference_area pixels and scale with this one's area
+        self.area_scale = float(w * h) / float(config.reference_area) if config.reference_area > 0 else 1.0
+        a = self.area_scale
+        self.cost_a = wp.vec3(0.0, config.human.cost_a * a, config.vehicle.cost_a * a)
+        self.cost_b = wp.vec3(0.0, config.human.cost_b * a, config.vehicle.cost_b * a)
+        self.exclusion = float(config.exclusion) * a
+        self.min_area = max(1, int(round(config.min_candidate_area * a)))
         self.score_scale = float(config.scale) / float(w * h)
         pinned = self.is_cuda
         self.host = {
@@ -624,7 +636,7 @@ class TemplateTracker(FrameChain):
             "slot_label": wp.zeros(r, dtype=wp.int32, device="cpu", pinned=pinned),
             "slot_kind": wp.zeros(r, dtype=wp.int32, device="cpu", pinned=pinned),
             "best_state": wp.zeros((r, 11), dtype=wp.float32, device="cpu", pinned=pinned),
-            "add": wp.zeros(2, dtype=wp.int32, device="cpu", pinned=pinned),
+            "add": wp.zeros(2 * int(config.additions), dtype=wp.int32, device="cpu", pinned=pinned),
             "qtotal": wp.zeros(1, dtype=wp.int32, device="cpu", pinned=pinned),
             "est": wp.zeros(int(kreduce.EST_SIZE), dtype=wp.float64, device="cpu", pinned=pinned),
             "n_groups": wp.zeros(1, dtype=wp.int32, device="cpu", pinned=pinned),
@@ -705,7 +717,7 @@ class TemplateTracker(FrameChain):
         finish_here = not (self.partition and self.xor_band > 0)
         launch_xor_score(
             self.hulls, s.kind, s.age, s.pos, s.heading, s.dims, self.qrow, self.qtotal, self.cost_a, self.cost_b,
-            self.score_scale, float(cfg.bg_weight), float(cfg.exclusion), self.xor_sums, s.logw, self.penalty,
+            self.score_scale, float(cfg.bg_weight), self.exclusion, self.xor_sums, s.logw, self.penalty,
             self.complexity, self.cov_diff, self.device, band=self.xor_band,
             groups=(self.group_box, self.n_groups, self.slot_group, self.group_sums) if self.partition else None,
             finish=finish_here,
@@ -715,7 +727,7 @@ class TemplateTracker(FrameChain):
                 kxor.group_logw_kernel,
                 dim=[self.blocks],
                 inputs=[s.kind, s.age, s.pos, s.heading, s.dims, self.qtotal, self.cost_a, self.cost_b,
-                        self.score_scale, float(cfg.bg_weight), float(cfg.exclusion), self.slot_group, self.n_groups,
+                        self.score_scale, float(cfg.bg_weight), self.exclusion, self.slot_group, self.n_groups,
                         self.n, self.chunk, int(not finish_here), self.xor_sums],
                 outputs=[self.group_sums, self.glogw, self.part_gmax, s.logw, self.penalty, self.complexity],
                 block_dim=BLOCK,
@@ -758,7 +770,7 @@ class TemplateTracker(FrameChain):
                 self.n,
                 float(cfg.add_beta),
                 float(cfg.add_min_gain),
-                int(cfg.min_candidate_area),
+                self.min_area,
             ],
             outputs=[c.score, c.area],
             block_dim=CANDIDATE_BLOCK,
@@ -784,7 +796,7 @@ class TemplateTracker(FrameChain):
                     c.best,
                     self.qrow,
                     0.5 * float(cfg.vehicle.dims_mean[0]),
-                    int(cfg.min_candidate_area),
+                    self.min_area,
                     wp.vec3(*cfg.vehicle.dims_mean),
                     self.slot_est,
                     self.slot_kind,
@@ -795,6 +807,19 @@ class TemplateTracker(FrameChain):
                 device=d,
             )
             self._argmax(c.fit, c.count, c.blocks, c.chunk, c.fit_max, c.fit_arg, c.fit_est, c.fit_best)
+        # beyond the paper: more additions on other pixels (TemplateConfig.additions): the candidates sharing pixels
+        # with the last round's choice are suppressed, and the next argmax picks among the rest
+        for k in range(1, len(c.round_best)):
+            min_fit = self.min_fit if k == 1 else math.inf  # round 0's choice after the class-aware replacement
+            wp.launch(
+                kuoh.suppress_candidates_kernel,
+                dim=c.count,
+                inputs=[c.round_best[k - 1], c.round_est[k - 1], int(kreduce.EST_MAXLOGW), c.fit_best, c.fit_est,
+                        min_fit, c.box],
+                outputs=[c.score],
+                device=d,
+            )  # fmt: skip
+            self._argmax(c.score, c.count, c.blocks, c.chunk, c.part_max, c.part_arg, c.round_est[k], c.round_best[k])
 
     def _argmax(self, values, n, blocks, chunk, part_max, part_arg, est, best) -> None:
         if n <= SINGLE_MAX:  # one block over all values: one launch instead of two, the same result
@@ -892,6 +917,14 @@ class TemplateTracker(FrameChain):
             outputs=[self.next_label, self.slot_label, self.slot_kind, self.add],
             device=d,
         )
+        if len(c.round_best) > 1:  # beyond the paper: the frame's further additions (TemplateConfig.additions)
+            wp.launch(
+                kuoh.choose_more_additions_kernel,
+                dim=1,
+                inputs=[c.best_k, c.est_k, int(kreduce.EST_MAXLOGW), c.kind, self.slot_count, self.r],
+                outputs=[self.next_label, self.slot_label, self.slot_kind, self.add],
+                device=d,
+            )
         if self.partition and self.config.resampling == "systematic":
             # each group of slots on its own factor (kernels.partition), one launch; unused rows: the identity
             wp.launch_tiled(
