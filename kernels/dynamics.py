@@ -2,7 +2,8 @@
 
 Each particle is a whole scene: R slots, each empty or holding one object (struct-of-arrays, shape (N, R)).
 Prediction per slot: gather from the resampled parent, stochastic diffusion (deletion, eq. 13; addition of the
-frame's chosen candidate, eq. 12; then noise) and deterministic drift (human eq. 8, vehicle eq. 9).
+frame's chosen candidates, eq. 12; then noise) and deterministic drift (human eq. 8, vehicle eq. 9; a cyclist, beyond
+the paper, moves as a vehicle with its own prior and limits).
 
 Random numbers come from counter-based streams keyed by ``(particle * SLOT_KEY + slot % SLOT_KEY, frame, STREAM_*,
 slot / SLOT_KEY)`` (the last in the Philox counter's fourth word): reproducible on every device and under CUDA graph
@@ -21,7 +22,7 @@ from .random import (
     normal4_at,
     uniform4_at,
 )
-from .raster import KIND_HUMAN, KIND_NONE, KIND_VEHICLE, PIECES
+from .raster import KIND_CYCLIST, KIND_HUMAN, KIND_NONE, KIND_VEHICLE, PIECES
 from .xor import disc_in_box
 
 wp.set_module_options({"enable_backward": False})
@@ -67,21 +68,26 @@ class Dynamics:
 
     dt: float  # frame period, s
     sigma_pos: float  # position diffusion (added to eqs. 8-9), m
-    sigma_speed: wp.vec3  # sigma_v: human velocity components / vehicle speed, m/s
-    sigma_turn: float  # sigma_theta: vehicle angular velocity, rad/s
+    sigma_speed: wp.vec4  # sigma_v by kind: human velocity components / vehicle and cyclist speed, m/s
+    sigma_turn: float  # sigma_theta: vehicle and cyclist angular velocity, rad/s
     sigma_dims_human: wp.vec3  # sigma_d of the human dims, m
     sigma_dims_vehicle: wp.vec3  # sigma_d of the vehicle dims, m
+    sigma_dims_cyclist: wp.vec3  # sigma_d of the cyclist dims, m
     dims_mean_human: wp.vec3  # prior mean of an added human, m
     dims_mean_vehicle: wp.vec3
+    dims_mean_cyclist: wp.vec3
     dims_sd_human: wp.vec3  # prior deviation of an added human's dims, m
     dims_sd_vehicle: wp.vec3
+    dims_sd_cyclist: wp.vec3
     dims_min_human: wp.vec3  # dims are clamped to [min, max], m
     dims_max_human: wp.vec3
     dims_min_vehicle: wp.vec3
     dims_max_vehicle: wp.vec3
-    init_speed_sd: wp.vec3  # initial velocity deviation of an added object by kind, m/s
-    init_heading_sd: float  # initial heading deviation of an added vehicle, rad
-    speed_max: wp.vec3  # |velocity| (human) / |speed| (vehicle) limit by kind, m/s
+    dims_min_cyclist: wp.vec3
+    dims_max_cyclist: wp.vec3
+    init_speed_sd: wp.vec4  # initial velocity deviation of an added object by kind, m/s
+    init_heading_sd: float  # initial heading deviation of an added vehicle or cyclist, rad
+    speed_max: wp.vec4  # |velocity| (human) / |speed| (vehicle, cyclist) limit by kind, m/s
     turn_max: float  # |theta| limit, rad/s
     t_add: float  # T_add of eq. 12
     t_del: float  # T_del of eq. 13
@@ -95,6 +101,22 @@ class Dynamics:
 @wp.func
 def clamp3(v: wp.vec3, lo: wp.vec3, hi: wp.vec3):
     return wp.vec3(wp.clamp(v[0], lo[0], hi[0]), wp.clamp(v[1], lo[1], hi[1]), wp.clamp(v[2], lo[2], hi[2]))
+
+
+@wp.func
+def box_prior(dyn: Dynamics, k: int):
+    """``(mean, sd, min, max, sigma_d)`` of the dims of a box kind: the cyclist's for ``KIND_CYCLIST``, else the
+    vehicle's (metres)."""
+    if k == KIND_CYCLIST:
+        return (dyn.dims_mean_cyclist, dyn.dims_sd_cyclist, dyn.dims_min_cyclist, dyn.dims_max_cyclist,
+                dyn.sigma_dims_cyclist)  # fmt: skip
+    return (
+        dyn.dims_mean_vehicle,
+        dyn.dims_sd_vehicle,
+        dyn.dims_min_vehicle,
+        dyn.dims_max_vehicle,
+        dyn.sigma_dims_vehicle,
+    )
 
 
 @wp.func
@@ -211,11 +233,11 @@ def template_predict_kernel(
                 z2 = normal4_at(seed, idx, f, STREAM_TEMPLATE_INIT2, word)
                 v = dyn.init_speed_sd[KIND_HUMAN] * wp.vec2(z2[0], z2[1])
                 alpha = 0.0
-            else:
-                d = dyn.dims_mean_vehicle + wp.cw_mul(dyn.dims_sd_vehicle, wp.vec3(z[0], z[1], z[2]))
-                d = clamp3(d, dyn.dims_min_vehicle, dyn.dims_max_vehicle)
+            else:  # a vehicle or a cyclist (beyond the paper: a box kind of its own prior)
+                mean, sd, lo, hi, _sig = box_prior(dyn, k)
+                d = clamp3(mean + wp.cw_mul(sd, wp.vec3(z[0], z[1], z[2])), lo, hi)
                 z2 = normal4_at(seed, idx, f, STREAM_TEMPLATE_INIT2, word)
-                v = wp.vec2(dyn.init_speed_sd[KIND_VEHICLE] * z2[0], 0.0)
+                v = wp.vec2(dyn.init_speed_sd[k] * z2[0], 0.0)
                 alpha = alpha + dyn.init_heading_sd * z[3]
     if k != KIND_NONE:
         n1 = normal4_at(seed, idx, f, STREAM_TEMPLATE_NOISE, word)
@@ -241,23 +263,18 @@ def template_predict_kernel(
             p = p + v * dyn.dt + sig_pos * wp.vec2(n2[1], n2[2])
             if sp > 0.2:
                 alpha = wp.atan2(v[1], v[0])
-        elif k == KIND_VEHICLE:
-            # eq. 9: theta_t = theta + N; alpha_t = alpha + theta_{t-1} dt; v_t = v + N;
-            #        l_t = l + v_{t-1} dt (cos alpha_t, sin alpha_t)
-            d = clamp3(
-                d
-                + dyn.dims_revert * (dyn.dims_mean_vehicle - d)
-                + wp.cw_mul(dyn.sigma_dims_vehicle, wp.vec3(n1[0], n1[1], n1[2])),
-                dyn.dims_min_vehicle,
-                dyn.dims_max_vehicle,
-            )
+        else:
+            # eq. 9 (vehicles; cyclists too, with their own prior and limits): theta_t = theta + N;
+            #        alpha_t = alpha + theta_{t-1} dt; v_t = v + N; l_t = l + v_{t-1} dt (cos alpha_t, sin alpha_t)
+            mean, _sd, lo, hi, sig = box_prior(dyn, k)
+            d = clamp3(d + dyn.dims_revert * (mean - d) + wp.cw_mul(sig, wp.vec3(n1[0], n1[1], n1[2])), lo, hi)
             speed = v[0]
             turn = v[1]
             alpha = alpha + turn * dyn.dt
             p = p + speed * dyn.dt * wp.vec2(wp.cos(alpha), wp.sin(alpha)) + sig_pos * wp.vec2(n2[1], n2[2])
-            vmax = dyn.speed_max[KIND_VEHICLE]
+            vmax = dyn.speed_max[k]
             v = wp.vec2(
-                wp.clamp(speed + ns * dyn.sigma_speed[KIND_VEHICLE] * n1[3], -vmax, vmax),
+                wp.clamp(speed + ns * dyn.sigma_speed[k] * n1[3], -vmax, vmax),
                 wp.clamp(turn + ns * dyn.sigma_turn * n2[0], -dyn.turn_max, dyn.turn_max),
             )
         age = age + dyn.dt

@@ -11,7 +11,7 @@ are the particles' (eq. 6) in the paper's joint filter, and the factor of the sl
 import warp as wp
 
 from .dynamics import TemplateState
-from .raster import KIND_NONE, KIND_VEHICLE
+from .raster import KIND_HUMAN, KIND_NONE
 from .reduce import EST_MAXLOGW, NEG_INF, block_argmax, block_sum17, vec17d
 from .resample import block_scan_int64
 
@@ -106,7 +106,7 @@ def block_slot_moments_kernel(
             d = state.dims[i, s]
             direction = state.heading[i, s]
             speed = wp.length(v)
-            if k == KIND_VEHICLE:
+            if k != KIND_HUMAN:  # vehicles and cyclists: (signed speed, turn rate) along the heading (eq. 9)
                 speed = wp.abs(v[0])
                 if v[0] < 0.0:
                     direction = direction + wp.pi

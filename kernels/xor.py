@@ -125,8 +125,8 @@ def particle_score(
     heading: wp.array2d(dtype=wp.float32),
     dims: wp.array2d(dtype=wp.vec3),
     qtotal: int,
-    cost_a: wp.vec3,
-    cost_b: wp.vec3,
+    cost_a: wp.vec4,
+    cost_b: wp.vec4,
     scale: float,
     bg_weight: float,
     exclusion: float,
@@ -167,8 +167,8 @@ def xor_score_kernel(
     dims: wp.array2d(dtype=wp.vec3),
     qrow: wp.array2d(dtype=wp.int32),
     qtotal: wp.array(dtype=wp.int32),
-    cost_a: wp.vec3,
-    cost_b: wp.vec3,
+    cost_a: wp.vec4,
+    cost_b: wp.vec4,
     scale: float,
     bg_weight: float,
     exclusion: float,
@@ -193,7 +193,7 @@ def xor_score_kernel(
         kind: (N, R) KIND_* per slot. age: (N, R) seconds each object has been in the particle (tau of eq. 5).
         pos, heading, dims: (N, R) ground position (metres), heading (radians), dims (metres) per slot.
         qrow: (H, W+1) row prefix sums of the motion mask; qtotal: (1,) |q|.
-        cost_a, cost_b: a_r and b_r of eq. 5 indexed by kind (pixels).
+        cost_a, cost_b: a_r and b_r of eq. 5 indexed by kind (pixels; index 0 unused).
         scale: s / (W H) of eq. 6 (1 / pixels).
         bg_weight: weight lambda of a template pixel on mask background in the weighted penalty
             ``m'_i = |q AND NOT v_i| + lambda |v_i AND NOT q|`` that enters the log-weight (1: eq. 4 exactly; < 1
@@ -487,8 +487,8 @@ def finish_particle(
     heading: wp.array2d(dtype=wp.float32),
     dims: wp.array2d(dtype=wp.vec3),
     qtotal: wp.array(dtype=wp.int32),
-    cost_a: wp.vec3,
-    cost_b: wp.vec3,
+    cost_a: wp.vec4,
+    cost_b: wp.vec4,
     scale: float,
     bg_weight: float,
     exclusion: float,
@@ -517,8 +517,8 @@ def xor_finish_kernel(
     heading: wp.array2d(dtype=wp.float32),
     dims: wp.array2d(dtype=wp.vec3),
     qtotal: wp.array(dtype=wp.int32),
-    cost_a: wp.vec3,
-    cost_b: wp.vec3,
+    cost_a: wp.vec4,
+    cost_b: wp.vec4,
     scale: float,
     bg_weight: float,
     exclusion: float,
@@ -545,8 +545,8 @@ def group_logw_kernel(
     heading: wp.array2d(dtype=wp.float32),
     dims: wp.array2d(dtype=wp.vec3),
     qtotal: wp.array(dtype=wp.int32),
-    cost_a: wp.vec3,
-    cost_b: wp.vec3,
+    cost_a: wp.vec4,
+    cost_b: wp.vec4,
     scale: float,
     bg_weight: float,
     exclusion: float,

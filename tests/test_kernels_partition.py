@@ -292,8 +292,8 @@ class GroupScore:
         self.qrow = wp.zeros((H, W + 1), dtype=wp.int32, device=d)
         self.qtotal = wp.zeros(1, dtype=wp.int32, device=d)
         launch_mask_rows(self.qd, self.qrow, self.qtotal, d)
-        self.cost_a = np.array([1.0e6, 17.5, 43.25], np.float32)
-        self.cost_b = np.array([1.0e6, 61.0, 119.5], np.float32)
+        self.cost_a = np.array([1.0e6, 17.5, 43.25, 23.5], np.float32)
+        self.cost_b = np.array([1.0e6, 61.0, 119.5, 71.0], np.float32)
         self.scale = 5000.0 / (W * H)
         self.arrays = [
             wp.array(self.kind, dtype=wp.int32, device=d),
@@ -313,7 +313,7 @@ class GroupScore:
         group_sums = wp.zeros((n, self.r), dtype=wp.vec2i, device=d)
         g = self.groups
         launch_xor_score(
-            self.hulls, *self.arrays, self.qrow, self.qtotal, wp.vec3(*self.cost_a), wp.vec3(*self.cost_b),
+            self.hulls, *self.arrays, self.qrow, self.qtotal, wp.vec4(*self.cost_a), wp.vec4(*self.cost_b),
             self.scale, bg_weight, exclusion, sums, logw, penalty, complexity, cov_diff, d, band=band,
             groups=(g.group_box, g.n_groups, g.slot_group, group_sums) if grouped else None, finish=finish,
         )  # fmt: skip
@@ -381,7 +381,7 @@ def test_group_factors_match_numpy(device, rng, band, scene):
     wp.launch_tiled(
         kxor.group_logw_kernel,
         dim=[blocks],
-        inputs=[*case.arrays, case.qtotal, wp.vec3(*case.cost_a), wp.vec3(*case.cost_b), case.scale, bg_weight,
+        inputs=[*case.arrays, case.qtotal, wp.vec4(*case.cost_a), wp.vec4(*case.cost_b), case.scale, bg_weight,
                 exclusion, g.slot_group, g.n_groups, n, chunk, int(finish), sums],
         outputs=[group_sums, glogw, part_gmax, lw_d, pen_d, cx_d],
         block_dim=BLOCK,

@@ -43,7 +43,7 @@ from wptrack.trackers.templates import (
 )
 from wptrack.warpcams import camera_struct
 
-HUMAN, VEHICLE = 1, 2
+HUMAN, VEHICLE, CYCLIST = 1, 2, 3
 PIECES = int(kraster.PIECES)
 EDGE_EPS = 0.01
 """Pixels whose centre lies within this distance (pixels) of a hull edge are not compared (float32 vs float64)."""
@@ -61,7 +61,8 @@ def template_vertices(kind: int, piece: int, dims, heading: float) -> np.ndarray
     radius from the ground to half the height; human upper body = hexagons of the body radius at half the height
     and at the shoulders (``max(height - 2.5 head_r, height / 2)``) and a square of half-diagonal head_r at the top;
     vehicle = lower box (full length/width, 0.55 of the height) and a cabin box (0.6 of the length, 0.9 of the
-    width) up to the full height, rotated by the heading.
+    width) up to the full height, rotated by the heading; cyclist = the same two boxes at 0.5 of the height, 0.35 of
+    the length and 0.8 of the width.
     """
     if kind == HUMAN:
         height, body_r, head_r = (float(v) for v in dims)
@@ -78,11 +79,12 @@ def template_vertices(kind: int, piece: int, dims, heading: float) -> np.ndarray
         return np.concatenate(
             [np.c_[ring, np.full(6, hip)], np.c_[ring, np.full(6, shoulder)], np.c_[top, np.full(4, height)]]
         )
-    if kind == VEHICLE:
+    if kind in (VEHICLE, CYCLIST):
         length, width, height = (float(v) for v in dims)
-        hl, hw, z0, z1 = 0.5 * length, 0.5 * width, 0.0, 0.55 * height
+        lower, top_l, top_w = (0.55, 0.6, 0.9) if kind == VEHICLE else (0.5, 0.35, 0.8)
+        hl, hw, z0, z1 = 0.5 * length, 0.5 * width, 0.0, lower * height
         if piece == 1:
-            hl, hw, z0, z1 = hl * 0.6, hw * 0.9, z1, height
+            hl, hw, z0, z1 = hl * top_l, hw * top_w, z1, height
         box = np.array([[sx * hl, sy * hw, z] for sx in (-1, 1) for sy in (-1, 1) for z in (z0, z1)])
         c, s = math.cos(heading), math.sin(heading)
         return np.c_[c * box[:, 0] - s * box[:, 1], s * box[:, 0] + c * box[:, 1], box[:, 2]]
@@ -233,12 +235,14 @@ def tall_human(cam: Camera, plane: GroundPlane, rows: int = 72):
 def random_object(rng, kind: int):
     if kind == HUMAN:
         return rng.uniform([1.3, 0.15, 0.08], [2.0, 0.35, 0.14]), rng.uniform(-np.pi, np.pi)
+    if kind == CYCLIST:
+        return rng.uniform([1.4, 0.4, 1.3], [2.2, 0.9, 2.0]), rng.uniform(-np.pi, np.pi)
     return rng.uniform([3.0, 1.5, 1.2], [6.0, 2.3, 2.0]), rng.uniform(-np.pi, np.pi)
 
 
 def random_scene(rng, cam: Camera, plane: GroundPlane, n: int, r: int, p_empty: float = 0.3, margin: float = 0.2):
-    """N particles x R slots of random humans and vehicles whose ground points lie under image points (some a little
-    outside the image, so objects are clipped), none of them on a float32 visibility tie."""
+    """N particles x R slots of random humans, vehicles and cyclists whose ground points lie under image points (some
+    a little outside the image, so objects are clipped), none of them on a float32 visibility tie."""
     r2_max = camera_struct(cam).r2_max
     kind = np.zeros((n, r), dtype=np.int32)
     pos = np.zeros((n, r, 2), dtype=np.float32)
@@ -248,7 +252,8 @@ def random_scene(rng, cam: Camera, plane: GroundPlane, n: int, r: int, p_empty: 
         for s in range(r):
             if rng.uniform() < p_empty:
                 continue
-            k = HUMAN if rng.uniform() < 0.6 else VEHICLE
+            u = rng.uniform()
+            k = HUMAN if u < 0.5 else VEHICLE if u < 0.8 else CYCLIST
             while True:
                 px = rng.uniform([-margin * cam.width, 0.25 * cam.height], [(1 + margin) * cam.width, cam.height * 1.1])
                 ground, dist = ground_rays(cam, plane, px[None])
@@ -524,8 +529,8 @@ class XorCase:
         self.pos, self.heading, self.dims = pos, heading, dims
         self.q = random_mask(rng, cam.width, cam.height)
         self.prior = rng.normal(-2.0, 1.0, n).astype(np.float32)
-        self.cost_a = np.array([1.0e6, 17.5, 43.25], np.float32)  # index 0 (empty slot) must never be used
-        self.cost_b = np.array([1.0e6, 61.0, 119.5], np.float32)
+        self.cost_a = np.array([1.0e6, 17.5, 43.25, 23.5], np.float32)  # index 0 (empty slot) must never be used
+        self.cost_b = np.array([1.0e6, 61.0, 119.5, 71.0], np.float32)
         self.scale = 5000.0 / (cam.width * cam.height)
         self.hulls = raster(device, cam, plane, kind, pos, heading, dims)
         self.virtual = render(device, self.hulls, r, cam.width, cam.height, np.arange(n))
@@ -556,7 +561,7 @@ class XorCase:
         sums = wp.zeros(self.n, dtype=wp.vec2i, device=d)
         launch_xor_score(
             self.hulls, self.kind_d, self.age_d, self.pos_d, self.heading_d, self.dims_d, self.qrow, self.qtotal,
-            wp.vec3(*self.cost_a), wp.vec3(*self.cost_b), self.scale, bg_weight, exclusion, sums, logw, penalty,
+            wp.vec4(*self.cost_a), wp.vec4(*self.cost_b), self.scale, bg_weight, exclusion, sums, logw, penalty,
             complexity, self.cov_diff, d, band=band,
         )  # fmt: skip
         assert not np.any(sums.numpy()), "xor_finish_kernel must clear the sums for the next frame"
@@ -586,10 +591,13 @@ def pair_overlap_ref(ka, pa, ha, da, kb, pb, hb, db) -> float:
 
 
 def test_pair_overlap_cases(device):
-    """The exclusion prior's overlap on hand-made pairs: humans apart / touching / coincident, a human beside and
-    inside a car, two cars nose to tail and side by side (every device, against the NumPy reference)."""
-    h, v = (1.7, 0.2, 0.1), (4.0, 2.0, 1.5)
+    """The exclusion prior's overlap on hand-made pairs: a human beside a cyclist (a box), humans apart / touching /
+    coincident, a human beside and inside a car, two cars nose to tail and side by side (every device, against the
+    NumPy reference)."""
+    h, v, c = (1.7, 0.2, 0.1), (4.0, 2.0, 1.5), (1.75, 0.6, 1.65)
     pairs = [
+        (CYCLIST, (0, 0), 0.0, c, HUMAN, (0, 0.5), 0.0, h, 0.0),  # a cyclist is a box: a person beside it, touching
+        (CYCLIST, (0, 0), 0.0, c, HUMAN, (0, 0.45), 0.0, h, 0.125),
         (HUMAN, (0, 0), 0.0, h, HUMAN, (1.0, 0), 0.0, h, 0.0),
         (HUMAN, (0, 0), 0.0, h, HUMAN, (0.2, 0), 0.0, h, 0.5),
         (HUMAN, (0, 0), 0.0, h, HUMAN, (0.0, 0), 0.0, h, 1.0),
@@ -831,7 +839,12 @@ def candidate_case(device, rng, min_gain: float, min_area: int, beta: float = 0.
     cam = random_camera(rng)
     plane = GroundPlane()
     config = TemplateConfig(
-        candidate_step_px=20, max_range=40.0, vehicle=VehiclePrior(orientations=2), vehicle_entry_px=0, human_entry_px=0
+        candidate_step_px=20,
+        max_range=40.0,
+        vehicle=VehiclePrior(orientations=2),
+        vehicle_entry_px=0,
+        human_entry_px=0,
+        classes=("human", "vehicle", "cyclist"),
     )
     cands = Candidates(cam, plane, camera_struct(cam), _plane_struct(plane), config, device)
     h, w, n = cam.height, cam.width, 37
@@ -916,7 +929,7 @@ def test_candidate_scores_match_union_silhouettes(device, rng, cpu_blocks, block
     np.testing.assert_array_equal(score[ok & eligible], gain_ref[ok & eligible].astype(np.float32))
     assert np.all(score[ok & ~eligible] == NEG_INF32)
     assert (ok & eligible).sum() >= 3 and (ok & ~eligible).sum() >= 3, "both outcomes must be exercised"
-    assert set(np.unique(cands.kind_np)) == {HUMAN, VEHICLE}
+    assert set(np.unique(cands.kind_np)) == {HUMAN, VEHICLE, CYCLIST}
 
 
 def test_candidate_min_area_rule(device):
@@ -1125,10 +1138,11 @@ def quiet_dynamics(**overrides):
     """The tracker's Dynamics struct with every noise deviation, T_add and T_del set to 0, then ``overrides``."""
     dyn = _dynamics_struct(TemplateConfig())
     dyn.sigma_pos = 0.0
-    dyn.sigma_speed = wp.vec3(0.0, 0.0, 0.0)
+    dyn.sigma_speed = wp.vec4(0.0, 0.0, 0.0, 0.0)
     dyn.sigma_turn = 0.0
     dyn.sigma_dims_human = wp.vec3(0.0, 0.0, 0.0)
     dyn.sigma_dims_vehicle = wp.vec3(0.0, 0.0, 0.0)
+    dyn.sigma_dims_cyclist = wp.vec3(0.0, 0.0, 0.0)
     dyn.t_add = 0.0
     dyn.t_del = 0.0
     dyn.dims_revert = 0.0
@@ -1142,9 +1156,9 @@ def quiet_dynamics(**overrides):
 
 
 CANDS = {
-    "kind": np.array([HUMAN, VEHICLE, HUMAN, VEHICLE], np.int32),
-    "pos": np.array([[1.0, 2.0], [-3.0, 7.5], [0.5, -1.5], [4.0, 4.0]], np.float32),
-    "heading": np.array([0.0, 0.7, 0.0, -2.0], np.float32),
+    "kind": np.array([HUMAN, VEHICLE, HUMAN, VEHICLE, CYCLIST], np.int32),
+    "pos": np.array([[1.0, 2.0], [-3.0, 7.5], [0.5, -1.5], [4.0, 4.0], [2.0, 6.0]], np.float32),
+    "heading": np.array([0.0, 0.7, 0.0, -2.0, 1.1], np.float32),
 }
 
 
@@ -1236,6 +1250,18 @@ def random_population(rng, n: int, r: int, p_empty: float = 0.25):
     arrays["vel"][0, 1] = (25.0, 3.5)
     assert 3.5 > cfg.vehicle.turn_max and 25.0 > cfg.vehicle.speed_max and 5.0 > cfg.human.speed_max
     arrays["dims"][0, :3] = (mid_h, mid_v, 1.2 * np.array(cfg.human.dims_max))
+    # cyclists in the last slot of every third particle, one of them (particle 0, with R > 3) at 15 m/s (max 12)
+    # and 0.7 x the smallest dims
+    mid_c = (np.array(cfg.cyclist.dims_min) + np.array(cfg.cyclist.dims_max)) / 2
+    for i in range(1, n, 3):
+        arrays["kind"][i, -1], arrays["label"][i, -1] = CYCLIST, 40 + i % 7
+        arrays["vel"][i, -1] = (6.0 if i % 2 else -5.0, 0.4 if i % 2 else -0.3)
+        arrays["dims"][i, -1] = mid_c
+    if r > 3:
+        arrays["kind"][0, 3], arrays["label"][0, 3] = CYCLIST, 4
+        arrays["vel"][0, 3] = (15.0, 0.2)
+        arrays["dims"][0, 3] = 0.7 * np.array(cfg.cyclist.dims_min)
+        assert 15.0 > cfg.cyclist.speed_max
     return {k: np.asarray(v).astype(np.float32) if k not in ("kind", "label") else v for k, v in arrays.items()}
 
 
@@ -1246,7 +1272,7 @@ def drift_reference(src: dict, dyn, anc, resampled: int) -> dict[str, np.ndarray
     dt = float(np.float32(dyn.dt))
     out = {"kind": kind, "label": np.where(kind > 0, np.asarray(src["label"])[anc], -1)}
     pos, vel, heading, dims = g["pos"].copy(), g["vel"].copy(), g["heading"].copy(), g["dims"].copy()
-    hum, veh = kind == HUMAN, kind == VEHICLE
+    hum, veh, cyc = kind == HUMAN, kind == VEHICLE, kind == CYCLIST
     # human (eq. 8): v_t = v (limited to speed_max), l_t = l + v_t dt, heading = direction of motion when moving
     sp = np.linalg.norm(vel, axis=-1)
     vmax_h = float(np.float32(dyn.speed_max[HUMAN]))
@@ -1260,12 +1286,18 @@ def drift_reference(src: dict, dyn, anc, resampled: int) -> dict[str, np.ndarray
     alpha_t = heading + vel[..., 1] * dt
     pos_v = pos + (vel[..., 0] * dt)[..., None] * np.stack([np.cos(alpha_t), np.sin(alpha_t)], axis=-1)
     vmax_v, tmax = float(np.float32(dyn.speed_max[VEHICLE])), float(np.float32(dyn.turn_max))
-    vel_v = np.stack([np.clip(vel[..., 0], -vmax_v, vmax_v), np.clip(vel[..., 1], -tmax, tmax)], axis=-1)
-    out["pos"] = np.where(hum[..., None], pos + vh * dt, np.where(veh[..., None], pos_v, 0.0))
-    out["vel"] = np.where(hum[..., None], vh, np.where(veh[..., None], vel_v, 0.0))
-    out["heading"] = np.where(hum, heading, np.where(veh, alpha_t, 0.0))
+    vmax_c = float(np.float32(dyn.speed_max[CYCLIST]))
+    vmax = np.where(cyc, vmax_c, vmax_v)  # a cyclist moves as a vehicle (eq. 9) with its own limits
+    vel_v = np.stack([np.clip(vel[..., 0], -vmax, vmax), np.clip(vel[..., 1], -tmax, tmax)], axis=-1)
+    box = (veh | cyc)[..., None]
+    lo_c, hi_c = np.array(dyn.dims_min_cyclist, np.float64), np.array(dyn.dims_max_cyclist, np.float64)
+    out["pos"] = np.where(hum[..., None], pos + vh * dt, np.where(box, pos_v, 0.0))
+    out["vel"] = np.where(hum[..., None], vh, np.where(box, vel_v, 0.0))
+    out["heading"] = np.where(hum, heading, np.where(veh | cyc, alpha_t, 0.0))
     out["dims"] = np.where(
-        hum[..., None], np.clip(dims, lo_h, hi_h), np.where(veh[..., None], np.clip(dims, lo_v, hi_v), dims)
+        hum[..., None],
+        np.clip(dims, lo_h, hi_h),
+        np.where(veh[..., None], np.clip(dims, lo_v, hi_v), np.where(cyc[..., None], np.clip(dims, lo_c, hi_c), dims)),
     )
     out["age"] = np.where(kind > 0, g["age"] + dt, 0.0)
     out["logw"] = np.zeros(len(anc)) if resampled else g["logw"]
@@ -1276,9 +1308,9 @@ def drift_reference(src: dict, dyn, anc, resampled: int) -> dict[str, np.ndarray
 def test_predict_deterministic_drift_matches_eqs_8_9(device, rng, resampled):
     """With every deviation, T_add and T_del at 0, template_predict_kernel gathers each particle from
     ``ancestors[j]`` and applies eq. 8 (human: l += v dt, v limited to speed_max, heading = direction of motion above
-    0.2 m/s) and eq. 9 (vehicle: alpha += theta dt, then l += v dt (cos alpha_t, sin alpha_t), v and theta clamped
-    afterwards) exactly (rtol 1e-6); dims are clamped; age += dt; empty slots are cleared; logw is reset to 0 when
-    resampled, else copied from the parent."""
+    0.2 m/s) and eq. 9 (vehicle, and cyclist with its own speed limit and dims: alpha += theta dt, then l += v dt (cos
+    alpha_t, sin alpha_t), v and theta clamped afterwards) exactly (rtol 1e-6); dims are clamped; age += dt; empty
+    slots are cleared; logw is reset to 0 when resampled, else copied from the parent."""
     n, r = 64, 6
     arrays = random_population(rng, n, r)
     src = make_state(device, n, r, **arrays)
@@ -1297,6 +1329,9 @@ def test_predict_deterministic_drift_matches_eqs_8_9(device, rng, resampled):
     np.testing.assert_allclose(np.linalg.norm(got["vel"][:3, 0], axis=-1), 3.0, rtol=1e-6)
     np.testing.assert_allclose(got["vel"][:3, 1], [[dyn.speed_max[VEHICLE], dyn.turn_max]] * 3, rtol=1e-6)
     np.testing.assert_allclose(got["dims"][:3, 2], [list(dyn.dims_max_human)] * 3, rtol=1e-6)
+    np.testing.assert_allclose(got["vel"][:3, 3, 0], dyn.speed_max[CYCLIST], rtol=1e-6)  # the cyclist's own limit
+    np.testing.assert_allclose(got["dims"][:3, 3], [list(dyn.dims_min_cyclist)] * 3, rtol=1e-6)
+    assert (ref["kind"] == CYCLIST).sum() > 10
     assert np.all(got["pos"][~alive] == 0) and np.all(got["age"][~alive] == 0)
 
 
@@ -1345,7 +1380,7 @@ def test_predict_unseen_deletion(device):
         assert abs(deleted[~unseen].mean() - t_del) < 4 * math.sqrt(max(t_del * (1 - t_del), 1e-12) / count)
 
 
-@pytest.mark.parametrize("cand", [0, 1], ids=["human", "vehicle"])
+@pytest.mark.parametrize("cand", [0, 1, 4], ids=["human", "vehicle", "cyclist"])
 def test_predict_addition(device, cand):
     """T_add = 0.4, add = (slot 2, candidate): among N = 4000 particles whose slot 2 is empty the fraction that
     receives the candidate is within 4 binomial sigmas of 0.4 (sigma = 0.008); 10% of particles hold another object
@@ -1380,6 +1415,8 @@ def test_predict_addition(device, cand):
     d = got["dims"][added, slot]
     if ck == HUMAN:
         lo, hi, mean, sd = dyn.dims_min_human, dyn.dims_max_human, dyn.dims_mean_human, dyn.dims_sd_human
+    elif ck == CYCLIST:
+        lo, hi, mean, sd = dyn.dims_min_cyclist, dyn.dims_max_cyclist, dyn.dims_mean_cyclist, dyn.dims_sd_cyclist
     else:
         lo, hi, mean, sd = dyn.dims_min_vehicle, dyn.dims_max_vehicle, dyn.dims_mean_vehicle, dyn.dims_sd_vehicle
     lo, hi, mean, sd = (np.array(v, np.float64) for v in (lo, hi, mean, sd))
@@ -1398,8 +1435,8 @@ def test_predict_addition(device, cand):
     else:
         a = got["heading"][added, slot].astype(np.float64)  # alpha_t = alpha_0 (theta_0 = 0)
         np.testing.assert_allclose(pos, p0 + (v[:, 0] * float(dt))[:, None] * np.c_[np.cos(a), np.sin(a)], atol=1e-5)
-        assert np.all(v[:, 1] == 0) and np.all(np.abs(v[:, 0]) < float(dyn.speed_max[VEHICLE]))
-        sdv, sda = float(dyn.init_speed_sd[VEHICLE]), float(dyn.init_heading_sd)
+        assert np.all(v[:, 1] == 0) and np.all(np.abs(v[:, 0]) < float(dyn.speed_max[ck]))
+        sdv, sda = float(dyn.init_speed_sd[ck]), float(dyn.init_heading_sd)
         assert abs(v[:, 0].mean()) < 4 * sdv / math.sqrt(k) and abs(v[:, 0].std() / sdv - 1) < 4 / math.sqrt(2 * k)
         da = a - float(CANDS["heading"][cand])
         assert abs(da.mean()) < 4 * sda / math.sqrt(k) and abs(da.std() / sda - 1) < 4 / math.sqrt(2 * k)
@@ -1446,11 +1483,11 @@ def test_predict_noise_statistics(device):
     sdh, sdv = (0.01, 0.005, 0.002), (0.03, 0.01, 0.01)
     dyn = quiet_dynamics(
         sigma_pos=sp,
-        sigma_speed=wp.vec3(0.0, sh, sv),
+        sigma_speed=wp.vec4(0.0, sh, sv, sv),
         sigma_turn=st,
         sigma_dims_human=wp.vec3(*sdh),
         sigma_dims_vehicle=wp.vec3(*sdv),
-        speed_max=wp.vec3(1.0, 1e6, 1e6),
+        speed_max=wp.vec4(1.0, 1e6, 1e6, 1e6),
         turn_max=1e6,
     )
     got = predict(device, dyn, src, n, r)
@@ -1607,7 +1644,7 @@ def slot_reference(a: dict, n: int, r: int) -> np.ndarray:
         ref[s, 2:4] = mean
         ref[s, 4:6] = np.sqrt((wa[:, None] * (x - mean) ** 2).sum(0) / wa.sum())
         v = a["vel"][:, s].astype(np.float64)
-        veh = a["kind"][:, s] == VEHICLE
+        veh = np.isin(a["kind"][:, s], (VEHICLE, CYCLIST))  # box kinds: (signed speed, turn rate) (eq. 9)
         speed = np.where(veh, np.abs(v[:, 0]), np.hypot(v[:, 0], v[:, 1]))
         direction = a["heading"][:, s].astype(np.float64) + np.where(veh & (v[:, 0] < 0), np.pi, 0.0)
         ref[s, 6] = (wa * speed).sum() / wa.sum()
@@ -1838,8 +1875,12 @@ def test_tracker_pixel_costs_scale_with_image_area(device):
     tr = TemplateTracker(rig, cfg, device=device)
     a = 320 * 240 / (640 * 480)
     assert tr.area_scale == a
-    assert tuple(tr.cost_a) == pytest.approx((0.0, cfg.human.cost_a * a, cfg.vehicle.cost_a * a))
-    assert tuple(tr.cost_b) == pytest.approx((0.0, cfg.human.cost_b * a, cfg.vehicle.cost_b * a))
+    assert tuple(tr.cost_a) == pytest.approx(
+        (0.0, cfg.human.cost_a * a, cfg.vehicle.cost_a * a, cfg.cyclist.cost_a * a)
+    )
+    assert tuple(tr.cost_b) == pytest.approx(
+        (0.0, cfg.human.cost_b * a, cfg.vehicle.cost_b * a, cfg.cyclist.cost_b * a)
+    )
     assert tr.exclusion == pytest.approx(cfg.exclusion * a) and tr.min_area == round(cfg.min_candidate_area * a)
     raw = TemplateTracker(rig, TemplateConfig(particles=10, max_objects=2, reference_area=0), device=device)
     assert raw.area_scale == 1.0 and raw.exclusion == cfg.exclusion and tuple(raw.cost_a)[1] == cfg.human.cost_a
@@ -1867,3 +1908,32 @@ def test_tracker_several_additions_on_the_first_frame(device):
     one = TemplateTracker(rig, TemplateConfig(particles=200, max_objects=8), device=device)
     one.step(masks[0])
     assert one.host["add"].numpy().shape == (2,) and one.host["add"].numpy()[0] >= 0
+
+
+def test_tracker_follows_a_rendered_cyclist(device):
+    """With the cyclist class on, a rendered cyclist riding at 5 m/s beside a walking person (320x240, 25 frames,
+    1000 particles) is reported at the last frame as one cyclist within 0.5 m, with a speed within 1 m/s of 5, and
+    the person as a human."""
+    rig = e2e_rig()
+    frames = 25
+    render = TemplateTracker(rig, TemplateConfig(particles=1, max_objects=4), device=device)
+    dims = np.array([[[1.75, 0.22, 0.11], [1.8, 0.6, 1.65], [0, 0, 0], [0, 0, 0]]], np.float32)
+
+    def truth(t: int) -> np.ndarray:
+        return np.array([[-1.5 + 0.08 * t, 5.0], [-7.0 + 5.0 * t / 15.0, 9.0]])
+
+    masks = []
+    for t in range(frames):
+        pos = np.zeros((1, 4, 2), np.float32)
+        pos[0, :2] = truth(t)
+        render.set_particles(kind=np.array([[HUMAN, CYCLIST, 0, 0]]), label=np.array([[0, 1, -1, -1]]), pos=pos,
+                             dims=dims, heading=np.zeros((1, 4)))  # fmt: skip
+        masks.append(render.render_virtual()[0])
+    cfg = TemplateConfig(particles=1000, max_objects=8, seed=1, classes=("human", "vehicle", "cyclist"))
+    tr = TemplateTracker(rig, cfg, device=device)
+    last = [tr.step(m) for m in masks][-1]
+    got = {o.cls: o for o in last.objects}
+    assert sorted(got) == ["cyclist", "human"], [(o.cls, o.ground.round(2).tolist()) for o in last.objects]
+    person, bike = truth(frames - 1)
+    assert np.linalg.norm(got["human"].ground - person) < 0.5
+    assert np.linalg.norm(got["cyclist"].ground - bike) < 0.5 and abs(got["cyclist"].speed - 5.0) < 1.0

@@ -134,11 +134,12 @@ def _template_config_from_args(args, fps: float | None):
     kw = {
         "particles": args.particles,
         "camera": int(args.camera) if args.camera.isdigit() else args.camera,
-        "classes": tuple(args.classes),
         "seed": args.seed,
         "resampling": args.resampling,
         "partition": not args.joint,
     }
+    if args.classes is not None:
+        kw["classes"] = tuple(args.classes)
     for name in (
         "max_objects",
         "scale",
@@ -210,7 +211,9 @@ def cmd_track_templates(args) -> int:
     )
     print(
         f"tracked {summary['frames']} frames on {summary['device']}: {summary['objects']} objects "
-        f"({summary['classes']['human']} human, {summary['classes']['vehicle']} vehicle)"
+        + "("
+        + ", ".join(f"{n} {c}" for c, n in summary["classes"].items() if n or c != "cyclist")
+        + ")"
     )
     print(f"outputs: {args.out}/tracks.csv, best.csv, run.json" + ("" if args.no_virtual else ", virtual.avi"))
     if args.groundtruth:
@@ -627,7 +630,12 @@ def build_parser() -> argparse.ArgumentParser:
     tt.add_argument(
         "--max-objects", type=int, default=None, help="R_max objects per particle, 1..64 (default 64; memory checked)"
     )
-    tt.add_argument("--classes", nargs="+", default=["human", "vehicle"], help="classes to add (human vehicle)")
+    tt.add_argument(
+        "--classes",
+        nargs="+",
+        default=None,
+        help="classes to add: human vehicle cyclist (default: human vehicle)",
+    )
     tt.add_argument("--fps", type=float, default=None, help="frame rate (default: the video's or masks', else 15)")
     tt.add_argument("--scale", type=float, default=None, help="s of eq. 6 (default 5000)")
     tt.add_argument("--t-add", type=float, default=None, help="T_add of eq. 12 (default 0.3)")

@@ -28,13 +28,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-KIND_NONE, KIND_HUMAN, KIND_VEHICLE = 0, 1, 2
+KIND_NONE, KIND_HUMAN, KIND_VEHICLE, KIND_CYCLIST = 0, 1, 2, 3
 PIECES = 2
 """Convex pieces per object (human: legs, upper body with head; vehicle: lower body, cabin)."""
 HULL_MAX = 16
 """Most vertices per piece."""
 LOWER, CABIN_LENGTH, CABIN_WIDTH = 0.55, 0.6, 0.9
 """Vehicle proportions (``kernels.raster``): lower body height, cabin length and width, as fractions."""
+RIDER_LOWER, RIDER_LENGTH, RIDER_WIDTH = 0.5, 0.35, 0.8
+"""Cyclist proportions (``kernels.raster.RIDER_*``): bike-and-legs height, rider length and width, as fractions."""
 MIN_DEPTH = 1.0e-6
 """Camera depth (metres) at or below which a point is not seen (``kernels.camera.MIN_DEPTH``)."""
 
@@ -165,20 +167,25 @@ class NumpyTemplateScorer:
             v[:, 1, :16] = upper
             verts[human] = v
             count[human] = (16, 16)
-        vehicle = kind == KIND_VEHICLE
-        if np.any(vehicle):
-            d = dims[vehicle]
-            a = heading[vehicle]
+        for box_kind, (lower, top_l, top_w) in (
+            (KIND_VEHICLE, (LOWER, CABIN_LENGTH, CABIN_WIDTH)),
+            (KIND_CYCLIST, (RIDER_LOWER, RIDER_LENGTH, RIDER_WIDTH)),
+        ):
+            boxes = kind == box_kind
+            if not np.any(boxes):
+                continue
+            d = dims[boxes]
+            a = heading[boxes]
             hl, hw, hh = 0.5 * d[:, 0:1], 0.5 * d[:, 1:2], d[:, 2:3]
             v = np.zeros((len(d), PIECES, HULL_MAX, 3))
-            for piece, (fl, fw, z0, z1) in enumerate(((1.0, 1.0, 0.0, LOWER), (CABIN_LENGTH, CABIN_WIDTH, LOWER, 1.0))):
+            for piece, (fl, fw, z0, z1) in enumerate(((1.0, 1.0, 0.0, lower), (top_l, top_w, lower, 1.0))):
                 lx = fl * hl * _BOX[:, 0]
                 ly = fw * hw * _BOX[:, 1]
                 z = hh * (z0 + (z1 - z0) * _BOX[:, 2])
                 ca, sa = np.cos(a)[:, None], np.sin(a)[:, None]
                 v[:, piece, :8] = np.stack([ca * lx - sa * ly, sa * lx + ca * ly, z], axis=-1)
-            verts[vehicle] = v
-            count[vehicle] = 8
+            verts[boxes] = v
+            count[boxes] = 8
         return verts, count
 
     def project(self, world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -662,7 +662,7 @@ def _render_scene3d(ctx: ReportContext, run: TemplateRun) -> list[Figure]:
                 )
             if objs:
                 tops = np.array(
-                    [run.plane.to_world(o.ground, o.dims[2] if o.cls == "vehicle" else o.dims[0]) for o in objs]
+                    [run.plane.to_world(o.ground, o.dims[0] if o.cls == "human" else o.dims[2]) for o in objs]
                 )
                 dynamic.append(
                     pl.add_point_labels(

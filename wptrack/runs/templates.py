@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError, FrameError, OutputError
+from ..trackers.template_config import CLASSES
 from .flood import FloodGuard
 from .loop import TrackerRun, run_tracker
 
@@ -364,7 +365,7 @@ class TemplateRun(TrackerRun):
             "frames": self.tracker.frames_done,
             "device": self.tracker.device,
             "objects": len(seen),
-            "classes": {c: sum(1 for v in seen.values() if v == c) for c in ("human", "vehicle")},
+            "classes": {c: sum(1 for v in seen.values() if v == c) for c in CLASSES},
             "mean_penalty": self._penalty_sum / self._penalty_frames if self._penalty_frames else None,
             "degenerate_frames": self._degenerate,
             "flooded_frames": len(self._flood.flooded) if self._flood is not None else None,

@@ -15,8 +15,12 @@ from wptrack.kernels import raster as kraster
 from wptrack.pf import _seed_words, check_particles
 from wptrack.resampling import SCHEMES
 
-CLASSES: tuple[str, ...] = ("human", "vehicle")
-"""Object classes, in KIND order (KIND_HUMAN = 1, KIND_VEHICLE = 2)."""
+CLASSES: tuple[str, ...] = ("human", "vehicle", "cyclist")
+"""Object classes, in KIND order (KIND_HUMAN = 1, KIND_VEHICLE = 2, KIND_CYCLIST = 3)."""
+DEFAULT_CLASSES: tuple[str, ...] = ("human", "vehicle")
+"""The classes the tracker adds by default. The cyclist (issue 26) is opt-in: with it on by default, cyclist
+hypotheses took people walking along the street (TownCentre, tracker seed 0: 10 cyclist tracks, 28 % of the
+reported rows, MOTA 0.28 -> 0.21; PETS seed 1: MOTA 0.88 -> 0.82; docs/reproduction.md)."""
 
 
 def _vec3(value: Any, name: str, positive: bool = True) -> tuple[float, float, float]:
@@ -126,6 +130,43 @@ class VehiclePrior:
         _check_dims("vehicle", self.dims_mean, self.dims_min, self.dims_max)
 
 
+@dataclass(frozen=True)
+class CyclistPrior:
+    """Cyclist template (a person riding a bicycle, one object: the bike-and-legs box and the rider's box of
+    ``kernels.raster``), its prior and its dynamics (eq. 9, as a vehicle's). Beyond the paper.
+
+    dims = (length, width, height), metres: the bike's length, the handlebar's width, the top of the rider's head.
+    Deviations are per frame; the turn rate's deviation and limit and the heading deviation of an added cyclist are
+    the vehicle's (``VehiclePrior.sigma_turn``, ``turn_max``, ``init_heading_sd``).
+    """
+
+    dims_mean: tuple[float, float, float] = (1.75, 0.6, 1.65)
+    dims_sd: tuple[float, float, float] = (0.1, 0.05, 0.06)
+    dims_min: tuple[float, float, float] = (1.4, 0.4, 1.3)
+    dims_max: tuple[float, float, float] = (2.2, 0.9, 2.0)
+    sigma_dims: tuple[float, float, float] = (0.01, 0.005, 0.005)
+    sigma_speed: float = 0.4
+    """sigma_v of eq. 9, m/s per frame."""
+    init_speed_sd: float = 3.0
+    """Speed deviation of an added cyclist (along its heading, either way), m/s."""
+    speed_max: float = 12.0
+    orientations: int = 4
+    """Candidate orientations in [0, pi)."""
+    cost_a: float = 20.0
+    """a_r of eq. 5, pixels (at ``TemplateConfig.reference_area``), as a human's."""
+    cost_b: float = 60.0
+
+    def __post_init__(self) -> None:
+        for name in ("dims_mean", "dims_sd", "dims_min", "dims_max", "sigma_dims"):
+            object.__setattr__(self, name, _vec3(getattr(self, name), f"cyclist.{name}"))
+        for name, unit in (("sigma_speed", "m/s"), ("init_speed_sd", "m/s"), ("cost_a", "px"), ("cost_b", "px")):
+            object.__setattr__(self, name, _nonneg(getattr(self, name), f"cyclist.{name}", unit))
+        object.__setattr__(self, "speed_max", _nonneg(self.speed_max, "cyclist.speed_max", "m/s", strict=True))
+        if isinstance(self.orientations, bool) or not isinstance(self.orientations, int) or self.orientations < 1:
+            raise ConfigError(f"cyclist.orientations: expected an integer >= 1, got {self.orientations!r}")
+        _check_dims("cyclist", self.dims_mean, self.dims_min, self.dims_max)
+
+
 def _check_dims(kind: str, mean, lo, hi) -> None:
     if not all(0 < a <= b for a, b in zip(lo, hi, strict=True)):
         raise ConfigError(f"{kind}.dims_min/dims_max: expected 0 < min <= max per dimension, got {lo} and {hi}")
@@ -218,8 +259,10 @@ class TemplateConfig:
     separate from the seed spread (docs/reproduction.md)."""
     human: HumanPrior = field(default_factory=HumanPrior)
     vehicle: VehiclePrior = field(default_factory=VehiclePrior)
-    classes: tuple[str, ...] = CLASSES
-    """Object classes the tracker may add."""
+    cyclist: CyclistPrior = field(default_factory=CyclistPrior)
+    classes: tuple[str, ...] = DEFAULT_CLASSES
+    """Object classes the tracker may add: any of ``human``, ``vehicle``, ``cyclist`` (default: human and vehicle;
+    add ``cyclist`` for streets with bicycles, :data:`DEFAULT_CLASSES`)."""
     candidate_step_px: int = 8
     """Addition candidates: ground points under an image grid of this pitch, pixels."""
     max_range: float = 60.0
@@ -352,6 +395,8 @@ class TemplateConfig:
             raise ConfigError("human: expected a HumanPrior")
         if not isinstance(self.vehicle, VehiclePrior):
             raise ConfigError("vehicle: expected a VehiclePrior")
+        if not isinstance(self.cyclist, CyclistPrior):
+            raise ConfigError("cyclist: expected a CyclistPrior")
         classes = tuple(self.classes)
         if not classes or any(c not in CLASSES for c in classes) or len(set(classes)) != len(classes):
             raise ConfigError(f"classes: expected a non-empty subset of {list(CLASSES)}, got {list(classes)}")
@@ -406,13 +451,13 @@ class TrackedObject:
     id: int
     """Persistent label."""
     cls: str
-    """``"human"`` or ``"vehicle"``."""
+    """``"human"``, ``"vehicle"`` or ``"cyclist"``."""
     position: np.ndarray
     """(3,) ground-contact point in world coordinates, metres."""
     ground: np.ndarray
     """(2,) ground-plane coordinates, metres."""
     dims: np.ndarray
-    """(3,) human (height, body radius, head radius) or vehicle (length, width, height), metres."""
+    """(3,) human (height, body radius, head radius) or vehicle and cyclist (length, width, height), metres."""
     heading: float
     """Direction of motion (vehicle: orientation towards its motion) in the ground plane, radians."""
     speed: float

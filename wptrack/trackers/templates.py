@@ -51,8 +51,9 @@ from wptrack.resampling import Resampler, bytes_per_particle, quantisation_bits
 from wptrack.rig import Camera, GroundPlane, Rig
 from wptrack.warpcams import camera_struct
 
-from .template_config import (  # noqa: F401  (HumanPrior, VehiclePrior: the tracker's public API)
+from .template_config import (  # noqa: F401  (HumanPrior, VehiclePrior, CyclistPrior: the tracker's public API)
     CLASSES,
+    CyclistPrior,
     HumanPrior,
     TemplateConfig,
     TemplateEstimate,
@@ -306,6 +307,12 @@ class Candidates:
                 pos.append(ground_v)
                 heading.append(np.full(len(ground_v), math.pi * k / config.vehicle.orientations))
                 dims.append(np.tile(config.vehicle.dims_mean, (len(ground_v), 1)))
+        if "cyclist" in config.classes:  # beyond the paper: a rider and a bike, entering as people do
+            for k in range(config.cyclist.orientations):
+                kinds.append(np.full(len(ground_h), int(kraster.KIND_CYCLIST)))
+                pos.append(ground_h)
+                heading.append(np.full(len(ground_h), math.pi * k / config.cyclist.orientations))
+                dims.append(np.tile(config.cyclist.dims_mean, (len(ground_h), 1)))
         self.kind_np = np.concatenate(kinds).astype(np.int32)
         self.pos_np = np.concatenate(pos).astype(np.float32)
         self.heading_np = np.concatenate(heading).astype(np.float32)
@@ -362,25 +369,30 @@ class Candidates:
 
 
 def _dynamics_struct(config: TemplateConfig) -> kdyn.Dynamics:
-    h, v = config.human, config.vehicle
+    h, v, c = config.human, config.vehicle, config.cyclist
     s = kdyn.Dynamics()
     s.dt = 1.0 / float(config.fps)
     s.sigma_pos = config.sigma_pos
-    s.sigma_speed = wp.vec3(0.0, h.sigma_speed, v.sigma_speed)
+    s.sigma_speed = wp.vec4(0.0, h.sigma_speed, v.sigma_speed, c.sigma_speed)
     s.sigma_turn = v.sigma_turn
     s.sigma_dims_human = wp.vec3(*h.sigma_dims)
     s.sigma_dims_vehicle = wp.vec3(*v.sigma_dims)
+    s.sigma_dims_cyclist = wp.vec3(*c.sigma_dims)
     s.dims_mean_human = wp.vec3(*h.dims_mean)
     s.dims_mean_vehicle = wp.vec3(*v.dims_mean)
+    s.dims_mean_cyclist = wp.vec3(*c.dims_mean)
     s.dims_sd_human = wp.vec3(*h.dims_sd)
     s.dims_sd_vehicle = wp.vec3(*v.dims_sd)
+    s.dims_sd_cyclist = wp.vec3(*c.dims_sd)
     s.dims_min_human = wp.vec3(*h.dims_min)
     s.dims_max_human = wp.vec3(*h.dims_max)
     s.dims_min_vehicle = wp.vec3(*v.dims_min)
     s.dims_max_vehicle = wp.vec3(*v.dims_max)
-    s.init_speed_sd = wp.vec3(0.0, h.init_speed_sd, v.init_speed_sd)
+    s.dims_min_cyclist = wp.vec3(*c.dims_min)
+    s.dims_max_cyclist = wp.vec3(*c.dims_max)
+    s.init_speed_sd = wp.vec4(0.0, h.init_speed_sd, v.init_speed_sd, c.init_speed_sd)
     s.init_heading_sd = v.init_heading_sd
-    s.speed_max = wp.vec3(1.0, h.speed_max, v.speed_max)
+    s.speed_max = wp.vec4(1.0, h.speed_max, v.speed_max, c.speed_max)
     s.turn_max = v.turn_max
     s.t_add = config.t_add
     s.t_del = config.t_del
@@ -440,8 +452,8 @@ def launch_xor_score(
     dims: wp.array,
     qrow: wp.array,
     qtotal: wp.array,
-    cost_a: wp.vec3,
-    cost_b: wp.vec3,
+    cost_a: wp.vec4,
+    cost_b: wp.vec4,
     scale: float,
     bg_weight: float,
     exclusion: float,
@@ -625,8 +637,9 @@ class TemplateTracker(FrameChain):
         # the pixel costs are given for an image of reference_area pixels and scale with this one's area
         self.area_scale = float(w * h) / float(config.reference_area) if config.reference_area > 0 else 1.0
         a = self.area_scale
-        self.cost_a = wp.vec3(0.0, config.human.cost_a * a, config.vehicle.cost_a * a)
-        self.cost_b = wp.vec3(0.0, config.human.cost_b * a, config.vehicle.cost_b * a)
+        hp, vp, cp = config.human, config.vehicle, config.cyclist
+        self.cost_a = wp.vec4(0.0, hp.cost_a * a, vp.cost_a * a, cp.cost_a * a)
+        self.cost_b = wp.vec4(0.0, hp.cost_b * a, vp.cost_b * a, cp.cost_b * a)
         self.exclusion = float(config.exclusion) * a
         self.min_area = max(1, int(round(config.min_candidate_area * a)))
         self.score_scale = float(config.scale) / float(w * h)
@@ -1062,7 +1075,7 @@ class TemplateTracker(FrameChain):
             if k > 0:
                 v = bs[s, 5:7]
                 speed = float(np.hypot(*v)) if k == 1 else abs(float(v[0]))
-                heading = float(bs[s, 4]) + (math.pi if k == 2 and v[0] < 0 else 0.0)
+                heading = float(bs[s, 4]) + (math.pi if k >= 2 and v[0] < 0 else 0.0)
                 best.append(self._object(int(bs[s, 1]), k, bs[s, 2:4], bs[s, 7:10], heading, speed))
         add = h["add"].numpy()
         added = None
