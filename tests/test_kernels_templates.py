@@ -1937,3 +1937,28 @@ def test_tracker_follows_a_rendered_cyclist(device):
     person, bike = truth(frames - 1)
     assert np.linalg.norm(got["human"].ground - person) < 0.5
     assert np.linalg.norm(got["cyclist"].ground - bike) < 0.5 and abs(got["cyclist"].speed - 5.0) < 1.0
+
+
+def test_candidate_grid_pitch_follows_a_persons_width():
+    """candidate_step_width > 0: each row of the candidate grid has the pitch of that fraction of the image width of
+    a person standing there, between 2 pixels and candidate_step_px: finer far away (top rows) than near (bottom
+    rows, where it is the full step); 0 keeps the fixed grid (the same points as before)."""
+    cam = Camera.look_at("cam0", 320, 240, position=[0, -4, 6], target=[0, 20, 0], fx=250.0)
+    plane = GroundPlane()
+    fixed = Candidates._grid(cam, plane, 8, 0, 60.0)
+    again = Candidates._grid(cam, plane, 8, 0, 60.0, 0.0, 0.44)
+    np.testing.assert_array_equal(fixed, again)
+    fine = Candidates._grid(cam, plane, 8, 0, 60.0, 0.33, 0.44)
+    assert len(fine) > len(fixed)
+    uv = cam.project(np.c_[fine, np.zeros(len(fine))])[0]
+    rows = np.unique(np.round(uv[:, 1], 3))
+    pitch = {}
+    for v in rows:  # the pitch of each row: the spacing of its columns
+        us = np.sort(uv[np.abs(uv[:, 1] - v) < 1e-3, 0])
+        if len(us) > 2:
+            pitch[v] = float(np.median(np.diff(us)))
+    far = [p for v, p in sorted(pitch.items()) if v < 100]  # the grid ends at max_range (60 m) near v = 85
+    near = [p for v, p in sorted(pitch.items()) if v > 220]
+    assert far and near and max(far) < min(near) and min(far) >= 2.0 - 1e-6 and max(near) <= 8.0 + 1e-6
+    width = 0.44 * 250.0 / np.linalg.norm(cam.center - np.r_[fine[0], 0.0])  # a person's width on the top row, px
+    assert abs(far[0] - np.clip(round(0.33 * width), 2, 8)) <= 1.0

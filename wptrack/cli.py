@@ -150,6 +150,7 @@ def _template_config_from_args(args, fps: float | None):
         "min_existence",
         "min_in_image",
         "candidate_step_px",
+        "candidate_step_width",
         "vehicle_entry_px",
         "human_entry_px",
         "min_track_frames",
@@ -652,6 +653,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="report objects with at least this fraction of their image box inside the image (default 0.25; 0: all)",
     )
     tt.add_argument("--candidate-step-px", type=int, default=None, help="addition grid pitch, pixels (default 8)")
+    tt.add_argument(
+        "--candidate-step-width",
+        type=float,
+        default=None,
+        help="addition grid pitch per row as this fraction of a person's width there, 2 px to --candidate-step-px "
+        "(default 0: fixed pitch; e.g. 0.33 for far people a few pixels wide)",
+    )
     tt.add_argument(
         "--vehicle-entry-px",
         type=int,

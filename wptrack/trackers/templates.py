@@ -272,19 +272,48 @@ class Candidates:
     at the prior's mean size, with their image spans precomputed on the device."""
 
     @staticmethod
-    def _grid(camera: Camera, plane: GroundPlane, step: int, margin: int, max_range: float) -> np.ndarray:
+    def _grid(
+        camera: Camera,
+        plane: GroundPlane,
+        step: int,
+        margin: int,
+        max_range: float,
+        width_frac: float = 0.0,
+        body_width: float = 0.44,
+    ) -> np.ndarray:
         """(K, 2) ground points (metres) under the pixel grid of pitch ``step`` over the image widened by ``margin``
         pixels left, right and below (the rays of pixels beyond the border: objects entering the view), within
-        ``max_range`` of the camera."""
-        us = np.arange(step / 2.0 - margin, camera.width + margin, step)
-        vs = np.arange(step / 2.0, camera.height + margin, step)
-        grid = np.stack(np.meshgrid(us, vs), axis=-1).reshape(-1, 2)
+        ``max_range`` of the camera.
+
+        With ``width_frac`` > 0 the pitch of each row of the grid is ``width_frac`` x the image width of a person
+        standing there (``body_width`` metres at the distance of the ground under the row's middle pixel), between 2
+        pixels and ``step``: far people a few pixels wide get a candidate every pixel or two across them."""
+        if width_frac <= 0.0:
+            us = np.arange(step / 2.0 - margin, camera.width + margin, step)
+            vs = np.arange(step / 2.0, camera.height + margin, step)
+            grid = np.stack(np.meshgrid(us, vs), axis=-1).reshape(-1, 2)
+        else:
+            fx = float(np.asarray(camera.K)[0, 0])
+            pts = []
+            v = 0.0
+            while v < camera.height + margin:
+                _, dist = ground_rays(camera, plane, np.array([[0.5 * camera.width, v + 0.5]]))
+                pitch = float(step)
+                if np.isfinite(dist[0]) and dist[0] > 0:
+                    pitch = float(np.clip(round(width_frac * body_width * fx / dist[0]), 2.0, step))
+                row = v + 0.5 * pitch
+                us = np.arange(pitch / 2.0 - margin, camera.width + margin, pitch)
+                pts.append(np.stack([us, np.full_like(us, row)], axis=-1))
+                v += pitch
+            grid = np.concatenate(pts)
         ground, dist = ground_rays(camera, plane, grid)
         return ground[dist <= max_range]
 
     def __init__(self, camera: Camera, plane: GroundPlane, cam_struct, plane_struct, config: TemplateConfig, device):
         step = int(config.candidate_step_px)
-        ground = self._grid(camera, plane, step, 0, config.max_range)
+        frac = float(config.candidate_step_width)
+        body = 2.0 * float(config.human.dims_mean[1])
+        ground = self._grid(camera, plane, step, 0, config.max_range, frac, body)
         if len(ground) == 0:
             raise RigError(
                 f"camera '{camera.name}' does not see the ground plane (origin {plane.origin.tolist()}, normal "
@@ -293,7 +322,7 @@ class Candidates:
             )
         grids = {0: ground}  # by margin beyond the border, pixels (the two classes' margins are often equal)
         for margin in {int(config.human_entry_px), int(config.vehicle_entry_px)} - {0}:
-            grids[margin] = self._grid(camera, plane, step, margin, config.max_range)
+            grids[margin] = self._grid(camera, plane, step, margin, config.max_range, frac, body)
         ground_h, ground_v = grids[int(config.human_entry_px)], grids[int(config.vehicle_entry_px)]
         kinds, pos, heading, dims = [], [], [], []
         if "human" in config.classes:
