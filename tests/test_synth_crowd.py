@@ -124,3 +124,20 @@ def test_cyclists_one_object_fast_and_rendered(tmp_path) -> None:
     _, labels, pixels = scene.render_labels(f, np.random.default_rng(0))
     oid = scene.actors[a].oid
     assert pixels[oid][0] > 50 and np.count_nonzero(labels == oid + 1) == pixels[oid][0]
+
+
+def test_crowd_and_cyclists_together() -> None:
+    """Both conditions: the cyclists of the cyclists condition alone (drawn first), and a crowd that keeps off
+    them (people at least 1.2 m from a cyclist while both are on their paths)."""
+    both = _scene("s3-people", 10, crowd=True, cyclists=True)
+    alone = _scene("s3-people", 10, cyclists=True)
+    bikes = [a for a in both.actors if isinstance(a.shape, PC.Cyclist)]
+    assert [a.oid for a in bikes] == [a.oid for a in alone.actors if isinstance(a.shape, PC.Cyclist)] and bikes
+    st = both.states(360)
+    people = [i for i, a in enumerate(both.actors) if isinstance(a.shape, P.Person)]
+    assert len(people) > 30
+    for b in (i for i, a in enumerate(both.actors) if isinstance(a.shape, PC.Cyclist)):
+        for p in people:
+            on = st.active[b] & st.active[p]
+            if on.any():
+                assert np.linalg.norm(st.pos[b, on] - st.pos[p, on], axis=1).min() >= 1.2 - 1e-6

@@ -205,13 +205,13 @@ class PlazaScene(Scene):
         self.conditions = PlazaConditions() if conditions is None else conditions
         if not isinstance(self.conditions, PlazaConditions):
             raise TypeError(f"conditions must be a PlazaConditions, got {type(self.conditions).__name__}")
-        if self.conditions.crowd or self.conditions.cyclists:  # more objects (issue 26)
+        if self.conditions.crowd or self.conditions.cyclists:  # more objects (issue 26); the crowd keeps off the bikes
             from wptrack.synth import plaza_crowd
 
-            if self.conditions.crowd:
-                self.actors = plaza_crowd.add_crowd(self.actors)
             if self.conditions.cyclists:
                 self.actors = plaza_crowd.add_cyclists(self.actors)
+            if self.conditions.crowd:
+                self.actors = plaza_crowd.add_crowd(self.actors)
         if self.conditions.dark_car:
             self.actors = _dark_car(self.actors)
         if self.conditions.static_start:
