@@ -307,6 +307,43 @@ def candidate_score_kernel(
             score[c] = NEG_INF
 
 
+@wp.kernel
+def slot_budget_kernel(
+    slot_count: wp.array(dtype=wp.float64),
+    slot_est: wp.array2d(dtype=wp.float64),
+    exist_col: int,
+    min_existence: float,
+    margin: int,
+    margin_frac: float,
+    slot_open: wp.array(dtype=wp.float64),
+):
+    """Beyond the paper (``TemplateConfig.slot_margin``): the slots that additions may open this frame. With ``n`` the
+    objects reported (existence ``slot_est[s, exist_col]`` >= ``min_existence``) and ``u`` the slots held by some
+    particle (``slot_count`` > 0), at most ``n + max(margin, ceil(margin_frac n)) - u`` free slots may be opened:
+    ``slot_open`` is ``slot_count`` with the other free slots (the highest) set to 1 (held), so the choice kernels
+    (:func:`choose_addition_kernel`, :func:`choose_more_additions_kernel`) pass over them. ``margin`` <= 0: every
+    free slot stays open (``slot_open`` = ``slot_count``). Launch ``dim=1``."""
+    r = slot_count.shape[0]
+    reported = int(0)
+    used = int(0)
+    for s in range(r):
+        if slot_count[s] > wp.float64(0.0):
+            used += 1
+            if slot_est[s, exist_col] >= wp.float64(min_existence):
+                reported += 1
+    budget = r
+    if margin > 0:
+        extra = wp.max(margin, int(wp.ceil(margin_frac * float(reported))))
+        budget = reported + extra - used
+    for s in range(r):
+        slot_open[s] = slot_count[s]
+        if slot_count[s] == wp.float64(0.0):
+            if budget > 0:
+                budget -= 1
+            else:
+                slot_open[s] = wp.float64(1.0)
+
+
 @wp.func
 def chosen_candidate(
     best: wp.array(dtype=wp.int32),

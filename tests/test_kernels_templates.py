@@ -1098,6 +1098,36 @@ def test_choose_more_additions_takes_the_next_free_slots(device):
     assert out["next_label"].tolist() == [5] and out["slot_label"].tolist() == [100, 101]
 
 
+@pytest.mark.parametrize(
+    ("margin", "frac", "open_free"),
+    [(0, 0.25, 5), (1, 0.0, 0), (2, 0.0, 1), (3, 0.0, 2), (1, 1.5, 2), (9, 0.0, 5)],
+)
+def test_slot_budget(device, margin, frac, open_free):
+    """slot_budget_kernel: 2 objects reported (existence >= 0.5), 3 slots held (one a hypothesis not yet reported),
+    5 free: n + max(margin, ceil(frac n)) - 3 of the free slots stay open (the lowest), the others are marked held
+    (1); margin 0: all open. The choice then gives a closed slot nothing."""
+    slot_count = np.array([0.0, 500.0, 0.0, 12.0, 0.0, 1000.0, 0.0, 0.0])
+    est = np.zeros((8, int(kslots.NE)))
+    est[[1, 5], int(kslots.SE_EXIST)] = (0.7, 0.95)
+    est[3, int(kslots.SE_EXIST)] = 0.2
+    out = wp.full(8, -1.0, dtype=wp.float64, device=device)
+    wp.launch(
+        kuoh.slot_budget_kernel,
+        dim=1,
+        inputs=[wp.array(slot_count, dtype=wp.float64, device=device), wp.array(est, dtype=wp.float64, device=device),
+                int(kslots.SE_EXIST), 0.5, margin, frac],
+        outputs=[out],
+        device=device,
+    )  # fmt: skip
+    got = out.numpy()
+    free = np.flatnonzero(slot_count == 0)
+    expected = slot_count.copy()
+    expected[free[open_free:]] = 1.0
+    np.testing.assert_array_equal(got, expected)
+    first = choose(device, best=1, best_score=5.0, slot_count=got, cand_kind=(1, 1))
+    assert first["add"].tolist() == ([int(free[0]), 1] if open_free else [-1, -1])
+
+
 # ------------------------------------------------------------------------------------------ 6. prediction
 
 FIELDS = ("kind", "label", "pos", "vel", "heading", "dims", "age")

@@ -657,6 +657,7 @@ class TemplateTracker(FrameChain):
         ]
         self.slot_est = wp.zeros((r, int(kslots.NE)), dtype=wp.float64, device=d)
         self.slot_count = wp.zeros(r, dtype=wp.float64, device=d)
+        self.slot_open = wp.zeros(r, dtype=wp.float64, device=d)  # slot_count with the closed free slots held
         self.slot_label = wp.full(r, -1, dtype=wp.int32, device=d)
         self.slot_kind = wp.zeros(r, dtype=wp.int32, device=d)
         self.next_label = wp.zeros(1, dtype=wp.int32, device=d)
@@ -942,6 +943,17 @@ class TemplateTracker(FrameChain):
     def _predict(self, cur: int, nxt: int) -> None:
         d = self.device
         c = self.candidates
+        slot_count = self.slot_count
+        if self.config.slot_margin > 0:  # beyond the paper: open as many slots as the reported objects justify
+            wp.launch(
+                kuoh.slot_budget_kernel,
+                dim=1,
+                inputs=[self.slot_count, self.slot_est, int(kslots.SE_EXIST), float(self.config.min_existence),
+                        int(self.config.slot_margin), float(self.config.slot_margin_frac)],
+                outputs=[self.slot_open],
+                device=d,
+            )  # fmt: skip
+            slot_count = self.slot_open
         wp.launch(
             kuoh.choose_addition_kernel,
             dim=1,
@@ -950,7 +962,7 @@ class TemplateTracker(FrameChain):
                 c.est,
                 int(kreduce.EST_MAXLOGW),
                 c.kind,
-                self.slot_count,
+                slot_count,
                 self.r,
                 c.fit_best,
                 c.fit_est,
@@ -963,7 +975,7 @@ class TemplateTracker(FrameChain):
             wp.launch(
                 kuoh.choose_more_additions_kernel,
                 dim=1,
-                inputs=[c.best_k, c.est_k, int(kreduce.EST_MAXLOGW), c.kind, self.slot_count, self.r],
+                inputs=[c.best_k, c.est_k, int(kreduce.EST_MAXLOGW), c.kind, slot_count, self.r],
                 outputs=[self.next_label, self.slot_label, self.slot_kind, self.add],
                 device=d,
             )
