@@ -13,13 +13,13 @@ from pathlib import Path
 
 import numpy as np
 
-from wptrack.device import quiet_warp
-from wptrack.experiments import drift_study
-from wptrack.frames import open_frames
-from wptrack.io import read_tracks
-from wptrack.rig import Rig
+from wptrack.cameras.rig import Rig
+from wptrack.core.device import quiet_warp
+from wptrack.io.frames import open_frames
+from wptrack.io.run import read_tracks
 from wptrack.synth import render_scene
-from wptrack.trackers.colour import ColorTracker, HSITarget
+from wptrack.trackers.colour.experiments import drift_study
+from wptrack.trackers.colour.tracker import ColorTracker, HSITarget
 
 
 def main(argv=None) -> dict:

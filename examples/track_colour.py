@@ -4,7 +4,7 @@
     python examples/track_colour.py --device cuda --frames 200 --particles 100000
 
 Renders the ``s1-lab`` scene (two calibrated webcams, ground truth) into a temporary folder, tracks it with
-:class:`wptrack.trackers.colour.ColorTracker` and prints the 3D error against the ground truth.
+:class:`wptrack.trackers.colour.tracker.ColorTracker` and prints the 3D error against the ground truth.
 """
 
 from __future__ import annotations
@@ -16,13 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
-from wptrack.device import quiet_warp
-from wptrack.frames import open_frames
-from wptrack.io import read_tracks
-from wptrack.metrics import summarize
-from wptrack.rig import Rig
+from wptrack.cameras.rig import Rig
+from wptrack.core.device import quiet_warp
+from wptrack.evaluation.convergence import summarize
+from wptrack.io.frames import open_frames
+from wptrack.io.run import read_tracks
 from wptrack.synth import render_scene
-from wptrack.trackers.colour import ColorTracker, HSITarget
+from wptrack.trackers.colour.tracker import ColorTracker, HSITarget
 
 
 def main(argv=None) -> dict:

@@ -6,7 +6,7 @@
 Renders the ``s2-office`` scene (two people enter from opposite doors, meet, shake hands and leave; furniture hides
 their legs) in memory at the chosen size, makes motion masks from the rendered frames with the offline background
 model (the default motion pipeline, not the scene's perfect masks), tracks with
-:class:`wptrack.trackers.people.PeopleTracker` frame by frame and prints the people and the evaluation (MOTA and
+:class:`wptrack.trackers.people.tracker.PeopleTracker` frame by frame and prints the people and the evaluation (MOTA and
 IDF1 at 0.5 m on the ground, mean 3D centroid error).
 """
 
@@ -16,12 +16,12 @@ import argparse
 
 import numpy as np
 
-from wptrack.device import quiet_warp, resolve_device
-from wptrack.evaluation import evaluate
-from wptrack.masks import MaskConfig, open_masks
+from wptrack.core.device import quiet_warp, resolve_device
+from wptrack.evaluation.mot import evaluate
+from wptrack.motion.masks import MaskConfig, open_masks
 from wptrack.synth.office import OfficeConfig, OfficeScene
-from wptrack.trackers.people import PeopleTracker
-from wptrack.trackers.people_model import PeopleConfig
+from wptrack.trackers.people.config import PeopleConfig
+from wptrack.trackers.people.tracker import PeopleTracker
 
 
 def main(argv=None) -> dict:

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from wptrack.batch import BATCH_FILE, load_manifest, run_batch
+from wptrack.cameras.rig import Camera, Rig
 from wptrack.cli import main
-from wptrack.errors import ConfigError
-from wptrack.frames import write_video
-from wptrack.rig import Camera, Rig
+from wptrack.core.errors import ConfigError
+from wptrack.io.frames import write_video
 
 BALL = np.array([0.42, 0.45, 0.035])
 
@@ -128,7 +128,7 @@ def test_manifest_grid_ids_paths_and_hash(scene):
         (COLOUR_ARGS + "runs:\n  - grid: {seed: 3}\n", "grid.seed: expected a non-empty list"),
         (COLOUR_ARGS + "runs:\n  - args: {out: x}\n", "are set by the batch"),
         ("tracker: function\nfunction: nowhere.py:f\n", "nowhere.py not found"),
-        ("tracker: function\nfunction: wptrack.io:nothing\n", "cannot load it"),
+        ("tracker: function\nfunction: wptrack.io.run:nothing\n", "cannot load it"),
         ("runs: [\n", "not valid YAML"),
     ],
 )
@@ -206,7 +206,7 @@ def test_without_ray_local_runs_inline(tmp_path, monkeypatch):
 
 
 def test_sweep_is_a_batch_with_the_same_table(tmp_path, capsys):
-    from wptrack.experiments import jump_experiment, read_sweep
+    from wptrack.trackers.colour.experiments import jump_experiment, read_sweep
 
     kw = {"particles": 64, "iterations": 12, "jump_at": 6, "runs": 2, "device": "cpu"}
     ref = jump_experiment([0.02, 0.2], **kw)

@@ -160,7 +160,7 @@ def test_bench_templates_rejects_cameras(capsys):
 
 def _small_tracker(device, n=20_000):
     from wptrack.bench.colour import HUE, INTENSITY, SAT, bench_frames, bench_rig
-    from wptrack.trackers.colour import ColorTracker, HSITarget
+    from wptrack.trackers.colour.tracker import ColorTracker, HSITarget
 
     rig = bench_rig(2)
     frames, balls = bench_frames(rig, 3)

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 import warp as wp
 
+from wptrack.cameras.rig import Camera, Rig
 from wptrack.cli import main
-from wptrack.frames import write_video
-from wptrack.io import read_tracks
-from wptrack.rig import Camera, Rig
+from wptrack.io.frames import write_video
+from wptrack.io.run import read_tracks
 
 BALL = np.array([0.42, 0.45, 0.035])
 

@@ -8,12 +8,12 @@ import json
 import numpy as np
 import pytest
 
+from wptrack.cameras.rig import Camera, Rig
 from wptrack.cli import main
-from wptrack.errors import ConfigError
-from wptrack.frames import write_video
-from wptrack.io import read_tracks
-from wptrack.rig import Camera, Rig
-from wptrack.trackers.templates import HumanPrior, TemplateConfig, TemplateTracker
+from wptrack.core.errors import ConfigError
+from wptrack.io.frames import write_video
+from wptrack.io.run import read_tracks
+from wptrack.trackers.templates.tracker import HumanPrior, TemplateConfig, TemplateTracker
 
 
 def _rig(tmp_path, look_up: bool = False) -> str:
@@ -159,7 +159,7 @@ def test_offline_masks_keep_backgrounds_for_the_report(scene, capsys):
     assert first.shape == frame0.shape
     assert np.abs(first.astype(int) - frame0.astype(int)).mean() < 20  # a background of this scene, not noise
 
-    from wptrack.report.templates import _background_for, _backgrounds
+    from wptrack.trackers.templates.report import _background_for, _backgrounds
 
     saved = _backgrounds(out)
     assert len(saved) == len(index["windows"])

@@ -9,8 +9,8 @@ import sys
 import numpy as np
 import pytest
 
-from wptrack.errors import ConfigError
-from wptrack.evaluation import SCALAR_METRICS, Evaluation, average, evaluate
+from wptrack.core.errors import ConfigError
+from wptrack.evaluation.mot import SCALAR_METRICS, Evaluation, average, evaluate
 
 
 @pytest.fixture

@@ -9,8 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
-from wptrack.errors import ConfigError, FrameError
-from wptrack.frames import (
+from wptrack.core.errors import ConfigError, FrameError
+from wptrack.io.frames import (
     ArraySource,
     ImageSequenceSource,
     SyncedFrames,
@@ -260,7 +260,7 @@ def test_write_video_ffv1_lossless(tmp_path, rng):
 
 
 def test_video_writer_mjpg_fallback(tmp_path, rng, monkeypatch):
-    import wptrack.frames as frames_mod
+    import wptrack.io.frames as frames_mod
 
     monkeypatch.setitem(frames_mod.VIDEO_CODECS, ".avi", ("XXXX", "MJPG"))
     frames = _frames(rng, 5)
@@ -297,7 +297,7 @@ def test_prefetch_order_errors_and_early_stop():
     import threading
     import time
 
-    from wptrack.frames import prefetch
+    from wptrack.io.frames import prefetch
 
     assert list(prefetch(range(50), depth=3)) == list(range(50))
 

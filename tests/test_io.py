@@ -8,8 +8,8 @@ import os
 import numpy as np
 import pytest
 
-from wptrack.errors import OutputError, WptrackError
-from wptrack.io import (
+from wptrack.core.errors import OutputError, WptrackError
+from wptrack.io.run import (
     RunWriter,
     _atomic_file,
     atomic_save_npz,
@@ -265,7 +265,7 @@ def test_complete_run_leaves_short_tracks_out(tmp_path):
 
 def test_drop_short_tracks_needs_an_id_column(tmp_path):
     """A tracks file without an id column is refused by name, and left as it was."""
-    from wptrack.io import drop_short_tracks
+    from wptrack.io.run import drop_short_tracks
 
     path = tmp_path / "t.csv"
     path.write_text("frame,x\n0,1.0\n")

@@ -6,9 +6,9 @@ import cv2
 import numpy as np
 import warp as wp
 
-from wptrack.kernels import camera as kcam
-from wptrack.rig import Camera, Rig
-from wptrack.warpcams import DeviceRig, fold_radius2
+from wptrack.cameras.rig import Camera, Rig
+from wptrack.cameras.structs import DeviceRig, fold_radius2
+from wptrack.kernels.core import camera as kcam
 
 
 def random_camera(rng: np.random.Generator, name: str = "c") -> Camera:

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.kernels import colour as kcolour
-from wptrack.kernels import scoring as kscoring
-from wptrack.rig import Camera, Rig
-from wptrack.trackers.colour import HSITarget
-from wptrack.warpcams import ColourMaps, DeviceRig, camera_struct
+from wptrack.cameras.rig import Camera, Rig
+from wptrack.cameras.structs import ColourMaps, DeviceRig, camera_struct
+from wptrack.kernels.colour import hsi as kcolour
+from wptrack.kernels.colour import scoring as kscoring
+from wptrack.trackers.colour.tracker import HSITarget
 
 
 def hsi_ref(bgr: np.ndarray):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from wptrack.kernels import motion as kmotion
+from wptrack.kernels.colour import walk as kmotion
 
 
 def test_gaussian_walk_statistics_and_gather(device, rng):

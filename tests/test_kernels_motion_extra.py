@@ -9,8 +9,8 @@ import numpy as np
 import warp as wp
 from kernel_refs import normal4_ref, uniform4_ref
 
-from wptrack.kernels import motion as kmotion
-from wptrack.kernels import random as krand
+from wptrack.kernels.colour import walk as kmotion
+from wptrack.kernels.core import random as krand
 
 
 def test_gaussian_walk_matches_numpy_philox(device, rng):

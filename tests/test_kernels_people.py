@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.kernels import camera as kcam
-from wptrack.kernels import descriptor as kdesc
-from wptrack.kernels import occupancy as kocc
-from wptrack.kernels import people as kpeople
-from wptrack.rig import Camera, Rig
-from wptrack.warpcams import DeviceRig
+from wptrack.cameras.rig import Camera, Rig
+from wptrack.cameras.structs import DeviceRig
+from wptrack.kernels.core import camera as kcam
+from wptrack.kernels.people import descriptor as kdesc
+from wptrack.kernels.people import filter as kpeople
+from wptrack.kernels.people import occupancy as kocc
 
 NB = 8
 R_N = 0.12
@@ -146,7 +146,7 @@ def run_noise(a, b, chunk, device, stride=1) -> float:
 
 
 def alpha_ref(rgb: np.ndarray, sigma_n: float) -> np.ndarray:
-    """(alpha_S, alpha_H) of eq. 17 with the delta-method variances (see kernels/descriptor.py)."""
+    """(alpha_S, alpha_H) of eq. 17 with the delta-method variances (see kernels/people/descriptor.py)."""
     s = np.sort(rgb, axis=1)[:, ::-1]
     mx, mid, mn = s[:, 0], s[:, 1], s[:, 2]
     vv = sigma_n**2
@@ -574,7 +574,7 @@ def test_occupancy_matches_brute_force_and_integrates(device, rng):
 def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     """The fused frame gives the same state, descriptor, log-weights and block partials as predict -> descriptor
     -> observation -> reduce.block_partials_kernel launched one after another."""
-    from wptrack.kernels import reduce as kred
+    from wptrack.kernels.core import reduce as kred
 
     rig = make_rig()
     drig = DeviceRig(rig, device)

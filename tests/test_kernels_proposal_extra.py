@@ -17,10 +17,10 @@ from test_kernels_random import philox_ref
 from test_kernels_scoring_extra import FRAME, SEED, launch_fused
 from test_proposal import HI, LO, np_log_det, np_log_motion, ray_dir, rig3
 
-from wptrack.kernels import proposal as kproposal
-from wptrack.kernels import random as krand
-from wptrack.kernels import scoring as kscoring
-from wptrack.warpcams import DeviceRig
+from wptrack.cameras.structs import DeviceRig
+from wptrack.kernels.colour import proposal as kproposal
+from wptrack.kernels.colour import scoring as kscoring
+from wptrack.kernels.core import random as krand
 
 
 def components_ref(rig, masks, seed, frame, k, tries, max_gap, depth_lo, depth_hi):

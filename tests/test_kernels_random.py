@@ -7,7 +7,7 @@ import pytest
 import warp as wp
 from scipy import stats
 
-from wptrack.kernels import random as krand
+from wptrack.kernels.core import random as krand
 
 M0, M1 = 0xD2511F53, 0xCD9E8D57
 W0, W1 = 0x9E3779B9, 0xBB67AE85

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.kernels import reduce as kred
+from wptrack.kernels.core import reduce as kred
 
 BLOCK = 256
 

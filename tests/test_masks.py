@@ -1,4 +1,4 @@
-"""Motion masks (wptrack.masks): OpenCV background subtraction + clean-up, given masks, size checks, config."""
+"""Motion masks (wptrack.motion.masks): OpenCV background subtraction + clean-up, given masks, size checks, config."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ import cv2
 import numpy as np
 import pytest
 
-from wptrack.errors import ConfigError, FrameError
-from wptrack.frames import VideoWriter, open_source
-from wptrack.masks import MaskConfig, MotionMasks, clean_mask, open_masks
-from wptrack.rig import Camera
+from wptrack.cameras.rig import Camera
+from wptrack.core.errors import ConfigError, FrameError
+from wptrack.io.frames import VideoWriter, open_source
+from wptrack.motion.masks import MaskConfig, MotionMasks, clean_mask, open_masks
 
 H, W = 90, 120
 WARM = 25  # background-only frames before anything moves or changes

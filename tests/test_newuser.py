@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.io import atomic_imwrite, atomic_save_npz, atomic_write_json, atomic_write_text, default_file_mode
-from wptrack.rig import Camera, Rig
+from wptrack.cameras.rig import Camera, Rig
+from wptrack.io.run import atomic_imwrite, atomic_save_npz, atomic_write_json, atomic_write_text, default_file_mode
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -30,7 +30,7 @@ def test_no_cuda_noise_on_a_cpu_run(spec):
     code = (
         "import logging, sys;"
         "logging.basicConfig(level=logging.INFO, stream=sys.stdout, format='%(levelname)s %(name)s: %(message)s');"
-        "from wptrack.device import resolve_device;"
+        "from wptrack.core.device import resolve_device;"
         f"print('RESOLVED', resolve_device({spec!r})); resolve_device({spec!r})"
     )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=_env())
@@ -39,8 +39,8 @@ def test_no_cuda_noise_on_a_cpu_run(spec):
     resolved = r.stdout.split("RESOLVED ")[1].split()[0]
     if spec == "cpu" or not wp.get_cuda_devices():
         assert resolved == "cpu"
-    assert r.stdout.count("INFO wptrack.device: device ") == 1, r.stdout  # said once, with why: "(...)"
-    assert "(" in r.stdout.split("INFO wptrack.device: device ")[1]
+    assert r.stdout.count("INFO wptrack.core.device: device ") == 1, r.stdout  # said once, with why: "(...)"
+    assert "(" in r.stdout.split("INFO wptrack.core.device: device ")[1]
 
 
 def test_atomic_writes_use_the_umask_mode(tmp_path):
@@ -93,7 +93,7 @@ def test_warm_up_says_compiling_only_on_a_cache_miss(tmp_path):
     (tmp_path / "tinykern.py").write_text(KERNEL_MODULE)
     code = (
         "import sys, numpy as np, warp as wp, tinykern;"
-        "from wptrack.device import warm_up;"
+        "from wptrack.core.device import warm_up;"
         "print('MISSING', warm_up([tinykern], 'cpu', say=lambda m: print('SAY', m)));"
         "a = wp.array(np.arange(3, dtype=np.float32)); b = wp.zeros(3);"
         "wp.launch(tinykern.twice, dim=3, inputs=[a], outputs=[b]); print('OUT', b.numpy().tolist())"

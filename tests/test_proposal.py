@@ -9,11 +9,11 @@ import pytest
 import warp as wp
 from test_tracker_colour import BALL, TARGET, frames_for, small_rig
 
-from wptrack.errors import ConfigError
-from wptrack.kernels import proposal as kproposal
-from wptrack.rig import Camera, Rig
-from wptrack.trackers.colour import ColorConfig, ColorTracker, HSITarget
-from wptrack.warpcams import DeviceRig
+from wptrack.cameras.rig import Camera, Rig
+from wptrack.cameras.structs import DeviceRig
+from wptrack.core.errors import ConfigError
+from wptrack.kernels.colour import proposal as kproposal
+from wptrack.trackers.colour.tracker import ColorConfig, ColorTracker, HSITarget
 
 LO = np.array([-0.5, -0.5, 0.0])
 HI = np.array([1.0, 1.0, 0.8])

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wptrack.errors import ConfigError, OutputError
-from wptrack.rig import Camera
+from wptrack.cameras.rig import Camera
+from wptrack.core.errors import ConfigError, OutputError
 
 # ------------------------------------------------------------------------------------------------- helpers
 
@@ -136,7 +136,7 @@ def lab_run(tmp_path_factory) -> dict:
     """The s1-lab scene (10 frames) tracked on the CPU: run folder, scene folder."""
     from wptrack.cli import run_color_tracking
     from wptrack.synth import render_scene
-    from wptrack.trackers.colour import ColorConfig, HSITarget
+    from wptrack.trackers.colour.tracker import ColorConfig, HSITarget
 
     root = tmp_path_factory.mktemp("lab")
     res = render_scene("s1-lab", root / "scene", frames=10, seed=0)
@@ -203,10 +203,10 @@ def test_report_images_not_blank(report):
 def test_overlay_shows_truth_and_estimate_where_projected(report, lab_run):
     """The green ground-truth circle and the orange estimate cross are drawn at their projections in each
     camera's panel of the overlay composite."""
-    from wptrack.io import read_tracks
+    from wptrack.cameras.rig import Rig
+    from wptrack.io.run import read_tracks
     from wptrack.report.overlays import LABEL_HEIGHT
     from wptrack.report.scene3d import ESTIMATE_RGB, TRUTH_RGB
-    from wptrack.rig import Rig
 
     rig = Rig.load(lab_run["scene"] / "rig.yaml")
     gt = read_tracks(lab_run["scene"] / "groundtruth.csv")
@@ -231,9 +231,9 @@ def test_camera_view_shows_truth_marker_where_projected(report, lab_run):
     distortion: the frame is undistorted and the render is a pinhole)."""
     import cv2
 
-    from wptrack.io import read_tracks
+    from wptrack.cameras.rig import Rig
+    from wptrack.io.run import read_tracks
     from wptrack.report.scene3d import TRUTH_RGB
-    from wptrack.rig import Rig
 
     rig = Rig.load(lab_run["scene"] / "rig.yaml")
     gt = read_tracks(lab_run["scene"] / "groundtruth.csv")
@@ -372,7 +372,7 @@ def test_cli_report_errors_one_line(tmp_path, capsys):
 
 
 def _sweep_dir(path: Path) -> Path:
-    from wptrack.experiments import write_sweep
+    from wptrack.trackers.colour.experiments import write_sweep
 
     sigmas = np.array([0.001, 0.05, 0.1])
     it = np.arange(30)

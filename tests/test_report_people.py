@@ -19,9 +19,9 @@ def test_people_report(scene, tmp_path):  # noqa: F811
     pytest.importorskip("pyvista")
     import cv2
 
-    from wptrack.report.people import draw_people, load_hulls
-    from wptrack.report.templates import id_bgr
-    from wptrack.rig import Rig
+    from wptrack.cameras.rig import Rig
+    from wptrack.trackers.people.report import draw_people, load_hulls
+    from wptrack.trackers.templates.report import id_bgr
 
     out = tmp_path / "run"
     assert main([*_args(scene, out), "--occupancy-every", "5"]) == 0

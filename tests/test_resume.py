@@ -10,14 +10,14 @@ import signal
 import pytest
 
 from wptrack.cli import main
-from wptrack.errors import ConfigError
+from wptrack.core.errors import ConfigError
 from wptrack.runs import RunInterrupted, run_tracker
-from wptrack.runs.colour import ColourRun
 from wptrack.runs.loop import CHECKPOINT_FILE
-from wptrack.runs.templates import TemplateRun
 from wptrack.synth import render_scene
-from wptrack.trackers.colour import ColorConfig, HSITarget
-from wptrack.trackers.templates import TemplateConfig
+from wptrack.trackers.colour.run import ColourRun
+from wptrack.trackers.colour.tracker import ColorConfig, HSITarget
+from wptrack.trackers.templates.run import TemplateRun
+from wptrack.trackers.templates.tracker import TemplateConfig
 
 pytestmark = pytest.mark.skipif(not hasattr(signal, "SIGTERM") or os.name == "nt", reason="POSIX signals")
 

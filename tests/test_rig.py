@@ -1,4 +1,4 @@
-"""Tests for the camera rig model (wptrack.rig)."""
+"""Tests for the camera rig model (wptrack.cameras.rig)."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 import yaml
 
-from wptrack.errors import OutputError, RigError
-from wptrack.rig import Camera, Rig, save_opencv
+from wptrack.cameras.rig import Camera, Rig, save_opencv
+from wptrack.core.errors import OutputError, RigError
 
 
 def _cam_entry(name: str = "cam0", **overrides: Any) -> dict[str, Any]:

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wptrack.io import read_tracks
+from wptrack.io.run import read_tracks
 from wptrack.runs import RunInterrupted, TrackerRun, run_tracker
 
 

@@ -1,4 +1,4 @@
-"""Tsai calibrations (wptrack.tsai), the tsai: rig entry and box ground truth (wptrack.groundtruth).
+"""Tsai calibrations (wptrack.cameras.tsai), the tsai: rig entry and box ground truth (wptrack.evaluation.groundtruth).
 
 Fixtures: tests/data/pets/ (PETS 2009 View_001 calibration, 5 annotated frames). The real-video test reads
 <repo>/../shared/data/pets09-s2l1-view001-dev when present and is skipped otherwise.
@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.errors import ConfigError, RigError
-from wptrack.groundtruth import boxes_to_ground, read_box_groundtruth, read_boxes
-from wptrack.kernels import camera as kcam
-from wptrack.rig import Rig
-from wptrack.tsai import _distorted_radius, load_tsai_camera, read_tsai, tsai_fit_residual, tsai_to_camera
-from wptrack.warpcams import DeviceRig
+from wptrack.cameras.rig import Rig
+from wptrack.cameras.structs import DeviceRig
+from wptrack.cameras.tsai import _distorted_radius, load_tsai_camera, read_tsai, tsai_fit_residual, tsai_to_camera
+from wptrack.core.errors import ConfigError, RigError
+from wptrack.evaluation.groundtruth import boxes_to_ground, read_box_groundtruth, read_boxes
+from wptrack.kernels.core import camera as kcam
 
 DATA = Path(__file__).parent / "data" / "pets"
 XML = DATA / "View_001.xml"
@@ -231,7 +231,7 @@ def test_cli_evaluate_xml(tmp_path):
 
 @pytest.mark.skipif(not SHARED.is_dir(), reason="PETS 2009 development clip not present in ../shared/data")
 def test_real_video_frames(tmp_path):
-    from wptrack.runs.templates import _camera_for_size
+    from wptrack.trackers.templates.run import _camera_for_size
 
     cv2 = pytest.importorskip("cv2")
     rig_file = tmp_path / "rig.yaml"

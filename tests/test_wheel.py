@@ -56,7 +56,7 @@ def test_wheel_installs_and_runs_bench(tmp_path):
     assert {n.split("/")[0] for n in names} == {"wptrack", wheel.name.split("-py")[0] + ".dist-info"}, names
     for mod in ("wptrack/bench/__init__.py", "wptrack/bench/colour.py", "wptrack/bench/numpy_colour.py"):
         assert mod in names
-    assert "wptrack/kernels/colour.py" in names
+    assert "wptrack/kernels/colour/hsi.py" in names
 
     # a venv without its own pip: the system pip (seen through --system-site-packages) installs into it
     _run([sys.executable, "-m", "venv", "--system-site-packages", "--without-pip", str(venv)], work)

@@ -69,7 +69,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .errors import ConfigError, WptrackError
+from wptrack.core.errors import ConfigError, WptrackError
 
 log = logging.getLogger(__name__)
 
@@ -243,7 +243,7 @@ def load_manifest(path: str | os.PathLike) -> Manifest:
 # ------------------------------------------------------------------------------------------ track arguments
 def _track_parser(tracker: str) -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     """The whole ``wptrack`` parser and its ``track TRACKER`` subparser."""
-    from .cli import build_parser
+    from wptrack.cli import build_parser
 
     def sub(p: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:
         for a in p._actions:
@@ -372,15 +372,15 @@ def _bump_attempts(root: Path, run_id: str) -> int:
         n = int(counter.read_text().strip() or 0)
     except (OSError, ValueError):
         n = 0
-    from .io import atomic_write_text
+    from wptrack.io.run import atomic_write_text
 
     atomic_write_text(counter, f"{n + 1}\n")
     return n + 1
 
 
 def _run_track(spec: RunSpec, out: Path, force_cpu: bool) -> dict[str, Any]:
-    from .device import quiet_warp
-    from .io import RUN_FILE
+    from wptrack.core.device import quiet_warp
+    from wptrack.io.run import RUN_FILE
 
     args = parse_track_args(spec, out)
     if force_cpu and args.device == "auto":
@@ -397,7 +397,7 @@ def _run_track(spec: RunSpec, out: Path, force_cpu: bool) -> dict[str, Any]:
 
 
 def _run_function(spec: RunSpec, out: Path) -> dict[str, Any]:
-    from .io import RUN_FILE, atomic_write_json
+    from wptrack.io.run import RUN_FILE, atomic_write_json
 
     out.mkdir(parents=True, exist_ok=True)
     summary = _load_function(spec.function)(out_dir=out, **spec.args)
@@ -422,7 +422,7 @@ def execute_run(
     Returns:
         The run's result row: id, tracker, status, attempts, seconds, host, error, summary, timings.
     """
-    from .io import atomic_write_json
+    from wptrack.io.run import atomic_write_json
 
     if threads is not None:
         import cv2
@@ -494,7 +494,7 @@ SUMMARY_COLUMNS = ["id", "tracker", "status", "reused", "attempts", "seconds", "
 def write_summary(results: Sequence[dict[str, Any]], path: str | os.PathLike) -> Path:
     """``summary.csv``: one row per run: the fixed columns, the grid parameters (``param.NAME``), the run's
     summary metrics (flattened: ``error.mean_error_after``...) and per-stage totals (``time.STAGE_s``)."""
-    from .io import atomic_write_text
+    from wptrack.io.run import atomic_write_text
 
     rows = []
     for r in results:
@@ -582,7 +582,7 @@ def run_batch(
             for but not installed, more GPUs per task than the cluster has.
         OutputError: ``out_dir`` cannot be written.
     """
-    from .io import ensure_writable_dir
+    from wptrack.io.run import ensure_writable_dir
 
     if not isinstance(manifest, Manifest):
         manifest = load_manifest(manifest)

@@ -13,9 +13,9 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from . import __version__
-from .errors import ConfigError, WptrackError
-from .runs.colour import TRACK_COLUMNS, run_color_tracking  # noqa: F401  (re-exported API)
+from wptrack import __version__
+from wptrack.core.errors import ConfigError, WptrackError
+from wptrack.trackers.colour.run import TRACK_COLUMNS, run_color_tracking  # noqa: F401  (re-exported API)
 
 log = logging.getLogger("wptrack")
 
@@ -59,13 +59,13 @@ def _add_device(p: argparse.ArgumentParser) -> None:
 
 # --- track color -----------------------------------------------------------------------------------------
 def _target_from_args(args):
-    from .trackers.colour import HSITarget
+    from wptrack.trackers.colour.tracker import HSITarget
 
     return HSITarget(hue=tuple(args.hue), sat=tuple(args.sat), intensity=tuple(args.intensity))
 
 
 def _color_config_from_args(args):
-    from .trackers.colour import ColorConfig
+    from wptrack.trackers.colour.tracker import ColorConfig
 
     init = tuple(args.init) if args.init is not None else None
     init_box = None
@@ -129,7 +129,7 @@ def _print_summary(summary: dict, out_dir) -> None:
 
 # --- track templates -----------------------------------------------------------------------------------------
 def _template_config_from_args(args, fps: float | None):
-    from .trackers.templates import TemplateConfig
+    from wptrack.trackers.templates.tracker import TemplateConfig
 
     kw = {
         "particles": args.particles,
@@ -167,7 +167,7 @@ def _template_config_from_args(args, fps: float | None):
 
 
 def _mask_config_from_args(args):
-    from .masks import MaskConfig
+    from wptrack.motion.masks import MaskConfig
 
     return MaskConfig(
         method=args.mask_method,
@@ -183,8 +183,8 @@ def _mask_config_from_args(args):
 
 
 def cmd_track_templates(args) -> int:
-    from .frames import open_source
-    from .runs.templates import run_template_tracking
+    from wptrack.io.frames import open_source
+    from wptrack.trackers.templates.run import run_template_tracking
 
     fps = None
     if args.fps is None:  # the frame rate of the video, or of the given masks when they are a video
@@ -223,7 +223,7 @@ def cmd_track_templates(args) -> int:
 def _people_config_from_args(args):
     from dataclasses import replace
 
-    from .trackers.people_model import PeopleConfig
+    from wptrack.trackers.people.config import PeopleConfig
 
     cfg = PeopleConfig(particles=args.particles, seed=args.seed)
     dyn = {
@@ -244,7 +244,7 @@ def _people_config_from_args(args):
 
 
 def cmd_track_people(args) -> int:
-    from .runs.people import run_people_tracking
+    from wptrack.trackers.people.run import run_people_tracking
 
     summary = run_people_tracking(
         args.rig,
@@ -273,8 +273,8 @@ def cmd_track_people(args) -> int:
 
 # --- evaluate ------------------------------------------------------------------------------------------------
 def _print_evaluation(groundtruth, tracks, threshold: float, out: str | None = None) -> None:
-    from .evaluation import evaluate
-    from .io import atomic_write_json
+    from wptrack.evaluation.mot import evaluate
+    from wptrack.io.run import atomic_write_json
 
     ev = evaluate(groundtruth, tracks, threshold=threshold)
     cls = "n/a" if ev.classification_accuracy is None else f"{ev.classification_accuracy:.3f}"
@@ -293,7 +293,7 @@ def cmd_evaluate(args) -> int:
         tracks = tracks / "tracks.csv"
     groundtruth = args.groundtruth
     if str(groundtruth).lower().endswith(".xml"):  # image boxes (PETS/Milan): feet back-projected with the rig
-        from .groundtruth import read_box_groundtruth
+        from wptrack.evaluation.groundtruth import read_box_groundtruth
 
         if args.rig is None:
             raise ConfigError(f"--groundtruth {groundtruth}: box annotations need --rig to back-project the feet")
@@ -312,7 +312,7 @@ def cmd_evaluate(args) -> int:
 
 # --- synth --------------------------------------------------------------------------------------------------
 def cmd_synth(args) -> int:
-    from .synth import render_scene
+    from wptrack.synth import render_scene
 
     res = render_scene(
         args.scene, args.out, frames=args.frames, seed=args.seed, progress=not args.quiet, conditions=args.conditions
@@ -326,8 +326,8 @@ def cmd_synth(args) -> int:
 def cmd_demo(args) -> int:
     import json
 
-    from .synth import render_scene
-    from .trackers.colour import ColorConfig, HSITarget
+    from wptrack.synth import render_scene
+    from wptrack.trackers.colour.tracker import ColorConfig, HSITarget
 
     out = Path(args.out)
     scene_dir = out / "scene"
@@ -362,14 +362,14 @@ def cmd_demo(args) -> int:
 
 # --- report -------------------------------------------------------------------------------------------------
 def _report_after_tracking(run_dir) -> None:
-    from .report import build_report
+    from wptrack.report import build_report
 
     print("rendering the report ...")
     print(f"report: {build_report(run_dir)}")
 
 
 def cmd_report(args) -> int:
-    from .report import ReportOptions, build_report
+    from wptrack.report import ReportOptions, build_report
 
     options = ReportOptions(movie=not args.no_movie, movie_frames=args.movie_frames, groundtruth=args.groundtruth)
     path = build_report(args.run_dir, out_dir=args.out, sweep=args.sweep, frames=args.frames, options=options)
@@ -379,7 +379,7 @@ def cmd_report(args) -> int:
 
 # --- convergence (section III.C) ---------------------------------------------------------------------------
 def cmd_convergence(args) -> int:
-    from .experiments import default_sigmas, sweep_batch
+    from wptrack.trackers.colour.experiments import default_sigmas, sweep_batch
 
     sigmas = args.sigma or list(default_sigmas(args.steps))
     table = sweep_batch(
@@ -412,7 +412,7 @@ def cmd_convergence(args) -> int:
 
 # --- batch (Ray) -----------------------------------------------------------------------------------------------
 def cmd_batch(args) -> int:
-    from .batch import run_batch
+    from wptrack.batch import run_batch
 
     def say(r: dict) -> None:
         if args.quiet:
@@ -442,7 +442,7 @@ def cmd_batch(args) -> int:
 
 # --- masks ---------------------------------------------------------------------------------------------------
 def cmd_masks(args) -> int:
-    from .masks import MaskConfig, write_masks
+    from wptrack.motion.masks import MaskConfig, write_masks
 
     kw = {"method": args.method, "device": args.device, "detect_shadows": not args.keep_shadows}
     for name in ("window", "samples", "fg_threshold", "noise_floor", "shadow_lo", "shadow_hi", "shadow_chroma",
@@ -460,9 +460,9 @@ def cmd_masks(args) -> int:
 
 # --- bench ---------------------------------------------------------------------------------------------------
 def cmd_bench(args) -> int:
-    from .bench import HEADER, format_row, load_suite
-    from .device import resolve_device
-    from .io import atomic_write_json, versions
+    from wptrack.bench import HEADER, format_row, load_suite
+    from wptrack.core.device import resolve_device
+    from wptrack.io.run import atomic_write_json, versions
 
     suite = load_suite(args.tracker)
     device = resolve_device(args.device)
@@ -879,7 +879,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     debug = bool(getattr(args, "debug", False))
     level = logging.DEBUG if debug else logging.INFO if args.verbose else logging.WARNING
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
-    from .device import quiet_warp
+    from wptrack.core.device import quiet_warp
 
     quiet_warp(not (args.verbose or debug))  # Warp's banner and kernel-cache messages only with --verbose
     try:

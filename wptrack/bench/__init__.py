@@ -12,7 +12,7 @@ from __future__ import annotations
 import importlib
 import logging
 
-from ..errors import ConfigError
+from wptrack.core.errors import ConfigError
 
 log = logging.getLogger(__name__)
 

@@ -124,7 +124,7 @@ def parallel_efficiency(
     import ray
 
     from wptrack.batch import execute_run, load_manifest
-    from wptrack.device import quiet_warp
+    from wptrack.core.device import quiet_warp
 
     quiet_warp(True)
     tmp = tempfile.TemporaryDirectory(prefix="wptrack-batch-bench-") if work_dir is None else None
@@ -144,7 +144,7 @@ def parallel_efficiency(
             == (batches / f"w{workers}" / i / "tracks.csv").read_bytes()
             for i in ids
         )
-        from wptrack.io import versions
+        from wptrack.io.run import versions
 
         return {
             "suite": "batch",

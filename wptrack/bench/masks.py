@@ -3,14 +3,14 @@
 Per case (frame size), ``frames`` synthetic frames (smooth colour texture, gaussian noise of 3 levels, a few
 moving rectangles) are encoded to a temporary FFV1 ``.avi`` (the project's lossless writer). Measured:
 
-* ``decode``: reading the video with :class:`wptrack.frames.VideoSource`, per frame (median of 3 passes);
+* ``decode``: reading the video with :class:`wptrack.io.frames.VideoSource`, per frame (median of 3 passes);
 * ``sample+build``: one background window (the sampler's reads of its ``samples`` frames, the upload, the
   median/MAD kernel and the host statistics: gains, spread, neighbourhood scale, shadow ratio), amortised over the
   ``window // 2`` frames between window starts (a window is built every ``window // 2`` frames). The video is
   shorter than ``window``, so its one window samples every other frame of it and the sampler decodes all
   ``frames`` frames for it, about a third of a decoding pass per frame; in a long video with the default window
   (a sample every 12 frames) the sampler reads forward and decodes each frame about once (see
-  :mod:`wptrack.background`): add about one ``decode`` for a video source;
+  :mod:`wptrack.motion.background`): add about one ``decode`` for a video source;
 * ``kernel``: the per-frame step (frame gain, upload, foreground and neighbourhood kernels, mask and probability
   back, hysteresis), per frame;
 * ``clean``: the host morphology (cv2 opening + closing) per frame;
@@ -93,7 +93,7 @@ def e2e_frames(window: int) -> int:
 def end_to_end(case: Case, device: str, frames: int, seed: int = 0, repeats: int = 1) -> dict:
     """Wall time of the default mask pipeline over a ``frames``-frame FFV1 video of ``case``'s size against
     decoding it: ``open_masks(video=path, config=MaskConfig(device=device))`` iterated to the end (the offline
-    model with its defaults, the frames decoded ahead by :func:`wptrack.frames.prefetch`, the windows' samples read
+    model with its defaults, the frames decoded ahead by :func:`wptrack.io.frames.prefetch`, the windows' samples read
     ahead by the model's worker, the clean-up), alternating with decode-only passes, ``repeats`` of each.
 
     Returns:
@@ -102,8 +102,8 @@ def end_to_end(case: Case, device: str, frames: int, seed: int = 0, repeats: int
         masks add to decoding per frame), ``added_vs_decode``; ``e2e_first_ms`` (time to the first mask, ms),
         ``e2e_steady_ms`` (ms per frame after it), ``added_steady_ms`` (that less decoding), ``added_steady_vs_decode``.
     """
-    from wptrack.frames import VideoWriter, open_source
-    from wptrack.masks import MaskConfig, open_masks
+    from wptrack.io.frames import VideoWriter, open_source
+    from wptrack.motion.masks import MaskConfig, open_masks
 
     config = MaskConfig(device=device)
     with tempfile.TemporaryDirectory() as tmp:
@@ -187,11 +187,10 @@ class MasksSuite:
     ) -> dict:
         import cv2
 
-        from wptrack.background import OfflineBackground
-        from wptrack.frames import open_source, write_video
-        from wptrack.masks import MaskConfig
-
-        from . import numpy_masks
+        from wptrack.bench import numpy_masks
+        from wptrack.io.frames import open_source, write_video
+        from wptrack.motion.background import OfflineBackground
+        from wptrack.motion.masks import MaskConfig
 
         config = MaskConfig(method="offline", device=device)
         video = bench_video(case.width, case.height, frames, seed)

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import WptrackError
+from wptrack.core.errors import WptrackError
 
 log = logging.getLogger(__name__)
 
@@ -115,7 +115,7 @@ def encode_movie(frames: Iterable[np.ndarray], out_dir: Path, fps: float, stem: 
     Returns:
         The files written and notes about those that could not be.
     """
-    from ..frames import VideoWriter
+    from wptrack.io.frames import VideoWriter
 
     out = MovieFiles()
     mp4: VideoWriter | None = None
@@ -177,7 +177,7 @@ def _write_gif(images: list[Any], path: Path, fps: float) -> Path:
 def add_movie_figures(sec: Any, files: MovieFiles, fps: float, total: int) -> None:
     """Attach an encoded movie to a report section: its notes, a note when frames were skipped, and the web
     video/animation (with the MP4 as an alternate) or the MP4 alone."""
-    from .model import Figure
+    from wptrack.report.model import Figure
 
     sec.notes.extend(files.notes)
     if files.frames < total:

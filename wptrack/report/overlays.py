@@ -10,10 +10,10 @@ from typing import Any
 
 import numpy as np
 
-from ..io import atomic_imwrite
-from .data import RunData
-from .model import Figure, ReportContext, Section
-from .scene3d import TRUTH_RGB, estimate_rgb, frames_for
+from wptrack.io.run import atomic_imwrite
+from wptrack.report.data import RunData
+from wptrack.report.model import Figure, ReportContext, Section
+from wptrack.report.scene3d import TRUTH_RGB, estimate_rgb, frames_for
 
 log = logging.getLogger(__name__)
 

@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from .model import Figure, ReportContext, Section
-from .scene3d import TRUTH_RGB, estimate_rgb, up_axis
+from wptrack.report.model import Figure, ReportContext, Section
+from wptrack.report.scene3d import TRUTH_RGB, estimate_rgb, up_axis
 
 log = logging.getLogger(__name__)
 

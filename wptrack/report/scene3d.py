@@ -15,10 +15,10 @@ from typing import Any
 
 import numpy as np
 
-from ..io import atomic_imwrite
-from .data import RunData
-from .model import Figure, ReportContext, Section
-from .offscreen import import_pyvista, new_plotter, renderer_info
+from wptrack.io.run import atomic_imwrite
+from wptrack.report.data import RunData
+from wptrack.report.model import Figure, ReportContext, Section
+from wptrack.report.offscreen import import_pyvista, new_plotter, renderer_info
 
 log = logging.getLogger(__name__)
 
@@ -418,7 +418,7 @@ def read_frames(videos: list[str], wanted: Sequence[int]) -> dict[int, list[np.n
 
 
 def _source_frames(spec: str, wanted: list[int]) -> dict[int, np.ndarray]:
-    from ..frames import VideoSource, open_source
+    from wptrack.io.frames import VideoSource, open_source
 
     src = open_source(spec)
     out: dict[int, np.ndarray] = {}
@@ -493,7 +493,7 @@ def render_camera_views(ctx: ReportContext, data: RunData) -> list[Figure]:
     """
     import cv2
 
-    from .vtkcam import apply_camera
+    from wptrack.report.vtkcam import apply_camera
 
     pv = import_pyvista()
     rig = data.rig
@@ -651,7 +651,7 @@ def shot(plotter: Any, path: Any = None, transparent: bool = False) -> np.ndarra
 
 def section_movie(ctx: ReportContext) -> Section | None:
     """The 3D view over time: ``movie.mp4`` plus ``movie.webm`` (or ``movie.gif``) for the page."""
-    from .movie import add_movie_figures, encode_movie
+    from wptrack.report.movie import add_movie_figures, encode_movie
 
     data = ctx.data
     if data is None:

@@ -4,10 +4,10 @@ A tracker plugs into :func:`run_tracker` through a :class:`TrackerRun`: the job 
 is built (rig, videos, sizes, parameters, device), and the loop then owns what all runs share:
 
 * the output folder (checked writable only after the job validated, so a bad input writes nothing),
-* :class:`wptrack.io.RunWriter` (``tracks.csv`` appended per frame, ``run.json`` and ``particles.npz`` replaced
+* :class:`wptrack.io.run.RunWriter` (``tracks.csv`` appended per frame, ``run.json`` and ``particles.npz`` replaced
   atomically), with the job's extra writers opened in :meth:`TrackerRun.start` and always closed in
   :meth:`TrackerRun.finish`,
-* frames decoded ahead by a background thread (:class:`wptrack.frames.prefetch`), the time the tracker waited
+* frames decoded ahead by a background thread (:class:`wptrack.io.frames.prefetch`), the time the tracker waited
   for them recorded as the ``decode_wait`` stage, and the tracker's own per-stage timings,
 * a tqdm progress bar,
 * interruption: Ctrl-C (SIGINT) and SIGTERM stop the run after the frame in progress, with ``run.json`` status
@@ -94,7 +94,7 @@ class TrackerRun:
         particles_every: keep the particle subsample of every this many frames in particles.npz (0: none).
         particles_max: at most this many particles per kept frame.
         particles_frames: at most this many frames of particles kept (evenly spaced over the run, see
-            :class:`wptrack.io.ParticleStore`), so memory stays bounded however long the run.
+            :class:`wptrack.io.run.ParticleStore`), so memory stays bounded however long the run.
     """
 
     name: str
@@ -167,8 +167,8 @@ def _check_resumable(job: TrackerRun, out_dir: Path) -> tuple[int, dict[str, Any
     """The last frame and the state of the checkpoint in ``out_dir``, if ``job`` may resume that run."""
     import json
 
-    from ..errors import ConfigError
-    from ..io import RUN_FILE, _jsonable
+    from wptrack.core.errors import ConfigError
+    from wptrack.io.run import RUN_FILE, _jsonable
 
     run_path = out_dir / RUN_FILE
     try:
@@ -197,7 +197,7 @@ def _check_resumable(job: TrackerRun, out_dir: Path) -> tuple[int, dict[str, Any
 
 def _write_checkpoint(job: TrackerRun, out: Any, frame: int) -> None:
     """Flush the outputs up to ``frame`` and save the state to continue after it (atomically)."""
-    from ..io import atomic_save_npz
+    from wptrack.io.run import atomic_save_npz
 
     out.flush()
     job.flush()
@@ -240,9 +240,9 @@ def run_tracker(
     import itertools
     import math
 
-    from ..errors import ConfigError
-    from ..frames import prefetch
-    from ..io import RunWriter, ensure_writable_dir
+    from wptrack.core.errors import ConfigError
+    from wptrack.io.frames import prefetch
+    from wptrack.io.run import RunWriter, ensure_writable_dir
 
     if (
         not (isinstance(checkpoint_seconds, (int, float)) and math.isfinite(checkpoint_seconds))
@@ -280,7 +280,7 @@ def run_tracker(
         if tracker is not None:  # compile the kernels missing from the cache now, not in the first frame's time
             import sys
 
-            from ..device import warm_up
+            from wptrack.core.device import warm_up
 
             say = (lambda m: print(m, file=sys.stderr)) if progress else None
             warm_up(getattr(tracker, "kernel_modules", None), tracker.device, say=say)

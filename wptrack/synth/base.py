@@ -3,7 +3,7 @@
 A scene is a :class:`Scene` object (rig, ground truth, per-frame renderer, tracker hints) built by a function
 registered with :func:`register_scene`; :func:`render_scene` writes any registered scene to a folder::
 
-    out_dir/rig.yaml            the calibrated rig (wptrack.rig format)
+    out_dir/rig.yaml            the calibrated rig (wptrack.cameras.rig format)
     out_dir/<camera>.avi        one lossless video per camera (FFV1, MJPG fallback)
     out_dir/<camera>_mask.avi   only for scenes with perfect foreground masks (:attr:`Scene.writes_masks`, e.g. the
                                 s3 scenes): binary silhouettes of the moving objects, 0/255, same size, lossless
@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from wptrack.errors import ConfigError
-from wptrack.rig import Rig
+from wptrack.cameras.rig import Rig
+from wptrack.core.errors import ConfigError
 
 __all__ = ["SCENES", "Scene", "SceneResult", "SceneSpec", "register_scene", "render_scene", "scene_names"]
 
@@ -256,8 +256,8 @@ def render_scene(
     """
     from tqdm import tqdm
 
-    from wptrack.frames import VideoWriter
-    from wptrack.io import atomic_write_json, atomic_write_text, ensure_writable_dir
+    from wptrack.io.frames import VideoWriter
+    from wptrack.io.run import atomic_write_json, atomic_write_text, ensure_writable_dir
 
     spec = get_scene(name)
     if frames is not None and (isinstance(frames, bool) or not isinstance(frames, (int, np.integer)) or frames < 1):

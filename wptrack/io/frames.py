@@ -1,0 +1,662 @@
+"""Synchronised multi-camera frame sources.
+
+A :class:`FrameSource` yields one camera's frames as ``(H, W, 3)`` ``uint8`` BGR arrays, whatever it reads from:
+
+* a video file (anything ``cv2.VideoCapture`` reads),
+* a folder of images (``*.png``, ``*.jpg``, ``*.jpeg``, ``*.bmp``, ``*.tif``, ``*.tiff``, natural sort order),
+* a glob pattern (a string containing ``*`` or ``?``) matching image files,
+* a single image file (a one-frame sequence),
+* a numpy array ``(F, H, W, 3)`` or ``(F, H, W)`` of ``uint8``.
+
+:class:`SyncedFrames` iterates several sources in lock-step (one frame per camera per time step) and checks that
+they agree on their frame counts. :class:`VideoWriter` / :func:`write_video` write videos with a lossless codec
+when one is available, atomically (temporary name, renamed on close).
+
+Every user mistake (missing file, unreadable video or image, inconsistent frame counts or sizes) raises a
+one-line :class:`~wptrack.core.errors.FrameError` naming the path.
+"""
+
+from __future__ import annotations
+
+import glob
+import logging
+import os
+import re
+import uuid
+from collections.abc import Iterable, Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wptrack.core.errors import ConfigError, FrameError, OutputError
+
+log = logging.getLogger(__name__)
+
+#: Image file extensions recognised in folders (lower case, compared case-insensitively).
+IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+
+#: Codecs tried, in order, per output video extension (the first one whose writer opens is used).
+VIDEO_CODECS: dict[str, tuple[str, ...]] = {
+    ".avi": ("FFV1", "MJPG"),
+    ".mkv": ("FFV1", "MJPG", "mp4v"),
+    ".mp4": ("mp4v", "avc1"),
+    ".mov": ("mp4v", "MJPG"),
+}
+
+_STOP_HINT = "(use --stop-at-shortest to track the common part)"
+
+
+def _natural_key(path: str) -> list[Any]:
+    """Sort key that orders ``img2.png`` before ``img10.png``."""
+    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", path)]
+
+
+def _to_bgr(image: np.ndarray) -> np.ndarray:
+    """Convert a grayscale ``(H, W)`` / ``(H, W, 1)`` or BGRA ``(H, W, 4)`` uint8 image to ``(H, W, 3)`` BGR."""
+    if image.ndim == 3 and image.shape[2] == 3:
+        return image
+    import cv2
+
+    if image.ndim == 2 or (image.ndim == 3 and image.shape[2] == 1):
+        return cv2.cvtColor(image.reshape(image.shape[:2]), cv2.COLOR_GRAY2BGR)
+    if image.ndim == 3 and image.shape[2] == 4:
+        return cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
+    raise ValueError(f"cannot convert an image of shape {image.shape} to BGR")
+
+
+def _read_image(path: str) -> np.ndarray | None:
+    """Read an image file as ``(H, W, 3)`` uint8 BGR (grayscale and 16-bit images converted); None if unreadable."""
+    import cv2
+
+    try:
+        data = np.fromfile(path, dtype=np.uint8)  # works with non-ASCII paths, unlike cv2.imread
+    except OSError:
+        return None
+    if data.size == 0:
+        return None
+    image = cv2.imdecode(data, cv2.IMREAD_COLOR)
+    if image is None:
+        return None
+    return _to_bgr(image)
+
+
+class FrameSource:
+    """One camera's frames.
+
+    Attributes:
+        name: Label used in messages: the path, or ``"array[i]"`` for an in-memory array.
+        width: Frame width in pixels (known after opening: the first frame is probed).
+        height: Frame height in pixels.
+        fps: Frames per second when the source knows it (videos), else None.
+
+    Iterating yields ``(H, W, 3)`` uint8 BGR frames; every iteration starts again from the first frame.
+
+    ``stopped_early`` is None, or after an iteration that ended before the reported frame count (a truncated or
+    corrupt video) ``{"camera": name, "frame": index of the first frame not read, "expected": reported count,
+    "reason": ...}``.
+    """
+
+    name: str
+    width: int
+    height: int
+    fps: float | None = None
+    stopped_early: dict[str, Any] | None = None
+
+    def __len__(self) -> int:
+        """Number of frames (as reported by the source; a video may turn out shorter when read)."""
+        raise NotImplementedError
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        raise NotImplementedError
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """``(width, height)`` in pixels."""
+        return (self.width, self.height)
+
+    def _check_size(self, frame: np.ndarray, index: int, where: str | None = None) -> None:
+        h, w = frame.shape[:2]
+        if (w, h) != (self.width, self.height):
+            raise FrameError(
+                f"frame {index} of {where or self.name} is {w}x{h} pixels, but the sequence started with "
+                f"{self.width}x{self.height} (the frame size must not change)"
+            )
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.name!r}, {len(self)} frames, {self.width}x{self.height})"
+
+
+class VideoSource(FrameSource):
+    """Frames of a video file read with ``cv2.VideoCapture``.
+
+    The frame count is ``CAP_PROP_FRAME_COUNT`` (counted by decoding the file when the container does not report
+    it). When reading, at most that many frames are yielded; a video that ends earlier stops early with a
+    warning in the log (:class:`SyncedFrames` turns that into an error when other cameras continue).
+
+    Args:
+        path: Video file path (or any string ``cv2.VideoCapture`` opens, e.g. a URL).
+        name: Label for messages; defaults to the path.
+
+    Raises:
+        FrameError: The file does not exist, cannot be opened, or its first frame cannot be decoded.
+    """
+
+    def __init__(self, path: str | os.PathLike, name: str | None = None) -> None:
+        self.path = str(path)
+        self.name = name or self.path
+        is_uri = "://" in self.path or "%" in self.path
+        if not is_uri and not os.path.exists(self.path):
+            raise FrameError(f"video file not found: {self.path}")
+        if not is_uri and os.path.isdir(self.path):
+            raise FrameError(f"{self.path} is a folder, not a video file")
+        cap = self._open()
+        try:
+            ok, frame = cap.read()
+            if not ok or frame is None:
+                raise FrameError(
+                    f"cannot read the first frame of video {self.path} (corrupt file or unsupported codec)"
+                )
+            frame = _to_bgr(frame)
+            self.height, self.width = frame.shape[:2]
+            import cv2
+
+            fps = cap.get(cv2.CAP_PROP_FPS)
+            self.fps = float(fps) if fps and np.isfinite(fps) and fps > 0 else None
+            count = cap.get(cv2.CAP_PROP_FRAME_COUNT)
+            if count and np.isfinite(count) and count > 0:
+                self._count = int(round(count))
+            else:
+                n = 1
+                while cap.grab():
+                    n += 1
+                log.debug("%s does not report its frame count; counted %d frames", self.path, n)
+                self._count = n
+        finally:
+            cap.release()
+        log.debug(
+            "opened video %s: %d frames, %dx%d, %s fps", self.path, self._count, self.width, self.height, self.fps
+        )
+
+    def _open(self) -> Any:
+        import cv2
+
+        cap = cv2.VideoCapture(self.path)
+        if not cap.isOpened():
+            cap.release()
+            raise FrameError(f"cannot open video {self.path} (not a video file, corrupt, or unsupported codec)")
+        return cap
+
+    def __len__(self) -> int:
+        return self._count
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        self.stopped_early = None
+        cap = self._open()
+        try:
+            for i in range(self._count):
+                ok, frame = cap.read()
+                if not ok or frame is None:
+                    log.warning("video %s ended after %d frames, although it reports %d", self.path, i, self._count)
+                    self.stopped_early = {
+                        "camera": self.name,
+                        "frame": i,
+                        "expected": self._count,
+                        "reason": f"video ended after {i} of its {self._count} reported frames (truncated or corrupt)",
+                    }
+                    return
+                frame = _to_bgr(frame)
+                self._check_size(frame, i)
+                yield frame
+        finally:
+            cap.release()
+
+
+class ImageSequenceSource(FrameSource):
+    """Frames read from a list of image files (a folder, a glob pattern, or a single image).
+
+    Grayscale, 16-bit and BGRA images are converted to 8-bit BGR.
+
+    Args:
+        files: Image paths, in frame order (at least one).
+        name: Label for messages (the folder or pattern).
+
+    Raises:
+        FrameError: The first image cannot be read.
+    """
+
+    def __init__(self, files: Sequence[str], name: str) -> None:
+        if not files:
+            raise FrameError(f"no images in {name}")
+        self.files = [str(f) for f in files]
+        self.name = name
+        first = _read_image(self.files[0])
+        if first is None:
+            raise FrameError(f"cannot read image {self.files[0]} (not an image, corrupt, or unsupported format)")
+        self.height, self.width = first.shape[:2]
+
+    def __len__(self) -> int:
+        return len(self.files)
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        for i, path in enumerate(self.files):
+            frame = _read_image(path)
+            if frame is None:
+                raise FrameError(f"cannot read image {path} (frame {i} of {self.name})")
+            self._check_size(frame, i, where=f"{self.name} ({path})")
+            yield frame
+
+
+class ArraySource(FrameSource):
+    """Frames held in memory.
+
+    Args:
+        frames: ``(F, H, W, 3)`` BGR or ``(F, H, W)`` / ``(F, H, W, 1)`` grayscale array of uint8, ``F >= 1``.
+        name: Label for messages.
+
+    Raises:
+        FrameError: Wrong dtype, wrong number of dimensions, or no frames.
+
+    Yielded BGR frames are views into the array (not copies); grayscale frames are converted per frame.
+    """
+
+    def __init__(self, frames: np.ndarray, name: str = "array") -> None:
+        self.name = name
+        arr = np.asarray(frames)
+        if arr.dtype != np.uint8:
+            raise FrameError(f"{name}: frames must be uint8, got {arr.dtype}")
+        if not (arr.ndim == 3 or (arr.ndim == 4 and arr.shape[3] in (1, 3))):
+            raise FrameError(f"{name}: frames must have shape (F, H, W, 3) or (F, H, W), got {tuple(arr.shape)}")
+        if arr.shape[0] == 0 or arr.shape[1] == 0 or arr.shape[2] == 0:
+            raise FrameError(f"{name}: empty frame array of shape {tuple(arr.shape)}")
+        self.frames = arr
+        self.height, self.width = int(arr.shape[1]), int(arr.shape[2])
+
+    def __len__(self) -> int:
+        return int(self.frames.shape[0])
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        for i in range(len(self)):
+            yield _to_bgr(np.ascontiguousarray(self.frames[i]))
+
+
+def _is_image_file(path: str) -> bool:
+    return os.path.splitext(path)[1].lower() in IMAGE_EXTENSIONS
+
+
+def open_source(spec: str | os.PathLike | np.ndarray, name: str | None = None) -> FrameSource:
+    """Open one camera's frames.
+
+    Args:
+        spec: A video file path; a folder of images (``*.png``, ``*.jpg``, ``*.jpeg``, ``*.bmp``, ``*.tif``,
+            ``*.tiff``, sorted in natural order, hidden files ignored); a glob pattern string containing ``*``
+            or ``?`` (matching files in natural order); a single image file (one frame); or a uint8 array
+            ``(F, H, W, 3)`` BGR / ``(F, H, W)`` grayscale.
+        name: Label used in messages; defaults to the path, or ``"array"`` for arrays.
+
+    Returns:
+        The opened source (its first frame has been read, so ``width`` and ``height`` are known).
+
+    Raises:
+        FrameError: Missing file, unreadable video or image, empty folder, glob with no match, bad array.
+    """
+    if isinstance(spec, np.ndarray):
+        return ArraySource(spec, name=name or "array")
+    if not isinstance(spec, (str, os.PathLike)):
+        raise FrameError(f"cannot use {type(spec).__name__} as a frame source (expected a path or a uint8 array)")
+    path = os.fspath(spec)
+    label = name or path
+    if os.path.isdir(path):
+        files = [
+            os.path.join(path, f)
+            for f in os.listdir(path)
+            if not f.startswith(".") and _is_image_file(f) and os.path.isfile(os.path.join(path, f))
+        ]
+        if not files:
+            exts = ", ".join("*" + e for e in IMAGE_EXTENSIONS)
+            raise FrameError(f"image folder {path} contains no images ({exts})")
+        return ImageSequenceSource(sorted(files, key=_natural_key), name=label)
+    if not os.path.exists(path) and ("*" in path or "?" in path):
+        files = [f for f in glob.glob(path) if os.path.isfile(f)]
+        if not files:
+            raise FrameError(f"no files match the pattern {path}")
+        return ImageSequenceSource(sorted(files, key=_natural_key), name=label)
+    if os.path.isfile(path) and _is_image_file(path):
+        return ImageSequenceSource([path], name=label)
+    return VideoSource(path, name=label)
+
+
+class SyncedFrames:
+    """Several cameras' frames in lock-step.
+
+    Args:
+        sources: One opened :class:`FrameSource` per camera (at least one); frame sizes may differ per camera.
+        stop_at_shortest: Track only the frames all sources have instead of failing on differing frame counts
+            (also stops quietly, with a log warning, when a video ends earlier than it reported).
+        max_frames: Yield at most this many frames (``None``: all). Differing frame counts are accepted when
+            every source has at least ``max_frames`` frames.
+
+    Raises:
+        FrameError: The sources report different frame counts (unless ``stop_at_shortest`` or ``max_frames``
+            makes that irrelevant), or no source was given.
+        ConfigError: ``max_frames`` is negative.
+
+    Iterating yields, per frame index, a list with one ``(H_c, W_c, 3)`` uint8 BGR frame per camera. If a video
+    turns out shorter than it reported while others continue, a :class:`FrameError` is raised at that point
+    (frames before it have been yielded); with ``stop_at_shortest``, or when all sources end together,
+    iteration just stops early. Either way ``stopped_early`` then says where: ``{"camera": the ended source(s),
+    "frame": the first frame index not delivered, "expected": the frames expected, "reason": ...}`` (None after
+    an iteration that delivered every frame).
+    """
+
+    stopped_early: dict[str, Any] | None = None
+
+    def __init__(
+        self, sources: list[FrameSource], stop_at_shortest: bool = False, max_frames: int | None = None
+    ) -> None:
+        if not sources:
+            raise FrameError("no frame sources given (need one video, image folder or array per camera)")
+        if max_frames is not None and max_frames < 0:
+            raise ConfigError(f"max_frames must be >= 0, got {max_frames}")
+        self.sources = list(sources)
+        self.stop_at_shortest = stop_at_shortest
+        self.max_frames = max_frames
+        counts = [len(s) for s in self.sources]
+        shortest = min(counts)
+        if len(set(counts)) > 1 and not stop_at_shortest and (max_frames is None or max_frames > shortest):
+            listing = ", ".join(f"{s.name} {n}" for s, n in zip(self.sources, counts, strict=True))
+            raise FrameError(f"videos have different frame counts: {listing} {_STOP_HINT}")
+        if len(set(counts)) > 1:
+            log.info("frame counts differ (%s); using the first %d frames", counts, shortest)
+        rates = [getattr(s, "fps", None) for s in self.sources]
+        known = [r for r in rates if r]
+        if known and max(known) > 1.01 * min(known):
+            listing = ", ".join(f"{s.name} {r:g} fps" for s, r in zip(self.sources, rates, strict=True) if r)
+            log.warning("frame rates differ (%s): frames are paired by index, check the videos are in sync", listing)
+        self._len = shortest if max_frames is None else min(shortest, max_frames)
+
+    @property
+    def sizes(self) -> list[tuple[int, int]]:
+        """``(width, height)`` in pixels per camera."""
+        return [(s.width, s.height) for s in self.sources]
+
+    @property
+    def names(self) -> list[str]:
+        """Each camera's source label (path or ``array[i]``)."""
+        return [s.name for s in self.sources]
+
+    def __len__(self) -> int:
+        """Number of frame steps that will be yielded (unless a video turns out shorter than it reported)."""
+        return self._len
+
+    def __iter__(self) -> Iterator[list[np.ndarray]]:
+        self.stopped_early = None
+        if self._len == 0:
+            return
+        iterators = [iter(s) for s in self.sources]
+        try:
+            for index in range(self._len):
+                frames: list[np.ndarray] = []
+                ended: list[int] = []
+                for c, it in enumerate(iterators):
+                    frame = next(it, None)
+                    if frame is None:
+                        ended.append(c)
+                    else:
+                        frames.append(frame)
+                if not ended:
+                    yield frames
+                    continue
+                names = ", ".join(self.sources[c].name for c in ended)
+                reasons = [self.sources[c].stopped_early for c in ended]
+                self.stopped_early = {
+                    "camera": names,
+                    "frame": index,
+                    "expected": self._len,
+                    "reason": "; ".join(r["reason"] for r in reasons if r) or "the source ended early",
+                }
+                if len(ended) == len(iterators) or self.stop_at_shortest:
+                    log.warning("%s ended after %d frames (expected %d); stopping there", names, index, self._len)
+                    return
+                parts = [
+                    f"{s.name} ended after {index} (reported {len(s)})" if c in ended else f"{s.name} {len(s)}"
+                    for c, s in enumerate(self.sources)
+                ]
+                raise FrameError(f"videos have different frame counts: {', '.join(parts)} {_STOP_HINT}")
+        finally:
+            for it in iterators:
+                close = getattr(it, "close", None)
+                if close is not None:
+                    close()
+
+    def __repr__(self) -> str:
+        return f"SyncedFrames({len(self.sources)} cameras, {len(self)} frames)"
+
+
+def open_frames(
+    specs: list[str | os.PathLike | np.ndarray], stop_at_shortest: bool = False, max_frames: int | None = None
+) -> SyncedFrames:
+    """Open one frame source per camera and synchronise them.
+
+    Args:
+        specs: One spec per camera, as accepted by :func:`open_source`; arrays are named ``array[i]``.
+        stop_at_shortest: See :class:`SyncedFrames`.
+        max_frames: See :class:`SyncedFrames`.
+
+    Returns:
+        The synchronised sources.
+
+    Raises:
+        FrameError: A source cannot be opened, or the sources are inconsistent.
+    """
+    sources = [
+        open_source(spec, name=f"array[{i}]" if isinstance(spec, np.ndarray) else None) for i, spec in enumerate(specs)
+    ]
+    return SyncedFrames(sources, stop_at_shortest=stop_at_shortest, max_frames=max_frames)
+
+
+class VideoWriter:
+    """Write frames to a video file, atomically, with a lossless codec where possible.
+
+    The codec is chosen by extension (:data:`VIDEO_CODECS`): ``.avi`` tries FFV1 (lossless) then MJPG;
+    ``.mkv`` FFV1, MJPG, mp4v; ``.mp4`` mp4v then avc1; ``.mov`` mp4v then MJPG. Frames are written to a hidden
+    temporary file in the same folder, renamed to ``path`` by :meth:`close`; leaving the ``with`` block by an
+    exception (including Ctrl-C) deletes the temporary file, so no broken video is left behind. If no frame
+    was written, no file is created.
+
+    Args:
+        path: Output video path.
+        fps: Frames per second (> 0).
+        size: ``(width, height)`` in pixels; ``None`` takes it from the first frame.
+
+    Attributes:
+        codec: The FOURCC in use (``None`` until the writer is opened).
+        frames_written: Number of frames written so far.
+
+    Raises:
+        OutputError: Unsupported extension, missing output folder, or no codec could be opened.
+    """
+
+    def __init__(self, path: str | os.PathLike, fps: float = 25.0, size: tuple[int, int] | None = None) -> None:
+        self.path = Path(path)
+        ext = self.path.suffix.lower()
+        if ext not in VIDEO_CODECS:
+            raise OutputError(f"cannot write video {self.path}: unsupported extension (use {', '.join(VIDEO_CODECS)})")
+        if not fps or fps <= 0:
+            raise ConfigError(f"video fps must be > 0, got {fps}")
+        if not self.path.parent.is_dir():
+            raise OutputError(f"cannot write video {self.path}: folder {self.path.parent} does not exist")
+        self.fps = float(fps)
+        self.size = tuple(int(v) for v in size) if size is not None else None
+        self.codec: str | None = None
+        self.frames_written = 0
+        self._tmp = self.path.with_name(f".{self.path.stem}.tmp-{uuid.uuid4().hex[:8]}{self.path.suffix}")
+        self._writer: Any = None
+        self._closed = False
+        if self.size is not None:
+            self._open()
+
+    def _open(self) -> None:
+        import cv2
+
+        assert self.size is not None
+        tried = []
+        for fourcc in VIDEO_CODECS[self.path.suffix.lower()]:
+            writer = cv2.VideoWriter(str(self._tmp), cv2.VideoWriter_fourcc(*fourcc), self.fps, self.size)
+            if writer.isOpened():
+                self._writer, self.codec = writer, fourcc
+                log.debug("writing %s with codec %s (%dx%d @ %g fps)", self.path, fourcc, *self.size, self.fps)
+                return
+            writer.release()
+            tried.append(fourcc)
+        self._remove_tmp()
+        raise OutputError(f"cannot write video {self.path}: no codec available (tried {', '.join(tried)})")
+
+    def write(self, frame: np.ndarray) -> None:
+        """Append one frame.
+
+        Args:
+            frame: ``(H, W, 3)`` uint8 BGR or ``(H, W)`` uint8 grayscale, of the writer's size.
+        """
+        if self._closed:
+            raise RuntimeError(f"video writer for {self.path} is closed")
+        frame = np.asarray(frame)
+        if frame.dtype != np.uint8:
+            raise ValueError(f"video frames must be uint8, got {frame.dtype}")
+        frame = _to_bgr(frame)
+        h, w = frame.shape[:2]
+        if self.size is None:
+            self.size = (w, h)
+            self._open()
+        if (w, h) != self.size:
+            raise ValueError(f"frame of {w}x{h} pixels written to video {self.path} of {self.size[0]}x{self.size[1]}")
+        self._writer.write(np.ascontiguousarray(frame))
+        self.frames_written += 1
+
+    def _remove_tmp(self) -> None:
+        try:
+            self._tmp.unlink()
+        except FileNotFoundError:
+            pass
+
+    def close(self) -> Path | None:
+        """Finish the file and rename it into place (idempotent).
+
+        Returns:
+            The written path, or None when no frame was written (nothing is created then).
+        """
+        if self._closed:
+            return self.path if self.path.exists() and self.frames_written else None
+        self._closed = True
+        if self._writer is not None:
+            self._writer.release()
+        if self.frames_written == 0:
+            self._remove_tmp()
+            log.warning("no frames written to %s; no video created", self.path)
+            return None
+        os.replace(self._tmp, self.path)
+        log.info("wrote %s (%d frames, %s)", self.path, self.frames_written, self.codec)
+        return self.path
+
+    def abort(self) -> None:
+        """Stop writing and delete the temporary file (``path`` is left untouched)."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._writer is not None:
+            self._writer.release()
+        self._remove_tmp()
+
+    def __enter__(self) -> VideoWriter:
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+
+def write_video(path: str | os.PathLike, frames: Iterable[np.ndarray], fps: float = 25.0) -> Path | None:
+    """Write frames to a video file (see :class:`VideoWriter` for codecs and atomicity).
+
+    Args:
+        path: Output path (``.avi``, ``.mkv``, ``.mp4`` or ``.mov``).
+        frames: ``(H, W, 3)`` uint8 BGR (or ``(H, W)`` grayscale) frames, all the same size.
+        fps: Frames per second.
+
+    Returns:
+        The written path, or None when ``frames`` was empty.
+    """
+    with VideoWriter(path, fps=fps) as writer:
+        for frame in frames:
+            writer.write(frame)
+    return writer.path if writer.frames_written else None
+
+
+class prefetch:  # noqa: N801 - used like a function: ``for frame in prefetch(frames): ...``
+    """Iterate over ``source`` with a background thread decoding up to ``depth`` items ahead.
+
+    Video decoding (OpenCV releases the GIL) then overlaps with the tracker's device work. Items come out in
+    order; an exception raised by the source is re-raised in the consumer at the position it occurred; leaving
+    the loop early (``break``, an exception, Ctrl-C) stops the thread at its next item.
+
+    Args:
+        source: any iterable (e.g. :class:`SyncedFrames`).
+        depth: queue length (frames decoded ahead); bounded so memory stays small.
+    """
+
+    _END = object()
+
+    def __init__(self, source, depth: int = 4) -> None:
+        import queue
+        import threading
+
+        if depth < 1:
+            raise ValueError(f"prefetch depth must be >= 1, got {depth}")
+        self._source = source
+        self._queue: queue.Queue = queue.Queue(maxsize=depth)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="wptrack-prefetch", daemon=True)
+        self._thread.start()
+
+    def __len__(self) -> int:
+        return len(self._source)
+
+    def _put(self, item) -> bool:
+        import queue
+
+        while not self._stop.is_set():
+            try:
+                self._queue.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def _run(self) -> None:
+        try:
+            for item in self._source:
+                if not self._put((item, None)):
+                    return
+        except BaseException as e:  # noqa: BLE001 - handed to the consumer
+            self._put((None, e))
+            return
+        self._put((self._END, None))
+
+    def __iter__(self):
+        try:
+            while True:
+                item, error = self._queue.get()
+                if error is not None:
+                    raise error
+                if item is self._END:
+                    return
+                yield item
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        """Stop the background thread (idempotent)."""
+        self._stop.set()
+        self._thread.join(timeout=5.0)
