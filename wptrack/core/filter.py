@@ -24,6 +24,7 @@ import math
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 import warp as wp
@@ -75,6 +76,27 @@ class Estimate:
     detection: int = -1
     """Trackers with a detection-driven proposal: detection components found this frame (0 = no detection);
     -1 when the tracker has none."""
+
+
+@runtime_checkable
+class Tracker(Protocol):
+    """The contract every tracker keeps (colour, people, templates), which the run loop, checkpoints, the report and
+    the benchmarks use.
+
+    ``step(observation)`` tracks one frame (colour: one BGR image per camera; people: ``(images, masks)``;
+    templates: one motion mask) and returns the frame's estimate; ``track(observations, max_frames)`` iterates;
+    ``state_dict()`` / ``load_state_dict()`` save and restore every array that carries the tracker to the next frame,
+    by name, and refuse a state of another configuration. The rows a run writes from an estimate are the run job's
+    (:class:`wptrack.runs.loop.TrackerRun`).
+    """
+
+    def step(self, observation: Any) -> Any: ...
+
+    def track(self, observations: Iterable, max_frames: int | None = None) -> Iterator: ...
+
+    def state_dict(self) -> dict[str, np.ndarray]: ...
+
+    def load_state_dict(self, state: dict[str, np.ndarray]) -> None: ...
 
 
 def _seed_words(seed: int) -> wp.vec2ui:
@@ -136,49 +158,67 @@ def _dtype_tail(arr: wp.array) -> tuple[int, ...]:
     return tuple(getattr(arr.dtype, "_shape_", ()))
 
 
-def _device_arrays(obj, prefix: str = "", seen: set[int] | None = None) -> Iterator[tuple[str, wp.array]]:
-    """Every ``wp.array`` reachable from ``obj``'s attributes: directly, in lists/tuples/dicts, in ``@wp.struct``
-    instances, and in wptrack helper objects (recursively), as ``(dotted.name, array)`` in a stable order.
+def arrays_state(arrays: dict[str, wp.array]) -> dict[str, np.ndarray]:
+    """Host copies of named device arrays (a tracker's :meth:`FrameChain.state_arrays`). Syncs with the device."""
+    return {name: arr.numpy().copy() for name, arr in arrays.items()}
 
-    Buffers created lazily or cached views appear only once used, so a fresh filter lists a subset of the names of
-    one that has run: :meth:`FrameChain.load_state_dict` restores the names the fresh filter has."""
-    if isinstance(obj, wp.array):  # an array reachable by two names (a cached view) is listed under both
-        yield prefix, obj
-        return
-    seen = set() if seen is None else seen
-    if id(obj) in seen:
-        return
-    seen.add(id(obj))
-    if isinstance(obj, (list, tuple)):
-        for i, v in enumerate(obj):
-            yield from _device_arrays(v, f"{prefix}.{i}", seen)
-    elif isinstance(obj, dict):
-        for k in sorted(obj, key=str):
-            yield from _device_arrays(obj[k], f"{prefix}.{k}", seen)
-    elif hasattr(obj, "_cls") and hasattr(obj._cls, "vars"):  # a @wp.struct instance
-        for k in obj._cls.vars:
-            yield from _device_arrays(getattr(obj, k), f"{prefix}.{k}", seen)
-    elif type(obj).__module__.startswith("wptrack") and hasattr(obj, "__dict__"):
-        for k in sorted(vars(obj)):
-            if not k.startswith("__"):
-                yield from _device_arrays(getattr(obj, k), f"{prefix}.{k}" if prefix else k, seen)
+
+def check_state(arrays: dict[str, wp.array], state: dict[str, np.ndarray], host: tuple[str, ...] = ()) -> None:
+    """Check that ``state`` holds exactly the named ``arrays`` (and the ``host`` keys), each with the array's shape
+    and element type.
+
+    Raises:
+        ConfigError: a name missing or unexpected (a checkpoint of another configuration or version), or an array of
+            another shape or type; the message names the arrays.
+    """
+    expected = set(arrays) | set(host)
+    missing, unexpected = sorted(expected - set(state)), sorted(set(state) - expected)
+    if missing or unexpected:
+        parts = [f"missing {missing[:5]}" if missing else "", f"unexpected {unexpected[:5]}" if unexpected else ""]
+        raise ConfigError(
+            f"checkpoint: arrays {' and '.join(p for p in parts if p)} (a checkpoint of another configuration or "
+            "version?)"
+        )
+    for name, arr in arrays.items():
+        value = np.asarray(state[name])
+        shape = tuple(arr.shape) + _dtype_tail(arr)
+        kind = np.dtype(wp.dtype_to_numpy(getattr(arr.dtype, "_wp_scalar_type_", arr.dtype)))
+        if value.shape != shape or value.dtype != kind:
+            raise ConfigError(
+                f"checkpoint: array {name} is {value.dtype} {value.shape}, the tracker's is {kind} {shape}"
+            )
+
+
+def load_arrays(arrays: dict[str, wp.array], state: dict[str, np.ndarray]) -> None:
+    """Copy checked host arrays (:func:`check_state`) into the named device arrays."""
+    for name, arr in arrays.items():
+        arr.assign(np.asarray(state[name]))
 
 
 class FrameChain:
     """A filter whose frame is a fixed chain of device launches over ping-pong buffers (parity 0/1).
 
-    Subclasses set ``device``, ``is_cuda``, ``use_graph``, ``parity``, ``frames_done``, ``_graphs = [None, None]``
-    and ``_warm = [False, False]``, and implement :meth:`stages` and ``step``. This base runs the chain (CUDA graph
-    capture per parity after a warm-up run), times it and iterates over observations.
+    Subclasses call ``FrameChain.__init__`` first, implement :meth:`stages` (the chain), :meth:`state_arrays` (the
+    device arrays a frame hands to the next) and ``step``. This base runs the chain (CUDA graph capture per parity
+    after a warm-up run), times it, saves and restores the state, and iterates over observations.
+
+    Attributes:
+        device: the Warp device, e.g. ``cpu`` or ``cuda:0``.
+        is_cuda: whether it is a CUDA device.
+        use_graph: the chain is captured as a CUDA graph per parity (CUDA only).
+        parity: which of the ping-pong buffers holds the current particles (0 or 1).
+        frames_done: frames tracked so far.
     """
 
-    device: str
-    is_cuda: bool
-    use_graph: bool
-    parity: int
-    frames_done: int
-    _graphs: list
-    _warm: list[bool]
+    def __init__(self, device: str, use_graph: bool | None = None) -> None:
+        dev = wp.get_device(device)
+        self.device = str(dev)
+        self.is_cuda = dev.is_cuda
+        self.use_graph = self.is_cuda if use_graph is None else (bool(use_graph) and self.is_cuda)
+        self.parity = 0
+        self.frames_done = 0
+        self._graphs: list = [None, None]
+        self._warm = [False, False]
 
     def stages(self, src: int, dst: int) -> list[tuple[str, Callable[[], None]]]:  # pragma: no cover - abstract
         """The frame chain as named stages; running them in order is one filter iteration."""
@@ -257,38 +297,38 @@ class FrameChain:
         return times
 
     # --- checkpoints -------------------------------------------------------------------------------
-    def state_dict(self) -> dict[str, np.ndarray]:
-        """A copy of the filter's whole state after the last frame, for :meth:`load_state_dict`.
+    def state_arrays(self) -> dict[str, wp.array]:  # pragma: no cover - implemented by each tracker
+        """The device arrays that carry the filter from one frame to the next, by name (both ping-pong buffers where a
+        frame reads the one it did not write). Scratch written before it is read in every frame is left out. This is
+        what a checkpoint saves: a name added here is a new checkpoint key."""
+        raise NotImplementedError
 
-        Every Warp array the filter holds (directly, in lists/dicts, in ``@wp.struct`` instances or in its helper
-        objects such as the resampler) is copied to the host, with ``parity`` and ``frames_done``: restoring it
-        into a filter built with the same configuration continues exactly as the original would have (the random
-        streams are counter-based, keyed by the frame). Scratch buffers are included (they are overwritten each
-        frame anyway), so the size is the filter's device memory. Syncs with the device: not for the frame loop.
-        """
-        state = {name: arr.numpy().copy() for name, arr in _device_arrays(self)}
-        state["__parity__"] = np.array(self.parity, dtype=np.int64)
-        state["__frames_done__"] = np.array(self.frames_done, dtype=np.int64)
-        return state
+    def host_state(self) -> dict[str, np.ndarray]:
+        """The host-side counters that go with :meth:`state_arrays` (``__parity__``, ``__frames_done__``)."""
+        return {"__parity__": np.int64(self.parity), "__frames_done__": np.int64(self.frames_done)}
+
+    def load_host_state(self, state: dict[str, np.ndarray]) -> None:
+        """Restore :meth:`host_state`."""
+        self.parity = int(state["__parity__"])
+        self.frames_done = int(state["__frames_done__"])
+
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """A copy of the filter's state after the last frame (:meth:`state_arrays` and :meth:`host_state`), for
+        :meth:`load_state_dict`: restoring it into a filter built with the same configuration continues exactly as the
+        original would have (the random streams are counter-based, keyed by the frame). Syncs with the device: not for
+        the frame loop."""
+        return {**arrays_state(self.state_arrays()), **self.host_state()}
 
     def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
         """Restore a :meth:`state_dict` into this filter (built with the same configuration).
 
         Raises:
-            ConfigError: the state does not match this filter (missing arrays, other shapes or types).
+            ConfigError: the state does not match this filter (names missing or unexpected, other shapes or types).
         """
-        arrays = dict(_device_arrays(self))
-        missing = sorted(set(arrays) - set(state))
-        if missing:
-            raise ConfigError(f"checkpoint: arrays {missing[:5]} missing (a checkpoint of another configuration?)")
-        for name, arr in arrays.items():
-            value = np.asarray(state[name])
-            if value.shape != tuple(arr.shape) + _dtype_tail(arr):
-                raise ConfigError(f"checkpoint: array {name} has shape {value.shape}, the filter's is {arr.shape}")
-        for name, arr in arrays.items():
-            arr.assign(np.asarray(state[name]))
-        self.parity = int(state["__parity__"])
-        self.frames_done = int(state["__frames_done__"])
+        arrays = self.state_arrays()
+        check_state(arrays, state, tuple(self.host_state()))
+        load_arrays(arrays, state)
+        self.load_host_state(state)
         wp.synchronize_device(self.device)
 
     def track(self, observations: Iterable, max_frames: int | None = None) -> Iterator:
@@ -344,11 +384,9 @@ class ParticleFilter(FrameChain):
         if not (0.0 < ess_threshold <= 1.0):
             raise ConfigError(f"ess_threshold: expected a fraction in (0, 1], got {ess_threshold!r}")
         check_fits(n, POINT_STATE_BYTES + resampler_bytes(resampling), 0, device)
+        super().__init__(device, use_graph)
         self.n = n
-        self.device = str(wp.get_device(device))
-        self.is_cuda = wp.get_device(device).is_cuda
         self.seed = _seed_words(seed)
-        self.use_graph = self.is_cuda if use_graph is None else (bool(use_graph) and self.is_cuda)
         sms = wp.get_device(self.device).sm_count if self.is_cuda else 0
         self.blocks, self.chunk = block_partition(n, not self.is_cuda, BLOCK, MAX_BLOCKS, sms)
         d = self.device
@@ -375,10 +413,23 @@ class ParticleFilter(FrameChain):
         if self.keep:
             self.sub_x_host = wp.zeros(self.keep, dtype=wp.vec3, device="cpu", pinned=pinned)
             self.sub_w_host = wp.zeros(self.keep, dtype=wp.float32, device="cpu", pinned=pinned)
-        self.parity = 0
-        self.frames_done = 0
-        self._graphs: list = [None, None]
-        self._warm = [False, False]
+
+    def state_arrays(self) -> dict[str, wp.array]:
+        """The point filter's state: both position and log-weight buffers, the ancestors and the resample flag the
+        next prediction reads, the frame counter (it keys the random streams), and the per-frame parameters sigma and
+        the ESS threshold (they may be changed between frames). The per-block partials, the estimate vector, the
+        resampler's scratch and the subsample are written before they are read in every frame."""
+        return {
+            "x.0": self.x[0],
+            "x.1": self.x[1],
+            "logw.0": self.logw[0],
+            "logw.1": self.logw[1],
+            "ancestors": self.ancestors,
+            "resampled": self.resampled,
+            "frame": self.frame,
+            "sigma": self.sigma,
+            "ess_threshold": self.ess_threshold,
+        }
 
     # --- initialisation ---------------------------------------------------------------------------
     def init_point(self, point) -> None:
@@ -519,16 +570,24 @@ class ParticleFilter(FrameChain):
         """Upload one frame's observation and run one iteration."""
         raise NotImplementedError
 
+    def launch_frame(self) -> None:
+        """Launch one frame of the chain on the already uploaded observation without waiting for the device: the
+        estimate reaches the host buffers once the device is synchronised (for trackers that run several filters per
+        frame and synchronise once, :class:`wptrack.trackers.people.tracker.PeopleTracker`)."""
+        src, dst = self.parity, 1 - self.parity
+        self._run_chain(src, dst)
+        self.parity = dst
+        self.frames_done += 1
+
     def advance(self) -> Estimate:
         """Run one frame of the chain on the already uploaded observation and return the estimate."""
         t0 = time.perf_counter()
-        src, dst = self.parity, 1 - self.parity
-        self._run_chain(src, dst)
+        frame = self.frames_done
+        self.launch_frame()
         wp.synchronize_device(self.device)
-        self.parity = dst
         e = self.est_host.numpy()
         est = Estimate(
-            frame=self.frames_done,
+            frame=frame,
             mean=e[kreduce.EST_MEAN : kreduce.EST_MEAN + 3].copy(),
             std=e[kreduce.EST_STD : kreduce.EST_STD + 3].copy(),
             map=e[kreduce.EST_MAP : kreduce.EST_MAP + 3].copy(),
@@ -542,5 +601,4 @@ class ParticleFilter(FrameChain):
             w = self.sub_w_host.numpy().copy()
             est.weights = w
         est.timings["filter"] = time.perf_counter() - t0
-        self.frames_done += 1
         return est

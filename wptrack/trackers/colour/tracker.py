@@ -291,6 +291,11 @@ class ColorTracker(ParticleFilter):
             self.device,
         )
 
+    def state_arrays(self) -> dict[str, wp.array]:
+        """:meth:`ParticleFilter.state_arrays` and the frame whose prior is the uniform initial box
+        (``uniform_frame``); the detection components are recomputed every frame."""
+        return {**super().state_arrays(), "uniform_frame": self.uniform_frame}
+
     def init_box(self, lo, hi) -> None:
         """Particles uniform in the box [lo, hi] (metres); with the mixture proposal the next frame's prior is this
         uniform distribution (alpha = 1 for that frame, ``kernels.colour.proposal``)."""

@@ -21,7 +21,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -31,7 +31,7 @@ from wptrack.cameras.rig import Rig
 from wptrack.cameras.structs import DeviceRig
 from wptrack.core.device import block_partition, resolve_device
 from wptrack.core.errors import ConfigError, FrameError
-from wptrack.core.filter import BLOCK, MAX_BLOCKS, ParticleFilter, _device_arrays
+from wptrack.core.filter import BLOCK, MAX_BLOCKS, ParticleFilter, arrays_state, check_state, load_arrays
 from wptrack.kernels.core import reduce as kreduce
 from wptrack.kernels.people import descriptor as kdesc
 from wptrack.kernels.people import filter as kpeople
@@ -150,6 +150,17 @@ class PersonFilter(ParticleFilter):
         self.grid_host = wp.zeros(self.grid_dims, dtype=wp.float32, device="cpu", pinned=tracker.is_cuda)
         self.log_norm = wp.zeros(1, dtype=wp.float64, device=d)
         self._occupancy_cmds: dict[int, tuple[wp.Launch, wp.Launch]] = {}  # recorded launches per parity
+
+    def state_arrays(self) -> dict[str, wp.array]:
+        """:meth:`ParticleFilter.state_arrays` and the person's other particle fields, both buffers of each (velocity,
+        appearance model C, descriptor A, mass), the patch colours and the velocity noise. The occupancy grid is
+        recomputed when asked for."""
+        arrays = super().state_arrays()
+        for name in ("vel", "model", "desc", "mass"):
+            for k, arr in enumerate(getattr(self, name)):
+                arrays[f"{name}.{k}"] = arr
+        arrays.update(rgb=self.rgb, sigma_vel=self.sigma_vel)
+        return arrays
 
     def launch_occupancy(self, origin: np.ndarray) -> None:
         """Launch the occupancy grid of the current particles with its corner at ``origin`` (metres) into
@@ -566,9 +577,14 @@ class PeopleTracker:
             wp.copy(self._top_host, self.top)
 
     # --- the frame --------------------------------------------------------------------------------------
-    def step(self, images: Sequence[np.ndarray], masks: Sequence[np.ndarray]) -> PeopleEstimate:
+    def step(
+        self, images: Sequence[np.ndarray] | tuple[Sequence[np.ndarray], Sequence[np.ndarray]], masks=None
+    ) -> PeopleEstimate:
         """Track one synchronised set of frames: one (H, W, 3) uint8 BGR image and one (H, W) motion mask
-        (nonzero = motion) per camera, in rig order."""
+        (nonzero = motion) per camera, in rig order; ``step(images, masks)`` or ``step((images, masks))`` (the
+        observation of the tracker contract, :class:`wptrack.core.filter.Tracker`)."""
+        if masks is None:
+            images, masks = images
         t0 = time.perf_counter()
         self.upload(images, masks)
         t1 = time.perf_counter()
@@ -576,10 +592,7 @@ class PeopleTracker:
         active = [k for k in range(len(self.pool)) if self.slot_id[k] >= 0]
         for j, k in enumerate(active):
             p = self.pool[k]
-            src, dst = p.parity, 1 - p.parity
-            p._run_chain(src, dst)
-            p.parity = dst
-            p.frames_done += 1
+            p.launch_frame()
             wp.launch(
                 kpeople.person_xy_kernel,
                 dim=1,
@@ -607,6 +620,18 @@ class PeopleTracker:
         self.frames_done += 1
         est.timings.update(upload=t1 - t0, filter=t2 - t1, population=time.perf_counter() - t2)
         return est
+
+    def track(
+        self,
+        observations: Iterable[tuple[Sequence[np.ndarray], Sequence[np.ndarray]]],
+        max_frames: int | None = None,
+    ) -> Iterator[PeopleEstimate]:
+        """Iterate over ``(images, masks)`` per frame (e.g. ``zip(open_frames(videos), motion_masks)``), yielding one
+        estimate each, for at most ``max_frames`` frames."""
+        for k, obs in enumerate(observations):
+            if max_frames is not None and k >= max_frames:
+                return
+            yield self.step(obs)
 
     # --- who is there (ours) ---------------------------------------------------------------------------------
     def _cell_centres(self) -> tuple[np.ndarray, np.ndarray]:
@@ -767,27 +792,43 @@ class PeopleTracker:
         return [int(i) for i in self.slot_id if i >= 0]
 
     # --- checkpoints -----------------------------------------------------------------------------------------
-    def state_dict(self) -> dict[str, np.ndarray]:
-        """The whole state after the last frame (device arrays of the tracker and its pool, and the population
-        bookkeeping), for :meth:`load_state_dict`."""
-        state = {name: arr.numpy().copy() for name, arr in _device_arrays(self)}
-        for name in ("slot_id", "slot_age", "slot_miss", "slot_close", "pending"):
-            state[f"__{name}__"] = getattr(self, name).copy()
+    _HOST_ARRAYS = ("slot_id", "slot_age", "slot_miss", "slot_close", "pending")
+    """The population bookkeeping kept on the host (per slot: person id, age, missed and close frames; pending
+    births)."""
+
+    def state_arrays(self) -> dict[str, wp.array]:
+        """The device arrays that carry the tracker to the next frame: the previous frame (the noise estimate of eq. 18
+        differences consecutive frames) and every slot's person filter (``person<k>.<name>``, see
+        :meth:`PersonFilter.state_arrays`), free slots included (a checkpoint has the same names whoever is tracked)."""
+        arrays = {"bgr_prev": self.bgr_prev}
+        for k, p in enumerate(self.pool):
+            arrays.update({f"person{k}.{name}": arr for name, arr in p.state_arrays().items()})
+        return arrays
+
+    def host_state(self) -> dict[str, np.ndarray]:
+        """The population bookkeeping, the next id, the frame count and each slot's parity and frame count."""
+        state = {f"__{name}__": getattr(self, name).copy() for name in self._HOST_ARRAYS}
         state["__next_id__"] = np.int64(self.next_id)
         state["__frames_done__"] = np.int64(self.frames_done)
         state["__parity__"] = np.array([p.parity for p in self.pool], dtype=np.int64)
         state["__person_frames__"] = np.array([p.frames_done for p in self.pool], dtype=np.int64)
         return state
 
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """The whole state after the last frame (:meth:`state_arrays` and :meth:`host_state`), for
+        :meth:`load_state_dict`. Syncs with the device: not for the frame loop."""
+        return {**arrays_state(self.state_arrays()), **self.host_state()}
+
     def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
-        """Restore a :meth:`state_dict` into a tracker built with the same rig and configuration."""
-        arrays = dict(_device_arrays(self))
-        missing = sorted(set(arrays) - set(state))
-        if missing:
-            raise ConfigError(f"checkpoint: arrays {missing[:5]} missing (a checkpoint of another configuration?)")
-        for name, arr in arrays.items():
-            arr.assign(np.asarray(state[name]))
-        for name in ("slot_id", "slot_age", "slot_miss", "slot_close", "pending"):
+        """Restore a :meth:`state_dict` into a tracker built with the same rig and configuration.
+
+        Raises:
+            ConfigError: the state does not match this tracker (names missing or unexpected, other shapes or types).
+        """
+        arrays = self.state_arrays()
+        check_state(arrays, state, tuple(self.host_state()))
+        load_arrays(arrays, state)
+        for name in self._HOST_ARRAYS:
             setattr(self, name, np.array(state[f"__{name}__"]))
         self.next_id = int(state["__next_id__"])
         self.frames_done = int(state["__frames_done__"])

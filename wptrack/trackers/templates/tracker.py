@@ -36,6 +36,7 @@ import warp as wp
 
 from wptrack.cameras.rig import Camera, GroundPlane, Rig
 from wptrack.cameras.structs import camera_struct
+from wptrack.core.device import block_partition
 from wptrack.core.errors import ConfigError, FrameError, RigError
 from wptrack.core.filter import BLOCK, MAX_BLOCKS, FrameChain, _seed_words, check_fits
 from wptrack.core.resampling import Resampler, bytes_per_particle, quantisation_bits
@@ -497,10 +498,8 @@ class TemplateTracker(FrameChain):
         self.rig = rig
         self.camera = rig[config.camera]
         self.plane = rig.ground_plane
-        dev = wp.get_device(device)
-        self.device = d = str(dev)
-        self.is_cuda = dev.is_cuda
-        self.use_graph = self.is_cuda if use_graph is None else (bool(use_graph) and self.is_cuda)
+        super().__init__(device, use_graph)
+        d = self.device
         self.n = n = int(config.particles)
         self.r = r = int(config.max_objects)
         self.width, self.height = self.camera.width, self.camera.height
@@ -553,8 +552,8 @@ class TemplateTracker(FrameChain):
         self.resampled = wp.ones(1, dtype=wp.int32, device=d)
         self.frame = wp.zeros(1, dtype=wp.int32, device=d)
         self.ess_threshold = wp.array([config.ess_threshold], dtype=wp.float32, device=d)
-        self.blocks = min((n + BLOCK - 1) // BLOCK, MAX_BLOCKS)
-        self.chunk = (n + self.blocks - 1) // self.blocks
+        sms = wp.get_device(d).sm_count if self.is_cuda else 0
+        self.blocks, self.chunk = block_partition(n, not self.is_cuda, BLOCK, MAX_BLOCKS, sms)
         self.part_max = wp.zeros(self.blocks, dtype=wp.float32, device=d)
         self.part_arg = wp.zeros(self.blocks, dtype=wp.int32, device=d)
         self.part = wp.zeros((self.blocks, r, int(kslots.NS)), dtype=wp.float64, device=d)
@@ -614,10 +613,33 @@ class TemplateTracker(FrameChain):
             self.host["virtual"] = wp.zeros((h, w), dtype=wp.uint8, device="cpu", pinned=pinned)
         if self.keep_uoh:
             self.host["uoh"] = wp.zeros((h, w), dtype=wp.int32, device="cpu", pinned=pinned)
-        self.parity = 0
-        self.frames_done = 0
-        self._graphs: list = [None, None]
-        self._warm = [False, False]
+
+    def state_arrays(self) -> dict[str, wp.array]:
+        """The template filter's state: both particle buffers (``kernels.templates.dynamics.TemplateState``: kind,
+        label, pos, vel, heading, dims, age (N, R); logw (N,)), the frame counter, the per-slot labels, kinds and
+        estimates (the addition and the vehicle fit read the previous frame's), the next label and the slots' box
+        accumulator (reset by every frame's grouping). The ancestors, weights, resample flag and slot counts are
+        rewritten before they are read in every configuration tests/test_state.py runs; they are kept (N x groups
+        values) so that a checkpoint does not depend on that order. Hulls, scores, the UOH, the groups and the
+        candidates' scores are recomputed every frame; the candidates' geometry is built from the configuration."""
+        arrays: dict[str, wp.array] = {}
+        for k, state in enumerate(self.state):
+            for name in ("kind", "label", "pos", "vel", "heading", "dims", "age", "logw"):
+                arrays[f"state.{k}.{name}"] = getattr(state, name)
+        arrays.update(
+            ancestors=self.ancestors,
+            weights=self.weights,
+            resampled=self.resampled,
+            frame=self.frame,
+            ess_threshold=self.ess_threshold,
+            slot_est=self.slot_est,
+            slot_count=self.slot_count,
+            slot_label=self.slot_label,
+            slot_kind=self.slot_kind,
+            next_label=self.next_label,
+            slot_acc=self.slot_acc,
+        )
+        return arrays
 
     # --- memory --------------------------------------------------------------------------------------------
     @property
