@@ -1,0 +1,104 @@
+"""Configuration declared once (wptrack.core.config): validation, the command line, dicts and flat options are all
+derived from one declaration per field."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+
+import pytest
+
+from wptrack.core.config import (
+    add_arguments,
+    check,
+    describe,
+    from_dict,
+    from_namespace,
+    from_options,
+    option_map,
+    param,
+    to_dict,
+)
+from wptrack.core.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class Prior:
+    cost_a: float = param(20.0, help="a_r of eq. 5", units="px", symbol="a_r", lo=0.0)
+    dims: tuple[float, float, float] = param((1.7, 0.2, 0.1), help="size", units="m", lo=0.0, lo_open=True)
+
+    def __post_init__(self) -> None:
+        check(self, "prior.")
+
+
+@dataclass(frozen=True)
+class Demo:
+    particles: int = param(1000, help="N", lo=1)
+    sigma: float = param(0.03, help="walk deviation", units="m", symbol="sigma_m", lo=0.0, lo_open=True)
+    scheme: str = param("systematic", help="resampling", choices=("systematic", "residual"))
+    classes: tuple[str, ...] = param(("human", "vehicle"), help="classes", choices=("human", "vehicle"))
+    joint: bool = param(False, help="joint filter")
+    fps: float | None = param(None, help="frame rate", units="frames/s", lo=0.0, lo_open=True)
+    hidden: int = param(3, help="not on the command line", flag="")
+    renamed: float = param(0.5, help="a field with another flag", flag="p-b", hi=1.0)
+    prior: Prior = param(default_factory=Prior, help="the prior", flag="human")
+
+    def __post_init__(self) -> None:
+        check(self)
+
+
+def test_check_names_field_expected_and_value():
+    with pytest.raises(ConfigError, match=r"^sigma: expected a number > 0 \(m\), got -1$"):
+        Demo(sigma=-1)
+    with pytest.raises(ConfigError, match=r"^particles: expected an integer >= 1, got 2.5$"):
+        Demo(particles=2.5)
+    with pytest.raises(ConfigError, match=r"^scheme: expected one of systematic, residual, got 'x'$"):
+        Demo(scheme="x")
+    with pytest.raises(ConfigError, match=r"^classes: expected .*one of human, vehicle.*got \('human', 'cat'\)"):
+        Demo(classes=("human", "cat"))
+    with pytest.raises(ConfigError, match=r"^prior.dims: expected 3 numbers > 0 \(m\), got \(1, 2\)$"):
+        Prior(dims=(1, 2))
+    with pytest.raises(ConfigError, match="^joint: expected true or false"):
+        Demo(joint=1)
+    with pytest.raises(ConfigError, match="^sigma: "):
+        Demo(sigma=float("nan"))
+    d = Demo(particles=5, sigma=1, classes=["human"], fps=None)
+    assert d.sigma == 1.0 and isinstance(d.sigma, float) and d.classes == ("human",)
+
+
+def test_command_line_is_derived():
+    parser = argparse.ArgumentParser()
+    opts = add_arguments(parser, Demo)
+    assert set(opts) == {"particles", "sigma", "scheme", "classes", "joint", "fps", "p-b", "human-cost-a",
+                         "human-dims"}  # fmt: skip
+    helps = {a.option_strings[0]: a.help for a in parser._actions if a.option_strings}
+    assert helps["--sigma"] == "walk deviation (m; sigma_m; default: 0.03)"
+    assert helps["--human-cost-a"] == "a_r of eq. 5 (px; a_r; default: 20.0)"
+    assert helps["--joint"] == "joint filter (default: off)"
+    args = parser.parse_args(["--sigma", "0.1", "--classes", "human", "--no-joint", "--human-dims", "1", "2", "3"])
+    d = from_namespace(Demo, args)
+    assert (d.sigma, d.classes, d.joint, d.prior.dims, d.particles) == (0.1, ("human",), False, (1.0, 2.0, 3.0), 1000)
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--scheme", "bogus"])
+    with pytest.raises(ConfigError, match="^prior.dims"):
+        from_namespace(Demo, parser.parse_args(["--human-dims", "1", "-2", "3"]))
+
+
+def test_dicts_and_options_round_trip():
+    d = Demo(sigma=0.2, prior=Prior(cost_a=5.0))
+    data = to_dict(d)
+    assert data["prior"] == {"cost_a": 5.0, "dims": [1.7, 0.2, 0.1]} and data["classes"] == ["human", "vehicle"]
+    assert from_dict(Demo, data) == d
+    assert from_dict(Demo, {"prior": {"cost_a": 7}}).prior == Prior(cost_a=7.0)
+    with pytest.raises(ConfigError, match=r"^prior.cost_b: unknown field; expected one of cost_a, dims$"):
+        from_dict(Demo, {"prior": {"cost_b": 1}})
+    assert from_options(Demo, {"p_b": 0.25, "human-cost-a": 3}) == Demo(renamed=0.25, prior=Prior(cost_a=3.0))
+    with pytest.raises(ConfigError, match="^runs\\[2\\].hidden: unknown option$"):
+        from_options(Demo, {"hidden": 1}, where="runs[2].")
+    assert option_map(Demo)["human-cost-a"].default == 20.0
+
+
+def test_describe_lists_every_option():
+    table = describe(Demo)
+    assert "| `--sigma` | 0.03 | m | sigma_m | walk deviation |" in table
+    assert table.count("\n") == 2 + len(option_map(Demo))
