@@ -1,7 +1,7 @@
 """Rig files: reading a ``.yaml``/``.yml``/``.json`` rig file into a :class:`~wptrack.cameras.rig.Rig` (camera entries
 given inline, by an OpenCV FileStorage file or by a Tsai calibration), writing a rig back, and writing a camera as an
 OpenCV FileStorage file. The rig model itself is :mod:`wptrack.cameras.rig`, whose ``Rig.load``, ``Rig.save``,
-``Rig.from_dict`` and ``Camera.from_dict`` call the functions here.
+``Rig.from_dict`` call the functions here; :func:`camera_from_dict` builds one camera from its entry.
 
 Rig files are YAML (``.yaml``/``.yml``) or JSON (``.json``) with the same keys::
 
@@ -43,6 +43,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import yaml
 
+from wptrack.cameras.camera import Camera, GroundPlane
 from wptrack.cameras.checks import (
     ROTATION_TOL,
     _array,
@@ -52,11 +53,12 @@ from wptrack.cameras.checks import (
     _rodrigues_to_matrix,
     _validated_fields,
 )
+from wptrack.cameras.tsai import camera_from_entry
 from wptrack.core.errors import OutputError, RigError
 from wptrack.io.run import default_file_mode
 
 if TYPE_CHECKING:
-    from wptrack.cameras.rig import Camera, Rig
+    from wptrack.cameras.rig import Rig
 
 __all__ = ["camera_from_dict", "load_rig", "rig_from_dict", "save_opencv", "save_rig"]
 
@@ -136,8 +138,6 @@ def save_rig(rig: Rig, path: str | os.PathLike[str]) -> None:
 def rig_from_dict(cls: type[Rig], d: Any, source: str = "<dict>", base_dir: Path | None = None) -> Rig:
     """:meth:`Rig.from_dict <wptrack.cameras.rig.Rig.from_dict>`: check the top-level layout, parse the camera entries,
     volume and ground plane, and build the rig (``cls``)."""
-    from wptrack.cameras.rig import Camera, GroundPlane
-
     if not isinstance(d, Mapping):
         raise RigError(f"{source}: expected a mapping with a 'cameras' list at the top level, got {_fmt(d)}")
     unknown = [k for k in d if k not in _RIG_KEYS]
@@ -148,7 +148,7 @@ def rig_from_dict(cls: type[Rig], d: Any, source: str = "<dict>", base_dir: Path
     entries = d["cameras"]
     if not isinstance(entries, list) or not entries:
         raise RigError(f"{source}: cameras: expected a non-empty list of cameras, got {_fmt(entries)}")
-    cameras = tuple(Camera.from_dict(e, source=source, index=i, base_dir=base_dir) for i, e in enumerate(entries))
+    cameras = tuple(camera_from_dict(e, source=source, index=i, base_dir=base_dir) for i, e in enumerate(entries))
     volume = None
     if d.get("volume") is not None:
         vol = d["volume"]
@@ -159,16 +159,23 @@ def rig_from_dict(cls: type[Rig], d: Any, source: str = "<dict>", base_dir: Path
     return cls(cameras=cameras, volume=volume, source=source, ground=ground)
 
 
-def camera_from_dict(
-    cls: type[Camera], d: Any, source: str = "<dict>", index: int = 0, base_dir: Path | None = None
-) -> Camera:
-    """:meth:`Camera.from_dict <wptrack.cameras.rig.Camera.from_dict>`: parse one camera entry (inline fields,
-    ``opencv:`` file plus overriding keys, or ``tsai:`` file) and build the camera (``cls``)."""
+def camera_from_dict(d: Any, source: str = "<dict>", index: int = 0, base_dir: Path | None = None) -> Camera:
+    """Build a camera from a rig-file entry.
+
+    Args:
+        d: The entry: ``name``, ``width``, ``height``, ``K``, optional ``dist``, ``R`` and/or ``rvec``, ``t``; or
+            ``opencv: file`` (plus optional overriding keys); or ``tsai: file`` (:mod:`wptrack.cameras.tsai`).
+        source: File name used in error messages.
+        index: Index of the entry in the rig's camera list (error messages; default name ``cam{index}``).
+        base_dir: Directory that relative ``opencv:`` / ``tsai:`` paths are resolved against (default: current
+            directory).
+
+    Raises:
+        RigError: any invalid, missing or unknown field.
+    """
     if not isinstance(d, Mapping):
         raise RigError(f"{source}: cameras[{index}]: expected a mapping of camera fields, got {_fmt(d)}")
     if "tsai" in d:
-        from wptrack.cameras.tsai import camera_from_entry
-
         return camera_from_entry(d, source, index, base_dir)
     raw_name = d.get("name")
     entry: dict[str, Any] = {}
@@ -228,7 +235,7 @@ def camera_from_dict(
     fields = _validated_fields(
         raw_name, entry["width"], entry["height"], entry["K"], entry.get("dist"), R, entry["t"], where
     )
-    return cls(*fields)
+    return Camera(*fields)
 
 
 # ----------------------------------------------------------------------------------------------------- OpenCV files

@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wptrack.cameras.camera import Camera
 from wptrack.cameras.checks import _camera_where, _fmt, _positive_int
 from wptrack.core.errors import RigError
 
@@ -284,8 +285,6 @@ def tsai_to_camera(
     Raises:
         RigError: unknown ``units``.
     """
-    from wptrack.cameras.rig import Camera
-
     if units not in UNITS:
         raise RigError(f"{calib.source}: units: expected one of {', '.join(UNITS)}, got {units!r}")
     fx = calib.focal * calib.sx / calib.dpx  # (T2, T4)
