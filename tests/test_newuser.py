@@ -107,3 +107,26 @@ def test_warm_up_says_compiling_only_on_a_cache_miss(tmp_path):
     assert "MISSING ['tinykern']" in runs[0].stdout
     assert f"SAY compiling kernels (first run only; cache: {tmp_path / 'cache'}" in runs[0].stdout
     assert "MISSING []" in runs[1].stdout and "SAY" not in runs[1].stdout
+
+
+def _readme() -> str:
+    return (ROOT / "README.md").read_text(encoding="utf-8")
+
+
+def _code_block_after(text: str, marker: str, lang: str = "bash") -> list[str]:
+    """The lines of the first fenced ``lang`` block after ``marker`` in ``text``."""
+    rest = text[text.index(marker) :]
+    start = rest.index(f"```{lang}\n") + len(f"```{lang}\n")
+    return rest[start : rest.index("```", start)].splitlines()
+
+
+def test_ci_runs_the_readme_test_commands_in_a_fresh_venv():
+    """Issue 30 item 1: CI runs exactly the README's test commands, and those make a fresh virtualenv first (a
+    test that only works in the system Python is caught)."""
+    readme = _code_block_after(_readme(), "exactly what `.ci/run` runs")
+    ci = (ROOT / ".ci" / "run").read_text().split("# --- the README's test commands (keep the two identical) ---\n")
+    assert len(ci) == 2
+    assert [line for line in ci[1].splitlines() if line.strip()] == readme
+    assert readme[0].startswith("python3 -m venv ") and ". .venv/bin/activate" in readme[0]
+    assert readme[-1] == 'python3 -m pip install -q -e ".[dev,ray]" && python3 -m pytest -q'
+    assert "rm -rf .venv" in ci[0]  # fresh every run
