@@ -166,3 +166,41 @@ def test_offline_masks_keep_backgrounds_for_the_report(scene, capsys):
     window, image = _background_for(saved, 5)
     assert window == min(saved, key=lambda w: abs(w[1] - 5))[0] and image.shape == frame0.shape
     assert _background_for(_backgrounds(scene / "nowhere"), 5) is None
+
+
+def _template_args(scene, out, *extra):
+    return [
+        "track", "templates", "--rig", str(scene / "scene/rig.yaml"), "--masks", str(scene / "scene/cam0_mask.avi"),
+        "--out", str(out), "--device", "cpu", "--particles", "100", "--max-frames", "4", "-q", *extra,
+    ]  # fmt: skip
+
+
+def test_groundtruth_scoring_checked_before_tracking(scene, capsys, monkeypatch):
+    """Issue 30 item 2: --groundtruth without the scoring package (or with a missing file) is one error line
+    before anything runs, not after the whole run."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "motmetrics", None)  # import motmetrics raises ImportError
+    out = scene / "nomm"
+    code, text, err = _run(_template_args(scene, out, "--groundtruth", str(scene / "scene/groundtruth.csv")), capsys)
+    assert code == 2 and "motmetrics" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists() and "tracked" not in text
+    monkeypatch.delitem(sys.modules, "motmetrics")
+    code, _, err = _run(_template_args(scene, out, "--groundtruth", str(scene / "nope.csv")), capsys)
+    assert code == 2 and "nope.csv" in err and "not found" in err and not out.exists()
+
+
+def test_report_is_written_when_scoring_fails(scene, capsys, monkeypatch):
+    """Issue 30 item 2: a scoring failure after the run still leaves the --report (then exits 2 with the error)."""
+    pytest.importorskip("pyvista")
+    import wptrack.evaluation
+
+    def broken(*a, **k):
+        raise ConfigError("ground truth: scoring failed on purpose")
+
+    monkeypatch.setattr(wptrack.evaluation, "evaluate", broken)
+    out = scene / "scored"
+    argv = _template_args(scene, out, "--groundtruth", str(scene / "scene/groundtruth.csv"), "--report")
+    code, text, err = _run(argv, capsys)
+    assert code == 2 and "scoring failed on purpose" in err
+    assert (out / "report" / "index.html").exists() and "report:" in text

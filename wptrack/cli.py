@@ -186,6 +186,7 @@ def cmd_track_templates(args) -> int:
     from .frames import open_source
     from .runs.templates import run_template_tracking
 
+    _check_scoring(args.groundtruth)
     fps = None
     if args.fps is None:  # the frame rate of the video, or of the given masks when they are a video
         source = args.video if args.video is not None else args.masks
@@ -212,10 +213,7 @@ def cmd_track_templates(args) -> int:
         f"({summary['classes']['human']} human, {summary['classes']['vehicle']} vehicle)"
     )
     print(f"outputs: {args.out}/tracks.csv, best.csv, run.json" + ("" if args.no_virtual else ", virtual.avi"))
-    if args.groundtruth:
-        _print_evaluation(args.groundtruth, Path(args.out) / "tracks.csv", 1.0)
-    if args.report:
-        _report_after_tracking(args.out)
+    _score_and_report(args, 1.0)
     return 0
 
 
@@ -246,6 +244,7 @@ def _people_config_from_args(args):
 def cmd_track_people(args) -> int:
     from .runs.people import run_people_tracking
 
+    _check_scoring(args.groundtruth)
     summary = run_people_tracking(
         args.rig,
         args.video,
@@ -264,14 +263,42 @@ def cmd_track_people(args) -> int:
     )
     print(f"tracked {summary['frames']} frames on {summary['device']}: {summary['people']} people")
     print(f"outputs: {args.out}/tracks.csv, hulls/, occupancy.npz, run.json")
-    if args.groundtruth:
-        _print_evaluation(args.groundtruth, Path(args.out) / "tracks.csv", 0.5)
-    if args.report:
-        _report_after_tracking(args.out)
+    _score_and_report(args, 0.5)
     return 0
 
 
 # --- evaluate ------------------------------------------------------------------------------------------------
+def _check_scoring(groundtruth) -> None:
+    """Before a run that scores against ``--groundtruth``: the file exists and the scoring package is importable,
+    so the run does not end, minutes later, in an error that could have been said first (issue 30 item 2).
+
+    Raises:
+        ConfigError: the file is missing, or motmetrics cannot be imported.
+    """
+    if groundtruth is None:
+        return
+    if not Path(groundtruth).is_file():
+        raise ConfigError(f"--groundtruth: ground-truth file not found: {groundtruth}")
+    from .evaluation import _import_motmetrics
+
+    _import_motmetrics()
+
+
+def _score_and_report(args, threshold: float) -> None:
+    """Score the finished run against ``--groundtruth`` and render ``--report``: the report is written even when
+    scoring fails (the scoring error is raised after it)."""
+    failure = None
+    if args.groundtruth:
+        try:
+            _print_evaluation(args.groundtruth, Path(args.out) / "tracks.csv", threshold)
+        except WptrackError as e:
+            failure = e
+    if args.report:
+        _report_after_tracking(args.out)
+    if failure is not None:
+        raise failure
+
+
 def _print_evaluation(groundtruth, tracks, threshold: float, out: str | None = None) -> None:
     from .evaluation import evaluate
     from .io import atomic_write_json

@@ -2,8 +2,8 @@
 
 This module scores the output of a multi-object tracker (a ``tracks.csv``) against a ground-truth table, both with
 the columns ``frame,id,x,y,z`` (metres) and optionally ``class``. It reports the standard CLEAR-MOT and identity
-metrics, computed by `py-motmetrics <https://github.com/cheind/py-motmetrics>`_ (the ``motmetrics`` package, an
-optional dependency: ``pip install motmetrics`` or the ``eval`` extra), and the accuracy of Juza et al. (*3D template
+metrics, computed by `py-motmetrics <https://github.com/cheind/py-motmetrics>`_ (the ``motmetrics`` package, a
+dependency of wptrack), and the accuracy of Juza et al. (*3D template
 based single camera multiple object tracking*, sections 5.1-5.2), following our reading of that paper set out below.
 
 **Evaluated frames.** The frames scored are the distinct frames of the ground-truth table, or, when ``frames`` is
@@ -359,7 +359,8 @@ def _import_motmetrics() -> ModuleType:
         import motmetrics
     except ImportError as e:
         raise ConfigError(
-            f"evaluation needs the motmetrics package ({e}): pip install motmetrics (or the wptrack 'eval' extra)"
+            f"scoring needs the motmetrics package, a dependency of wptrack that is not importable here ({e}): "
+            "pip install motmetrics"
         ) from None
     return motmetrics
 
