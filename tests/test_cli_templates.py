@@ -204,3 +204,14 @@ def test_report_is_written_when_scoring_fails(scene, capsys, monkeypatch):
     code, text, err = _run(argv, capsys)
     assert code == 2 and "scoring failed on purpose" in err
     assert (out / "report" / "index.html").exists() and "report:" in text
+
+
+@pytest.mark.parametrize("flag", ["--video", "--masks"])
+def test_templates_refuses_two_cameras(scene, capsys, flag):
+    """Issue 30 item 3: two --video (or --masks) were silently the last one with the first camera's calibration."""
+    video = str(scene / "scene/cam0.avi") if flag == "--video" else str(scene / "scene/cam0_mask.avi")
+    out = scene / "two"
+    argv = ["track", "templates", "--rig", str(scene / "scene/rig.yaml"), flag, video, flag, video, "--out", str(out)]
+    code, _, err = _run([*argv, "--device", "cpu", "-q"], capsys)
+    assert code == 2 and "one camera" in err and "--camera" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()

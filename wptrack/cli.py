@@ -186,6 +186,14 @@ def cmd_track_templates(args) -> int:
     from .frames import open_source
     from .runs.templates import run_template_tracking
 
+    for flag in ("video", "masks"):  # one camera: a second --video must not silently replace the first
+        given = getattr(args, flag)
+        if given is not None and len(given) > 1:
+            raise ConfigError(
+                f"--{flag}: the template tracker follows one camera, got {len(given)} ({', '.join(given)}); give one "
+                f"--{flag} and pick its rig camera with --camera NAME"
+            )
+        setattr(args, flag, given[0] if given else None)
     _check_scoring(args.groundtruth)
     fps = None
     if args.fps is None:  # the frame rate of the video, or of the given masks when they are a video
@@ -645,8 +653,15 @@ def build_parser() -> argparse.ArgumentParser:
         "weighted by the XOR of its virtual image and the motion mask; new objects from the UOH.",
     )
     tt.add_argument("--rig", required=True, help="rig file (YAML/JSON) with the camera and optional 'ground' plane")
-    tt.add_argument("--video", default=None, help="the camera's video or image folder (background subtraction)")
-    tt.add_argument("--masks", default=None, help="binary motion masks (video or image folder) instead of --video")
+    tt.add_argument(
+        "--video",
+        action="append",
+        default=None,
+        help="the camera's video or image folder (background subtraction); one camera: give it once",
+    )
+    tt.add_argument(
+        "--masks", action="append", default=None, help="binary motion masks (video or image folder) instead of --video"
+    )
     tt.add_argument("--camera", default="0", help="rig camera name or index (default 0)")
     tt.add_argument("--particles", type=_positive_int, default=1000, help="N (default 1000)")
     tt.add_argument("--max-objects", type=int, default=8, help="R_max objects per particle, 1..16 (default 8)")
