@@ -119,3 +119,13 @@ def test_cli_resume_errors_are_one_line(tmp_path, lab, capsys):
     assert "nothing to resume" in capsys.readouterr().err
     assert main([*base, "--out", str(tmp_path / "x"), "--checkpoint-every", "-1"]) == 2
     assert not (tmp_path / "x" / "run.json").exists()
+
+
+def test_resume_into_a_missing_folder_leaves_nothing(tmp_path, lab, capsys):
+    """Issue 30 item 15: --resume into a folder that does not exist said 'nothing to resume' and left an empty
+    folder behind."""
+    base = ["track", "color", "--rig", str(lab.rig_path), "--video", str(lab.videos[0]), "--video", str(lab.videos[1])]
+    base += ["--hue", "312", "348", "--sat", "0.3", "0.8", "--init", "0.4", "0.1", "0.2", "--device", "cpu", "-q"]
+    assert main([*base, "--out", str(tmp_path / "new" / "run"), "--resume"]) == 2
+    assert "nothing to resume" in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()

@@ -45,6 +45,11 @@ def _add_run_control(p: argparse.ArgumentParser) -> None:
         help="continue the interrupted run in --out from its checkpoint (same inputs and options)",
     )
     p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="--out may hold a previous run: remove what it wrote first (without it such a folder is refused)",
+    )
+    p.add_argument(
         "--checkpoint-every",
         type=float,
         default=60.0,
@@ -105,6 +110,7 @@ def cmd_track_color(args) -> int:
         progress=not args.quiet,
         resume=args.resume,
         checkpoint_seconds=args.checkpoint_every,
+        overwrite=args.overwrite,
     )
     _print_summary(summary, args.out)
     if args.report:
@@ -215,6 +221,7 @@ def cmd_track_templates(args) -> int:
         progress=not args.quiet,
         resume=args.resume,
         checkpoint_seconds=args.checkpoint_every,
+        overwrite=args.overwrite,
     )
     print(
         f"tracked {summary['frames']} frames on {summary['device']}: {summary['objects']} objects "
@@ -268,6 +275,7 @@ def cmd_track_people(args) -> int:
         progress=not args.quiet,
         resume=args.resume,
         checkpoint_seconds=args.checkpoint_every,
+        overwrite=args.overwrite,
     )
     print(f"tracked {summary['frames']} frames on {summary['device']}: {summary['people']} people")
     print(f"outputs: {args.out}/tracks.csv, hulls/, occupancy.npz, run.json")
@@ -388,6 +396,7 @@ def cmd_demo(args) -> int:
         device=args.device,
         groundtruth=res.groundtruth_path,
         progress=not args.quiet,
+        overwrite=True,  # the demo's own folder: running it again replaces its run
     )
     _print_summary(summary, out / "track")
     if args.report:

@@ -308,9 +308,11 @@ def run_people_tracking(
     progress: bool = False,
     resume: bool = False,
     checkpoint_seconds: float = 60.0,
+    overwrite: bool = False,
 ) -> dict[str, Any]:
     """Track people in synchronised videos of two or more cameras and write the run folder (see the module
-    docstring and :class:`PeopleRun`; ``resume`` and ``checkpoint_seconds``: :func:`wptrack.runs.run_tracker`).
+    docstring and :class:`PeopleRun`; ``resume``, ``checkpoint_seconds`` and ``overwrite``:
+    :func:`wptrack.runs.run_tracker`).
 
     Returns:
         The run summary (also in run.json).
@@ -318,4 +320,6 @@ def run_people_tracking(
     job = PeopleRun(
         rig_path, videos, config, mask_config, masks, device, stop_at_shortest, max_frames, occupancy_every, save_masks
     )
-    return run_tracker(job, out_dir, progress=progress, resume=resume, checkpoint_seconds=checkpoint_seconds)
+    return run_tracker(
+        job, out_dir, progress=progress, resume=resume, checkpoint_seconds=checkpoint_seconds, overwrite=overwrite
+    )

@@ -385,17 +385,24 @@ def run_template_tracking(
     progress: bool = False,
     resume: bool = False,
     checkpoint_seconds: float = 60.0,
+    overwrite: bool = False,
     flood_guard: bool = True,
 ) -> dict[str, Any]:
     """Track objects with the template tracker and write the run folder (see the module docstring and
     :class:`TemplateRun` for the arguments).
 
-    ``resume`` and ``checkpoint_seconds``: see :func:`wptrack.runs.run_tracker`.
+    ``resume``, ``checkpoint_seconds`` and ``overwrite``: see :func:`wptrack.runs.run_tracker`.
 
     Returns:
         The run summary (also in run.json).
     """
     job = TemplateRun(rig_path, config, video, masks, mask_config, device, max_frames, save_masks, virtual, flood_guard)
     return run_tracker(
-        job, out_dir, progress=progress, max_frames=max_frames, resume=resume, checkpoint_seconds=checkpoint_seconds
+        job,
+        out_dir,
+        progress=progress,
+        max_frames=max_frames,
+        resume=resume,
+        checkpoint_seconds=checkpoint_seconds,
+        overwrite=overwrite,
     )
