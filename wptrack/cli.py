@@ -943,8 +943,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"wptrack: error: {e}", file=sys.stderr)
         return e.exit_code
     except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM during a run (RunInterrupted)
-        print("wptrack: interrupted; partial results were kept", file=sys.stderr)
+        print(f"wptrack: {_interrupted_message(e)}", file=sys.stderr)
         return int(getattr(e, "exit_code", 130))
+
+
+def _interrupted_message(e: BaseException) -> str:
+    """What an interruption left (the run loop tags the exception with ``run_dir``, ``resumable``,
+    ``nothing_written``): a checkpoint to resume from, nothing at all, or outputs without a checkpoint."""
+    run_dir = getattr(e, "run_dir", None)
+    if run_dir is None:  # not inside a run (before it started, or another command)
+        return "interrupted"
+    if getattr(e, "resumable", False):
+        return f"interrupted; the outputs so far are in {run_dir}: the same command with --resume continues the run"
+    if getattr(e, "nothing_written", False):
+        return "interrupted before the first frame was tracked; nothing was written (run the command again)"
+    return (
+        f"interrupted; the outputs so far are in {run_dir} but no checkpoint was saved, so --resume cannot continue "
+        "it: run the command again with --overwrite"
+    )
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -119,7 +119,11 @@ def run_lock(out_dir: Path) -> Iterator[Path]:
 
     path = out_dir / LOCK_FILE
     host = socket.gethostname()
-    me = {"pid": os.getpid(), "host": host, "started": datetime.now(timezone.utc).astimezone().isoformat(timespec="seconds")}
+    me = {
+        "pid": os.getpid(),
+        "host": host,
+        "started": datetime.now(timezone.utc).astimezone().isoformat(timespec="seconds"),
+    }
     for _attempt in range(3):
         try:
             fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
@@ -286,9 +290,73 @@ def _progress(total: int | None, enabled: bool) -> Any:
     return tqdm(total=total, desc="tracking", unit="frame", disable=not enabled, leave=False, dynamic_ncols=True)
 
 
-def _check_resumable(job: TrackerRun, out_dir: Path) -> tuple[int, dict[str, Any]]:
-    """The last frame and the state of the checkpoint in ``out_dir``, if ``job`` may resume that run."""
+_OPTION_OF = {
+    "videos": "--video",
+    "init_box": "--volume",
+    "partition": "--joint",
+    "detect_shadows": "--keep-shadows",
+    "method": "--mask-method",
+    "history": "--mask-history",
+    "var_threshold": "--mask-threshold",
+    "dist2_threshold": "--mask-threshold",
+    "n_bins": "--bins",
+    "score_mode_resolved": "--score-mode",
+}
+"""Run-config leaf names whose command-line option is not ``--`` + the name with dashes."""
+
+
+def _flat(d: Any, prefix: str = "") -> dict[str, Any]:
+    if not isinstance(d, dict):
+        return {prefix.rstrip("."): d}
+    out: dict[str, Any] = {}
+    for k, v in d.items():
+        out.update(_flat(v, f"{prefix}{k}.") if isinstance(v, dict) else {f"{prefix}{k}": v})
+    return out
+
+
+def _track_options(tracker: str) -> set[str]:
+    """The option strings of ``wptrack track TRACKER`` (empty for a job that is no CLI tracker)."""
+    import argparse
+
+    from ..cli import build_parser
+
+    def sub(p: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser | None:
+        for a in p._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                return a.choices.get(name)
+        return None
+
+    track = sub(build_parser(), "track")
+    parser = sub(track, tracker) if track is not None else None
+    return {o for a in parser._actions for o in a.option_strings} if parser is not None else set()
+
+
+def describe_changes(tracker: str, before: dict[str, Any], now: dict[str, Any]) -> list[str]:
+    """What differs between two run configurations, by command-line option where there is one:
+    ``["--particles was 400, now 300", ...]`` (config paths such as ``tracker.occupancy.p_h`` otherwise)."""
+
+    def show(v: Any) -> str:
+        text = "unset" if v is None else str(v)
+        return text if len(text) <= 80 else text[:77] + "..."
+
+    options = _track_options(tracker)
+    a, b = _flat(before), _flat(now)
+    out: dict[str, str] = {}
+    for key in sorted(set(a) | set(b)):
+        if a.get(key) == b.get(key):
+            continue
+        leaf = key.rsplit(".", 1)[-1]
+        option = _OPTION_OF.get(leaf, "--" + leaf.replace("_", "-"))
+        name = option if option in options else key
+        out.setdefault(name, f"{name} was {show(a.get(key))}, now {show(b.get(key))}")
+    return list(out.values())
+
+
+def _check_resumable(job: TrackerRun, out_dir: Path) -> tuple[int | None, dict[str, Any]]:
+    """The last frame and the state of the checkpoint in ``out_dir``, if ``job`` may resume that run; ``(None,
+    {})`` when that run stopped before its first frame (nothing to continue: the run starts from the beginning)."""
     import json
+    import zipfile
 
     from ..errors import ConfigError
     from ..io import RUN_FILE, _jsonable
@@ -302,20 +370,29 @@ def _check_resumable(job: TrackerRun, out_dir: Path) -> tuple[int, dict[str, Any
         raise ConfigError(f"--resume: the run in {out_dir} is already complete")
     if previous.get("tracker") != job.name:
         raise ConfigError(f"--resume: {run_path} is a {previous.get('tracker')!r} run, not {job.name!r}")
-    now = _jsonable(job.config)
-    before = previous.get("config", {})
-    changed = sorted(k for k in set(now) | set(before) if now.get(k) != before.get(k))
+    changed = describe_changes(job.name, previous.get("config", {}), _jsonable(job.config))
     if changed:
         raise ConfigError(
-            f"--resume: the configuration differs from the interrupted run in {out_dir} ({', '.join(changed)}); "
-            "resume with the same inputs and options"
+            f"--resume: the configuration differs from the interrupted run in {out_dir}: {'; '.join(changed)}; "
+            "resume with the same inputs and options (or start again with --overwrite)"
         )
     ckpt = out_dir / CHECKPOINT_FILE
     if not ckpt.exists():
-        raise ConfigError(f"--resume: {ckpt} not found (the run stopped before its first checkpoint); start again")
-    with np.load(ckpt) as z:
-        state = {k: z[k] for k in z.files}
-    return int(state.pop("__run_frame__")), state
+        if previous.get("last_frame") is None:  # stopped before its first frame: start it from the beginning
+            return None, {}
+        raise ConfigError(
+            f"--resume: {ckpt} not found (the run stopped before its first checkpoint); start again with --overwrite"
+        )
+    try:
+        with open(ckpt, "rb") as fh, np.load(fh) as z:  # our handle: closed also when the archive is unreadable
+            state = {k: z[k] for k in z.files}
+        frame = int(state.pop("__run_frame__"))
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError, KeyError) as e:
+        raise ConfigError(
+            f"--resume: the checkpoint {ckpt} is damaged ({type(e).__name__}: {e}; a full disk or a killed copy?) "
+            "and cannot be continued from: run the command again without --resume, with --overwrite"
+        ) from None
+    return frame, state
 
 
 def _write_checkpoint(job: TrackerRun, out: Any, frame: int) -> None:
@@ -383,9 +460,38 @@ def run_tracker(
         raise ConfigError("--resume continues the run in --out, --overwrite replaces it: give one of them")
     if resume and not (Path(out_dir) / RUN_FILE).is_file():  # said before the folder is created (nothing left)
         raise ConfigError(f"--resume: {Path(out_dir) / RUN_FILE} is missing or unreadable: nothing to resume")
+    created = not Path(out_dir).exists()
     out_dir = ensure_writable_dir(out_dir)
-    with run_lock(out_dir):
-        return _run_locked(job, out_dir, progress, max_frames, prefetch_depth, resume, checkpoint_seconds, overwrite)
+    try:
+        with run_lock(out_dir):
+            try:
+                return _run_locked(
+                    job, out_dir, progress, max_frames, prefetch_depth, resume, checkpoint_seconds, overwrite
+                )
+            except KeyboardInterrupt as e:  # what the CLI tells the user; a run stopped before its first frame
+                e.run_dir = out_dir  # leaves nothing behind
+                e.resumable = (out_dir / CHECKPOINT_FILE).exists()
+                e.nothing_written = not e.resumable and _nothing_tracked(out_dir)
+                if e.nothing_written:
+                    clear_run_outputs(out_dir)
+                raise
+    except KeyboardInterrupt as e:
+        if getattr(e, "nothing_written", False) and created:
+            with contextlib.suppress(OSError):
+                out_dir.rmdir()  # only if empty
+        raise
+
+
+def _nothing_tracked(out_dir: Path) -> bool:
+    """Whether the run in ``out_dir`` stopped before it tracked a frame (run.json's ``last_frame`` is null)."""
+    import json
+
+    from ..io import RUN_FILE
+
+    try:
+        return json.loads((out_dir / RUN_FILE).read_text(encoding="utf-8")).get("last_frame") is None
+    except (OSError, ValueError):
+        return True
 
 
 def _run_locked(
@@ -401,7 +507,7 @@ def _run_locked(
     """:func:`run_tracker` once the run folder is locked."""
     import itertools
 
-    from ..errors import ConfigError
+    from ..errors import ConfigError, WptrackError
     from ..frames import prefetch
     from ..io import RUN_FILE, RunWriter
 
@@ -416,8 +522,22 @@ def _run_locked(
     after = None
     if resume:
         after, state = _check_resumable(job, out_dir)
-        job.load_state_dict(state)
-        log.info("resuming %s after frame %d", out_dir, after)
+        if after is None:
+            log.warning(
+                "--resume: the run in %s stopped before its first frame; starting it from the beginning", out_dir
+            )
+            clear_run_outputs(out_dir)
+            resume = False
+        else:
+            try:
+                job.load_state_dict(state)
+            except (KeyError, ValueError, TypeError, IndexError, WptrackError) as e:
+                why = str(e) if isinstance(e, WptrackError) else f"{type(e).__name__}: {e}"
+                raise ConfigError(
+                    f"--resume: the checkpoint {out_dir / CHECKPOINT_FILE} is damaged or of another version "
+                    f"({why}) and cannot be continued from: run the command again without --resume, with --overwrite"
+                ) from None
+            log.info("resuming %s after frame %d", out_dir, after)
     start = 0 if after is None else after + 1
     total = job.total if max_frames is None or job.total is None else min(job.total, max_frames)
     with (
