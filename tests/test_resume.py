@@ -230,3 +230,56 @@ def test_damaged_checkpoint_is_one_clear_error(tmp_path, lab, capsys, damage):
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
     assert "damaged" in err and "--overwrite" in err and "without --resume" in err
     assert main([*base, "--out", str(tmp_path), "--overwrite", "--max-frames", "2"]) == 0
+
+
+def _video_frames(path):
+    import cv2
+
+    cap = cv2.VideoCapture(str(path))
+    frames = []
+    while True:
+        ok, f = cap.read()
+        if not ok:
+            break
+        frames.append(f)
+    cap.release()
+    return frames
+
+
+def test_resumed_template_run_writes_one_virtual_video(tmp_path, plaza):
+    """Issue 30 item 9: a resumed template run split virtual.avi into virtual.avi + virtual.from6.avi; now it writes
+    one virtual.avi (and masks.avi) with the same frames as an uninterrupted run (FFV1: lossless)."""
+    import numpy as np
+
+    (args, kw) = _template_args(plaza)
+    kw = {**kw, "save_masks": True}
+    run_tracker(TemplateRun(*args, **kw), tmp_path / "full", checkpoint_seconds=0)
+    out = tmp_path / "cut"
+    with pytest.raises(RunInterrupted):
+        run_tracker(_interrupting(TemplateRun, 5)(*args, **kw), out, checkpoint_seconds=0)
+    assert len(_video_frames(out / "virtual.avi")) == 6
+    run_tracker(TemplateRun(*args, **kw), out, resume=True)
+    assert sorted(p.name for p in out.glob("*.avi")) == ["masks.avi", "virtual.avi"]
+    for name in ("virtual.avi", "masks.avi"):
+        full, resumed = _video_frames(tmp_path / "full" / name), _video_frames(out / name)
+        assert len(resumed) == len(full) == 14
+        assert all(np.array_equal(a, b) for a, b in zip(full, resumed, strict=True)), name
+
+
+def test_continue_video_fills_missing_frames_black(tmp_path):
+    """A video with fewer frames than the resume point (a killed run never closed it): the gap is black, so frame i
+    of the video stays frame i of the run."""
+    import numpy as np
+
+    from wptrack.frames import continue_video, write_video
+
+    write_video(tmp_path / "v.avi", [np.full((8, 10, 3), 50 + k, np.uint8) for k in range(2)], fps=5)
+    w = continue_video(tmp_path / "v.avi", 4, fps=5)
+    w.write(np.full((8, 10, 3), 200, np.uint8))
+    w.close()
+    got = [int(f.mean()) for f in _video_frames(tmp_path / "v.avi")]
+    assert got == [50, 51, 0, 0, 200]
+    w = continue_video(tmp_path / "none.avi", 2, fps=5)
+    w.write(np.full((8, 10, 3), 9, np.uint8))
+    w.close()
+    assert [int(f.mean()) for f in _video_frames(tmp_path / "none.avi")] == [0, 0, 9]

@@ -190,16 +190,15 @@ class PeopleRun(TrackerRun):
 
     def start(self, out_dir: Path, resume_after: int | None = None) -> None:
         from ..chunklog import ChunkLog
-        from ..frames import VideoWriter
+        from ..frames import continue_video
 
         self._out_dir = out_dir
         self._hulls = ChunkLog(out_dir / HULLS_DIR, resume_after=resume_after)
         if resume_after is not None:
             self._load_npz_logs(out_dir, resume_after)
-        if self._save_masks:
-            suffix = "" if resume_after is None else f".from{resume_after + 1}"
-            fps = 25.0
-            self._mask_writers = [VideoWriter(out_dir / f"masks_{n}{suffix}.avi", fps=fps) for n in self._names]
+        if self._save_masks:  # a resumed run rewrites them: the frames up to the resume point, then the new ones
+            keep = 0 if resume_after is None else resume_after + 1
+            self._mask_writers = [continue_video(out_dir / f"masks_{n}.avi", keep, fps=25.0) for n in self._names]
 
     def step(self, item: Any) -> Any:
         images, *masks = item
