@@ -130,3 +130,15 @@ def test_ci_runs_the_readme_test_commands_in_a_fresh_venv():
     assert readme[0].startswith("python3 -m venv ") and ". .venv/bin/activate" in readme[0]
     assert readme[-1] == 'python3 -m pip install -q -e ".[dev,ray]" && python3 -m pytest -q'
     assert "rm -rf .venv" in ci[0]  # fresh every run
+
+
+@pytest.mark.parametrize("path", ["wptrack-demo/track/run.json", "examples/lab/cam1.avi", "lab-batch/summary.csv"])
+def test_readme_outputs_are_ignored_by_git(path):
+    """Issue 30 item 16: `wptrack demo` in a checkout left wptrack-demo/ untracked (and the README's batch example
+    examples/lab/ and lab-batch/)."""
+    import shutil
+
+    if not (ROOT / ".git").exists() or shutil.which("git") is None:
+        pytest.skip("not a git checkout")
+    r = subprocess.run(["git", "check-ignore", "-q", path], cwd=ROOT, capture_output=True, text=True)
+    assert r.returncode == 0, f"{path} is not ignored: {r.stderr}"
