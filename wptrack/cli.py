@@ -119,7 +119,7 @@ def cmd_track_color(args) -> int:
 
 
 def _print_summary(summary: dict, out_dir) -> None:
-    print(f"tracked {summary['frames']} frames on {summary['device']} ({summary['score_mode']} scoring)")
+    print(f"tracked {plural(summary['frames'], 'frame')} on {summary['device']} ({summary['score_mode']} scoring)")
     err = summary.get("error")
     if err:
         if err["converged_at"] is None:
@@ -224,7 +224,7 @@ def cmd_track_templates(args) -> int:
         overwrite=args.overwrite,
     )
     print(
-        f"tracked {summary['frames']} frames on {summary['device']}: {summary['objects']} objects "
+        f"tracked {plural(summary['frames'], 'frame')} on {summary['device']}: {plural(summary['objects'], 'object')} "
         f"({summary['classes']['human']} human, {summary['classes']['vehicle']} vehicle)"
     )
     print(f"outputs: {args.out}/tracks.csv, best.csv, run.json" + ("" if args.no_virtual else ", virtual.avi"))
@@ -277,7 +277,10 @@ def cmd_track_people(args) -> int:
         checkpoint_seconds=args.checkpoint_every,
         overwrite=args.overwrite,
     )
-    print(f"tracked {summary['frames']} frames on {summary['device']}: {summary['people']} people")
+    print(
+        f"tracked {plural(summary['frames'], 'frame')} on {summary['device']}: "
+        f"{plural(summary['people'], 'person', 'people')}"
+    )
     print(f"outputs: {args.out}/tracks.csv, hulls/, occupancy.npz, run.json")
     _score_and_report(args, 0.5)
     return 0
@@ -369,9 +372,11 @@ def cmd_synth(args) -> int:
 def cmd_demo(args) -> int:
     import json
 
+    from .device import resolve_device
     from .synth import render_scene
     from .trackers.colour import ColorConfig, HSITarget
 
+    device = resolve_device(args.device)  # a missing GPU is said before the scene is rendered
     out = Path(args.out)
     scene_dir = out / "scene"
     print(f"rendering the synthetic lab scene 's1-lab' into {scene_dir} ...")
@@ -393,7 +398,7 @@ def cmd_demo(args) -> int:
         target,
         out / "track",
         config,
-        device=args.device,
+        device=device,
         groundtruth=res.groundtruth_path,
         progress=not args.quiet,
         overwrite=True,  # the demo's own folder: running it again replaces its run
@@ -422,6 +427,19 @@ def cmd_report(args) -> int:
 
 
 # --- convergence (section III.C) ---------------------------------------------------------------------------
+def plural(n: int, word: str, many: str | None = None) -> str:
+    """``1 object``, ``2 objects`` (``many``: an irregular plural, e.g. ``people``)."""
+    return f"{n} {word if n == 1 else many or word + 's'}"
+
+
+def convergence_words(row: dict, jump_at: int) -> str:
+    """One sweep row's convergence in words: ``converges in 3 iterations; after the jump, in 5 iterations``."""
+    c0, c1 = row["converge_initial"], row["converge_after_jump"]
+    first = f"converges in {plural(c0, 'iteration')}" if c0 is not None else f"no convergence in {jump_at} iterations"
+    after = f"in {plural(c1, 'iteration')}" if c1 is not None else "no convergence within the run"
+    return f"{first}; after the jump, {after}"
+
+
 def cmd_convergence(args) -> int:
     from .experiments import default_sigmas, sweep_batch
 
@@ -442,12 +460,7 @@ def cmd_convergence(args) -> int:
     )
     path = Path(args.out) / "errors.csv"
     for row in table["summary"]:
-        c0 = row["converge_initial"]
-        c1 = row["converge_after_jump"]
-        print(
-            f"sigma_m = {row['sigma']:.4f} m: converges in {c0 if c0 is not None else '>' + str(args.jump_at)} "
-            f"iterations, after the jump in {c1 if c1 is not None else 'not within the run'}"
-        )
+        print(f"sigma_m = {row['sigma']:.4f} m: {convergence_words(row, args.jump_at)}")
     print(f"error-vs-iteration table: {path} (runs: {Path(args.out) / 'runs'})")
     if args.report:
         _report_after_tracking(args.out)
@@ -565,7 +578,7 @@ def build_parser() -> argparse.ArgumentParser:
     common.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
     common.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     common.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
-    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)  # none: main prints the usage
 
     d = sub.add_parser(
         "demo", parents=[common], help="synthesise the lab scene and track the ball (no GPU, display or download)"
@@ -600,7 +613,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_synth)
 
     t = sub.add_parser("track", parents=[common], help="track objects in calibrated videos")
-    tsub = t.add_subparsers(dest="tracker", required=True, parser_class=_Parser)
+    tsub = t.add_subparsers(dest="tracker", metavar="TRACKER", parser_class=_Parser)
     c = tsub.add_parser(
         "color", parents=[common], aliases=["colour"], help="S1 colour particle filter (Barrera et al.)"
     )
@@ -923,11 +936,37 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _subparser(parser: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:
+    for a in parser._actions:
+        if isinstance(a, argparse._SubParsersAction):
+            return a.choices[name]
+    raise KeyError(name)
+
+
+def _missing_command(parser: argparse.ArgumentParser, args) -> tuple[argparse.ArgumentParser, str] | None:
+    """The parser to show and what is missing when no command (or no tracker after ``track``) was given."""
+    if getattr(args, "command", None) is None:
+        return parser, "command"
+    if args.command == "track" and getattr(args, "tracker", None) is None:
+        return _subparser(parser, "track"), "tracker"
+    return None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``wptrack`` console script."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    missing = _missing_command(parser, args)
+    if missing is not None:  # `wptrack` or `wptrack track` alone: the usage with the list of commands / trackers
+        sub, what = missing
+        sub.print_help(sys.stderr)
+        print(f"\nwptrack: error: give a {what} ({sub.prog} {what.upper()} --help for its options)", file=sys.stderr)
+        return 2
     debug = bool(getattr(args, "debug", False))
+    if not (args.verbose or debug):  # FFmpeg's own lines ("[ffv1 @ 0x...] ...") beside wptrack's: only with -v
+        import os
+
+        os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")  # AV_LOG_QUIET; read when OpenCV first opens a video
     level = logging.DEBUG if debug else logging.INFO if args.verbose else logging.WARNING
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     from .device import quiet_warp

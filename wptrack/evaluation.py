@@ -284,9 +284,9 @@ def _load(source: TableLike, role: str, ground_truth: bool) -> _Table:
     if isinstance(source, (str, os.PathLike)):
         label = f"{role} {os.fspath(source)}"
         try:
-            columns: Mapping[str, Any] = read_tracks(source)
+            columns: Mapping[str, Any] = read_tracks(source, what=f"{role} file")
         except WptrackError as e:
-            raise ConfigError(f"{role}: {e}") from None
+            raise ConfigError(str(e)) from None
     elif isinstance(source, Mapping):
         label = f"{role} <table>"
         columns = source
