@@ -517,6 +517,8 @@ def cmd_masks(args) -> int:
 
 # --- bench ---------------------------------------------------------------------------------------------------
 def cmd_bench(args) -> int:
+    import inspect
+
     from .bench import HEADER, format_row, load_suite
     from .device import resolve_device
     from .io import atomic_write_json, versions
@@ -546,11 +548,29 @@ def cmd_bench(args) -> int:
                 f"--joint: only the 'templates' suite has a joint and a partitioned filter, not {args.tracker!r}"
             )
         extra["partition"] = False
+    if args.frames is not None and "e2e" in inspect.signature(suite.run_case).parameters:
+        extra["e2e"] = args.frames  # --frames also bounds a suite's end-to-end pass (masks: 600 frames by default)
+    if not (args.particles or getattr(args, second)):  # the default grid: say what it leaves out
+        for note in getattr(suite, "notes", lambda is_cuda: [])(wp.get_device(device).is_cuda):
+            print(note)
     results = []
     row = getattr(suite, "format_row", format_row)
-    print(getattr(suite, "HEADER", HEADER))
-    for case in grid:
+    if args.weights:
+        from .bench.resample_weights import WEIGHTS_HEADER
+
+        print(WEIGHTS_HEADER)
+    else:
+        print(getattr(suite, "HEADER", HEADER))
+    for i, case in enumerate(grid):
         frames = args.frames if args.frames is not None else getattr(suite, "default_frames", 50)
+        if not args.quiet:  # a case can take a while: say which one runs
+            describe = getattr(suite, "describe", None)
+            what = (
+                describe(case, frames, extra.get("e2e"))
+                if describe
+                else ", ".join(f"{k} {v}" for k, v in vars(case).items())
+            )
+            print(f"{args.tracker}: case {i + 1}/{len(grid)}: {what} ...", file=sys.stderr, flush=True)
         r = suite.run_case(case, device, frames=frames, numpy_max=args.numpy_max, **extra)
         results.append(r)
         print(row(r), flush=True)
@@ -917,7 +937,12 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--cameras", type=int, nargs="+", help="camera counts (default: the suite's grid)")
     b.add_argument("--objects", type=int, nargs="+", help="object counts of the templates suite (default: its grid)")
     b.add_argument("--runs", type=int, nargs="+", help="runs K per batch of the batch suite (default: its grid)")
-    b.add_argument("--frames", type=_positive_int, default=None, help="timed frames per case (default 50; soak 10000)")
+    b.add_argument(
+        "--frames",
+        type=_positive_int,
+        default=None,
+        help="timed frames per case (default 50; soak 10000); masks: also the end-to-end video's length (default 600)",
+    )
     b.add_argument("--numpy-max", type=int, default=100_000, help="largest N also run by the NumPy reference")
     b.add_argument("--out", default=None, help="write the results as JSON here")
     b.add_argument(
