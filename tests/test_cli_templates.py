@@ -71,7 +71,21 @@ def test_track_templates_writes_outputs_and_evaluates(scene, capsys):
     assert run["min_track_frames"] == 8 and run["short_tracks_dropped"] == int(np.sum(counts < 8))
     assert sorted(set(kept["id"].tolist())) == sorted(ids[counts >= 8].tolist()) and len(kept["id"]) > 0
     code, text, err = _run(["evaluate", str(out), "--groundtruth", str(scene / "scene/groundtruth.csv")], capsys)
-    assert code == 0 and "IDF1" in text
+    assert code == 0 and "IDF1" in text and "HOTA" in text
+    # issue 30: MOTChallenge files, image boxes of the run's camera for the tracks and the ground truth
+    boxes, truth = (np.loadtxt(out / "mot" / p / "cam0.txt", delimiter=",", ndmin=2) for p in (".", "gt"))
+    assert len(boxes) == len(kept["frame"]) and len(truth) == len(read_tracks(scene / "scene/groundtruth.csv")["id"])
+    assert (out / "mot" / "world.txt").is_file() and (out / "mot" / "gt" / "world.txt").is_file()
+
+    def iou(a, b):
+        w = min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0])
+        h = min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1])
+        inter = max(w, 0) * max(h, 0)
+        return inter / (a[2] * a[3] + b[2] * b[3] - inter)
+
+    last = boxes[boxes[:, 0] == boxes[:, 0].max()]
+    here = truth[truth[:, 0] == last[0, 0]]
+    assert all(max(iou(b[2:6], t[2:6]) for t in here) > 0.5 for b in last)  # each tracked box lies on a true one
 
 
 @pytest.mark.parametrize(

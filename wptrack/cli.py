@@ -318,25 +318,66 @@ def _score_and_report(args, threshold: float) -> None:
         raise failure
 
 
-def _print_evaluation(groundtruth, tracks, threshold: float, out: str | None = None) -> None:
+def _evaluation_line(ev, threshold: float) -> str:
+    cls = "n/a" if ev.classification_accuracy is None else f"{ev.classification_accuracy:.3f}"
+    return (
+        f"accuracy {ev.accuracy:.3f} (tracking {ev.tracking_accuracy:.3f} x classification {cls}); "
+        f"MOTA {ev.mota:.3f}, IDF1 {ev.idf1:.3f}, ID switches {ev.id_switches}, HOTA {ev.hota:.3f} "
+        f"(DetA {ev.deta:.3f}, AssA {ev.assa:.3f}, LocA {ev.loca:.3f}) at {threshold:g} m"
+    )
+
+
+def _print_evaluation(groundtruth, tracks, threshold: float, out: str | None = None):
     from .evaluation import evaluate
     from .io import atomic_write_json
 
     ev = evaluate(groundtruth, tracks, threshold=threshold)
-    cls = "n/a" if ev.classification_accuracy is None else f"{ev.classification_accuracy:.3f}"
-    print(
-        f"accuracy {ev.accuracy:.3f} (tracking {ev.tracking_accuracy:.3f} x classification {cls}); "
-        f"MOTA {ev.mota:.3f}, IDF1 {ev.idf1:.3f}, ID switches {ev.id_switches} at {threshold} m"
-    )
+    print(_evaluation_line(ev, threshold))
     if out:
         atomic_write_json(out, ev.to_dict())
         print(f"evaluation: {out}")
+    return ev
+
+
+SPREAD_METRICS = ("hota", "deta", "assa", "mota", "idf1", "accuracy", "id_switches")
+"""The metrics whose spread over runs ``wptrack evaluate RUN RUN ...`` prints (all are in its --out JSON)."""
+
+
+def _run_camera(run_dir: Path, rig_path, camera_arg):
+    """The rig camera (at the run's frame size) and ground plane of a run's image boxes, or ``(None, None)``: a
+    template run's own rig and camera unless ``--rig`` / ``--camera`` name others."""
+    import json
+
+    from .io import RUN_FILE
+    from .rig import Rig
+
+    try:
+        run = json.loads((run_dir / RUN_FILE).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        run = {}
+    config = run.get("config") or {}
+    if run.get("tracker") != "templates" and rig_path is None:
+        return None, None
+    path = rig_path or config.get("rig")
+    if path is None or not Path(path).is_file():
+        return None, None
+    rig = Rig.load(path)
+    name = camera_arg if camera_arg is not None else config.get("camera", 0)
+    camera = rig[int(name) if str(name).lstrip("-").isdigit() else name]
+    size = config.get("frame_size")
+    if isinstance(size, list) and len(size) == 2 and tuple(size) != (camera.width, camera.height):
+        camera = camera.scaled(int(size[0]), int(size[1]))
+    return camera, rig.ground_plane
 
 
 def cmd_evaluate(args) -> int:
-    tracks = Path(args.tracks)
-    if tracks.is_dir():
-        tracks = tracks / "tracks.csv"
+    from .evaluation import MOT_DIR, average, evaluate, write_mot_files
+    from .io import atomic_write_json
+
+    runs = []
+    for given in args.tracks:
+        tracks = Path(given)
+        runs.append((tracks, tracks / "tracks.csv" if tracks.is_dir() else tracks))
     groundtruth = args.groundtruth
     if str(groundtruth).lower().endswith(".xml"):  # image boxes (PETS/Milan): feet back-projected with the rig
         from .groundtruth import read_box_groundtruth
@@ -350,9 +391,34 @@ def cmd_evaluate(args) -> int:
             except ValueError:
                 raise ConfigError(f"--box-size: expected WIDTHxHEIGHT, e.g. 768x576, got {args.box_size!r}") from None
             size = (w, h)
-        camera = int(args.camera) if str(args.camera).lstrip("-").isdigit() else args.camera
+        camera = args.camera if args.camera is not None else 0
+        camera = int(camera) if str(camera).lstrip("-").isdigit() else camera
         groundtruth = read_box_groundtruth(groundtruth, args.rig, camera=camera, box_size=size)
-    _print_evaluation(groundtruth, tracks, args.threshold, args.out)
+    evaluations = {}
+    for given, tracks in runs:
+        ev = evaluate(groundtruth, tracks, threshold=args.threshold)
+        evaluations[str(given)] = ev
+        print((f"{given}: " if len(runs) > 1 else "") + _evaluation_line(ev, args.threshold))
+        if not args.no_mot:  # MOTChallenge files beside the tracks: RUN/mot/, the ground truth in RUN/mot/gt/
+            folder = tracks.parent / MOT_DIR
+            cam, plane = _run_camera(tracks.parent, args.rig, args.camera)
+            written = write_mot_files(tracks, folder, cam, plane, "tracks")
+            written += write_mot_files(groundtruth, folder / "gt", cam, plane, "ground truth")
+            print(f"MOTChallenge files: {', '.join(str(w) for w in written)}")
+    spread = None
+    if len(runs) > 1:
+        spread = average(list(evaluations.values()))
+        print(f"over {len(runs)} runs: mean (min, max, std)")
+        for name in SPREAD_METRICS:
+            m = spread[name]
+            if m["n"]:
+                print(f"  {name:12s} {m['mean']:.3f} ({m['min']:.3f}, {m['max']:.3f}, {m['std']:.3f})")
+    if args.out:
+        if spread is None:
+            atomic_write_json(args.out, next(iter(evaluations.values())).to_dict())
+        else:
+            atomic_write_json(args.out, {"runs": {k: v.to_dict() for k, v in evaluations.items()}, "spread": spread})
+        print(f"evaluation: {args.out}")
     return 0
 
 
@@ -834,17 +900,25 @@ def build_parser() -> argparse.ArgumentParser:
     tp.set_defaults(func=cmd_track_people)
 
     e = sub.add_parser(
-        "evaluate", parents=[common], help="accuracy, MOTA and IDF1 of tracks against ground truth (ground plane)"
+        "evaluate",
+        parents=[common],
+        help="accuracy, MOTA, IDF1 and HOTA of tracks against ground truth (ground plane); MOTChallenge files",
+        description="Scores one or more runs (e.g. seeds) against the ground truth on the ground plane: the paper's "
+        "accuracy, MOTA and IDF1 (motmetrics) and HOTA (distance similarity, 0 at --threshold), the spread over the "
+        "runs, and MOTChallenge files in each RUN/mot/ (world coordinates; image boxes for template runs).",
     )
-    e.add_argument("tracks", help="tracks.csv or a run folder")
+    e.add_argument("tracks", nargs="+", help="tracks.csv or a run folder; several: the spread over them (seeds)")
     e.add_argument(
         "--groundtruth", required=True, help="groundtruth.csv (wptrack synth writes one) or a PETS box .xml (--rig)"
     )
     e.add_argument("--rig", default=None, help="rig to back-project .xml box feet onto the ground")
-    e.add_argument("--camera", default=0, help="annotated camera of the rig (name or index; default 0)")
+    e.add_argument(
+        "--camera", default=None, help="rig camera (name or index) of .xml boxes (default 0) and of the image boxes"
+    )
     e.add_argument("--box-size", default=None, help="WIDTHxHEIGHT of the boxes' image if not the camera's size")
     e.add_argument("--threshold", type=float, default=1.0, help="match distance on the ground plane, metres")
-    e.add_argument("--out", default=None, help="write the evaluation as JSON here")
+    e.add_argument("--out", default=None, help="write the evaluation as JSON here (several runs: each, and spread)")
+    e.add_argument("--no-mot", action="store_true", help="do not write the MOTChallenge files (RUN/mot/)")
     e.set_defaults(func=cmd_evaluate)
 
     v = sub.add_parser(
