@@ -23,7 +23,7 @@ from wptrack.trackers.colour.tracker import ColorTracker, HSITarget
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))  # the whole sentence
     ap.add_argument("--device", default="auto")
     ap.add_argument("--frames", type=int, default=100)
     ap.add_argument("--particles", type=int, default=200)

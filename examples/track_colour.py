@@ -26,7 +26,7 @@ from wptrack.trackers.colour.tracker import ColorTracker, HSITarget
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))  # the whole sentence
     ap.add_argument("--device", default="auto", help="auto, cpu, cuda or cuda:N")
     ap.add_argument("--frames", type=int, default=200, help="frames of the scene to render and track")
     ap.add_argument("--particles", type=int, default=200)
@@ -60,7 +60,15 @@ def main(argv=None) -> dict:
                     f" spread {np.round(100 * est.std, 1)} cm"
                 )
     summary = summarize(np.asarray(errors)).as_dict()
-    print(f"device {tracker.device}, {tracker.score_mode} scoring: {summary}")
+    if summary["converged_at"] is None:
+        result = f"did not converge to 5 cm (final error {100 * summary['final_error']:.1f} cm)"
+    else:
+        result = (
+            f"converged at frame {summary['converged_at']}; error after it: mean "
+            f"{100 * summary['mean_error_after']:.2f} cm, median {100 * summary['median_error_after']:.2f} cm, "
+            f"max {100 * summary['max_error_after']:.2f} cm"
+        )
+    print(f"device {tracker.device}, {tracker.score_mode} scoring, {summary['frames']} frames: {result}")
     return summary
 
 

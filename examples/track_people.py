@@ -25,7 +25,7 @@ from wptrack.trackers.people.tracker import PeopleTracker
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))  # the whole sentence
     ap.add_argument("--device", default="auto", help="auto, cpu, cuda or cuda:N")
     ap.add_argument("--frames", type=int, default=120, help="frames of the scene to render and track")
     ap.add_argument("--size", type=int, nargs=2, default=(320, 240), metavar=("W", "H"), help="image size, pixels")

@@ -67,3 +67,24 @@ def test_every_example_is_tested():
 def test_examples_have_device_and_frames_flags(name):
     text = (EXAMPLES / f"{name}.py").read_text()
     assert "--device" in text and "--frames" in text
+
+
+@pytest.mark.parametrize("name", ["track_colour", "sigma_sweep", "drift", "track_templates", "track_people"])
+def test_example_help_is_whole_sentences(name, capsys):
+    """Issue 30 item 11: the examples' --help stopped mid-sentence (the docstring's first line)."""
+    mod = load(name)
+    with pytest.raises(SystemExit):
+        mod.main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    first = " ".join(mod.__doc__.split("\n\n")[0].split())
+    assert first.endswith(".") and first in text
+
+
+def test_examples_print_words_not_none_or_dicts(capsys, tmp_path):
+    """Issue 30 item 11: the sweep printed 'None / None', the colour example a raw dict."""
+    load("sigma_sweep").main(
+        ["--device", "cpu", "--frames", "8", "--steps", "2", "--runs", "1", "--out", str(tmp_path)]
+    )
+    load("track_colour").main(["--device", "cpu", "--frames", "4"])
+    out = capsys.readouterr().out
+    assert "None" not in out and "{'" not in out

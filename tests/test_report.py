@@ -438,7 +438,7 @@ def test_track_color_report_flag_and_sweep_option(lab_run, tmp_path, capsys):
     ]
     assert main(args) == 0
     assert not (out / "report").exists()  # off by default
-    assert main([*args, "--report"]) == 0
+    assert main([*args, "--report", "--overwrite"]) == 0  # the same --out again: replace the run
     assert (out / "report" / "index.html").is_file()
     assert "report:" in capsys.readouterr().out
     sweep = _sweep_dir(tmp_path / "sweep")
@@ -488,3 +488,35 @@ def test_registry_plugs_in_a_new_tracker(lab_run, tmp_path):
     finally:
         REPORTERS.pop("unit-test-tracker")
     assert "People boxes" in html and "1 object(s), frames [1]" in html
+
+
+def test_3d_views_have_axes_and_a_scale_and_captions_say_the_markers(report):
+    """Issue 30 item 19: the 3D scene had no axes or scale bar, and the overlay captions did not say what the
+    markers are."""
+    import cv2
+
+    html = report.read_text()
+    assert "the world axes (lower left)" in html and "grid" in html and "spacing in metres" in html
+    assert "orange cross" in html and "green circle" in html and "yellow = heaviest" in html  # overlay captions
+    assert "orange sphere" in html and "green sphere" in html  # per-frame 3D stills
+    # the axes marker is drawn in the lower left corner, the grid label in the upper right
+    img = cv2.imread(str(report.parent / "scene_overview.png"))
+    h, w = img.shape[:2]
+    corner = img[int(0.8 * h) :, : int(0.2 * w)]
+    assert (corner.min(axis=2) < 128).sum() > 20, "no axes marker in the lower left corner"
+    right = img[: int(0.1 * h), int(0.6 * w) :]
+    assert (right.max(axis=2) < 80).sum() > 20, "no scale label in the upper right corner"
+
+
+def test_ground_grid_step_is_returned():
+    pytest.importorskip("pyvista")
+    from wptrack.report.offscreen import import_pyvista, new_plotter
+    from wptrack.report.scene3d import SceneGeometry, add_ground
+
+    pv = import_pyvista()
+    pl = new_plotter(160, 120)
+    try:
+        geo = SceneGeometry(np.zeros(3), np.array([4.0, 3.0, 2.0]), up=2, up_sign=1.0, ground=0.0, frustum_depth=0.5)
+        assert add_ground(pl, pv, geo, None) == 0.5  # 4 m / 8 -> the nice step 0.5 m, the label's number
+    finally:
+        pl.close()

@@ -447,8 +447,9 @@ def execute_run(
     t0 = time.perf_counter()
     try:
         run = _run_function(spec, partial) if spec.tracker == "function" else _run_track(spec, partial, force_cpu)
-    except WptrackError as e:
+    except WptrackError as e:  # not retried: this invocation's count ends here
         shutil.rmtree(partial, ignore_errors=True)
+        (root / f".{spec.id}.attempts").unlink(missing_ok=True)
         return {**result, "status": "failed", "error": str(e), "seconds": time.perf_counter() - t0}
     except BaseException:
         shutil.rmtree(partial, ignore_errors=True)
@@ -613,6 +614,7 @@ def run_batch(
                 on_result(results[spec.id])
         else:
             _clear_partials(out, spec.id)
+            (out / f".{spec.id}.attempts").unlink(missing_ok=True)  # attempts count within this invocation
             pending.append(spec)
     order = [s.id for s in manifest.runs]
 

@@ -45,6 +45,11 @@ def _add_run_control(p: argparse.ArgumentParser) -> None:
         help="continue the interrupted run in --out from its checkpoint (same inputs and options)",
     )
     p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="--out may hold a previous run: remove what it wrote first (without it such a folder is refused)",
+    )
+    p.add_argument(
         "--checkpoint-every",
         type=float,
         default=60.0,
@@ -105,6 +110,7 @@ def cmd_track_color(args) -> int:
         progress=not args.quiet,
         resume=args.resume,
         checkpoint_seconds=args.checkpoint_every,
+        overwrite=args.overwrite,
     )
     _print_summary(summary, args.out)
     if args.report:
@@ -113,7 +119,7 @@ def cmd_track_color(args) -> int:
 
 
 def _print_summary(summary: dict, out_dir) -> None:
-    print(f"tracked {summary['frames']} frames on {summary['device']} ({summary['score_mode']} scoring)")
+    print(f"tracked {plural(summary['frames'], 'frame')} on {summary['device']} ({summary['score_mode']} scoring)")
     err = summary.get("error")
     if err:
         if err["converged_at"] is None:
@@ -186,6 +192,15 @@ def cmd_track_templates(args) -> int:
     from wptrack.io.frames import open_source
     from wptrack.trackers.templates.run import run_template_tracking
 
+    for flag in ("video", "masks"):  # one camera: a second --video must not silently replace the first
+        given = getattr(args, flag)
+        if given is not None and len(given) > 1:
+            raise ConfigError(
+                f"--{flag}: the template tracker follows one camera, got {len(given)} ({', '.join(given)}); give one "
+                f"--{flag} and pick its rig camera with --camera NAME"
+            )
+        setattr(args, flag, given[0] if given else None)
+    _check_scoring(args.groundtruth)
     fps = None
     if args.fps is None:  # the frame rate of the video, or of the given masks when they are a video
         source = args.video if args.video is not None else args.masks
@@ -206,16 +221,14 @@ def cmd_track_templates(args) -> int:
         progress=not args.quiet,
         resume=args.resume,
         checkpoint_seconds=args.checkpoint_every,
+        overwrite=args.overwrite,
     )
     print(
-        f"tracked {summary['frames']} frames on {summary['device']}: {summary['objects']} objects "
+        f"tracked {plural(summary['frames'], 'frame')} on {summary['device']}: {plural(summary['objects'], 'object')} "
         f"({summary['classes']['human']} human, {summary['classes']['vehicle']} vehicle)"
     )
     print(f"outputs: {args.out}/tracks.csv, best.csv, run.json" + ("" if args.no_virtual else ", virtual.avi"))
-    if args.groundtruth:
-        _print_evaluation(args.groundtruth, Path(args.out) / "tracks.csv", 1.0)
-    if args.report:
-        _report_after_tracking(args.out)
+    _score_and_report(args, 1.0)
     return 0
 
 
@@ -246,6 +259,7 @@ def _people_config_from_args(args):
 def cmd_track_people(args) -> int:
     from wptrack.trackers.people.run import run_people_tracking
 
+    _check_scoring(args.groundtruth)
     summary = run_people_tracking(
         args.rig,
         args.video,
@@ -261,36 +275,109 @@ def cmd_track_people(args) -> int:
         progress=not args.quiet,
         resume=args.resume,
         checkpoint_seconds=args.checkpoint_every,
+        overwrite=args.overwrite,
     )
-    print(f"tracked {summary['frames']} frames on {summary['device']}: {summary['people']} people")
+    print(
+        f"tracked {plural(summary['frames'], 'frame')} on {summary['device']}: "
+        f"{plural(summary['people'], 'person', 'people')}"
+    )
     print(f"outputs: {args.out}/tracks.csv, hulls/, occupancy.npz, run.json")
-    if args.groundtruth:
-        _print_evaluation(args.groundtruth, Path(args.out) / "tracks.csv", 0.5)
-    if args.report:
-        _report_after_tracking(args.out)
+    _score_and_report(args, 0.5)
     return 0
 
 
 # --- evaluate ------------------------------------------------------------------------------------------------
-def _print_evaluation(groundtruth, tracks, threshold: float, out: str | None = None) -> None:
+def _check_scoring(groundtruth) -> None:
+    """Before a run that scores against ``--groundtruth``: the file exists and the scoring package is importable,
+    so the run does not end, minutes later, in an error that could have been said first (issue 30 item 2).
+
+    Raises:
+        ConfigError: the file is missing, or motmetrics cannot be imported.
+    """
+    if groundtruth is None:
+        return
+    if not Path(groundtruth).is_file():
+        raise ConfigError(f"--groundtruth: ground-truth file not found: {groundtruth}")
+    from wptrack.evaluation.mot import _import_motmetrics
+
+    _import_motmetrics()
+
+
+def _score_and_report(args, threshold: float) -> None:
+    """Score the finished run against ``--groundtruth`` and render ``--report``: the report is written even when
+    scoring fails (the scoring error is raised after it)."""
+    failure = None
+    if args.groundtruth:
+        try:
+            _print_evaluation(args.groundtruth, Path(args.out) / "tracks.csv", threshold)
+        except WptrackError as e:
+            failure = e
+    if args.report:
+        _report_after_tracking(args.out)
+    if failure is not None:
+        raise failure
+
+
+def _evaluation_line(ev, threshold: float) -> str:
+    cls = "n/a" if ev.classification_accuracy is None else f"{ev.classification_accuracy:.3f}"
+    return (
+        f"accuracy {ev.accuracy:.3f} (tracking {ev.tracking_accuracy:.3f} x classification {cls}); "
+        f"MOTA {ev.mota:.3f}, IDF1 {ev.idf1:.3f}, ID switches {ev.id_switches}, HOTA {ev.hota:.3f} "
+        f"(DetA {ev.deta:.3f}, AssA {ev.assa:.3f}, LocA {ev.loca:.3f}) at {threshold:g} m"
+    )
+
+
+def _print_evaluation(groundtruth, tracks, threshold: float, out: str | None = None):
     from wptrack.evaluation.mot import evaluate
     from wptrack.io.run import atomic_write_json
 
     ev = evaluate(groundtruth, tracks, threshold=threshold)
-    cls = "n/a" if ev.classification_accuracy is None else f"{ev.classification_accuracy:.3f}"
-    print(
-        f"accuracy {ev.accuracy:.3f} (tracking {ev.tracking_accuracy:.3f} x classification {cls}); "
-        f"MOTA {ev.mota:.3f}, IDF1 {ev.idf1:.3f}, ID switches {ev.id_switches} at {threshold} m"
-    )
+    print(_evaluation_line(ev, threshold))
     if out:
         atomic_write_json(out, ev.to_dict())
         print(f"evaluation: {out}")
+    return ev
+
+
+SPREAD_METRICS = ("hota", "deta", "assa", "mota", "idf1", "accuracy", "id_switches")
+"""The metrics whose spread over runs ``wptrack evaluate RUN RUN ...`` prints (all are in its --out JSON)."""
+
+
+def _run_camera(run_dir: Path, rig_path, camera_arg):
+    """The rig camera (at the run's frame size) and ground plane of a run's image boxes, or ``(None, None)``: a
+    template run's own rig and camera unless ``--rig`` / ``--camera`` name others."""
+    import json
+
+    from wptrack.cameras.rig import Rig
+    from wptrack.io.run import RUN_FILE
+
+    try:
+        run = json.loads((run_dir / RUN_FILE).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        run = {}
+    config = run.get("config") or {}
+    if run.get("tracker") != "templates" and rig_path is None:
+        return None, None
+    path = rig_path or config.get("rig")
+    if path is None or not Path(path).is_file():
+        return None, None
+    rig = Rig.load(path)
+    name = camera_arg if camera_arg is not None else config.get("camera", 0)
+    camera = rig[int(name) if str(name).lstrip("-").isdigit() else name]
+    size = config.get("frame_size")
+    if isinstance(size, list) and len(size) == 2 and tuple(size) != (camera.width, camera.height):
+        camera = camera.scaled(int(size[0]), int(size[1]))
+    return camera, rig.ground_plane
 
 
 def cmd_evaluate(args) -> int:
-    tracks = Path(args.tracks)
-    if tracks.is_dir():
-        tracks = tracks / "tracks.csv"
+    from wptrack.evaluation.mot import MOT_DIR, average, evaluate, write_mot_files
+    from wptrack.io.run import atomic_write_json
+
+    runs = []
+    for given in args.tracks:
+        tracks = Path(given)
+        runs.append((tracks, tracks / "tracks.csv" if tracks.is_dir() else tracks))
     groundtruth = args.groundtruth
     if str(groundtruth).lower().endswith(".xml"):  # image boxes (PETS/Milan): feet back-projected with the rig
         from wptrack.evaluation.groundtruth import read_box_groundtruth
@@ -304,9 +391,34 @@ def cmd_evaluate(args) -> int:
             except ValueError:
                 raise ConfigError(f"--box-size: expected WIDTHxHEIGHT, e.g. 768x576, got {args.box_size!r}") from None
             size = (w, h)
-        camera = int(args.camera) if str(args.camera).lstrip("-").isdigit() else args.camera
+        camera = args.camera if args.camera is not None else 0
+        camera = int(camera) if str(camera).lstrip("-").isdigit() else camera
         groundtruth = read_box_groundtruth(groundtruth, args.rig, camera=camera, box_size=size)
-    _print_evaluation(groundtruth, tracks, args.threshold, args.out)
+    evaluations = {}
+    for given, tracks in runs:
+        ev = evaluate(groundtruth, tracks, threshold=args.threshold)
+        evaluations[str(given)] = ev
+        print((f"{given}: " if len(runs) > 1 else "") + _evaluation_line(ev, args.threshold))
+        if not args.no_mot:  # MOTChallenge files beside the tracks: RUN/mot/, the ground truth in RUN/mot/gt/
+            folder = tracks.parent / MOT_DIR
+            cam, plane = _run_camera(tracks.parent, args.rig, args.camera)
+            written = write_mot_files(tracks, folder, cam, plane, "tracks")
+            written += write_mot_files(groundtruth, folder / "gt", cam, plane, "ground truth")
+            print(f"MOTChallenge files: {', '.join(str(w) for w in written)}")
+    spread = None
+    if len(runs) > 1:
+        spread = average(list(evaluations.values()))
+        print(f"over {len(runs)} runs: mean (min, max, std)")
+        for name in SPREAD_METRICS:
+            m = spread[name]
+            if m["n"]:
+                print(f"  {name:12s} {m['mean']:.3f} ({m['min']:.3f}, {m['max']:.3f}, {m['std']:.3f})")
+    if args.out:
+        if spread is None:
+            atomic_write_json(args.out, next(iter(evaluations.values())).to_dict())
+        else:
+            atomic_write_json(args.out, {"runs": {k: v.to_dict() for k, v in evaluations.items()}, "spread": spread})
+        print(f"evaluation: {args.out}")
     return 0
 
 
@@ -326,9 +438,11 @@ def cmd_synth(args) -> int:
 def cmd_demo(args) -> int:
     import json
 
+    from wptrack.core.device import resolve_device
     from wptrack.synth import render_scene
     from wptrack.trackers.colour.tracker import ColorConfig, HSITarget
 
+    device = resolve_device(args.device)  # a missing GPU is said before the scene is rendered
     out = Path(args.out)
     scene_dir = out / "scene"
     print(f"rendering the synthetic lab scene 's1-lab' into {scene_dir} ...")
@@ -350,9 +464,10 @@ def cmd_demo(args) -> int:
         target,
         out / "track",
         config,
-        device=args.device,
+        device=device,
         groundtruth=res.groundtruth_path,
         progress=not args.quiet,
+        overwrite=True,  # the demo's own folder: running it again replaces its run
     )
     _print_summary(summary, out / "track")
     if args.report:
@@ -378,6 +493,19 @@ def cmd_report(args) -> int:
 
 
 # --- convergence (section III.C) ---------------------------------------------------------------------------
+def plural(n: int, word: str, many: str | None = None) -> str:
+    """``1 object``, ``2 objects`` (``many``: an irregular plural, e.g. ``people``)."""
+    return f"{n} {word if n == 1 else many or word + 's'}"
+
+
+def convergence_words(row: dict, jump_at: int) -> str:
+    """One sweep row's convergence in words: ``converges in 3 iterations; after the jump, in 5 iterations``."""
+    c0, c1 = row["converge_initial"], row["converge_after_jump"]
+    first = f"converges in {plural(c0, 'iteration')}" if c0 is not None else f"no convergence in {jump_at} iterations"
+    after = f"in {plural(c1, 'iteration')}" if c1 is not None else "no convergence within the run"
+    return f"{first}; after the jump, {after}"
+
+
 def cmd_convergence(args) -> int:
     from wptrack.trackers.colour.experiments import default_sigmas, sweep_batch
 
@@ -398,12 +526,7 @@ def cmd_convergence(args) -> int:
     )
     path = Path(args.out) / "errors.csv"
     for row in table["summary"]:
-        c0 = row["converge_initial"]
-        c1 = row["converge_after_jump"]
-        print(
-            f"sigma_m = {row['sigma']:.4f} m: converges in {c0 if c0 is not None else '>' + str(args.jump_at)} "
-            f"iterations, after the jump in {c1 if c1 is not None else 'not within the run'}"
-        )
+        print(f"sigma_m = {row['sigma']:.4f} m: {convergence_words(row, args.jump_at)}")
     print(f"error-vs-iteration table: {path} (runs: {Path(args.out) / 'runs'})")
     if args.report:
         _report_after_tracking(args.out)
@@ -460,6 +583,8 @@ def cmd_masks(args) -> int:
 
 # --- bench ---------------------------------------------------------------------------------------------------
 def cmd_bench(args) -> int:
+    import inspect
+
     from wptrack.bench import HEADER, format_row, load_suite
     from wptrack.core.device import resolve_device
     from wptrack.io.run import atomic_write_json, versions
@@ -489,11 +614,29 @@ def cmd_bench(args) -> int:
                 f"--joint: only the 'templates' suite has a joint and a partitioned filter, not {args.tracker!r}"
             )
         extra["partition"] = False
+    if args.frames is not None and "e2e" in inspect.signature(suite.run_case).parameters:
+        extra["e2e"] = args.frames  # --frames also bounds a suite's end-to-end pass (masks: 600 frames by default)
+    if not (args.particles or getattr(args, second)):  # the default grid: say what it leaves out
+        for note in getattr(suite, "notes", lambda is_cuda: [])(wp.get_device(device).is_cuda):
+            print(note)
     results = []
     row = getattr(suite, "format_row", format_row)
-    print(getattr(suite, "HEADER", HEADER))
-    for case in grid:
+    if args.weights:
+        from wptrack.bench.resample_weights import WEIGHTS_HEADER
+
+        print(WEIGHTS_HEADER)
+    else:
+        print(getattr(suite, "HEADER", HEADER))
+    for i, case in enumerate(grid):
         frames = args.frames if args.frames is not None else getattr(suite, "default_frames", 50)
+        if not args.quiet:  # a case can take a while: say which one runs
+            describe = getattr(suite, "describe", None)
+            what = (
+                describe(case, frames, extra.get("e2e"))
+                if describe
+                else ", ".join(f"{k} {v}" for k, v in vars(case).items())
+            )
+            print(f"{args.tracker}: case {i + 1}/{len(grid)}: {what} ...", file=sys.stderr, flush=True)
         r = suite.run_case(case, device, frames=frames, numpy_max=args.numpy_max, **extra)
         results.append(r)
         print(row(r), flush=True)
@@ -521,7 +664,7 @@ def build_parser() -> argparse.ArgumentParser:
     common.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
     common.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     common.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
-    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)  # none: main prints the usage
 
     d = sub.add_parser(
         "demo", parents=[common], help="synthesise the lab scene and track the ball (no GPU, display or download)"
@@ -556,7 +699,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_synth)
 
     t = sub.add_parser("track", parents=[common], help="track objects in calibrated videos")
-    tsub = t.add_subparsers(dest="tracker", required=True, parser_class=_Parser)
+    tsub = t.add_subparsers(dest="tracker", metavar="TRACKER", parser_class=_Parser)
     c = tsub.add_parser(
         "color", parents=[common], aliases=["colour"], help="S1 colour particle filter (Barrera et al.)"
     )
@@ -618,8 +761,15 @@ def build_parser() -> argparse.ArgumentParser:
         "weighted by the XOR of its virtual image and the motion mask; new objects from the UOH.",
     )
     tt.add_argument("--rig", required=True, help="rig file (YAML/JSON) with the camera and optional 'ground' plane")
-    tt.add_argument("--video", default=None, help="the camera's video or image folder (background subtraction)")
-    tt.add_argument("--masks", default=None, help="binary motion masks (video or image folder) instead of --video")
+    tt.add_argument(
+        "--video",
+        action="append",
+        default=None,
+        help="the camera's video or image folder (background subtraction); one camera: give it once",
+    )
+    tt.add_argument(
+        "--masks", action="append", default=None, help="binary motion masks (video or image folder) instead of --video"
+    )
     tt.add_argument("--camera", default="0", help="rig camera name or index (default 0)")
     tt.add_argument("--particles", type=_positive_int, default=1000, help="N (default 1000)")
     tt.add_argument("--max-objects", type=int, default=8, help="R_max objects per particle, 1..16 (default 8)")
@@ -750,17 +900,25 @@ def build_parser() -> argparse.ArgumentParser:
     tp.set_defaults(func=cmd_track_people)
 
     e = sub.add_parser(
-        "evaluate", parents=[common], help="accuracy, MOTA and IDF1 of tracks against ground truth (ground plane)"
+        "evaluate",
+        parents=[common],
+        help="accuracy, MOTA, IDF1 and HOTA of tracks against ground truth (ground plane); MOTChallenge files",
+        description="Scores one or more runs (e.g. seeds) against the ground truth on the ground plane: the paper's "
+        "accuracy, MOTA and IDF1 (motmetrics) and HOTA (distance similarity, 0 at --threshold), the spread over the "
+        "runs, and MOTChallenge files in each RUN/mot/ (world coordinates; image boxes for template runs).",
     )
-    e.add_argument("tracks", help="tracks.csv or a run folder")
+    e.add_argument("tracks", nargs="+", help="tracks.csv or a run folder; several: the spread over them (seeds)")
     e.add_argument(
         "--groundtruth", required=True, help="groundtruth.csv (wptrack synth writes one) or a PETS box .xml (--rig)"
     )
     e.add_argument("--rig", default=None, help="rig to back-project .xml box feet onto the ground")
-    e.add_argument("--camera", default=0, help="annotated camera of the rig (name or index; default 0)")
+    e.add_argument(
+        "--camera", default=None, help="rig camera (name or index) of .xml boxes (default 0) and of the image boxes"
+    )
     e.add_argument("--box-size", default=None, help="WIDTHxHEIGHT of the boxes' image if not the camera's size")
     e.add_argument("--threshold", type=float, default=1.0, help="match distance on the ground plane, metres")
-    e.add_argument("--out", default=None, help="write the evaluation as JSON here")
+    e.add_argument("--out", default=None, help="write the evaluation as JSON here (several runs: each, and spread)")
+    e.add_argument("--no-mot", action="store_true", help="do not write the MOTChallenge files (RUN/mot/)")
     e.set_defaults(func=cmd_evaluate)
 
     v = sub.add_parser(
@@ -853,7 +1011,12 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--cameras", type=int, nargs="+", help="camera counts (default: the suite's grid)")
     b.add_argument("--objects", type=int, nargs="+", help="object counts of the templates suite (default: its grid)")
     b.add_argument("--runs", type=int, nargs="+", help="runs K per batch of the batch suite (default: its grid)")
-    b.add_argument("--frames", type=_positive_int, default=None, help="timed frames per case (default 50; soak 10000)")
+    b.add_argument(
+        "--frames",
+        type=_positive_int,
+        default=None,
+        help="timed frames per case (default 50; soak 10000); masks: also the end-to-end video's length (default 600)",
+    )
     b.add_argument("--numpy-max", type=int, default=100_000, help="largest N also run by the NumPy reference")
     b.add_argument("--out", default=None, help="write the results as JSON here")
     b.add_argument(
@@ -872,11 +1035,37 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _subparser(parser: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:
+    for a in parser._actions:
+        if isinstance(a, argparse._SubParsersAction):
+            return a.choices[name]
+    raise KeyError(name)
+
+
+def _missing_command(parser: argparse.ArgumentParser, args) -> tuple[argparse.ArgumentParser, str] | None:
+    """The parser to show and what is missing when no command (or no tracker after ``track``) was given."""
+    if getattr(args, "command", None) is None:
+        return parser, "command"
+    if args.command == "track" and getattr(args, "tracker", None) is None:
+        return _subparser(parser, "track"), "tracker"
+    return None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``wptrack`` console script."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    missing = _missing_command(parser, args)
+    if missing is not None:  # `wptrack` or `wptrack track` alone: the usage with the list of commands / trackers
+        sub, what = missing
+        sub.print_help(sys.stderr)
+        print(f"\nwptrack: error: give a {what} ({sub.prog} {what.upper()} --help for its options)", file=sys.stderr)
+        return 2
     debug = bool(getattr(args, "debug", False))
+    if not (args.verbose or debug):  # FFmpeg's own lines ("[ffv1 @ 0x...] ...") beside wptrack's: only with -v
+        import os
+
+        os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")  # AV_LOG_QUIET; read when OpenCV first opens a video
     level = logging.DEBUG if debug else logging.INFO if args.verbose else logging.WARNING
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     from wptrack.core.device import quiet_warp
@@ -892,8 +1081,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"wptrack: error: {e}", file=sys.stderr)
         return e.exit_code
     except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM during a run (RunInterrupted)
-        print("wptrack: interrupted; partial results were kept", file=sys.stderr)
+        print(f"wptrack: {_interrupted_message(e)}", file=sys.stderr)
         return int(getattr(e, "exit_code", 130))
+
+
+def _interrupted_message(e: BaseException) -> str:
+    """What an interruption left (the run loop tags the exception with ``run_dir``, ``resumable``,
+    ``nothing_written``): a checkpoint to resume from, nothing at all, or outputs without a checkpoint."""
+    run_dir = getattr(e, "run_dir", None)
+    if run_dir is None:  # not inside a run (before it started, or another command)
+        return "interrupted"
+    if getattr(e, "resumable", False):
+        return f"interrupted; the outputs so far are in {run_dir}: the same command with --resume continues the run"
+    if getattr(e, "nothing_written", False):
+        return "interrupted before the first frame was tracked; nothing was written (run the command again)"
+    return (
+        f"interrupted; the outputs so far are in {run_dir} but no checkpoint was saved, so --resume cannot continue "
+        "it: run the command again with --overwrite"
+    )
 
 
 if __name__ == "__main__":  # pragma: no cover

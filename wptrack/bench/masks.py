@@ -37,6 +37,7 @@ standard deviations of a threshold (float32 vs float64), and probabilities agree
 
 from __future__ import annotations
 
+import logging
 import tempfile
 import time
 from collections.abc import Iterator
@@ -148,6 +149,14 @@ def end_to_end(case: Case, device: str, frames: int, seed: int = 0, repeats: int
     }
 
 
+class _DropShortWindowWarning(logging.Filter):
+    """The bench's own short temporary videos are shorter than a background window on purpose: the model's warning
+    about it (naming the temporary file) says nothing to the user."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "shorter than the background window" not in record.getMessage()
+
+
 class MasksSuite:
     """Offline background model vs decoding, at 640x480 and 1920x1080."""
 
@@ -182,9 +191,29 @@ class MasksSuite:
         )
 
     @staticmethod
+    def describe(case: Case, frames: int, e2e: int | None = None) -> str:
+        """What a case times (said before it runs: the end-to-end pass takes a while on a CPU)."""
+        from wptrack.motion.masks import MaskConfig
+
+        what = f"{case.width}x{case.height}, {frames} frames"
+        if case.e2e:
+            what += f", then the end-to-end mask pass over {e2e or e2e_frames(MaskConfig().window)} frames"
+        return what
+
+    @staticmethod
     def run_case(
         case: Case, device: str, frames: int = 50, numpy_max: int = 0, seed: int = 0, e2e: int | None = None
     ) -> dict:
+        quiet = _DropShortWindowWarning()
+        logger = logging.getLogger("wptrack.motion.background")
+        logger.addFilter(quiet)
+        try:
+            return MasksSuite._run_case(case, device, frames, numpy_max, seed, e2e)
+        finally:
+            logger.removeFilter(quiet)
+
+    @staticmethod
+    def _run_case(case: Case, device: str, frames: int, numpy_max: int, seed: int, e2e: int | None) -> dict:
         import cv2
 
         from wptrack.bench import numpy_masks

@@ -136,6 +136,10 @@ def _systematic_reference(q: np.ndarray, seed, device) -> np.ndarray:
     return np.repeat(np.arange(n), np.diff(np.concatenate([[0], bounds])))
 
 
+WEIGHTS_HEADER = "resampling alone on synthetic log-weights (ms per call; serial scatter: the reference path)"
+"""The line above the ``--weights`` rows (the colour suite's table header does not describe them)."""
+
+
 def format_weights_row(r: dict) -> str:
     """One line of the ``--weights`` benchmark."""
     eq = "yes" if r["equivalent"] else "NO"

@@ -2,8 +2,8 @@
 
 This module scores the output of a multi-object tracker (a ``tracks.csv``) against a ground-truth table, both with
 the columns ``frame,id,x,y,z`` (metres) and optionally ``class``. It reports the standard CLEAR-MOT and identity
-metrics, computed by `py-motmetrics <https://github.com/cheind/py-motmetrics>`_ (the ``motmetrics`` package, an
-optional dependency: ``pip install motmetrics`` or the ``eval`` extra), and the accuracy of Juza et al. (*3D template
+metrics, computed by `py-motmetrics <https://github.com/cheind/py-motmetrics>`_ (the ``motmetrics`` package, a
+dependency of wptrack), and the accuracy of Juza et al. (*3D template
 based single camera multiple object tracking*, sections 5.1-5.2), following our reading of that paper set out below.
 
 **Evaluated frames.** The frames scored are the distinct frames of the ground-truth table, or, when ``frames`` is
@@ -53,7 +53,34 @@ objects, and the classification accuracy defined as the percentage of objects mo
 * ``accuracy`` = ``tracking_accuracy * classification_accuracy``; when ``classification_accuracy`` is ``None`` it is
   ``tracking_accuracy`` alone (classification not scored; with no correctly tracked track that is 0).
 
-The paper runs the probabilistic tracker six times per sequence and averages the results: see :func:`average`.
+**HOTA** (Luiten et al., *HOTA: A Higher Order Metric for Evaluating Multi-Object Tracking*, IJCV 2020), on the
+ground plane with a distance similarity ``S = max(0, 1 - d / threshold)`` (``d`` the ground-plane distance above, in
+metres; 1 at the same point, 0 at the threshold and beyond) in place of the paper's box IoU (:func:`hota`):
+
+* Matching (paper section 5; the authors' TrackEval does the same): per frame, one Hungarian assignment maximising
+  ``A_global(o, h) * S(o, h)``, where ``A_global(o, h) = P / (n_o + n_h - P)`` is the soft association IoU of the two
+  identities over the whole sequence (``n_o``, ``n_h``: their frames; ``P``: their summed per-frame soft overlaps
+  ``S / (sum_h' S(o, h') + sum_o' S(o', h) - S)``), so that the matching prefers pairs that stay together. For a
+  threshold ``alpha`` the pairs of that assignment with ``S >= alpha`` are the true positives ``TP_alpha``; the other
+  objects are misses (FN), the other hypotheses false positives (FP).
+* ``DetA_alpha = |TP| / (|TP| + |FN| + |FP|)``; per true positive ``c``, ``A(c) = |TPA(c)| / (|TPA(c)| + |FNA(c)| +
+  |FPA(c)|)`` with TPA the true positives of the same object and hypothesis ids, FNA the object's other frames,
+  FPA the hypothesis's other frames; ``AssA_alpha`` = mean of ``A(c)`` over ``TP_alpha`` (0 without true positives);
+  ``HOTA_alpha = sqrt(DetA_alpha AssA_alpha)`` (paper eqs. 3-9).
+* ``HOTA``, ``DetA``, ``AssA`` (and the recall/precision parts ``DetRe``, ``DetPr``, ``AssRe``, ``AssPr``) are the
+  means over ``alpha = 0.05, 0.10, ..., 0.95`` (eq. 10); ``LocA`` is the mean similarity of the true positives,
+  averaged over the alphas that have any (NaN when none has).
+
+**MOTChallenge files** (:func:`write_mot_files`, written by ``wptrack evaluate`` into ``RUN/mot/``): one line per row,
+``frame,id,bb_left,bb_top,bb_width,bb_height,conf,x,y,z`` with 1-based frames (the MOT15 layout that py-motmetrics
+reads with ``motmetrics.io.loadtxt(path, fmt="mot15-2D")`` and TrackEval's MOT format): ``world.txt`` with the
+world ``x, y, z`` in metres and no box (-1), and for a run of the template tracker ``<camera>.txt`` with the image
+box of each object's 3D box seen by the rig camera, in MOTChallenge's 1-based pixel coordinates (OpenCV's + 1;
+``x, y, z`` -1); the same for the ground truth in
+``RUN/mot/gt/`` (image boxes when it has the template columns ``length,width,height,orientation``).
+
+The paper runs the probabilistic tracker six times per sequence and averages the results: see :func:`average`
+(mean, min, max and the standard deviation over runs, e.g. seeds).
 
 Example:
     >>> from wptrack.evaluation.mot import evaluate, average
@@ -96,6 +123,10 @@ SCALAR_METRICS = (
     "num_matches",
     "num_misses",
     "num_false_positives",
+    "hota",
+    "deta",
+    "assa",
+    "loca",
 )
 
 # motmetrics metric name -> Evaluation field.
@@ -170,6 +201,11 @@ class Evaluation:
         num_false_positives: Unmatched hypotheses summed over frames.
         threshold: Matching distance threshold (metres).
         min_coverage: Fraction of its frames a track must be matched in to count as correctly tracked.
+        hota: HOTA with the distance similarity of the same threshold (:func:`hota`).
+        deta: Its detection accuracy DetA.
+        assa: Its association accuracy AssA.
+        loca: Its localisation accuracy LocA (mean similarity of the true positives).
+        hota_detail: The whole :class:`HotaResult` (per-alpha values, recall and precision parts).
     """
 
     mota: float
@@ -191,6 +227,11 @@ class Evaluation:
     num_false_positives: int
     threshold: float
     min_coverage: float
+    hota: float = math.nan
+    deta: float = math.nan
+    assa: float = math.nan
+    loca: float = math.nan
+    hota_detail: HotaResult | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-ready dict (``per_track`` as a list of dicts; NaN and infinities as ``None``)."""
@@ -284,9 +325,9 @@ def _load(source: TableLike, role: str, ground_truth: bool) -> _Table:
     if isinstance(source, (str, os.PathLike)):
         label = f"{role} {os.fspath(source)}"
         try:
-            columns: Mapping[str, Any] = read_tracks(source)
+            columns: Mapping[str, Any] = read_tracks(source, what=f"{role} file")
         except WptrackError as e:
-            raise ConfigError(f"{role}: {e}") from None
+            raise ConfigError(str(e)) from None
     elif isinstance(source, Mapping):
         label = f"{role} <table>"
         columns = source
@@ -359,7 +400,8 @@ def _import_motmetrics() -> ModuleType:
         import motmetrics
     except ImportError as e:
         raise ConfigError(
-            f"evaluation needs the motmetrics package ({e}): pip install motmetrics (or the wptrack 'eval' extra)"
+            f"scoring needs the motmetrics package, a dependency of wptrack that is not importable here ({e}): "
+            "pip install motmetrics"
         ) from None
     return motmetrics
 
@@ -370,6 +412,155 @@ def _majority(values: Sequence[Any]) -> Any:
     for v in values:
         counts[v] = counts.get(v, 0) + 1
     return max(counts, key=counts.__getitem__) if counts else None  # max keeps the first of equal counts
+
+
+# ----------------------------------------------------------------------------------------------- HOTA
+
+HOTA_ALPHAS = tuple(round(0.05 * k, 2) for k in range(1, 20))
+"""The localisation thresholds alpha = 0.05, 0.10, ..., 0.95 HOTA averages over (paper eq. 10)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class HotaResult:
+    """HOTA and its parts on the ground plane (see the module docstring); each scalar is the mean over
+    :data:`HOTA_ALPHAS`, each ``*_alpha`` tuple holds the 19 per-alpha values.
+
+    Attributes:
+        hota, deta, assa: HOTA, detection accuracy, association accuracy (eqs. 3-10), in [0, 1].
+        detre, detpr: detection recall TP / (TP + FN) and precision TP / (TP + FP).
+        assre, asspr: association recall and precision (the mean over TP of TPA / (TPA + FNA), TPA / (TPA + FPA)).
+        loca: mean similarity of the true positives, over the alphas that have any (NaN when none has).
+        alphas: the thresholds.
+        threshold: distance (metres) at which the similarity reaches 0.
+    """
+
+    hota: float
+    deta: float
+    assa: float
+    detre: float
+    detpr: float
+    assre: float
+    asspr: float
+    loca: float
+    hota_alpha: tuple[float, ...]
+    deta_alpha: tuple[float, ...]
+    assa_alpha: tuple[float, ...]
+    alphas: tuple[float, ...]
+    threshold: float
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-ready dict (NaN as None)."""
+        return _plain(dataclasses.asdict(self))
+
+
+def _hota_tables(gt: _Table, hyp: _Table, eval_frames: np.ndarray, threshold: float) -> HotaResult:
+    """HOTA of two validated tables restricted to ``eval_frames`` (see the module docstring)."""
+    from scipy.optimize import linear_sum_assignment
+
+    alphas = np.asarray(HOTA_ALPHAS, dtype=np.float64)
+    gt_ids, gt_codes = np.unique(gt.ids, return_inverse=True)
+    hyp_ids, hyp_codes = np.unique(hyp.ids, return_inverse=True)
+    ng, nh = len(gt_ids), len(hyp_ids)
+    gt_count = np.bincount(gt_codes, minlength=ng).astype(np.float64)
+    hyp_count = np.bincount(hyp_codes, minlength=nh).astype(np.float64)
+    g0s, g1s = np.searchsorted(gt.frame, eval_frames, "left"), np.searchsorted(gt.frame, eval_frames, "right")
+    h0s, h1s = np.searchsorted(hyp.frame, eval_frames, "left"), np.searchsorted(hyp.frame, eval_frames, "right")
+
+    def similarity(g0: int, g1: int, h0: int, h1: int) -> np.ndarray:
+        d = np.linalg.norm(gt.xy[g0:g1, None, :] - hyp.xy[None, h0:h1, :], axis=2)
+        return np.maximum(0.0, 1.0 - d / threshold)
+
+    # the identities' soft association over the whole sequence (the matching's preference for lasting pairs)
+    potential = np.zeros((ng, nh))
+    frames = list(zip(g0s.tolist(), g1s.tolist(), h0s.tolist(), h1s.tolist(), strict=True))
+    for g0, g1, h0, h1 in frames:
+        if g1 == g0 or h1 == h0:
+            continue
+        sim = similarity(g0, g1, h0, h1)
+        denom = sim.sum(axis=0, keepdims=True) + sim.sum(axis=1, keepdims=True) - sim
+        soft = np.divide(sim, denom, out=np.zeros_like(sim), where=denom > 1e-12)
+        np.add.at(potential, (gt_codes[g0:g1, None], hyp_codes[None, h0:h1]), soft)
+    alignment = potential / np.maximum(gt_count[:, None] + hyp_count[None, :] - potential, 1e-12)
+
+    # one assignment per frame; each alpha keeps its pairs with S >= alpha
+    pair_g, pair_h, pair_s = [], [], []
+    for g0, g1, h0, h1 in frames:
+        if g1 == g0 or h1 == h0:
+            continue
+        sim = similarity(g0, g1, h0, h1)
+        rows, cols = linear_sum_assignment(-(alignment[gt_codes[g0:g1, None], hyp_codes[None, h0:h1]] * sim))
+        keep = sim[rows, cols] > 0.0
+        pair_g.append(gt_codes[g0 + rows[keep]])
+        pair_h.append(hyp_codes[h0 + cols[keep]])
+        pair_s.append(sim[rows[keep], cols[keep]])
+    pg = np.concatenate(pair_g) if pair_g else np.zeros(0, np.int64)
+    ph = np.concatenate(pair_h) if pair_h else np.zeros(0, np.int64)
+    ps = np.concatenate(pair_s) if pair_s else np.zeros(0)
+
+    n_gt, n_hyp = float(gt_count.sum()), float(hyp_count.sum())
+    per = {k: np.zeros(len(alphas)) for k in ("hota", "deta", "assa", "detre", "detpr", "assre", "asspr", "loca")}
+    for a, alpha in enumerate(alphas):
+        sel = ps >= alpha - 1e-9
+        tp = float(sel.sum())
+        fn, fp = n_gt - tp, n_hyp - tp
+        per["deta"][a] = tp / (tp + fn + fp) if tp + fn + fp > 0 else 0.0
+        per["detre"][a] = tp / n_gt if n_gt else 0.0
+        per["detpr"][a] = tp / n_hyp if n_hyp else 0.0
+        if tp > 0:
+            keys, counts = np.unique(pg[sel] * nh + ph[sel], return_counts=True)
+            g, h, c = keys // nh, keys % nh, counts.astype(np.float64)
+            per["assa"][a] = float(np.sum(c * c / (gt_count[g] + hyp_count[h] - c))) / tp
+            per["assre"][a] = float(np.sum(c * c / gt_count[g])) / tp
+            per["asspr"][a] = float(np.sum(c * c / hyp_count[h])) / tp
+            per["loca"][a] = float(ps[sel].mean())
+        else:
+            per["loca"][a] = np.nan
+        per["hota"][a] = math.sqrt(per["deta"][a] * per["assa"][a])
+    loca = per["loca"][np.isfinite(per["loca"])]
+    return HotaResult(
+        hota=float(per["hota"].mean()),
+        deta=float(per["deta"].mean()),
+        assa=float(per["assa"].mean()),
+        detre=float(per["detre"].mean()),
+        detpr=float(per["detpr"].mean()),
+        assre=float(per["assre"].mean()),
+        asspr=float(per["asspr"].mean()),
+        loca=float(loca.mean()) if loca.size else math.nan,
+        hota_alpha=tuple(float(v) for v in per["hota"]),
+        deta_alpha=tuple(float(v) for v in per["deta"]),
+        assa_alpha=tuple(float(v) for v in per["assa"]),
+        alphas=HOTA_ALPHAS,
+        threshold=threshold,
+    )
+
+
+def hota(
+    groundtruth: TableLike, tracks: TableLike, threshold: float = 1.0, frames: Iterable[int] | None = None
+) -> HotaResult:
+    """HOTA of ground-plane tracks against ground truth with the similarity ``max(0, 1 - d / threshold)``.
+
+    Args:
+        groundtruth: Ground truth (dict of columns or CSV path; ``frame,id,x,y,z``), as for :func:`evaluate`.
+        tracks: Tracker output, same forms; rows with a non-finite ``x`` or ``y`` are dropped.
+        threshold: Ground-plane distance (metres) at which the similarity reaches 0.
+        frames: Frames to evaluate; by default the frames of the ground truth.
+
+    Returns:
+        The :class:`HotaResult`.
+
+    Raises:
+        ConfigError: As :func:`evaluate` (motmetrics is not needed).
+    """
+    threshold = float(threshold)
+    if not (math.isfinite(threshold) and threshold > 0):
+        raise ConfigError(f"threshold must be a positive distance in metres, got {threshold}")
+    gt = _load(groundtruth, "ground truth", ground_truth=True)
+    hyp = _load(tracks, "tracks", ground_truth=False)
+    eval_frames = _evaluated_frames(frames, gt)
+    gt, hyp = gt.restrict(eval_frames), hyp.restrict(eval_frames)
+    if gt.frame.size == 0:
+        raise ConfigError(f"{gt.label}: no ground-truth objects in the evaluated frames")
+    return _hota_tables(gt, hyp, eval_frames, threshold)
 
 
 # ----------------------------------------------------------------------------------------------- evaluation
@@ -492,6 +683,7 @@ def evaluate(
         classification_accuracy = sum(bool(t.class_correct) for t in per_track) / n_correct
     accuracy = tracking_accuracy * (1.0 if classification_accuracy is None else classification_accuracy)
 
+    ho = _hota_tables(gt, hyp, eval_frames, threshold)
     return Evaluation(
         mota=scores["mota"],
         motp=scores["motp"],
@@ -512,11 +704,119 @@ def evaluate(
         num_false_positives=scores["num_false_positives"],
         threshold=threshold,
         min_coverage=min_coverage,
+        hota=ho.hota,
+        deta=ho.deta,
+        assa=ho.assa,
+        loca=ho.loca,
+        hota_detail=ho,
     )
 
 
+# ----------------------------------------------------------------------------------------------- MOTChallenge files
+
+MOT_DIR = "mot"
+"""Folder of a run where ``wptrack evaluate`` writes the MOTChallenge files (:func:`write_mot_files`)."""
+
+
+def _mot_lines(frame: np.ndarray, ids: np.ndarray, boxes: np.ndarray, conf: np.ndarray, xyz: np.ndarray) -> str:
+    rows = np.column_stack([frame + 1, ids, boxes, conf, xyz])  # MOTChallenge frames are 1-based
+    order = np.lexsort((rows[:, 1], rows[:, 0]))
+    return "".join(
+        f"{int(r[0])},{int(r[1])},{r[2]:.2f},{r[3]:.2f},{r[4]:.2f},{r[5]:.2f},{r[6]:.4g},{r[7]:.4f},{r[8]:.4f},"
+        f"{r[9]:.4f}\n"
+        for r in rows[order]
+    )
+
+
+def image_boxes(columns: Mapping[str, Any], camera: Any, plane: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The image box of each row's object: the bounding box of its 3D box (ground point ``x, y, z``, the template
+    columns ``length, width, height, orientation``) projected by ``camera`` (lens distortion included).
+
+    Returns:
+        ``(boxes, ok)``: (N, 4) ``left, top, width, height`` in pixels (not clipped to the image), and (N,) whether
+        every corner is in front of the camera (other rows have no box).
+    """
+    from wptrack.trackers.templates.tracker import object_box_corners
+
+    xyz = np.column_stack([np.asarray(columns[k], dtype=np.float64) for k in ("x", "y", "z")])
+    size = np.column_stack([np.asarray(columns[k], dtype=np.float64) for k in ("length", "width", "height")])
+    corners = object_box_corners(plane, plane.to_ground(xyz), size, np.asarray(columns["orientation"], np.float64))
+    n = len(xyz)
+    if n == 0:
+        return np.zeros((0, 4)), np.zeros(0, bool)
+    uv, depth = camera.project(corners.reshape(-1, 3))
+    uv = uv.reshape(n, 8, 2)
+    lo, hi = uv.min(axis=1), uv.max(axis=1)
+    ok = np.all(depth.reshape(n, 8) > 0, axis=1) & np.all(np.isfinite(uv), axis=(1, 2))
+    return np.column_stack([lo, hi - lo]), ok
+
+
+TEMPLATE_BOX_COLUMNS = ("length", "width", "height", "orientation")
+"""Columns a table needs for its rows to have image boxes (the template tracker's tracks, the s3 ground truth)."""
+
+
+def write_mot_files(
+    table: Mapping[str, Any] | str | os.PathLike,
+    out_dir: str | os.PathLike,
+    camera: Any = None,
+    plane: Any = None,
+    what: str = "tracks",
+) -> list[Any]:
+    """Write a tracks or ground-truth table as MOTChallenge files into ``out_dir`` (see the module docstring):
+    ``world.txt`` (world ``x, y, z`` in metres, no box) and, when ``camera`` is given and the table has the template
+    columns, ``<camera name>.txt`` (image boxes in pixels). Rows without a finite position are left out; the
+    confidence is the ``existence`` column when there is one, else 1. Files are written atomically.
+
+    Args:
+        table: A dict of columns or a CSV path (``frame,id,x,y,z`` and optional columns).
+        out_dir: Folder to write into (created).
+        camera: A rig camera for the image boxes, or None.
+        plane: The rig's ground plane (``Rig.ground_plane``) for the boxes' footprints.
+        what: What the table is, in error messages (``tracks``, ``ground truth``).
+
+    Returns:
+        The paths written.
+
+    Raises:
+        ConfigError: The table is unreadable or lacks ``frame,id,x,y,z``.
+    """
+    from pathlib import Path
+
+    from wptrack.io.run import atomic_write_text
+
+    columns = table if isinstance(table, Mapping) else None
+    if columns is None:
+        try:
+            columns = read_tracks(table, what=f"{what} file")
+        except WptrackError as e:
+            raise ConfigError(str(e)) from None
+    missing = [c for c in REQUIRED_COLUMNS if c not in columns]
+    if missing:
+        raise ConfigError(f"{what}: missing column(s) {', '.join(missing)} for the MOTChallenge files")
+    frame = _integers(what, "frame", np.asarray(columns["frame"]), non_negative=True)
+    ids = _integers(what, "id", np.asarray(columns["id"]), non_negative=False)
+    xyz = np.column_stack([_numeric(what, k, np.asarray(columns[k])) for k in ("x", "y", "z")])
+    conf = np.asarray(columns["existence"], dtype=np.float64) if "existence" in columns else np.ones(len(frame))
+    keep = np.all(np.isfinite(xyz), axis=1)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    none = -np.ones((len(frame), 4))
+    paths = [out / "world.txt"]
+    atomic_write_text(paths[0], _mot_lines(frame[keep], ids[keep], none[keep], conf[keep], xyz[keep]))
+    if camera is not None and plane is not None and all(c in columns for c in TEMPLATE_BOX_COLUMNS):
+        sub = {k: np.asarray(columns[k])[keep] for k in ("x", "y", "z", *TEMPLATE_BOX_COLUMNS)}
+        boxes, ok = image_boxes(sub, camera, plane)
+        f, i, c = frame[keep][ok], ids[keep][ok], conf[keep][ok]
+        name = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in str(camera.name)) or "camera"
+        paths.append(out / f"{name}.txt")
+        one_based = boxes[ok] + np.array([1.0, 1.0, 0.0, 0.0])  # MOTChallenge pixel coordinates start at 1
+        atomic_write_text(paths[1], _mot_lines(f, i, one_based, c, -np.ones((len(f), 3))))
+    return paths
+
+
 def average(evaluations: Sequence[Evaluation]) -> dict[str, Any]:
-    """Mean, minimum and maximum of the scalar metrics over several runs (the paper averages six per sequence).
+    """Mean, minimum, maximum and standard deviation of the scalar metrics over several runs (e.g. seeds; the paper
+    averages six per sequence).
 
     Values that are ``None`` or NaN (e.g. ``motp`` with nothing matched, ``classification_accuracy`` without
     classes) are left out of a metric's statistics; ``n`` says how many runs contributed.
@@ -525,8 +825,9 @@ def average(evaluations: Sequence[Evaluation]) -> dict[str, Any]:
         evaluations: Evaluations of runs of one sequence.
 
     Returns:
-        ``{"runs": R, metric: {"mean": m, "min": lo, "max": hi, "n": n}, ...}`` for every name in
-        :data:`SCALAR_METRICS`; ``mean``/``min``/``max`` are ``None`` when ``n`` is 0. JSON-ready.
+        ``{"runs": R, metric: {"mean": m, "min": lo, "max": hi, "std": s, "n": n}, ...}`` for every name in
+        :data:`SCALAR_METRICS` (``std``: the sample standard deviation, ``n - 1`` in the denominator, 0 for one run);
+        ``mean``/``min``/``max``/``std`` are ``None`` when ``n`` is 0. JSON-ready.
 
     Raises:
         ConfigError: ``evaluations`` is empty.
@@ -538,12 +839,9 @@ def average(evaluations: Sequence[Evaluation]) -> dict[str, Any]:
     for name in SCALAR_METRICS:
         values = [float(v) for v in (getattr(e, name) for e in runs) if v is not None and math.isfinite(float(v))]
         if values:
-            out[name] = {
-                "mean": math.fsum(values) / len(values),
-                "min": min(values),
-                "max": max(values),
-                "n": len(values),
-            }
+            mean = math.fsum(values) / len(values)
+            var = math.fsum((v - mean) ** 2 for v in values) / (len(values) - 1) if len(values) > 1 else 0.0
+            out[name] = {"mean": mean, "min": min(values), "max": max(values), "std": math.sqrt(var), "n": len(values)}
         else:
-            out[name] = {"mean": None, "min": None, "max": None, "n": 0}
+            out[name] = {"mean": None, "min": None, "max": None, "std": None, "n": 0}
     return out

@@ -493,6 +493,7 @@ class VideoWriter:
         self._tmp = self.path.with_name(f".{self.path.stem}.tmp-{uuid.uuid4().hex[:8]}{self.path.suffix}")
         self._writer: Any = None
         self._closed = False
+        self._blank_pending = 0
         if self.size is not None:
             self._open()
 
@@ -530,6 +531,10 @@ class VideoWriter:
             self._open()
         if (w, h) != self.size:
             raise ValueError(f"frame of {w}x{h} pixels written to video {self.path} of {self.size[0]}x{self.size[1]}")
+        while self._blank_pending > 0:  # frames missing before a resume point (continue_video), once the size is known
+            self._writer.write(np.zeros_like(frame))
+            self.frames_written += 1
+            self._blank_pending -= 1
         self._writer.write(np.ascontiguousarray(frame))
         self.frames_written += 1
 
@@ -575,6 +580,48 @@ class VideoWriter:
             self.close()
         else:
             self.abort()
+
+
+def continue_video(path: str | os.PathLike, keep: int, fps: float = 25.0) -> VideoWriter:
+    """A :class:`VideoWriter` for ``path`` that starts with the first ``keep`` frames of the video already there, for
+    a resumed run: it goes on writing one file, as an uninterrupted run does, and the old file is replaced only
+    when the new one is closed (atomic, see :class:`VideoWriter`). The frames are decoded and encoded again
+    (exact with the lossless FFV1 codec).
+
+    When ``path`` holds fewer than ``keep`` frames (missing, or a run killed before it closed the video), the
+    missing frames are written black (with a warning), so frame ``i`` of the video stays frame ``i`` of the run.
+
+    Args:
+        path: The video (``.avi``...).
+        keep: Frames of the existing video to copy first (the frames before the resume point).
+        fps: Frames per second.
+    """
+    writer = VideoWriter(path, fps=fps)
+    copied = 0
+    target = Path(path)
+    if keep > 0 and target.exists():
+        import cv2
+
+        cap = cv2.VideoCapture(str(target))
+        try:
+            while copied < keep:
+                ok, frame = cap.read()
+                if not ok:
+                    break
+                writer.write(frame)
+                copied += 1
+        finally:
+            cap.release()
+    if copied < keep:
+        log.warning(
+            "%s: %d of the %d frames before the resume point were found; the other %d are written black",
+            target,
+            copied,
+            keep,
+            keep - copied,
+        )
+        writer._blank_pending = keep - copied
+    return writer
 
 
 def write_video(path: str | os.PathLike, frames: Iterable[np.ndarray], fps: float = 25.0) -> Path | None:

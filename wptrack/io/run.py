@@ -832,7 +832,7 @@ def _column_array(name: str, values: list[str]) -> np.ndarray:
         return np.array(values, dtype=str)
 
 
-def read_tracks(path: str | os.PathLike) -> dict[str, np.ndarray]:
+def read_tracks(path: str | os.PathLike, what: str = "tracks file") -> dict[str, np.ndarray]:
     """Read a tracks.csv / groundtruth.csv into columns.
 
     Blank lines and lines starting with ``#`` are skipped. A last line without a newline and with too few values
@@ -840,6 +840,7 @@ def read_tracks(path: str | os.PathLike) -> dict[str, np.ndarray]:
 
     Args:
         path: CSV file with a header line.
+        what: What the file is, in the error messages (``tracks file``, ``ground truth file``).
 
     Returns:
         ``{column: (N,) array}`` in header order: int64 when every value is an integer, float64 when every
@@ -852,16 +853,16 @@ def read_tracks(path: str | os.PathLike) -> dict[str, np.ndarray]:
     try:
         text = p.read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise WptrackError(f"tracks file not found: {p}") from None
+        raise WptrackError(f"{what} not found: {p}") from None
     except (OSError, UnicodeDecodeError) as e:
-        raise WptrackError(f"cannot read tracks file {p}: {e}") from None
+        raise WptrackError(f"cannot read {what} {p}: {e}") from None
     lines = text.splitlines(keepends=True)
     records = [(i + 1, line) for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")]
     if not records:
-        raise WptrackError(f"tracks file {p} is empty (expected a header line such as frame,id,x,y,z)")
+        raise WptrackError(f"{what} {p} is empty (expected a header line such as frame,id,x,y,z)")
     header = [h.strip() for h in next(csv.reader([records[0][1]]))]
     if len(set(header)) != len(header) or not all(header):
-        raise WptrackError(f"tracks file {p}: invalid header {header}")
+        raise WptrackError(f"{what} {p}: invalid header {header}")
     data: list[list[str]] = [[] for _ in header]
     body = records[1:]
     for j, (lineno, line) in enumerate(body):
@@ -870,7 +871,7 @@ def read_tracks(path: str | os.PathLike) -> dict[str, np.ndarray]:
             if j == len(body) - 1 and not line.endswith("\n") and len(row) < len(header):
                 log.warning("%s: dropping the incomplete last line %d", p, lineno)
                 break
-            raise WptrackError(f"tracks file {p}, line {lineno}: {len(row)} values, expected {len(header)}")
+            raise WptrackError(f"{what} {p}, line {lineno}: {len(row)} values, expected {len(header)}")
         for col, value in zip(data, row, strict=True):
             col.append(value.strip())
     return {name: _column_array(name, col) for name, col in zip(header, data, strict=True)}

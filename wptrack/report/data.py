@@ -217,10 +217,11 @@ def load_run(run_dir: str | Path, known: list[str] | None = None) -> RunData:
 
 
 def _load_particles(data: RunData) -> None:
-    name = (data.run.get("files") or {}).get("particles") or PARTICLES_FILE
-    path = data.run_dir / str(name)
+    listed = (data.run.get("files") or {}).get("particles")
+    path = data.run_dir / str(listed or PARTICLES_FILE)
     if not path.is_file():
-        data.notes.append(f"no {PARTICLES_FILE}: particle clouds are left out")
+        if listed or data.tracker == "color":  # a run that saves none (people, templates) needs no note
+            data.notes.append(f"no {PARTICLES_FILE}: particle clouds are left out")
         return
     try:
         with np.load(path) as z:

@@ -179,5 +179,12 @@ def render_overlays(ctx: ReportContext, data: RunData) -> list[Figure]:
         canvas, _ = compose(drawn, labels)
         path = ctx.out_dir / f"overlay_frame{f:05d}.png"
         atomic_imwrite(path, canvas)
-        figs.append(Figure(path.name, f"Frame {f}: particles projected into each camera", wide=True))
+        figs.append(
+            Figure(
+                path.name,
+                f"Frame {f}: particles projected into each camera (dots coloured by weight, viridis: yellow = "
+                "heaviest), the estimate (orange cross) and the ground truth (green circle)",
+                wide=True,
+            )
+        )
     return figs

@@ -189,8 +189,20 @@ def add_rig(plotter: Any, pv: Any, rig: Any, depth: float, labels: bool = True) 
         )
 
 
-def add_ground(plotter: Any, pv: Any, geo: SceneGeometry, rig: Any) -> None:
-    """A light grid on the ground plane under the region of interest, and the rig's working volume outline."""
+def add_axes_and_scale(plotter: Any, step: float) -> None:
+    """The world axes (an x/y/z marker in the lower left corner) and the ground grid's spacing (a ``grid: 0.5 m``
+    label in the upper right corner), so that a 3D view has directions and a scale."""
+    plotter.add_axes(xlabel="x", ylabel="y", zlabel="z", line_width=2, color="black")
+    plotter.add_text(f"ground grid: {step:g} m", position="upper_right", font_size=10, color="black")
+
+
+SCALE_TEXT = "x/y/z: the world axes (lower left); the ground grid's spacing in metres is written upper right"
+"""What :func:`add_axes_and_scale` draws, for the sections' texts."""
+
+
+def add_ground(plotter: Any, pv: Any, geo: SceneGeometry, rig: Any) -> float:
+    """A light grid on the ground plane under the region of interest, and the rig's working volume outline; returns
+    the grid spacing (metres)."""
     axes = [a for a in range(3) if a != geo.up]
     ext = [(geo.lo[a], geo.hi[a]) for a in axes]
     step = _nice_step(max(e[1] - e[0] for e in ext) / 8.0)
@@ -212,9 +224,10 @@ def add_ground(plotter: Any, pv: Any, geo: SceneGeometry, rig: Any) -> None:
     if rig is not None and rig.volume is not None:
         vlo, vhi = rig.bounds()
         if np.linalg.norm(vhi - vlo) > 3.0 * np.linalg.norm(geo.hi - geo.lo):
-            return  # a room-sized volume around a bench-sized scene: its outline would only cross the view
+            return step  # a room-sized volume around a bench-sized scene: its outline would only cross the view
         box = pv.Box(bounds=(vlo[0], vhi[0], vlo[1], vhi[1], vlo[2], vhi[2]))
         plotter.add_mesh(box.extract_all_edges(), color=(0.55, 0.55, 0.55), line_width=1, lighting=False, render=False)
+    return step
 
 
 def _nice_step(x: float) -> float:
@@ -341,7 +354,9 @@ def section_scene(ctx: ReportContext) -> Section | None:
         "3D scene",
         text=(
             "Camera frusta (blue) from the rig, the ground grid, the estimated trajectory (orange) and the ground "
-            "truth (green). Particles are coloured by weight relative to the frame's largest weight."
+            "truth (green). Particles are coloured by weight relative to the frame's largest weight. "
+            + SCALE_TEXT
+            + "."
         ),
     )
     with ctx.timed("3D stills"):
@@ -364,7 +379,7 @@ def _render_stills(ctx: ReportContext, data: RunData) -> list[Figure]:
         ctx.renderer = renderer_info(pl)
         if data.rig is not None:
             add_rig(pl, pv, data.rig, geo.frustum_depth)
-        add_ground(pl, pv, geo, data.rig)
+        add_axes_and_scale(pl, add_ground(pl, pv, geo, data.rig))
         add_trajectories(pl, pv, data)
         radius = 0.012 * float(np.max(geo.hi - geo.lo))
         # overview: the clouds of every chosen frame
@@ -395,7 +410,13 @@ def _render_stills(ctx: ReportContext, data: RunData) -> list[Figure]:
             path = ctx.out_dir / f"scene_frame{f:05d}.png"
             pl.renderer.ResetCameraClippingRange()
             shot(pl, path)
-            figs.append(Figure(path.name, f"Frame {f}: particle cloud, estimate (orange) and ground truth (green)"))
+            figs.append(
+                Figure(
+                    path.name,
+                    f"Frame {f}: particle cloud (colour: weight / max), estimate (orange sphere) and ground truth "
+                    "(green sphere)",
+                )
+            )
             for a in dynamic:
                 pl.remove_actor(a, render=False)
     finally:
@@ -528,7 +549,7 @@ def render_camera_views(ctx: ReportContext, data: RunData) -> list[Figure]:
                 Figure(
                     path.name,
                     f"{cam.name}, frame {frame}: the 3D scene rendered from the calibrated camera over its undistorted "
-                    "frame",
+                    "frame: estimated trajectory (orange), ground truth (green), particles (colour: weight / max)",
                 )
             )
     finally:
@@ -583,7 +604,7 @@ def iter_movie(ctx: ReportContext, data: RunData) -> Iterator[np.ndarray]:
     try:
         if data.rig is not None:
             add_rig(pl, pv, data.rig, geo.frustum_depth)
-        add_ground(pl, pv, geo, data.rig)
+        add_axes_and_scale(pl, add_ground(pl, pv, geo, data.rig))
         add_trajectories(pl, pv, data, upto=-(10**12), width=2.0)  # ground truth only
         overview_view(pl, geo, data.rig)
         cloud = _empty_cloud(pv)
@@ -656,11 +677,13 @@ def section_movie(ctx: ReportContext) -> Section | None:
     data = ctx.data
     if data is None:
         return None
+    what = "The particle cloud (weight colours), the estimated" if data.particles is not None else "The estimated"
     sec = Section(
         "movie",
         "3D view over time",
-        text="The particle cloud (weight colours), the estimated trajectory so far (orange) and the ground truth "
-        "(green) frame by frame.",
+        text=f"{what} trajectories so far (one colour per track) and the ground truth (green), frame by frame. "
+        + SCALE_TEXT
+        + ".",
     )
     if not ctx.options.movie:
         sec.notes.append("movie not rendered (disabled)")

@@ -38,6 +38,133 @@ log = logging.getLogger(__name__)
 CHECKPOINT_FILE = "checkpoint.npz"
 """The state to resume an interrupted run from (``--resume``), in the run folder."""
 
+LOCK_FILE = ".wptrack.lock"
+"""Held in the run folder while a run writes into it (:func:`run_lock`): a second run into the folder refuses."""
+
+RUN_OUTPUTS = (
+    "run.json",
+    "tracks.csv",
+    "tracks_all.csv",
+    "particles.npz",
+    CHECKPOINT_FILE,
+    "best.csv",
+    "virtual*.avi",
+    "masks*.avi",
+    "occupancy.npz",
+    "hulls",
+    "hulls.npz",
+    "backgrounds",
+    "report",
+    "mot",
+    "evaluation.json",
+    ".*.tmp",
+    ".*.tmp-*",
+    "*.tmp",
+)
+"""What a run (and its report and evaluation) writes into its folder: ``--overwrite`` removes these names and
+nothing else (other files a user keeps in the folder stay)."""
+
+
+def clear_run_outputs(out_dir: Path) -> list[str]:
+    """Remove the files and folders of a previous run in ``out_dir`` (the names of :data:`RUN_OUTPUTS`); returns
+    the names removed."""
+    import shutil
+
+    removed = []
+    for pattern in RUN_OUTPUTS:
+        for path in sorted(out_dir.glob(pattern)):
+            if path.name == LOCK_FILE:
+                continue
+            if path.is_dir() and not path.is_symlink():
+                shutil.rmtree(path)
+            else:
+                path.unlink(missing_ok=True)
+            removed.append(path.name)
+    return removed
+
+
+def _pid_alive(pid: int) -> bool:
+    import os
+
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's live process
+        return True
+    except OSError:
+        return False
+    return True
+
+
+@contextlib.contextmanager
+def run_lock(out_dir: Path) -> Iterator[Path]:
+    """Hold ``out_dir/.wptrack.lock`` (pid, host, start time; created with ``O_EXCL``) while the block runs.
+
+    A lock held by a live process, or by a process of another host (which cannot be checked from here), is a
+    :class:`~wptrack.core.errors.ConfigError` naming it. A lock left by a process of this host that is no longer alive
+    (a run killed with SIGKILL, a crashed machine) is stale: it is taken over with a warning.
+
+    Raises:
+        ConfigError: another run holds the folder.
+        OutputError: the lock file cannot be written.
+    """
+    import json
+    import os
+    import socket
+    import uuid
+    from datetime import datetime, timezone
+
+    from wptrack.core.errors import ConfigError, OutputError
+
+    path = out_dir / LOCK_FILE
+    host = socket.gethostname()
+    me = {
+        "pid": os.getpid(),
+        "host": host,
+        "started": datetime.now(timezone.utc).astimezone().isoformat(timespec="seconds"),
+    }
+    for _attempt in range(3):
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            try:
+                other = json.loads(path.read_text(encoding="utf-8") or "{}")
+            except (OSError, ValueError):
+                other = {}
+            pid, other_host = other.get("pid"), other.get("host")
+            if isinstance(pid, int) and other_host == host and not _pid_alive(pid):
+                log.warning("%s: taking over the stale lock of process %d (no longer running)", out_dir, pid)
+                stale = out_dir / f"{LOCK_FILE}.stale-{uuid.uuid4().hex[:8]}"
+                with contextlib.suppress(FileNotFoundError):  # another run may have taken it over first
+                    os.rename(path, stale)
+                    stale.unlink()
+                continue
+            if not other:  # being written this instant, or unreadable: say so rather than guess
+                raise ConfigError(
+                    f"{out_dir} is in use by another wptrack run (lock {path}); wait for it to finish, or choose "
+                    "another --out"
+                ) from None
+            raise ConfigError(
+                f"{out_dir} is in use by another wptrack run (pid {pid} on {other_host}, started "
+                f"{other.get('started', '?')}); wait for it to finish, or choose another --out (a lock left by a "
+                f"dead run of another host: delete {path})"
+            ) from None
+        except OSError as e:
+            raise OutputError(f"cannot write the lock file {path}: {e.strerror or e}") from None
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(json.dumps(me) + "\n")
+        break
+    else:
+        raise ConfigError(f"{out_dir}: could not take the run lock {path}; try again")
+    try:
+        yield path
+    finally:
+        with contextlib.suppress(OSError):
+            current = json.loads(path.read_text(encoding="utf-8") or "{}")
+            if current.get("pid") == me["pid"] and current.get("host") == host:
+                path.unlink()
+
 
 class RunInterrupted(KeyboardInterrupt):
     """A run stopped by a signal (SIGINT or SIGTERM). ``exit_code`` is the shell convention 128 + signal."""
@@ -163,9 +290,73 @@ def _progress(total: int | None, enabled: bool) -> Any:
     return tqdm(total=total, desc="tracking", unit="frame", disable=not enabled, leave=False, dynamic_ncols=True)
 
 
-def _check_resumable(job: TrackerRun, out_dir: Path) -> tuple[int, dict[str, Any]]:
-    """The last frame and the state of the checkpoint in ``out_dir``, if ``job`` may resume that run."""
+_OPTION_OF = {
+    "videos": "--video",
+    "init_box": "--volume",
+    "partition": "--joint",
+    "detect_shadows": "--keep-shadows",
+    "method": "--mask-method",
+    "history": "--mask-history",
+    "var_threshold": "--mask-threshold",
+    "dist2_threshold": "--mask-threshold",
+    "n_bins": "--bins",
+    "score_mode_resolved": "--score-mode",
+}
+"""Run-config leaf names whose command-line option is not ``--`` + the name with dashes."""
+
+
+def _flat(d: Any, prefix: str = "") -> dict[str, Any]:
+    if not isinstance(d, dict):
+        return {prefix.rstrip("."): d}
+    out: dict[str, Any] = {}
+    for k, v in d.items():
+        out.update(_flat(v, f"{prefix}{k}.") if isinstance(v, dict) else {f"{prefix}{k}": v})
+    return out
+
+
+def _track_options(tracker: str) -> set[str]:
+    """The option strings of ``wptrack track TRACKER`` (empty for a job that is no CLI tracker)."""
+    import argparse
+
+    from wptrack.cli import build_parser
+
+    def sub(p: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser | None:
+        for a in p._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                return a.choices.get(name)
+        return None
+
+    track = sub(build_parser(), "track")
+    parser = sub(track, tracker) if track is not None else None
+    return {o for a in parser._actions for o in a.option_strings} if parser is not None else set()
+
+
+def describe_changes(tracker: str, before: dict[str, Any], now: dict[str, Any]) -> list[str]:
+    """What differs between two run configurations, by command-line option where there is one:
+    ``["--particles was 400, now 300", ...]`` (config paths such as ``tracker.occupancy.p_h`` otherwise)."""
+
+    def show(v: Any) -> str:
+        text = "unset" if v is None else str(v)
+        return text if len(text) <= 80 else text[:77] + "..."
+
+    options = _track_options(tracker)
+    a, b = _flat(before), _flat(now)
+    out: dict[str, str] = {}
+    for key in sorted(set(a) | set(b)):
+        if a.get(key) == b.get(key):
+            continue
+        leaf = key.rsplit(".", 1)[-1]
+        option = _OPTION_OF.get(leaf, "--" + leaf.replace("_", "-"))
+        name = option if option in options else key
+        out.setdefault(name, f"{name} was {show(a.get(key))}, now {show(b.get(key))}")
+    return list(out.values())
+
+
+def _check_resumable(job: TrackerRun, out_dir: Path) -> tuple[int | None, dict[str, Any]]:
+    """The last frame and the state of the checkpoint in ``out_dir``, if ``job`` may resume that run; ``(None,
+    {})`` when that run stopped before its first frame (nothing to continue: the run starts from the beginning)."""
     import json
+    import zipfile
 
     from wptrack.core.errors import ConfigError
     from wptrack.io.run import RUN_FILE, _jsonable
@@ -179,20 +370,29 @@ def _check_resumable(job: TrackerRun, out_dir: Path) -> tuple[int, dict[str, Any
         raise ConfigError(f"--resume: the run in {out_dir} is already complete")
     if previous.get("tracker") != job.name:
         raise ConfigError(f"--resume: {run_path} is a {previous.get('tracker')!r} run, not {job.name!r}")
-    now = _jsonable(job.config)
-    before = previous.get("config", {})
-    changed = sorted(k for k in set(now) | set(before) if now.get(k) != before.get(k))
+    changed = describe_changes(job.name, previous.get("config", {}), _jsonable(job.config))
     if changed:
         raise ConfigError(
-            f"--resume: the configuration differs from the interrupted run in {out_dir} ({', '.join(changed)}); "
-            "resume with the same inputs and options"
+            f"--resume: the configuration differs from the interrupted run in {out_dir}: {'; '.join(changed)}; "
+            "resume with the same inputs and options (or start again with --overwrite)"
         )
     ckpt = out_dir / CHECKPOINT_FILE
     if not ckpt.exists():
-        raise ConfigError(f"--resume: {ckpt} not found (the run stopped before its first checkpoint); start again")
-    with np.load(ckpt) as z:
-        state = {k: z[k] for k in z.files}
-    return int(state.pop("__run_frame__")), state
+        if previous.get("last_frame") is None:  # stopped before its first frame: start it from the beginning
+            return None, {}
+        raise ConfigError(
+            f"--resume: {ckpt} not found (the run stopped before its first checkpoint); start again with --overwrite"
+        )
+    try:
+        with open(ckpt, "rb") as fh, np.load(fh) as z:  # our handle: closed also when the archive is unreadable
+            state = {k: z[k] for k in z.files}
+        frame = int(state.pop("__run_frame__"))
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError, KeyError) as e:
+        raise ConfigError(
+            f"--resume: the checkpoint {ckpt} is damaged ({type(e).__name__}: {e}; a full disk or a killed copy?) "
+            "and cannot be continued from: run the command again without --resume, with --overwrite"
+        ) from None
+    return frame, state
 
 
 def _write_checkpoint(job: TrackerRun, out: Any, frame: int) -> None:
@@ -213,6 +413,7 @@ def run_tracker(
     prefetch_depth: int = 4,
     resume: bool = False,
     checkpoint_seconds: float = 60.0,
+    overwrite: bool = False,
 ) -> dict[str, Any]:
     """Run ``job`` over its frames and write the run folder as it goes.
 
@@ -228,6 +429,10 @@ def run_tracker(
         checkpoint_seconds: write ``checkpoint.npz`` (the tracker's whole state, see ``FrameChain.state_dict``)
             at most this often while running, and always when interrupted; 0 only when interrupted. It is
             removed when the run completes.
+        overwrite: ``out_dir`` may hold a previous run (its ``run.json``): remove what that run wrote
+            (:data:`RUN_OUTPUTS`) first. Without it such a folder is refused (unless ``resume``).
+
+        The folder is locked while the run writes into it (:func:`run_lock`).
 
     Returns:
         The job's summary (also in run.json).
@@ -235,14 +440,13 @@ def run_tracker(
     Raises:
         OutputError: the folder cannot be written (before anything is written).
         RunInterrupted: SIGINT / SIGTERM (after a checkpoint); run.json then says ``interrupted``.
-        ConfigError: ``resume`` without a resumable run of the same configuration in ``out_dir``.
+        ConfigError: ``resume`` without a resumable run of the same configuration in ``out_dir``; ``out_dir``
+            holds a previous run and neither ``overwrite`` nor ``resume`` is given; another run holds the folder.
     """
-    import itertools
     import math
 
     from wptrack.core.errors import ConfigError
-    from wptrack.io.frames import prefetch
-    from wptrack.io.run import RunWriter, ensure_writable_dir
+    from wptrack.io.run import RUN_FILE, ensure_writable_dir
 
     if (
         not (isinstance(checkpoint_seconds, (int, float)) and math.isfinite(checkpoint_seconds))
@@ -252,12 +456,88 @@ def run_tracker(
             f"checkpoint interval: expected seconds >= 0 (0: only when interrupted), got {checkpoint_seconds!r}"
         )
 
+    if resume and overwrite:
+        raise ConfigError("--resume continues the run in --out, --overwrite replaces it: give one of them")
+    if resume and not (Path(out_dir) / RUN_FILE).is_file():  # said before the folder is created (nothing left)
+        raise ConfigError(f"--resume: {Path(out_dir) / RUN_FILE} is missing or unreadable: nothing to resume")
+    created = not Path(out_dir).exists()
     out_dir = ensure_writable_dir(out_dir)
+    try:
+        with run_lock(out_dir):
+            try:
+                return _run_locked(
+                    job, out_dir, progress, max_frames, prefetch_depth, resume, checkpoint_seconds, overwrite
+                )
+            except KeyboardInterrupt as e:  # what the CLI tells the user; a run stopped before its first frame
+                e.run_dir = out_dir  # leaves nothing behind
+                e.resumable = (out_dir / CHECKPOINT_FILE).exists()
+                e.nothing_written = not e.resumable and _nothing_tracked(out_dir)
+                if e.nothing_written:
+                    clear_run_outputs(out_dir)
+                raise
+    except KeyboardInterrupt as e:
+        if getattr(e, "nothing_written", False) and created:
+            with contextlib.suppress(OSError):
+                out_dir.rmdir()  # only if empty
+        raise
+
+
+def _nothing_tracked(out_dir: Path) -> bool:
+    """Whether the run in ``out_dir`` stopped before it tracked a frame (run.json's ``last_frame`` is null)."""
+    import json
+
+    from wptrack.io.run import RUN_FILE
+
+    try:
+        return json.loads((out_dir / RUN_FILE).read_text(encoding="utf-8")).get("last_frame") is None
+    except (OSError, ValueError):
+        return True
+
+
+def _run_locked(
+    job: TrackerRun,
+    out_dir: Path,
+    progress: bool,
+    max_frames: int | None,
+    prefetch_depth: int,
+    resume: bool,
+    checkpoint_seconds: float,
+    overwrite: bool,
+) -> dict[str, Any]:
+    """:func:`run_tracker` once the run folder is locked."""
+    import itertools
+
+    from wptrack.core.errors import ConfigError, WptrackError
+    from wptrack.io.frames import prefetch
+    from wptrack.io.run import RUN_FILE, RunWriter
+
+    if not resume and (out_dir / RUN_FILE).exists():
+        if not overwrite:
+            raise ConfigError(
+                f"{out_dir} holds a previous run ({RUN_FILE}); --overwrite replaces it, --resume continues an "
+                "interrupted one, or choose another --out"
+            )
+        removed = clear_run_outputs(out_dir)
+        log.info("--overwrite: removed %s from %s", ", ".join(removed), out_dir)
     after = None
     if resume:
         after, state = _check_resumable(job, out_dir)
-        job.load_state_dict(state)
-        log.info("resuming %s after frame %d", out_dir, after)
+        if after is None:
+            log.warning(
+                "--resume: the run in %s stopped before its first frame; starting it from the beginning", out_dir
+            )
+            clear_run_outputs(out_dir)
+            resume = False
+        else:
+            try:
+                job.load_state_dict(state)
+            except (KeyError, ValueError, TypeError, IndexError, WptrackError) as e:
+                why = str(e) if isinstance(e, WptrackError) else f"{type(e).__name__}: {e}"
+                raise ConfigError(
+                    f"--resume: the checkpoint {out_dir / CHECKPOINT_FILE} is damaged or of another version "
+                    f"({why}) and cannot be continued from: run the command again without --resume, with --overwrite"
+                ) from None
+            log.info("resuming %s after frame %d", out_dir, after)
     start = 0 if after is None else after + 1
     total = job.total if max_frames is None or job.total is None else min(job.total, max_frames)
     with (

@@ -411,6 +411,7 @@ def _template_run(task: dict) -> dict:
         device=task["device"],
         virtual=False,
         progress=task["progress"],
+        overwrite=True,  # the experiment's own run folder: running the experiment again replaces it
     )
     return evaluate(task["groundtruth"], Path(task["run_dir"]) / "tracks.csv", threshold=1.0).to_dict()
 

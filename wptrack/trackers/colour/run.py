@@ -138,14 +138,17 @@ def run_color_tracking(
     progress: bool = False,
     resume: bool = False,
     checkpoint_seconds: float = 60.0,
+    overwrite: bool = False,
 ) -> dict[str, Any]:
     """Track a coloured object in synchronised videos and write ``tracks.csv``, ``run.json`` and
     ``particles.npz`` into ``out_dir`` as the run goes (see :class:`ColourRun` for the arguments).
 
-    ``resume`` and ``checkpoint_seconds``: see :func:`wptrack.runs.run_tracker`.
+    ``resume``, ``checkpoint_seconds`` and ``overwrite``: see :func:`wptrack.runs.run_tracker`.
 
     Returns:
         The run summary (also in run.json).
     """
     job = ColourRun(rig_path, videos, target, config, device, stop_at_shortest, max_frames, groundtruth)
-    return run_tracker(job, out_dir, progress=progress, resume=resume, checkpoint_seconds=checkpoint_seconds)
+    return run_tracker(
+        job, out_dir, progress=progress, resume=resume, checkpoint_seconds=checkpoint_seconds, overwrite=overwrite
+    )

@@ -76,7 +76,9 @@ def section_occupancy(ctx: ReportContext) -> Section | None:
         "Occupancy and bounding volumes",
         text="Each person's volumetric occupancy pdf (3D Gaussian kernel over its particles, paper Figs. 6 and 8) as "
         "iso-surfaces at 25 % and 60 % of its peak, and the convex hull of the particles that hold 95 % of the "
-        "weight (the bounding volume) as a wire mesh, one colour per id, with the camera frusta.",
+        "weight (the bounding volume) as a wire mesh, one colour per id, with the camera frusta. "
+        + scene3d.SCALE_TEXT
+        + ".",
     )
     hulls = load_hulls(data.run_dir, ctx.frames)
     occ, voxel = load_occupancy(data.run_dir)
@@ -102,7 +104,7 @@ def _render_occupancy(ctx, data, hulls, occ, voxel, occ_frames) -> list[Figure]:
         ctx.renderer = renderer_info(pl)
         if data.rig is not None:
             scene3d.add_rig(pl, pv, data.rig, geo.frustum_depth)
-        scene3d.add_ground(pl, pv, geo, data.rig)
+        scene3d.add_axes_and_scale(pl, scene3d.add_ground(pl, pv, geo, data.rig))
         scene3d.overview_view(pl, geo, data.rig)
         for f in ctx.frames:
             dynamic = []
@@ -139,7 +141,13 @@ def _render_occupancy(ctx, data, hulls, occ, voxel, occ_frames) -> list[Figure]:
             path = ctx.out_dir / f"occupancy_frame{f:05d}.png"
             pl.renderer.ResetCameraClippingRange()
             scene3d.shot(pl, path)
-            figs.append(Figure(path.name, f"Frame {f}: occupancy iso-surfaces and 95 % bounding volumes per person"))
+            figs.append(
+                Figure(
+                    path.name,
+                    f"Frame {f}: each person's occupancy iso-surfaces (translucent, 25 % and 60 % of the peak) and "
+                    "95 % bounding volume (wire mesh), in the colour of its #id",
+                )
+            )
             for a in dynamic:
                 pl.remove_actor(a, render=False)
     finally:
@@ -239,7 +247,14 @@ def section_segmentation(ctx: ReportContext) -> Section | None:
             path = ctx.out_dir / f"segmentation_frame{f:05d}.png"
             atomic_imwrite(path, canvas)
             ids = ", ".join(f"#{pid}" for pid, _ in people) or "nobody"
-            sec.figures.append(Figure(path.name, f"Frame {f}: {ids}", wide=True))
+            sec.figures.append(
+                Figure(
+                    path.name,
+                    f"Frame {f}: {ids}; each person's 95 % bounding volume projected into every camera (filled and "
+                    "outlined in the colour of its #id)",
+                    wide=True,
+                )
+            )
     return sec
 
 
@@ -299,6 +314,7 @@ PEOPLE_SECTIONS = (
     plots.section_birdseye,
     section_metrics,
     plots.section_errors,
+    scene3d.section_movie,
     plots.section_timings,
 )
 """Section builders of the people tracker's report, in page order."""

@@ -190,16 +190,15 @@ class PeopleRun(TrackerRun):
 
     def start(self, out_dir: Path, resume_after: int | None = None) -> None:
         from wptrack.io.chunklog import ChunkLog
-        from wptrack.io.frames import VideoWriter
+        from wptrack.io.frames import continue_video
 
         self._out_dir = out_dir
         self._hulls = ChunkLog(out_dir / HULLS_DIR, resume_after=resume_after)
         if resume_after is not None:
             self._load_npz_logs(out_dir, resume_after)
-        if self._save_masks:
-            suffix = "" if resume_after is None else f".from{resume_after + 1}"
-            fps = 25.0
-            self._mask_writers = [VideoWriter(out_dir / f"masks_{n}{suffix}.avi", fps=fps) for n in self._names]
+        if self._save_masks:  # a resumed run rewrites them: the frames up to the resume point, then the new ones
+            keep = 0 if resume_after is None else resume_after + 1
+            self._mask_writers = [continue_video(out_dir / f"masks_{n}.avi", keep, fps=25.0) for n in self._names]
 
     def step(self, item: Any) -> Any:
         images, *masks = item
@@ -308,9 +307,11 @@ def run_people_tracking(
     progress: bool = False,
     resume: bool = False,
     checkpoint_seconds: float = 60.0,
+    overwrite: bool = False,
 ) -> dict[str, Any]:
     """Track people in synchronised videos of two or more cameras and write the run folder (see the module
-    docstring and :class:`PeopleRun`; ``resume`` and ``checkpoint_seconds``: :func:`wptrack.runs.run_tracker`).
+    docstring and :class:`PeopleRun`; ``resume``, ``checkpoint_seconds`` and ``overwrite``:
+    :func:`wptrack.runs.run_tracker`).
 
     Returns:
         The run summary (also in run.json).
@@ -318,4 +319,6 @@ def run_people_tracking(
     job = PeopleRun(
         rig_path, videos, config, mask_config, masks, device, stop_at_shortest, max_frames, occupancy_every, save_masks
     )
-    return run_tracker(job, out_dir, progress=progress, resume=resume, checkpoint_seconds=checkpoint_seconds)
+    return run_tracker(
+        job, out_dir, progress=progress, resume=resume, checkpoint_seconds=checkpoint_seconds, overwrite=overwrite
+    )

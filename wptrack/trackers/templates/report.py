@@ -252,7 +252,13 @@ def section_overlays(ctx: ReportContext) -> Section | None:
             path = ctx.out_dir / f"overlay_frame{f:05d}.png"
             atomic_imwrite(path, out)
             ids = ", ".join(f"{o.id} ({o.cls})" for o in objs) or "none"
-            sec.figures.append(Figure(path.name, f"Frame {f}: tracked objects {ids}"))
+            sec.figures.append(
+                Figure(
+                    path.name,
+                    f"Frame {f}: tracked objects {ids}: template outlines in each object's colour with its id and "
+                    "class, a dot at its ground point; green rings: the ground truth",
+                )
+            )
     missing = [f for f in ctx.frames if f not in images]
     if missing:
         sec.notes.append(f"frames {missing} are beyond the end of {Path(source).name}: left out")
@@ -613,7 +619,7 @@ def section_scene3d(ctx: ReportContext) -> Section | None:
             "The camera frustum (blue) with the rays of the image corners down to the ground it sees (blue outline, "
             "clipped to the region shown), the ground grid, every track on the ground in its id colour, the ground "
             "truth (green) and the objects' templates at the frame shown (humans: body cylinder and head sphere; "
-            "vehicles: lower body and cabin)."
+            "vehicles: lower body and cabin). " + scene3d.SCALE_TEXT + "."
         ),
     )
     with ctx.timed("3D stills"):
@@ -640,7 +646,7 @@ def _render_scene3d(ctx: ReportContext, run: TemplateRun) -> list[Figure]:
             scene3d.add_rig(pl, pv, data.rig, geo.frustum_depth)
         if run.camera is not None:
             _add_footprint(pl, pv, run, max_range=min(MAX_RANGE, 2.0 * geo.radius))
-        scene3d.add_ground(pl, pv, geo, data.rig)
+        scene3d.add_axes_and_scale(pl, scene3d.add_ground(pl, pv, geo, data.rig))
         if run.truth is not None:
             for rows in _per_id(run.truth).values():
                 for _, seg in _split_gaps(run.truth["frame"][rows], _ground_xy(run, run.truth, rows)):

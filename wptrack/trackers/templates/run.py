@@ -261,17 +261,17 @@ class TemplateRun(TrackerRun):
         return self._stream
 
     def start(self, out_dir: Path, resume_after: int | None = None) -> None:
-        from wptrack.io.frames import VideoWriter
+        from wptrack.io.frames import continue_video
         from wptrack.io.run import truncate_csv_after
 
         best = out_dir / "best.csv"
         if resume_after is not None:
             truncate_csv_after(best, resume_after)
         self._best_csv = _CsvAppender(best, TEMPLATE_COLUMNS, append=resume_after is not None and best.exists())
-        # a resumed run writes its videos from the next frame on into new files: virtual.from<F>.avi
-        suffix = "" if resume_after is None else f".from{resume_after + 1}"
-        self._vwriter = VideoWriter(out_dir / f"virtual{suffix}.avi", fps=self._fps) if self._virtual else None
-        self._mwriter = VideoWriter(out_dir / f"masks{suffix}.avi", fps=self._fps) if self._save_masks else None
+        # a resumed run rewrites its videos: the frames up to the resume point copied, then the new ones (one file)
+        keep = 0 if resume_after is None else resume_after + 1
+        self._vwriter = continue_video(out_dir / "virtual.avi", keep, fps=self._fps) if self._virtual else None
+        self._mwriter = continue_video(out_dir / "masks.avi", keep, fps=self._fps) if self._save_masks else None
         model = getattr(self._stream, "model", None)
         if model is not None:  # offline masks: keep each background window for the report's Fig. 5 panels
             model.on_build = BackgroundSaver(out_dir / BACKGROUNDS_DIR)
@@ -386,17 +386,24 @@ def run_template_tracking(
     progress: bool = False,
     resume: bool = False,
     checkpoint_seconds: float = 60.0,
+    overwrite: bool = False,
     flood_guard: bool = True,
 ) -> dict[str, Any]:
     """Track objects with the template tracker and write the run folder (see the module docstring and
     :class:`TemplateRun` for the arguments).
 
-    ``resume`` and ``checkpoint_seconds``: see :func:`wptrack.runs.run_tracker`.
+    ``resume``, ``checkpoint_seconds`` and ``overwrite``: see :func:`wptrack.runs.run_tracker`.
 
     Returns:
         The run summary (also in run.json).
     """
     job = TemplateRun(rig_path, config, video, masks, mask_config, device, max_frames, save_masks, virtual, flood_guard)
     return run_tracker(
-        job, out_dir, progress=progress, max_frames=max_frames, resume=resume, checkpoint_seconds=checkpoint_seconds
+        job,
+        out_dir,
+        progress=progress,
+        max_frames=max_frames,
+        resume=resume,
+        checkpoint_seconds=checkpoint_seconds,
+        overwrite=overwrite,
     )

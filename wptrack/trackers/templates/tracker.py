@@ -197,6 +197,23 @@ def box_fraction_in_image(
     ground = np.asarray(ground, dtype=np.float64).reshape(-1, 2)
     if len(ground) == 0:
         return np.zeros(0)
+    ok, area, inside = camera.image_box_cover(object_box_corners(plane, ground, size, heading))
+    return np.where(ok, inside / area, 0.0)
+
+
+def object_box_corners(plane: GroundPlane, ground: np.ndarray, size: np.ndarray, heading: np.ndarray) -> np.ndarray:
+    """The 8 world corners of each object's 3D box (the box whose image is the object's image box).
+
+    Args:
+        plane: The ground plane.
+        ground: (n, 2) ground-plane positions of the footprint centres, metres.
+        size: (n, 3) length, width, height, metres.
+        heading: (n,) headings on the ground plane, radians.
+
+    Returns:
+        (n, 8, 3) world points, metres.
+    """
+    ground = np.asarray(ground, dtype=np.float64).reshape(-1, 2)
     size = np.asarray(size, dtype=np.float64).reshape(-1, 3)
     heading = np.asarray(heading, dtype=np.float64).reshape(-1)
     c = np.cos(heading)[:, None]
@@ -204,8 +221,7 @@ def box_fraction_in_image(
     local = _BOX_CORNERS[None] * size[:, None, :]  # (n, 8, 3)
     gx = ground[:, :1] + c * local[..., 0] - s * local[..., 1]
     gy = ground[:, 1:] + s * local[..., 0] + c * local[..., 1]
-    ok, area, inside = camera.image_box_cover(plane.to_world(np.stack([gx, gy], axis=-1), local[..., 2]))
-    return np.where(ok, inside / area, 0.0)
+    return plane.to_world(np.stack([gx, gy], axis=-1), local[..., 2])
 
 
 class Hulls:
