@@ -16,7 +16,7 @@ import numpy as np
 from wptrack.cameras.rig import Rig
 from wptrack.core.device import quiet_warp
 from wptrack.io.frames import open_frames
-from wptrack.io.run import read_tracks
+from wptrack.io.tables import read_tracks
 from wptrack.synth import render_scene
 from wptrack.trackers.colour.experiments import drift_study
 from wptrack.trackers.colour.tracker import ColorTracker, HSITarget

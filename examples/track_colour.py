@@ -20,7 +20,7 @@ from wptrack.cameras.rig import Rig
 from wptrack.core.device import quiet_warp
 from wptrack.evaluation.convergence import summarize
 from wptrack.io.frames import open_frames
-from wptrack.io.run import read_tracks
+from wptrack.io.tables import read_tracks
 from wptrack.synth import render_scene
 from wptrack.trackers.colour.tracker import ColorTracker, HSITarget
 

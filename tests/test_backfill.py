@@ -186,7 +186,7 @@ def test_a_completed_template_run_is_backfilled(tmp_path, capsys):
     """The run loop backfills tracks.csv when the run completes; tracks_all.csv keeps the tracker's rows."""
     pytest.importorskip("motmetrics")
     from wptrack.cli import main
-    from wptrack.io.run import read_tracks
+    from wptrack.io.tables import read_tracks
 
     assert main(["synth", "s3-people", "--out", str(tmp_path / "scene"), "--frames", "30", "-q"]) == 0
     out = tmp_path / "run"
@@ -215,7 +215,8 @@ def test_run_writer_finish_tracks(tmp_path):
     """RunWriter.close('complete', finish_tracks=f): f gets tracks.csv after the short tracks are left out, its dict
     goes into run.json, tracks_all.csv holds the rows before it; an error leaves tracks.csv as it was and is
     recorded; an interrupted run does not call it."""
-    from wptrack.io.run import RunWriter, read_tracks
+    from wptrack.io.run import RunWriter
+    from wptrack.io.tables import read_tracks
 
     cols = ["frame", "id", "x", "y", "z"]
     rows = [(f, 1, 1.0, 2.0, 0.0) for f in range(5)]

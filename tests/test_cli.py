@@ -15,7 +15,7 @@ import warp as wp
 from wptrack.cameras.rig import Camera, Rig
 from wptrack.cli import main
 from wptrack.io.frames import write_video
-from wptrack.io.run import read_tracks
+from wptrack.io.tables import read_tracks
 
 BALL = np.array([0.42, 0.45, 0.035])
 

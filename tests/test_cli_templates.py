@@ -12,7 +12,7 @@ from wptrack.cameras.rig import Camera, Rig
 from wptrack.cli import main
 from wptrack.core.errors import ConfigError
 from wptrack.io.frames import write_video
-from wptrack.io.run import read_tracks
+from wptrack.io.tables import read_tracks
 from wptrack.trackers.templates.tracker import HumanPrior, TemplateConfig, TemplateTracker
 
 

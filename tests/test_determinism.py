@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.io.run import read_tracks
+from wptrack.io.tables import read_tracks
 from wptrack.runs import run_tracker
 from wptrack.synth import render_scene
 from wptrack.trackers.colour.run import ColourRun

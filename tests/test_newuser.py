@@ -14,7 +14,7 @@ import pytest
 import warp as wp
 
 from wptrack.cameras.rig import Camera, Rig
-from wptrack.io.run import atomic_imwrite, atomic_save_npz, atomic_write_json, atomic_write_text, default_file_mode
+from wptrack.io.atomic import atomic_imwrite, atomic_save_npz, atomic_write_json, atomic_write_text, default_file_mode
 
 ROOT = Path(__file__).resolve().parents[1]
 

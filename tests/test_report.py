@@ -204,7 +204,7 @@ def test_overlay_shows_truth_and_estimate_where_projected(report, lab_run):
     """The green ground-truth circle and the orange estimate cross are drawn at their projections in each
     camera's panel of the overlay composite."""
     from wptrack.cameras.rig import Rig
-    from wptrack.io.run import read_tracks
+    from wptrack.io.tables import read_tracks
     from wptrack.report.overlays import LABEL_HEIGHT
     from wptrack.report.scene3d import ESTIMATE_RGB, TRUTH_RGB
 
@@ -232,7 +232,7 @@ def test_camera_view_shows_truth_marker_where_projected(report, lab_run):
     import cv2
 
     from wptrack.cameras.rig import Rig
-    from wptrack.io.run import read_tracks
+    from wptrack.io.tables import read_tracks
     from wptrack.report.scene3d import TRUTH_RGB
 
     rig = Rig.load(lab_run["scene"] / "rig.yaml")

@@ -241,7 +241,7 @@ def test_report_overlay_outlines_tracked_object(report, people_run):
     """The object's colour is drawn at the projected ground point of a tracked object (overlay_scale 2)."""
     import cv2
 
-    from wptrack.io.run import read_tracks
+    from wptrack.io.tables import read_tracks
     from wptrack.trackers.templates.report import id_bgr
 
     rig = Rig.load(people_run["rig"])

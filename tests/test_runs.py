@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wptrack.io.run import read_tracks
+from wptrack.io.tables import read_tracks
 from wptrack.runs import RunInterrupted, TrackerRun, run_tracker
 
 
@@ -211,7 +211,7 @@ def test_a_run_folder_in_use_is_locked(tmp_path):
     """Issue 30 item 22: two runs into one --out both ran and reported success. The second now refuses, naming
     the first's pid; the lock goes with the run that held it."""
     from wptrack.core.errors import ConfigError
-    from wptrack.runs.loop import LOCK_FILE
+    from wptrack.io.rundir import LOCK_FILE
 
     out, ready = tmp_path / "run", tmp_path / "ready"
     code = _LOCK_HOLDER.format(tests=str(Path(__file__).parent), ready=str(ready), out=str(out))
@@ -243,7 +243,7 @@ def test_a_stale_lock_is_taken_over(tmp_path, caplog):
     import socket
 
     from wptrack.core.errors import ConfigError
-    from wptrack.runs.loop import LOCK_FILE
+    from wptrack.io.rundir import LOCK_FILE
 
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
     pid = int(dead.stdout)

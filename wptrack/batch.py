@@ -338,15 +338,6 @@ def _load_function(ref: str | None) -> Callable[..., Any]:
 
 
 # ------------------------------------------------------------------------------------------------- one run
-def _fsync_dir(path: Path) -> None:
-    with contextlib.suppress(OSError):
-        fd = os.open(path, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-
-
 def _clear_partials(root: Path, run_id: str) -> None:
     for p in root.glob(f".{run_id}.partial-*"):
         shutil.rmtree(p, ignore_errors=True)
@@ -363,7 +354,9 @@ def _publish(partial: Path, final: Path) -> None:
         shutil.rmtree(old, ignore_errors=True)
     else:
         os.rename(partial, final)
-    _fsync_dir(final.parent)
+    from wptrack.io.atomic import fsync_dir
+
+    fsync_dir(final.parent)
 
 
 def _bump_attempts(root: Path, run_id: str) -> int:
@@ -372,7 +365,7 @@ def _bump_attempts(root: Path, run_id: str) -> int:
         n = int(counter.read_text().strip() or 0)
     except (OSError, ValueError):
         n = 0
-    from wptrack.io.run import atomic_write_text
+    from wptrack.io.atomic import atomic_write_text
 
     atomic_write_text(counter, f"{n + 1}\n")
     return n + 1
@@ -397,7 +390,8 @@ def _run_track(spec: RunSpec, out: Path, force_cpu: bool) -> dict[str, Any]:
 
 
 def _run_function(spec: RunSpec, out: Path) -> dict[str, Any]:
-    from wptrack.io.run import RUN_FILE, atomic_write_json
+    from wptrack.io.atomic import atomic_write_json
+    from wptrack.io.run import RUN_FILE
 
     out.mkdir(parents=True, exist_ok=True)
     summary = _load_function(spec.function)(out_dir=out, **spec.args)
@@ -422,7 +416,7 @@ def execute_run(
     Returns:
         The run's result row: id, tracker, status, attempts, seconds, host, error, summary, timings.
     """
-    from wptrack.io.run import atomic_write_json
+    from wptrack.io.atomic import atomic_write_json
 
     if threads is not None:
         import cv2
@@ -495,7 +489,7 @@ SUMMARY_COLUMNS = ["id", "tracker", "status", "reused", "attempts", "seconds", "
 def write_summary(results: Sequence[dict[str, Any]], path: str | os.PathLike) -> Path:
     """``summary.csv``: one row per run: the fixed columns, the grid parameters (``param.NAME``), the run's
     summary metrics (flattened: ``error.mean_error_after``...) and per-stage totals (``time.STAGE_s``)."""
-    from wptrack.io.run import atomic_write_text
+    from wptrack.io.atomic import atomic_write_text
 
     rows = []
     for r in results:
@@ -583,7 +577,7 @@ def run_batch(
             for but not installed, more GPUs per task than the cluster has.
         OutputError: ``out_dir`` cannot be written.
     """
-    from wptrack.io.run import ensure_writable_dir
+    from wptrack.io.atomic import ensure_writable_dir
 
     if not isinstance(manifest, Manifest):
         manifest = load_manifest(manifest)

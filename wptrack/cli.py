@@ -329,7 +329,7 @@ def _evaluation_line(ev, threshold: float) -> str:
 
 def _print_evaluation(groundtruth, tracks, threshold: float, out: str | None = None):
     from wptrack.evaluation.mot import evaluate
-    from wptrack.io.run import atomic_write_json
+    from wptrack.io.atomic import atomic_write_json
 
     ev = evaluate(groundtruth, tracks, threshold=threshold)
     print(_evaluation_line(ev, threshold))
@@ -372,7 +372,7 @@ def _run_camera(run_dir: Path, rig_path, camera_arg):
 
 def cmd_evaluate(args) -> int:
     from wptrack.evaluation.mot import MOT_DIR, average, evaluate, write_mot_files
-    from wptrack.io.run import atomic_write_json
+    from wptrack.io.atomic import atomic_write_json
 
     runs = []
     for given in args.tracks:
@@ -587,7 +587,8 @@ def cmd_bench(args) -> int:
 
     from wptrack.bench import HEADER, format_row, load_suite
     from wptrack.core.device import resolve_device
-    from wptrack.io.run import atomic_write_json, versions
+    from wptrack.io.atomic import atomic_write_json
+    from wptrack.io.run import versions
 
     suite = load_suite(args.tracker)
     device = resolve_device(args.device)

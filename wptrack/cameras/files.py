@@ -32,10 +32,8 @@ and name) and the field, e.g. ``rig.yaml: cameras[1] 'cam1': K: focal length fx 
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
-import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -55,7 +53,7 @@ from wptrack.cameras.checks import (
 )
 from wptrack.cameras.tsai import camera_from_entry
 from wptrack.core.errors import OutputError, RigError
-from wptrack.io.run import default_file_mode
+from wptrack.io.atomic import atomic_path, atomic_write_text
 
 if TYPE_CHECKING:
     from wptrack.cameras.rig import Rig
@@ -117,21 +115,9 @@ def save_rig(rig: Rig, path: str | os.PathLike[str]) -> None:
         text = json.dumps(data, indent=2) + "\n"
     else:
         text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None)
-    tmp_name: str | None = None
     try:
-        with tempfile.NamedTemporaryFile(
-            "w", encoding="utf-8", dir=path.parent, prefix=f".{path.name}.", suffix=".tmp", delete=False
-        ) as fh:
-            tmp_name = fh.name
-            os.fchmod(fh.fileno(), default_file_mode())  # NamedTemporaryFile's 0600 -> the umask's mode
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp_name, path)
+        atomic_write_text(path, text)
     except OSError as exc:
-        if tmp_name is not None:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp_name)
         raise OutputError(f"{path}: cannot write rig file: {_fmt(str(exc))}") from None
 
 
@@ -307,21 +293,18 @@ def save_opencv(camera: Camera, path: str | os.PathLike[str]) -> None:
     import cv2
 
     path = Path(path)
-    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
     try:
-        fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
-        if not fs.isOpened():
-            raise OSError("cannot open for writing")
-        fs.write("image_width", int(camera.width))
-        fs.write("image_height", int(camera.height))
-        fs.write("camera_matrix", np.array(camera.K))
-        fs.write("distortion_coefficients", np.array(camera.dist).reshape(1, 5))
-        fs.write("R", np.array(camera.R))
-        fs.write("rvec", camera.rvec.reshape(3, 1))
-        fs.write("tvec", np.array(camera.t).reshape(3, 1))
-        fs.release()
-        os.replace(tmp, path)
+        with atomic_path(path) as tmp:
+            fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
+            if not fs.isOpened():
+                raise OSError("cannot open for writing")
+            fs.write("image_width", int(camera.width))
+            fs.write("image_height", int(camera.height))
+            fs.write("camera_matrix", np.array(camera.K))
+            fs.write("distortion_coefficients", np.array(camera.dist).reshape(1, 5))
+            fs.write("R", np.array(camera.R))
+            fs.write("rvec", camera.rvec.reshape(3, 1))
+            fs.write("tvec", np.array(camera.t).reshape(3, 1))
+            fs.release()
     except (OSError, cv2.error) as exc:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
         raise OutputError(f"{path}: cannot write OpenCV camera file: {_fmt(str(exc))}") from None

@@ -100,7 +100,7 @@ from typing import Any
 import numpy as np
 
 from wptrack.core.errors import ConfigError, WptrackError
-from wptrack.io.run import read_tracks
+from wptrack.io.tables import read_tracks
 
 #: Columns every ground-truth and tracks table must have.
 REQUIRED_COLUMNS = ("frame", "id", "x", "y", "z")
@@ -782,7 +782,7 @@ def write_mot_files(
     """
     from pathlib import Path
 
-    from wptrack.io.run import atomic_write_text
+    from wptrack.io.atomic import atomic_write_text
 
     columns = table if isinstance(table, Mapping) else None
     if columns is None:

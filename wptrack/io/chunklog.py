@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wptrack.io.run import atomic_save_npz
+from wptrack.io.atomic import atomic_save_npz
 
 
 def _chunk_files(folder: Path) -> list[tuple[int, Path]]:

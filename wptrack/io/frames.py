@@ -22,7 +22,6 @@ import glob
 import logging
 import os
 import re
-import uuid
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -30,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from wptrack.core.errors import ConfigError, FrameError, OutputError
+from wptrack.io.atomic import commit, discard, temp_path
 
 log = logging.getLogger(__name__)
 
@@ -490,7 +490,7 @@ class VideoWriter:
         self.size = tuple(int(v) for v in size) if size is not None else None
         self.codec: str | None = None
         self.frames_written = 0
-        self._tmp = self.path.with_name(f".{self.path.stem}.tmp-{uuid.uuid4().hex[:8]}{self.path.suffix}")
+        self._tmp = temp_path(self.path)
         self._writer: Any = None
         self._closed = False
         self._blank_pending = 0
@@ -539,10 +539,7 @@ class VideoWriter:
         self.frames_written += 1
 
     def _remove_tmp(self) -> None:
-        try:
-            self._tmp.unlink()
-        except FileNotFoundError:
-            pass
+        discard(self._tmp)
 
     def close(self) -> Path | None:
         """Finish the file and rename it into place (idempotent).
@@ -559,7 +556,7 @@ class VideoWriter:
             self._remove_tmp()
             log.warning("no frames written to %s; no video created", self.path)
             return None
-        os.replace(self._tmp, self.path)
+        commit(self._tmp, self.path)
         log.info("wrote %s (%d frames, %s)", self.path, self.frames_written, self.codec)
         return self.path
 

@@ -25,8 +25,6 @@ from __future__ import annotations
 
 import contextlib
 import csv
-import dataclasses
-import enum
 import io
 import json
 import logging
@@ -34,7 +32,6 @@ import math
 import os
 import platform
 import random
-import tempfile
 import time
 from collections.abc import Callable, Iterable, Sequence
 from datetime import datetime, timezone
@@ -43,202 +40,24 @@ from typing import Any
 
 import numpy as np
 
-from wptrack.core.errors import OutputError, WptrackError
+from wptrack.core.errors import OutputError
+from wptrack.io.atomic import atomic_save_npz, atomic_write_json, copy_atomic, ensure_writable_dir, jsonable
+from wptrack.io.tables import (
+    BASE_COLUMNS,
+    TRACKS_ALL_FILE,
+    TRACKS_FILE,
+    drop_short_tracks,
+    format_cell,
+    read_tracks,
+    truncate_csv_after,
+)
 
 log = logging.getLogger(__name__)
 
-TRACKS_FILE = "tracks.csv"
-TRACKS_ALL_FILE = "tracks_all.csv"
-"""Every track of a completed run whose tracks.csv left the short ones out (``RunWriter.close``)."""
 RUN_FILE = "run.json"
+
+
 PARTICLES_FILE = "particles.npz"
-
-#: The first columns of every tracks.csv.
-BASE_COLUMNS = ("frame", "id", "x", "y", "z")
-
-# --------------------------------------------------------------------------------------------- atomic writes
-
-
-def _fsync_dir(directory: Path) -> None:
-    """Make a rename durable (best effort: not every platform lets a folder be opened)."""
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
-def default_file_mode() -> int:
-    """The mode a plain ``open(path, "w")`` would give a new file: ``0o666`` less the process umask.
-
-    ``tempfile.mkstemp`` creates its files ``0o600``; an atomic write renames such a file into place, so it sets
-    this mode first, or a report would be unreadable by a web server or a colleague.
-    """
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
-@contextlib.contextmanager
-def _atomic_file(path: str | os.PathLike) -> Any:
-    """Yield a binary file object on a temporary file next to ``path``; on success fsync and rename it to ``path``.
-
-    On any exception (including KeyboardInterrupt) the temporary file is removed and ``path`` is untouched.
-    """
-    target = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            os.fchmod(f.fileno(), default_file_mode())  # mkstemp's 0600 -> the umask's usual mode
-            yield f
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, target)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
-    _fsync_dir(target.parent)
-
-
-def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """Replace ``path`` with ``data`` atomically (temporary file in the same folder, fsync, ``os.replace``)."""
-    with _atomic_file(path) as f:
-        f.write(data)
-
-
-def atomic_imwrite(path: str | os.PathLike, image: np.ndarray) -> None:
-    """Write an image (format from the suffix, e.g. ``.png``; BGR as OpenCV) atomically: a crash never leaves a
-    half-written picture that a browser would show broken.
-
-    Raises:
-        OutputError: OpenCV cannot encode the image in that format.
-    """
-    import cv2
-
-    ok, buf = cv2.imencode(Path(path).suffix or ".png", image)
-    if not ok:
-        raise OutputError(f"{path}: cannot encode the image as {Path(path).suffix or '.png'}")
-    atomic_write_bytes(path, buf.tobytes())
-
-
-def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> None:
-    """Replace ``path`` with ``text`` atomically (no newline translation)."""
-    atomic_write_bytes(path, text.encode(encoding))
-
-
-def _jsonable(obj: Any) -> Any:
-    """Convert ``obj`` into plain JSON types: numpy scalars/arrays, paths, dataclasses, enums, sets, tuples.
-
-    Non-finite floats become ``None`` so that the output is strict JSON.
-    """
-    if obj is None or isinstance(obj, (bool, str)):
-        return obj
-    if isinstance(obj, int):
-        return int(obj)
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, np.generic):
-        return _jsonable(obj.item())
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple, set, frozenset)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, os.PathLike):
-        return os.fspath(obj)
-    if isinstance(obj, enum.Enum):
-        return _jsonable(obj.value)
-    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return _jsonable(dataclasses.asdict(obj))
-    return str(obj)
-
-
-def atomic_write_json(path: str | os.PathLike, obj: Any, indent: int | None = 2) -> None:
-    """Write ``obj`` as strict JSON (NaN/inf as null; numpy, paths and dataclasses converted), atomically."""
-    text = json.dumps(_jsonable(obj), indent=indent, allow_nan=False) + "\n"
-    atomic_write_text(path, text)
-
-
-def atomic_save_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
-    """Save arrays to an uncompressed ``.npz`` file atomically (``path`` is used as given; no suffix added)."""
-    with _atomic_file(path) as f:
-        np.savez(f, **arrays)
-
-
-def truncate_csv_after(path: str | os.PathLike, frame: int) -> int:
-    """Keep the header and the rows of ``frame`` and earlier (first column) of a CSV file, atomically.
-
-    Used to resume a run from a checkpoint: rows written after the checkpoint's frame (and an incomplete last line
-    of a killed run) are dropped. A missing file is left missing.
-
-    Returns:
-        The number of rows kept.
-    """
-    p = Path(path)
-    if not p.exists():
-        return 0
-    lines = p.read_text(encoding="utf-8").splitlines(keepends=True)
-    kept = lines[:1]
-    for line in lines[1:]:
-        if not line.endswith("\n"):
-            break  # the incomplete last line of a killed run
-        head = line.split(",", 1)[0].strip()
-        try:
-            if int(head) > frame:
-                break
-        except ValueError:
-            break
-        kept.append(line)
-    atomic_write_text(p, "".join(kept))
-    return len(kept) - 1
-
-
-def ensure_writable_dir(path: str | os.PathLike) -> Path:
-    """Create an output folder (with parents) and check that files can be written into it.
-
-    Args:
-        path: Folder path.
-
-    Returns:
-        The folder as a :class:`~pathlib.Path`.
-
-    Raises:
-        OutputError: ``output directory 'x' is not writable: <reason>`` when the path is a file, lies under a file,
-            cannot be created, or a test file cannot be written in it.
-    """
-    p = Path(path)
-
-    def fail(reason: str) -> OutputError:
-        return OutputError(f"output directory '{p}' is not writable: {reason}")
-
-    if p.exists() and not p.is_dir():
-        raise fail("it exists and is a file")
-    for parent in p.parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise fail(f"'{parent}' is a file, not a folder")
-            break
-    try:
-        p.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise fail(e.strerror or str(e)) from None
-    try:
-        fd, tmp = tempfile.mkstemp(dir=p, prefix=".wptrack-write-test-")
-        os.close(fd)
-        os.unlink(tmp)
-    except OSError as e:
-        raise fail(e.strerror or str(e)) from None
-    return p
-
-
-# ----------------------------------------------------------------------------------------------- versions
 
 
 def versions() -> dict[str, str | None]:
@@ -259,9 +78,6 @@ def versions() -> dict[str, str | None]:
 def _now() -> str:
     """Local time, ISO 8601 with offset, to the second."""
     return datetime.now(timezone.utc).astimezone().isoformat(timespec="seconds")
-
-
-# ----------------------------------------------------------------------------------------------- bounded stores
 
 
 class StageTimer:
@@ -357,89 +173,6 @@ class ParticleStore:
         return len(self.frames)
 
 
-# ----------------------------------------------------------------------------------------------- RunWriter
-
-
-def _format_value(value: Any) -> Any:
-    """Format one CSV cell: ints as ints, floats with ``%.6f`` (``nan``/``inf`` spelled out), strings as-is."""
-    if isinstance(value, np.ndarray) and value.ndim == 0:
-        value = value.item()
-    if value is None:
-        return ""
-    if isinstance(value, (bool, np.bool_)):
-        return "1" if value else "0"
-    if isinstance(value, (int, np.integer)):
-        return str(int(value))
-    if isinstance(value, (float, np.floating)):
-        v = float(value)
-        if math.isnan(v):
-            return "nan"
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        return f"{v:.6f}"
-    text = str(value)
-    if "\n" in text or "\r" in text:
-        raise ValueError(f"tracks values must not contain line breaks: {text!r}")
-    return text
-
-
-def _copy_atomic(src: Path, dst: Path) -> None:
-    """Copy ``src`` to ``dst`` through a temporary file beside ``dst`` (``dst`` is never half-written)."""
-    import shutil
-
-    tmp = dst.with_name(dst.name + ".tmp")
-    try:
-        shutil.copyfile(src, tmp)
-        with open(tmp, "rb") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, dst)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
-def drop_short_tracks(path: Path, all_path: Path, min_frames: int) -> int:
-    """Leave the tracks with fewer than ``min_frames`` rows out of the tracks CSV ``path`` (columns ``frame`` and
-    ``id``), except those still reported in its last frame (the recording ended, not the track: a run of fewer
-    frames keeps its tracks), keeping every row in ``all_path``; returns the number of tracks left out.
-
-    Crash-safe: the full file is copied to ``all_path`` and the filtered one written next to ``path`` before it
-    replaces ``path`` (at every moment ``path`` holds either every row or the filtered rows). Two streaming passes
-    (the row counts and last frames per id, then the copy): memory grows with the number of tracks, not rows.
-    """
-
-    counts: dict[str, int] = {}
-    last: dict[str, int] = {}
-    end = None
-    with open(path, encoding="utf-8", newline="") as fh:
-        reader = csv.reader(fh)
-        header = next(reader, None)
-        if header is None or "id" not in header or "frame" not in header:
-            raise OutputError(f"{path}: no 'frame' and 'id' columns to count the tracks' rows by")
-        col, fcol = header.index("id"), header.index("frame")
-        for row in reader:
-            k, f = row[col], int(row[fcol])
-            counts[k] = counts.get(k, 0) + 1
-            last[k] = max(last.get(k, f), f)
-            end = f if end is None else max(end, f)
-    keep = {k for k, c in counts.items() if c >= min_frames or last[k] == end}
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        _copy_atomic(path, all_path)
-        with open(path, encoding="utf-8", newline="") as src, open(tmp, "w", encoding="utf-8", newline="") as dst:
-            lines = iter(src)
-            dst.write(next(lines))
-            for line in lines:
-                if next(csv.reader([line]))[col] in keep:
-                    dst.write(line)
-            dst.flush()
-            os.fsync(dst.fileno())
-        os.replace(tmp, path)
-    finally:  # nothing half-written is left behind
-        with contextlib.suppress(OSError):
-            tmp.unlink(missing_ok=True)
-    return len(counts) - len(keep)
-
-
 class RunWriter:
     """Write a run's outputs (``run.json``, ``tracks.csv``, ``particles.npz``) as the run goes.
 
@@ -529,7 +262,7 @@ class RunWriter:
             "frames": 0,
             "last_frame": None,
             "rows": 0,
-            "config": _jsonable(config),
+            "config": jsonable(config),
             "versions": versions(),
             "columns": list(columns),
             "files": {"tracks": TRACKS_FILE, "particles": None},
@@ -564,7 +297,7 @@ class RunWriter:
         clash = sorted(set(kw) & self._reserved)
         if clash:
             raise ValueError(f"run.json fields {clash} are managed by RunWriter and cannot be set with set_info")
-        self._run.update(_jsonable(kw))
+        self._run.update(jsonable(kw))
         if not self._closed:
             self._write_run_json()
 
@@ -590,7 +323,7 @@ class RunWriter:
                 raise ValueError(
                     f"tracks row has {len(row)} values, expected {len(self.columns)} ({self.columns}): {row}"
                 )
-            writer.writerow([_format_value(v) for v in row])
+            writer.writerow([format_cell(v) for v in row])
             frames.append(row[0])
             n += 1
         if n == 0:
@@ -719,7 +452,7 @@ class RunWriter:
         if status == "complete" and finish_tracks is not None:
             try:
                 if not all_written:  # the tracker's own rows stay in tracks_all.csv
-                    _copy_atomic(self.tracks_path, self.out_dir / TRACKS_ALL_FILE)
+                    copy_atomic(self.tracks_path, self.out_dir / TRACKS_ALL_FILE)
                 self._run.update(finish_tracks(self.tracks_path))
             except (OSError, OutputError) as e:  # the run is complete: keep the rows as they are and say why
                 log.warning("could not finish the tracks of %s: %s", self.tracks_path, e)
@@ -728,7 +461,7 @@ class RunWriter:
             self._write_particles()
         self._run.update(status=status, finished=_now())
         if summary is not None:
-            self._run["summary"] = _jsonable(summary)
+            self._run["summary"] = jsonable(summary)
         self._write_run_json()
         log.info(
             "run %s: %d frames, %d rows written to %s", status, self.frames_written, self.rows_written, self.out_dir
@@ -813,65 +546,3 @@ class RunWriter:
         self._run["rows"] = self.rows_written
         self._run["timings"] = self.timings()
         atomic_write_json(self.run_path, self._run)
-
-
-# ----------------------------------------------------------------------------------------------- reading
-
-
-def _column_array(name: str, values: list[str]) -> np.ndarray:
-    """Numeric column -> int64 (all integers) or float64 (empty cells as NaN); otherwise a str array."""
-    if not values:
-        return np.zeros(0, dtype=np.int64 if name in ("frame", "id") else np.float64)
-    try:
-        return np.array([int(v) for v in values], dtype=np.int64)
-    except ValueError:
-        pass
-    try:
-        return np.array([float(v) if v.strip() else np.nan for v in values], dtype=np.float64)
-    except ValueError:
-        return np.array(values, dtype=str)
-
-
-def read_tracks(path: str | os.PathLike, what: str = "tracks file") -> dict[str, np.ndarray]:
-    """Read a tracks.csv / groundtruth.csv into columns.
-
-    Blank lines and lines starting with ``#`` are skipped. A last line without a newline and with too few values
-    (a run killed in the middle of a write) is dropped with a warning.
-
-    Args:
-        path: CSV file with a header line.
-        what: What the file is, in the error messages (``tracks file``, ``ground truth file``).
-
-    Returns:
-        ``{column: (N,) array}`` in header order: int64 when every value is an integer, float64 when every
-        value is a number (empty cells as NaN), otherwise a str array.
-
-    Raises:
-        WptrackError: The file is missing/unreadable, has no header, or a row has the wrong number of values.
-    """
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise WptrackError(f"{what} not found: {p}") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise WptrackError(f"cannot read {what} {p}: {e}") from None
-    lines = text.splitlines(keepends=True)
-    records = [(i + 1, line) for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")]
-    if not records:
-        raise WptrackError(f"{what} {p} is empty (expected a header line such as frame,id,x,y,z)")
-    header = [h.strip() for h in next(csv.reader([records[0][1]]))]
-    if len(set(header)) != len(header) or not all(header):
-        raise WptrackError(f"{what} {p}: invalid header {header}")
-    data: list[list[str]] = [[] for _ in header]
-    body = records[1:]
-    for j, (lineno, line) in enumerate(body):
-        row = next(csv.reader([line]))
-        if len(row) != len(header):
-            if j == len(body) - 1 and not line.endswith("\n") and len(row) < len(header):
-                log.warning("%s: dropping the incomplete last line %d", p, lineno)
-                break
-            raise WptrackError(f"{what} {p}, line {lineno}: {len(row)} values, expected {len(header)}")
-        for col, value in zip(data, row, strict=True):
-            col.append(value.strip())
-    return {name: _column_array(name, col) for name, col in zip(header, data, strict=True)}

@@ -451,8 +451,8 @@ def write_masks(
     """
     import time
 
+    from wptrack.io.atomic import atomic_write_bytes, atomic_write_json, ensure_writable_dir
     from wptrack.io.frames import VideoWriter
-    from wptrack.io.run import atomic_write_bytes, atomic_write_json, ensure_writable_dir
 
     masks = open_masks(video=video, config=config)
     out = ensure_writable_dir(out_dir)

@@ -58,7 +58,7 @@ class GroundTruthFrames:
 
     @classmethod
     def read(cls, path: str | os.PathLike) -> GroundTruthFrames:
-        from wptrack.io.run import read_tracks
+        from wptrack.io.tables import read_tracks
 
         return cls.from_columns(read_tracks(path))
 

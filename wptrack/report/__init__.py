@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from wptrack.core.errors import ConfigError, OutputError
-from wptrack.io.run import RUN_FILE, ensure_writable_dir
+from wptrack.io.atomic import ensure_writable_dir
+from wptrack.io.run import RUN_FILE
 from wptrack.report.data import GROUNDTRUTH_FILE, RunData, find_sweep, load_run, load_sweep, trajectories
 from wptrack.report.model import (
     REPORTERS,
@@ -102,7 +103,7 @@ def use_groundtruth(data: RunData, path: str | Path) -> None:
         ConfigError: The file is missing or unreadable.
     """
     from wptrack.core.errors import WptrackError
-    from wptrack.io.run import read_tracks
+    from wptrack.io.tables import read_tracks
 
     p = Path(path)
     if not p.is_file():

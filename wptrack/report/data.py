@@ -15,7 +15,8 @@ from typing import Any
 import numpy as np
 
 from wptrack.core.errors import ConfigError, OutputError, WptrackError
-from wptrack.io.run import PARTICLES_FILE, RUN_FILE, TRACKS_FILE, read_tracks
+from wptrack.io.run import PARTICLES_FILE, RUN_FILE
+from wptrack.io.tables import TRACKS_FILE, read_tracks
 
 log = logging.getLogger(__name__)
 

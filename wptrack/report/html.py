@@ -9,7 +9,7 @@ from html import escape
 from pathlib import Path
 from typing import Any
 
-from wptrack.io.run import atomic_write_text
+from wptrack.io.atomic import atomic_write_text
 from wptrack.report.model import ReportContext, Section
 
 log = logging.getLogger(__name__)

@@ -8,7 +8,6 @@ import contextlib
 import logging
 import os
 import sys
-import uuid
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from wptrack.core.errors import WptrackError
+from wptrack.io.atomic import atomic_path, commit, discard, temp_path
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +69,7 @@ class _WebmWriter:
         import cv2
 
         self.path = path
-        self.tmp = path.with_name(f".{path.stem}.tmp-{uuid.uuid4().hex[:8]}{path.suffix}")
+        self.tmp = temp_path(path)
         self.writer: Any = None
         self.codec: str | None = None
         for codec in WEBM_CODECS:
@@ -80,8 +80,7 @@ class _WebmWriter:
                 break
             w.release()
         if self.writer is None:
-            with contextlib.suppress(FileNotFoundError):
-                self.tmp.unlink()
+            discard(self.tmp)
 
     @property
     def ok(self) -> bool:
@@ -96,10 +95,9 @@ class _WebmWriter:
         with _quiet_stderr():
             self.writer.release()
         if keep and self.tmp.exists() and self.tmp.stat().st_size > 0:
-            os.replace(self.tmp, self.path)
+            commit(self.tmp, self.path)
             return self.path
-        with contextlib.suppress(FileNotFoundError):
-            self.tmp.unlink()
+        discard(self.tmp)
         return None
 
 
@@ -162,15 +160,10 @@ def _to_palette(rgb: np.ndarray) -> Any:
 
 
 def _write_gif(images: list[Any], path: Path, fps: float) -> Path:
-    tmp = path.with_name(f".{path.stem}.tmp-{uuid.uuid4().hex[:8]}{path.suffix}")
-    try:
+    with atomic_path(path) as tmp:
         images[0].save(
             tmp, format="GIF", save_all=True, append_images=images[1:], duration=int(round(1000 / fps)), loop=0
         )
-        os.replace(tmp, path)
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
     return path
 
 

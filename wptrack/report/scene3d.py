@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from wptrack.io.run import atomic_imwrite
+from wptrack.io.atomic import atomic_imwrite
 from wptrack.report.data import RunData
 from wptrack.report.model import Figure, ReportContext, Section
 from wptrack.report.offscreen import import_pyvista, new_plotter, renderer_info

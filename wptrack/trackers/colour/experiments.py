@@ -14,7 +14,7 @@ import numpy as np
 from wptrack.core.device import resolve_device
 from wptrack.core.errors import ConfigError
 from wptrack.evaluation.convergence import convergence_frame
-from wptrack.io.run import atomic_write_json, atomic_write_text, ensure_writable_dir
+from wptrack.io.atomic import atomic_write_json, atomic_write_text, ensure_writable_dir
 from wptrack.trackers.colour.gaussian3d import Gaussian3DTracker
 
 JUMP_DIRECTION = np.array([1.0, 1.0, 0.0]) / np.sqrt(2.0)
@@ -271,7 +271,7 @@ def drift_study(
     from wptrack.cameras.rig import Rig
     from wptrack.cameras.structs import DeviceRig
     from wptrack.io.frames import open_frames
-    from wptrack.io.run import read_tracks
+    from wptrack.io.tables import read_tracks
     from wptrack.kernels.colour import scoring as kscoring
     from wptrack.trackers.colour.tracker import HSITarget
 

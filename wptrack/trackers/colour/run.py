@@ -58,7 +58,7 @@ class ColourRun(TrackerRun):
         from wptrack.cameras.rig import Rig
         from wptrack.core.device import resolve_device
         from wptrack.io.frames import open_frames
-        from wptrack.io.run import read_tracks
+        from wptrack.io.tables import read_tracks
         from wptrack.trackers.colour.tracker import ColorTracker
 
         rig = Rig.load(rig_path)

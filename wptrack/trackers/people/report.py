@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from wptrack.io.run import atomic_imwrite
+from wptrack.io.atomic import atomic_imwrite
 from wptrack.report import plots, scene3d
 from wptrack.report.model import Figure, ReportContext, Section, register_reporter
 from wptrack.report.offscreen import import_pyvista, new_plotter, renderer_info

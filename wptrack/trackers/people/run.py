@@ -230,7 +230,7 @@ class PeopleRun(TrackerRun):
 
     # --- the npz logs (hulls streamed in chunks, occupancy rewritten atomically) ------------------------
     def flush(self) -> None:
-        from wptrack.io.run import atomic_save_npz
+        from wptrack.io.atomic import atomic_save_npz
 
         if self._out_dir is None:
             return

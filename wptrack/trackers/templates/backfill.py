@@ -38,13 +38,13 @@ from __future__ import annotations
 import contextlib
 import csv
 import math
-import os
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 
 import numpy as np
 
 from wptrack.core.errors import OutputError
+from wptrack.io.atomic import atomic_file
 
 InView = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 """``in_view(ground (n, 2) m, size (n, 3) m, heading (n,) rad) -> (n,) bool``."""
@@ -253,19 +253,13 @@ class _Table:
 
     def rewrite(self, lines: Iterator[str]) -> None:
         """Replace the file by the header and ``lines`` atomically (temporary file, fsync, rename)."""
-        tmp = self.path.with_name(self.path.name + ".tmp")
         try:
-            with open(tmp, "w", encoding="utf-8", newline="") as dst:
-                dst.write(self.header_line)
+            with atomic_file(self.path) as dst:
+                dst.write(self.header_line.encode("utf-8"))
                 for line in lines:
-                    dst.write(line)
-                dst.flush()
-                os.fsync(dst.fileno())
-            os.replace(tmp, self.path)
+                    dst.write(line.encode("utf-8"))
         except OSError as e:
             raise OutputError(f"cannot write {self.path}: {e.strerror or e}") from None
-        finally:
-            tmp.unlink(missing_ok=True)
 
 
 def backfill_tracks_file(

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from wptrack.core.errors import ConfigError
-from wptrack.io.run import atomic_imwrite
+from wptrack.io.atomic import atomic_imwrite
 from wptrack.report import plots, scene3d
 from wptrack.report.calibration import (
     GRID_ALPHA,

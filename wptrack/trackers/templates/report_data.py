@@ -149,7 +149,7 @@ def template_run(ctx: ReportContext) -> TemplateRun:
     if "templates" in ctx.cache:
         return ctx.cache["templates"]
     from wptrack.cameras.rig import GroundPlane
-    from wptrack.io.run import read_tracks
+    from wptrack.io.tables import read_tracks
 
     data = ctx.data
     assert data is not None

@@ -22,13 +22,13 @@ from __future__ import annotations
 
 import logging
 import math
-import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from wptrack.core.errors import ConfigError, FrameError, OutputError
+from wptrack.core.errors import ConfigError, FrameError
+from wptrack.io.tables import CsvAppender
 from wptrack.motion.flood import FloodGuard
 from wptrack.runs.loop import TrackerRun, run_tracker
 
@@ -94,31 +94,6 @@ def colour_virtual(virtual: np.ndarray, slot_labels: np.ndarray) -> np.ndarray:
     return lut[virtual]
 
 
-class _CsvAppender:
-    """A CSV file written line by line and flushed every frame (a partial file is always valid)."""
-
-    def __init__(self, path: Path, columns: list[str], append: bool = False) -> None:
-        try:
-            self.fh = open(path, "a" if append else "w", encoding="utf-8", newline="")
-        except OSError as e:
-            raise OutputError(f"cannot write {path}: {e.strerror or e}") from None
-        if not append:
-            self.fh.write(",".join(columns) + "\n")
-
-    def add(self, rows: list[list[Any]]) -> None:
-        for row in rows:
-            self.fh.write(",".join(f"{v:.6g}" if isinstance(v, float) else str(v) for v in row) + "\n")
-        self.fh.flush()
-
-    def sync(self) -> None:
-        self.fh.flush()
-        os.fsync(self.fh.fileno())
-
-    def close(self) -> None:
-        self.sync()
-        self.fh.close()
-
-
 def _camera_for_size(camera, width: int, height: int, source: str, rig_source: str):
     """The camera at the video's resolution: the same camera when sizes agree, a scaled K when the video is a
     resized copy (same aspect ratio), an error otherwise."""
@@ -155,7 +130,7 @@ class BackgroundSaver:
                 self.windows = {}
 
     def __call__(self, window: int, centre: float, image: np.ndarray) -> None:
-        from wptrack.io.run import atomic_imwrite, atomic_write_json
+        from wptrack.io.atomic import atomic_imwrite, atomic_write_json
 
         self.folder.mkdir(parents=True, exist_ok=True)
         name = f"window_{window:04d}.png"
@@ -249,7 +224,7 @@ class TemplateRun(TrackerRun):
         self._penalty_sum = 0
         self._penalty_frames = 0
         self._degenerate = 0
-        self._best_csv: _CsvAppender | None = None
+        self._best_csv: CsvAppender | None = None
         self._vwriter: Any = None
         self._mwriter: Any = None
 
@@ -262,12 +237,12 @@ class TemplateRun(TrackerRun):
 
     def start(self, out_dir: Path, resume_after: int | None = None) -> None:
         from wptrack.io.frames import continue_video
-        from wptrack.io.run import truncate_csv_after
+        from wptrack.io.tables import truncate_csv_after
 
         best = out_dir / "best.csv"
         if resume_after is not None:
             truncate_csv_after(best, resume_after)
-        self._best_csv = _CsvAppender(best, TEMPLATE_COLUMNS, append=resume_after is not None and best.exists())
+        self._best_csv = CsvAppender(best, TEMPLATE_COLUMNS, append=resume_after is not None and best.exists())
         # a resumed run rewrites its videos: the frames up to the resume point copied, then the new ones (one file)
         keep = 0 if resume_after is None else resume_after + 1
         self._vwriter = continue_video(out_dir / "virtual.avi", keep, fps=self._fps) if self._virtual else None
