@@ -212,6 +212,77 @@ class VideoSource(FrameSource):
             cap.release()
 
 
+class VideoReader:
+    """Exact random access to a video's frames, for readers that need frames out of order or far apart (the offline
+    background model's samples, the report's frames).
+
+    Over gaps of ``seek_gap`` frames or more it seeks (``CAP_PROP_POS_FRAMES``) and checks the position the decoder
+    reports; when a seek lands elsewhere (inexact seeking for this codec), it reads sequentially from then on
+    (re-opening the file to go backwards). Frames passed on the way can be collected for later reads.
+
+    Args:
+        source: The video.
+        seek_gap: Smallest forward gap, in frames, over which to seek rather than decode through (a seek decodes
+            from the previous keyframe, so short gaps are cheaper to read through).
+
+    Attributes:
+        passed: Frames decoded on the way to a read whose index was in its ``collect`` set (index -> BGR frame).
+    """
+
+    def __init__(self, source: VideoSource, seek_gap: int = 24) -> None:
+        self.source = source
+        self.seek_gap = max(1, int(seek_gap))
+        self.cap: Any = None
+        self.pos = 0
+        self.exact_seek = True
+        self.passed: dict[int, np.ndarray] = {}
+
+    def _reopen(self) -> None:
+        if self.cap is not None:
+            self.cap.release()
+        self.cap = self.source._open()
+        self.pos = 0
+
+    def read(self, index: int, collect: Iterable[int] = ()) -> np.ndarray | None:
+        """Frame ``index`` as an (H, W, 3) uint8 BGR image, or None when the video ends before it."""
+        import cv2
+
+        if self.cap is None:
+            self._reopen()
+        if index < self.pos or (index - self.pos >= self.seek_gap and self.exact_seek):
+            if self.exact_seek:
+                self.cap.set(cv2.CAP_PROP_POS_FRAMES, float(index))
+                if int(round(self.cap.get(cv2.CAP_PROP_POS_FRAMES))) == index:
+                    self.pos = index
+                else:
+                    log.debug("seeking in %s is inexact; reading sequentially", self.source.path)
+                    self.exact_seek = False
+                    self._reopen()
+            else:
+                self._reopen()
+        collect = set(collect)
+        while self.pos < index:
+            if not self.cap.grab():
+                return None
+            if self.pos in collect:
+                ok, frame = self.cap.retrieve()
+                if ok and frame is not None:
+                    self.passed[self.pos] = _to_bgr(frame)
+            self.pos += 1
+        ok, frame = self.cap.read()
+        if not ok or frame is None:
+            return None
+        self.pos += 1
+        return _to_bgr(frame)
+
+    def close(self) -> None:
+        """Release the file."""
+        if self.cap is not None:
+            self.cap.release()
+            self.cap = None
+        self.passed = {}
+
+
 class ImageSequenceSource(FrameSource):
     """Frames read from a list of image files (a folder, a glob pattern, or a single image).
 

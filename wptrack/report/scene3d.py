@@ -455,47 +455,22 @@ def _source_frames(spec: str, wanted: list[int]) -> dict[int, np.ndarray]:
 
 
 def _video_frames(src: Any, wanted: list[int]) -> dict[int, np.ndarray]:
-    """Wanted frames of a video: seek (``CAP_PROP_POS_FRAMES``) over long gaps, checking the position after each
-    seek; if a seek lands elsewhere the rest is read sequentially (``grab`` without conversion)."""
-    import cv2
+    """Wanted frames of a video (:class:`wptrack.io.frames.VideoReader`: exact seeks over long gaps)."""
+    from wptrack.io.frames import VideoReader
 
     out: dict[int, np.ndarray] = {}
-    cap = src._open()
+    reader = VideoReader(src, seek_gap=9)
     try:
-        pos, seek = 0, True
         for f in wanted:
             if f >= len(src):
                 break
-            if seek and f - pos > 8:
-                cap.set(cv2.CAP_PROP_POS_FRAMES, f)
-                if int(round(cap.get(cv2.CAP_PROP_POS_FRAMES))) == f:
-                    pos = f
-                else:  # inexact seeking for this codec: start again, sequentially
-                    log.debug("seeking in %s is inexact; reading sequentially", src.path)
-                    seek = False
-                    cap.release()
-                    cap = src._open()
-                    pos = 0
-            while pos < f and cap.grab():
-                pos += 1
-            if pos != f:
+            frame = reader.read(f)
+            if frame is None:
                 break
-            ok, frame = cap.read()
-            pos += 1
-            if not ok or frame is None:
-                break
-            out[f] = frame if frame.ndim == 3 and frame.shape[2] == 3 else _bgr3(frame)
+            out[f] = frame
     finally:
-        cap.release()
+        reader.close()
     return out
-
-
-def _bgr3(frame: np.ndarray) -> np.ndarray:
-    import cv2
-
-    if frame.ndim == 2:
-        return cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
-    return cv2.cvtColor(frame, cv2.COLOR_BGRA2BGR)
 
 
 def frames_for(ctx: ReportContext, data: RunData) -> dict[int, list[np.ndarray]]:
