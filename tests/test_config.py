@@ -102,3 +102,49 @@ def test_describe_lists_every_option():
     table = describe(Demo)
     assert "| `--sigma` | 0.03 | m | sigma_m | walk deviation |" in table
     assert table.count("\n") == 2 + len(option_map(Demo))
+
+
+@dataclass(frozen=True)
+class Inputs:
+    rig: str = param(help="rig file")
+    video: tuple[str, ...] = param(help="one video per camera")
+    partition: bool = param(True, help="independent groups", negative="joint")
+    shadows: bool = param(True, help="detect shadows", negative="keep-shadows")
+
+    def __post_init__(self) -> None:
+        check(self)
+
+
+def test_required_fields_negative_flags_and_prefixes():
+    parser = argparse.ArgumentParser()
+    add_arguments(parser, Inputs, prefix="in-")
+    with pytest.raises(SystemExit):  # --in-rig and --in-video are required
+        parser.parse_args(["--in-video", "a.avi"])
+    args = parser.parse_args(["--in-rig", "r.yaml", "--in-video", "a.avi", "b.avi", "--in-joint"])
+    got = from_namespace(Inputs, args, prefix="in-")
+    assert got == Inputs(rig="r.yaml", video=("a.avi", "b.avi"), partition=False, shadows=True)
+    args = parser.parse_args(["--in-rig", "r", "--in-video", "v", "--in-partition", "--in-keep-shadows"])
+    assert from_namespace(Inputs, args, prefix="in-").shadows is False
+    assert from_options(Inputs, {"rig": "r", "video": ["v"], "partition": False}).partition is False
+    with pytest.raises(ConfigError, match="^video: required$"):
+        from_options(Inputs, {"rig": "r"})
+    with pytest.raises(ConfigError, match="^x.yaml: video: required$"):
+        from_dict(Inputs, {"rig": "r"}, where="x.yaml: ")
+
+
+def test_load_file_reads_what_to_dict_writes(tmp_path):
+    import json
+
+    from wptrack.core.config import load_file
+
+    d = Demo(sigma=0.2, classes=("human",), prior=Prior(dims=(1.8, 0.2, 0.1)))
+    (tmp_path / "c.json").write_text(json.dumps(to_dict(d)))
+    assert load_file(Demo, str(tmp_path / "c.json")) == d
+    (tmp_path / "c.yaml").write_text("particles: 50\nprior: {cost_a: 3}\n")
+    assert load_file(Demo, str(tmp_path / "c.yaml")) == Demo(particles=50, prior=Prior(cost_a=3.0))
+    (tmp_path / "bad.yaml").write_text("particles: -5\n")
+    with pytest.raises(ConfigError, match=r"bad.yaml: particles: expected an integer >= 1, got -5$"):
+        load_file(Demo, str(tmp_path / "bad.yaml"))
+    with pytest.raises(ConfigError, match="bad2.yaml: partcles: unknown field"):
+        (tmp_path / "bad2.yaml").write_text("partcles: 5\n")
+        load_file(Demo, str(tmp_path / "bad2.yaml"))

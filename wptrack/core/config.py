@@ -46,6 +46,7 @@ __all__ = [
     "from_dict",
     "from_namespace",
     "from_options",
+    "load_file",
     "option_map",
     "param",
     "to_dict",
@@ -68,6 +69,8 @@ class Param:
         flag: The command-line option without the dashes (default: the field's name with ``-`` for ``_``, after the
             nested config's prefix); ``""`` keeps the field off the command line (YAML and ``--set`` only).
         metavar: Names of a tuple's elements on the command line, or None.
+        negative: For a boolean: the flag that sets it False (default ``no-<flag>``), e.g. ``joint`` for
+            ``partition``.
     """
 
     help: str
@@ -80,6 +83,7 @@ class Param:
     hi_open: bool = False
     flag: str | None = None
     metavar: tuple[str, ...] | None = None
+    negative: str | None = None
 
 
 def param(
@@ -95,6 +99,7 @@ def param(
     hi_open: bool = False,
     flag: str | None = None,
     metavar: Sequence[str] | None = None,
+    negative: str | None = None,
     default_factory: Any = MISSING,
 ) -> Any:
     """A dataclass field with its :class:`Param` (see the module docstring)."""
@@ -109,6 +114,7 @@ def param(
         hi_open=hi_open,
         flag=flag,
         metavar=tuple(metavar) if metavar is not None else None,
+        negative=negative,
     )
     if default_factory is not MISSING:
         return dataclasses.field(default_factory=default_factory, metadata={_KEY: info})
@@ -292,16 +298,21 @@ def from_dict(cls: type, data: Mapping[str, Any] | None, where: str = "", base: 
     unknown = sorted(set(data) - set(known))
     if unknown:
         raise ConfigError(f"{where}{unknown[0]}: unknown field; expected one of {', '.join(sorted(known))}")
-    base = base if base is not None else cls()
     kw = {}
     for key, value in data.items():
         f, t = known[key]
         if dataclasses.is_dataclass(t.base):
-            value = from_dict(t.base, value, f"{where}{key}.", getattr(base, key))
+            inner = getattr(base, key) if base is not None else None
+            value = from_dict(t.base, value, f"{where}{key}.", inner)
         elif isinstance(value, list):
             value = tuple(value)
         kw[key] = value
-    return dataclasses.replace(base, **kw)
+    if base is not None:
+        return dataclasses.replace(base, **kw)
+    missing = [f.name for f in dataclasses.fields(cls) if _default(f) is MISSING and f.name not in kw]
+    if missing:
+        raise ConfigError(f"{where}{missing[0]}: required")
+    return cls(**kw)
 
 
 # --- options (the command line, flat manifests) --------------------------------------------------------------------
@@ -317,23 +328,40 @@ class Option:
     default: Any
 
 
+REQUIRED = MISSING
+"""The default of a field that has none (an input that must be given)."""
+
+
+def _default(f: Field) -> Any:
+    if f.default is not MISSING:
+        return f.default
+    if f.default_factory is not MISSING:  # type: ignore[misc]
+        return f.default_factory()  # type: ignore[misc]
+    return MISSING
+
+
 def option_map(cls: type, prefix: str = "", path: tuple[str, ...] = ()) -> dict[str, Option]:
-    """Every command-line option of a config class (nested configs included), by flag. A nested config's fields get
-    the nested field's name as prefix (``human-cost-a``) unless their Param names a flag."""
+    """Every command-line option of a config class (nested configs included), by flag, after ``prefix``. A nested
+    config's fields get the nested field's flag as a further prefix (``human-cost-a``; a nested field with flag
+    ``""`` keeps its fields off the command line); a field whose Param names a flag has that flag after ``prefix``
+    alone. Fields without a default are required (their Option's default is ``MISSING``)."""
     out: dict[str, Option] = {}
-    defaults = cls()
     for f, p, t in fields_of(cls):
-        if dataclasses.is_dataclass(t.base):
-            sub = (p.flag if p is not None and p.flag is not None else f.name.replace("_", "-")) + "-"
-            for flag, opt in option_map(t.base, prefix + sub if sub != "-" else prefix, (*path, f.name)).items():
-                out[flag] = dataclasses.replace(opt, default=_get(getattr(defaults, f.name), opt.path[len(path) + 1 :]))
-            continue
         if p is not None and p.flag == "":
             continue
-        flag = p.flag if p is not None and p.flag else prefix + f.name.replace("_", "-")
+        if dataclasses.is_dataclass(t.base):
+            sub = (p.flag if p is not None and p.flag else f.name.replace("_", "-")) + "-"
+            default = _default(f)
+            for flag, opt in option_map(t.base, prefix, (*path, f.name)).items():
+                inner = opt.path[len(path) + 1 :]
+                named = opt.param is not None and bool(opt.param.flag)
+                key = flag if named else prefix + sub + flag[len(prefix) :]
+                out[key] = dataclasses.replace(opt, flag=key, default=_get(default, inner))
+            continue
+        flag = prefix + (p.flag if p is not None and p.flag else f.name.replace("_", "-"))
         if flag in out:
             raise TypeError(f"{cls.__name__}: two fields give the option --{flag}")
-        out[flag] = Option(flag, (*path, f.name), p, t, getattr(defaults, f.name))
+        out[flag] = Option(flag, (*path, f.name), p, t, _default(f))
     return out
 
 
@@ -354,7 +382,9 @@ def _help(opt: Option) -> str:
     text = p.help if p is not None else opt.path[-1].replace("_", " ")
     bits = [b for b in ((p.units if p else None), (p.symbol if p else None)) if b]
     d = opt.default
-    if isinstance(d, bool):
+    if d is MISSING:
+        pass
+    elif isinstance(d, bool):
         bits.append(f"default: {'on' if d else 'off'}")
     elif d is not None and d != ():
         bits.append("default: " + (" ".join(str(x) for x in d) if isinstance(d, tuple) else str(d)))
@@ -365,41 +395,54 @@ def add_arguments(
     parser: argparse.ArgumentParser | Any,
     cls: type,
     *,
+    prefix: str = "",
     exclude: Sequence[str] = (),
     only: Sequence[str] | None = None,
-    required: Sequence[str] = (),
 ) -> dict[str, Option]:
     """Add one option per field of ``cls`` (:func:`option_map`) to an argparse parser or group. Every option
-    defaults to None (unset: the config's default applies), so :func:`from_namespace` applies only what was given.
+    defaults to None (unset: the config's default applies), so :func:`from_namespace` applies only what was given;
+    a field without a default is a required option. A boolean is two flags, ``--flag`` and ``--no-flag`` (or the
+    Param's ``negative``).
 
     Args:
         parser: The parser or argument group.
         cls: The config class.
-        exclude: Flags to leave out (the command adds them itself).
-        only: Flags to add (default: all).
-        required: Flags that must be given.
+        prefix: Put before every flag (a command that embeds the config, e.g. ``mask-``).
+        exclude: Flags (without the prefix) to leave out: the command adds them itself.
+        only: Flags (without the prefix) to add (default: all).
 
     Returns:
-        The options added, by flag.
+        The options added, by flag (with the prefix).
     """
     added = {}
-    for flag, opt in option_map(cls).items():
-        if flag in exclude or (only is not None and flag not in only):
+    for flag, opt in option_map(cls, prefix).items():
+        bare = flag[len(prefix) :]
+        if bare in exclude or (only is not None and bare not in only):
             continue
         t, p = opt.type, opt.param
         kw: dict[str, Any] = {"default": None, "help": _help(opt), "dest": _dest(flag)}
-        if flag in required:
+        if opt.default is MISSING:
             kw["required"] = True
         if t.base is bool and t.size is None:
-            kw["action"] = argparse.BooleanOptionalAction
-        else:
-            kw["type"] = {int: int, float: float, str: str}[t.base]
-            if t.size is not None:
-                kw["nargs"] = "+" if t.size < 0 else t.size
-                if p is not None and p.metavar:
-                    kw["metavar"] = p.metavar
-            if p is not None and p.choices:
-                kw["choices"] = p.choices
+            negative = prefix + p.negative if p is not None and p.negative else None
+            if negative is None:
+                kw["action"] = argparse.BooleanOptionalAction
+                parser.add_argument(f"--{flag}", **kw)
+            else:
+                parser.add_argument(f"--{flag}", action="store_const", const=True, **kw)
+                parser.add_argument(
+                    f"--{negative}", action="store_const", const=False, dest=kw["dest"], default=None,
+                    help=f"the opposite of --{flag}",
+                )  # fmt: skip
+            added[flag] = opt
+            continue
+        kw["type"] = {int: int, float: float, str: str}[t.base]
+        if t.size is not None:
+            kw["nargs"] = "+" if t.size < 0 else t.size
+            if p is not None and p.metavar:
+                kw["metavar"] = p.metavar
+        if p is not None and p.choices:
+            kw["choices"] = p.choices
         parser.add_argument(f"--{flag}", **kw)
         added[flag] = opt
     return added
@@ -409,35 +452,74 @@ def _dest(flag: str) -> str:
     return flag.replace("-", "_")
 
 
-def from_namespace(cls: type, args: argparse.Namespace, base: Any = None, exclude: Sequence[str] = ()) -> Any:
-    """The config ``base`` (default: the class defaults) with every option given on the command line applied."""
+def from_namespace(cls: type, args: argparse.Namespace, base: Any = None, prefix: str = "") -> Any:
+    """The config ``base`` (default: the class defaults) with every option of ``cls`` given on the command line
+    applied (options added by :func:`add_arguments` with the same ``prefix``)."""
     values = {}
-    for flag in option_map(cls):
-        if flag in exclude:
-            continue
+    for flag in option_map(cls, prefix):
         v = getattr(args, _dest(flag), None)
         if v is not None:
-            values[flag] = v
+            values[flag[len(prefix) :]] = v
     return from_options(cls, values, base=base)
 
 
 def from_options(cls: type, values: Mapping[str, Any], base: Any = None, where: str = "") -> Any:
-    """The config ``base`` (default: the class defaults) with options applied, keyed by flag (``max-objects``) or by
-    the same name with underscores (``max_objects``), as a batch manifest's ``args`` write them.
+    """The config ``base`` (default: built from the options and the class defaults) with options applied, keyed by
+    flag (``max-objects``) or by the same name with underscores (``max_objects``), as a batch manifest's ``args``
+    write them. Required fields (no default) must be among the options when there is no ``base``.
 
     Raises:
-        ConfigError: an unknown option (naming it and ``where``), or a value of the wrong type or range.
+        ConfigError: an unknown option (naming it and ``where``), a missing required one, or a value of the wrong type
+            or range.
     """
     opts = option_map(cls)
-    config = base if base is not None else cls()
+    by_path: dict[tuple[str, ...], Any] = {}
     for key, value in values.items():
         flag = str(key).replace("_", "-")
         if flag not in opts:
             raise ConfigError(f"{where}{key}: unknown option")
-        if isinstance(value, list):
-            value = tuple(value)
-        config = _set(config, opts[flag].path, value)
+        by_path[opts[flag].path] = tuple(value) if isinstance(value, list) else value
+    if base is None:
+        top = {path[0]: v for path, v in by_path.items() if len(path) == 1}
+        missing = [f.name for f in dataclasses.fields(cls) if _default(f) is MISSING and f.name not in top]
+        if missing:
+            flags = [o.flag for o in opts.values() if o.path == (missing[0],)]
+            raise ConfigError(f"{where}{flags[0] if flags else missing[0]}: required")
+        base = cls(**top)
+        by_path = {path: v for path, v in by_path.items() if len(path) > 1}
+    config = base
+    for path, value in by_path.items():
+        config = _set(config, path, value)
     return config
+
+
+def load_file(cls: type, path: str, base: Any = None) -> Any:
+    """A config from a YAML or JSON file holding a mapping of its fields (nested configs as mappings; what
+    ``run.json``'s ``config`` and :func:`to_dict` hold), applied over ``base``.
+
+    Raises:
+        ConfigError: the file is missing or not YAML/JSON, or a field is unknown or invalid (naming the file).
+    """
+    import json
+    from pathlib import Path
+
+    import yaml
+
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as e:
+        raise ConfigError(f"{p}: cannot read the config file: {e.strerror or e}") from None
+    try:
+        data = json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
+    except (ValueError, yaml.YAMLError) as e:
+        raise ConfigError(f"{p}: not valid YAML/JSON: {' '.join(str(e).split())}") from None
+    try:
+        return from_dict(cls, data, where=f"{p}: ", base=base)
+    except ConfigError as e:
+        if str(e).startswith(f"{p}: "):
+            raise
+        raise ConfigError(f"{p}: {e}") from None
 
 
 # --- documentation ----------------------------------------------------------------------------------------------------

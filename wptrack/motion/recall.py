@@ -50,7 +50,7 @@ class GroundTruthFrames:
 
     @classmethod
     def from_columns(cls, cols: Mapping[str, np.ndarray]) -> GroundTruthFrames:
-        """From ``groundtruth.csv`` columns (:func:`wptrack.io.run.read_tracks`)."""
+        """From ``groundtruth.csv`` columns (:func:`wptrack.io.tables.read_tracks`)."""
         names = ("id", "x", "y", "z", "length", "width", "height", "orientation")
         table = np.stack([np.asarray(cols[n], dtype=np.float64) for n in names], axis=1)
         frames = np.asarray(cols["frame"], dtype=np.int64)
