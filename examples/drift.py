@@ -52,7 +52,13 @@ def main(argv=None) -> dict:
         for name, sign in (("nearer", -1.0), ("further", 1.0)):
             init = ball + sign * args.offset * ray
             tracker = ColorTracker(
-                rig, target, particles=args.particles, sigma=0.03, init=tuple(init), device=args.device
+                rig,
+                target,
+                particles=args.particles,
+                sigma=0.03,
+                init=tuple(init),
+                device=args.device,
+                proposal="prior",
             )
             depth = [float((e.mean - ball) @ ray) for e in tracker.track(open_frames([str(v) for v in scene.videos]))]
             runs[name] = depth

@@ -9,7 +9,8 @@ from __future__ import annotations
 import argparse
 
 from wptrack.core.device import quiet_warp
-from wptrack.trackers.colour.experiments import default_sigmas, jump_experiment, write_sweep
+from wptrack.trackers.colour.experiments import default_sigmas, jump_experiment
+from wptrack.trackers.colour.sweep import write_sweep
 
 
 def main(argv=None) -> dict:

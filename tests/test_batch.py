@@ -122,7 +122,7 @@ def test_manifest_grid_ids_paths_and_hash(scene):
         ("tracker: nope\n", "tracker: expected one of"),
         ("speed: 1\n", "unknown key(s) ['speed']"),
         (COLOUR_ARGS + "runs:\n  - args: {particle: 10}\n", "args.particle: not an option of 'wptrack track color'"),
-        (COLOUR_ARGS + "runs:\n  - args: {particles: many}\n", "run run000: argument --particles"),
+        (COLOUR_ARGS + "runs:\n  - args: {particles: many}\n", "run run000: args.particles: expected a positive"),
         (COLOUR_ARGS + "runs:\n  - id: a\n  - id: a\n", "run id 'a' is used twice"),
         (COLOUR_ARGS + "runs:\n  - id: ../x\n", "is not a valid run id"),
         (COLOUR_ARGS + "runs:\n  - grid: {seed: 3}\n", "grid.seed: expected a non-empty list"),
@@ -206,7 +206,8 @@ def test_without_ray_local_runs_inline(tmp_path, monkeypatch):
 
 
 def test_sweep_is_a_batch_with_the_same_table(tmp_path, capsys):
-    from wptrack.trackers.colour.experiments import jump_experiment, read_sweep
+    from wptrack.trackers.colour.experiments import jump_experiment
+    from wptrack.trackers.colour.sweep import read_sweep
 
     kw = {"particles": 64, "iterations": 12, "jump_at": 6, "runs": 2, "device": "cpu"}
     ref = jump_experiment([0.02, 0.2], **kw)
@@ -287,20 +288,25 @@ def test_example_manifest_is_valid():
 
 
 def test_track_arguments_of_every_tracker(tmp_path):
-    """Manifest args become the command's own options: lists for nargs and repeated options, booleans as flags."""
-    from wptrack.batch import RunSpec, parse_track_args
+    """Manifest args become the run's declared parts (wptrack.runs.spec), by option name: lists for list options,
+    booleans as values or as their opposite flag (no_virtual, joint), None for an option's default."""
+    from wptrack.batch import RunSpec, track_parts
 
     kw = {"rig": "r.yaml", "video": "v.avi", "classes": ["human"], "no_virtual": True, "camera": 0, "t_add": 0.4}
-    t = parse_track_args(RunSpec("t", "templates", {**kw, "max_frames": None}), tmp_path)
-    assert (t.classes, t.no_virtual, t.camera, t.t_add, t.max_frames) == (["human"], True, "0", 0.4, None)
-    assert t.out == str(tmp_path)
-    p = parse_track_args(RunSpec("p", "people", {"rig": "r.yaml", "video": ["a.avi", "b.avi"], "p_b": 0.1}), "o")
-    assert p.video == ["a.avi", "b.avi"] and p.p_b == 0.1 and p.quiet and not p.resume
+    t = track_parts(RunSpec("t", "templates", {**kw, "max_frames": None, "joint": True}), tmp_path)
+    got = (t["config"].classes, t["inputs"].virtual, t["config"].camera, t["config"].t_add, t["control"].max_frames)
+    assert got == (("human",), False, "0", 0.4, None) and t["config"].partition is False
+    assert t["control"].out == str(tmp_path)
+    p = track_parts(RunSpec("p", "people", {"rig": "r.yaml", "video": ["a.avi", "b.avi"], "p_b": 0.1}), "o")
+    assert p["inputs"].video == ("a.avi", "b.avi") and p["config"].motion.p_b == 0.1 and not p["control"].resume
     kw = {"rig": "r", "video": "v", "hue": [350, 10], "sat": [0, 1], "init_random": True, "report": False}
-    c = parse_track_args(RunSpec("c", "color", {**kw, "volume": [-1, -1, 0, 1, 1, 2]}), "o")
-    assert c.hue == [350.0, 10.0] and c.init_random and c.volume == [-1, -1, 0, 1, 1, 2] and c.report is False
-    with pytest.raises(ConfigError, match="args.report: expected true or false"):
-        parse_track_args(RunSpec("t", "templates", {"rig": "r", "report": "yes"}), "o")
+    c = track_parts(RunSpec("c", "color", {**kw, "volume": [-1, -1, 0, 1, 1, 2]}), "o")
+    assert c["target"].hue == (350.0, 10.0) and c["inputs"].init_random and c["control"].report is False
+    assert c["config"].box == ((-1.0, -1.0, 0.0), (1.0, 1.0, 2.0))
+    with pytest.raises(ConfigError, match="run t: args.report: expected true or false"):
+        track_parts(RunSpec("t", "templates", {"rig": "r", "report": "yes"}), "o")
+    with pytest.raises(ConfigError, match="run t: args.particels: not an option of 'wptrack track templates'"):
+        track_parts(RunSpec("t", "templates", {"rig": "r", "particels": 5}), "o")
 
 
 def test_attempts_count_only_this_invocation(scene, tmp_path, capsys):

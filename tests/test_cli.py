@@ -104,7 +104,7 @@ def test_init_random_uses_the_rig_volume(scene, tmp_path):
     assert main(args) == 0
     run = json.loads((out / "run.json").read_text())
     lo, hi = Rig.load(scene["rig"]).bounds()
-    np.testing.assert_allclose(run["config"]["tracker"]["init_box"], [lo, hi])
+    np.testing.assert_allclose(np.reshape(run["config"]["tracker"]["init_box"], (2, 3)), [lo, hi])  # xyz min, max
     assert run["config"]["tracker"]["init"] is None
     assert len(read_tracks(out / "tracks.csv")["frame"]) == 6
 
@@ -223,7 +223,8 @@ def test_command_alone_prints_the_usage_with_the_list(argv, names):
 
 def test_plural_and_convergence_words():
     """Issue 30 item 11: 'converges in 1 iterations', 'after the jump in not within the run', '1 objects'."""
-    from wptrack.cli import convergence_words, plural
+    from wptrack.cli.commands import convergence_words
+    from wptrack.cli.common import plural
 
     assert (plural(1, "object"), plural(2, "object"), plural(1, "person", "people")) == (
         "1 object",

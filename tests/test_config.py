@@ -50,7 +50,7 @@ class Demo:
 def test_check_names_field_expected_and_value():
     with pytest.raises(ConfigError, match=r"^sigma: expected a number > 0 \(m\), got -1$"):
         Demo(sigma=-1)
-    with pytest.raises(ConfigError, match=r"^particles: expected an integer >= 1, got 2.5$"):
+    with pytest.raises(ConfigError, match=r"^particles: expected a positive integer, got 2.5$"):
         Demo(particles=2.5)
     with pytest.raises(ConfigError, match=r"^scheme: expected one of systematic, residual, got 'x'$"):
         Demo(scheme="x")
@@ -143,8 +143,15 @@ def test_load_file_reads_what_to_dict_writes(tmp_path):
     (tmp_path / "c.yaml").write_text("particles: 50\nprior: {cost_a: 3}\n")
     assert load_file(Demo, str(tmp_path / "c.yaml")) == Demo(particles=50, prior=Prior(cost_a=3.0))
     (tmp_path / "bad.yaml").write_text("particles: -5\n")
-    with pytest.raises(ConfigError, match=r"bad.yaml: particles: expected an integer >= 1, got -5$"):
+    with pytest.raises(ConfigError, match=r"bad.yaml: particles: expected a positive integer, got -5$"):
         load_file(Demo, str(tmp_path / "bad.yaml"))
     with pytest.raises(ConfigError, match="bad2.yaml: partcles: unknown field"):
         (tmp_path / "bad2.yaml").write_text("partcles: 5\n")
         load_file(Demo, str(tmp_path / "bad2.yaml"))
+
+
+def test_list_options_accumulate_when_repeated():
+    parser = argparse.ArgumentParser()
+    add_arguments(parser, Inputs)
+    args = parser.parse_args(["--rig", "r", "--video", "a.avi", "--video", "b.avi", "c.avi"])
+    assert from_namespace(Inputs, args).video == ("a.avi", "b.avi", "c.avi")

@@ -290,7 +290,7 @@ def test_size_change_mid_stream(tmp_path):
     ],
 )
 def test_bad_config_names_field(kwargs, field):
-    with pytest.raises(ConfigError, match=rf"^MaskConfig\.{field}: must be .*, got "):
+    with pytest.raises(ConfigError, match=rf"^MaskConfig\.{field}: expected .*, got "):
         MaskConfig(**kwargs)
 
 

@@ -263,7 +263,7 @@ def test_given_masks_of_wrong_size(tmp_path):
     ],
 )
 def test_bad_offline_config_names_field(kwargs, field):
-    with pytest.raises(ConfigError, match=rf"^MaskConfig\.{field}: must be .*, got "):
+    with pytest.raises(ConfigError, match=rf"^MaskConfig\.{field}: expected .*, got "):
         MaskConfig(**kwargs)
 
 

@@ -134,7 +134,7 @@ def test_apply_camera_checks_window_size():
 @pytest.fixture(scope="module")
 def lab_run(tmp_path_factory) -> dict:
     """The s1-lab scene (10 frames) tracked on the CPU: run folder, scene folder."""
-    from wptrack.cli import run_color_tracking
+    from wptrack.trackers.colour.run import run_color_tracking
     from wptrack.synth import render_scene
     from wptrack.trackers.colour.tracker import ColorConfig, HSITarget
 
@@ -372,7 +372,7 @@ def test_cli_report_errors_one_line(tmp_path, capsys):
 
 
 def _sweep_dir(path: Path) -> Path:
-    from wptrack.trackers.colour.experiments import write_sweep
+    from wptrack.trackers.colour.sweep import write_sweep
 
     sigmas = np.array([0.001, 0.05, 0.1])
     it = np.arange(30)

@@ -277,14 +277,20 @@ def test_rig_indexing_and_bounds() -> None:
     assert vol.volume[0].dtype == np.float64
 
 
-def test_check_frame_size(tmp_path: Path) -> None:
+def test_frame_sizes_check_and_scale(tmp_path: Path) -> None:
+    """Frames of the calibrated size use the rig as it is; a resized copy (same aspect ratio) scales K; another
+    aspect ratio is an error naming the source, the camera and both sizes."""
     path = _write_yaml(tmp_path / "rig.yaml", {"cameras": [_cam_entry("cam0"), _cam_entry("cam1", width=640)]})
     rig = Rig.load(path)
-    rig.check_frame_size(0, 320, 240, "a.mp4")
-    rig.check_frame_size(1, 640, 240, "b.mp4")
+    assert rig.at_sizes([(320, 240), (640, 240)], ["a.mp4", "b.mp4"]) is rig
     with pytest.raises(RigError) as info:
-        rig.check_frame_size(1, 320, 240, "b.mp4")
-    assert str(info.value) == f"b.mp4: frame size 320x240 differs from camera 'cam1' calibration 640x240 in {path}"
+        rig.at_sizes([(320, 240), (320, 240)], ["a.mp4", "b.mp4"])
+    assert str(info.value).startswith(
+        f"b.mp4: frame size 320x240 differs from camera 'cam1' calibration 640x240 in {path}"
+    )
+    half = rig.at_sizes([(160, 120), (640, 240)], ["a.mp4", "b.mp4"])
+    assert (half[0].width, half[0].height) == (160, 120) and half[1] is rig[1]
+    np.testing.assert_allclose(half[0].K[:2], rig[0].K[:2] / 2)
 
 
 # --------------------------------------------------------------------------------------------- validation

@@ -282,7 +282,7 @@ def test_render_scene_with_a_new_seed(tmp_path, name: str) -> None:
 
 def test_accuracy_cache_renders_stale_scenes_again(tmp_path, caplog) -> None:
     """A scene folder of template_accuracy rendered before seeds drew new sequences is not reused."""
-    from wptrack.trackers.colour.experiments import _s3_scene
+    from wptrack.trackers.templates.experiments import _s3_scene
 
     first = _s3_scene("s3-cars", tmp_path, 2, 2, False)
     assert _s3_scene("s3-cars", tmp_path, 2, 2, False).groundtruth_path == first.groundtruth_path
@@ -302,7 +302,7 @@ def test_accuracy_workers_give_the_same_table(tmp_path) -> None:
     (every run is seeded and independent); a worker count below 1 is refused with the field named."""
     pytest.importorskip("motmetrics")
     from wptrack.core.errors import ConfigError
-    from wptrack.trackers.colour.experiments import template_accuracy
+    from wptrack.trackers.templates.experiments import template_accuracy
 
     kw = dict(scenes=["s3-people"], seeds=[0, 1], frames=6, particles=60, masks="perfect", device="cpu",
               scenes_dir=tmp_path / "scenes")  # fmt: skip

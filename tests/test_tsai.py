@@ -231,8 +231,6 @@ def test_cli_evaluate_xml(tmp_path):
 
 @pytest.mark.skipif(not SHARED.is_dir(), reason="PETS 2009 development clip not present in ../shared/data")
 def test_real_video_frames(tmp_path):
-    from wptrack.trackers.templates.run import _camera_for_size
-
     cv2 = pytest.importorskip("cv2")
     rig_file = tmp_path / "rig.yaml"
     rig_file.write_text(f"cameras:\n  - tsai: {SHARED / 'View_001.xml'}\n")
@@ -245,7 +243,7 @@ def test_real_video_frames(tmp_path):
         frames.append(frame)
     cap.release()
     h, w = frames[0].shape[:2]
-    cam = _camera_for_size(rig[0], w, h, "video.avi", str(rig_file))
+    cam = rig[0].for_size(w, h, "video.avi", str(rig_file))
     assert (cam.width, cam.height) == (w, h) == (480, 360)
     gt = read_box_groundtruth(SHARED / "PETS2009-S2L1-frames0-399.xml", rig_file)
     first = gt["frame"] < 5

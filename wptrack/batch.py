@@ -49,8 +49,6 @@ Ctrl-C only the missing runs run again); a changed entry runs again and replaces
 
 from __future__ import annotations
 
-import argparse
-import contextlib
 import csv
 import hashlib
 import io
@@ -241,68 +239,18 @@ def load_manifest(path: str | os.PathLike) -> Manifest:
 
 
 # ------------------------------------------------------------------------------------------ track arguments
-def _track_parser(tracker: str) -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
-    """The whole ``wptrack`` parser and its ``track TRACKER`` subparser."""
-    from wptrack.cli import build_parser
-
-    def sub(p: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:
-        for a in p._actions:
-            if isinstance(a, argparse._SubParsersAction):
-                return a.choices[name]
-        raise KeyError(name)
-
-    parser = build_parser()
-    return parser, sub(sub(parser, "track"), tracker)
-
-
-def track_argv(spec: RunSpec, out_dir: str | os.PathLike) -> list[str]:
-    """``wptrack`` command-line arguments of a tracker run (``track TRACKER ... --out out_dir -q``).
+def track_parts(spec: RunSpec, out_dir: str | os.PathLike) -> dict[str, Any]:
+    """The declared parts of a tracker run (:mod:`wptrack.runs.spec`: inputs, the tracker's config, ...) from the
+    run's ``args`` (keyed by ``wptrack track`` option names, with or without dashes), writing into ``out_dir``.
 
     Raises:
-        ConfigError: an argument that is not an option of ``wptrack track TRACKER`` or of the wrong kind.
+        ConfigError: an argument that is not an option of ``wptrack track TRACKER``, a missing required one or a bad
+            value (the message names the run).
     """
-    _, sub = _track_parser(spec.tracker)
-    actions = {a.dest: a for a in sub._actions if a.option_strings}
-    argv = ["track", spec.tracker]
-    for key, value in spec.args.items():
-        a = actions.get(key)
-        if a is None or key in RESERVED_ARGS:
-            known = sorted(k for k in actions if k not in RESERVED_ARGS and k != "help")
-            raise ConfigError(f"run {spec.id}: args.{key}: not an option of 'wptrack track {spec.tracker}' ({known})")
-        opt = next((o for o in a.option_strings if o.startswith("--")), a.option_strings[0])
-        if value is None:  # the command's default
-            continue
-        if isinstance(a, argparse.BooleanOptionalAction):
-            argv.append(opt if value else "--no-" + opt[2:])
-        elif isinstance(a, (argparse._StoreTrueAction, argparse._StoreFalseAction)):
-            if not isinstance(value, bool):
-                raise ConfigError(f"run {spec.id}: args.{key}: expected true or false, got {value!r}")
-            if value == isinstance(a, argparse._StoreTrueAction):
-                argv.append(opt)
-        elif isinstance(a, argparse._AppendAction):  # OPT=VALUE: a value may start with -
-            argv += [f"{opt}={v}" for v in (value if isinstance(value, list) else [value])]
-        elif a.nargs not in (None, "?"):
-            argv += [opt, *(str(v) for v in (value if isinstance(value, list) else [value]))]
-        else:
-            argv.append(f"{opt}={value}")
-    return [*argv, "--out", str(out_dir), "-q"]
+    from wptrack.runs.spec import command, parts_from_options
 
-
-def parse_track_args(spec: RunSpec, out_dir: str | os.PathLike) -> argparse.Namespace:
-    """The parsed ``wptrack track`` arguments of a tracker run, as the CLI would parse them.
-
-    Raises:
-        ConfigError: the arguments are not valid for the command (argparse's message, with the run id).
-    """
-    parser, _ = _track_parser(spec.tracker)
-    err = io.StringIO()
-    try:
-        with contextlib.redirect_stderr(err):
-            return parser.parse_args(track_argv(spec, out_dir))
-    except SystemExit:
-        msg = err.getvalue().strip().splitlines()
-        text = msg[-1].removeprefix("wptrack: error: ") if msg else "bad arguments"
-        raise ConfigError(f"run {spec.id}: {text}") from None
+    args = {k: v for k, v in spec.args.items() if v is not None}  # None: the option's default
+    return parts_from_options(command(spec.tracker), {**args, "out": str(out_dir)}, where=f"run {spec.id}: args.")
 
 
 def validate(spec: RunSpec) -> None:
@@ -310,7 +258,7 @@ def validate(spec: RunSpec) -> None:
     if spec.tracker == "function":
         _load_function(spec.function)
     else:
-        parse_track_args(spec, "OUT")
+        track_parts(spec, "OUT")
 
 
 def _load_function(ref: str | None) -> Callable[..., Any]:
@@ -372,17 +320,23 @@ def _bump_attempts(root: Path, run_id: str) -> int:
 
 
 def _run_track(spec: RunSpec, out: Path, force_cpu: bool) -> dict[str, Any]:
+    """Run a tracker through the library (what ``wptrack track`` calls), then its scoring and report."""
     from wptrack.core.device import quiet_warp
     from wptrack.io.run import RUN_FILE
+    from wptrack.runs.spec import command, replace_part, run_command, score_run
 
-    args = parse_track_args(spec, out)
-    if force_cpu and args.device == "auto":
-        args.device = "cpu"
+    cmd = command(spec.tracker)
+    parts = track_parts(spec, out)
+    if force_cpu and parts["control"].device == "auto":
+        parts = replace_part(parts, "control", device="cpu")
     quiet_warp(True)
-    with contextlib.redirect_stdout(io.StringIO()):  # the command's summary lines; the batch prints its own
-        rc = int(args.func(args) or 0)
-    if rc != 0:
-        raise RuntimeError(f"run {spec.id}: 'wptrack track {spec.tracker}' returned {rc}")
+    control = parts["control"]
+    run_command(cmd, parts, progress=False)
+    score_run(cmd, parts)  # evaluation.json in the run folder
+    if control.report:
+        from wptrack.report import build_report
+
+        build_report(out)
     run = json.loads((out / RUN_FILE).read_text(encoding="utf-8"))
     if run.get("status") != "complete":
         raise RuntimeError(f"run {spec.id}: run.json status is {run.get('status')!r}")

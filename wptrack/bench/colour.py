@@ -108,7 +108,17 @@ class ColourSuite:
         init = tuple(balls[0] + np.array([0.05, -0.05, 0.05]))
         dev = wp.get_device(device)
         mem0 = wp.get_mempool_used_mem_current(dev) if dev.is_cuda else 0
-        tracker = ColorTracker(rig, target, particles=case.particles, sigma=0.01, init=init, device=device, seed=seed)
+        tracker = ColorTracker(
+            rig,
+            target,
+            particles=case.particles,
+            sigma=0.01,
+            init=init,
+            device=device,
+            seed=seed,
+            proposal="prior",
+            keep_particles=0,
+        )  # the paper's filter, as the NumPy reference
         result = {
             "tracker": "color",
             "particles": case.particles,

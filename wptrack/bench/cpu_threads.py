@@ -43,7 +43,15 @@ def _make(impl: str, particles: int, cameras: int, seed: int):
         from wptrack.trackers.colour.tracker import ColorTracker, HSITarget
 
         tr = ColorTracker(
-            rig, HSITarget(HUE, SAT, INTENSITY), particles=particles, sigma=0.01, init=init, device="cpu", seed=seed
+            rig,
+            HSITarget(HUE, SAT, INTENSITY),
+            particles=particles,
+            sigma=0.01,
+            init=init,
+            device="cpu",
+            seed=seed,
+            proposal="prior",
+            keep_particles=0,
         )
         step = tr.step
         if impl == "warp-observe":  # the observation stage alone (mask + window map: plain, untiled launches)

@@ -49,7 +49,15 @@ class EndToEndSuite:
                 decode.append(time.perf_counter() - t0)
             target = HSITarget(hue=HUE, sat=SAT, intensity=INTENSITY)
             tracker = ColorTracker(
-                rig, target, particles=case.particles, sigma=0.01, init=tuple(balls[0] + 0.03), device=device, seed=seed
+                rig,
+                target,
+                particles=case.particles,
+                sigma=0.01,
+                init=tuple(balls[0] + 0.03),
+                device=device,
+                seed=seed,
+                proposal="prior",
+                keep_particles=0,
             )
             for _ in range(3):  # compile + capture outside the timing
                 tracker.step(images[0])

@@ -199,7 +199,12 @@ def soak_job(
     rig_path = out_dir / "rig.yaml"
     rig.save(rig_path)
     cfg = ColorConfig(
-        particles=case.particles, sigma=0.01, init=tuple(balls[0]), seed=seed, keep_particles=keep_particles
+        particles=case.particles,
+        sigma=0.01,
+        init=tuple(balls[0]),
+        seed=seed,
+        keep_particles=keep_particles,
+        proposal="prior",
     )
     target = HSITarget(hue=(300.0, 340.0), sat=(0.3, 1.0), intensity=(20.0, 240.0))
     return SoakRun(rig_path, videos, target, cfg, device=device, frames=frames, on_record=on_record)

@@ -13,6 +13,7 @@ and name) and the field.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -24,6 +25,8 @@ from wptrack.cameras.checks import _array, _camera_where, _fmt, _positive_int, _
 from wptrack.core.errors import RigError
 
 __all__ = ["Camera", "GroundPlane"]
+
+log = logging.getLogger(__name__)
 
 
 # ----------------------------------------------------------------------------------------------------- Camera
@@ -243,6 +246,25 @@ class Camera:
         norm = cv2.undistortPoints(pts, np.array(self.K), np.array(self.dist)).reshape(-1, 2)
         rays = np.column_stack([norm, np.ones(len(norm))]) @ self.R  # R^T d per row
         return rays / np.linalg.norm(rays, axis=1, keepdims=True)
+
+    def for_size(self, width: int, height: int, source: str, rig_source: str = "the rig") -> Camera:
+        """This camera for frames of ``width`` x ``height`` pixels from ``source``: itself when the sizes agree, the
+        camera :meth:`scaled` to them when the frames are a resized copy (the same aspect ratio within 1 %).
+
+        Raises:
+            RigError: another aspect ratio (the message names the source, the camera and both sizes).
+        """
+        width, height = int(width), int(height)
+        if (width, height) == (self.width, self.height):
+            return self
+        if abs(width / height - self.width / self.height) <= 0.01 * self.width / self.height:
+            log.info("scaling camera %s from %dx%d to %dx%d (%s)", self.name, self.width, self.height, width, height,
+                     source)  # fmt: skip
+            return self.scaled(width, height)
+        raise RigError(
+            f"{source}: frame size {width}x{height} differs from camera '{self.name}' calibration "
+            f"{self.width}x{self.height} in {rig_source} (and is not a resized copy of the same aspect ratio)"
+        )
 
     def scaled(self, width: int, height: int) -> Camera:
         """The same camera at another resolution.

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -206,21 +206,24 @@ class Rig:
                 blind.append(cam.name)
         return blind
 
-    def check_frame_size(self, index: int, width: int, height: int, source: str) -> None:
-        """Check that a frame from ``source`` matches camera ``index``'s calibrated size.
-
-        Args:
-            index: Camera index in the rig.
-            width: Frame width, pixels.
-            height: Frame height, pixels.
-            source: The frame source (video path, folder...) for the message.
+    def at_sizes(self, sizes: Sequence[tuple[int, int]], sources: Sequence[str]) -> Rig:
+        """The rig for frames of the given sizes, one per camera in rig order: each camera as it is when its frames
+        have its calibrated size, scaled (:meth:`Camera.for_size`) when they are a resized copy.
 
         Raises:
-            RigError: the sizes differ.
+            RigError: frames of another aspect ratio (naming the source and the camera).
         """
-        cam = self[index]
-        if int(width) != cam.width or int(height) != cam.height:
-            raise RigError(
-                f"{source}: frame size {width}x{height} differs from camera '{cam.name}' calibration "
-                f"{cam.width}x{cam.height} in {self.source}"
-            )
+        cams = tuple(
+            cam.for_size(w, h, str(src), self.source)
+            for cam, (w, h), src in zip(self.cameras, sizes, sources, strict=True)
+        )
+        if all(a is b for a, b in zip(cams, self.cameras, strict=True)):
+            return self
+        return Rig(cameras=cams, volume=self.volume, source=self.source, ground=self.ground)
+
+    def with_camera(self, camera: Camera) -> Rig:
+        """The rig with the camera of the same name replaced by ``camera`` (e.g. scaled to another frame size)."""
+        if camera is self[camera.name]:
+            return self
+        cams = tuple(camera if c.name == camera.name else c for c in self.cameras)
+        return Rig(cameras=cams, volume=self.volume, source=self.source, ground=self.ground)

@@ -182,20 +182,27 @@ def _is_real(v: Any) -> bool:
     return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
 
 
-def _range_text(p: Param) -> str:
-    lo = None if p.lo is None else f"{'>' if p.lo_open else '>='} {p.lo:g}"
-    hi = None if p.hi is None else f"{'<' if p.hi_open else '<='} {p.hi:g}"
+def _num(x: float) -> str:
+    return str(int(x)) if float(x).is_integer() and abs(x) < 1e18 else f"{x:g}"
+
+
+def _range_text(p: Param, skip_lo: bool = False) -> str:
+    lo = None if p.lo is None or skip_lo else f"{'>' if p.lo_open else '>='} {_num(p.lo)}"
+    hi = None if p.hi is None else f"{'<' if p.hi_open else '<='} {_num(p.hi)}"
     return " and ".join(x for x in (lo, hi) if x)
 
 
 def _expected(p: Param | None, t: _Type) -> str:
     name = {int: "an integer", float: "a number", bool: "true or false", str: "a name"}.get(t.base, "a value")
+    positive = t.base is int and p is not None and p.lo == 1 and not p.lo_open
+    if positive:
+        name = "a positive integer"
     if t.size is not None:
         name = f"{t.size if t.size > 0 else 'a list of'} {name.split(' ', 1)[1]}s"
     if p is not None:
         if p.choices:
             name = f"one of {', '.join(p.choices)}"
-        rng = _range_text(p)
+        rng = _range_text(p, skip_lo=positive)
         if rng:
             name += f" {rng}"
         if p.units:
@@ -439,6 +446,8 @@ def add_arguments(
         kw["type"] = {int: int, float: float, str: str}[t.base]
         if t.size is not None:
             kw["nargs"] = "+" if t.size < 0 else t.size
+            if t.size < 0:  # a list: --video a.avi b.avi or --video a.avi --video b.avi
+                kw["action"] = "extend"
             if p is not None and p.metavar:
                 kw["metavar"] = p.metavar
         if p is not None and p.choices:
@@ -478,7 +487,11 @@ def from_options(cls: type, values: Mapping[str, Any], base: Any = None, where: 
         flag = str(key).replace("_", "-")
         if flag not in opts:
             raise ConfigError(f"{where}{key}: unknown option")
-        by_path[opts[flag].path] = tuple(value) if isinstance(value, list) else value
+        if isinstance(value, list):
+            value = tuple(value)
+        elif opts[flag].type.size == -1 and isinstance(value, (str, int, float)) and not isinstance(value, bool):
+            value = (value,)  # one item of a list option, as a manifest may write it
+        by_path[opts[flag].path] = value
     if base is None:
         top = {path[0]: v for path, v in by_path.items() if len(path) == 1}
         missing = [f.name for f in dataclasses.fields(cls) if _default(f) is MISSING and f.name not in top]

@@ -576,8 +576,8 @@ def evaluate(
     """Score tracks against ground truth on the ground plane (definitions in the module docstring).
 
     Args:
-        groundtruth: Ground truth: a dict of columns as returned by :func:`wptrack.io.tables.read_tracks`, or the path of
-            a CSV file. Columns ``frame,id,x,y,z`` required; ``class`` optional; other columns ignored.
+        groundtruth: Ground truth: a dict of columns as returned by :func:`wptrack.io.tables.read_tracks`, or the
+            path of a CSV file. Columns ``frame,id,x,y,z`` required; ``class`` optional; other columns ignored.
         tracks: Tracker output (e.g. a run's ``tracks.csv``), same forms and columns. Rows with a non-finite
             ``x`` or ``y`` are dropped.
         threshold: Largest ground-plane distance (metres) at which an object and a hypothesis may be matched.

@@ -81,6 +81,39 @@ def _read_image(path: str) -> np.ndarray | None:
     return _to_bgr(image)
 
 
+def camera_frame(image: np.ndarray, camera: Any, what: str = "frame", where: str = "") -> np.ndarray:
+    """One image checked against a camera's calibrated size, as the trackers take it (every tracker's ``upload``).
+
+    Args:
+        image: ``what`` ``frame``: an (H, W, 3) uint8 BGR image; ``mask``: an (H, W) motion mask, or (H, W, 1|3)
+            reduced by the maximum over its channels (nonzero = foreground).
+        camera: The :class:`wptrack.cameras.camera.Camera` the image is from.
+        what: ``frame`` or ``mask``.
+        where: Appended to the message (e.g. `` in rig.yaml``).
+
+    Returns:
+        The image: the frame as it is; the mask as (H, W).
+
+    Raises:
+        FrameError: the wrong type or shape, or a size other than the camera's (``mask size 320x240 differs from
+            camera 'cam0' calibration 640x480``).
+    """
+    img = np.asarray(image)
+    if what == "mask":
+        if img.ndim == 3 and img.shape[2] in (1, 3):
+            img = img.max(axis=2)
+        if img.ndim != 2:
+            raise FrameError(f"camera '{camera.name}': expected a 2D (H, W) motion mask, got shape {img.shape}")
+    elif img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 3:
+        raise FrameError(f"camera '{camera.name}': expected an (H, W, 3) uint8 BGR image, got {img.dtype} {img.shape}")
+    if img.shape[:2] != (camera.height, camera.width):
+        raise FrameError(
+            f"{what} size {img.shape[1]}x{img.shape[0]} differs from camera '{camera.name}' calibration "
+            f"{camera.width}x{camera.height}{where}"
+        )
+    return img
+
+
 class FrameSource:
     """One camera's frames.
 

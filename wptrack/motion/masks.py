@@ -27,7 +27,6 @@ processed.
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -36,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from wptrack.cameras.rig import Camera
+from wptrack.core.config import check, param
 from wptrack.core.errors import ConfigError, FrameError
 from wptrack.io.frames import FrameSource, open_source, prefetch
 
@@ -70,139 +70,95 @@ def _is_real(value: Any) -> bool:
 
 @dataclass(frozen=True)
 class MaskConfig:
-    """How motion masks are made.
-
-    Attributes:
-        method: ``"offline"`` (windowed temporal-median background of the whole recording, see
-            :mod:`wptrack.motion.background`), ``"mog2"`` (online Gaussian-mixture background model), ``"knn"`` (online
-            K-nearest-neighbour background model) or ``"given"`` (the source already holds masks; see ``threshold``).
-        history: Frames of history the background model is learnt over (>= 1).
-        var_threshold: MOG2 only: squared Mahalanobis distance above which a pixel is foreground (> 0).
-        dist2_threshold: KNN only: squared distance (in 8-bit intensity units squared) to the nearest samples
-            above which a pixel is foreground (> 0).
-        detect_shadows: Mark shadows (darker pixels of the same colour), which then count as background; ``False``
-            makes shadows foreground. Offline: the test of ``shadow_lo``, ``shadow_hi`` and ``shadow_chroma``.
-        learning_rate: Background-model learning rate in ``[0, 1]`` per frame, or ``-1`` for OpenCV's automatic
-            rate (about ``1 / min(frames seen, history)``).
-        open_px: Diameter in pixels of the elliptical kernel of the morphological opening (>= 0; 0 or 1 disables).
-        close_px: Diameter in pixels of the elliptical kernel of the morphological closing (>= 0; 0 or 1 disables).
-        min_area: Connected components (8-connected) with fewer pixels than this are removed (>= 0; 0 disables).
-        threshold: Given masks only: a pixel is foreground when any channel is ``> threshold`` (0 to 254).
-        window: Offline only: background window length in frames (>= 1); windows overlap by half, each frame
-            uses the two nearest windows' backgrounds interpolated. A shorter recording uses one window.
-        samples: Offline only: frames sampled per window for its temporal median (1 to 64).
-        fg_threshold: Offline only: foreground when the RMS colour distance to the background exceeds this many
-            robust standard deviations (> 0).
-        fg_low: Offline only: hysteresis low threshold, robust standard deviations: a pixel with
-            ``fg_low < z <= fg_threshold`` (not a shadow) is foreground when 8-connected to one above ``fg_threshold``
-            (0 disables; else in ``(0, fg_threshold]``).
-        neighbourhood: Offline only: radius in pixels of the neighbourhood whose mean difference to the background
-            also marks weak foreground (:func:`wptrack.kernels.core.background.neighbourhood_kernel`: a faint but
-            coherent change, as a dark car's roof on the road; 0 disables; 0 to 3). Needs ``fg_low``.
-        spread_cap: Offline only: the per-pixel noise scale is capped at this many times the image-wide median
-            scale of the window (0 disables; else >= 1), so an object standing still in many of a window's samples
-            does not inflate its own pixels' noise scale and vanish.
-        noise_floor: Offline only: lower bound of the per-pixel noise standard deviation, 8-bit units (> 0).
-        shadow_lo: Offline only: smallest brightness ratio (pixel / background along the background colour) of a
-            cast shadow, in ``(0, shadow_hi)``.
-        shadow_hi: Offline only: largest brightness ratio of a cast shadow, in ``(shadow_lo, 1]``.
-        shadow_band: Offline only: learn the shadows' brightness ratio ``r`` from the recording (the peak of the
-            ratios of candidate shadow pixels of each window's samples, see
-            :func:`wptrack.motion.background.shadow_ratio`) and take ``r - shadow_band <= a <= r + shadow_band`` as cast
-            shadow (``shadow_lo`` then no longer applies: nothing darker than the scene's own shadows is a shadow), and
-            ``r + shadow_band < a <= shadow_hi`` as shadow only within 3 px of it (the penumbra); 0 disables (then, and
-            where nothing is learnt: ``shadow_lo <= a <= shadow_hi``); else in ``(0, 0.5]``.
-        shadow_chroma: Offline only: largest chromaticity distortion ``|I - a B| / |B|`` of a cast shadow (>= 0).
-        soft_scale: Offline only: scale ``k`` of the foreground probability ``1 / (1 + exp(-(z - T) / k))``, robust
-            standard deviations (> 0).
-        device: Offline only: Warp device, ``"auto"``, ``"cpu"``, ``"cuda"`` or ``"cuda:N"``.
+    """How motion masks are made: the background model (``offline``: windowed temporal median of the whole recording,
+    :mod:`wptrack.motion.background`; ``mog2``/``knn``: OpenCV's online models; ``given``: the source already holds
+    masks), the shadow test and the clean-up.
 
     Raises:
-        ConfigError: A field is out of range; the message names the field and the expected range.
+        ConfigError: A field is out of range; the message names the field, the expected range and the value.
     """
 
-    method: str = DEFAULT_METHOD
-    history: int = 200
-    var_threshold: float = 16.0
-    dist2_threshold: float = 400.0
-    detect_shadows: bool = True
-    learning_rate: float = -1.0
-    open_px: int = 3
-    close_px: int = 5
-    min_area: int = 0
-    threshold: int = 127
-    window: int = 300
-    samples: int = 25
-    fg_threshold: float = 4.0
-    fg_low: float = 3.0
-    spread_cap: float = 1.5
-    neighbourhood: int = 1
-    noise_floor: float = 3.0
-    shadow_lo: float = 0.4
-    shadow_hi: float = 0.95
-    shadow_chroma: float = 0.1
-    shadow_band: float = 0.08
-    soft_scale: float = 1.0
-    device: str = "auto"
+    method: str = param(
+        DEFAULT_METHOD,
+        help="background model: offline (whole-recording median), mog2 or knn (online), given (the source holds masks)",
+        choices=METHODS,
+    )
+    history: int = param(200, help="mog2/knn: frames of history the model is learnt over", units="frames", lo=1)
+    var_threshold: float = param(
+        16.0, help="mog2: squared Mahalanobis distance above which a pixel is foreground", lo=0.0, lo_open=True
+    )
+    dist2_threshold: float = param(
+        400.0, help="knn: squared distance to the nearest samples above which a pixel is foreground",
+        units="8-bit levels^2", lo=0.0, lo_open=True,
+    )  # fmt: skip
+    detect_shadows: bool = param(
+        True, help="cast shadows count as background (off: shadows are foreground)", negative="keep-shadows"
+    )
+    learning_rate: float = param(
+        -1.0, help="mog2/knn: learning rate per frame in [0, 1], or -1 for OpenCV's automatic rate", lo=-1.0, hi=1.0
+    )
+    open_px: int = param(3, help="diameter of the morphological opening (0 or 1: off)", units="px", lo=0)
+    close_px: int = param(5, help="diameter of the morphological closing (0 or 1: off)", units="px", lo=0)
+    min_area: int = param(0, help="drop 8-connected foreground blobs smaller than this (0: off)", units="px", lo=0)
+    threshold: int = param(
+        127, help="given masks: a pixel is foreground when any channel is above this", units="8-bit levels", lo=0,
+        hi=254, flag="given-threshold",
+    )  # fmt: skip
+    window: int = param(
+        300, help="offline: background window; windows overlap by half, each frame interpolates the two nearest",
+        units="frames", lo=1,
+    )  # fmt: skip
+    samples: int = param(25, help="offline: frames sampled per window for its temporal median", lo=1, hi=64)
+    fg_threshold: float = param(
+        4.0, help="offline: foreground when the RMS colour distance to the background exceeds this",
+        units="robust sigmas", lo=0.0, lo_open=True, flag="fg-threshold",
+    )  # fmt: skip
+    fg_low: float = param(
+        3.0, help="offline: hysteresis low threshold: weaker pixels 8-connected to strong ones are foreground (0: off)",
+        units="robust sigmas", lo=0.0,
+    )  # fmt: skip
+    spread_cap: float = param(
+        1.5, help="offline: cap of the per-pixel noise scale, times the image-wide median (0: off; else >= 1)", lo=0.0
+    )
+    neighbourhood: int = param(
+        1, help="offline: radius of the neighbourhood whose mean difference also marks weak foreground (0: off)",
+        units="px", lo=0, hi=3,
+    )  # fmt: skip
+    noise_floor: float = param(
+        3.0, help="offline: lower bound of the per-pixel noise deviation", units="8-bit levels", lo=0.0, lo_open=True
+    )
+    shadow_lo: float = param(
+        0.4, help="offline: smallest brightness ratio of a cast shadow", lo=0.0, hi=1.0, lo_open=True, hi_open=True
+    )
+    shadow_hi: float = param(0.95, help="offline: largest brightness ratio of a cast shadow", lo=0.0, hi=1.0)
+    shadow_chroma: float = param(0.1, help="offline: largest chromaticity distortion of a cast shadow", lo=0.0)
+    shadow_band: float = param(
+        0.08, help="offline: learn the recording's shadow brightness ratio r and take r +- this as shadow (0: the "
+        "fixed bounds)", lo=0.0, hi=0.5,
+    )  # fmt: skip
+    soft_scale: float = param(
+        1.0, help="offline: scale of the foreground probability 1 / (1 + exp(-(z - T) / k))", units="robust sigmas",
+        symbol="k", lo=0.0, lo_open=True,
+    )  # fmt: skip
+    device: str = param("auto", help="offline: Warp device (auto, cpu, cuda or cuda:N)", flag="")
 
     def __post_init__(self) -> None:
-        def fail(field: str, expected: str) -> None:
-            raise ConfigError(f"MaskConfig.{field}: must be {expected}, got {getattr(self, field)!r}")
+        check(self, "MaskConfig.")
 
-        if not isinstance(self.method, str) or self.method not in METHODS:
-            fail("method", "one of " + ", ".join(repr(m) for m in METHODS))
-        if not _is_int(self.history) or self.history < 1:
-            fail("history", "an integer >= 1 (frames)")
-        for field in ("var_threshold", "dist2_threshold"):
-            value = getattr(self, field)
-            if not _is_real(value) or not math.isfinite(value) or value <= 0:
-                fail(field, "a finite number > 0")
-        if not isinstance(self.detect_shadows, (bool, np.bool_)):
-            fail("detect_shadows", "True or False")
-        lr = self.learning_rate
-        if not _is_real(lr) or not (lr == -1 or 0 <= lr <= 1):
-            fail("learning_rate", "in [0, 1] (per frame) or -1 (automatic)")
-        for field in ("open_px", "close_px"):
-            if not _is_int(getattr(self, field)) or getattr(self, field) < 0:
-                fail(field, "an integer >= 0 (kernel diameter in pixels; 0 disables)")
-        if not _is_int(self.min_area) or self.min_area < 0:
-            fail("min_area", "an integer >= 0 (pixels; 0 disables)")
-        if not _is_int(self.threshold) or not 0 <= self.threshold <= 254:
-            fail("threshold", "an integer in [0, 254] (foreground: pixel > threshold)")
-        if not _is_int(self.window) or self.window < 1:
-            fail("window", "an integer >= 1 (frames)")
-        if not _is_int(self.samples) or not 1 <= self.samples <= 64:
-            fail("samples", "an integer in [1, 64] (frames per window)")
-        for field, expected in (
-            ("fg_threshold", "a finite number > 0 (robust standard deviations)"),
-            ("noise_floor", "a finite number > 0 (8-bit units)"),
-            ("soft_scale", "a finite number > 0 (robust standard deviations)"),
-        ):
-            value = getattr(self, field)
-            if not _is_real(value) or not math.isfinite(value) or value <= 0:
-                fail(field, expected)
-        if not _is_real(self.fg_low) or not (self.fg_low == 0 or 0 < self.fg_low <= self.fg_threshold):
-            fail("fg_low", f"0 (off) or in (0, fg_threshold={self.fg_threshold}] (robust standard deviations)")
-        if not _is_int(self.neighbourhood) or not 0 <= self.neighbourhood <= 3:
-            fail("neighbourhood", "an integer in [0, 3] (pixels; 0 disables)")
+        def fail(field: str, expected: str) -> None:
+            raise ConfigError(f"MaskConfig.{field}: expected {expected}, got {getattr(self, field)!r}")
+
+        if self.learning_rate < 0 and self.learning_rate != -1:
+            fail("learning_rate", "a rate in [0, 1] per frame or -1 (automatic)")
+        if not (self.fg_low == 0 or self.fg_low <= self.fg_threshold):
+            fail("fg_low", f"0 (off) or a value in (0, fg_threshold={self.fg_threshold}] (robust sigmas)")
         if self.neighbourhood and not self.fg_low:
             fail("neighbourhood", "0 unless fg_low is set (it adds weak foreground, kept by the hysteresis)")
-        if not _is_real(self.spread_cap) or not (self.spread_cap == 0 or 1 <= self.spread_cap < math.inf):
-            fail("spread_cap", "0 (off) or a finite number >= 1 (times the image-wide median noise scale)")
-        for field in ("shadow_lo", "shadow_hi", "shadow_chroma"):
-            if not _is_real(getattr(self, field)) or not math.isfinite(getattr(self, field)):
-                fail(field, "a finite number")
-        if not 0 < self.shadow_lo < 1:
-            fail("shadow_lo", "in (0, 1) (brightness ratio)")
-        if not self.shadow_lo < self.shadow_hi <= 1:
-            fail("shadow_hi", f"in (shadow_lo={self.shadow_lo}, 1] (brightness ratio)")
-        if not _is_real(self.shadow_band) or not 0 <= self.shadow_band <= 0.5:
-            fail("shadow_band", "in [0, 0.5] (brightness ratio; 0: fixed bounds)")
-        if self.shadow_chroma < 0:
-            fail("shadow_chroma", ">= 0 (chromaticity distortion)")
-        if not isinstance(self.device, str) or not (
-            self.device in ("auto", "cpu", "cuda") or self.device.startswith("cuda:")
-        ):
+        if not (self.spread_cap == 0 or self.spread_cap >= 1):
+            fail("spread_cap", "0 (off) or a number >= 1 (times the image-wide median noise scale)")
+        if not self.shadow_lo < self.shadow_hi:
+            fail("shadow_hi", f"a ratio in (shadow_lo={self.shadow_lo}, 1]")
+        if not (self.device in ("auto", "cpu", "cuda") or self.device.startswith("cuda:")):
             fail("device", "'auto', 'cpu', 'cuda' or 'cuda:N'")
 
 

@@ -304,7 +304,7 @@ def load_sweep(path: str | Path) -> dict[str, Any]:
     Raises:
         ConfigError: No errors.csv there, or it cannot be parsed.
     """
-    from wptrack.trackers.colour.experiments import read_sweep
+    from wptrack.trackers.colour.sweep import read_sweep
 
     csv_path = find_sweep(path)
     if csv_path is None:

@@ -165,21 +165,6 @@ def _progress(total: int | None, enabled: bool) -> Any:
     return tqdm(total=total, desc="tracking", unit="frame", disable=not enabled, leave=False, dynamic_ncols=True)
 
 
-_OPTION_OF = {
-    "videos": "--video",
-    "init_box": "--volume",
-    "partition": "--joint",
-    "detect_shadows": "--keep-shadows",
-    "method": "--mask-method",
-    "history": "--mask-history",
-    "var_threshold": "--mask-threshold",
-    "dist2_threshold": "--mask-threshold",
-    "n_bins": "--bins",
-    "score_mode_resolved": "--score-mode",
-}
-"""Run-config leaf names whose command-line option is not ``--`` + the name with dashes."""
-
-
 def _flat(d: Any, prefix: str = "") -> dict[str, Any]:
     if not isinstance(d, dict):
         return {prefix.rstrip("."): d}
@@ -189,40 +174,26 @@ def _flat(d: Any, prefix: str = "") -> dict[str, Any]:
     return out
 
 
-def _track_options(tracker: str) -> set[str]:
-    """The option strings of ``wptrack track TRACKER`` (empty for a job that is no CLI tracker)."""
-    import argparse
-
-    from wptrack.cli import build_parser
-
-    def sub(p: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser | None:
-        for a in p._actions:
-            if isinstance(a, argparse._SubParsersAction):
-                return a.choices.get(name)
-        return None
-
-    track = sub(build_parser(), "track")
-    parser = sub(track, tracker) if track is not None else None
-    return {o for a in parser._actions for o in a.option_strings} if parser is not None else set()
-
-
 def describe_changes(tracker: str, before: dict[str, Any], now: dict[str, Any]) -> list[str]:
     """What differs between two run configurations, by command-line option where there is one:
     ``["--particles was 400, now 300", ...]`` (config paths such as ``tracker.occupancy.p_h`` otherwise)."""
+    from wptrack.core.errors import ConfigError
+    from wptrack.runs.spec import command, option_names
 
     def show(v: Any) -> str:
         text = "unset" if v is None else str(v)
         return text if len(text) <= 80 else text[:77] + "..."
 
-    options = _track_options(tracker)
+    try:
+        options = option_names(command(tracker))
+    except ConfigError:  # a job that is no track command
+        options = {}
     a, b = _flat(before), _flat(now)
     out: dict[str, str] = {}
     for key in sorted(set(a) | set(b)):
         if a.get(key) == b.get(key):
             continue
-        leaf = key.rsplit(".", 1)[-1]
-        option = _OPTION_OF.get(leaf, "--" + leaf.replace("_", "-"))
-        name = option if option in options else key
+        name = options.get(key, key)
         out.setdefault(name, f"{name} was {show(a.get(key))}, now {show(b.get(key))}")
     return list(out.values())
 

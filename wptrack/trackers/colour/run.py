@@ -10,12 +10,13 @@ Outputs::
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from dataclasses import asdict
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from wptrack.core.config import REQUIRED, check, param
 from wptrack.core.errors import ConfigError
 from wptrack.runs.loop import TrackerRun, run_tracker
 
@@ -67,8 +68,7 @@ class ColourRun(TrackerRun):
                 f"{len(videos)} video(s) given for a rig of {len(rig)} camera(s) in {rig_path} ({', '.join(rig.names)})"
             )
         self._frames = open_frames(list(videos), stop_at_shortest=stop_at_shortest, max_frames=max_frames)
-        for i, (w, h) in enumerate(self._frames.sizes):
-            rig.check_frame_size(i, w, h, str(self._frames.names[i]))
+        rig = rig.at_sizes(self._frames.sizes, [str(n) for n in self._frames.names])  # a resized copy: K scaled
         device = resolve_device(device)
         self._truth = None
         if groundtruth is not None and Path(groundtruth).exists():
@@ -151,4 +151,54 @@ def run_color_tracking(
     job = ColourRun(rig_path, videos, target, config, device, stop_at_shortest, max_frames, groundtruth)
     return run_tracker(
         job, out_dir, progress=progress, resume=resume, checkpoint_seconds=checkpoint_seconds, overwrite=overwrite
+    )
+
+
+@dataclass(frozen=True)
+class ColourInputs:
+    """The inputs of a colour run (``wptrack track color``)."""
+
+    rig: str = param(REQUIRED, help="rig file (YAML/JSON)")
+    video: tuple[str, ...] = param(
+        REQUIRED, help="video file, image folder or glob, one per camera in rig order (repeat --video)"
+    )
+    init_random: bool = param(False, help="start the particles uniformly in --volume or the rig's working volume")
+    stop_at_shortest: bool = param(False, help="track the common part of videos of unequal lengths")
+
+    def __post_init__(self) -> None:
+        check(self)
+
+
+def run_colour_job(
+    inputs: ColourInputs, target: Any, config: Any, control: Any, progress: bool = False
+) -> dict[str, Any]:
+    """``wptrack track color``: the run of :func:`run_color_tracking` from its declared parts (inputs, the target
+    colour, the tracker's config, the run control); the CLI and ``wptrack batch`` call this.
+
+    Raises:
+        ConfigError: neither or both of ``init`` and ``init_random``.
+    """
+    if inputs.init_random and config.init is not None:
+        raise ConfigError("give --init X Y Z or --init-random, not both")
+    if not inputs.init_random:
+        if config.init is None:
+            raise ConfigError("give --init X Y Z or --init-random")
+        if config.init_box is not None:
+            raise ConfigError("--volume: only with --init-random (the box the particles start in)")
+    elif config.init_box is None:
+        config = replace(config, init=None)  # the tracker uses the rig's working volume
+    return run_color_tracking(
+        inputs.rig,
+        list(inputs.video),
+        target,
+        control.out,
+        config,
+        device=control.device,
+        stop_at_shortest=inputs.stop_at_shortest,
+        max_frames=control.max_frames,
+        groundtruth=control.groundtruth,
+        progress=progress,
+        resume=control.resume,
+        checkpoint_seconds=control.checkpoint_every,
+        overwrite=control.overwrite,
     )

@@ -28,10 +28,12 @@ import warp as wp
 
 from wptrack.cameras.rig import Rig
 from wptrack.cameras.structs import ColourMaps, DeviceRig
+from wptrack.core.config import check, param
 from wptrack.core.device import resolve_device
 from wptrack.core.errors import ConfigError, FrameError
-from wptrack.core.filter import Estimate, ParticleFilter, check_particles
+from wptrack.core.filter import Estimate, ParticleFilter
 from wptrack.core.resampling import SCHEMES
+from wptrack.io.frames import camera_frame
 from wptrack.kernels.colour import hsi as kcolour
 from wptrack.kernels.colour import proposal as kproposal
 from wptrack.kernels.colour import scoring as kscoring
@@ -46,34 +48,25 @@ mixture proposal of ``wptrack.kernels.colour.proposal`` (converges from anywhere
 
 @dataclass(frozen=True)
 class HSITarget:
-    """Target colour in HSI (paper, section II.B).
+    """Target colour in HSI (paper, section II.B): a pixel is the target's when its hue, saturation and intensity all
+    lie in these ranges."""
 
-    Attributes:
-        hue: (H_min, H_max) degrees in [0, 360]; H_min > H_max wraps through 0 (e.g. (330, 20) for pink-red).
-        sat: (S_min, S_max) saturation in [0, 1].
-        intensity: (I_min, I_max) in [0, 255]; darker or brighter pixels never match.
-    """
-
-    hue: tuple[float, float]
-    sat: tuple[float, float] = (0.0, 1.0)
-    intensity: tuple[float, float] = (20.0, 240.0)
+    hue: tuple[float, float] = param(
+        help="hue range (HMIN > HMAX wraps through 0, e.g. 330 20 for pink-red)", units="degrees", lo=0.0, hi=360.0,
+        metavar=("HMIN", "HMAX"),
+    )  # fmt: skip
+    sat: tuple[float, float] = param((0.0, 1.0), help="saturation range", lo=0.0, hi=1.0, metavar=("SMIN", "SMAX"))
+    intensity: tuple[float, float] = param(
+        (20.0, 240.0), help="intensity range: darker or brighter pixels never match", units="8-bit levels", lo=0.0,
+        hi=255.0, metavar=("IMIN", "IMAX"),
+    )  # fmt: skip
 
     def __post_init__(self) -> None:
-        for name, (lo_ok, hi_ok), ordered in (
-            ("hue", (0.0, 360.0), False),
-            ("sat", (0.0, 1.0), True),
-            ("intensity", (0.0, 255.0), True),
-        ):
-            value = getattr(self, name)
-            try:
-                lo, hi = (float(v) for v in value)
-            except (TypeError, ValueError):
-                raise ConfigError(f"{name}: expected two numbers (min max), got {value!r}") from None
-            if not (math.isfinite(lo) and math.isfinite(hi) and lo_ok <= lo <= hi_ok and lo_ok <= hi <= hi_ok):
-                raise ConfigError(f"{name}: values must lie in [{lo_ok:g}, {hi_ok:g}], got {lo:g} {hi:g}")
-            if ordered and lo > hi:
+        check(self)
+        for name in ("sat", "intensity"):
+            lo, hi = getattr(self, name)
+            if lo > hi:
                 raise ConfigError(f"{name}: min {lo:g} must not exceed max {hi:g}")
-            object.__setattr__(self, name, (lo, hi))
 
     def hue_intervals(self) -> tuple[list[tuple[float, float]], list[tuple[float, float]]]:
         """The hue range as intervals of cos(hue) on the two halves of the hue circle: B <= G (hue = acos c,
@@ -112,81 +105,80 @@ class HSITarget:
 
 @dataclass(frozen=True)
 class ColorConfig:
-    """Parameters of the S1 colour particle filter (paper symbols in brackets).
+    """Parameters of the S1 colour particle filter (Barrera et al.; the paper's symbols in the help)."""
 
-    Attributes:
-        particles: number of particles [N].
-        sigma: deviation of the gaussian walk per axis [sigma_m], metres (eqs. 1-3).
-        init: initial point (x, y, z) in metres: all particles start there and the first prediction spreads
-            them (the paper's initialisation). ``None`` together with ``init_box`` = uniform in a box.
-        init_box: ((xmin, ymin, zmin), (xmax, ymax, zmax)) metres for uniform initialisation.
-        resampling: scheme name: systematic, stratified, multinomial or residual.
-        ess_threshold: resample when ESS <= threshold * N; 1.0 resamples every frame (CONDENSATION).
-        score_mode: ``direct`` (25 reads of the frame per camera), ``integral`` (integral image of the
-            colour mask, 4 reads), ``map`` (a per-pixel window-count map made from the mask once per frame, 1 read) or
-            ``auto``: map when 25 N > total pixels (the paper's crossover), else direct. All give identical
-            results.
-        seed: seed of the counter-based random streams (same seed + device -> identical output).
-        keep_particles: particles per frame copied back for reports (0 = none).
-        proposal: ``prior`` (the paper's filter, bit-identical to earlier versions) or ``mixture``: draw each
-            particle from (1 - mixture) x motion prior + mixture x detection proposal, importance-weighted
-            (``wptrack.kernels.colour.proposal``).
-        mixture: fraction eps of particles drawn from the detection proposal, in [0, 1) (mixture only).
-        reset_rate: probability alpha per frame that the object jumps uniformly into the working volume (the
-            motion model's kidnap term, which makes re-acquisition possible), in [0, 1) (mixture only).
-        detection_sigma: deviation sigma_d of each detection component, metres (mixture only).
-        detection_components: number K of gaussian components of the detection proposal (mixture only).
-        detection_tries: rejection-sampling draws per component and camera to find a target pixel (mixture only).
-        max_gap: largest distance between two back-projected rays accepted as a triangulation, metres.
-    """
-
-    particles: int = 200
-    sigma: float = 0.03
-    init: tuple[float, float, float] | None = None
-    init_box: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
-    resampling: str = "systematic"
-    ess_threshold: float = 1.0
-    score_mode: str = "auto"
-    seed: int = 0
-    keep_particles: int = 0
-    proposal: str = "prior"
-    mixture: float = 0.25
-    reset_rate: float = 0.05
-    detection_sigma: float = 0.04
-    detection_components: int = 32
-    detection_tries: int = 1024
-    max_gap: float = 0.1
+    particles: int = param(200, help="number of particles", symbol="N", lo=1, hi=2**31 - 2)
+    sigma: float = param(
+        0.03, help="deviation of the gaussian walk per axis", units="m", symbol="sigma_m, eqs. 1-3", lo=0.0,
+        lo_open=True,
+    )  # fmt: skip
+    init: tuple[float, float, float] | None = param(
+        None, help="initial point: all particles start there and the first prediction spreads them (the paper's "
+        "initialisation); none: uniform in init_box or the rig's working volume", units="m", metavar=("X", "Y", "Z"),
+    )  # fmt: skip
+    init_box: tuple[float, float, float, float, float, float] | None = param(
+        None, help="box for the uniform initialisation (xmin ymin zmin xmax ymax zmax); default: the rig's working "
+        "volume", units="m", flag="volume", metavar=("XMIN", "YMIN", "ZMIN", "XMAX", "YMAX", "ZMAX"),
+    )  # fmt: skip
+    resampling: str = param("systematic", help="resampling scheme", choices=SCHEMES)
+    ess_threshold: float = param(
+        1.0, help="resample when ESS <= this fraction of N (1: every frame, as in the paper)", lo=0.0, hi=1.0,
+        lo_open=True,
+    )  # fmt: skip
+    score_mode: str = param(
+        "auto", help="window counts: direct (25 reads per camera), integral (integral image, 4 reads), map (a "
+        "per-pixel window map, 1 read) or auto (map when 25 N > the pixels, the paper's crossover); all identical",
+        choices=SCORE_MODES,
+    )  # fmt: skip
+    seed: int = param(0, help="seed of the counter-based random streams (same seed and device: identical output)",
+                      lo=0, hi=2**64 - 1)  # fmt: skip
+    keep_particles: int = param(1000, help="particles per frame copied back for reports (0: none)", lo=0)
+    proposal: str = param(
+        "mixture", help="prior: the paper's filter (the gaussian walk only); mixture: (1 - mixture) x the motion prior "
+        "+ mixture x a detection proposal from the colour masks, importance-weighted (converges from anywhere, "
+        "re-acquires a lost object)", choices=PROPOSALS,
+    )  # fmt: skip
+    mixture: float = param(
+        0.25, help="fraction of particles drawn from the detection proposal (mixture only)", symbol="eps", lo=0.0,
+        hi=1.0, hi_open=True,
+    )  # fmt: skip
+    reset_rate: float = param(
+        0.05, help="probability per frame that the object jumps uniformly into the working volume: the motion model's "
+        "kidnap term, which makes re-acquisition possible (mixture only)", symbol="alpha", lo=0.0, hi=1.0,
+        hi_open=True,
+    )  # fmt: skip
+    detection_sigma: float = param(
+        0.04, help="deviation of each detection component (mixture only)", units="m", symbol="sigma_d", lo=0.0,
+        lo_open=True,
+    )  # fmt: skip
+    detection_components: int = param(
+        32, help="gaussian components of the detection proposal (mixture only)", symbol="K", lo=1, hi=4096
+    )
+    detection_tries: int = param(
+        1024, help="rejection-sampling draws per component and camera to find a target pixel (mixture only)", lo=1,
+        hi=1 << 20,
+    )  # fmt: skip
+    max_gap: float = param(
+        0.1, help="largest distance between two back-projected rays accepted as a triangulation", units="m", lo=0.0,
+        lo_open=True,
+    )  # fmt: skip
 
     def __post_init__(self) -> None:
-        check_particles(self.particles)
-        if self.proposal not in PROPOSALS:
-            raise ConfigError(f"proposal: expected one of {', '.join(PROPOSALS)}, got {self.proposal!r}")
-        for name, lo, hi in (("mixture", 0.0, 1.0), ("reset_rate", 0.0, 1.0)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo <= v < hi):
-                raise ConfigError(f"{name}: expected a fraction in [{lo:g}, {hi:g}), got {v!r}")
-        for name in ("detection_sigma", "max_gap"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
-                raise ConfigError(f"{name}: expected a positive length in metres, got {v!r}")
-        for name, hi in (("detection_components", 4096), ("detection_tries", 1 << 20)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not (1 <= v <= hi):
-                raise ConfigError(f"{name}: expected an integer in [1, {hi}], got {v!r}")
-        if (
-            isinstance(self.sigma, bool)
-            or not isinstance(self.sigma, (int, float))
-            or not (math.isfinite(self.sigma) and self.sigma > 0)
-        ):
-            raise ConfigError(f"sigma: expected a motion deviation > 0 metres, got {self.sigma!r}")
-        if self.score_mode not in SCORE_MODES:
-            raise ConfigError(f"score_mode: expected one of {', '.join(SCORE_MODES)}, got {self.score_mode!r}")
-        if self.resampling not in SCHEMES:
-            raise ConfigError(f"resampling: unknown scheme {self.resampling!r}; expected one of {', '.join(SCHEMES)}")
-        if not (0.0 < self.ess_threshold <= 1.0):
-            raise ConfigError(f"ess_threshold: expected a fraction in (0, 1], got {self.ess_threshold!r}")
-        if self.keep_particles < 0:
-            raise ConfigError(f"keep_particles: expected >= 0, got {self.keep_particles}")
+        box = self.init_box
+        if box is not None and len(box) == 2 and all(np.ndim(c) == 1 and len(c) == 3 for c in box):
+            object.__setattr__(self, "init_box", tuple(box[0]) + tuple(box[1]))  # ((min), (max)) corners
+        check(self)
+        if self.init_box is not None:
+            lo, hi = self.init_box[:3], self.init_box[3:]
+            if any(a > b for a, b in zip(lo, hi, strict=True)):
+                raise ConfigError(f"init_box: min {list(lo)} must not exceed max {list(hi)}")
+
+    @property
+    def box(self) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None:
+        """``init_box`` as ``(min, max)`` corners, or None (``init_box`` also accepts the corners when built)."""
+        if self.init_box is None:
+            return None
+        return tuple(self.init_box[:3]), tuple(self.init_box[3:])  # type: ignore[return-value]
 
 
 class ColorTracker(ParticleFilter):
@@ -223,7 +215,7 @@ class ColorTracker(ParticleFilter):
             if init != "random":
                 raise ConfigError(f"init: expected (x, y, z) metres or 'random', got {init!r}")
             box = overrides.pop("init_box", config.init_box) or tuple(tuple(v) for v in rig.bounds())
-            overrides["init_box"] = tuple(tuple(float(c) for c in v) for v in box)
+            overrides["init_box"] = box
             init = None
         elif init is not None:
             init = tuple(float(v) for v in init)
@@ -272,7 +264,7 @@ class ColorTracker(ParticleFilter):
         if config.init is None and config.init_box is None:
             config = replace(config, init_box=tuple(tuple(float(c) for c in v) for v in rig.bounds()))
             self.config = config
-        self.volume = tuple(tuple(float(c) for c in v) for v in (config.init_box or rig.bounds()))
+        self.volume = config.box or tuple(tuple(float(c) for c in v) for v in rig.bounds())
         k = config.detection_components
         self.det_centres = wp.zeros(k, dtype=wp.vec3, device=d)
         self.det_valid = wp.zeros(k, dtype=wp.int32, device=d)
@@ -282,7 +274,7 @@ class ColorTracker(ParticleFilter):
         if config.init is not None:
             self.init_point(config.init)
         else:
-            self.init_box(*config.init_box)
+            self.init_box(*config.box)
         log.info(
             "colour tracker: %d particles, %d cameras, %s scoring, device %s",
             config.particles,
@@ -317,16 +309,7 @@ class ColorTracker(ParticleFilter):
             raise FrameError(f"got {len(images)} images for a rig of {len(cams)} cameras")
         offs = self.drig.pixel_offsets
         for c, (img, cam) in enumerate(zip(images, cams, strict=True)):
-            if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 3:
-                raise FrameError(
-                    f"camera '{cam.name}': expected an (H, W, 3) uint8 BGR image, got {img.dtype} {img.shape}"
-                )
-            if img.shape[0] != cam.height or img.shape[1] != cam.width:
-                raise FrameError(
-                    f"camera '{cam.name}': frame size {img.shape[1]}x{img.shape[0]} differs from the "
-                    f"calibration {cam.width}x{cam.height}"
-                )
-            self._staging_np[3 * offs[c] : 3 * offs[c + 1]] = img.reshape(-1)
+            self._staging_np[3 * offs[c] : 3 * offs[c + 1]] = camera_frame(img, cam).reshape(-1)
         wp.copy(self.bgr, self._staging)
 
     def _launch_observation(self) -> None:

@@ -10,8 +10,9 @@ The kernels these parameters feed are in ``kernels/people/filter.py``, ``kernels
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
+from wptrack.core.config import param
 from wptrack.core.errors import ConfigError
 
 OUTSIDE_MODES = ("background", "neutral")
@@ -55,9 +56,30 @@ class DynamicsConfig:
             the paper asks for a value close to zero. Ours: 0.05. Must lie in [0, 1).
     """
 
-    sigma_pos: float = 0.03
-    sigma_vel: float = 0.01
-    alpha: float = 0.05
+    sigma_pos: float = param(
+        0.03,
+        help="deviation of the position noise n_P per axis (eq. 5), per frame",
+        units="m",
+        lo=0.0,
+        lo_open=True,
+        flag="sigma-pos",
+    )
+    sigma_vel: float = param(
+        0.01,
+        help="deviation of the velocity noise n_V per axis (eq. 5), per frame",
+        units="m/frame",
+        lo=0.0,
+        flag="sigma-vel",
+    )
+    alpha: float = param(
+        0.05,
+        help="forgetting factor of the appearance update (eq. 6), close to zero",
+        symbol="alpha",
+        lo=0.0,
+        hi=1.0,
+        hi_open=True,
+        flag="alpha",
+    )
 
     def __post_init__(self) -> None:
         _positive(self.sigma_pos, "dynamics.sigma_pos", "a position noise deviation in metres")
@@ -81,9 +103,26 @@ class MotionConfig:
             the whole person and the centroid is not pushed up to what every camera sees). False: eq. 9 as printed.
     """
 
-    p_b: float = 0.05
-    outside: str = "background"
-    drop_worst: bool = True
+    p_b: float = param(
+        0.05,
+        help="background probability: the likelihood factor of a camera whose mask shows no motion at the projection "
+        "(eq. 10)",
+        symbol="p_B",
+        lo=0.0,
+        hi=0.5,
+        lo_open=True,
+        hi_open=True,
+        flag="p-b",
+    )
+    outside: str = param(
+        "background",
+        help="what a camera that does not see the particle contributes: background (p_B, eq. 10) or neutral (1)",
+        choices=OUTSIDE_MODES,
+    )
+    drop_worst: bool = param(
+        True,
+        help="with three or more cameras, leave out the least supporting camera's factor (off: eq. 9 as printed)",
+    )
 
     def __post_init__(self) -> None:
         v = _number(self.p_b, "motion.p_b")
@@ -115,12 +154,33 @@ class DescriptorConfig:
             cost). Ours: 2.
     """
 
-    r_n: float = 0.10
-    n_bins: int = 8
-    r_min: float = 1.0
-    r_max: float = 12.0
-    sigma_p: float = 0.2
-    step: int = 2
+    r_n: float = param(
+        0.1,
+        help="radius of the spherical neighbourhood N_P (eq. 19)",
+        units="m",
+        symbol="r_N",
+        lo=0.0,
+        lo_open=True,
+        flag="r-n",
+    )
+    n_bins: int = param(
+        8,
+        help="bins of each of the H, S and V histograms (eq. 20)",
+        symbol="N_b",
+        lo=2,
+        hi=16,
+        flag="bins",
+    )
+    r_min: float = param(1.0, help="smallest projected disc radius", units="px", lo=0.0, lo_open=True)
+    r_max: float = param(12.0, help="largest projected disc radius (bounds the cost)", units="px", lo=0.0, lo_open=True)
+    sigma_p: float = param(
+        0.2,
+        help="deviation of the appearance probability (eq. 26)",
+        symbol="sigma_p",
+        lo=0.0,
+        lo_open=True,
+    )
+    step: int = param(2, help="pixel stride of the disc's samples (1: eq. 20 exactly)", units="px", lo=1)
 
     def __post_init__(self) -> None:
         _positive(self.r_n, "descriptor.r_n", "a neighbourhood radius in metres")
@@ -147,11 +207,26 @@ class OccupancyConfig:
         p_h: probability P_H that the bounding volume V_k must contain (section 4: 0.95).
     """
 
-    sigma: float = 0.10
-    cutoff: float = 3.0
-    voxel: float = 0.1
-    extent: tuple[float, float, float] = (1.2, 1.2, 2.2)
-    p_h: float = 0.95
+    sigma: float = param(0.10, help="deviation of the 3D Gaussian kernel per particle", units="m", lo=0.0, lo_open=True)
+    cutoff: float = param(3.0, help="truncation radius of the kernel, in kernel deviations", lo=0.0, lo_open=True)
+    voxel: float = param(0.1, help="edge of the output voxels", units="m", lo=0.0, lo_open=True)
+    extent: tuple[float, float, float] = param(
+        (1.2, 1.2, 2.2),
+        help="size of the grid around each person (x, y, z)",
+        units="m",
+        lo=0.0,
+        lo_open=True,
+        metavar=("X", "Y", "Z"),
+    )
+    p_h: float = param(
+        0.95,
+        help="probability the bounding volume must contain (section 4)",
+        symbol="P_H",
+        lo=0.0,
+        hi=1.0,
+        lo_open=True,
+        hi_open=True,
+    )
 
     def __post_init__(self) -> None:
         _positive(self.sigma, "occupancy.sigma", "a kernel deviation in metres")
@@ -197,21 +272,73 @@ class BirthConfig:
     cameras' rays cross are not added as people.
     """
 
-    cell: float = 0.1
-    heights: tuple[float, ...] = (0.3, 0.6, 0.9, 1.2, 1.5)
-    min_fraction: float = 0.6
-    min_cameras: int = 2
-    exclusion: float = 0.7
-    min_area: int = 4
-    frames_to_add: int = 3
-    frames_to_remove: int = 5
-    support_radius: float = 0.4
-    init_radius: float = 0.25
-    init_z: tuple[float, float] = (0.3, 1.6)
-    merge_distance: float = 0.3
-    person_radius: float = 0.4
-    person_height: float = 2.0
-    max_people: int = 8
+    cell: float = param(0.1, help="ground grid pitch of the evidence map", units="m", lo=0.0, lo_open=True)
+    heights: tuple[float, ...] = param(
+        (0.3, 0.6, 0.9, 1.2, 1.5),
+        help="heights of the points tested over each cell",
+        units="m",
+        lo=0.0,
+    )
+    min_fraction: float = param(
+        0.6,
+        help="fraction of a camera's visible points that must be on its motion mask for its vote",
+        lo=0.0,
+        hi=1.0,
+        lo_open=True,
+        hi_open=True,
+    )
+    min_cameras: int = param(2, help="cameras that must vote", lo=1)
+    exclusion: float = param(
+        0.7,
+        help="no birth within this distance of a tracked person",
+        units="m",
+        lo=0.0,
+        lo_open=True,
+    )
+    min_area: int = param(4, help="connected cells with enough votes needed for a birth", units="cells", lo=1)
+    frames_to_add: int = param(3, help="consecutive frames of unexplained evidence before adding", units="frames", lo=1)
+    frames_to_remove: int = param(5, help="consecutive frames without evidence before removing", units="frames", lo=1)
+    support_radius: float = param(
+        0.4,
+        help="radius around a person searched for its evidence",
+        units="m",
+        lo=0.0,
+        lo_open=True,
+    )
+    init_radius: float = param(
+        0.25,
+        help="radius of the cylinder a new person's particles start in",
+        units="m",
+        lo=0.0,
+        lo_open=True,
+    )
+    init_z: tuple[float, float] = param(
+        (0.3, 1.6),
+        help="heights of that cylinder (low, high)",
+        units="m",
+        lo=0.0,
+        metavar=("LOW", "HIGH"),
+    )
+    merge_distance: float = param(
+        0.3,
+        help="two people closer than this for frames_to_remove frames follow one person",
+        units="m",
+        lo=0.0,
+    )
+    person_radius: float = param(
+        0.4,
+        help="motion within this distance of a tracked person's axis is explained by that person",
+        units="m",
+        lo=0.0,
+        lo_open=True,
+    )
+    person_height: float = param(2.0, help="height of that axis", units="m", lo=0.0, lo_open=True)
+    max_people: int = param(
+        8,
+        help="people tracked at once (a pool of filters allocated once)",
+        lo=1,
+        flag="max-people",
+    )
 
     def __post_init__(self) -> None:
         _positive(self.cell, "birth.cell", "a grid pitch in metres")
@@ -260,12 +387,21 @@ class BodyConfig:
             the highest top wins), metres. Ours: 0.08.
     """
 
-    centroid: str = "standing"
-    ratio: float = 0.55
-    step: float = 0.02
-    max_gap: float = 0.1
-    min_cameras: int = 2
-    search: float = 0.08
+    centroid: str = param(
+        "standing",
+        help="the 3D centroid: standing (ground position and a standing-person height) or particles (the paper's mean)",
+        choices=CENTROID_MODES,
+    )
+    ratio: float = param(0.55, help="centre-of-mass height / stature", lo=0.0, hi=1.0, lo_open=True, hi_open=True)
+    step: float = param(0.02, help="vertical step of the column search", units="m", lo=0.0, lo_open=True)
+    max_gap: float = param(0.1, help="holes in the masks bridged on the way up", units="m", lo=0.0)
+    min_cameras: int = param(2, help="cameras that must see a column point moving", lo=1)
+    search: float = param(
+        0.08,
+        help="the column is also searched this far around the ground position",
+        units="m",
+        lo=0.0,
+    )
 
     def __post_init__(self) -> None:
         if self.centroid not in CENTROID_MODES:
@@ -289,14 +425,14 @@ class PeopleConfig:
     Resampling runs every frame (section 2.1: "particle resampling should be performed at each time step").
     """
 
-    particles: int = 500
-    seed: int = 0
-    dynamics: DynamicsConfig = field(default_factory=DynamicsConfig)
-    motion: MotionConfig = field(default_factory=MotionConfig)
-    descriptor: DescriptorConfig = field(default_factory=DescriptorConfig)
-    occupancy: OccupancyConfig = field(default_factory=OccupancyConfig)
-    birth: BirthConfig = field(default_factory=BirthConfig)
-    body: BodyConfig = field(default_factory=BodyConfig)
+    particles: int = param(500, help="particles per tracked person", symbol="N_S", lo=1)
+    seed: int = param(0, help="seed of the counter-based random streams", lo=0, hi=2**64 - 1)
+    dynamics: DynamicsConfig = param(default_factory=DynamicsConfig, help="particle dynamics (section 2.1)")
+    motion: MotionConfig = param(default_factory=MotionConfig, help="motion observation (section 2.2)")
+    descriptor: DescriptorConfig = param(default_factory=DescriptorConfig, help="3D colour descriptor (section 3.2)")
+    occupancy: OccupancyConfig = param(default_factory=OccupancyConfig, help="volumetric occupancy (eqs. 2-3)")
+    birth: BirthConfig = param(default_factory=BirthConfig, help="how people appear and leave")
+    body: BodyConfig = param(default_factory=BodyConfig, help="the person's 3D centroid")
 
     def __post_init__(self) -> None:
         _int_at_least(self.particles, "particles", 1, "a particle count")

@@ -20,12 +20,13 @@ Outputs::
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from dataclasses import asdict
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from wptrack.core.config import REQUIRED, check, param
 from wptrack.core.errors import ConfigError
 from wptrack.runs.loop import TrackerRun, run_tracker
 
@@ -145,8 +146,7 @@ class PeopleRun(TrackerRun):
         if not isinstance(occupancy_every, int) or occupancy_every < 0:
             raise ConfigError(f"occupancy_every: expected frames >= 0, got {occupancy_every!r}")
         self._frames = open_frames(list(videos), stop_at_shortest=stop_at_shortest, max_frames=max_frames)
-        for i, (w, h) in enumerate(self._frames.sizes):
-            rig.check_frame_size(i, w, h, str(self._frames.names[i]))
+        rig = rig.at_sizes(self._frames.sizes, [str(n) for n in self._frames.names])  # a resized copy: K scaled
         mask_config = mask_config if mask_config is not None else MaskConfig()
         self._masks = [
             open_masks(masks=masks[i], config=mask_config, camera=cam, rig_source=rig.source)
@@ -321,4 +321,43 @@ def run_people_tracking(
     )
     return run_tracker(
         job, out_dir, progress=progress, resume=resume, checkpoint_seconds=checkpoint_seconds, overwrite=overwrite
+    )
+
+
+@dataclass(frozen=True)
+class PeopleInputs:
+    """The inputs of a people run (``wptrack track people``)."""
+
+    rig: str = param(REQUIRED, help="rig file (YAML/JSON) with two or more cameras")
+    video: tuple[str, ...] = param(REQUIRED, help="video per camera, in rig order (repeat --video)")
+    masks: tuple[str, ...] | None = param(None, help="given motion masks per camera, in rig order (repeat --masks)")
+    occupancy_every: int = param(10, help="occupancy grids every this many frames (0: none)", units="frames", lo=0)
+    save_masks: bool = param(False, help="write the masks used to masks_<camera>.avi")
+    stop_at_shortest: bool = param(False, help="track the common part of videos of unequal lengths")
+
+    def __post_init__(self) -> None:
+        check(self)
+
+
+def run_people_job(
+    inputs: PeopleInputs, config: Any, masks: Any, control: Any, progress: bool = False
+) -> dict[str, Any]:
+    """``wptrack track people``: the run of :func:`run_people_tracking` from its declared parts (inputs, the
+    tracker's config, the motion masks' config, the run control); the CLI and ``wptrack batch`` call this."""
+    return run_people_tracking(
+        inputs.rig,
+        list(inputs.video),
+        control.out,
+        config,
+        mask_config=replace(masks, device=control.device),
+        masks=list(inputs.masks) if inputs.masks else None,
+        device=control.device,
+        stop_at_shortest=inputs.stop_at_shortest,
+        max_frames=control.max_frames,
+        occupancy_every=inputs.occupancy_every,
+        save_masks=inputs.save_masks,
+        progress=progress,
+        resume=control.resume,
+        checkpoint_seconds=control.checkpoint_every,
+        overwrite=control.overwrite,
     )

@@ -32,6 +32,7 @@ from wptrack.cameras.structs import DeviceRig
 from wptrack.core.device import block_partition, resolve_device
 from wptrack.core.errors import ConfigError, FrameError
 from wptrack.core.filter import BLOCK, MAX_BLOCKS, ParticleFilter, arrays_state, check_state, load_arrays
+from wptrack.io.frames import camera_frame
 from wptrack.kernels.core import reduce as kreduce
 from wptrack.kernels.people import descriptor as kdesc
 from wptrack.kernels.people import filter as kpeople
@@ -481,21 +482,9 @@ class PeopleTracker:
         offs = self.drig.pixel_offsets
         bgr, msk = self._bgr_host.numpy(), self._mask_host.numpy()
         for c, (img, m, cam) in enumerate(zip(images, masks, cams, strict=True)):
-            if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 3:
-                raise FrameError(
-                    f"camera '{cam.name}': expected an (H, W, 3) uint8 BGR image, got {img.dtype} {img.shape}"
-                )
-            m = np.asarray(m)
-            if m.ndim == 3:
-                m = m.max(axis=2)
+            img, m = camera_frame(img, cam), camera_frame(m, cam, "mask")
             if m.dtype != np.uint8 and m.dtype != np.bool_:
                 m = m != 0
-            for what, shape in (("frame", img.shape[:2]), ("mask", m.shape)):
-                if tuple(shape) != (cam.height, cam.width):
-                    raise FrameError(
-                        f"camera '{cam.name}': {what} size {shape[1]}x{shape[0]} differs from the calibration "
-                        f"{cam.width}x{cam.height}"
-                    )
             bgr[3 * offs[c] : 3 * offs[c + 1]] = img.reshape(-1)
             msk[offs[c] : offs[c + 1]] = m.reshape(-1)  # the kernels read nonzero as motion
         wp.copy(self.bgr, self._bgr_host)

@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from wptrack.core.config import check, param
 from wptrack.core.errors import ConfigError
-from wptrack.core.filter import _seed_words, check_particles
 from wptrack.core.resampling import SCHEMES
 from wptrack.kernels.templates import raster as kraster
 
@@ -138,17 +138,24 @@ def _check_dims(kind: str, mean, lo, hi) -> None:
 class TemplateConfig:
     """Configuration of the template tracker (defaults suit 640x480 surveillance video at 10-25 fps)."""
 
-    particles: int = 1000
-    """N, particles (each a whole scene)."""
-    max_objects: int = 8
-    """R_max, objects per particle (at most 16)."""
-    camera: str | int = 0
-    """The rig camera that sees the scene (name or index)."""
-    fps: float = 15.0
-    """Frame rate of the sequence, frames per second (Delta t = 1 / fps in eqs. 8-9)."""
-    scale: float = 5000.0
-    """s of eq. 6: log w_i = -(m'_i + c_i) s / (W H)."""
-    bg_weight: float = 0.6
+    particles: int = param(1000, help="number of particles, each a whole scene", symbol="N", lo=1, hi=2**31 - 2)
+    max_objects: int = param(8, help="objects per particle", symbol="R_max", lo=1, hi=int(kraster.MAX_SLOTS))
+    camera: str = param("0", help="the rig camera that sees the scene: its name or index")
+    fps: float | None = param(
+        None,
+        help="frame rate of the sequence (Delta t = 1 / fps in eqs. 8-9; default: the video's, else 15)",
+        units="frames/s",
+        lo=0.0,
+        lo_open=True,
+    )
+    scale: float = param(5000.0, help="log w_i = -(m'_i + c_i) s / (W H)", symbol="s, eq. 6", lo=0.0, lo_open=True)
+    bg_weight: float = param(
+        0.6,
+        help="weight of a template pixel on mask background in the matching penalty (1: the XOR of eq. 4)",
+        symbol="lambda",
+        lo=0.0,
+        hi=1.0,
+    )
     """lambda, weight of a template pixel on mask background in the matching penalty that enters eq. 6:
     m'_i = |q AND NOT v_i| + lambda |v_i AND NOT q| (1: the XOR of eq. 4 exactly). Beyond the paper: masks made by
     background subtraction miss parts of objects (clothes like the ground, the shadow test) far more often than
@@ -156,19 +163,38 @@ class TemplateConfig:
     hypothesis than a foreground pixel left uncovered (a per-pixel Bernoulli model with a miss rate above the
     false-alarm rate gives lambda < 1). 0.6 was chosen on the tuning scenes (scene seed 0, offline masks): 0.5 kept
     more of the people whose clothes the masks miss, 0.75 placed cars better (docs/reproduction.md)."""
-    exclusion: float = 300.0
+    exclusion: float = param(
+        300.0,
+        help="cost of two objects of a particle on the same ground, per pair at full overlap (0: eq. 5 exactly)",
+        units="px",
+        lo=0.0,
+    )
     """Cost of two objects of a particle sharing the same ground, pixels per pair at full overlap (added to eq. 5's
     c_i; 0: eq. 5 exactly). Beyond the paper: humans are discs of their body radius and vehicles boxes on the ground
     (``kernels.templates.xor.pair_overlap``); solid objects cannot overlap, which keeps two hypotheses off one person in
     a group and humans off a car that its template does not fit yet. 300 px is about a fifth of a person's silhouette
     at 15 m."""
-    t_add: float = 0.3
-    """T_add of eq. 12: fraction of particles that receive the frame's proposed object."""
-    t_del: float = 0.02
-    """T_del of eq. 13: per-frame deletion probability of each object in each particle."""
-    sigma_pos: float = 0.03
-    """Position diffusion added to eqs. 8-9, m per frame (helps new objects settle)."""
-    dims_revert: float = 0.02
+    t_add: float = param(
+        0.3,
+        help="fraction of particles that receive the frame's proposed object",
+        symbol="T_add, eq. 12",
+        lo=0.0,
+        hi=1.0,
+    )
+    t_del: float = param(
+        0.02,
+        help="per-frame deletion probability of each object in each particle",
+        symbol="T_del, eq. 13",
+        lo=0.0,
+        hi=1.0,
+    )
+    sigma_pos: float = param(0.03, help="position diffusion added to eqs. 8-9, per frame", units="m", lo=0.0)
+    dims_revert: float = param(
+        0.02,
+        help="per-frame pull of an object's dims towards its class's prior mean (0: the random walk of eqs. 8-9)",
+        lo=0.0,
+        hi=1.0,
+    )
     """Per-frame pull of every object's dims towards its class's prior mean ``dims_mean``, in [0, 1]: eqs. 8-9's
     d_t = d + dims_revert (mean - d) + N(0, sigma_d^2) (0: the random walk of eqs. 8-9). Beyond the paper: a mean-
     reverting (Ornstein-Uhlenbeck) size, stationary deviation sigma_d / sqrt(2 dims_revert) per dimension (human
@@ -176,7 +202,9 @@ class TemplateConfig:
     and grown tall (to dims_max) covers the same pixels as the right one: seen on s3-groups, where lagging hypotheses
     sat 0.7-1 m nearer than their person with heights of 2.0-2.1 m. 0.02 was chosen on scene seed 0 (s3-groups,
     perfect masks, tracker seeds 0-3: 8.0 ID switches per run instead of 10.0; docs/reproduction.md)."""
-    occlusion_del: float = 0.0
+    occlusion_del: float = param(
+        0.0, help="share of T_del that an object's occlusion removes (0: eq. 13 exactly)", lo=0.0, hi=1.0
+    )
     """Share of T_del (eq. 13) that an object's occlusion removes, in [0, 1]: an object whose image box is hidden a
     fraction o by nearer objects of its particle (``kernels.templates.occlusion``) is deleted with probability T_del (1
     - occlusion_del o) (0: eq. 13 exactly). Beyond the paper: a hidden object explains no pixel, so deleting it costs
@@ -185,31 +213,45 @@ class TemplateConfig:
     default: on the tuning scene it did not lower the group ID switches (1: 11.3 per run over tracker seeds 0-3 instead
     of 10.0; with ``dims_revert`` 17.5 instead of 8.0): hidden hypotheses that are kept also wander
     onto the wrong person (docs/reproduction.md)."""
-    occlusion_noise: float = 0.0
+    occlusion_noise: float = param(
+        0.0, help="share of the motion noise that an object's occlusion removes (0: eqs. 8-9 exactly)", lo=0.0, hi=1.0
+    )
     """Share of the velocity, turn and position noise (eqs. 8-9, ``sigma_pos``) that an object's occlusion removes,
     in [0, 1]: noise x (1 - occlusion_noise o) (0: eqs. 8-9 exactly). Beyond the paper: a hidden object gets no
     evidence that could correct a diffused velocity, so it keeps its motion while hidden. Off by default: 0.7 (with
     occlusion_del 1) gave 26 group ID switches instead of 10 on the one tracker seed tried."""
-    unseen_del: float = 0.0
+    unseen_del: float = param(
+        0.0, help="per-frame deletion probability of an object none of whose pieces is in the image", lo=0.0, hi=1.0
+    )
     """Per-frame deletion probability of an object none of whose pieces is in the image, in [0, 1] (0: eq. 13
     only). Beyond the paper: an object that has left the view explains no pixel and no pixel contradicts it, so
     under eq. 13 alone it stays (and is reported) for 1 / T_del = 50 frames on average after it left. Off by
     default: on scene seeds 0-2 (with ``vehicle_entry_px`` 64) 0.5 lowered the false positives of s3-people (13 -> 7
     per run) and s3-mixed (18 -> 13) but s3-cars lost accuracy (0.93 -> 0.85), a difference 9 runs per scene cannot
     separate from the seed spread (docs/reproduction.md)."""
-    human: HumanPrior = field(default_factory=HumanPrior)
-    vehicle: VehiclePrior = field(default_factory=VehiclePrior)
-    classes: tuple[str, ...] = CLASSES
-    """Object classes the tracker may add."""
-    candidate_step_px: int = 8
-    """Addition candidates: ground points under an image grid of this pitch, pixels."""
-    max_range: float = 60.0
-    """Addition candidates farther from the camera than this are dropped, m."""
-    add_min_gain: float = 0.2
-    """A candidate is proposed when its gain (eq. 11 score) is at least this fraction of its area."""
-    add_beta: float = 0.5
-    """Weight of uncovered background in the addition gain (0: eq. 11 exactly; see ``kernels.templates.uoh``)."""
-    vehicle_fit: float = 0.85
+    human: HumanPrior = param(
+        default_factory=HumanPrior, help="the human template, its prior and dynamics (YAML, --config)", flag=""
+    )
+    vehicle: VehiclePrior = param(
+        default_factory=VehiclePrior, help="the vehicle template, its prior and dynamics (YAML, --config)", flag=""
+    )
+    classes: tuple[str, ...] = param(CLASSES, help="object classes the tracker may add", choices=CLASSES)
+    candidate_step_px: int = param(
+        8, help="addition candidates: ground points under an image grid of this pitch", units="px", lo=1
+    )
+    max_range: float = param(
+        60.0, help="addition candidates farther from the camera are dropped", units="m", lo=0.0, lo_open=True
+    )
+    add_min_gain: float = param(
+        0.2, help="a candidate is proposed when its gain (eq. 11) is at least this fraction of its area", lo=0.0
+    )
+    add_beta: float = param(0.5, help="weight of uncovered background in the addition gain (0: eq. 11 exactly)", lo=0.0)
+    vehicle_fit: float = param(
+        0.85,
+        help="class-aware addition: a vehicle candidate this much on foreground replaces a chosen human (0: off)",
+        lo=0.0,
+        hi=1.0,
+    )
     """Class-aware addition (``kernels.templates.classify``; 0: off, eq. 11 exactly): when eq. 11 picks a human
     candidate, the vehicle candidate within half a vehicle length (``vehicle.dims_mean``) whose silhouette is the
     largest fraction of foreground replaces it if that fraction is at least ``vehicle_fit`` (candidates on the footprint
@@ -217,24 +259,34 @@ class TemplateConfig:
     image, turning, a vehicle hypothesis lagging behind it) is human-sized, so eq. 11 adds humans on it; a car's blob
     fills a vehicle template, a person's does not. 0.85 was chosen on scene seed 0 over 0.7 (with 0.7 s3-mixed lost a
     person for up to 50 frames; docs/reproduction.md)."""
-    absorb: bool = True
+    absorb: bool = param(True, help="an added vehicle removes the particle's humans on its footprint (off: eq. 12)")
     """A vehicle added to a particle removes the particle's humans whose ground disc meets its footprint (one move
     that replaces the humans covering a car by the vehicle, drawn with the addition's own random number; the
     weights of eq. 6 judge it like every addition and deletion of eqs. 12-13). Beyond the paper; false: eq. 12."""
-    vehicle_entry_px: int = 64
+    vehicle_entry_px: int = param(
+        64, help="vehicle candidates also this far beyond the image's left, right and bottom borders", units="px", lo=0
+    )
     """Vehicle addition candidates also stand under the pixels up to this far beyond the image's left, right and
     bottom borders, pixels (0: under the image only, the paper's grid). Beyond the paper: a car entering the view
     shows only its front, no vehicle centred in the image fits that blob, and eq. 11 added humans on it (the short-
     lived false positives beside cars). 64 was chosen on scene seeds 0-2 (tracker seeds 0-2, offline masks): s3-mixed
     MOTA 0.566 -> 0.665 and false positives per run 55 -> 18, s3-cars MOTA 0.468 -> 0.609, s3-people and s3-groups
     unchanged within their spread; 128 gave the same (docs/reproduction.md)."""
-    human_entry_px: int = 64
+    human_entry_px: int = param(
+        64, help="human candidates also this far beyond the image's left, right and bottom borders", units="px", lo=0
+    )
     """Human addition candidates also stand under the pixels up to this far beyond the image's left, right and bottom
     borders, pixels (0: under the image only, the paper's grid). Beyond the paper: a person walking in from below the
     image shows the head and shoulders first, whose ground point is below the image, so no human candidate fitted
     them until the feet came into view, 0.6-1 s later (docs/reproduction.md, round six). 64 as for vehicles; chosen on
     scene seeds 0-5 (perfect masks: 16 and 64 px helped, 128 px did not)."""
-    min_track_frames: int = 8
+    min_track_frames: int = param(
+        8,
+        help="tracks reported in fewer frames are left out of a completed run's tracks.csv (1: keep all; "
+        "tracks_all.csv keeps every track)",
+        units="frames",
+        lo=1,
+    )
     """Tracks reported in fewer frames than this are left out of a completed run's ``tracks.csv``, unless still
     reported in its last frame (1: every track; all of them stay in ``tracks_all.csv``; ``wptrack.io.run.
     drop_short_tracks``). Offline confirmation: the whole run is known when it completes, so a track that lasts is
@@ -245,7 +297,13 @@ class TemplateConfig:
     0.665 -> 0.671, s3-groups id switches 10.9 -> 8.4, s3-people accuracy 0.667 -> 0.644 (one short true track); 12
     and 16 cost s3-mixed accuracy. Held out it costs accuracy where an object was only covered by short fragments
     (s3-cars 0.92 -> 0.86) and halves the id switches (docs/reproduction.md, round four)."""
-    backfill_seconds: float = 1.35
+    backfill_seconds: float = param(
+        1.35,
+        help="when the run completes, extend each lasting track back over up to this long before it was first "
+        "reported, while in view (0: off)",
+        units="s",
+        lo=0.0,
+    )
     """Offline backfill (``wptrack.trackers.templates.backfill``): a completed run's ``tracks.csv`` extends every track
     of at least ``backfill_min_frames`` rows back over up to this long before its first row (``round(backfill_seconds x
     fps)`` frames: 20 at 15 fps), at the velocity of its first 8 rows, while the object stays in view (``min_in_image``)
@@ -258,11 +316,17 @@ class TemplateConfig:
     0.94 (perfect), no scene worse. The horizon is a time because the extrapolation's error grows with time
     (docs/reproduction.md, round seven). Extending forwards was tried and not kept (s3-cars MOTA fell: hypotheses that
     died on a confusion were prolonged)."""
-    backfill_min_frames: int = 15
+    backfill_min_frames: int = param(15, help="backfill only tracks with at least this many rows", units="rows", lo=1)
     """Tracks with fewer rows than this in ``tracks.csv`` are not backfilled (``backfill_seconds``): short tracks
     are more often hypotheses added on the wrong thing (a human on the edge of a car) whose extension only adds
     false positives."""
-    stitch_seconds: float = 2.0
+    stitch_seconds: float = param(
+        2.0,
+        help="when the run completes, a track that starts up to this long after another ended, where that one was "
+        "heading, takes its id (0: off)",
+        units="s",
+        lo=0.0,
+    )
     """Offline stitching (``wptrack.trackers.templates.backfill.stitch_tracks_file``), after the backfill: a track that
     ends and one of the same class that starts at most this long later (``round(stitch_seconds x fps)`` frames: 30 at 15
     fps) within ``stitch_distance`` of where the first was heading (its last position moved on at the velocity of its
@@ -271,9 +335,14 @@ class TemplateConfig:
     label, an identity switch that the completed run can see. Chosen on scene seeds 0-5 (tracker seeds 0-2, both mask
     kinds; 2 and 4 s, 1 and 2 m compared): s3-groups IDF1 0.793 -> 0.820 and id switches 5.2 -> 3.8 per run (offline
     masks), s3-mixed IDF1 0.844 -> 0.885, no scene worse (docs/reproduction.md, round seven)."""
-    stitch_distance: float = 2.0
-    """Largest ground distance between a successor's first position and the predicted one (``stitch_seconds``), m."""
-    partition: bool = True
+    stitch_distance: float = param(
+        2.0, help="largest distance from where the ended track was heading", units="m", lo=0.0
+    )
+    partition: bool = param(
+        True,
+        help="resample independent groups of objects apart (off: the paper's joint filter, one weight per particle)",
+        negative="joint",
+    )
     """Resample independent groups of objects apart (``kernels.templates.partition``; false: the paper's joint filter,
     one weight per particle). Objects whose image boxes (over all particles) are a column apart or more explain disjoint
     pixels, so the weight of eq. 6 is a product of one factor per group; each group of slots is resampled on its own
@@ -282,11 +351,19 @@ class TemplateConfig:
     collapses as R grows (on the PETS clip 10,000 joint particles scored MOTA 0.50 where 1,000 scored 0.14 on the same
     masks); objects that interact (overlapping boxes) stay in one group, resampled jointly. Needs ``ess_threshold`` 1
     (every group is resampled every frame)."""
-    min_candidate_area: int = 30
-    """Smallest candidate silhouette, pixels."""
-    min_existence: float = 0.5
-    """Objects are reported when the weight of the particles holding them reaches this fraction."""
-    min_in_image: float = 0.25
+    min_candidate_area: int = param(30, help="smallest candidate silhouette", units="px", lo=1)
+    min_existence: float = param(
+        0.5,
+        help="objects are reported when the weight of the particles holding them reaches this fraction",
+        lo=0.0,
+        hi=1.0,
+    )
+    min_in_image: float = param(
+        0.25,
+        help="objects are reported with at least this fraction of their image box inside the image (0: all)",
+        lo=0.0,
+        hi=1.0,
+    )
     """Objects are reported when at least this fraction of their image bounding box (the box around the image of
     their 3D bounding box: a vehicle's length x width x height, a human's body diameter square x height) lies inside
     the image (0: wherever they are). The particles hold an object that has left the view until eq. 13 deletes it
@@ -294,80 +371,51 @@ class TemplateConfig:
     of a labelled ground truth. 0.25 is the convention of our synthetic ground truth (``wptrack.synth``:
     an object is labelled while >= 25 % of its image box is inside the image); set 0 when your labels include
     objects mostly outside the image. Only the report changes: the particles keep every object."""
-    resampling: str = "systematic"
-    ess_threshold: float = 1.0
-    """Resample when ESS <= threshold x N (1: every frame, as in the paper)."""
-    seed: int = 0
+    resampling: str = param("systematic", help="resampling scheme", choices=SCHEMES)
+    ess_threshold: float = param(
+        1.0,
+        help="resample when ESS <= this fraction of N (1: every frame, as in the paper)",
+        lo=0.0,
+        hi=1.0,
+        lo_open=True,
+    )
+    seed: int = param(0, help="seed of the counter-based random streams", lo=0, hi=2**64 - 1)
 
     def __post_init__(self) -> None:
-        check_particles(self.particles)
-        if isinstance(self.max_objects, bool) or not isinstance(self.max_objects, (int, np.integer)):
-            raise ConfigError(f"max_objects: expected an integer R_max in [1, 16], got {self.max_objects!r}")
-        if not 1 <= int(self.max_objects) <= int(kraster.MAX_SLOTS):
-            raise ConfigError(f"max_objects: R_max must be in [1, {int(kraster.MAX_SLOTS)}], got {self.max_objects}")
-        _nonneg(self.fps, "fps", "frames/s", strict=True)
-        _nonneg(self.scale, "scale", "s of eq. 6", strict=True)
-        _nonneg(self.bg_weight, "bg_weight", "weight of template pixels on background", upper=1.0)
-        _nonneg(self.exclusion, "exclusion", "pixels")
-        _nonneg(self.t_add, "t_add", "probability", upper=1.0)
-        _nonneg(self.t_del, "t_del", "probability", upper=1.0)
-        _nonneg(self.sigma_pos, "sigma_pos", "m")
-        _nonneg(self.dims_revert, "dims_revert", "fraction per frame", upper=1.0)
-        _nonneg(self.vehicle_fit, "vehicle_fit", "fraction of a vehicle candidate on foreground", upper=1.0)
-        if not isinstance(self.absorb, bool):
-            raise ConfigError(f"absorb: expected true or false, got {self.absorb!r}")
-        _nonneg(self.occlusion_del, "occlusion_del", "share of T_del", upper=1.0)
-        _nonneg(self.occlusion_noise, "occlusion_noise", "share of the noise", upper=1.0)
-        _nonneg(self.unseen_del, "unseen_del", "probability", upper=1.0)
-        _nonneg(self.max_range, "max_range", "m", strict=True)
-        _nonneg(self.add_min_gain, "add_min_gain", "fraction")
-        _nonneg(self.add_beta, "add_beta", "weight")
-        _nonneg(self.min_existence, "min_existence", "fraction", upper=1.0)
-        _nonneg(self.min_in_image, "min_in_image", "fraction of the image box", upper=1.0)
-        _nonneg(self.backfill_seconds, "backfill_seconds", "s")
-        _nonneg(self.stitch_seconds, "stitch_seconds", "s")
-        _nonneg(self.stitch_distance, "stitch_distance", "m")
+        if isinstance(self.camera, (int, np.integer)) and not isinstance(self.camera, bool):
+            object.__setattr__(self, "camera", str(int(self.camera)))  # an index, as the command line gives it
+        check(self)
         if not isinstance(self.human, HumanPrior):
             raise ConfigError("human: expected a HumanPrior")
         if not isinstance(self.vehicle, VehiclePrior):
             raise ConfigError("vehicle: expected a VehiclePrior")
-        classes = tuple(self.classes)
-        if not classes or any(c not in CLASSES for c in classes) or len(set(classes)) != len(classes):
-            raise ConfigError(f"classes: expected a non-empty subset of {list(CLASSES)}, got {list(classes)}")
-        object.__setattr__(self, "classes", classes)
-        for name, low, unit in (
-            ("candidate_step_px", 1, "pixels"),
-            ("min_candidate_area", 1, "pixels"),
-            ("vehicle_entry_px", 0, "pixels"),
-            ("human_entry_px", 0, "pixels"),
-            ("min_track_frames", 1, "frames"),
-            ("backfill_min_frames", 1, "rows"),
-        ):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
-                raise ConfigError(f"{name}: expected an integer >= {low} ({unit}), got {v!r}")
-        if self.resampling not in SCHEMES:
-            raise ConfigError(f"resampling: unknown scheme {self.resampling!r}; expected one of {', '.join(SCHEMES)}")
-        if not (isinstance(self.ess_threshold, (int, float)) and 0.0 < self.ess_threshold <= 1.0):
-            raise ConfigError(f"ess_threshold: expected a fraction in (0, 1], got {self.ess_threshold!r}")
-        if not isinstance(self.partition, bool):
-            raise ConfigError(f"partition: expected true or false, got {self.partition!r}")
+        if not self.classes or len(set(self.classes)) != len(self.classes):
+            raise ConfigError(f"classes: expected a non-empty subset of {list(CLASSES)}, got {list(self.classes)}")
         if self.partition and self.ess_threshold < 1.0:
             raise ConfigError(
                 f"ess_threshold {self.ess_threshold}: the partitioned filter (partition: true) resamples every group "
                 "every frame; use ess_threshold 1, or partition false for the joint filter with an ESS trigger"
             )
-        _seed_words(self.seed)
+
+    @property
+    def frame_rate(self) -> float:
+        """``fps``, or 15 frames/s when it is not given (the tracker's Delta t = 1 / frame_rate)."""
+        return 15.0 if self.fps is None else float(self.fps)
+
+    @property
+    def camera_key(self) -> int | str:
+        """The rig camera: its index when ``camera`` is a number, else its name."""
+        return int(self.camera) if self.camera.isdigit() else self.camera
 
     @property
     def backfill_frames(self) -> int:
         """``backfill_seconds`` in frames at ``fps``."""
-        return int(round(self.backfill_seconds * self.fps))
+        return int(round(self.backfill_seconds * self.frame_rate))
 
     @property
     def stitch_frames(self) -> int:
         """``stitch_seconds`` in frames at ``fps``."""
-        return int(round(self.stitch_seconds * self.fps))
+        return int(round(self.stitch_seconds * self.frame_rate))
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-Python form (run.json)."""

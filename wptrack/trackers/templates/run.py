@@ -22,12 +22,14 @@ from __future__ import annotations
 
 import logging
 import math
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from wptrack.core.errors import ConfigError, FrameError
+from wptrack.core.config import REQUIRED, check, param
+from wptrack.core.errors import ConfigError
 from wptrack.io.tables import CsvAppender
 from wptrack.motion.flood import FloodGuard
 from wptrack.runs.loop import TrackerRun, run_tracker
@@ -92,20 +94,6 @@ def colour_virtual(virtual: np.ndarray, slot_labels: np.ndarray) -> np.ndarray:
     n = len(slot_labels)
     lut[1 : n + 1] = label_colours(np.maximum(slot_labels, 0))
     return lut[virtual]
-
-
-def _camera_for_size(camera, width: int, height: int, source: str, rig_source: str):
-    """The camera at the video's resolution: the same camera when sizes agree, a scaled K when the video is a
-    resized copy (same aspect ratio), an error otherwise."""
-    if (width, height) == (camera.width, camera.height):
-        return camera
-    if abs(width / height - camera.width / camera.height) <= 0.01 * camera.width / camera.height:
-        log.info("scaling camera %s from %dx%d to %dx%d", camera.name, camera.width, camera.height, width, height)
-        return camera.scaled(width, height)
-    raise FrameError(
-        f"{source}: frame size {width}x{height} differs from camera '{camera.name}' calibration "
-        f"{camera.width}x{camera.height} in {rig_source} (and is not a resized copy of the same aspect ratio)"
-    )
 
 
 BACKGROUNDS_DIR = "backgrounds"
@@ -188,24 +176,22 @@ class TemplateRun(TrackerRun):
         if video is None and masks is None:
             raise ConfigError("give --video (background subtraction) or --masks (binary motion masks)")
         rig = Rig.load(rig_path)
-        camera = rig[config.camera]
+        camera = rig[config.camera_key]
         mask_config = mask_config if mask_config is not None else MaskConfig()
         if video is not None:
             src = open_source(video)
             width, height = src.size
-            camera = _camera_for_size(camera, width, height, str(video), rig.source)
+            camera = camera.for_size(width, height, str(video), rig.source)
         if masks is not None:
             mask_config = replace(mask_config, method="given")
             stream = open_masks(masks=masks, config=mask_config, camera=camera, rig_source=rig.source)
         else:
             stream = open_masks(video=video, config=mask_config, camera=camera, rig_source=rig.source)
-        if camera is not rig[config.camera]:
-            cams = tuple(camera if c.name == camera.name else c for c in rig.cameras)
-            rig = Rig(cameras=cams, volume=rig.volume, source=rig.source, ground=rig.ground)
+        rig = rig.with_camera(camera)
         device = resolve_device(device)
         self.tracker = TemplateTracker(rig, config, device=device, keep_virtual=virtual)
         self._stream = stream
-        self._fps = config.fps
+        self._fps = config.frame_rate
         self._virtual = virtual
         self._save_masks = save_masks
         self.total = len(stream) if max_frames is None else min(len(stream), max_frames)
@@ -319,7 +305,7 @@ class TemplateRun(TrackerRun):
             return box_fraction_in_image(camera, plane, ground, size, heading) >= least
 
         added = backfill_tracks_file(
-            path, plane.to_world, in_view, cfg.backfill_frames, int(cfg.backfill_min_frames), fps=float(cfg.fps)
+            path, plane.to_world, in_view, cfg.backfill_frames, int(cfg.backfill_min_frames), fps=cfg.frame_rate
         )
         stitched = stitch_tracks_file(path, cfg.stitch_frames, float(cfg.stitch_distance))
         log.info("%s: %d rows backfilled, %d tracks stitched to their predecessors", path, added, stitched)
@@ -381,4 +367,66 @@ def run_template_tracking(
         resume=resume,
         checkpoint_seconds=checkpoint_seconds,
         overwrite=overwrite,
+    )
+
+
+@dataclass(frozen=True)
+class TemplateInputs:
+    """The inputs of a template run (``wptrack track templates``); the rig camera is the config's ``camera``."""
+
+    rig: str = param(REQUIRED, help="rig file (YAML/JSON) with the camera and an optional 'ground' plane")
+    video: tuple[str, ...] | None = param(
+        None, help="the camera's video or image folder (motion masks by background subtraction)"
+    )
+    masks: tuple[str, ...] | None = param(
+        None, help="binary motion masks (video or image folder, nonzero = foreground) instead of --video"
+    )
+    save_masks: bool = param(False, help="write the masks used to masks.avi")
+    virtual: bool = param(True, help="write virtual.avi (the best particle's virtual image per frame)")
+
+    def __post_init__(self) -> None:
+        check(self)
+
+
+def run_template_job(
+    inputs: TemplateInputs, config: Any, masks: Any, control: Any, progress: bool = False
+) -> dict[str, Any]:
+    """``wptrack track templates``: the run of :func:`run_template_tracking` from its declared parts (inputs, the
+    tracker's config, the motion masks' config, the run control); the CLI and ``wptrack batch`` call this. Without a
+    ``fps`` in the config, the frame rate is the video's (or the masks video's).
+
+    Raises:
+        ConfigError: more than one video or masks source (one camera), or neither.
+    """
+    from wptrack.io.frames import open_source
+
+    sources = {}
+    for flag in ("video", "masks"):  # one camera: a second --video must not silently replace the first
+        given = getattr(inputs, flag)
+        if given is not None and len(given) > 1:
+            raise ConfigError(
+                f"--{flag}: the template tracker follows one camera, got {len(given)} ({', '.join(given)}); give one "
+                f"--{flag} and pick its rig camera with --camera NAME"
+            )
+        sources[flag] = given[0] if given else None
+    if config.fps is None:  # the frame rate of the video, or of the given masks when they are a video
+        source = sources["video"] if sources["video"] is not None else sources["masks"]
+        fps = open_source(source).fps if source is not None else None
+        if fps:
+            config = replace(config, fps=float(fps))
+    return run_template_tracking(
+        inputs.rig,
+        control.out,
+        config,
+        video=sources["video"],
+        masks=sources["masks"],
+        mask_config=replace(masks, device=control.device),
+        device=control.device,
+        max_frames=control.max_frames,
+        save_masks=inputs.save_masks,
+        virtual=inputs.virtual,
+        progress=progress,
+        resume=control.resume,
+        checkpoint_seconds=control.checkpoint_every,
+        overwrite=control.overwrite,
     )

@@ -37,9 +37,10 @@ import warp as wp
 from wptrack.cameras.rig import Camera, GroundPlane, Rig
 from wptrack.cameras.structs import camera_struct
 from wptrack.core.device import block_partition
-from wptrack.core.errors import ConfigError, FrameError, RigError
+from wptrack.core.errors import ConfigError, RigError
 from wptrack.core.filter import BLOCK, MAX_BLOCKS, FrameChain, _seed_words, check_fits
 from wptrack.core.resampling import Resampler, bytes_per_particle, quantisation_bits
+from wptrack.io.frames import camera_frame
 from wptrack.kernels.core import reduce as kreduce
 from wptrack.kernels.core import resample as kres
 from wptrack.kernels.templates import classify as kcls
@@ -351,7 +352,7 @@ class Candidates:
 def _dynamics_struct(config: TemplateConfig) -> kdyn.Dynamics:
     h, v = config.human, config.vehicle
     s = kdyn.Dynamics()
-    s.dt = 1.0 / float(config.fps)
+    s.dt = 1.0 / config.frame_rate
     s.sigma_pos = config.sigma_pos
     s.sigma_speed = wp.vec3(0.0, h.sigma_speed, v.sigma_speed)
     s.sigma_turn = v.sigma_turn
@@ -512,7 +513,7 @@ class TemplateTracker(FrameChain):
         if not isinstance(rig, Rig):
             raise ConfigError(f"rig: expected a wptrack.cameras.rig.Rig, got {type(rig).__name__}")
         self.rig = rig
-        self.camera = rig[config.camera]
+        self.camera = rig[config.camera_key]
         self.plane = rig.ground_plane
         super().__init__(device, use_graph)
         d = self.device
@@ -670,16 +671,7 @@ class TemplateTracker(FrameChain):
         Raises:
             FrameError: the mask's size differs from the camera's calibrated size, or it is not 2D.
         """
-        m = np.asarray(mask)
-        if m.ndim == 3 and m.shape[2] in (1, 3):
-            m = m.max(axis=2)
-        if m.ndim != 2:
-            raise FrameError(f"mask: expected a 2D (H, W) motion image, got shape {m.shape}")
-        if m.shape != (self.height, self.width):
-            raise FrameError(
-                f"mask size {m.shape[1]}x{m.shape[0]} differs from camera '{self.camera.name}' calibration "
-                f"{self.width}x{self.height} in {self.rig.source}"
-            )
+        m = camera_frame(mask, self.camera, "mask", f" in {self.rig.source}")
         np.copyto(self.q_host.numpy(), m != 0, casting="unsafe")
         wp.copy(self.q, self.q_host)
 
