@@ -138,7 +138,7 @@ def test_kernels_hold_only_warp_code(path):
 
 def test_long_modules_say_why():
     long = []
-    for name, (f, _) in _modules().items():
+    for f, _ in _modules().values():
         text = f.read_text()
         lines = text.count("\n")
         doc = ast.get_docstring(ast.parse(text)) or ""
@@ -151,7 +151,9 @@ def test_readme_names_every_package():
     readme = (REPO / "README.md").read_text()
     section = readme[readme.index("## How it is built") :]
     section = section[: section.find("\n## ", 3) if "\n## " in section[3:] else len(section)]
-    inits = [p for p in (REPO / "wptrack").rglob("__init__.py") if p.relative_to(REPO / "wptrack").parts[0] != "kernels"]
+    inits = [
+        p for p in (REPO / "wptrack").rglob("__init__.py") if p.relative_to(REPO / "wptrack").parts[0] != "kernels"
+    ]
     inits += list((REPO / "kernels").rglob("__init__.py"))
     packages = sorted(str(p.parent.relative_to(REPO)) + "/" for p in inits)
     missing = [p for p in packages if f"`{p}`" not in section]

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from wptrack.bench import numpy_masks
-from wptrack.io.frames import open_source, write_video
+from wptrack.io.frames import open_source
+from wptrack.io.video import write_video
 from wptrack.motion import background as B
 from wptrack.motion.masks import MaskConfig
 

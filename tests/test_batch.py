@@ -14,7 +14,7 @@ from wptrack.batch import BATCH_FILE, load_manifest, run_batch
 from wptrack.cameras.rig import Camera, Rig
 from wptrack.cli import main
 from wptrack.core.errors import ConfigError
-from wptrack.io.frames import write_video
+from wptrack.io.video import write_video
 
 BALL = np.array([0.42, 0.45, 0.035])
 

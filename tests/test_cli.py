@@ -14,8 +14,8 @@ import warp as wp
 
 from wptrack.cameras.rig import Camera, Rig
 from wptrack.cli import main
-from wptrack.io.frames import write_video
 from wptrack.io.tables import read_tracks
+from wptrack.io.video import write_video
 
 BALL = np.array([0.42, 0.45, 0.035])
 

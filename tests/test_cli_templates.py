@@ -11,8 +11,8 @@ import pytest
 from wptrack.cameras.rig import Camera, Rig
 from wptrack.cli import main
 from wptrack.core.errors import ConfigError
-from wptrack.io.frames import write_video
 from wptrack.io.tables import read_tracks
+from wptrack.io.video import write_video
 from wptrack.trackers.templates.tracker import HumanPrior, TemplateConfig, TemplateTracker
 
 

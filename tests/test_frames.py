@@ -10,16 +10,8 @@ import numpy as np
 import pytest
 
 from wptrack.core.errors import ConfigError, FrameError
-from wptrack.io.frames import (
-    ArraySource,
-    ImageSequenceSource,
-    SyncedFrames,
-    VideoSource,
-    VideoWriter,
-    open_frames,
-    open_source,
-    write_video,
-)
+from wptrack.io.frames import ArraySource, ImageSequenceSource, SyncedFrames, VideoSource, open_frames, open_source
+from wptrack.io.video import VideoWriter, write_video
 
 
 def _frames(rng: np.random.Generator, n: int, w: int = 32, h: int = 24) -> np.ndarray:
@@ -260,7 +252,7 @@ def test_write_video_ffv1_lossless(tmp_path, rng):
 
 
 def test_video_writer_mjpg_fallback(tmp_path, rng, monkeypatch):
-    import wptrack.io.frames as frames_mod
+    import wptrack.io.video as frames_mod
 
     monkeypatch.setitem(frames_mod.VIDEO_CODECS, ".avi", ("XXXX", "MJPG"))
     frames = _frames(rng, 5)
@@ -297,7 +289,7 @@ def test_prefetch_order_errors_and_early_stop():
     import threading
     import time
 
-    from wptrack.io.frames import prefetch
+    from wptrack.io.prefetch import prefetch
 
     assert list(prefetch(range(50), depth=3)) == list(range(50))
 
@@ -332,7 +324,8 @@ def test_prefetch_order_errors_and_early_stop():
 def test_video_reader_gives_the_frames_of_a_sequential_read_in_any_order(tmp_path, suffix):
     """Random access (seeks over long gaps, backwards, collected frames on the way) gives the same frames as
     decoding the file from the start (lossless FFV1 and lossy MPEG-4 with keyframes far apart)."""
-    from wptrack.io.frames import VideoReader, VideoSource, write_video
+    from wptrack.io.frames import VideoReader, VideoSource
+    from wptrack.io.video import write_video
 
     rng = np.random.default_rng(4)
     frames = [np.full((24, 32, 3), 7 * k % 256, np.uint8) + rng.integers(0, 20, (24, 32, 3), dtype=np.uint8)

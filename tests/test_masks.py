@@ -10,7 +10,8 @@ import pytest
 
 from wptrack.cameras.rig import Camera
 from wptrack.core.errors import ConfigError, FrameError
-from wptrack.io.frames import VideoWriter, open_source
+from wptrack.io.frames import open_source
+from wptrack.io.video import VideoWriter
 from wptrack.motion.masks import MaskConfig, MotionMasks, clean_mask, open_masks
 
 H, W = 90, 120

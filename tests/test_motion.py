@@ -15,7 +15,8 @@ import warp as wp
 from wptrack.bench import numpy_masks
 from wptrack.cli import main
 from wptrack.core.errors import ConfigError, FrameError
-from wptrack.io.frames import open_source, write_video
+from wptrack.io.frames import open_source
+from wptrack.io.video import write_video
 from wptrack.kernels.core import background as kbg
 from wptrack.motion.background import SEEK_GAP, bracket, plan_windows
 from wptrack.motion.masks import MaskConfig, open_masks

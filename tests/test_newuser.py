@@ -182,7 +182,7 @@ def test_readme_lists_the_colour_tracks_columns():
 def test_truncated_video_shows_no_ffmpeg_lines(tmp_path):
     """Issue 30 item 20: a truncated video showed FFmpeg's raw '[ffv1 @ 0x...] Slice pointer chain broken' beside
     wptrack's own message; with -v they are shown."""
-    from wptrack.io.frames import write_video
+    from wptrack.io.video import write_video
 
     rng = np.random.default_rng(0)
     write_video(tmp_path / "full.avi", [rng.integers(0, 255, (96, 128, 3), dtype=np.uint8) for _ in range(10)], fps=10)

@@ -134,8 +134,8 @@ def test_apply_camera_checks_window_size():
 @pytest.fixture(scope="module")
 def lab_run(tmp_path_factory) -> dict:
     """The s1-lab scene (10 frames) tracked on the CPU: run folder, scene folder."""
-    from wptrack.trackers.colour.run import run_color_tracking
     from wptrack.synth import render_scene
+    from wptrack.trackers.colour.run import run_color_tracking
     from wptrack.trackers.colour.tracker import ColorConfig, HSITarget
 
     root = tmp_path_factory.mktemp("lab")

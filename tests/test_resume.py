@@ -271,7 +271,7 @@ def test_continue_video_fills_missing_frames_black(tmp_path):
     of the video stays frame i of the run."""
     import numpy as np
 
-    from wptrack.io.frames import continue_video, write_video
+    from wptrack.io.video import continue_video, write_video
 
     write_video(tmp_path / "v.avi", [np.full((8, 10, 3), 50 + k, np.uint8) for k in range(2)], fps=5)
     w = continue_video(tmp_path / "v.avi", 4, fps=5)

@@ -8,8 +8,8 @@ import pytest
 
 from wptrack.bench.soak import cycle_scene
 from wptrack.core.errors import FrameError
-from wptrack.io.frames import write_video
 from wptrack.io.tables import read_tracks
+from wptrack.io.video import write_video
 from wptrack.runs import run_tracker
 from wptrack.trackers.colour.run import ColourRun
 from wptrack.trackers.colour.tracker import ColorConfig, HSITarget

@@ -13,7 +13,7 @@ import pytest
 from wptrack.cameras.rig import Camera, Rig
 from wptrack.cli import main
 from wptrack.core.errors import ConfigError
-from wptrack.io.frames import write_video
+from wptrack.io.video import write_video
 from wptrack.motion.flood import FloodGuard
 from wptrack.trackers.templates.run import run_template_tracking
 from wptrack.trackers.templates.tracker import TemplateConfig

@@ -142,7 +142,7 @@ def test_gaussian3d_filter_converges_after_a_jump(device):
 
 
 def test_too_many_particles_is_a_clear_error_before_allocation(device, monkeypatch):
-    import wptrack.core.filter as pf
+    import wptrack.core.memory as pf
 
     monkeypatch.setattr(pf, "available_bytes", lambda dev: 64 * 2**20)  # pretend 64 MiB are free
     before = wp.get_mempool_used_mem_current(device) if wp.get_device(device).is_cuda else None

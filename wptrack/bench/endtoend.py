@@ -30,7 +30,9 @@ class EndToEndSuite:
 
     @staticmethod
     def run_case(case: Case, device: str, frames: int = 100, numpy_max: int = 0, seed: int = 0) -> dict:
-        from wptrack.io.frames import open_frames, prefetch, write_video
+        from wptrack.io.frames import open_frames
+        from wptrack.io.prefetch import prefetch
+        from wptrack.io.video import write_video
         from wptrack.trackers.colour.tracker import ColorTracker, HSITarget
 
         rig = bench_rig(case.cameras)

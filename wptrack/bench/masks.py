@@ -94,7 +94,7 @@ def e2e_frames(window: int) -> int:
 def end_to_end(case: Case, device: str, frames: int, seed: int = 0, repeats: int = 1) -> dict:
     """Wall time of the default mask pipeline over a ``frames``-frame FFV1 video of ``case``'s size against
     decoding it: ``open_masks(video=path, config=MaskConfig(device=device))`` iterated to the end (the offline
-    model with its defaults, the frames decoded ahead by :func:`wptrack.io.frames.prefetch`, the windows' samples read
+    model with its defaults, the frames decoded ahead by :func:`wptrack.io.prefetch.prefetch`, the windows' samples read
     ahead by the model's worker, the clean-up), alternating with decode-only passes, ``repeats`` of each.
 
     Returns:
@@ -103,7 +103,8 @@ def end_to_end(case: Case, device: str, frames: int, seed: int = 0, repeats: int
         masks add to decoding per frame), ``added_vs_decode``; ``e2e_first_ms`` (time to the first mask, ms),
         ``e2e_steady_ms`` (ms per frame after it), ``added_steady_ms`` (that less decoding), ``added_steady_vs_decode``.
     """
-    from wptrack.io.frames import VideoWriter, open_source
+    from wptrack.io.frames import open_source
+    from wptrack.io.video import VideoWriter
     from wptrack.motion.masks import MaskConfig, open_masks
 
     config = MaskConfig(device=device)
@@ -217,7 +218,8 @@ class MasksSuite:
         import cv2
 
         from wptrack.bench import numpy_masks
-        from wptrack.io.frames import open_source, write_video
+        from wptrack.io.frames import open_source
+        from wptrack.io.video import write_video
         from wptrack.motion.background import OfflineBackground
         from wptrack.motion.masks import MaskConfig
 

@@ -37,7 +37,8 @@ import numpy as np
 from wptrack.cameras.rig import Camera
 from wptrack.core.config import check, param
 from wptrack.core.errors import ConfigError, FrameError
-from wptrack.io.frames import FrameSource, open_source, prefetch
+from wptrack.io.frames import FrameSource, open_source
+from wptrack.io.prefetch import prefetch
 
 __all__ = [
     "DEFAULT_METHOD",
@@ -408,7 +409,7 @@ def write_masks(
     import time
 
     from wptrack.io.atomic import atomic_write_bytes, atomic_write_json, ensure_writable_dir
-    from wptrack.io.frames import VideoWriter
+    from wptrack.io.video import VideoWriter
 
     masks = open_masks(video=video, config=config)
     out = ensure_writable_dir(out_dir)

@@ -113,7 +113,7 @@ def encode_movie(frames: Iterable[np.ndarray], out_dir: Path, fps: float, stem: 
     Returns:
         The files written and notes about those that could not be.
     """
-    from wptrack.io.frames import VideoWriter
+    from wptrack.io.video import VideoWriter
 
     out = MovieFiles()
     mp4: VideoWriter | None = None

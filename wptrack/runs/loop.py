@@ -7,7 +7,7 @@ is built (rig, videos, sizes, parameters, device), and the loop then owns what a
 * :class:`wptrack.io.run.RunWriter` (``tracks.csv`` appended per frame, ``run.json`` and ``particles.npz`` replaced
   atomically), with the job's extra writers opened in :meth:`TrackerRun.start` and always closed in
   :meth:`TrackerRun.finish`,
-* frames decoded ahead by a background thread (:class:`wptrack.io.frames.prefetch`), the time the tracker waited
+* frames decoded ahead by a background thread (:class:`wptrack.io.prefetch.prefetch`), the time the tracker waited
   for them recorded as the ``decode_wait`` stage, and the tracker's own per-stage timings,
 * a tqdm progress bar,
 * interruption: Ctrl-C (SIGINT) and SIGTERM stop the run after the frame in progress, with ``run.json`` status
@@ -356,7 +356,7 @@ def _run_locked(
     import itertools
 
     from wptrack.core.errors import ConfigError, WptrackError
-    from wptrack.io.frames import prefetch
+    from wptrack.io.prefetch import prefetch
     from wptrack.io.run import RUN_FILE, RunWriter
 
     if not resume and (out_dir / RUN_FILE).exists():

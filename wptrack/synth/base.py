@@ -257,7 +257,7 @@ def render_scene(
     from tqdm import tqdm
 
     from wptrack.io.atomic import atomic_write_json, atomic_write_text, ensure_writable_dir
-    from wptrack.io.frames import VideoWriter
+    from wptrack.io.video import VideoWriter
 
     spec = get_scene(name)
     if frames is not None and (isinstance(frames, bool) or not isinstance(frames, (int, np.integer)) or frames < 1):

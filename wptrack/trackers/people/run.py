@@ -190,7 +190,7 @@ class PeopleRun(TrackerRun):
 
     def start(self, out_dir: Path, resume_after: int | None = None) -> None:
         from wptrack.io.chunklog import ChunkLog
-        from wptrack.io.frames import continue_video
+        from wptrack.io.video import continue_video
 
         self._out_dir = out_dir
         self._hulls = ChunkLog(out_dir / HULLS_DIR, resume_after=resume_after)

@@ -222,8 +222,8 @@ class TemplateRun(TrackerRun):
         return self._stream
 
     def start(self, out_dir: Path, resume_after: int | None = None) -> None:
-        from wptrack.io.frames import continue_video
         from wptrack.io.tables import truncate_csv_after
+        from wptrack.io.video import continue_video
 
         best = out_dir / "best.csv"
         if resume_after is not None:

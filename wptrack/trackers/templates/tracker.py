@@ -38,7 +38,8 @@ from wptrack.cameras.rig import Camera, GroundPlane, Rig
 from wptrack.cameras.structs import camera_struct
 from wptrack.core.device import block_partition
 from wptrack.core.errors import ConfigError, RigError
-from wptrack.core.filter import BLOCK, MAX_BLOCKS, FrameChain, _seed_words, check_fits
+from wptrack.core.filter import BLOCK, MAX_BLOCKS, FrameChain, _seed_words
+from wptrack.core.memory import check_fits
 from wptrack.core.resampling import Resampler, bytes_per_particle, quantisation_bits
 from wptrack.io.frames import camera_frame
 from wptrack.kernels.core import reduce as kreduce
