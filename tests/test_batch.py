@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wptrack.batch import BATCH_FILE, load_manifest, run_batch
+from wptrack.batch import BATCH_FILE, run_batch
+from wptrack.batch.manifest import load_manifest
 from wptrack.cameras.rig import Camera, Rig
 from wptrack.cli import main
 from wptrack.core.errors import ConfigError
@@ -279,7 +280,7 @@ def test_ray_failing_run_reported_after_retries(ray_local, tmp_path, capsys):
 
 
 def test_example_manifest_is_valid():
-    from wptrack.batch import validate
+    from wptrack.batch.manifest import validate
 
     m = load_manifest(Path(__file__).resolve().parents[1] / "examples" / "batch_lab.yaml")
     assert [r.id for r in m.runs][:2] == ["n200-seed0", "n200-seed1"] and len(m.runs) == 7 and m.retries == 2
@@ -290,7 +291,7 @@ def test_example_manifest_is_valid():
 def test_track_arguments_of_every_tracker(tmp_path):
     """Manifest args become the run's declared parts (wptrack.runs.spec), by option name: lists for list options,
     booleans as values or as their opposite flag (no_virtual, joint), None for an option's default."""
-    from wptrack.batch import RunSpec, track_parts
+    from wptrack.batch.manifest import RunSpec, track_parts
 
     kw = {"rig": "r.yaml", "video": "v.avi", "classes": ["human"], "no_virtual": True, "camera": 0, "t_add": 0.4}
     t = track_parts(RunSpec("t", "templates", {**kw, "max_frames": None, "joint": True}), tmp_path)

@@ -123,7 +123,8 @@ def parallel_efficiency(
     """Measure E = T1 / (G TG) (see the module docstring) and return the numbers as a dict."""
     import ray
 
-    from wptrack.batch import execute_run, load_manifest
+    from wptrack.batch import execute_run
+    from wptrack.batch.manifest import load_manifest
     from wptrack.core.device import quiet_warp
 
     quiet_warp(True)

@@ -181,7 +181,8 @@ def sweep_batch(
     seeds) and is written with :func:`write_sweep` (``out_dir/errors.csv``, ``summary.json``). Completed runs are
     reused when the sweep is run again.
     """
-    from wptrack.batch import Manifest, RunSpec, run_batch
+    from wptrack.batch import run_batch
+    from wptrack.batch.manifest import Manifest, RunSpec
 
     if len(sigmas) == 0:
         raise ConfigError("sigma: give at least one value")
