@@ -12,6 +12,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import kernel_harness as harness
 import numpy as np
 import pytest
 import warp as wp
@@ -21,7 +22,6 @@ from wptrack.cameras.structs import DeviceRig
 from wptrack.cameras.tsai import _distorted_radius, load_tsai_camera, read_tsai, tsai_fit_residual, tsai_to_camera
 from wptrack.core.errors import ConfigError, RigError
 from wptrack.evaluation.groundtruth import boxes_to_ground, read_box_groundtruth, read_boxes
-from wptrack.kernels.core import camera as kcam
 
 DATA = Path(__file__).parent / "data" / "pets"
 XML = DATA / "View_001.xml"
@@ -86,7 +86,7 @@ def test_converted_camera_matches_tsai(device):
     drig = DeviceRig(Rig((cam,)), device)
     out = wp.zeros((1, len(pts)), dtype=wp.vec3, device=device)
     wp.launch(
-        kcam.project_kernel,
+        harness.project_kernel,
         dim=(1, len(pts)),
         inputs=[drig.cams, wp.array(pts / 1000.0, dtype=wp.vec3, device=device)],
         outputs=[out],

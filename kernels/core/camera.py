@@ -92,14 +92,3 @@ def pixel_index(cam: Camera, x: wp.vec3):
     if px < 0 or py < 0 or px >= cam.width or py >= cam.height:
         return -1
     return cam.pixel_offset + py * cam.width + px
-
-
-@wp.kernel
-def project_kernel(
-    cams: wp.array(dtype=Camera),
-    points: wp.array(dtype=wp.vec3),
-    out: wp.array2d(dtype=wp.vec3),
-):
-    """Project ``points`` (N,) into every camera; ``out`` (M, N) holds (u, v, depth) as in :func:`project`."""
-    c, i = wp.tid()
-    out[c, i] = project(cams[c], points[i])

@@ -306,30 +306,6 @@ def moments_store(
 
 
 @wp.kernel
-def block_partials_kernel(
-    logw: wp.array(dtype=wp.float32),
-    particles: wp.array(dtype=wp.vec3),
-    n: int,
-    chunk: int,
-    part_max: wp.array(dtype=wp.float32),
-    part_arg: wp.array(dtype=wp.int32),
-    part: wp.array2d(dtype=wp.float64),
-):
-    """Per-block max, MAP index and weighted sums (see :func:`moments_store`) of existing particles, in one pass.
-
-    The trackers fuse the same accumulation into their predict + score kernels; this kernel serves filters whose
-    weights come from elsewhere, and the tests. Launch with ``wp.launch_tiled(dim=[blocks], block_dim=B)``.
-    """
-    b, lane = wp.tid()
-    start = b * chunk
-    stop = wp.min(start + chunk, n)
-    best, arg, sw, sw2, sx, sxx = moments_zero()
-    for i in range(start + lane, stop, wp.block_dim()):
-        best, arg, sw, sw2, sx, sxx = moments_push(best, arg, sw, sw2, sx, sxx, logw[i], i, particles[i])
-    moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)
-
-
-@wp.kernel
 def final_moments_kernel(
     part_max: wp.array(dtype=wp.float32),
     part_arg: wp.array(dtype=wp.int32),
