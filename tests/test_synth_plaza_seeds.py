@@ -224,7 +224,7 @@ def test_vehicle_prior_covers_the_cars_turns_and_speeds() -> None:
     """The clamps of eq. 9 (``VehiclePrior.turn_max``, ``speed_max``) cover what every scene's cars do, seeds 0-50.
 
     A turn limit below a car's yaw rate makes every hypothesis of that car lag outside its turn, and humans are then
-    added on the part of the car it leaves uncovered (the U-turn lag of docs/reproduction.md: with the old limit of
+    added on the part of the car it leaves uncovered (the U-turn lag of docs/notes.md: with the old limit of
     1 rad/s the U-turns of s3-cars, up to 2.4 rad/s, were out of the prior's reach)."""
     prior = VehiclePrior()
     for name in ("s3-cars", "s3-mixed"):

@@ -10,7 +10,7 @@ every particle, the fraction of its image that nearer objects of the same partic
 (``dynamics.template_predict_kernel``) lowers the deletion probability and the diffusion of hidden objects.
 
 Off by default (``TemplateConfig.occlusion_del`` = ``occlusion_noise`` = 0, the kernel is then not launched): on
-the tuning scene it did not lower the group identity switches (docs/reproduction.md); kept as an option.
+the tuning scene it did not lower the group identity switches (docs/notes.md); kept as an option.
 
 The measure is on image boxes: each piece's hull (``raster.template_hulls_kernel``) is replaced by its bounding
 box clipped to the image, and the occlusion of object ``s`` is

@@ -4,7 +4,7 @@ Each particle of the template tracker is a whole scene (Juza et al., section 2.2
 (eq. 6) judges every object at once: with R objects a particle that fits one object well and another badly is
 kept or dropped as a whole, and the particles' diversity per object falls like the R-th root of N (the joint
 filter's curse of dimension; on the PETS clip, 4-8 people in view, 10,000 particles gave MOTA 0.50 where 1,000
-gave 0.14 with the same masks, docs/reproduction.md).
+gave 0.14 with the same masks, docs/notes.md).
 
 The matching penalty is a sum over pixels, so it splits wherever the objects' pixels do. The *box* of slot ``s``
 is the union over the particles of the image boxes of its drawn pieces (rows from the hulls, columns from their

@@ -10,7 +10,7 @@ Every object is made of ``PIECES`` convex 3D pieces, each given by at most ``HUL
   vertices. The paper's Fig. 2 template is a body prism with a head; ours keeps its parameters (height, body and
   head radius) but gives it legs narrower than the torso and a shoulder-to-head taper, because the silhouette of a
   walking person is narrow below the hips and wide at the arms: with one prism wide enough for the torso the XOR
-  penalty of a correctly placed person stayed at about 40 % of its mask area (docs/reproduction.md).
+  penalty of a correctly placed person stayed at about 40 % of its mask area (docs/notes.md).
 * vehicle (``KIND_VEHICLE``, dims = (length, width, height) metres, heading alpha radians): piece 0 the lower
   body box (full length and width, ``LOWER`` of the height), piece 1 the cabin box (``CABIN_LENGTH`` of the length,
   ``CABIN_WIDTH`` of the width, from the lower body to the full height).

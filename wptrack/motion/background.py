@@ -728,7 +728,7 @@ class OfflineBackground:
         Until 2026-11-24 the learnt ratio could lower ``shadow_lo`` but not raise it, because raising it on the
         PETS clip made the darker shadows at the people's feet foreground and the joint template filter then lost
         MOTA (0.24 -> 0.05); with the partitioned filter (``TemplateConfig.partition``) the fuller legs are worth
-        more than the feet's shadow costs (docs/reproduction.md, round five)."""
+        more than the feet's shadow costs (docs/notes.md, round five)."""
         c = self.config
         ri, rj = self._ratio.get(i), self._ratio.get(j)
         if ri is None and rj is None:

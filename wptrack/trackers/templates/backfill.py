@@ -19,7 +19,7 @@ constant velocity fitted (least squares) to its first ``fit_rows`` rows, and sto
 The added rows copy the track's first row (class, size, heading, spread) with the extrapolated position, the
 fitted speed and ``existence`` 0 (no particle holds them). Extending tracks *forwards* was tried and not kept: an
 object that stops being reported has mostly left, or its hypothesis died on a confusion that extrapolation would
-prolong (docs/reproduction.md, round seven).
+prolong (docs/notes.md, round seven).
 
 :func:`backfill_tracks_file` applies it to a completed run's ``tracks.csv``: every line of the file is kept as
 written, the new ones are added in frame order, and the file is replaced atomically (write to a temporary file,

@@ -93,7 +93,7 @@ class VehiclePrior:
     """sigma_v of eq. 9, m/s per frame."""
     sigma_turn: float = 0.3
     """sigma_theta of eq. 9, rad/s per frame. 0.3 lets the turn rate reach 1 rad/s within one second of turning in
-    (15 frames, one deviation); was 0.15 (docs/reproduction.md, round six)."""
+    (15 frames, one deviation); was 0.15 (docs/notes.md, round six)."""
     init_speed_sd: float = 3.0
     init_heading_sd: float = 0.2
     """Heading deviation of an added vehicle around the candidate's orientation, rad."""
@@ -102,7 +102,7 @@ class VehiclePrior:
     """|theta| limit, rad/s. A car's yaw rate is its speed over its turning radius: 2.5 rad/s is a 1.6 m radius at
     4 m/s, beyond any road car; the U-turns of ``wptrack synth s3-cars`` reach 2.4 rad/s. The former limit, 1 rad/s,
     held every hypothesis of a U-turning car outside its turn, and humans were added on the part it left uncovered
-    (docs/reproduction.md, round six)."""
+    (docs/notes.md, round six)."""
     orientations: int = 4
     """Candidate orientations in [0, pi) (a box is symmetric under a half turn)."""
     cost_a: float = 40.0
@@ -162,7 +162,7 @@ class TemplateConfig:
     they show motion where there is none, so a template pixel on background is weaker evidence against a
     hypothesis than a foreground pixel left uncovered (a per-pixel Bernoulli model with a miss rate above the
     false-alarm rate gives lambda < 1). 0.6 was chosen on the tuning scenes (scene seed 0, offline masks): 0.5 kept
-    more of the people whose clothes the masks miss, 0.75 placed cars better (docs/reproduction.md)."""
+    more of the people whose clothes the masks miss, 0.75 placed cars better (docs/notes.md)."""
     exclusion: float = param(
         300.0,
         help="cost of two objects of a particle on the same ground, per pair at full overlap (0: eq. 5 exactly)",
@@ -201,7 +201,7 @@ class TemplateConfig:
     height: 0.05 m). In a group the feet of the people behind are hidden, and a template placed too near the camera
     and grown tall (to dims_max) covers the same pixels as the right one: seen on s3-groups, where lagging hypotheses
     sat 0.7-1 m nearer than their person with heights of 2.0-2.1 m. 0.02 was chosen on scene seed 0 (s3-groups,
-    perfect masks, tracker seeds 0-3: 8.0 ID switches per run instead of 10.0; docs/reproduction.md)."""
+    perfect masks, tracker seeds 0-3: 8.0 ID switches per run instead of 10.0; docs/notes.md)."""
     occlusion_del: float = param(
         0.0, help="share of T_del that an object's occlusion removes (0: eq. 13 exactly)", lo=0.0, hi=1.0
     )
@@ -212,7 +212,7 @@ class TemplateConfig:
     the particles until the slot is freed and the person is re-added with a new label (an identity switch). Off by
     default: on the tuning scene it did not lower the group ID switches (1: 11.3 per run over tracker seeds 0-3 instead
     of 10.0; with ``dims_revert`` 17.5 instead of 8.0): hidden hypotheses that are kept also wander
-    onto the wrong person (docs/reproduction.md)."""
+    onto the wrong person (docs/notes.md)."""
     occlusion_noise: float = param(
         0.0, help="share of the motion noise that an object's occlusion removes (0: eqs. 8-9 exactly)", lo=0.0, hi=1.0
     )
@@ -228,7 +228,7 @@ class TemplateConfig:
     under eq. 13 alone it stays (and is reported) for 1 / T_del = 50 frames on average after it left. Off by
     default: on scene seeds 0-2 (with ``vehicle_entry_px`` 64) 0.5 lowered the false positives of s3-people (13 -> 7
     per run) and s3-mixed (18 -> 13) but s3-cars lost accuracy (0.93 -> 0.85), a difference 9 runs per scene cannot
-    separate from the seed spread (docs/reproduction.md)."""
+    separate from the seed spread (docs/notes.md)."""
     human: HumanPrior = param(
         default_factory=HumanPrior, help="the human template, its prior and dynamics (YAML, --config)", flag=""
     )
@@ -258,7 +258,7 @@ class TemplateConfig:
     of a reported vehicle are skipped). Beyond the paper: the uncovered part of a partly explained car (entering the
     image, turning, a vehicle hypothesis lagging behind it) is human-sized, so eq. 11 adds humans on it; a car's blob
     fills a vehicle template, a person's does not. 0.85 was chosen on scene seed 0 over 0.7 (with 0.7 s3-mixed lost a
-    person for up to 50 frames; docs/reproduction.md)."""
+    person for up to 50 frames; docs/notes.md)."""
     absorb: bool = param(True, help="an added vehicle removes the particle's humans on its footprint (off: eq. 12)")
     """A vehicle added to a particle removes the particle's humans whose ground disc meets its footprint (one move
     that replaces the humans covering a car by the vehicle, drawn with the addition's own random number; the
@@ -271,14 +271,14 @@ class TemplateConfig:
     shows only its front, no vehicle centred in the image fits that blob, and eq. 11 added humans on it (the short-
     lived false positives beside cars). 64 was chosen on scene seeds 0-2 (tracker seeds 0-2, offline masks): s3-mixed
     MOTA 0.566 -> 0.665 and false positives per run 55 -> 18, s3-cars MOTA 0.468 -> 0.609, s3-people and s3-groups
-    unchanged within their spread; 128 gave the same (docs/reproduction.md)."""
+    unchanged within their spread; 128 gave the same (docs/notes.md)."""
     human_entry_px: int = param(
         64, help="human candidates also this far beyond the image's left, right and bottom borders", units="px", lo=0
     )
     """Human addition candidates also stand under the pixels up to this far beyond the image's left, right and bottom
     borders, pixels (0: under the image only, the paper's grid). Beyond the paper: a person walking in from below the
     image shows the head and shoulders first, whose ground point is below the image, so no human candidate fitted
-    them until the feet came into view, 0.6-1 s later (docs/reproduction.md, round six). 64 as for vehicles; chosen on
+    them until the feet came into view, 0.6-1 s later (docs/notes.md, round six). 64 as for vehicles; chosen on
     scene seeds 0-5 (perfect masks: 16 and 64 px helped, 128 px did not)."""
     min_track_frames: int = param(
         8,
@@ -296,7 +296,7 @@ class TemplateConfig:
     compared): s3-cars MOTA 0.609 -> 0.704 and id switches 2.9 -> 1.4 per run with the same accuracy, s3-mixed MOTA
     0.665 -> 0.671, s3-groups id switches 10.9 -> 8.4, s3-people accuracy 0.667 -> 0.644 (one short true track); 12
     and 16 cost s3-mixed accuracy. Held out it costs accuracy where an object was only covered by short fragments
-    (s3-cars 0.92 -> 0.86) and halves the id switches (docs/reproduction.md, round four)."""
+    (s3-cars 0.92 -> 0.86) and halves the id switches (docs/notes.md, round four)."""
     backfill_seconds: float = param(
         1.35,
         help="when the run completes, extend each lasting track back over up to this long before it was first "
@@ -314,7 +314,7 @@ class TemplateConfig:
     known to have held it. 20 frames and 15 rows were chosen on scene seeds 0-5 (15 fps, tracker seeds 0-2, both mask
     kinds; 10, 20 and 30 frames, 0 and 15 rows compared): s3-people accuracy 0.60 -> 0.71 (offline masks) and 0.87 ->
     0.94 (perfect), no scene worse. The horizon is a time because the extrapolation's error grows with time
-    (docs/reproduction.md, round seven). Extending forwards was tried and not kept (s3-cars MOTA fell: hypotheses that
+    (docs/notes.md, round seven). Extending forwards was tried and not kept (s3-cars MOTA fell: hypotheses that
     died on a confusion were prolonged)."""
     backfill_min_frames: int = param(15, help="backfill only tracks with at least this many rows", units="rows", lo=1)
     """Tracks with fewer rows than this in ``tracks.csv`` are not backfilled (``backfill_seconds``): short tracks
@@ -334,7 +334,7 @@ class TemplateConfig:
     object now and then (eq. 13 deletes it, or a neighbour's hypothesis takes its pixels) and adds it again under a new
     label, an identity switch that the completed run can see. Chosen on scene seeds 0-5 (tracker seeds 0-2, both mask
     kinds; 2 and 4 s, 1 and 2 m compared): s3-groups IDF1 0.793 -> 0.820 and id switches 5.2 -> 3.8 per run (offline
-    masks), s3-mixed IDF1 0.844 -> 0.885, no scene worse (docs/reproduction.md, round seven)."""
+    masks), s3-mixed IDF1 0.844 -> 0.885, no scene worse (docs/notes.md, round seven)."""
     stitch_distance: float = param(
         2.0, help="largest distance from where the ended track was heading", units="m", lo=0.0
     )
