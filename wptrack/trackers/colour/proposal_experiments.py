@@ -25,7 +25,7 @@ def render_frames(scene_name: str, frames: int, scene_seed: int = 0, positions: 
     Args:
         scene_name: e.g. ``s1-lab``.
         frames: number of frames.
-        scene_seed: seed of the sensor noise.
+        scene_seed: seed of the sensor noise (and of the layout for seeded scenes such as ``s1-clutter``).
         positions: optional (frames, 3) ball centres (metres) replacing the scene's trajectory; NaN rows hide the
             ball (rendered far behind every camera's view is not possible in general, so the frame is rendered
             without the ball by placing it 1 km below the floor).
@@ -33,7 +33,8 @@ def render_frames(scene_name: str, frames: int, scene_seed: int = 0, positions: 
     Returns:
         ``(scene, images per frame, (frames, 3) truth)``; truth rows are NaN where the ball is hidden.
     """
-    scene = get_scene(scene_name).build()
+    spec = get_scene(scene_name)
+    scene = spec.build(scene_seed) if spec.seeded else spec.build()
     truth = scene.trajectories(frames)[0] if positions is None else np.asarray(positions, dtype=np.float64)
     rngs = [np.random.default_rng([scene_seed, c]) for c in range(len(scene.rig))]
     images = []
