@@ -11,7 +11,9 @@ another room with the same ingredients, so tuning on some seeds and reporting on
   saturation with a hue just outside its range (``hue_near``: violet-magenta and raspberry); small cushions and books
   of both kinds. Sensor noise, shading, JPEG and the light change push a fraction of their pixels into the target's
   HSI range: the colour masks show sparse or dense speckle over areas much larger than the ball.
-- **A true distractor**: a small box in exactly the target's colour, placed where only one camera sees it.
+- **A true distractor**: a small box in exactly the target's colour, in camera 1's view and outside the images of at
+  least half of the other cameras (with two cameras: seen by camera 1 only), so fewer cameras agree on it than on a
+  ball seen by all (left out when no such place is found).
 - **Partial occlusion**: a thin pole between camera 1 and the ball's position at a frame in 6-14 (where the ball moves
   most across camera 1's view) hides part of the ball for a few frames.
 - **The ball leaves one camera's view**: the last camera is zoomed (1.6x focal length) and aimed so that the ball's
@@ -19,7 +21,7 @@ another room with the same ingredients, so tuning on some seeds and reporting on
   ``visibility`` says when; on a few seeds, whose path runs along that camera's line of sight, no aim does it and
   the ball stays in view).
 - **Illumination drift**: brightness x ``light_gain`` and a warmer colour temperature over ``light_ramp`` frames
-  (hues move towards red: violet look-alikes drift into the target's hue range).
+  (hues move towards red: violet look-alikes drift to the edge of the target's hue range).
 - **Compression**: each frame is JPEG-encoded at quality ``jpeg_quality`` and decoded (blocking, chroma subsampling),
   then written losslessly, so the files hold exactly the frames a tracker saw in memory.
 - **Calibration**: OpenCV radial + tangential distortion on every camera; ``rig.yaml`` names one OpenCV FileStorage
@@ -91,7 +93,8 @@ def lookalike_albedo(kind: str, rng: np.random.Generator) -> tuple[float, float,
 
     Args:
         kind: ``sat_low`` (the target's hue, saturation 0.20-0.285: just below the range) or ``hue_near`` (saturation
-            0.4-0.65, hue 296-309 or 351-358 deg: just outside the range on either side).
+            0.4-0.65, hue 292-304 or 351-358 deg: outside the range on either side; the light change moves the violet
+            ones 7-10 degrees towards it, to 299-314).
         rng: draws the colour.
 
     Returns:
@@ -100,7 +103,7 @@ def lookalike_albedo(kind: str, rng: np.random.Generator) -> tuple[float, float,
     if kind == "sat_low":
         h, s = rng.uniform(318.0, 342.0), rng.uniform(0.20, 0.285)
     elif kind == "hue_near":
-        h = rng.uniform(296.0, 309.0) if rng.random() < 0.5 else rng.uniform(351.0, 358.0)
+        h = rng.uniform(292.0, 304.0) if rng.random() < 0.5 else rng.uniform(351.0, 358.0)
         s = rng.uniform(0.4, 0.65)
     else:
         raise ValueError(f"unknown look-alike kind {kind!r}")
@@ -124,7 +127,8 @@ class ClutterConfig:
         speed: speed of the ball, m/s (constant along its path).
         large_lookalikes: number of large look-alike objects (furniture, wall panels).
         small_lookalikes: number of small look-alike objects (cushions, books).
-        true_distractor: place a small box in the target's exact colour, seen by one camera only.
+        true_distractor: place a small box in the target's exact colour, seen by camera 1 and at most half of the
+            other cameras (if such a place exists).
         pole: place a thin pole that partially hides the ball from camera 1 for a few frames (around frames 6-14).
         leave_view: zoom the last camera and aim it so that the ball leaves its view within frames 8-30.
         light_ramp: (first, last) frames of the illumination change.
@@ -150,7 +154,7 @@ class ClutterConfig:
     leave_view: bool = True
     light_ramp: tuple[int, int] = (10, 40)
     light_gain: float = 1.2
-    warmth: float = 0.07
+    warmth: float = 0.05
     noise_sigma: float = 3.0
     jpeg_quality: int = 70
     distortion: float = 0.18
@@ -210,6 +214,28 @@ def _leaving_view(
         if inside[0] and np.sum(outside[8:31]) >= 5:
             return aim
     return start
+
+
+def _mostly_in_first_view(cams, rng: np.random.Generator, tries: int = 400) -> np.ndarray | None:
+    """A point 0.3-1.2 m in front of camera 1, in its image, above the floor, inside the room and outside the images
+    (by 20 pixels, or behind) of at least half of the other cameras - with two cameras, of the other one - occlusion
+    ignored; None when none of ``tries`` draws is."""
+    first = cams[0]
+    lo, hi = np.asarray(ROOM_LO) + 0.1, np.asarray(ROOM_HI) - 0.1
+    need = max(1, -(-(len(cams) - 1) // 2))
+    for _ in range(tries):
+        uv = rng.uniform([10.0, 10.0], [first.width - 10.0, first.height - 10.0])
+        p = first.center + rng.uniform(0.3, 1.2) * first.pixel_rays(uv[None])[0]
+        if np.any(p < lo) or np.any(p > hi) or p[2] < 0.06:
+            continue
+        unseen = 0
+        for cam in cams[1:]:
+            q, depth = cam.project(p[None])
+            inside = (q[0] > -20.0) & (q[0] < np.array([cam.width, cam.height]) + 20.0)
+            unseen += int(not (depth[0] > 0 and np.all(inside)))
+        if unseen >= need:
+            return p
+    return None
 
 
 def _crossing_frame(path: np.ndarray, centre: np.ndarray) -> int:
@@ -333,13 +359,11 @@ class ClutterScene(Scene):
             else:
                 objects.append(Cylinder((c[0], c[1]), size[0] / 2, blo[2], bhi[2], solid(albedo), LABEL_LOOKALIKE))
         cams = self.rig.cameras
-        if cfg.true_distractor:  # in the target's colour, only in front of camera 1 (close to it, below its view axis)
-            c0 = np.asarray(cams[0].center)
-            toward = np.asarray(PATH_CENTRE) - c0
-            p = c0 + 0.3 * toward
-            p[2] = max(0.06, p[2] - 0.45)
-            s = 0.05
-            objects.append(Box(tuple(p - s), tuple(p + s), solid(BALL_RGB), LABEL_TRUE_DISTRACTOR))
+        if cfg.true_distractor:  # in the target's colour, in camera 1's view and out of half the others'
+            p = _mostly_in_first_view(cams, rng)
+            if p is not None:
+                s = 0.05
+                objects.append(Box(tuple(p - s), tuple(p + s), solid(BALL_RGB), LABEL_TRUE_DISTRACTOR))
         if cfg.pole:  # a thin pole between camera 1 and the ball: partial occlusion for a few frames
             c0 = np.asarray(cams[0].center)
             f = _crossing_frame(path, c0)

@@ -30,8 +30,9 @@ from wptrack.cameras.rig import Rig
 from wptrack.cameras.structs import ColourMaps, DeviceRig
 from wptrack.core.device import resolve_device
 from wptrack.core.errors import ConfigError, FrameError
-from wptrack.core.filter import Estimate, ParticleFilter, check_particles
+from wptrack.core.filter import BLOCK, Estimate, ParticleFilter, check_particles
 from wptrack.core.resampling import SCHEMES
+from wptrack.kernels.colour import blobs as kblobs
 from wptrack.kernels.colour import hsi as kcolour
 from wptrack.kernels.colour import proposal as kproposal
 from wptrack.kernels.colour import scoring as kscoring
@@ -40,8 +41,9 @@ log = logging.getLogger(__name__)
 
 SCORE_MODES = ("auto", "direct", "integral", "map")
 PROPOSALS = ("prior", "mixture")
-"""``prior``: the paper's filter (particles drawn from the gaussian walk only); ``mixture``: the detection-driven
-mixture proposal of ``wptrack.kernels.colour.proposal`` (converges from anywhere, re-acquires a lost object)."""
+"""``prior``: the paper's filter (particles drawn from the gaussian walk only); ``mixture``: the walk plus jumps to
+geometric detection candidates decided by a mode test (``wptrack.kernels.colour.proposal``; converges from anywhere,
+re-acquires a lost object)."""
 
 
 @dataclass(frozen=True)
@@ -128,16 +130,25 @@ class ColorConfig:
             results.
         seed: seed of the counter-based random streams (same seed + device -> identical output).
         keep_particles: particles per frame copied back for reports (0 = none).
-        proposal: ``prior`` (the paper's filter, bit-identical to earlier versions) or ``mixture``: draw each
-            particle from (1 - mixture) x motion prior + mixture x detection proposal, importance-weighted
-            (``wptrack.kernels.colour.proposal``).
-        mixture: fraction eps of particles drawn from the detection proposal, in [0, 1) (mixture only).
-        reset_rate: probability alpha per frame that the object jumps uniformly into the working volume (the
-            motion model's kidnap term, which makes re-acquisition possible), in [0, 1) (mixture only).
-        detection_sigma: deviation sigma_d of each detection component, metres (mixture only).
-        detection_components: number K of gaussian components of the detection proposal (mixture only).
-        detection_tries: rejection-sampling draws per component and camera to find a target pixel (mixture only).
-        max_gap: largest distance between two back-projected rays accepted as a triangulation, metres.
+        proposal: ``prior`` (the paper's filter, bit-identical to earlier versions) or ``mixture``: the motion model
+            may jump to a detection candidate - colour blobs triangulated across camera pairs - when a mode test says
+            the candidates beat the cloud (``wptrack.kernels.colour.proposal``, ``wptrack.kernels.colour.blobs``).
+        mixture: fraction eps of particles that jump to the detection candidates on a frame where the mode test fires
+            and on the first frame after a random initialisation, in [0, 1) (mixture only).
+        reset_rate: fraction alpha of particles that jump to the candidates on the other frames, in [0, 1) (mixture
+            only; 0: a stable track never jumps).
+        detection_sigma: deviation sigma_d of the particles a jump puts around a candidate, metres (mixture only).
+        detection_components: number K of candidates kept per frame (the best after non-maximum suppression within
+            2 sigma_d), 1 to 64 (mixture only).
+        blobs: colour blobs kept per camera and frame (the best local maxima of the target-pixel count over 15 x 15
+            pixel neighbourhoods), 1 to 32 (mixture only).
+        min_blob_pixels: fewest target pixels in a blob's 15 x 15 neighbourhood (mixture only).
+        epipolar_px: largest reprojection error, pixels, of a blob pair's triangulated point in either camera of the
+            pair (mixture only).
+        jump_margin: nats per frame by which the best candidate's log-likelihood must exceed the cloud's (that of the
+            previous estimate on the current frame) before evidence accumulates (mixture only).
+        jump_evidence: accumulated excess, nats, beyond which the frame jumps (a CUSUM; 0: the first frame whose
+            excess passes the margin jumps) (mixture only).
     """
 
     particles: int = 200
@@ -150,12 +161,15 @@ class ColorConfig:
     seed: int = 0
     keep_particles: int = 0
     proposal: str = "prior"
-    mixture: float = 0.25
-    reset_rate: float = 0.05
-    detection_sigma: float = 0.04
-    detection_components: int = 32
-    detection_tries: int = 1024
-    max_gap: float = 0.1
+    mixture: float = 0.5
+    reset_rate: float = 0.0
+    detection_sigma: float = 0.02
+    detection_components: int = 8
+    blobs: int = 8
+    min_blob_pixels: int = 8
+    epipolar_px: float = 8.0
+    jump_margin: float = 2.0
+    jump_evidence: float = 0.0
 
     def __post_init__(self) -> None:
         check_particles(self.particles)
@@ -165,14 +179,18 @@ class ColorConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo <= v < hi):
                 raise ConfigError(f"{name}: expected a fraction in [{lo:g}, {hi:g}), got {v!r}")
-        for name in ("detection_sigma", "max_gap"):
+        for name, what in (("detection_sigma", "a length in metres"), ("epipolar_px", "a distance in pixels")):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
-                raise ConfigError(f"{name}: expected a positive length in metres, got {v!r}")
-        for name, hi in (("detection_components", 4096), ("detection_tries", 1 << 20)):
+                raise ConfigError(f"{name}: expected {what} > 0, got {v!r}")
+        for name in ("jump_margin", "jump_evidence"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not (1 <= v <= hi):
-                raise ConfigError(f"{name}: expected an integer in [1, {hi}], got {v!r}")
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+                raise ConfigError(f"{name}: expected a log-likelihood ratio >= 0 nats, got {v!r}")
+        for name, lo, hi in (("detection_components", 1, 64), ("blobs", 1, 32), ("min_blob_pixels", 1, 225)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not (lo <= v <= hi):
+                raise ConfigError(f"{name}: expected an integer in [{lo}, {hi}], got {v!r}")
         if (
             isinstance(self.sigma, bool)
             or not isinstance(self.sigma, (int, float))
@@ -206,7 +224,13 @@ class ColorTracker(ParticleFilter):
         maps: :class:`wptrack.cameras.structs.ColourMaps` (mask, integral images, window map) in integral/map mode.
     """
 
-    kernel_modules = (*ParticleFilter.kernel_modules, "wptrack.kernels.colour.hsi", "wptrack.kernels.colour.scoring")
+    kernel_modules = (
+        *ParticleFilter.kernel_modules,
+        "wptrack.kernels.colour.hsi",
+        "wptrack.kernels.colour.scoring",
+        "wptrack.kernels.colour.proposal",
+        "wptrack.kernels.colour.blobs",
+    )
 
     def __init__(
         self,
@@ -273,12 +297,9 @@ class ColorTracker(ParticleFilter):
             config = replace(config, init_box=tuple(tuple(float(c) for c in v) for v in rig.bounds()))
             self.config = config
         self.volume = tuple(tuple(float(c) for c in v) for v in (config.init_box or rig.bounds()))
-        k = config.detection_components
-        self.det_centres = wp.zeros(k, dtype=wp.vec3, device=d)
-        self.det_valid = wp.zeros(k, dtype=wp.int32, device=d)
-        self.det_count = wp.zeros(1, dtype=wp.int32, device=d)
-        self.det_count_host = wp.zeros(1, dtype=wp.int32, device="cpu", pinned=self.is_cuda)
         self.uniform_frame = wp.array([-1], dtype=wp.int32, device=d)
+        if config.proposal != "prior":
+            self._allocate_detection()
         if config.init is not None:
             self.init_point(config.init)
         else:
@@ -291,18 +312,83 @@ class ColorTracker(ParticleFilter):
             self.device,
         )
 
+    def _allocate_detection(self) -> None:
+        """Fixed-size device buffers of the geometric detection and the mode test (``proposal='mixture'``):
+
+        sb_offset: (M + 1,) int32 start of each camera's 5 x 5 sub-block grid in ``sb_counts``.
+        sb_counts, peaks: (sum floor(W/5) floor(H/5),) int32 target pixels per sub-block; float32 peak scores.
+        part_score, part_index, part_uv: (M, chunks, PEAK_KEEP) the best peaks of each chunk of sub-blocks.
+        blob_score, blob_uv: (M, B) blobs per camera (pixel count of the 15 x 15 neighbourhood, 0 = empty; centre, px).
+        pair_a, pair_b: (P,) int32 camera pairs (a < b), P = M (M - 1) / 2.
+        cand_pos, cand_score, cand_keep: (P B^2,) triangulated candidates, their log-likelihood, the NMS flag.
+        det_pos, det_score, det_cum: (K,) the kept candidates (score descending, LOG_ZERO = empty slot) and their
+            normalised cumulative weights; det_count: (1,) int32 valid slots.
+        mix: (MIX_SIZE,) float32 the frame's jump threshold, evidence, jump flag, CUSUM (``kernels.colour.proposal``).
+        """
+        from statistics import NormalDist
+
+        cfg, d = self.config, self.device
+        cams = self.rig.cameras
+        m = len(cams)
+        sizes = [(c.width // int(kblobs.SUBBLOCK)) * (c.height // int(kblobs.SUBBLOCK)) for c in cams]
+        self._sb_max = (
+            max(c.height // int(kblobs.SUBBLOCK) for c in cams),
+            max(c.width // int(kblobs.SUBBLOCK) for c in cams),
+        )
+        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int32)
+        total = max(1, int(offsets[-1]))
+        self._chunks = max(1, -(-max(sizes) // int(kblobs.PEAK_CHUNK)))
+        keep = int(kblobs.PEAK_KEEP)
+        self.sb_offset = wp.array(offsets, dtype=wp.int32, device=d)
+        self.sb_counts = wp.zeros(total, dtype=wp.int32, device=d)
+        self.peaks = wp.zeros(total, dtype=wp.float32, device=d)
+        self.part_score = wp.zeros((m, self._chunks, keep), dtype=wp.float32, device=d)
+        self.part_index = wp.zeros((m, self._chunks, keep), dtype=wp.int32, device=d)
+        self.part_uv = wp.zeros((m, self._chunks, keep), dtype=wp.vec2, device=d)
+        b = cfg.blobs
+        self.blob_score = wp.zeros((m, b), dtype=wp.float32, device=d)
+        self.blob_uv = wp.zeros((m, b), dtype=wp.vec2, device=d)
+        pairs = [(i, j) for i in range(m) for j in range(i + 1, m)]
+        self._pairs = len(pairs)
+        self.pair_a = wp.array([p[0] for p in pairs] or [0], dtype=wp.int32, device=d)
+        self.pair_b = wp.array([p[1] for p in pairs] or [0], dtype=wp.int32, device=d)
+        c = max(1, len(pairs) * b * b)
+        self.cand_pos = wp.zeros(c, dtype=wp.vec3, device=d)
+        self.cand_score = wp.full(c, float(kproposal.LOG_ZERO), dtype=wp.float32, device=d)
+        self.cand_keep = wp.zeros(c, dtype=wp.int32, device=d)
+        k = cfg.detection_components
+        self.det_pos = wp.zeros(k, dtype=wp.vec3, device=d)
+        self.det_score = wp.full(k, float(kproposal.LOG_ZERO), dtype=wp.float32, device=d)
+        self.det_cum = wp.zeros(k, dtype=wp.float32, device=d)
+        self.det_count = wp.zeros(1, dtype=wp.int32, device=d)
+        self.mix = wp.zeros(int(kproposal.MIX_SIZE), dtype=wp.float32, device=d)
+        pinned = self.is_cuda
+        self.det_count_host = wp.zeros(1, dtype=wp.int32, device="cpu", pinned=pinned)
+        self.mix_host = wp.zeros(int(kproposal.MIX_SIZE), dtype=wp.float32, device="cpu", pinned=pinned)
+
+        def threshold(p: float) -> float:
+            return NormalDist().inv_cdf(p) if p > 0.0 else float(kproposal.NO_JUMP)
+
+        self._thresholds = wp.vec2(threshold(cfg.mixture), threshold(cfg.reset_rate))
+
     def init_box(self, lo, hi) -> None:
-        """Particles uniform in the box [lo, hi] (metres); with the mixture proposal the next frame's prior is this
-        uniform distribution (alpha = 1 for that frame, ``kernels.colour.proposal``)."""
+        """Particles uniform in the box [lo, hi] (metres); with the mixture proposal the next frame draws its
+        non-jumping particles uniformly in the box and a fraction ``mixture`` from the detection candidates
+        (``kernels.colour.proposal``)."""
         super().init_box(lo, hi)
         if hasattr(self, "uniform_frame"):
             self.uniform_frame.fill_(self.frames_done)
 
     def init_point(self, point) -> None:
-        """Put every particle at ``point`` (3,) metres (the paper's initialisation)."""
+        """Put every particle at ``point`` (3,) metres (the paper's initialisation); with the mixture proposal the
+        first mode test compares the candidates with this point."""
         super().init_point(point)
         if hasattr(self, "uniform_frame"):
             self.uniform_frame.fill_(-1)
+        if hasattr(self, "mix"):
+            p = np.asarray(point, dtype=np.float64).reshape(-1)
+            wp.launch(kproposal.set_anchor_kernel, dim=1, inputs=[wp.vec3(*p)], outputs=[self.est], device=self.device)
+            self.mix.zero_()
 
     # --- observation --------------------------------------------------------------------------------
     def upload(self, images: Sequence[np.ndarray]) -> None:
@@ -328,43 +414,108 @@ class ColorTracker(ParticleFilter):
         if self.maps is not None:
             self.maps.launch(self._target, self.bgr)
 
+    def _launch_detection(self) -> None:
+        """Blobs, candidates and the mode test of the current frame (``proposal='mixture'``; fixed launches)."""
+        cfg, d, dr = self.config, self.device, self.drig
+        m = dr.num_cameras
+        obs = [dr.cams, self._target, self.bgr, self._integral, self._window, self._mode_id]
+        wp.launch(
+            kblobs.subblock_counts_kernel,
+            dim=(m, *self._sb_max),
+            inputs=[*obs, self.sb_offset],
+            outputs=[self.sb_counts],
+            device=d,
+        )
+        wp.launch_tiled(
+            kblobs.blob_peaks_kernel,
+            dim=[m, self._chunks],
+            inputs=[dr.cams, self.sb_offset, self.sb_counts, cfg.min_blob_pixels],
+            outputs=[self.peaks, self.part_score, self.part_index, self.part_uv],
+            block_dim=BLOCK,
+            device=d,
+        )
+        wp.launch(
+            kblobs.blob_select_kernel,
+            dim=(m, self._chunks, int(kblobs.PEAK_KEEP)),
+            inputs=[self.part_score, self.part_index, self.part_uv, cfg.blobs],
+            outputs=[self.blob_score, self.blob_uv],
+            device=d,
+        )
+        if self._pairs > 0:
+            lo, hi = (wp.vec3(*v) for v in self.volume)
+            c = self.cand_pos.shape[0]
+            wp.launch(
+                kblobs.candidates_kernel,
+                dim=c,
+                inputs=[*obs, self.blob_score, self.blob_uv, self.pair_a, self.pair_b, cfg.epipolar_px, lo, hi],
+                outputs=[self.cand_pos, self.cand_score],
+                device=d,
+            )
+            radius = 2.0 * cfg.detection_sigma
+            wp.launch(
+                kblobs.candidate_keep_kernel,
+                dim=c,
+                inputs=[self.cand_pos, self.cand_score, radius],
+                outputs=[self.cand_keep],
+                device=d,
+            )
+            wp.launch(
+                kblobs.candidate_rank_kernel,
+                dim=max(c, cfg.detection_components),
+                inputs=[self.cand_pos, self.cand_score, self.cand_keep],
+                outputs=[self.det_pos, self.det_score],
+                device=d,
+            )
+        wp.launch(
+            kproposal.jump_decision_kernel,
+            dim=1,
+            inputs=[*obs, self.det_score, self.est, self.frame, self.uniform_frame, self._thresholds]
+            + [cfg.jump_margin, cfg.jump_evidence],
+            outputs=[self.det_cum, self.det_count, self.mix],
+            device=d,
+        )
+
+    def stages(self, src: int, dst: int):
+        """The frame chain as named stages (for profiling); with the mixture proposal a ``detect`` stage (blobs,
+        candidates, mode test) runs between ``observe`` and ``predict_score``."""
+        stages = super().stages(src, dst)
+        if self.config.proposal == "prior":
+            return stages
+        return [stages[0], ("detect", self._launch_detection), *stages[1:]]
+
     def _launch_predict_score(self, src: int, dst: int) -> None:
         observation = [self.drig.cams, self._target, self.bgr, self._integral, self._window, self._mode_id]
         cfg = self.config
+        map_set = self.score_mode == "map" and self.drig.cam_set.count > 0
         if cfg.proposal == "prior":
-            if self.score_mode == "map" and self.drig.cam_set.count > 0:  # the large-N kernel (cameras by value)
+            if map_set:  # the large-N kernel (cameras by value)
                 kernel = kscoring.colour_predict_score_map_kernel(self.drig.cam_set.count)
                 self._launch_fused(kernel, [self.drig.cam_set, self._window], src, dst)
                 return
             self._launch_fused(kscoring.colour_predict_score_kernel, observation, src, dst)
             return
-        d = self.device
-        k = cfg.detection_components
-        lo, hi = (np.asarray(v, dtype=np.float64) for v in self.volume)
-        depth_hi = float(np.linalg.norm(hi - lo))
-        wp.launch(
-            kproposal.detection_components_kernel,
-            dim=k,
-            inputs=[self.drig.cams, self._target, self.bgr, self.seed, self.frame, cfg.detection_tries]
-            + [cfg.max_gap, 0.1, depth_hi],
-            outputs=[self.det_centres, self.det_valid],
-            device=d,
-        )
-        wp.launch(kproposal.detection_count_kernel, dim=1, inputs=[self.det_valid], outputs=[self.det_count], device=d)
-        observation += [self.det_centres, self.det_valid, self.det_count, cfg.detection_sigma, cfg.mixture]
-        observation += [cfg.reset_rate, self.uniform_frame, wp.vec3(*lo), wp.vec3(*hi)]
-        self._launch_fused(kproposal.colour_mixture_predict_score_kernel, observation, src, dst)
+        lo, hi = (wp.vec3(*v) for v in self.volume)
+        jumps = [self.det_pos, self.det_cum, self.det_count, self.mix, cfg.detection_sigma, self.uniform_frame, lo, hi]
+        if map_set:
+            kernel = kproposal.colour_jump_predict_score_map_kernel(self.drig.cam_set.count)
+            self._launch_fused(kernel, [self.drig.cam_set, self._window, *jumps], src, dst)
+            return
+        self._launch_fused(kproposal.colour_jump_predict_score_kernel, observation + jumps, src, dst)
 
     def _readback(self) -> None:
         super()._readback()
         if self.config.proposal != "prior":
             wp.copy(self.det_count_host, self.det_count)
+            wp.copy(self.mix_host, self.mix)
 
     def advance(self) -> Estimate:
-        """One frame on the uploaded images; ``Estimate.detection`` is the number of valid detection components
-        (0 = no target pixel in any camera; the proposal fell back to the prior) or -1 with ``proposal='prior'``."""
+        """One frame on the uploaded images; ``Estimate.detection`` is the number of detection candidates kept (0 = no
+        candidate: the frame was the paper's) or -1 with ``proposal='prior'``; ``Estimate.jump`` whether the frame
+        jumped (mode test fired, or first frame after a random initialisation)."""
         est = super().advance()
-        est.detection = int(self.det_count_host.numpy()[0]) if self.config.proposal != "prior" else -1
+        if self.config.proposal != "prior":
+            est.detection = int(self.det_count_host.numpy()[0])
+            est.jump = bool(self.mix_host.numpy()[int(kproposal.MIX_JUMP)] > 0.5)
         return est
 
     # --- public API -----------------------------------------------------------------------------------
