@@ -84,24 +84,32 @@ def test_subblock_counts_match_numpy(device, rng, mode):
 
 
 def peaks_ref(counts, nx, ny, min_pixels):
-    """Peak scores (0: not a peak) and blob centres of one camera's (ny, nx) grid, by the module's definitions."""
+    """Peak keys (0: not a peak), blob centres and all keys of one camera's (ny, nx) grid, by the module's
+    definitions: key = 1024 x (3 x 3 count) + (5 x 5 count)."""
     c = counts.reshape(ny, nx)
-    pad = np.pad(c, 1)
-    nsum = sum(pad[1 + dy : 1 + dy + ny, 1 + dx : 1 + dx + nx] for dy in (-1, 0, 1) for dx in (-1, 0, 1))
-    npad = np.pad(nsum, 1, constant_values=-1)
+
+    def box(r):
+        pad = np.pad(c, r)
+        return sum(
+            pad[r + dy : r + dy + ny, r + dx : r + dx + nx] for dy in range(-r, r + 1) for dx in range(-r, r + 1)
+        )
+
+    s3 = box(1)
+    key = s3 * 1024 + box(2)
+    kpad = np.pad(key, 1, constant_values=-1)
     score = np.zeros((ny, nx))
     centre = np.zeros((ny, nx, 2))
     for j in range(ny):
         for i in range(nx):
-            s = nsum[j, i]
-            if s < min_pixels or s <= 0:
+            s = key[j, i]
+            if s3[j, i] < min_pixels or s <= 0:
                 continue
             peak = True
             for dj in (-1, 0, 1):
                 for di in (-1, 0, 1):
                     if di == 0 and dj == 0:
                         continue
-                    t = npad[1 + j + dj, 1 + i + di]
+                    t = kpad[1 + j + dj, 1 + i + di]
                     earlier = dj < 0 or (dj == 0 and di < 0)
                     if t > s or (earlier and t == s):
                         peak = False
@@ -110,7 +118,7 @@ def peaks_ref(counts, nx, ny, min_pixels):
                 ys, xs = np.mgrid[max(j - 1, 0) : min(j + 2, ny), max(i - 1, 0) : min(i + 2, nx)]
                 w = c[ys, xs].astype(np.float64)
                 centre[j, i] = [(w * (xs * SB + 2)).sum() / w.sum(), (w * (ys * SB + 2)).sum() / w.sum()]
-    return score.reshape(-1), centre.reshape(-1, 2)
+    return score.reshape(-1), centre.reshape(-1, 2), key.reshape(-1)
 
 
 def launch_peaks(device, rig, counts_np, min_pixels, blobs):
@@ -119,6 +127,16 @@ def launch_peaks(device, rig, counts_np, min_pixels, blobs):
     chunks = max(1, -(-max(int(off[c + 1] - off[c]) for c in range(m)) // CHUNK))
     drig = DeviceRig(rig, device)
     counts = wp.array(counts_np.astype(np.int32), dtype=wp.int32, device=device)
+    sums = wp.full(int(off[-1]), -7, dtype=wp.int32, device=device)
+    sb_max = (max(c.height // SB for c in rig.cameras), max(c.width // SB for c in rig.cameras))
+    off_d = wp.array(off, device=device)
+    wp.launch(
+        kblobs.neighbourhood_sums_kernel,
+        dim=(m, *sb_max),
+        inputs=[drig.cams, off_d, counts],
+        outputs=[sums],
+        device=device,
+    )
     peaks = wp.full(int(off[-1]), -7.0, dtype=wp.float32, device=device)
     ps = wp.full((m, chunks, KEEP), -7.0, dtype=wp.float32, device=device)
     pi = wp.full((m, chunks, KEEP), -7, dtype=wp.int32, device=device)
@@ -126,7 +144,7 @@ def launch_peaks(device, rig, counts_np, min_pixels, blobs):
     wp.launch_tiled(
         kblobs.blob_peaks_kernel,
         dim=[m, chunks],
-        inputs=[drig.cams, wp.array(off, device=device), counts, min_pixels],
+        inputs=[drig.cams, off_d, counts, sums, min_pixels],
         outputs=[peaks, ps, pi, pu],
         block_dim=BLOCK,
         device=device,
@@ -136,7 +154,7 @@ def launch_peaks(device, rig, counts_np, min_pixels, blobs):
     wp.launch(
         kblobs.blob_select_kernel, dim=(m, chunks, KEEP), inputs=[ps, pi, pu, blobs], outputs=[bs, bu], device=device
     )
-    return peaks.numpy(), (ps.numpy(), pi.numpy(), pu.numpy()), bs.numpy(), bu.numpy()
+    return peaks.numpy(), (ps.numpy(), pi.numpy(), pu.numpy()), bs.numpy(), bu.numpy(), sums.numpy()
 
 
 @pytest.mark.parametrize("blobs", [3, 8])
@@ -155,10 +173,11 @@ def test_peaks_chunks_and_blob_selection_match_numpy(device, rng, blobs):
         g[2:6, 3:9] = 25
         counts[off[c] : off[c + 1]] = g.reshape(-1)
     min_pixels = 12
-    peaks, (ps, pi, pu), bs, bu = launch_peaks(device, rig, counts, min_pixels, blobs)
+    peaks, (ps, pi, pu), bs, bu, sums = launch_peaks(device, rig, counts, min_pixels, blobs)
     for c, cam in enumerate(rig.cameras):
         nx, ny = cam.width // SB, cam.height // SB
-        score, centre = peaks_ref(counts[off[c] : off[c + 1]], nx, ny, min_pixels)
+        score, centre, nsum = peaks_ref(counts[off[c] : off[c + 1]], nx, ny, min_pixels)
+        np.testing.assert_array_equal(sums[off[c] : off[c + 1]], nsum)
         np.testing.assert_array_equal(peaks[off[c] : off[c + 1]], score)
         # per chunk: the best KEEP peaks, score descending then index ascending
         entries = []
@@ -175,11 +194,28 @@ def test_peaks_chunks_and_blob_selection_match_numpy(device, rng, blobs):
                     assert ps[c, k, r] == 0.0
         best = sorted(entries, key=lambda i: (-score[i], i))[:blobs]
         assert len(best) == blobs  # the grid has more peaks than slots
-        np.testing.assert_array_equal(bs[c], score[best])
+        np.testing.assert_array_equal(bs[c], score[best] // 1024)
         np.testing.assert_allclose(bu[c], centre[best], atol=1e-4)
     # fewer peaks than slots: the rest are emptied
-    peaks, _, bs, _ = launch_peaks(device, rig, np.where(np.arange(len(counts)) == 40, 20, 0), 12, blobs)
+    peaks, _, bs, _, _ = launch_peaks(device, rig, np.where(np.arange(len(counts)) == 40, 20, 0), 12, blobs)
     assert bs[0, 0] == 20 and np.all(bs[0, 1:] == 0) and np.all(bs[1:] == 0)
+
+
+def test_a_wide_blob_peaks_at_its_centre(device):
+    """A disc wider than the 15-pixel neighbourhood: its 3 x 3 counts are full over a plateau, the 5 x 5 count picks
+    the sub-block at its centre, and the blob centre lies within half a sub-block of the disc's."""
+    rig = rig3()
+    off = grid_offsets(rig)
+    counts = np.zeros(int(off[-1]), np.int64)
+    cam = rig.cameras[0]
+    nx, ny = cam.width // SB, cam.height // SB
+    yy, xx = np.mgrid[: ny * SB, : nx * SB]
+    centre = np.array([71.0, 52.0])  # pixels; radius 13 > 7.5
+    disc = ((xx - centre[0]) ** 2 + (yy - centre[1]) ** 2 <= 13.0**2).astype(np.int64)
+    counts[: nx * ny] = disc.reshape(ny, SB, nx, SB).sum(axis=(1, 3)).reshape(-1)
+    _, _, bs, bu, _ = launch_peaks(device, rig, counts, 8, 4)
+    assert bs[0, 0] == 225 and np.all(bs[0, 1:] == 0)
+    assert np.linalg.norm(bu[0, 0] - centre) <= 2.5 * np.sqrt(2)
 
 
 def mode_score_ref(rig, masks, pts):

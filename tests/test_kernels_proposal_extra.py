@@ -135,7 +135,8 @@ def mode_score_ref(rig, drig, mask, x):
 def test_jump_decision_matches_numpy(device, rng):
     """Several frames through the mode test: the evidence accumulates (CUSUM) over frames, a jump resets it, no
     candidate resets it and never jumps, the first frame after a random initialisation always jumps (when there is
-    a candidate); the thresholds and component weights follow."""
+    a candidate), a candidate on the cloud (within near + 2 |spread| of its mean) raises the cloud's score; the
+    thresholds and component weights follow."""
     rig = make_rig(rng)
     drig = DeviceRig(rig, device)
     target = TARGETS[0]
@@ -156,25 +157,43 @@ def test_jump_decision_matches_numpy(device, rng):
     s_ref = 0.0
     jumps = []
     # (best candidate's score relative to the cloud, candidates, uniform frame)
-    plan = [(1.6, 3, False), (1.8, 3, False), (0.2, 2, False), (5.0, 4, False), (9.0, 0, False), (0.5, 1, True)]
-    for f, (excess, count, uniform) in enumerate(plan):
+    # (and whether candidate 1 lies on the cloud, scoring 4 nats better than its mean and MAP)
+    plan = [
+        (1.6, 3, False, False),
+        (1.8, 3, False, False),
+        (0.2, 2, False, False),
+        (5.0, 4, False, False),
+        (9.0, 0, False, False),
+        (0.5, 1, True, False),
+        (4.5, 3, False, True),
+    ]
+    spread = np.array([0.01, 0.02, 0.02])
+    est[kreduce.EST_STD : kreduce.EST_STD + 3] = spread
+    near = 0.06
+    for f, (excess, count, uniform, on_cloud) in enumerate(plan):
         scores = np.full(k, LOG_ZERO, np.float32)
         scores[:count] = np.sort(l_cloud + excess - rng.uniform(0, 3, count))[::-1]
         scores[0] = l_cloud + excess if count else LOG_ZERO
+        pos = rng.uniform(-1.0, 1.0, (k, 3)) + np.array([3.0, 0.0, 0.0])  # away from the cloud
+        if on_cloud:
+            scores[1] = l_cloud + 4.0
+            pos[1] = cloud + 0.9 * (near + 2 * np.linalg.norm(spread)) * np.array([0.0, 0.6, 0.8])
         frame.fill_(f)
         wp.launch(
             kproposal.jump_decision_kernel,
             dim=1,
             inputs=[drig.cams, target.to_struct(device), bgr, integral, window, int(kscoring.SCORE_INTEGRAL)]
-            + [wp.array(scores, device=device), wp.array(est, dtype=wp.float64, device=device), frame]
+            + [wp.array(pos.astype(np.float32), dtype=wp.vec3, device=device), wp.array(scores, device=device)]
+            + [wp.array(est, dtype=wp.float64, device=device), frame]
             + [wp.array([f if uniform else -1], dtype=wp.int32, device=device), wp.vec2(*thresholds)]
-            + [margin, evidence],
+            + [margin, evidence, near],
             outputs=[det_cum, det_count, mix],
             device=device,
         )
         jump = False
+        l_mode = max(l_cloud, float(scores[1])) if on_cloud else l_cloud
         if count:
-            e = float(scores[0]) - l_cloud
+            e = float(scores[0]) - l_mode
             s_ref = max(0.0, s_ref + e - margin)
             if s_ref > evidence:
                 jump, s_ref = True, 0.0
@@ -190,12 +209,13 @@ def test_jump_decision_matches_numpy(device, rng):
         want_thr = np.float32(thresholds[0] if jump else thresholds[1]) if count else np.float32(kproposal.NO_JUMP)
         assert got[kproposal.MIX_THRESHOLD] == want_thr
         if count:
-            assert abs(got[kproposal.MIX_EVIDENCE] - (scores[0] - l_cloud)) < 1e-4
+            assert abs(got[kproposal.MIX_EVIDENCE] - (scores[0] - l_mode)) < 1e-4
             w = np.exp(scores[:count].astype(np.float64) - scores[0])
             np.testing.assert_allclose(det_cum.numpy()[:count], np.cumsum(w) / w.sum(), rtol=1e-5)
     # the plan exercises every branch: evidence 0.6 (no jump), 0.6 + 0.8 = 1.4 (no), 1.4 - 0.8 = 0.6 (no), 0.6 + 4.0
-    # (jump), no candidate, the first frame after a random initialisation (jump)
-    assert jumps == [False, False, False, True, False, True]
+    # (jump), no candidate, the first frame after a random initialisation (jump), 4.5 nats over the mean but 0.5
+    # over the candidate on the cloud (no jump)
+    assert jumps == [False, False, False, True, False, True, False]
 
 
 def test_set_anchor_kernel(device):

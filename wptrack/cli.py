@@ -87,6 +87,7 @@ def _color_config_from_args(args):
         keep_particles=args.keep_particles,
         proposal=args.proposal,
         mixture=args.mixture,
+        jump_margin=args.jump_margin,
     )
 
 
@@ -483,6 +484,10 @@ def cmd_bench(args) -> int:
             raise ConfigError(f"--weights: only the 'color' suite times resampling alone, not {args.tracker!r}")
         extra["weights"] = args.weights
         grid = list({case.particles: case for case in grid}.values())
+    if args.proposal is not None:  # the colour tracker's detection jumps instead of the paper's prior
+        if args.tracker != "color" or args.weights:
+            raise ConfigError(f"--proposal: only the 'color' suite's tracker has proposals, not {args.tracker!r}")
+        extra["proposal"] = args.proposal
     if args.joint:  # the template tracker's joint filter (one weight per particle) instead of the partitioned one
         if args.tracker != "templates":
             raise ConfigError(
@@ -595,9 +600,18 @@ def build_parser() -> argparse.ArgumentParser:
         "--proposal",
         choices=("mixture", "prior"),
         default="mixture",
-        help="mixture: motion prior + detection proposal from the colour masks (default); prior: the paper's filter",
+        help="mixture: the paper's walk plus jumps to colour blobs triangulated across cameras when they beat the "
+        "cloud (default); prior: the paper's filter",
     )
-    c.add_argument("--mixture", type=float, default=0.25, help="fraction of particles from the detection proposal")
+    c.add_argument(
+        "--mixture", type=float, default=0.5, help="fraction of particles that jump to the detections (default 0.5)"
+    )
+    c.add_argument(
+        "--jump-margin",
+        type=float,
+        default=2.0,
+        help="nats by which the detections' log-likelihood must beat the cloud's before it jumps (default 2)",
+    )
     c.add_argument("--keep-particles", type=int, default=1000, help="particles per frame saved for reports")
     c.add_argument("--max-frames", type=_positive_int, default=None)
     c.add_argument("--stop-at-shortest", action="store_true", help="track the common part of unequal videos")
@@ -861,6 +875,12 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("ordinary", "concentrated"),
         default=None,
         help="color suite: time resampling alone on synthetic log-weights, N(0, 1) or N(0, 5^2)",
+    )
+    b.add_argument(
+        "--proposal",
+        choices=("prior", "mixture"),
+        default=None,
+        help="color suite: the tracker's proposal (default prior, the paper's filter; mixture: detection jumps)",
     )
     b.add_argument(
         "--joint",

@@ -8,8 +8,10 @@ Per frame, with fixed-size buffers (no allocation, no host round trip, no atomic
    four of the integral image in ``SCORE_INTEGRAL`` mode, 25 classified pixels in ``SCORE_DIRECT`` mode). The grid
    covers ``floor(W / 5) x floor(H / 5)`` sub-blocks (a remainder strip of < 5 pixels at the right and bottom is left
    out).
-2. :func:`blob_peaks_kernel`: a sub-block's **blob score** is the count of its 3 x 3 sub-block neighbourhood (15 x 15
-   pixels); it is a **peak** when that score is at least ``min_pixels``, at least the score of each of its 8
+2. :func:`neighbourhood_sums_kernel` and :func:`blob_peaks_kernel`: a sub-block's **blob score** is the count of its
+   3 x 3 sub-block neighbourhood (15 x 15 pixels; neighbours beyond the grid count 0); it is a **peak** when that
+   score is at least ``min_pixels`` and its key - the score, ties broken by the 5 x 5 neighbourhood's count, so that
+   inside a blob wider than 15 pixels the most central position wins - is at least the key of each of its 8
    neighbours and greater than those of its neighbours earlier in raster order (one peak per plateau). Its blob centre
    is the count-weighted mean of the neighbourhood's sub-block centres (pixels). Each block of the tiled launch owns
    ``PEAK_CHUNK`` sub-blocks of one camera and keeps its ``PEAK_KEEP`` best peaks (rounds of a block argmax), so the
@@ -19,8 +21,9 @@ Per frame, with fixed-size buffers (no allocation, no host round trip, no atomic
 4. :func:`candidates_kernel`: one thread per (camera pair, blob of the first camera, blob of the second): the
    midpoint of the two back-projected rays (``proposal.ray_pair_midpoint``) is kept when it lies in front of both
    cameras, inside the working volume and reprojects within ``gate_px`` pixels of both blob centres (epipolar
-   consistency); its score is the filter's own log-likelihood there (eqs. 5-7 over all cameras, so a point that
-   more cameras agree on scores higher: each agreeing camera adds up to log 25).
+   consistency); its score is the mode-test log-likelihood there (``proposal.mode_log_likelihood``: eqs. 5-7 over
+   all cameras, a camera that does not see the point adding log(1/5); a point that more cameras agree on scores
+   higher: each agreeing camera adds up to log 25).
 5. :func:`candidate_keep_kernel` and :func:`candidate_rank_kernel`: non-maximum suppression (a candidate is dropped
    when a better one lies within ``radius``) and the ``K`` best survivors, score descending, into the detection
    slots (score ``LOG_ZERO``: empty).
@@ -99,32 +102,53 @@ def subblock_counts_kernel(
 
 
 @wp.func
-def neighbourhood_sum(counts: wp.array(dtype=wp.int32), base: int, nx: int, ny: int, i: int, j: int):
-    """Sum of the counts of the 3 x 3 sub-blocks around (i, j) that exist (0 when (i, j) itself does not)."""
+def neighbourhood_sum(counts: wp.array(dtype=wp.int32), base: int, nx: int, ny: int, i: int, j: int, r: int):
+    """Sum of the counts of the (2r+1) x (2r+1) sub-blocks around (i, j) that exist."""
     s = int(0)
-    if i < 0 or j < 0 or i >= nx or j >= ny:
-        return s
-    for dj in range(-1, 2):
-        y = j + dj
-        if y >= 0 and y < ny:
-            for di in range(-1, 2):
-                x = i + di
-                if x >= 0 and x < nx:
-                    s += counts[base + y * nx + x]
+    for y in range(wp.max(j - r, 0), wp.min(j + r + 1, ny)):
+        for x in range(wp.max(i - r, 0), wp.min(i + r + 1, nx)):
+            s += counts[base + y * nx + x]
     return s
 
 
+KEY_SCALE = wp.constant(1024)
+"""Blob key = 3 x 3 count * KEY_SCALE + 5 x 5 count (the 5 x 5 count, at most 625, breaks ties of the 3 x 3 one)."""
+
+
+@wp.kernel
+def neighbourhood_sums_kernel(
+    cams: wp.array(dtype=Camera),
+    sb_offset: wp.array(dtype=wp.int32),
+    counts: wp.array(dtype=wp.int32),
+    keys: wp.array(dtype=wp.int32),
+):
+    """Blob key of every sub-block: ``KEY_SCALE`` x the count of its 3 x 3 sub-block neighbourhood (15 x 15 pixels,
+    the blob score) + the count of its 5 x 5 neighbourhood (25 x 25 pixels), over the neighbours that exist. The second
+    count ranks the positions inside a blob wider than 15 pixels, whose 3 x 3 counts are all full, by how central they
+    are. Launch as :func:`subblock_counts_kernel`; ``keys`` flat like ``counts``."""
+    c, j, i = wp.tid()
+    cam = cams[c]
+    nx = cam.width // SUBBLOCK
+    ny = cam.height // SUBBLOCK
+    if i >= nx or j >= ny:
+        return
+    base = sb_offset[c]
+    s3 = neighbourhood_sum(counts, base, nx, ny, i, j, 1)
+    s5 = neighbourhood_sum(counts, base, nx, ny, i, j, 2)
+    keys[base + j * nx + i] = s3 * KEY_SCALE + s5
+
+
 @wp.func
-def peak_score(counts: wp.array(dtype=wp.int32), base: int, nx: int, ny: int, i: int, j: int, min_pixels: int):
-    """The blob score of sub-block (i, j) when it is a peak (see the module docstring), else 0."""
-    s = neighbourhood_sum(counts, base, nx, ny, i, j)
-    if s < min_pixels or s <= 0:
+def peak_key(keys: wp.array(dtype=wp.int32), base: int, nx: int, ny: int, i: int, j: int, min_pixels: int):
+    """The blob key of sub-block (i, j) when it is a peak (see the module docstring), else 0."""
+    s = keys[base + j * nx + i]
+    if s < min_pixels * KEY_SCALE or s <= 0:
         return 0
-    for dj in range(-1, 2):
-        for di in range(-1, 2):
-            if di != 0 or dj != 0:
-                t = neighbourhood_sum(counts, base, nx, ny, i + di, j + dj)
-                earlier = dj < 0 or (dj == 0 and di < 0)
+    for y in range(wp.max(j - 1, 0), wp.min(j + 2, ny)):
+        for x in range(wp.max(i - 1, 0), wp.min(i + 2, nx)):
+            if x != i or y != j:
+                t = keys[base + y * nx + x]
+                earlier = y < j or (y == j and x < i)
                 if t > s or (earlier and t == s):
                     return 0
     return s
@@ -156,6 +180,7 @@ def blob_peaks_kernel(
     cams: wp.array(dtype=Camera),
     sb_offset: wp.array(dtype=wp.int32),
     counts: wp.array(dtype=wp.int32),
+    keys: wp.array(dtype=wp.int32),
     min_pixels: int,
     peaks: wp.array(dtype=wp.float32),
     part_score: wp.array3d(dtype=wp.float32),
@@ -165,9 +190,9 @@ def blob_peaks_kernel(
     """Peaks per chunk. Launch ``wp.launch_tiled(dim=[M, chunks], block_dim=B)`` with ``chunks`` = ceil(largest
     grid / PEAK_CHUNK); block (c, k) owns sub-blocks ``[k PEAK_CHUNK, (k+1) PEAK_CHUNK)`` of camera ``c``.
 
-    Writes ``peaks`` (flat like ``counts``: the peak score, 0 if not a peak; scratch) and, per block, its
-    ``PEAK_KEEP`` best peaks (score descending, index ascending) into ``part_*[c, k, r]`` (M, chunks, PEAK_KEEP):
-    score (0: none), sub-block index within the camera, blob centre (pixels).
+    Writes ``peaks`` (flat like ``counts``: the peak's key, 0 if not a peak; scratch) and, per block, its
+    ``PEAK_KEEP`` best peaks (key descending, index ascending) into ``part_*[c, k, r]`` (M, chunks, PEAK_KEEP): key
+    (0: none; exact in float32), sub-block index within the camera, blob centre (pixels).
     """
     c, k, lane = wp.tid()
     cam = cams[c]
@@ -183,7 +208,7 @@ def blob_peaks_kernel(
         return  # the whole block leaves together
     stop = wp.min(start + PEAK_CHUNK, total)
     for s in range(start + lane, stop, wp.block_dim()):
-        peaks[base + s] = float(peak_score(counts, base, nx, ny, s % nx, s // nx, min_pixels))
+        peaks[base + s] = float(peak_key(keys, base, nx, ny, s % nx, s // nx, min_pixels))
     prev_score = float(3.0e38)
     prev_index = int(-1)
     for r in range(PEAK_KEEP):
@@ -217,9 +242,10 @@ def blob_select_kernel(
     blob_score: wp.array2d(dtype=wp.float32),
     blob_uv: wp.array2d(dtype=wp.vec2),
 ):
-    """The ``blobs`` best peaks of each camera, score descending, into ``blob_*[c, 0:blobs]`` (score 0: empty slot).
-    Launch (M, chunks, PEAK_KEEP): one thread per peak entry writes it to the slot of its rank (the number of its
-    camera's entries with a higher score, or the same score and a lower sub-block index) when that is < ``blobs``;
+    """The ``blobs`` best peaks of each camera, key descending, into ``blob_*[c, 0:blobs]``: blob score (the 3 x 3
+    count; 0: empty slot) and centre. Launch (M, chunks, PEAK_KEEP): one thread per peak entry writes it to the slot
+    of its rank (the number of its camera's entries with a higher key, or the same key and a lower sub-block index)
+    when that is < ``blobs``;
     thread (c, 0, 0) empties the slots from the camera's number of peaks on (disjoint from the ranked ones)."""
     c, k, r = wp.tid()
     v = part_score[c, k, r]
@@ -243,7 +269,7 @@ def blob_select_kernel(
             if w > v or (w == v and w > 0.0 and part_index[c, kk, rr] < idx):
                 rank += 1
     if rank < blobs:
-        blob_score[c, rank] = v
+        blob_score[c, rank] = float(int(v) // KEY_SCALE)
         blob_uv[c, rank] = part_uv[c, k, r]
 
 
@@ -267,7 +293,8 @@ def candidates_kernel(
 ):
     """One thread per (pair p, blob i of camera ``pair_a[p]``, blob j of camera ``pair_b[p]``), flat index
     ``(p B + i) B + j`` with ``B = blob_score.shape[1]``; launch ``len(cand_pos)`` threads (P B^2). Writes the
-    triangulated point and its log-likelihood (eqs. 5-7), or score ``LOG_ZERO`` when a blob slot is empty, the rays
+    triangulated point and its mode-test score (``proposal.mode_log_likelihood``), or score ``LOG_ZERO`` when a blob
+    slot is empty, the rays
     do not meet in front of both cameras, the point lies outside [lo, hi] or reprojects more than ``gate_px`` from
     either blob centre."""
     t = wp.tid()

@@ -14,8 +14,9 @@ Veloso, ICRA 2000; mixture Monte Carlo localisation, Thrun, Fox, Burgard and Del
 the best one's), so jumps go to the candidates that the most cameras agree on.
 
 The jump probability a_t comes from a **mode test** (:func:`jump_decision_kernel`, one thread per frame): the best
-candidate's log-likelihood is compared with the cloud's - the larger of the log-likelihoods of the previous frame's
-MMSE and MAP estimates on the current frame - and the excess over ``margin`` nats accumulates (a CUSUM, Page 1954):
+candidate's score (:func:`mode_log_likelihood`) is compared with the cloud's - the best score of the previous frame's
+MMSE and MAP estimates and of the candidates next to them, on the current frame - and the excess over ``margin`` nats
+accumulates (a CUSUM, Page 1954):
 
     S_t = max(0, S_{t-1} + (L_best - L_cloud) - margin);   jump when S_t > evidence, then S_t = 0
 
@@ -40,7 +41,15 @@ from wptrack.kernels.colour.scoring import LOG_WINDOW_AREA, colour_log_likelihoo
 from wptrack.kernels.colour.walk import STREAM_MOTION
 from wptrack.kernels.core.camera import CAMERA_SET_SIZE, Camera, CameraSet
 from wptrack.kernels.core.random import normal4, uniform4
-from wptrack.kernels.core.reduce import EST_MAP, EST_MEAN, finite_logw, moments_push, moments_store, moments_zero
+from wptrack.kernels.core.reduce import (
+    EST_MAP,
+    EST_MEAN,
+    EST_STD,
+    finite_logw,
+    moments_push,
+    moments_store,
+    moments_zero,
+)
 
 wp.set_module_options({"enable_backward": False})
 
@@ -181,6 +190,7 @@ def jump_decision_kernel(
     integral: wp.array(dtype=wp.int32),
     window: wp.array(dtype=wp.uint8),
     mode: int,
+    det_pos: wp.array(dtype=wp.vec3),
     det_score: wp.array(dtype=wp.float32),
     est: wp.array(dtype=wp.float64),
     frame: wp.array(dtype=wp.int32),
@@ -188,13 +198,17 @@ def jump_decision_kernel(
     thresholds: wp.vec2,
     margin: float,
     evidence: float,
+    near: float,
     det_cum: wp.array(dtype=wp.float32),
     det_count: wp.array(dtype=wp.int32),
     mix: wp.array(dtype=wp.float32),
 ):
     """The mode test (module docstring), one thread. Reads the detection slots (score descending, ``LOG_ZERO`` =
-    empty) and the previous frame's estimate ``est`` (MMSE mean and MAP, ``kernels.core.reduce.EST_*``; after
-    ``init_point`` both hold the initial point); writes ``det_count[0]`` (valid slots), ``det_cum`` (normalised
+    empty) and the previous frame's estimate ``est`` (MMSE mean, spread and MAP, ``kernels.core.reduce.EST_*``; after
+    ``init_point`` the mean and MAP hold the initial point). The cloud's score is the best of its mean's, its MAP's
+    and those of the candidates within ``near`` + 2 |spread| metres of either (the cloud's own mode: near an image
+    border a slightly biased estimate can fall just inside a camera that no longer sees the object, while the
+    object's candidate, outside it, scores higher). Writes ``det_count[0]`` (valid slots), ``det_cum`` (normalised
     cumulative component weights, exp(score - best)) and ``mix`` (``MIX_*``). ``thresholds`` = (Phi^-1(eps),
     Phi^-1(alpha)) with ``NO_JUMP`` for a probability 0."""
     count = int(0)
@@ -222,6 +236,13 @@ def jump_decision_kernel(
             mode_log_likelihood(cams, target, bgr, integral, window, mode, mean),
             mode_log_likelihood(cams, target, bgr, integral, window, mode, best_particle),
         )
+        # candidates on the cloud are the cloud's own mode: within near + 2 |spread| of the mean or the MAP
+        spread = wp.vec3(float(est[EST_STD]), float(est[EST_STD + 1]), float(est[EST_STD + 2]))
+        r = near + 2.0 * wp.length(spread)
+        for k in range(count):
+            p = det_pos[k]
+            if wp.length(p - mean) <= r or wp.length(p - best_particle) <= r:
+                cloud = wp.max(cloud, det_score[k])
         e = best - cloud
         s = wp.max(0.0, s + e - margin)
         if s > evidence:

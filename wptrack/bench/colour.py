@@ -91,6 +91,7 @@ class ColourSuite:
         seed: int = 0,
         offspring_at: tuple[int, ...] = (10**7,),
         weights: str | None = None,
+        proposal: str = "prior",
     ) -> dict:
         if weights is not None:  # --weights: the resampling pass alone on synthetic log-weights (cameras unused)
             from wptrack.bench.resample_weights import run_weights_case
@@ -108,9 +109,12 @@ class ColourSuite:
         init = tuple(balls[0] + np.array([0.05, -0.05, 0.05]))
         dev = wp.get_device(device)
         mem0 = wp.get_mempool_used_mem_current(dev) if dev.is_cuda else 0
-        tracker = ColorTracker(rig, target, particles=case.particles, sigma=0.01, init=init, device=device, seed=seed)
+        tracker = ColorTracker(
+            rig, target, particles=case.particles, sigma=0.01, init=init, device=device, seed=seed, proposal=proposal
+        )
         result = {
-            "tracker": "color",
+            "tracker": "color" if proposal == "prior" else "color+m",
+            "proposal": proposal,
             "particles": case.particles,
             "cameras": case.cameras,
             "width": WIDTH,

@@ -297,6 +297,10 @@ class ColorTracker(ParticleFilter):
             config = replace(config, init_box=tuple(tuple(float(c) for c in v) for v in rig.bounds()))
             self.config = config
         self.volume = tuple(tuple(float(c) for c in v) for v in (config.init_box or rig.bounds()))
+        # detection candidates are kept inside a volume someone chose (the init box, the rig file's volume); the
+        # fallback box around the camera centres would drop an object below or beside them
+        chosen = config.init_box is not None or rig.volume is not None
+        self.candidate_volume = self.volume if chosen else ((-1.0e30,) * 3, (1.0e30,) * 3)
         self.uniform_frame = wp.array([-1], dtype=wp.int32, device=d)
         if config.proposal != "prior":
             self._allocate_detection()
@@ -316,7 +320,8 @@ class ColorTracker(ParticleFilter):
         """Fixed-size device buffers of the geometric detection and the mode test (``proposal='mixture'``):
 
         sb_offset: (M + 1,) int32 start of each camera's 5 x 5 sub-block grid in ``sb_counts``.
-        sb_counts, peaks: (sum floor(W/5) floor(H/5),) int32 target pixels per sub-block; float32 peak scores.
+        sb_counts, sb_keys, peaks: (sum floor(W/5) floor(H/5),) int32 target pixels per sub-block, blob keys
+            (``kernels.colour.blobs.neighbourhood_sums_kernel``); float32 peak keys.
         part_score, part_index, part_uv: (M, chunks, PEAK_KEEP) the best peaks of each chunk of sub-blocks.
         blob_score, blob_uv: (M, B) blobs per camera (pixel count of the 15 x 15 neighbourhood, 0 = empty; centre, px).
         pair_a, pair_b: (P,) int32 camera pairs (a < b), P = M (M - 1) / 2.
@@ -341,6 +346,7 @@ class ColorTracker(ParticleFilter):
         keep = int(kblobs.PEAK_KEEP)
         self.sb_offset = wp.array(offsets, dtype=wp.int32, device=d)
         self.sb_counts = wp.zeros(total, dtype=wp.int32, device=d)
+        self.sb_keys = wp.zeros(total, dtype=wp.int32, device=d)
         self.peaks = wp.zeros(total, dtype=wp.float32, device=d)
         self.part_score = wp.zeros((m, self._chunks, keep), dtype=wp.float32, device=d)
         self.part_index = wp.zeros((m, self._chunks, keep), dtype=wp.int32, device=d)
@@ -426,10 +432,17 @@ class ColorTracker(ParticleFilter):
             outputs=[self.sb_counts],
             device=d,
         )
+        wp.launch(
+            kblobs.neighbourhood_sums_kernel,
+            dim=(m, *self._sb_max),
+            inputs=[dr.cams, self.sb_offset, self.sb_counts],
+            outputs=[self.sb_keys],
+            device=d,
+        )
         wp.launch_tiled(
             kblobs.blob_peaks_kernel,
             dim=[m, self._chunks],
-            inputs=[dr.cams, self.sb_offset, self.sb_counts, cfg.min_blob_pixels],
+            inputs=[dr.cams, self.sb_offset, self.sb_counts, self.sb_keys, cfg.min_blob_pixels],
             outputs=[self.peaks, self.part_score, self.part_index, self.part_uv],
             block_dim=BLOCK,
             device=d,
@@ -442,7 +455,7 @@ class ColorTracker(ParticleFilter):
             device=d,
         )
         if self._pairs > 0:
-            lo, hi = (wp.vec3(*v) for v in self.volume)
+            lo, hi = (wp.vec3(*v) for v in self.candidate_volume)
             c = self.cand_pos.shape[0]
             wp.launch(
                 kblobs.candidates_kernel,
@@ -469,8 +482,8 @@ class ColorTracker(ParticleFilter):
         wp.launch(
             kproposal.jump_decision_kernel,
             dim=1,
-            inputs=[*obs, self.det_score, self.est, self.frame, self.uniform_frame, self._thresholds]
-            + [cfg.jump_margin, cfg.jump_evidence],
+            inputs=[*obs, self.det_pos, self.det_score, self.est, self.frame, self.uniform_frame, self._thresholds]
+            + [cfg.jump_margin, cfg.jump_evidence, 3.0 * cfg.detection_sigma],
             outputs=[self.det_cum, self.det_count, self.mix],
             device=d,
         )
