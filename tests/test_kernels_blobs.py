@@ -342,3 +342,126 @@ def test_suppression_and_ranking_match_numpy(device, rng, k):
     np.testing.assert_array_equal(det_pos.numpy()[: len(order)], pos[order])
     np.testing.assert_array_equal(got[len(order) :], np.float32(LOG_ZERO))
     assert (len(order) == k) == (k == 4)  # 256 slots: more than the survivors, the rest emptied
+
+
+def test_detect_tail_kernel_equals_the_staged_launches(device, rng):
+    """The one-block tail (blob selection, candidates, suppression, ranking, mode test) gives exactly what the five
+    separate launches give, on a frame of discs seen by three cameras (some candidates, some suppressed)."""
+    from statistics import NormalDist
+
+    from wptrack.kernels.core import reduce as kreduce
+
+    rig = rig3()
+    m = len(rig.cameras)
+    drig = DeviceRig(rig, device)
+    ball = np.array([0.42, 0.5, 0.06])
+    frames = disc_frames(rig, rng, discs=4)
+    import cv2
+
+    for cam, img in zip(rig.cameras, frames, strict=True):  # the ball in every camera: valid candidates
+        uv, depth = cam.project(ball[None])
+        cv2.circle(img, (int(round(uv[0, 0])), int(round(uv[0, 1]))), 8, (180, 60, 230), -1)
+    target = TARGETS[0]
+    bgr = upload(frames, device)
+    mask, integral, window, _ = mask_and_integral(drig, target, bgr, device)
+    off = grid_offsets(rig)
+    sb_max = (max(c.height // SB for c in rig.cameras), max(c.width // SB for c in rig.cameras))
+    chunks = max(1, -(-max(int(off[c + 1] - off[c]) for c in range(m)) // CHUNK))
+    tgt = target.to_struct(device)
+    obs = [drig.cams, tgt, bgr, integral, window, int(kscoring.SCORE_INTEGRAL)]
+    off_d = wp.array(off, device=device)
+    counts = wp.zeros(int(off[-1]), dtype=wp.int32, device=device)
+    keys = wp.zeros(int(off[-1]), dtype=wp.int32, device=device)
+    wp.launch(kblobs.subblock_counts_kernel, dim=(m, *sb_max), inputs=[*obs, off_d], outputs=[counts], device=device)
+    wp.launch(
+        kblobs.neighbourhood_sums_kernel,
+        dim=(m, *sb_max),
+        inputs=[drig.cams, off_d, counts],
+        outputs=[keys],
+        device=device,
+    )
+    peaks = wp.zeros(int(off[-1]), dtype=wp.float32, device=device)
+    part = [wp.zeros((m, chunks, KEEP), dtype=dt, device=device) for dt in (wp.float32, wp.int32, wp.vec2)]
+    wp.launch_tiled(
+        kblobs.blob_peaks_kernel,
+        dim=[m, chunks],
+        inputs=[drig.cams, off_d, counts, keys, 8],
+        outputs=[peaks, *part],
+        block_dim=BLOCK,
+        device=device,
+    )
+    nb, k = 6, 5
+    pairs = [(a, b) for a in range(m) for b in range(a + 1, m)]
+    pa = wp.array([p[0] for p in pairs], dtype=wp.int32, device=device)
+    pb = wp.array([p[1] for p in pairs], dtype=wp.int32, device=device)
+    n = len(pairs) * nb * nb
+    lo, hi = wp.vec3(-1.0, -1.0, -0.5), wp.vec3(2.0, 2.0, 1.5)
+    est = np.zeros(int(kreduce.EST_SIZE))
+    est[kreduce.EST_MEAN : kreduce.EST_MEAN + 3] = ball + 0.3
+    est[kreduce.EST_MAP : kreduce.EST_MAP + 3] = ball + 0.3
+    est_d = wp.array(est, dtype=wp.float64, device=device)
+    frame = wp.array([4], dtype=wp.int32, device=device)
+    uni = wp.array([-1], dtype=wp.int32, device=device)
+    thr = wp.vec2(NormalDist().inv_cdf(0.5), float(kproposal.NO_JUMP))
+
+    def buffers():
+        return {
+            "blob_score": wp.full((m, nb), 7.0, dtype=wp.float32, device=device),
+            "blob_uv": wp.full((m, nb), wp.vec2(7.0, 7.0), dtype=wp.vec2, device=device),
+            "cand_pos": wp.full(n, wp.vec3(7.0, 7.0, 7.0), dtype=wp.vec3, device=device),
+            "cand_score": wp.full(n, 7.0, dtype=wp.float32, device=device),
+            "keep": wp.full(n, 7, dtype=wp.int32, device=device),
+            "det_pos": wp.full(k, wp.vec3(7.0, 7.0, 7.0), dtype=wp.vec3, device=device),
+            "det_score": wp.full(k, 7.0, dtype=wp.float32, device=device),
+            "det_cum": wp.full(k, 7.0, dtype=wp.float32, device=device),
+            "det_count": wp.full(1, 7, dtype=wp.int32, device=device),
+            "mix": wp.zeros(int(kproposal.MIX_SIZE), dtype=wp.float32, device=device),
+        }
+
+    a = buffers()
+    wp.launch(
+        kblobs.blob_select_kernel, dim=(m, chunks, KEEP), inputs=[*part, nb], outputs=[a["blob_score"], a["blob_uv"]]
+    )
+    wp.launch(
+        kblobs.candidates_kernel,
+        dim=n,
+        inputs=[*obs, a["blob_score"], a["blob_uv"], pa, pb, 8.0, lo, hi],
+        outputs=[a["cand_pos"], a["cand_score"]],
+        device=device,
+    )
+    wp.launch(
+        kblobs.candidate_keep_kernel,
+        dim=n,
+        inputs=[a["cand_pos"], a["cand_score"], 0.04],
+        outputs=[a["keep"]],
+        device=device,
+    )
+    wp.launch(
+        kblobs.candidate_rank_kernel,
+        dim=max(n, k),
+        inputs=[a["cand_pos"], a["cand_score"], a["keep"]],
+        outputs=[a["det_pos"], a["det_score"]],
+        device=device,
+    )
+    wp.launch(
+        kproposal.jump_decision_kernel,
+        dim=1,
+        inputs=[*obs, a["det_pos"], a["det_score"], est_d, frame, uni, thr, 2.0, 0.0, 0.06],
+        outputs=[a["det_cum"], a["det_count"], a["mix"]],
+        device=device,
+    )
+    b = buffers()
+    wp.launch_tiled(
+        kblobs.detect_tail_kernel,
+        dim=[1],
+        inputs=[*obs, *part, pa, pb, len(pairs), 8.0, lo, hi, 0.04, est_d, frame, uni, thr, 2.0, 0.0, 0.06],
+        outputs=[b[key] for key in ("blob_score", "blob_uv", "cand_pos", "cand_score", "keep", "det_pos")]
+        + [b[key] for key in ("det_score", "det_cum", "det_count", "mix")],
+        block_dim=BLOCK,
+        device=device,
+    )
+    for key in a:
+        np.testing.assert_array_equal(a[key].numpy(), b[key].numpy(), err_msg=key)
+    # the frame exercised the stages: candidates on the ball, some suppressed, a jump away from the far cloud
+    assert (a["cand_score"].numpy() > LOG_ZERO).sum() > a["keep"].numpy().sum() >= 1
+    assert np.linalg.norm(a["det_pos"].numpy()[0] - ball) < 0.03 and a["mix"].numpy()[kproposal.MIX_JUMP] == 1.0

@@ -27,6 +27,9 @@ Per frame, with fixed-size buffers (no allocation, no host round trip, no atomic
 5. :func:`candidate_keep_kernel` and :func:`candidate_rank_kernel`: non-maximum suppression (a candidate is dropped
    when a better one lies within ``radius``) and the ``K`` best survivors, score descending, into the detection
    slots (score ``LOG_ZERO``: empty).
+
+The tracker launches 1, 2 and the peaks, then steps 3-5 and the mode test (``proposal.jump_decision_kernel``) as one
+block (:func:`detect_tail_kernel`); the separate kernels are the same functions, for tests.
 """
 
 import warp as wp
@@ -35,6 +38,7 @@ from wptrack.kernels.colour.hsi import HALF_WINDOW, ColourTarget, window_count_i
 from wptrack.kernels.colour.proposal import (
     LOG_ZERO,
     camera_centre,
+    jump_decision,
     mode_log_likelihood,
     pixel_ray_direction,
     ray_pair_midpoint,
@@ -233,6 +237,44 @@ def blob_peaks_kernel(
         prev_index = a
 
 
+@wp.func
+def select_blob(
+    c: int,
+    k: int,
+    r: int,
+    part_score: wp.array3d(dtype=wp.float32),
+    part_index: wp.array3d(dtype=wp.int32),
+    part_uv: wp.array3d(dtype=wp.vec2),
+    blobs: int,
+    blob_score: wp.array2d(dtype=wp.float32),
+    blob_uv: wp.array2d(dtype=wp.vec2),
+):
+    """Peak entry (c, k, r) to the blob slot of its rank (see :func:`blob_select_kernel`); entry (c, 0, 0) also
+    empties the camera's slots from its number of peaks on."""
+    v = part_score[c, k, r]
+    if k == 0 and r == 0:
+        # count this camera's peaks: slots from that count on are empty
+        n = int(0)
+        for kk in range(part_score.shape[1]):
+            for rr in range(part_score.shape[2]):
+                if part_score[c, kk, rr] > 0.0:
+                    n += 1
+        for q in range(n, blobs):
+            blob_score[c, q] = 0.0
+            blob_uv[c, q] = wp.vec2(0.0, 0.0)
+    if v > 0.0:
+        idx = part_index[c, k, r]
+        rank = int(0)
+        for kk in range(part_score.shape[1]):
+            for rr in range(part_score.shape[2]):
+                w = part_score[c, kk, rr]
+                if w > v or (w == v and w > 0.0 and part_index[c, kk, rr] < idx):
+                    rank += 1
+        if rank < blobs:
+            blob_score[c, rank] = float(int(v) // KEY_SCALE)
+            blob_uv[c, rank] = part_uv[c, k, r]
+
+
 @wp.kernel
 def blob_select_kernel(
     part_score: wp.array3d(dtype=wp.float32),
@@ -245,36 +287,15 @@ def blob_select_kernel(
     """The ``blobs`` best peaks of each camera, key descending, into ``blob_*[c, 0:blobs]``: blob score (the 3 x 3
     count; 0: empty slot) and centre. Launch (M, chunks, PEAK_KEEP): one thread per peak entry writes it to the slot
     of its rank (the number of its camera's entries with a higher key, or the same key and a lower sub-block index)
-    when that is < ``blobs``;
-    thread (c, 0, 0) empties the slots from the camera's number of peaks on (disjoint from the ranked ones)."""
+    when that is < ``blobs``; thread (c, 0, 0) empties the slots from the camera's number of peaks on (disjoint from
+    the ranked ones)."""
     c, k, r = wp.tid()
-    v = part_score[c, k, r]
-    if k == 0 and r == 0:
-        # count this camera's peaks: slots from that count on are empty
-        n = int(0)
-        for kk in range(part_score.shape[1]):
-            for rr in range(part_score.shape[2]):
-                if part_score[c, kk, rr] > 0.0:
-                    n += 1
-        for q in range(n, blobs):
-            blob_score[c, q] = 0.0
-            blob_uv[c, q] = wp.vec2(0.0, 0.0)
-    if v <= 0.0:
-        return
-    idx = part_index[c, k, r]
-    rank = int(0)
-    for kk in range(part_score.shape[1]):
-        for rr in range(part_score.shape[2]):
-            w = part_score[c, kk, rr]
-            if w > v or (w == v and w > 0.0 and part_index[c, kk, rr] < idx):
-                rank += 1
-    if rank < blobs:
-        blob_score[c, rank] = float(int(v) // KEY_SCALE)
-        blob_uv[c, rank] = part_uv[c, k, r]
+    select_blob(c, k, r, part_score, part_index, part_uv, blobs, blob_score, blob_uv)
 
 
-@wp.kernel
-def candidates_kernel(
+@wp.func
+def candidate(
+    t: int,
     cams: wp.array(dtype=Camera),
     target: ColourTarget,
     bgr: wp.array(dtype=wp.uint8),
@@ -291,13 +312,7 @@ def candidates_kernel(
     cand_pos: wp.array(dtype=wp.vec3),
     cand_score: wp.array(dtype=wp.float32),
 ):
-    """One thread per (pair p, blob i of camera ``pair_a[p]``, blob j of camera ``pair_b[p]``), flat index
-    ``(p B + i) B + j`` with ``B = blob_score.shape[1]``; launch ``len(cand_pos)`` threads (P B^2). Writes the
-    triangulated point and its mode-test score (``proposal.mode_log_likelihood``), or score ``LOG_ZERO`` when a blob
-    slot is empty, the rays
-    do not meet in front of both cameras, the point lies outside [lo, hi] or reprojects more than ``gate_px`` from
-    either blob centre."""
-    t = wp.tid()
+    """Candidate t (see :func:`candidates_kernel`)."""
     nb = blob_score.shape[1]
     p = t // (nb * nb)
     i = (t // nb) % nb
@@ -335,10 +350,78 @@ def candidates_kernel(
     cand_score[t] = mode_log_likelihood(cams, target, bgr, integral, window, mode, x)
 
 
+@wp.kernel
+def candidates_kernel(
+    cams: wp.array(dtype=Camera),
+    target: ColourTarget,
+    bgr: wp.array(dtype=wp.uint8),
+    integral: wp.array(dtype=wp.int32),
+    window: wp.array(dtype=wp.uint8),
+    mode: int,
+    blob_score: wp.array2d(dtype=wp.float32),
+    blob_uv: wp.array2d(dtype=wp.vec2),
+    pair_a: wp.array(dtype=wp.int32),
+    pair_b: wp.array(dtype=wp.int32),
+    gate_px: float,
+    lo: wp.vec3,
+    hi: wp.vec3,
+    cand_pos: wp.array(dtype=wp.vec3),
+    cand_score: wp.array(dtype=wp.float32),
+):
+    """One thread per (pair p, blob i of camera ``pair_a[p]``, blob j of camera ``pair_b[p]``), flat index
+    ``(p B + i) B + j`` with ``B = blob_score.shape[1]``; launch ``len(cand_pos)`` threads (P B^2). Writes the
+    triangulated point and its mode-test score (``proposal.mode_log_likelihood``), or score ``LOG_ZERO`` when a blob
+    slot is empty, the rays do not meet in front of both cameras, the point lies outside [lo, hi] or reprojects more
+    than ``gate_px`` from either blob centre."""
+    t = wp.tid()
+    candidate(
+        t,
+        cams,
+        target,
+        bgr,
+        integral,
+        window,
+        mode,
+        blob_score,
+        blob_uv,
+        pair_a,
+        pair_b,
+        gate_px,
+        lo,
+        hi,
+        cand_pos,
+        cand_score,
+    )
+
+
 @wp.func
 def ranks_before(s: float, t: int, u: float, q: int):
     """True when candidate (score u, index q) ranks before (score s, index t): higher score, ties by lower index."""
     return u > s or (u == s and q < t)
+
+
+@wp.func
+def keep_candidate(
+    t: int,
+    cand_pos: wp.array(dtype=wp.vec3),
+    cand_score: wp.array(dtype=wp.float32),
+    radius: float,
+    keep: wp.array(dtype=wp.int32),
+):
+    """The suppression flag of candidate t (see :func:`candidate_keep_kernel`)."""
+    s = cand_score[t]
+    flag = int(0)
+    if s > LOG_ZERO:
+        flag = int(1)
+        x = cand_pos[t]
+        r2 = radius * radius
+        for q in range(cand_score.shape[0]):
+            u = cand_score[q]
+            if u > LOG_ZERO and ranks_before(s, t, u, q):
+                d = cand_pos[q] - x
+                if wp.dot(d, d) < r2:
+                    flag = int(0)
+    keep[t] = flag
 
 
 @wp.kernel
@@ -350,20 +433,38 @@ def candidate_keep_kernel(
 ):
     """Non-maximum suppression: ``keep[t] = 1`` when candidate t is valid and no valid candidate ranking before it
     lies within ``radius`` metres. One thread per candidate."""
-    t = wp.tid()
-    s = cand_score[t]
-    keep[t] = 0
-    if s <= LOG_ZERO:
-        return
-    x = cand_pos[t]
-    r2 = radius * radius
-    for q in range(cand_score.shape[0]):
-        u = cand_score[q]
-        if u > LOG_ZERO and ranks_before(s, t, u, q):
-            d = cand_pos[q] - x
-            if wp.dot(d, d) < r2:
-                return
-    keep[t] = 1
+    keep_candidate(wp.tid(), cand_pos, cand_score, radius, keep)
+
+
+@wp.func
+def rank_candidate(
+    t: int,
+    cand_pos: wp.array(dtype=wp.vec3),
+    cand_score: wp.array(dtype=wp.float32),
+    keep: wp.array(dtype=wp.int32),
+    det_pos: wp.array(dtype=wp.vec3),
+    det_score: wp.array(dtype=wp.float32),
+):
+    """Work item t of :func:`candidate_rank_kernel`."""
+    kslots = det_pos.shape[0]
+    n = cand_score.shape[0]
+    if t < kslots:
+        kept = int(0)
+        for q in range(n):
+            kept += keep[q]
+        if t >= kept:
+            det_score[t] = LOG_ZERO
+            det_pos[t] = wp.vec3(0.0, 0.0, 0.0)
+    if t < n:
+        if keep[t] != 0:
+            s = cand_score[t]
+            rank = int(0)
+            for q in range(n):
+                if keep[q] != 0 and ranks_before(s, t, cand_score[q], q):
+                    rank += 1
+            if rank < kslots:
+                det_pos[rank] = cand_pos[t]
+                det_score[rank] = s
 
 
 @wp.kernel
@@ -377,25 +478,119 @@ def candidate_rank_kernel(
     """The ``K = len(det_pos)`` best kept candidates, score descending, into the detection slots; slots beyond the
     number kept get score ``LOG_ZERO``. One thread per candidate (at least K threads: thread t < K also checks
     whether slot t stays empty)."""
-    t = wp.tid()
-    kslots = det_pos.shape[0]
-    n = cand_score.shape[0]
-    if t < kslots:
-        kept = int(0)
-        for q in range(n):
-            kept += keep[q]
-        if t >= kept:
-            det_score[t] = LOG_ZERO
-            det_pos[t] = wp.vec3(0.0, 0.0, 0.0)
-    if t >= n:
-        return
-    if keep[t] == 0:
-        return
-    s = cand_score[t]
-    rank = int(0)
-    for q in range(n):
-        if keep[q] != 0 and ranks_before(s, t, cand_score[q], q):
-            rank += 1
-    if rank < kslots:
-        det_pos[rank] = cand_pos[t]
-        det_score[rank] = s
+    rank_candidate(wp.tid(), cand_pos, cand_score, keep, det_pos, det_score)
+
+
+@wp.func_native("""
+#if defined(__CUDA_ARCH__)
+    __syncthreads();
+#endif
+""")
+def block_sync():
+    """Barrier of the block's threads, whose global-memory writes before it are then visible to all of them (CUDA; the
+    CPU backend runs a block as one thread, which needs none). Every thread of the block must call it."""
+    ...
+
+
+@wp.kernel
+def detect_tail_kernel(
+    cams: wp.array(dtype=Camera),
+    target: ColourTarget,
+    bgr: wp.array(dtype=wp.uint8),
+    integral: wp.array(dtype=wp.int32),
+    window: wp.array(dtype=wp.uint8),
+    mode: int,
+    part_score: wp.array3d(dtype=wp.float32),
+    part_index: wp.array3d(dtype=wp.int32),
+    part_uv: wp.array3d(dtype=wp.vec2),
+    pair_a: wp.array(dtype=wp.int32),
+    pair_b: wp.array(dtype=wp.int32),
+    pairs: int,
+    gate_px: float,
+    lo: wp.vec3,
+    hi: wp.vec3,
+    radius: float,
+    est: wp.array(dtype=wp.float64),
+    frame: wp.array(dtype=wp.int32),
+    uniform_frame: wp.array(dtype=wp.int32),
+    thresholds: wp.vec2,
+    margin: float,
+    evidence: float,
+    near: float,
+    blob_score: wp.array2d(dtype=wp.float32),
+    blob_uv: wp.array2d(dtype=wp.vec2),
+    cand_pos: wp.array(dtype=wp.vec3),
+    cand_score: wp.array(dtype=wp.float32),
+    keep: wp.array(dtype=wp.int32),
+    det_pos: wp.array(dtype=wp.vec3),
+    det_score: wp.array(dtype=wp.float32),
+    det_cum: wp.array(dtype=wp.float32),
+    det_count: wp.array(dtype=wp.int32),
+    mix: wp.array(dtype=wp.float32),
+):
+    """:func:`blob_select_kernel`, :func:`candidates_kernel` (``pairs`` camera pairs: none with one camera),
+    :func:`candidate_keep_kernel`, :func:`candidate_rank_kernel` and the mode test (``proposal.jump_decision_kernel``)
+    in one block, the stages separated by block barriers: one launch instead of five (each a few microseconds of
+    latency on a GPU, where a frame of 1e5 particles takes tens of microseconds). The same results as the five
+    launches. Launch ``wp.launch_tiled(dim=[1], block_dim=B)``."""
+    _b, lane = wp.tid()
+    m = part_score.shape[0]
+    per_camera = part_score.shape[1] * part_score.shape[2]
+    for e in range(lane, m * per_camera, wp.block_dim()):
+        c = e // per_camera
+        q = e % per_camera
+        k = q // part_score.shape[2]
+        r = q % part_score.shape[2]
+        select_blob(c, k, r, part_score, part_index, part_uv, blob_score.shape[1], blob_score, blob_uv)
+    block_sync()
+    n = int(0)
+    if pairs > 0:
+        n = cand_score.shape[0]
+    for t in range(lane, n, wp.block_dim()):
+        candidate(
+            t,
+            cams,
+            target,
+            bgr,
+            integral,
+            window,
+            mode,
+            blob_score,
+            blob_uv,
+            pair_a,
+            pair_b,
+            gate_px,
+            lo,
+            hi,
+            cand_pos,
+            cand_score,
+        )
+    block_sync()
+    for t in range(lane, n, wp.block_dim()):
+        keep_candidate(t, cand_pos, cand_score, radius, keep)
+    block_sync()
+    for t in range(lane, wp.max(n, det_pos.shape[0]), wp.block_dim()):
+        if n > 0:
+            rank_candidate(t, cand_pos, cand_score, keep, det_pos, det_score)
+    block_sync()
+    if lane == 0:
+        jump_decision(
+            cams,
+            target,
+            bgr,
+            integral,
+            window,
+            mode,
+            det_pos,
+            det_score,
+            est,
+            frame,
+            uniform_frame,
+            thresholds,
+            margin,
+            evidence,
+            near,
+            det_cum,
+            det_count,
+            mix,
+        )

@@ -182,8 +182,8 @@ NO_JUMP = wp.constant(-1.0e30)
 """A threshold no normal draw falls below (jump probability 0)."""
 
 
-@wp.kernel
-def jump_decision_kernel(
+@wp.func
+def jump_decision(
     cams: wp.array(dtype=Camera),
     target: ColourTarget,
     bgr: wp.array(dtype=wp.uint8),
@@ -203,14 +203,7 @@ def jump_decision_kernel(
     det_count: wp.array(dtype=wp.int32),
     mix: wp.array(dtype=wp.float32),
 ):
-    """The mode test (module docstring), one thread. Reads the detection slots (score descending, ``LOG_ZERO`` =
-    empty) and the previous frame's estimate ``est`` (MMSE mean, spread and MAP, ``kernels.core.reduce.EST_*``; after
-    ``init_point`` the mean and MAP hold the initial point). The cloud's score is the best of its mean's, its MAP's
-    and those of the candidates within ``near`` + 2 |spread| metres of either (the cloud's own mode: near an image
-    border a slightly biased estimate can fall just inside a camera that no longer sees the object, while the
-    object's candidate, outside it, scores higher). Writes ``det_count[0]`` (valid slots), ``det_cum`` (normalised
-    cumulative component weights, exp(score - best)) and ``mix`` (``MIX_*``). ``thresholds`` = (Phi^-1(eps),
-    Phi^-1(alpha)) with ``NO_JUMP`` for a probability 0."""
+    """The mode test (:func:`jump_decision_kernel`; also called by ``blobs.detect_tail_kernel``)."""
     count = int(0)
     for k in range(det_score.shape[0]):
         if det_score[k] > LOG_ZERO:
@@ -263,6 +256,57 @@ def jump_decision_kernel(
     mix[MIX_EVIDENCE] = e
     mix[MIX_JUMP] = float(jump)
     mix[MIX_CUSUM] = s
+
+
+@wp.kernel
+def jump_decision_kernel(
+    cams: wp.array(dtype=Camera),
+    target: ColourTarget,
+    bgr: wp.array(dtype=wp.uint8),
+    integral: wp.array(dtype=wp.int32),
+    window: wp.array(dtype=wp.uint8),
+    mode: int,
+    det_pos: wp.array(dtype=wp.vec3),
+    det_score: wp.array(dtype=wp.float32),
+    est: wp.array(dtype=wp.float64),
+    frame: wp.array(dtype=wp.int32),
+    uniform_frame: wp.array(dtype=wp.int32),
+    thresholds: wp.vec2,
+    margin: float,
+    evidence: float,
+    near: float,
+    det_cum: wp.array(dtype=wp.float32),
+    det_count: wp.array(dtype=wp.int32),
+    mix: wp.array(dtype=wp.float32),
+):
+    """The mode test (module docstring), one thread. Reads the detection slots (score descending, ``LOG_ZERO`` =
+    empty) and the previous frame's estimate ``est`` (MMSE mean, spread and MAP, ``kernels.core.reduce.EST_*``; after
+    ``init_point`` the mean and MAP hold the initial point). The cloud's score is the best of its mean's, its MAP's
+    and those of the candidates within ``near`` + 2 |spread| metres of either (the cloud's own mode: near an image
+    border a slightly biased estimate can fall just inside a camera that no longer sees the object, while the
+    object's candidate, outside it, scores higher). Writes ``det_count[0]`` (valid slots), ``det_cum`` (normalised
+    cumulative component weights, exp(score - best)) and ``mix`` (``MIX_*``). ``thresholds`` = (Phi^-1(eps),
+    Phi^-1(alpha)) with ``NO_JUMP`` for a probability 0."""
+    jump_decision(
+        cams,
+        target,
+        bgr,
+        integral,
+        window,
+        mode,
+        det_pos,
+        det_score,
+        est,
+        frame,
+        uniform_frame,
+        thresholds,
+        margin,
+        evidence,
+        near,
+        det_cum,
+        det_count,
+        mix,
+    )
 
 
 @wp.kernel

@@ -238,11 +238,13 @@ def jump_sweep(
     particles: int = 1000,
     device: str = "cpu",
     plot: str | None = None,
+    **config,
 ) -> dict:
     """Section III.C's 2 m jump with image observations: the ball rests ``before`` frames (paper's initialisation at
     the ball), then jumps by ``jump`` metres; for each sigma_m of the sweep (``experiments.default_sigmas(steps)``)
     the mean over seeds of the frames after the jump until the error stays < 3 cm (``after`` if never), both
-    proposals. ``plot``: a PNG path for both curves in one plot."""
+    proposals. ``plot``: a PNG path for both curves in one plot. ``config``: ``ColorConfig`` fields of the mixture
+    runs (e.g. ``reset_rate``)."""
     from wptrack.trackers.colour.experiments import default_sigmas
 
     scene = get_scene(scene_name).build()
@@ -266,6 +268,7 @@ def jump_sweep(
                 sigma=sigma,
                 init=tuple(rest),
                 proposal=proposal,
+                **(config if proposal == "mixture" else {}),
             )
             conv = first_below(errs, start=before)
             frames = np.where(conv >= 0, conv - before, after)

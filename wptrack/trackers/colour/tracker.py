@@ -145,8 +145,9 @@ class ColorConfig:
         min_blob_pixels: fewest target pixels in a blob's 15 x 15 neighbourhood (mixture only).
         epipolar_px: largest reprojection error, pixels, of a blob pair's triangulated point in either camera of the
             pair (mixture only).
-        jump_margin: nats per frame by which the best candidate's log-likelihood must exceed the cloud's (that of the
-            previous estimate on the current frame) before evidence accumulates (mixture only).
+        jump_margin: nats per frame by which the best candidate's log-likelihood must exceed the cloud's (the best of
+            the previous MMSE and MAP estimates and the candidates next to them, on the current frame) before evidence
+            accumulates (mixture only).
         jump_evidence: accumulated excess, nats, beyond which the frame jumps (a CUSUM; 0: the first frame whose
             excess passes the margin jumps) (mixture only).
     """
@@ -421,7 +422,8 @@ class ColorTracker(ParticleFilter):
             self.maps.launch(self._target, self.bgr)
 
     def _launch_detection(self) -> None:
-        """Blobs, candidates and the mode test of the current frame (``proposal='mixture'``; fixed launches)."""
+        """Blobs, candidates and the mode test of the current frame (``proposal='mixture'``): four fixed launches
+        (sub-block counts, blob keys, peaks per chunk, then the rest in one block: ``kernels.colour.blobs``)."""
         cfg, d, dr = self.config, self.device, self.drig
         m = dr.num_cameras
         obs = [dr.cams, self._target, self.bgr, self._integral, self._window, self._mode_id]
@@ -447,44 +449,16 @@ class ColorTracker(ParticleFilter):
             block_dim=BLOCK,
             device=d,
         )
-        wp.launch(
-            kblobs.blob_select_kernel,
-            dim=(m, self._chunks, int(kblobs.PEAK_KEEP)),
-            inputs=[self.part_score, self.part_index, self.part_uv, cfg.blobs],
-            outputs=[self.blob_score, self.blob_uv],
-            device=d,
-        )
-        if self._pairs > 0:
-            lo, hi = (wp.vec3(*v) for v in self.candidate_volume)
-            c = self.cand_pos.shape[0]
-            wp.launch(
-                kblobs.candidates_kernel,
-                dim=c,
-                inputs=[*obs, self.blob_score, self.blob_uv, self.pair_a, self.pair_b, cfg.epipolar_px, lo, hi],
-                outputs=[self.cand_pos, self.cand_score],
-                device=d,
-            )
-            radius = 2.0 * cfg.detection_sigma
-            wp.launch(
-                kblobs.candidate_keep_kernel,
-                dim=c,
-                inputs=[self.cand_pos, self.cand_score, radius],
-                outputs=[self.cand_keep],
-                device=d,
-            )
-            wp.launch(
-                kblobs.candidate_rank_kernel,
-                dim=max(c, cfg.detection_components),
-                inputs=[self.cand_pos, self.cand_score, self.cand_keep],
-                outputs=[self.det_pos, self.det_score],
-                device=d,
-            )
-        wp.launch(
-            kproposal.jump_decision_kernel,
-            dim=1,
-            inputs=[*obs, self.det_pos, self.det_score, self.est, self.frame, self.uniform_frame, self._thresholds]
-            + [cfg.jump_margin, cfg.jump_evidence, 3.0 * cfg.detection_sigma],
-            outputs=[self.det_cum, self.det_count, self.mix],
+        lo, hi = (wp.vec3(*v) for v in self.candidate_volume)
+        wp.launch_tiled(
+            kblobs.detect_tail_kernel,
+            dim=[1],
+            inputs=[*obs, self.part_score, self.part_index, self.part_uv, self.pair_a, self.pair_b, self._pairs]
+            + [cfg.epipolar_px, lo, hi, 2.0 * cfg.detection_sigma, self.est, self.frame, self.uniform_frame]
+            + [self._thresholds, cfg.jump_margin, cfg.jump_evidence, 3.0 * cfg.detection_sigma],
+            outputs=[self.blob_score, self.blob_uv, self.cand_pos, self.cand_score, self.cand_keep, self.det_pos]
+            + [self.det_score, self.det_cum, self.det_count, self.mix],
+            block_dim=BLOCK,
             device=d,
         )
 
