@@ -301,3 +301,14 @@ def test_a_cloud_on_a_wrong_mode_jumps_to_the_ball_and_a_locked_one_does_not(dev
     out = [locked.step(f) for f in frames]
     assert not any(e.jump for e in out)
     assert np.mean([np.linalg.norm(e.mean - BALL) for e in out[2:]]) < 0.01
+
+
+@pytest.mark.parametrize("mode", ["integral", "map"])
+def test_mixture_scoring_modes_identical(device, frames, mode):
+    """The detection reads the same counts in every scoring mode, so the mixture's estimates are identical too."""
+    d = run(device, frames[:5], score_mode="direct")
+    o = run(device, frames[:5], score_mode=mode)
+    for ed, eo in zip(d, o, strict=True):
+        np.testing.assert_array_equal(ed.mean, eo.mean)
+        assert (ed.ess, ed.detection, ed.jump) == (eo.ess, eo.detection, eo.jump)
+    assert d[0].jump and d[0].detection > 0
