@@ -67,11 +67,11 @@ def test_track_people_example(device, capsys):
 
 
 def test_every_example_is_tested():
-    tested = {"track_colour", "sigma_sweep", "drift", "track_templates", "track_people"}
+    tested = {"track_colour", "sigma_sweep", "drift", "track_templates", "track_people", "lock_on"}
     assert {p.stem for p in EXAMPLES.glob("*.py")} == tested, "add a test for the new example"
 
 
-@pytest.mark.parametrize("name", ["track_colour", "sigma_sweep", "drift", "track_templates", "track_people"])
+@pytest.mark.parametrize("name", ["track_colour", "sigma_sweep", "drift", "track_templates", "track_people", "lock_on"])
 def test_examples_have_device_and_frames_flags(name):
     text = (EXAMPLES / f"{name}.py").read_text()
     assert "--device" in text and "--frames" in text
