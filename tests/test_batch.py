@@ -458,13 +458,20 @@ def test_kept_workers_serve_the_next_batch(ray_local, tmp_path):
 
 
 def test_pool_size():
-    from wptrack.batch.actors import pool_size
+    from wptrack.batch.actors import cpus_per_slot, pool_size
 
     assert pool_size({"GPU": 2, "CPU": 16}, 1, 1, 64) == 2
     assert pool_size({"GPU": 4, "CPU": 16}, 0.5, 2, 64) == 8  # two workers per GPU
     assert pool_size({"GPU": 4, "CPU": 16}, 0.5, 4, 64) == 4  # the cores limit them
     assert pool_size({"GPU": 4, "CPU": 16}, 1, 1, 3) == 3  # never more than the runs
     assert pool_size({"CPU": 2}, 0, 1, 8) == 2 and pool_size({"CPU": 2}, 0, 3, 8) == 1
+    # the default cores per GPU worker: what the smallest GPU node gives each (a head without GPUs aside)
+    head = {"Alive": True, "Resources": {"CPU": 8}}
+    small = {"Alive": True, "Resources": {"CPU": 16, "GPU": 4}}
+    big = {"Alive": True, "Resources": {"CPU": 64, "GPU": 8}}
+    assert cpus_per_slot([head, small, big], 1) == 4 and cpus_per_slot([head, big], 1) == 8
+    assert cpus_per_slot([head, small], 0.5) == 2 and cpus_per_slot([head], 1) == 1
+    assert cpus_per_slot([{"Alive": False, "Resources": {"CPU": 2, "GPU": 2}}, big], 1) == 8
 
 
 def test_decode_threads_shared_among_a_runs_videos(scene, monkeypatch):

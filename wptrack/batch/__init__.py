@@ -1,4 +1,4 @@
-"""Batches of runs and parameter sweeps, one Ray task per run (``wptrack batch MANIFEST --out DIR``).
+"""Batches of runs and parameter sweeps on Ray workers that stay warm (``wptrack batch MANIFEST --out DIR``).
 
 A manifest (YAML, :mod:`wptrack.batch.manifest`) lists runs, or grids of runs to expand. Each run is a ``wptrack
 track color|templates|people`` run (its arguments are the command's options, without the dashes) or a Python
@@ -33,9 +33,12 @@ identity (what makes a re-run skip it) is its tracker, function and arguments: i
 
 Execution (``address``):
 
-* ``local`` (default): a new local Ray instance (``ray.init(address="local")``), one task per run, each pinned to
-  ``gpus_per_task`` GPUs (``CUDA_VISIBLE_DEVICES`` set by Ray, so ``--device auto`` is the task's GPU) or, with
-  ``gpus_per_task = 0``, to the CPU (``--device auto`` becomes ``cpu``) with ``cpus_per_task`` cores.
+* ``local`` (default): a new local Ray instance (``ray.init(address="local")``). ``pool="actors"`` (default): one
+  warm worker (a Ray actor, :mod:`wptrack.batch.actors`) per ``gpus_per_task`` GPUs (``CUDA_VISIBLE_DEVICES`` set
+  by Ray, so ``--device auto`` is the worker's GPU) or, with ``gpus_per_task = 0``, per ``cpus_per_task`` cores on
+  the CPU (``--device auto`` becomes ``cpu``), each started once and taking runs from a queue; ``pool="tasks"``: one
+  Ray task per run (a fresh worker process per GPU run). Each worker holds ``cpus_per_task`` cores and sizes its
+  runs' video decoding to them. Every run records its stage times (:mod:`wptrack.batch.worker`).
 * ``auto`` / ``HOST:PORT`` / ``ray://HOST:PORT``: an existing Ray cluster. ``DIR`` and the inputs must be on a
   filesystem shared by the nodes, at the same paths, and wptrack installed on every node.
 * ``inline``: no Ray; the runs one after another in this process (the default when Ray is not installed), same
@@ -43,10 +46,11 @@ Execution (``address``):
 
 Fault tolerance: a run writes into ``DIR/.<run-id>.partial-<unique>`` and is renamed to ``DIR/<run-id>`` when it
 completed (an older ``DIR/<run-id>`` is replaced); a run that raised (other than a user-input error, which is
-reported at once) or whose worker died is retried up to ``retries`` times (Ray's ``max_retries`` and
-``retry_exceptions``), each attempt from a clean partial folder. ``DIR/<run-id>/batch.json`` records the manifest
-entry's hash: re-running the manifest skips the runs completed with the same entry (after a crash, a node loss or
-Ctrl-C only the missing runs run again); a changed entry runs again and replaces its folder.
+reported at once) or whose worker died is retried up to ``retries`` times (on another warm worker; for tasks
+Ray's ``max_retries`` and ``retry_exceptions``), each attempt from a clean partial folder.
+``DIR/<run-id>/batch.json`` records the manifest entry's hash: re-running the manifest skips the runs completed
+with the same entry (after a crash, a node loss or Ctrl-C only the missing runs run again); a changed entry runs
+again and replaces its folder.
 """
 
 from __future__ import annotations
@@ -336,7 +340,7 @@ def run_batch(
     out_dir: str | os.PathLike,
     address: str = "local",
     gpus_per_task: float | None = None,
-    cpus_per_task: float = 1.0,
+    cpus_per_task: float | None = None,
     retries: int | None = None,
     on_result: Callable[[dict[str, Any]], None] | None = None,
     pool: str = "actors",
@@ -354,7 +358,9 @@ def run_batch(
             (``ray.init`` before) is used as it is.
         gpus_per_task: GPUs per run (fractions share a GPU); None: 1 if the Ray cluster has GPUs, else 0. With 0
             the runs' ``device: auto`` means the CPU.
-        cpus_per_task: CPU cores reserved per run (Ray's ``num_cpus``).
+        cpus_per_task: CPU cores reserved per worker (Ray's ``num_cpus``; its runs' video decoding threads); None:
+            for GPU runs the cores per GPU worker of the cluster's GPU nodes (the smallest node's
+            ``floor(cores / (GPUs / gpus_per_task))``, e.g. 4 on a node of 16 cores and 4 GPUs), else 1.
         retries: attempts after the first for a run that raised or whose worker died (default: the manifest's
             ``retries``, else 2).
         on_result: called with each run's result as it arrives (also for runs skipped as already complete).
@@ -382,7 +388,7 @@ def run_batch(
         raise ConfigError(f"retries: expected an integer >= 0, got {retries!r}")
     if gpus_per_task is not None and not (gpus_per_task >= 0):
         raise ConfigError(f"--gpus-per-task: expected a number >= 0, got {gpus_per_task!r}")
-    if not (cpus_per_task > 0):
+    if cpus_per_task is not None and not (cpus_per_task > 0):
         raise ConfigError(f"--cpus-per-task: expected a number > 0, got {cpus_per_task!r}")
     if pool not in POOLS:
         raise ConfigError(f"--pool: expected one of {', '.join(POOLS)}, got {pool!r}")
@@ -462,7 +468,7 @@ def _run_ray(
     out: Path,
     address: str,
     gpus_per_task: float | None,
-    cpus_per_task: float,
+    cpus_per_task: float | None,
     retries: int,
     record: Callable[[dict[str, Any]], None],
     pool: str = "actors",
@@ -481,6 +487,10 @@ def _run_ray(
                 f"--gpus-per-task {gpus_per_task:g}: the Ray cluster has {gpus:g} GPU(s); use --gpus-per-task 0 "
                 "for CPU runs"
             )
+        if cpus_per_task is None:
+            from wptrack.batch.actors import cpus_per_slot
+
+            cpus_per_task = cpus_per_slot(ray.nodes(), gpus_per_task) if gpus_per_task > 0 else 1.0
         if cpus_per_task > float(resources.get("CPU", 0.0)):
             raise ConfigError(f"--cpus-per-task {cpus_per_task:g}: the Ray cluster has {resources.get('CPU', 0)} CPUs")
         threads = max(1, int(cpus_per_task))

@@ -152,6 +152,19 @@ def pool_size(resources: Mapping[str, float], gpus_per_task: float, cpus_per_tas
     return max(1, min(n, runs))
 
 
+def cpus_per_slot(nodes: Sequence[Mapping[str, Any]], gpus_per_task: float) -> float:
+    """The cores each GPU worker can hold on every GPU node of a cluster (``ray.nodes()``): the smallest
+    ``floor(cores / (GPUs / gpus_per_task))`` over the live nodes with a GPU, at least 1 (1 without GPU nodes)."""
+    eps = 1e-9
+    per = []
+    for node in nodes:
+        res = node.get("Resources") or {}
+        gpus = float(res.get("GPU", 0.0))
+        if node.get("Alive", True) and gpus >= gpus_per_task > 0:
+            per.append(math.floor(float(res.get("CPU", 0.0)) / math.floor(gpus / gpus_per_task + eps) + eps))
+    return float(max(1, min(per))) if per else 1.0
+
+
 def run_actor_pool(
     pending: Sequence[Any],
     execute: Callable[..., dict[str, Any]],

@@ -171,7 +171,13 @@ def build_parser(batch_tracker: str | None = None) -> argparse.ArgumentParser:
         "inline (no Ray: one run after another here; also the default without Ray installed)",
     )
     bt.add_argument("--gpus-per-task", type=float, default=None, help="GPUs per run (default 1 if the cluster has any)")
-    bt.add_argument("--cpus-per-task", type=float, default=1.0, help="CPU cores reserved per run (default 1)")
+    bt.add_argument(
+        "--cpus-per-task",
+        type=float,
+        default=None,
+        help="CPU cores reserved per worker, its runs' decoding threads (default: GPU runs the cores per GPU worker, "
+        "e.g. 4 on 16 cores and 4 GPUs; CPU runs 1)",
+    )
     bt.add_argument("--retries", type=int, default=None, help="retries of a failed/killed run (default: manifest, 2)")
     bt.add_argument(
         "--pool",
