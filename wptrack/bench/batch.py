@@ -9,8 +9,9 @@ one offering ``G`` GPUs with ``slots`` workers per GPU (``gpus_per_task = 1 / sl
 start outside. With ``--pool tasks`` every run's worker start, imports and Warp start are inside (each task pays
 them). With ``--pool actors`` (warm workers) the pool is started before the timed batch, by a batch of tiny runs
 (2 frames, two per worker) that also loads the kernels in every worker, and kept for the timed batch
-(``keep_workers``): T is then the steady state of warm workers, and the pool's start (``pool start``, the wall time
-of that warm-up batch, paid once per ``wptrack batch`` command or per Python session) is reported beside it, with
+(``keep_workers``): T is then the steady state of warm workers, and the pool's start (``pool start``: from that
+batch's start until every worker began its first run, paid once per ``wptrack batch`` command or per Python
+session) is reported beside it, with
 ``E cold = (S1 + T1) / (G (SG + TG))``, the efficiency had the pool started inside (``--cold`` measures that
 directly). The parallel efficiency is
 
@@ -234,10 +235,13 @@ def _timed_batch(
     keep = warm is not None and pool == "actors"
     try:
         pool_start = 0.0
-        if keep:
+        if keep:  # the pool's start: until every worker began its first (warm-up) run
             t0 = time.time()
-            run_batch(warm, out.parent / f".{out.name}-warm", keep_workers=True, **shape)
-            pool_start = time.time() - t0
+            warmed = run_batch(warm, out.parent / f".{out.name}-warm", keep_workers=True, **shape)
+            first: dict[int, float] = {}
+            for r in warmed:
+                first[r["pid"]] = min(first.get(r["pid"], r["started_at"]), r["started_at"])
+            pool_start = max(first.values()) - t0
         t0 = time.time()
         res = run_batch(manifest, out, keep_workers=keep, **shape)
         t_end = time.time()
