@@ -8,7 +8,10 @@ is built (rig, videos, sizes, parameters, device), and the loop then owns what a
   atomically), with the job's extra writers opened in :meth:`TrackerRun.start` and always closed in
   :meth:`TrackerRun.finish`,
 * frames decoded ahead by a background thread (:class:`wptrack.io.prefetch.prefetch`), the time the tracker waited
-  for them recorded as the ``decode_wait`` stage, and the tracker's own per-stage timings,
+  for them recorded as the ``decode_wait`` stage, and the tracker's own per-stage timings; run.json's ``phases``:
+  the kernel modules' load time before the first frame (``module_load_s``, compilation included when the cache
+  missed them), the frame loop's wall time (``frame_loop_s``) and its start (``loop_start``, seconds since the
+  epoch),
 * a tqdm progress bar,
 * interruption: Ctrl-C (SIGINT) and SIGTERM stop the run after the frame in progress, with ``run.json`` status
   ``interrupted`` and the last frame written (``last_frame``); the outputs written so far stay valid,
@@ -405,6 +408,7 @@ def _run_locked(
         out.set_info(**info)
         job.start(out.out_dir, after)
         tracker = getattr(job, "tracker", None)
+        t_load = time.perf_counter()
         if tracker is not None:  # compile the kernels missing from the cache now, not in the first frame's time
             import sys
 
@@ -415,6 +419,9 @@ def _run_locked(
         bar = _progress(total, progress)
         bar.update(start)
         last_checkpoint = time.monotonic()
+        # run.json "phases": what a run costs besides its frames (a batch's stage times, wptrack.batch)
+        phases = {"module_load_s": time.perf_counter() - t_load, "loop_start": time.time()}
+        t_loop = time.perf_counter()
         try:
             frames = itertools.islice(job.frames(), start, max_frames)  # decoded and skipped when resuming
             t_wait = time.perf_counter()
@@ -446,6 +453,7 @@ def _run_locked(
                     stopped["frame"],
                     stopped["reason"],
                 )
+        out.set_info(phases={**phases, "frame_loop_s": time.perf_counter() - t_loop})
         summary = job.summary()
         out.close(
             "complete",
