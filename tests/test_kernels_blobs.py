@@ -4,6 +4,7 @@ selection, triangulated candidates with their gates and mode-test scores, non-ma
 
 from __future__ import annotations
 
+import kernel_harness as harness
 import numpy as np
 import pytest
 import warp as wp
@@ -152,7 +153,7 @@ def launch_peaks(device, rig, counts_np, min_pixels, blobs):
     bs = wp.full((m, blobs), -7.0, dtype=wp.float32, device=device)
     bu = wp.full((m, blobs), wp.vec2(-7.0, -7.0), dtype=wp.vec2, device=device)
     wp.launch(
-        kblobs.blob_select_kernel, dim=(m, chunks, KEEP), inputs=[ps, pi, pu, blobs], outputs=[bs, bu], device=device
+        harness.blob_select_kernel, dim=(m, chunks, KEEP), inputs=[ps, pi, pu, blobs], outputs=[bs, bu], device=device
     )
     return peaks.numpy(), (ps.numpy(), pi.numpy(), pu.numpy()), bs.numpy(), bu.numpy(), sums.numpy()
 
@@ -254,7 +255,7 @@ def test_candidates_match_numpy(device, rng):
     pos = wp.full(n, wp.vec3(7.0, 7.0, 7.0), dtype=wp.vec3, device=device)
     sc = wp.full(n, 7.0, dtype=wp.float32, device=device)
     wp.launch(
-        kblobs.candidates_kernel,
+        harness.candidates_kernel,
         dim=n,
         inputs=[drig.cams, target.to_struct(device), bgr, integral, window, int(kscoring.SCORE_INTEGRAL)]
         + [wp.array(score, device=device), wp.array(uv, dtype=wp.vec2, device=device)]
@@ -324,11 +325,11 @@ def test_suppression_and_ranking_match_numpy(device, rng, k):
     pos_d = wp.array(pos, dtype=wp.vec3, device=device)
     sc_d = wp.array(score, dtype=wp.float32, device=device)
     keep = wp.full(n, 7, dtype=wp.int32, device=device)
-    wp.launch(kblobs.candidate_keep_kernel, dim=n, inputs=[pos_d, sc_d, radius], outputs=[keep], device=device)
+    wp.launch(harness.candidate_keep_kernel, dim=n, inputs=[pos_d, sc_d, radius], outputs=[keep], device=device)
     det_pos = wp.full(k, wp.vec3(7.0, 7.0, 7.0), dtype=wp.vec3, device=device)
     det_sc = wp.full(k, 7.0, dtype=wp.float32, device=device)
     wp.launch(
-        kblobs.candidate_rank_kernel,
+        harness.candidate_rank_kernel,
         dim=max(n, k),
         inputs=[pos_d, sc_d, keep],
         outputs=[det_pos, det_sc],
@@ -420,24 +421,24 @@ def test_detect_tail_kernel_equals_the_staged_launches(device, rng):
 
     a = buffers()
     wp.launch(
-        kblobs.blob_select_kernel, dim=(m, chunks, KEEP), inputs=[*part, nb], outputs=[a["blob_score"], a["blob_uv"]]
+        harness.blob_select_kernel, dim=(m, chunks, KEEP), inputs=[*part, nb], outputs=[a["blob_score"], a["blob_uv"]]
     )
     wp.launch(
-        kblobs.candidates_kernel,
+        harness.candidates_kernel,
         dim=n,
         inputs=[*obs, a["blob_score"], a["blob_uv"], pa, pb, 8.0, lo, hi],
         outputs=[a["cand_pos"], a["cand_score"]],
         device=device,
     )
     wp.launch(
-        kblobs.candidate_keep_kernel,
+        harness.candidate_keep_kernel,
         dim=n,
         inputs=[a["cand_pos"], a["cand_score"], 0.04],
         outputs=[a["keep"]],
         device=device,
     )
     wp.launch(
-        kblobs.candidate_rank_kernel,
+        harness.candidate_rank_kernel,
         dim=max(n, k),
         inputs=[a["cand_pos"], a["cand_score"], a["keep"]],
         outputs=[a["det_pos"], a["det_score"]],

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import kernel_harness as harness
 import numpy as np
 import pytest
 import warp as wp
@@ -81,7 +82,7 @@ def test_streams_do_not_collide_at_large_indices(device):
 def test_normals_distribution(device):
     n = 50_000
     out = wp.zeros((n, 4), dtype=wp.float32, device=device)
-    wp.launch(krand.normal_kernel, dim=n, inputs=[wp.vec2ui(42, 0), 0, 1], outputs=[out], device=device)
+    wp.launch(harness.normal_kernel, dim=n, inputs=[wp.vec2ui(42, 0), 0, 1], outputs=[out], device=device)
     z = out.numpy().ravel()
     assert np.all(np.isfinite(z))
     # 200k samples: mean within 5 sigma (5/sqrt(2e5) ~ 0.011), variance within 1.5 %

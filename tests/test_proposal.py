@@ -5,6 +5,7 @@ a cloud off a wrong mode and leaving a locked one alone."""
 
 from __future__ import annotations
 
+import kernel_harness as harness
 import numpy as np
 import pytest
 import warp as wp
@@ -51,7 +52,7 @@ def test_ray_pairs_triangulate_projected_points(device):
     out = wp.zeros(64, dtype=wp.vec4, device=device)
     for uv_b, exact in ((uvb, True), (uvb_off, False)):
         wp.launch(
-            kproposal.ray_pair_kernel,
+            harness.ray_pair_kernel,
             dim=64,
             inputs=[
                 drig.cams,
@@ -95,7 +96,7 @@ def jump_sample(device, parents, det_pos, det_cum, count, threshold, uniform=0, 
     cum = np.ones(k, np.float32)
     cum[: len(det_cum)] = det_cum
     wp.launch(
-        kproposal.jump_sample_kernel,
+        harness.jump_sample_kernel,
         dim=len(parents),
         inputs=[
             wp.array(np.asarray(parents, np.float32), dtype=wp.vec3, device=device),

@@ -275,24 +275,6 @@ def select_blob(
             blob_uv[c, rank] = part_uv[c, k, r]
 
 
-@wp.kernel
-def blob_select_kernel(
-    part_score: wp.array3d(dtype=wp.float32),
-    part_index: wp.array3d(dtype=wp.int32),
-    part_uv: wp.array3d(dtype=wp.vec2),
-    blobs: int,
-    blob_score: wp.array2d(dtype=wp.float32),
-    blob_uv: wp.array2d(dtype=wp.vec2),
-):
-    """The ``blobs`` best peaks of each camera, key descending, into ``blob_*[c, 0:blobs]``: blob score (the 3 x 3
-    count; 0: empty slot) and centre. Launch (M, chunks, PEAK_KEEP): one thread per peak entry writes it to the slot
-    of its rank (the number of its camera's entries with a higher key, or the same key and a lower sub-block index)
-    when that is < ``blobs``; thread (c, 0, 0) empties the slots from the camera's number of peaks on (disjoint from
-    the ranked ones)."""
-    c, k, r = wp.tid()
-    select_blob(c, k, r, part_score, part_index, part_uv, blobs, blob_score, blob_uv)
-
-
 @wp.func
 def candidate(
     t: int,
@@ -350,50 +332,6 @@ def candidate(
     cand_score[t] = mode_log_likelihood(cams, target, bgr, integral, window, mode, x)
 
 
-@wp.kernel
-def candidates_kernel(
-    cams: wp.array(dtype=Camera),
-    target: ColourTarget,
-    bgr: wp.array(dtype=wp.uint8),
-    integral: wp.array(dtype=wp.int32),
-    window: wp.array(dtype=wp.uint8),
-    mode: int,
-    blob_score: wp.array2d(dtype=wp.float32),
-    blob_uv: wp.array2d(dtype=wp.vec2),
-    pair_a: wp.array(dtype=wp.int32),
-    pair_b: wp.array(dtype=wp.int32),
-    gate_px: float,
-    lo: wp.vec3,
-    hi: wp.vec3,
-    cand_pos: wp.array(dtype=wp.vec3),
-    cand_score: wp.array(dtype=wp.float32),
-):
-    """One thread per (pair p, blob i of camera ``pair_a[p]``, blob j of camera ``pair_b[p]``), flat index
-    ``(p B + i) B + j`` with ``B = blob_score.shape[1]``; launch ``len(cand_pos)`` threads (P B^2). Writes the
-    triangulated point and its mode-test score (``proposal.mode_log_likelihood``), or score ``LOG_ZERO`` when a blob
-    slot is empty, the rays do not meet in front of both cameras, the point lies outside [lo, hi] or reprojects more
-    than ``gate_px`` from either blob centre."""
-    t = wp.tid()
-    candidate(
-        t,
-        cams,
-        target,
-        bgr,
-        integral,
-        window,
-        mode,
-        blob_score,
-        blob_uv,
-        pair_a,
-        pair_b,
-        gate_px,
-        lo,
-        hi,
-        cand_pos,
-        cand_score,
-    )
-
-
 @wp.func
 def ranks_before(s: float, t: int, u: float, q: int):
     """True when candidate (score u, index q) ranks before (score s, index t): higher score, ties by lower index."""
@@ -422,18 +360,6 @@ def keep_candidate(
                 if wp.dot(d, d) < r2:
                     flag = int(0)
     keep[t] = flag
-
-
-@wp.kernel
-def candidate_keep_kernel(
-    cand_pos: wp.array(dtype=wp.vec3),
-    cand_score: wp.array(dtype=wp.float32),
-    radius: float,
-    keep: wp.array(dtype=wp.int32),
-):
-    """Non-maximum suppression: ``keep[t] = 1`` when candidate t is valid and no valid candidate ranking before it
-    lies within ``radius`` metres. One thread per candidate."""
-    keep_candidate(wp.tid(), cand_pos, cand_score, radius, keep)
 
 
 @wp.func
@@ -465,20 +391,6 @@ def rank_candidate(
             if rank < kslots:
                 det_pos[rank] = cand_pos[t]
                 det_score[rank] = s
-
-
-@wp.kernel
-def candidate_rank_kernel(
-    cand_pos: wp.array(dtype=wp.vec3),
-    cand_score: wp.array(dtype=wp.float32),
-    keep: wp.array(dtype=wp.int32),
-    det_pos: wp.array(dtype=wp.vec3),
-    det_score: wp.array(dtype=wp.float32),
-):
-    """The ``K = len(det_pos)`` best kept candidates, score descending, into the detection slots; slots beyond the
-    number kept get score ``LOG_ZERO``. One thread per candidate (at least K threads: thread t < K also checks
-    whether slot t stays empty)."""
-    rank_candidate(wp.tid(), cand_pos, cand_score, keep, det_pos, det_score)
 
 
 @wp.func_native("""

@@ -260,30 +260,6 @@ def col_scan_kernel(
         integral[i] = acc
 
 
-@wp.kernel
-def window_from_mask_kernel(
-    cams: wp.array(dtype=Camera),
-    mask: wp.array(dtype=wp.uint8),
-    window: wp.array(dtype=wp.uint8),
-):
-    """The 5x5 window-count map straight from the target mask (25 reads per pixel, all from cache on a GPU; no
-    integral image). Launch (M, max H, max W); flat like the mask."""
-    c, py, px = wp.tid()
-    cam = cams[c]
-    if py >= cam.height or px >= cam.width:
-        return
-    m = int(0)
-    for dy in range(-HALF_WINDOW, HALF_WINDOW + 1):
-        y = py + dy
-        if y >= 0 and y < cam.height:
-            row = cam.pixel_offset + y * cam.width
-            for dx in range(-HALF_WINDOW, HALF_WINDOW + 1):
-                x = px + dx
-                if x >= 0 and x < cam.width:
-                    m += int(mask[row + x])
-    window[cam.pixel_offset + py * cam.width + px] = wp.uint8(m)
-
-
 WINDOW_STRIP = wp.constant(8)
 """Output rows per thread of :func:`observe_map_kernel`."""
 STRIP_ROWS = wp.constant(12)

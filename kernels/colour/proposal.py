@@ -121,28 +121,6 @@ def ray_pair_midpoint(o1: wp.vec3, d1: wp.vec3, o2: wp.vec3, d2: wp.vec3):
     return wp.vec4(mid[0], mid[1], mid[2], wp.length(p1 - p2))
 
 
-@wp.kernel
-def ray_pair_kernel(
-    cams: wp.array(dtype=Camera),
-    cam_a: wp.array(dtype=wp.int32),
-    cam_b: wp.array(dtype=wp.int32),
-    uv_a: wp.array(dtype=wp.vec2),
-    uv_b: wp.array(dtype=wp.vec2),
-    out: wp.array(dtype=wp.vec4),
-):
-    """Triangulate pixel pairs (tests): ``out[i]`` = :func:`ray_pair_midpoint` of the rays through ``uv_a[i]`` in
-    camera ``cam_a[i]`` and ``uv_b[i]`` in camera ``cam_b[i]``."""
-    i = wp.tid()
-    ca = cams[cam_a[i]]
-    cb = cams[cam_b[i]]
-    out[i] = ray_pair_midpoint(
-        camera_centre(ca),
-        pixel_ray_direction(ca, uv_a[i][0], uv_a[i][1]),
-        camera_centre(cb),
-        pixel_ray_direction(cb, uv_b[i][0], uv_b[i][1]),
-    )
-
-
 OUTSIDE_NATS = wp.constant(-1.6094379124341003)
 """log(1/5): what a camera that does not see a point adds to its mode-test score (:func:`mode_log_likelihood`)."""
 
@@ -361,30 +339,6 @@ def jump_sample(
         b = uniform4(seed, i, f, STREAM_PROPOSAL_BOX)
         return wp.vec3(lo[0] + (hi[0] - lo[0]) * b[0], lo[1] + (hi[1] - lo[1]) * b[1], lo[2] + (hi[2] - lo[2]) * b[2])
     return parent + sigma * wp.vec3(z[0], z[1], z[2])
-
-
-@wp.kernel
-def jump_sample_kernel(
-    parents: wp.array(dtype=wp.vec3),
-    seed: wp.vec2ui,
-    frame: int,
-    sigma: float,
-    threshold: float,
-    uniform: int,
-    lo: wp.vec3,
-    hi: wp.vec3,
-    det_pos: wp.array(dtype=wp.vec3),
-    det_cum: wp.array(dtype=wp.float32),
-    count: int,
-    sigma_d: float,
-    out: wp.array(dtype=wp.vec3),
-):
-    """:func:`jump_sample` per point, with the filter's own motion normals (tests)."""
-    i = wp.tid()
-    z = normal4(seed, i, frame, STREAM_MOTION)
-    out[i] = jump_sample(
-        parents[i], z, seed, i, frame, sigma, threshold, uniform, lo, hi, det_pos, det_cum, count, sigma_d
-    )
 
 
 @wp.kernel

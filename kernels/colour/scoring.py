@@ -133,22 +133,6 @@ def window_count_kernel(
 
 
 @wp.kernel
-def colour_score_kernel(
-    cams: wp.array(dtype=Camera),
-    target: ColourTarget,
-    bgr: wp.array(dtype=wp.uint8),
-    integral: wp.array(dtype=wp.int32),
-    window: wp.array(dtype=wp.uint8),
-    mode: int,
-    points: wp.array(dtype=wp.vec3),
-    loglik: wp.array(dtype=wp.float32),
-):
-    """Log-likelihood of every point (eqs. 5-7), without prediction."""
-    i = wp.tid()
-    loglik[i] = colour_log_likelihood(cams, target, bgr, integral, window, mode, points[i])
-
-
-@wp.kernel
 def colour_predict_score_kernel(
     cams: wp.array(dtype=Camera),
     target: ColourTarget,

@@ -20,20 +20,6 @@ def gaussian_walk(x: wp.vec3, sigma: float, seed: wp.vec2ui, index: int, frame: 
 
 
 @wp.kernel
-def gaussian_walk_kernel(
-    particles: wp.array(dtype=wp.vec3),
-    ancestors: wp.array(dtype=wp.int32),
-    sigma: wp.array(dtype=wp.float32),
-    seed: wp.vec2ui,
-    frame: wp.array(dtype=wp.int32),
-    out: wp.array(dtype=wp.vec3),
-):
-    """Resampled gather + gaussian walk: ``out[i] = particles[ancestors[i]] + N(0, sigma[0])``."""
-    i = wp.tid()
-    out[i] = gaussian_walk(particles[ancestors[i]], sigma[0], seed, i, frame[0])
-
-
-@wp.kernel
 def init_point_kernel(point: wp.vec3, out: wp.array(dtype=wp.vec3)):
     """All particles at one point (the paper's initialisation; the first prediction spreads them)."""
     out[wp.tid()] = point

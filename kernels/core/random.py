@@ -111,17 +111,3 @@ def philox_kernel(
     w = random_words(seed, i, frame, stream)
     for k in range(4):
         words[i, k] = w[k]
-
-
-@wp.kernel
-def normal_kernel(
-    seed: wp.vec2ui,
-    frame: int,
-    stream: int,
-    out: wp.array2d(dtype=wp.float32),
-):
-    """N(0, 1) draws for indices ``0..N-1`` (tests). ``out``: (N, 4)."""
-    i = wp.tid()
-    z = normal4(seed, i, frame, stream)
-    for k in range(4):
-        out[i, k] = z[k]
