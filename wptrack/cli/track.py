@@ -57,7 +57,7 @@ def summary_lines(cmd: TrackCommand, summary: dict, parts: dict[str, Any]) -> li
     if cmd.name == "color":
         return colour_summary_lines(summary, out)
     if cmd.name == "templates":
-        virtual = parts["inputs"].virtual
+        virtual = summary.get("virtual", parts["inputs"].virtual)
         return [
             f"tracked {plural(summary['frames'], 'frame')} on {summary['device']}: "
             f"{plural(summary['objects'], 'object')} ({summary['classes']['human']} human, "

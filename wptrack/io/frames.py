@@ -126,6 +126,7 @@ class FrameSource:
     height: int
     fps: float | None = None
     stopped_early: dict[str, Any] | None = None
+    stage = "decode"  # the timeline stage of a thread iterating it (wptrack.io.prefetch)
 
     def __len__(self) -> int:
         """Number of frames (as reported by the source; a video may turn out shorter when read)."""
@@ -445,6 +446,7 @@ class SyncedFrames:
     """
 
     stopped_early: dict[str, Any] | None = None
+    stage = "decode"  # the timeline stage of a thread iterating it (wptrack.io.prefetch)
 
     def __init__(
         self, sources: list[FrameSource], stop_at_shortest: bool = False, max_frames: int | None = None

@@ -1,0 +1,252 @@
+"""The run pipeline's threads (issue 27): decode-ahead with its timeline, background video writers (bounded, atomic,
+errors raised in the caller), grey mask videos, the virtual.avi rule, and bad input (a decoder slower than real
+time, a consumer that stops early, a writer that fails or is slower than the run): no deadlock, bounded queues."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import cv2
+import numpy as np
+import pytest
+
+from wptrack.io import timeline
+from wptrack.io.prefetch import prefetch
+from wptrack.io.video import BackgroundWriter, VideoWriter, continue_video
+
+
+def _read_all(path) -> list[np.ndarray]:
+    cap = cv2.VideoCapture(str(path))
+    out = []
+    while True:
+        ok, frame = cap.read()
+        if not ok:
+            break
+        out.append(frame)
+    cap.release()
+    return out
+
+
+# ------------------------------------------------------------------------------------------------ timeline
+
+
+def test_timeline_summary_overlap_and_waits():
+    t = timeline.Timeline()
+    t.add("filter", 0.5)
+    t.add("decode", 0.25, count=2)
+    t.add("wait_masks", 10.0)
+    t.add("decode_blocked", 10.0)
+    t.started, t.stopped = 0.0, 0.5
+    s = t.summary()
+    assert s["wall_s"] == pytest.approx(0.5)
+    assert s["overlap"] == pytest.approx(1.5)  # waits and blocked producers are idle, not work
+    assert s["stages"]["decode"] == {"total_s": 0.25, "count": 2, "mean_ms": 125.0, "share": 0.5}
+    assert timeline.is_wait("wait_decode") and timeline.is_wait("masks_blocked") and not timeline.is_wait("masks")
+
+
+def test_record_goes_to_the_active_timeline_only():
+    timeline.record("decode", 1.0)  # none active: dropped
+    t = timeline.Timeline()
+    with timeline.active(t):
+        timeline.record("decode", 0.25)
+        assert timeline.current() is t
+    timeline.record("decode", 1.0)
+    assert timeline.current() is None
+    assert t.total("decode") == 0.25
+
+
+# ------------------------------------------------------------------------------------------------ prefetch
+
+
+def test_prefetch_records_producer_consumer_and_blocked_time():
+    def slow_source():
+        for i in range(6):
+            time.sleep(0.01)  # a decoder slower than the consumer
+            yield i
+
+    t = timeline.Timeline()
+    with timeline.active(t):
+        got = list(prefetch(slow_source(), depth=2, name="decode"))
+    assert got == list(range(6))
+    s = t.summary()["stages"]
+    assert s["decode"]["count"] == 6 and s["decode"]["total_s"] >= 0.05
+    assert s["wait_decode"]["count"] == 7  # six items and the end
+    assert s["wait_decode"]["total_s"] >= 0.03  # the consumer waited for the slow producer
+
+    t = timeline.Timeline()
+    with timeline.active(t):
+        for _ in prefetch(iter(range(5)), depth=1, name="masks"):
+            time.sleep(0.01)  # a consumer slower than the producer: the producer is blocked
+    assert t.total("masks_blocked") >= 0.02
+
+
+def test_prefetch_bounded_and_stops_its_source_when_the_consumer_leaves():
+    produced = []
+    closed = threading.Event()
+
+    def endless():
+        try:
+            i = 0
+            while True:
+                produced.append(i)
+                yield np.zeros(1000, dtype=np.uint8)
+                i += 1
+        finally:
+            closed.set()
+
+    it = prefetch(endless(), depth=3)
+    for k, _ in enumerate(it):
+        time.sleep(0.02)
+        assert len(produced) <= k + 1 + 3 + 1  # consumed + queued + one in the producer's hands
+        if k == 5:
+            break
+    assert closed.wait(2.0)  # the source generator was closed (its file released) when the loop was left
+    assert not it._thread.is_alive()
+
+
+def test_prefetch_reraises_the_source_error_in_order():
+    def failing():
+        yield 1
+        yield 2
+        raise ValueError("corrupt frame 2")
+
+    got = []
+    with pytest.raises(ValueError, match="corrupt frame 2"):
+        for item in prefetch(failing(), depth=4):
+            got.append(item)
+    assert got == [1, 2]
+
+
+# ------------------------------------------------------------------------------------------------ writers
+
+
+def test_grey_writer_round_trip(tmp_path, rng):
+    masks = [(rng.random((24, 32)) > 0.5).astype(np.uint8) * 255 for _ in range(4)]
+    with VideoWriter(tmp_path / "m.avi", fps=10, grey=True) as w:
+        for m in masks[:3]:
+            w.write(m)
+        w.write(np.repeat(masks[3][..., None], 3, axis=2))  # a BGR frame is converted
+    if w.codec != "FFV1":
+        pytest.skip("FFV1 not available (grey round trip is exact only with a lossless codec)")
+    back = _read_all(tmp_path / "m.avi")
+    assert len(back) == 4
+    for m, b in zip(masks, back, strict=True):
+        assert b.shape == (24, 32, 3)
+        for c in range(3):
+            np.testing.assert_array_equal(b[..., c], m)
+
+
+def test_background_writer_writes_what_the_plain_writer_writes(tmp_path, rng):
+    frames = [rng.integers(0, 256, (24, 32), dtype=np.uint8) for _ in range(9)]
+    t = timeline.Timeline()
+    with timeline.active(t):
+        bw = BackgroundWriter(VideoWriter(tmp_path / "b.avi", fps=10), depth=2, stage="write_test")
+        for f in frames:
+            bw.write(f, lambda g: cv2.merge([g, 255 - g, g // 2]))  # prepared in the writer thread
+        bw.flush()
+        assert bw.frames_written == 9
+        assert not (tmp_path / "b.avi").exists()  # atomic: only once closed
+        assert bw.close() == tmp_path / "b.avi"
+    with VideoWriter(tmp_path / "a.avi", fps=10) as w:
+        for f in frames:
+            w.write(cv2.merge([f, 255 - f, f // 2]))
+    if w.codec != "FFV1":
+        pytest.skip("FFV1 not available")
+    for a, b in zip(_read_all(tmp_path / "a.avi"), _read_all(tmp_path / "b.avi"), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert t.summary()["stages"]["write_test"]["count"] == 9
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.avi", "b.avi"]  # no temporary file left
+
+
+class _SlowWriter:
+    """A stand-in encoder slower than the run, failing at frame ``fail_at``."""
+
+    def __init__(self, delay: float, fail_at: int = -1) -> None:
+        self.delay, self.fail_at = delay, fail_at
+        self.frames_written = 0
+        self.closed = self.aborted = False
+
+    def write(self, frame) -> None:
+        time.sleep(self.delay)
+        if self.frames_written == self.fail_at:
+            raise OSError("disk full")
+        self.frames_written += 1
+
+    def close(self):
+        self.closed = True
+
+    def abort(self) -> None:
+        self.aborted = True
+
+
+def test_background_writer_is_bounded_when_the_encoder_is_slow():
+    slow = _SlowWriter(0.01)
+    bw = BackgroundWriter(slow, depth=3)
+    t = timeline.Timeline()
+    with timeline.active(t):
+        for k in range(15):
+            bw.write(np.zeros(10, dtype=np.uint8))
+            assert bw._queue.qsize() <= 3  # memory bounded: the caller waits instead
+            assert k + 1 - slow.frames_written <= 3 + 1
+    bw.close()
+    assert slow.frames_written == 15 and slow.closed
+    assert t.total("wait_write_video") > 0.05  # the caller waited for the encoder
+
+
+def test_background_writer_error_is_raised_by_the_caller_and_aborts():
+    slow = _SlowWriter(0.0, fail_at=2)
+    bw = BackgroundWriter(slow, depth=8)
+    with pytest.raises(OSError, match="disk full"):
+        for _ in range(50):
+            bw.write(np.zeros(10, dtype=np.uint8))
+            time.sleep(0.002)
+        bw.close()
+    bw.abort()
+    assert slow.aborted and not slow.closed
+
+
+def test_background_writer_abort_leaves_nothing(tmp_path):
+    bw = BackgroundWriter(VideoWriter(tmp_path / "x.avi", fps=10), depth=2)
+    for _ in range(5):
+        bw.write(np.zeros((8, 8), dtype=np.uint8))
+    bw.abort()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_continue_video_grey_keeps_the_frames_before_the_resume_point(tmp_path, rng):
+    masks = [(rng.random((16, 16)) > 0.5).astype(np.uint8) * 255 for _ in range(5)]
+    with VideoWriter(tmp_path / "m.avi", fps=10, grey=True) as w:
+        for m in masks[:3]:
+            w.write(m)
+    if w.codec != "FFV1":
+        pytest.skip("FFV1 not available")
+    w = continue_video(tmp_path / "m.avi", 2, fps=10, grey=True)
+    for m in masks[2:]:
+        w.write(m)
+    w.close()
+    back = _read_all(tmp_path / "m.avi")
+    assert len(back) == 5
+    for m, b in zip(masks, back, strict=True):
+        np.testing.assert_array_equal(b[..., 0], m)
+
+
+# ------------------------------------------------------------------------------------------------ template outputs
+
+
+def test_colour_virtual_equals_the_table_lookup(rng):
+    from wptrack.trackers.templates.run import colour_virtual, label_colours
+
+    labels = np.array([3, -1, 7, 12], dtype=np.int32)
+    virtual = rng.integers(0, 6, (20, 30), dtype=np.uint8)
+    lut = np.zeros((256, 3), dtype=np.uint8)
+    lut[1:5] = label_colours(np.maximum(labels, 0))
+    np.testing.assert_array_equal(colour_virtual(virtual, labels), lut[virtual])
+
+
+def test_virtual_video_default_by_frame_size():
+    from wptrack.trackers.templates.run import VIRTUAL_AUTO_PIXELS, virtual_default
+
+    assert virtual_default(480, 360) and virtual_default(640, 480)
+    assert not virtual_default(1440, 1080) and not virtual_default(1920, 1080)
+    assert virtual_default(VIRTUAL_AUTO_PIXELS, 1) and not virtual_default(VIRTUAL_AUTO_PIXELS + 1, 1)

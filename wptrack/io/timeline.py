@@ -1,0 +1,116 @@
+"""The stage timeline of a run: wall time spent per stage in every thread of the pipeline (decode, masks, upload,
+filter, writers) and the waits between them, so a run can say where its time went and how much of it overlapped.
+
+A :class:`Timeline` is thread-safe. The run loop (:func:`wptrack.runs.loop.run_tracker`) makes one per run and
+makes it the active one (:func:`active`) while the run goes; the pipeline's parts record into whatever timeline is
+active (:func:`record`, a no-op when none is): the decode-ahead threads (:class:`wptrack.io.prefetch.prefetch`: the
+time spent producing each item, the time blocked on a full queue, the time the consumer waited), the background
+video writers (:class:`wptrack.io.video.BackgroundWriter`) and the loop itself. One run at a time per process
+(the active timeline is global; ``wptrack batch`` runs each run in its own process).
+
+run.json's ``timeline`` (:meth:`Timeline.summary`): per stage the total seconds, the count, the mean in ms and the
+share of the run's wall time; ``wall_s`` (from the first frame asked for to the last frame recorded) and
+``overlap``: the busy stages' total over the wall time (1: one stage at a time; 2: two threads busy on average).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from collections.abc import Iterator
+from typing import Any
+
+WAIT_PREFIX = "wait_"
+"""Stages named ``wait_*`` (a consumer waiting for a producer) and ``*_blocked`` (a producer waiting for room in a
+full queue) are idle time: left out of ``overlap``."""
+
+BLOCKED_SUFFIX = "_blocked"
+
+
+def is_wait(stage: str) -> bool:
+    """Whether ``stage`` is idle time (a wait or a blocked producer), not work."""
+    return stage.startswith(WAIT_PREFIX) or stage.endswith(BLOCKED_SUFFIX)
+
+
+class Timeline:
+    """Total wall time and count per stage, added to from any thread.
+
+    Attributes:
+        started: ``time.perf_counter()`` when the timeline was made (or :meth:`start` last called).
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._stages: dict[str, list[float]] = {}
+        self.started = time.perf_counter()
+        self.stopped: float | None = None
+
+    def start(self) -> None:
+        """Start the wall clock now (the run's first frame is asked for)."""
+        self.started = time.perf_counter()
+        self.stopped = None
+
+    def stop(self) -> None:
+        """Stop the wall clock now (the run's last frame is recorded)."""
+        self.stopped = time.perf_counter()
+
+    def add(self, stage: str, seconds: float, count: int = 1) -> None:
+        """Add ``seconds`` of ``stage`` (``count`` items)."""
+        with self._lock:
+            entry = self._stages.get(stage)
+            if entry is None:
+                self._stages[stage] = [float(seconds), count]
+            else:
+                entry[0] += float(seconds)
+                entry[1] += count
+
+    def total(self, stage: str) -> float:
+        """Total seconds of ``stage`` so far (0 when never recorded)."""
+        with self._lock:
+            entry = self._stages.get(stage)
+            return entry[0] if entry else 0.0
+
+    def summary(self) -> dict[str, Any]:
+        """``{"wall_s", "overlap", "stages": {stage: {"total_s", "count", "mean_ms", "share"}}}`` (see the module)."""
+        end = self.stopped if self.stopped is not None else time.perf_counter()
+        wall = max(end - self.started, 1e-9)
+        with self._lock:
+            items = sorted(self._stages.items())
+        stages = {
+            name: {
+                "total_s": round(total, 6),
+                "count": int(count),
+                "mean_ms": round(1000.0 * total / count, 4) if count else 0.0,
+                "share": round(total / wall, 4),
+            }
+            for name, (total, count) in items
+        }
+        busy = sum(total for name, (total, _) in items if not is_wait(name))
+        return {"wall_s": round(wall, 6), "overlap": round(busy / wall, 3), "stages": stages}
+
+
+_active: Timeline | None = None
+
+
+def current() -> Timeline | None:
+    """The active timeline, or None."""
+    return _active
+
+
+def record(stage: str, seconds: float, count: int = 1) -> None:
+    """Add to the active timeline's ``stage`` (nothing when no timeline is active)."""
+    timeline = _active
+    if timeline is not None:
+        timeline.add(stage, seconds, count)
+
+
+@contextlib.contextmanager
+def active(timeline: Timeline) -> Iterator[Timeline]:
+    """Make ``timeline`` the active one inside the block (the previous one again after it)."""
+    global _active
+    previous, _active = _active, timeline
+    try:
+        yield timeline
+    finally:
+        _active = previous
