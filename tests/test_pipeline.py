@@ -250,3 +250,52 @@ def test_virtual_video_default_by_frame_size():
     assert virtual_default(480, 360) and virtual_default(640, 480)
     assert not virtual_default(1440, 1080) and not virtual_default(1920, 1080)
     assert virtual_default(VIRTUAL_AUTO_PIXELS, 1) and not virtual_default(VIRTUAL_AUTO_PIXELS + 1, 1)
+
+
+# ------------------------------------------------------------------------------------------------ the pipeline bench
+
+
+def test_bench_pipeline_tiny(tmp_path, capsys):
+    """``wptrack bench --tracker pipeline``: its own video, the three commands as the CLI runs them, the decode rate,
+    the ratios and the run's own stage timeline (decode, masks, upload, filter, record, writer, waits, CPU)."""
+    import json
+
+    from wptrack.cli import main
+
+    out = tmp_path / "pipe.json"
+    argv = ["bench", "--tracker", "pipeline", "--device", "cpu", "--size", "96x72", "--frames", "6", "-q"]
+    assert main([*argv, "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "decode only (cv2.VideoCapture, one thread)" in printed and "target track_fps >= 30" in printed
+    (r,) = json.loads(out.read_text())["results"]
+    assert (r["width"], r["height"], r["frames"]) == (96, 72, 6)
+    assert r["decode_fps"] > 0 and len(r["decode_s"]) == 2
+    for key in ("masks", "track", "track_from_masks"):
+        assert r[key]["fps"] > 0 and r[key]["ratio"] == pytest.approx(r[key]["fps"] / r["decode_fps"])
+    tl = r["track"]["timeline"]
+    for stage in ("decode", "masks", "upload", "filter", "record", "write_virtual", "wait_masks"):
+        assert tl["stages"][stage]["count"] >= 6, stage  # every frame went through every stage
+    assert tl["stages"]["masks"]["count"] == tl["stages"]["filter"]["count"] == 6
+    assert set(tl["cpu_s"]) >= {"main", "masks", "decode", "write_virtual", "process"}
+    assert tl["overlap"] > 0 and r["track"]["summary"]["virtual"] is True
+    assert "masks" not in r["track_from_masks"]["timeline"]["stages"]  # decoded masks, not made
+
+
+def test_bench_pipeline_options(tmp_path, capsys):
+    from wptrack.bench.pipeline import parse_size, scene_rig, write_scene
+    from wptrack.cli import main
+    from wptrack.core.errors import ConfigError
+
+    assert parse_size("1920x1080") == (1920, 1080)
+    for bad in ("1920", "axb", "8x8"):
+        with pytest.raises(ConfigError, match="--size"):
+            parse_size(bad)
+    base = ["bench", "--device", "cpu", "-q"]
+    assert main([*base, "--tracker", "templates", "--size", "64x48"]) == 2  # the pipeline suite's option
+    assert "only the 'pipeline' suite" in capsys.readouterr().err
+    assert main([*base, "--tracker", "pipeline", "--particles", "10"]) == 2
+    video = write_scene(tmp_path / "v.avi", 80, 64, 3)
+    assert main([*base, "--tracker", "pipeline", "--video", str(video), "--size", "64x48"]) == 2
+    rig = scene_rig(80, 64, tmp_path / "rig.yaml")
+    assert main([*base, "--tracker", "pipeline", "--rig", str(rig)]) == 2  # a rig without --video
+    capsys.readouterr()

@@ -66,6 +66,10 @@ class prefetch:  # noqa: N801 - used like a function: ``for frame in prefetch(fr
             timeline.record(self.name + timeline.BLOCKED_SUFFIX, time.perf_counter() - t0)
 
     def _run(self) -> None:
+        with timeline.thread_cpu(self.name):
+            self._produce()
+
+    def _produce(self) -> None:
         stage = self.name
         try:
             it = iter(self._source)

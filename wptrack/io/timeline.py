@@ -9,8 +9,13 @@ video writers (:class:`wptrack.io.video.BackgroundWriter`) and the loop itself. 
 (the active timeline is global; ``wptrack batch`` runs each run in its own process).
 
 run.json's ``timeline`` (:meth:`Timeline.summary`): per stage the total seconds, the count, the mean in ms and the
-share of the run's wall time; ``wall_s`` (from the first frame asked for to the last frame recorded) and
-``overlap``: the busy stages' total over the wall time (1: one stage at a time; 2: two threads busy on average).
+share of the run's wall time; ``wall_s`` (from the first frame asked for to the last frame written) and
+``overlap``: the busy stages' total over the wall time (1: one stage at a time; 2: two threads busy on average);
+``cpu_s``: the CPU time of each of the pipeline's threads (``main``: the loop; ``decode``, ``masks``: the prefetch
+threads; ``write_*``: the writers) and ``process`` (every thread of the process, OpenCV's and the background
+model's workers included). On a shared machine the wall times of the stages include the time other processes had
+the cores; the CPU times do not, so together they tell what a free machine would do: a run needs at least its
+busiest thread's CPU time, and its process CPU time over the cores.
 """
 
 from __future__ import annotations
@@ -43,17 +48,28 @@ class Timeline:
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._stages: dict[str, list[float]] = {}
+        self._cpu: dict[str, float] = {}
         self.started = time.perf_counter()
         self.stopped: float | None = None
+        self._process_cpu = time.process_time()
+        self._process_cpu_end: float | None = None
 
     def start(self) -> None:
         """Start the wall clock now (the run's first frame is asked for)."""
         self.started = time.perf_counter()
         self.stopped = None
+        self._process_cpu = time.process_time()
+        self._process_cpu_end = None
 
     def stop(self) -> None:
-        """Stop the wall clock now (the run's last frame is recorded)."""
+        """Stop the wall clock now (the run's last frame is written)."""
         self.stopped = time.perf_counter()
+        self._process_cpu_end = time.process_time()
+
+    def add_cpu(self, thread: str, seconds: float) -> None:
+        """Add ``seconds`` of CPU time of the pipeline thread ``thread`` (``time.thread_time`` differences)."""
+        with self._lock:
+            self._cpu[thread] = self._cpu.get(thread, 0.0) + float(seconds)
 
     def add(self, stage: str, seconds: float, count: int = 1) -> None:
         """Add ``seconds`` of ``stage`` (``count`` items)."""
@@ -87,7 +103,11 @@ class Timeline:
             for name, (total, count) in items
         }
         busy = sum(total for name, (total, _) in items if not is_wait(name))
-        return {"wall_s": round(wall, 6), "overlap": round(busy / wall, 3), "stages": stages}
+        with self._lock:
+            cpu = {name: round(seconds, 6) for name, seconds in sorted(self._cpu.items())}
+        end_cpu = self._process_cpu_end if self._process_cpu_end is not None else time.process_time()
+        cpu["process"] = round(end_cpu - self._process_cpu, 6)
+        return {"wall_s": round(wall, 6), "overlap": round(busy / wall, 3), "stages": stages, "cpu_s": cpu}
 
 
 _active: Timeline | None = None
@@ -96,6 +116,23 @@ _active: Timeline | None = None
 def current() -> Timeline | None:
     """The active timeline, or None."""
     return _active
+
+
+def record_cpu(thread: str, seconds: float) -> None:
+    """Add to the active timeline's CPU time of ``thread`` (nothing when no timeline is active)."""
+    timeline = _active
+    if timeline is not None:
+        timeline.add_cpu(thread, seconds)
+
+
+@contextlib.contextmanager
+def thread_cpu(thread: str) -> Iterator[None]:
+    """Record the CPU time the calling thread spends inside the block as ``thread`` (:func:`record_cpu`)."""
+    t0 = time.thread_time()
+    try:
+        yield
+    finally:
+        record_cpu(thread, time.thread_time() - t0)
 
 
 def record(stage: str, seconds: float, count: int = 1) -> None:

@@ -214,6 +214,12 @@ class BackgroundWriter:
         return int(getattr(self.writer, "frames_written", 0))
 
     def _run(self) -> None:
+        from wptrack.io import timeline
+
+        with timeline.thread_cpu(self.stage):
+            self._encode()
+
+    def _encode(self) -> None:
         import time
 
         from wptrack.io import timeline

@@ -464,6 +464,24 @@ def _frame_loop(
 ) -> None:
     """The frames of :func:`run_tracker`: source (decoded ahead) -> ``job.step`` -> ``job.record``, with the
     timings, the progress bar, checkpoints and the stop signal."""
+
+    from wptrack.io import timeline
+
+    with timeline.thread_cpu("main"):
+        _frames(job, out, bar, stop, clock, start, max_frames, prefetch_depth, checkpoint_seconds)
+
+
+def _frames(
+    job: TrackerRun,
+    out: Any,
+    bar: Any,
+    stop: _Stop,
+    clock: Any,
+    start: int,
+    max_frames: int | None,
+    prefetch_depth: int,
+    checkpoint_seconds: float,
+) -> None:
     import itertools
 
     from wptrack.io.prefetch import prefetch
