@@ -299,3 +299,24 @@ def test_bench_pipeline_options(tmp_path, capsys):
     rig = scene_rig(80, 64, tmp_path / "rig.yaml")
     assert main([*base, "--tracker", "pipeline", "--rig", str(rig)]) == 2  # a rig without --video
     capsys.readouterr()
+
+
+def test_given_mask_equals_any_channel_above_the_threshold(rng):
+    from wptrack.motion.masks import given_mask
+
+    image = rng.integers(0, 256, (17, 23, 3), dtype=np.uint8)
+    for threshold in (0, 127, 254):
+        np.testing.assert_array_equal(given_mask(image, threshold), np.any(image > threshold, axis=2))
+        np.testing.assert_array_equal(given_mask(image[..., 1], threshold), image[..., 1] > threshold)
+    assert given_mask(image, 127).dtype == np.uint8
+
+
+def test_iterating_masks_makes_no_probability(rng):
+    from wptrack.motion.masks import open_masks
+
+    frames = (rng.random((4, 12, 16)) > 0.5).astype(np.uint8) * 255
+    masks = open_masks(masks=frames)
+    assert all(p is None for _, p in masks.evidence(probability=False))
+    pairs = list(masks.evidence())
+    assert all(p.dtype == np.float32 and np.array_equal(p, m) for m, p in pairs)
+    assert [m.tolist() for m in masks] == [m.tolist() for m, _ in pairs]
