@@ -320,3 +320,50 @@ def test_iterating_masks_makes_no_probability(rng):
     pairs = list(masks.evidence())
     assert all(p.dtype == np.float32 and np.array_equal(p, m) for m, p in pairs)
     assert [m.tolist() for m in masks] == [m.tolist() for m, _ in pairs]
+
+
+# ------------------------------------------------------------------------------------------------ multi-core CPU
+
+
+def test_cpu_split_ranges_and_errors():
+    from wptrack.core.device import CPU_SPLIT_MIN, CpuSplit, cpu_split_threads
+
+    split = CpuSplit(10, 3)
+    assert split.ranges == [(0, 3), (3, 6), (6, 10)]
+    seen = []
+    split(lambda k, lo, hi: seen.append((k, lo, hi, threading.current_thread() is threading.main_thread())))
+    assert sorted(s[:3] for s in seen) == [(0, 0, 3), (1, 3, 6), (2, 6, 10)]
+    assert [s[3] for s in seen if s[0] == 0] == [True]  # the calling thread runs the first range
+
+    def fail(k, lo, hi):
+        if k == 2:
+            raise ValueError("range 2")
+
+    with pytest.raises(ValueError, match="range 2"):
+        split(fail)
+    split.close()
+    assert CpuSplit(1, 4).ranges == [(0, 1)]
+    assert cpu_split_threads(CPU_SPLIT_MIN - 1) == 1
+
+
+def test_split_hulls_equal_one_launch(monkeypatch):
+    """The template tracker's hull projection over particle ranges in threads (CPU backend) writes the same hulls."""
+    from wptrack.bench.templates import bench_objects, bench_particles, bench_rig
+    from wptrack.core.device import CpuSplit
+    from wptrack.trackers.templates.tracker import TemplateConfig, TemplateTracker
+
+    truth = bench_objects(5, seed=3)
+    tr = TemplateTracker(bench_rig(), TemplateConfig(particles=700, max_objects=5, seed=1), device="cpu")
+    tr.set_particles(**bench_particles(truth, 700, seed=3))
+    s = tr.state[tr.parity]
+    hulls = (tr.hulls.pts, tr.hulls.n, tr.hulls.rows, tr.hulls.depth)
+    out = []
+    for split in (None, CpuSplit(700, 3), CpuSplit(700, 2)):
+        for a in hulls:
+            a.zero_()
+        tr.hulls.launch(tr.cam, tr.plane_struct, s.kind, s.pos, s.heading, s.dims, tr.device, split)
+        out.append([a.numpy().copy() for a in hulls])
+    assert out[0][1].sum() > 0  # pieces were projected
+    for got in out[1:]:
+        for a, b in zip(out[0], got, strict=True):
+            np.testing.assert_array_equal(a, b)
