@@ -91,6 +91,7 @@ class ColourSuite:
         seed: int = 0,
         offspring_at: tuple[int, ...] = (10**7,),
         weights: str | None = None,
+        proposal: str = "prior",
     ) -> dict:
         if weights is not None:  # --weights: the resampling pass alone on synthetic log-weights (cameras unused)
             from wptrack.bench.resample_weights import run_weights_case
@@ -116,11 +117,12 @@ class ColourSuite:
             init=init,
             device=device,
             seed=seed,
-            proposal="prior",
+            proposal=proposal,
             keep_particles=0,
-        )  # the paper's filter, as the NumPy reference
+        )  # prior (default): the paper's filter, as the NumPy reference
         result = {
-            "tracker": "color",
+            "tracker": "color" if proposal == "prior" else "color+m",
+            "proposal": proposal,
             "particles": case.particles,
             "cameras": case.cameras,
             "width": WIDTH,

@@ -191,6 +191,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="color suite: time resampling alone on synthetic log-weights, N(0, 1) or N(0, 5^2)",
     )
     b.add_argument(
+        "--proposal",
+        choices=("prior", "mixture"),
+        default=None,
+        help="color suite: the tracker's proposal (default prior, the paper's filter; mixture: detection jumps)",
+    )
+    b.add_argument(
         "--joint",
         action="store_true",
         help="templates suite: the paper's joint filter (one weight per particle) instead of the partitioned one",

@@ -278,6 +278,10 @@ def cmd_bench(args) -> int:
             raise ConfigError(f"--weights: only the 'color' suite times resampling alone, not {args.tracker!r}")
         extra["weights"] = args.weights
         grid = list({case.particles: case for case in grid}.values())
+    if args.proposal is not None:  # the colour tracker's detection jumps instead of the paper's prior
+        if args.tracker != "color" or args.weights:
+            raise ConfigError(f"--proposal: only the 'color' suite's tracker has proposals, not {args.tracker!r}")
+        extra["proposal"] = args.proposal
     if args.joint:  # the template tracker's joint filter (one weight per particle) instead of the partitioned one
         if args.tracker != "templates":
             raise ConfigError(

@@ -75,8 +75,10 @@ class Estimate:
     timings: dict[str, float] = field(default_factory=dict)
     """Seconds spent per stage for this frame (host wall clock; see ParticleFilter.step)."""
     detection: int = -1
-    """Trackers with a detection-driven proposal: detection components found this frame (0 = no detection);
+    """Trackers with a detection-driven proposal: detection candidates found this frame (0 = no detection);
     -1 when the tracker has none."""
+    jump: bool = False
+    """Trackers with detection jumps: whether this frame moved particles to the detections (a mode test fired)."""
 
 
 @runtime_checkable

@@ -104,6 +104,11 @@ class Scene(ABC):
         """
         raise ConfigError("this scene takes no conditions (only the s3 plaza scenes do)")
 
+    def save_rig(self, path: Path) -> None:
+        """Write the scene's rig file (default: ``self.rig.save(path)``, inline camera entries). Scenes that show
+        other calibration formats override it (``s1-clutter``: OpenCV FileStorage files through ``opencv:`` entries)."""
+        self.rig.save(path)
+
     def groundtruth_columns(self, frames: int) -> dict[str, dict[int, np.ndarray]] | None:
         """Extra ground-truth columns written after ``frame,id,x,y,z`` (default: none).
 
@@ -310,7 +315,7 @@ def render_scene(
         writer.close()
     elapsed = time.perf_counter() - start
 
-    scene.rig.save(rig_path)
+    scene.save_rig(rig_path)
     gt_path = out / "groundtruth.csv"
     atomic_write_text(gt_path, _groundtruth_csv(trajectories, extra_columns))
     scene_json = out / "scene.json"

@@ -1,8 +1,10 @@
 """Issue 12 acceptance experiments for the colour tracker's mixture proposal (``ColorConfig.proposal``).
 
-Each experiment renders its scene once (one scene seed: sensor noise) and runs the tracker with many tracker seeds
-on the same frames, so seeds vary the filter's random streams only. Run them with ``python -m
-wptrack.trackers.colour.proposal_experiments convergence --scene s1-lab --seeds 40`` (prints JSON).
+Each experiment renders its scene once (one scene seed: sensor noise, and the layout of seeded scenes such as
+``s1-clutter``) and runs the tracker with many tracker seeds on the same frames, so seeds vary the filter's random
+streams only. Run them with ``python -m wptrack.trackers.colour.proposal_experiments convergence --scene s1-lab
+--seeds 40`` (prints JSON). Issue 29's lock-on experiment: ``... lock-on --scene s1-clutter --scene-seed 100 --seeds
+40 --frames 30 --particles 20000``.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ def render_frames(scene_name: str, frames: int, scene_seed: int = 0, positions: 
     Args:
         scene_name: e.g. ``s1-lab``.
         frames: number of frames.
-        scene_seed: seed of the sensor noise.
+        scene_seed: seed of the sensor noise (and of the layout for seeded scenes such as ``s1-clutter``).
         positions: optional (frames, 3) ball centres (metres) replacing the scene's trajectory; NaN rows hide the
             ball (rendered far behind every camera's view is not possible in general, so the frame is rendered
             without the ball by placing it 1 km below the floor).
@@ -33,7 +35,8 @@ def render_frames(scene_name: str, frames: int, scene_seed: int = 0, positions: 
     Returns:
         ``(scene, images per frame, (frames, 3) truth)``; truth rows are NaN where the ball is hidden.
     """
-    scene = get_scene(scene_name).build()
+    spec = get_scene(scene_name)
+    scene = spec.build(scene_seed) if spec.seeded else spec.build()
     truth = scene.trajectories(frames)[0] if positions is None else np.asarray(positions, dtype=np.float64)
     rngs = [np.random.default_rng([scene_seed, c]) for c in range(len(scene.rig))]
     images = []
@@ -77,6 +80,66 @@ def first_below(errs: np.ndarray, threshold: float = 0.03, start: int = 0) -> np
         elif ok[-1]:
             out[r] = start + int(np.nonzero(~ok)[0][-1]) + 1
     return out
+
+
+def lock_on_frame(errs: np.ndarray, good: float = 0.03, stay: float = 0.05) -> np.ndarray:
+    """Per row: the first frame c with error < ``good`` at c and < ``stay`` on every frame from c to the end (issue
+    29's "converged": < 3 cm and staying < 5 cm), -1 when there is none."""
+    out = np.full(len(errs), -1)
+    for r, row in enumerate(np.asarray(errs, dtype=np.float64)):
+        # suffix maxima: the largest error from frame c to the end
+        tail = np.maximum.accumulate(row[::-1])[::-1]
+        ok = np.nonzero((row < good) & (tail < stay))[0]
+        if ok.size:
+            out[r] = int(ok[0])
+    return out
+
+
+def lock_on(
+    scene_name: str = "s1-clutter",
+    scene_seed: int = 0,
+    seeds: int = 40,
+    frames: int = 30,
+    particles: int = 20000,
+    device: str = "cpu",
+    faithful_seeds: int = 2,
+    **config,
+) -> dict:
+    """Issue 29: random initialisation over the working volume with the mixture proposal, ``seeds`` tracker seeds on
+    one rendering; per run the lock-on frame (:func:`lock_on_frame`). Also the paper's filter and the mixture started
+    at the scene's ``init`` hint (the ball at frame 0 on the clutter scenes; the paper's point on s1-lab), ``faithful_
+    seeds`` runs each: their largest error, and the mean error from their own lock-on frame on. ``valid`` says whether
+    the paper's filter started on the ball stays < 5 cm on every frame (when it does not, no filter with this
+    likelihood can pass the criterion on this rendering, whatever its initialisation)."""
+    scene, images, truth = render_frames(scene_name, frames, scene_seed)
+    cfg = {"particles": particles, **config}
+    errs = run_seeds(scene, images, truth, range(seeds), device, init="random", proposal="mixture", **cfg)
+    conv = lock_on_frame(errs)
+    init = tuple(float(v) for v in scene.hints()["init"])
+    faithful = {}
+    for proposal in ("prior", "mixture"):
+        fe = run_seeds(scene, images, truth, range(faithful_seeds), device, init=init, proposal=proposal, **cfg)
+        fc = lock_on_frame(fe)
+        faithful[proposal] = {
+            "max_error_m": float(np.nanmax(fe)),
+            "locked_from": fc.tolist(),
+            "mean_error_after_lock_m": [
+                float(np.nanmean(r[c:])) if c >= 0 else None for r, c in zip(fe, fc, strict=True)
+            ],
+        }
+    return {
+        "scene": scene_name,
+        "scene_seed": scene_seed,
+        "particles": particles,
+        "frames": frames,
+        "seeds": seeds,
+        "config": config,
+        "lock_on_frame": conv.tolist(),
+        "within_10": int(np.sum((conv >= 0) & (conv < 10))),
+        "within_20": int(np.sum((conv >= 0) & (conv < 20))),
+        "valid": bool(faithful["prior"]["max_error_m"] < 0.05),
+        "faithful": faithful,
+    }
 
 
 def convergence(
@@ -175,11 +238,13 @@ def jump_sweep(
     particles: int = 1000,
     device: str = "cpu",
     plot: str | None = None,
+    **config,
 ) -> dict:
     """Section III.C's 2 m jump with image observations: the ball rests ``before`` frames (paper's initialisation at
     the ball), then jumps by ``jump`` metres; for each sigma_m of the sweep (``experiments.default_sigmas(steps)``)
     the mean over seeds of the frames after the jump until the error stays < 3 cm (``after`` if never), both
-    proposals. ``plot``: a PNG path for both curves in one plot."""
+    proposals. ``plot``: a PNG path for both curves in one plot. ``config``: ``ColorConfig`` fields of the mixture
+    runs (e.g. ``reset_rate``)."""
     from wptrack.trackers.colour.experiments import default_sigmas
 
     scene = get_scene(scene_name).build()
@@ -203,6 +268,7 @@ def jump_sweep(
                 sigma=sigma,
                 init=tuple(rest),
                 proposal=proposal,
+                **(config if proposal == "mixture" else {}),
             )
             conv = first_below(errs, start=before)
             frames = np.where(conv >= 0, conv - before, after)
@@ -228,8 +294,9 @@ def jump_sweep(
 
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m wptrack.trackers.colour.proposal_experiments")
-    p.add_argument("experiment", choices=("convergence", "reacquisition", "static", "jump-sweep"))
+    p.add_argument("experiment", choices=("convergence", "reacquisition", "static", "jump-sweep", "lock-on"))
     p.add_argument("--scene", default="s1-lab")
+    p.add_argument("--scene-seed", type=int, default=0, help="lock-on: seed of the rendering (and of seeded layouts)")
     p.add_argument("--seeds", type=int, default=40)
     p.add_argument("--frames", type=int, default=10)
     p.add_argument("--particles", type=int, default=1000)
@@ -239,7 +306,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--plot", default=None, help="jump-sweep: PNG of both curves")
     p.add_argument("--jump", type=float, nargs=3, default=(0.0, -1.0, 0.0), help="re-appearance offset, metres")
     a = p.parse_args(argv)
-    if a.experiment == "convergence":
+    if a.experiment == "lock-on":
+        r = lock_on(a.scene, a.scene_seed, a.seeds, a.frames, a.particles, a.device)
+    elif a.experiment == "convergence":
         r = convergence(a.scene, a.seeds, a.frames, a.particles, a.proposal, a.device)
     elif a.experiment == "jump-sweep":
         r = jump_sweep(a.scene, a.seeds, a.steps, a.jump, particles=a.particles, device=a.device, plot=a.plot)

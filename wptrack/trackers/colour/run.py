@@ -22,8 +22,9 @@ from wptrack.runs.loop import TrackerRun, run_tracker
 
 TRACK_COLUMNS = ["frame", "id", "x", "y", "z", "sx", "sy", "sz", "map_x", "map_y", "map_z", "ess", "loglik"]
 COLOR_TRACK_COLUMNS = [*TRACK_COLUMNS, "detection", "degenerate"]
-"""``detection``: 1 when the mixture proposal found target pixels this frame, 0 = no detection (the frame was
-tracked with the motion prior alone), -1 with ``--proposal prior`` (no detector). ``degenerate``: 1 when every
+"""``detection``: 1 when the mixture proposal found detection candidates this frame (colour blobs that triangulate
+across two cameras), 0 = none (the frame was tracked with the paper's walk alone), -1 with ``--proposal prior`` (no
+detector). ``degenerate``: 1 when every
 particle had zero likelihood (all log-weights -inf: the predicted cloud is kept with uniform weights, the prior)."""
 
 

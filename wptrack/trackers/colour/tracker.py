@@ -31,9 +31,10 @@ from wptrack.cameras.structs import ColourMaps, DeviceRig
 from wptrack.core.config import check, param
 from wptrack.core.device import resolve_device
 from wptrack.core.errors import ConfigError, FrameError
-from wptrack.core.filter import Estimate, ParticleFilter
+from wptrack.core.filter import BLOCK, Estimate, ParticleFilter
 from wptrack.core.resampling import SCHEMES
 from wptrack.io.frames import camera_frame
+from wptrack.kernels.colour import blobs as kblobs
 from wptrack.kernels.colour import hsi as kcolour
 from wptrack.kernels.colour import proposal as kproposal
 from wptrack.kernels.colour import scoring as kscoring
@@ -42,8 +43,9 @@ log = logging.getLogger(__name__)
 
 SCORE_MODES = ("auto", "direct", "integral", "map")
 PROPOSALS = ("prior", "mixture")
-"""``prior``: the paper's filter (particles drawn from the gaussian walk only); ``mixture``: the detection-driven
-mixture proposal of ``wptrack.kernels.colour.proposal`` (converges from anywhere, re-acquires a lost object)."""
+"""``prior``: the paper's filter (particles drawn from the gaussian walk only); ``mixture``: the walk plus jumps to
+geometric detection candidates decided by a mode test (``wptrack.kernels.colour.proposal``; converges from anywhere,
+re-acquires a lost object)."""
 
 
 @dataclass(frozen=True)
@@ -134,33 +136,45 @@ class ColorConfig:
                       lo=0, hi=2**64 - 1)  # fmt: skip
     keep_particles: int = param(1000, help="particles per frame copied back for reports (0: none)", lo=0)
     proposal: str = param(
-        "mixture", help="prior: the paper's filter (the gaussian walk only); mixture: (1 - mixture) x the motion prior "
-        "+ mixture x a detection proposal from the colour masks, importance-weighted (converges from anywhere, "
-        "re-acquires a lost object)", choices=PROPOSALS,
+        "mixture", help="prior: the paper's filter (the gaussian walk only); mixture: the motion model may also jump "
+        "to a detection candidate (colour blobs triangulated across camera pairs) when a mode test says the "
+        "candidates beat the cloud (converges from anywhere, re-acquires a lost object)", choices=PROPOSALS,
     )  # fmt: skip
     mixture: float = param(
-        0.25, help="fraction of particles drawn from the detection proposal (mixture only)", symbol="eps", lo=0.0,
-        hi=1.0, hi_open=True,
-    )  # fmt: skip
-    reset_rate: float = param(
-        0.05, help="probability per frame that the object jumps uniformly into the working volume: the motion model's "
-        "kidnap term, which makes re-acquisition possible (mixture only)", symbol="alpha", lo=0.0, hi=1.0,
+        0.5, help="fraction of particles that jump to the detection candidates on a frame where the mode test fires "
+        "and on the first frame after a random initialisation (mixture only)", symbol="eps", lo=0.0, hi=1.0,
         hi_open=True,
     )  # fmt: skip
+    reset_rate: float = param(
+        0.0, help="fraction of particles that jump to the candidates on the other frames (mixture only; 0: a stable "
+        "track never jumps)", symbol="alpha", lo=0.0, hi=1.0, hi_open=True,
+    )  # fmt: skip
     detection_sigma: float = param(
-        0.04, help="deviation of each detection component (mixture only)", units="m", symbol="sigma_d", lo=0.0,
-        lo_open=True,
+        0.02, help="deviation of the particles a jump puts around a candidate (mixture only)", units="m",
+        symbol="sigma_d", lo=0.0, lo_open=True,
     )  # fmt: skip
     detection_components: int = param(
-        32, help="gaussian components of the detection proposal (mixture only)", symbol="K", lo=1, hi=4096
-    )
-    detection_tries: int = param(
-        1024, help="rejection-sampling draws per component and camera to find a target pixel (mixture only)", lo=1,
-        hi=1 << 20,
+        8, help="candidates kept per frame, the best after non-maximum suppression within 2 sigma_d (mixture only)",
+        symbol="K", lo=1, hi=64,
     )  # fmt: skip
-    max_gap: float = param(
-        0.1, help="largest distance between two back-projected rays accepted as a triangulation", units="m", lo=0.0,
-        lo_open=True,
+    blobs: int = param(
+        8, help="colour blobs kept per camera and frame: the best local maxima of the target-pixel count over 15 x 15 "
+        "pixel neighbourhoods (mixture only)", lo=1, hi=32,
+    )  # fmt: skip
+    min_blob_pixels: int = param(
+        8, help="fewest target pixels in a blob's 15 x 15 neighbourhood (mixture only)", units="px", lo=1, hi=225
+    )
+    epipolar_px: float = param(
+        8.0, help="largest reprojection error of a blob pair's triangulated point in either camera of the pair "
+        "(mixture only)", units="px", lo=0.0, lo_open=True,
+    )  # fmt: skip
+    jump_margin: float = param(
+        2.0, help="nats per frame by which the best candidate's log-likelihood must exceed the cloud's before "
+        "evidence accumulates (mixture only)", units="nats", lo=0.0,
+    )  # fmt: skip
+    jump_evidence: float = param(
+        0.0, help="accumulated excess beyond which the frame jumps (a CUSUM; 0: the first frame whose excess passes "
+        "the margin jumps; mixture only)", units="nats", lo=0.0,
     )  # fmt: skip
 
     def __post_init__(self) -> None:
@@ -198,7 +212,13 @@ class ColorTracker(ParticleFilter):
         maps: :class:`wptrack.cameras.structs.ColourMaps` (mask, integral images, window map) in integral/map mode.
     """
 
-    kernel_modules = (*ParticleFilter.kernel_modules, "wptrack.kernels.colour.hsi", "wptrack.kernels.colour.scoring")
+    kernel_modules = (
+        *ParticleFilter.kernel_modules,
+        "wptrack.kernels.colour.hsi",
+        "wptrack.kernels.colour.scoring",
+        "wptrack.kernels.colour.proposal",
+        "wptrack.kernels.colour.blobs",
+    )
 
     def __init__(
         self,
@@ -265,12 +285,13 @@ class ColorTracker(ParticleFilter):
             config = replace(config, init_box=tuple(tuple(float(c) for c in v) for v in rig.bounds()))
             self.config = config
         self.volume = config.box or tuple(tuple(float(c) for c in v) for v in rig.bounds())
-        k = config.detection_components
-        self.det_centres = wp.zeros(k, dtype=wp.vec3, device=d)
-        self.det_valid = wp.zeros(k, dtype=wp.int32, device=d)
-        self.det_count = wp.zeros(1, dtype=wp.int32, device=d)
-        self.det_count_host = wp.zeros(1, dtype=wp.int32, device="cpu", pinned=self.is_cuda)
+        # detection candidates are kept inside a volume someone chose (the init box, the rig file's volume); the
+        # fallback box around the camera centres would drop an object below or beside them
+        chosen = config.init_box is not None or rig.volume is not None
+        self.candidate_volume = self.volume if chosen else ((-1.0e30,) * 3, (1.0e30,) * 3)
         self.uniform_frame = wp.array([-1], dtype=wp.int32, device=d)
+        if config.proposal != "prior":
+            self._allocate_detection()
         if config.init is not None:
             self.init_point(config.init)
         else:
@@ -283,23 +304,95 @@ class ColorTracker(ParticleFilter):
             self.device,
         )
 
+    def _allocate_detection(self) -> None:
+        """Fixed-size device buffers of the geometric detection and the mode test (``proposal='mixture'``):
+
+        sb_offset: (M + 1,) int32 start of each camera's 5 x 5 sub-block grid in ``sb_counts``.
+        sb_counts, sb_keys, peaks: (sum floor(W/5) floor(H/5),) int32 target pixels per sub-block, blob keys
+            (``kernels.colour.blobs.neighbourhood_sums_kernel``); float32 peak keys.
+        part_score, part_index, part_uv: (M, chunks, PEAK_KEEP) the best peaks of each chunk of sub-blocks.
+        blob_score, blob_uv: (M, B) blobs per camera (pixel count of the 15 x 15 neighbourhood, 0 = empty; centre, px).
+        pair_a, pair_b: (P,) int32 camera pairs (a < b), P = M (M - 1) / 2.
+        cand_pos, cand_score, cand_keep: (P B^2,) triangulated candidates, their log-likelihood, the NMS flag.
+        det_pos, det_score, det_cum: (K,) the kept candidates (score descending, LOG_ZERO = empty slot) and their
+            normalised cumulative weights; det_count: (1,) int32 valid slots.
+        mix: (MIX_SIZE,) float32 the frame's jump threshold, evidence, jump flag, CUSUM (``kernels.colour.proposal``).
+        """
+        from statistics import NormalDist
+
+        cfg, d = self.config, self.device
+        cams = self.rig.cameras
+        m = len(cams)
+        sizes = [(c.width // int(kblobs.SUBBLOCK)) * (c.height // int(kblobs.SUBBLOCK)) for c in cams]
+        self._sb_max = (
+            max(c.height // int(kblobs.SUBBLOCK) for c in cams),
+            max(c.width // int(kblobs.SUBBLOCK) for c in cams),
+        )
+        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int32)
+        total = max(1, int(offsets[-1]))
+        self._chunks = max(1, -(-max(sizes) // int(kblobs.PEAK_CHUNK)))
+        keep = int(kblobs.PEAK_KEEP)
+        self.sb_offset = wp.array(offsets, dtype=wp.int32, device=d)
+        self.sb_counts = wp.zeros(total, dtype=wp.int32, device=d)
+        self.sb_keys = wp.zeros(total, dtype=wp.int32, device=d)
+        self.peaks = wp.zeros(total, dtype=wp.float32, device=d)
+        self.part_score = wp.zeros((m, self._chunks, keep), dtype=wp.float32, device=d)
+        self.part_index = wp.zeros((m, self._chunks, keep), dtype=wp.int32, device=d)
+        self.part_uv = wp.zeros((m, self._chunks, keep), dtype=wp.vec2, device=d)
+        b = cfg.blobs
+        self.blob_score = wp.zeros((m, b), dtype=wp.float32, device=d)
+        self.blob_uv = wp.zeros((m, b), dtype=wp.vec2, device=d)
+        pairs = [(i, j) for i in range(m) for j in range(i + 1, m)]
+        self._pairs = len(pairs)
+        self.pair_a = wp.array([p[0] for p in pairs] or [0], dtype=wp.int32, device=d)
+        self.pair_b = wp.array([p[1] for p in pairs] or [0], dtype=wp.int32, device=d)
+        c = max(1, len(pairs) * b * b)
+        self.cand_pos = wp.zeros(c, dtype=wp.vec3, device=d)
+        self.cand_score = wp.full(c, float(kproposal.LOG_ZERO), dtype=wp.float32, device=d)
+        self.cand_keep = wp.zeros(c, dtype=wp.int32, device=d)
+        k = cfg.detection_components
+        self.det_pos = wp.zeros(k, dtype=wp.vec3, device=d)
+        self.det_score = wp.full(k, float(kproposal.LOG_ZERO), dtype=wp.float32, device=d)
+        self.det_cum = wp.zeros(k, dtype=wp.float32, device=d)
+        self.det_count = wp.zeros(1, dtype=wp.int32, device=d)
+        self.mix = wp.zeros(int(kproposal.MIX_SIZE), dtype=wp.float32, device=d)
+        pinned = self.is_cuda
+        self.det_count_host = wp.zeros(1, dtype=wp.int32, device="cpu", pinned=pinned)
+        self.mix_host = wp.zeros(int(kproposal.MIX_SIZE), dtype=wp.float32, device="cpu", pinned=pinned)
+
+        def threshold(p: float) -> float:
+            return NormalDist().inv_cdf(p) if p > 0.0 else float(kproposal.NO_JUMP)
+
+        self._thresholds = wp.vec2(threshold(cfg.mixture), threshold(cfg.reset_rate))
+
     def state_arrays(self) -> dict[str, wp.array]:
         """:meth:`ParticleFilter.state_arrays` and the frame whose prior is the uniform initial box
-        (``uniform_frame``); the detection components are recomputed every frame."""
-        return {**super().state_arrays(), "uniform_frame": self.uniform_frame}
+        (``uniform_frame``); with the mixture proposal also the previous frame's estimate vector (the mode test
+        compares the candidates with the cloud's MMSE and MAP estimates) and ``mix`` (its CUSUM carries over). The
+        blobs and candidates are recomputed every frame."""
+        arrays = {**super().state_arrays(), "uniform_frame": self.uniform_frame}
+        if self.config.proposal != "prior":
+            arrays.update(est=self.est, mix=self.mix)
+        return arrays
 
     def init_box(self, lo, hi) -> None:
-        """Particles uniform in the box [lo, hi] (metres); with the mixture proposal the next frame's prior is this
-        uniform distribution (alpha = 1 for that frame, ``kernels.colour.proposal``)."""
+        """Particles uniform in the box [lo, hi] (metres); with the mixture proposal the next frame draws its
+        non-jumping particles uniformly in the box and a fraction ``mixture`` from the detection candidates
+        (``kernels.colour.proposal``)."""
         super().init_box(lo, hi)
         if hasattr(self, "uniform_frame"):
             self.uniform_frame.fill_(self.frames_done)
 
     def init_point(self, point) -> None:
-        """Put every particle at ``point`` (3,) metres (the paper's initialisation)."""
+        """Put every particle at ``point`` (3,) metres (the paper's initialisation); with the mixture proposal the
+        first mode test compares the candidates with this point."""
         super().init_point(point)
         if hasattr(self, "uniform_frame"):
             self.uniform_frame.fill_(-1)
+        if hasattr(self, "mix"):
+            p = np.asarray(point, dtype=np.float64).reshape(-1)
+            wp.launch(kproposal.set_anchor_kernel, dim=1, inputs=[wp.vec3(*p)], outputs=[self.est], device=self.device)
+            self.mix.zero_()
 
     # --- observation --------------------------------------------------------------------------------
     def upload(self, images: Sequence[np.ndarray]) -> None:
@@ -316,43 +409,88 @@ class ColorTracker(ParticleFilter):
         if self.maps is not None:
             self.maps.launch(self._target, self.bgr)
 
+    def _launch_detection(self) -> None:
+        """Blobs, candidates and the mode test of the current frame (``proposal='mixture'``): four fixed launches
+        (sub-block counts, blob keys, peaks per chunk, then the rest in one block: ``kernels.colour.blobs``)."""
+        cfg, d, dr = self.config, self.device, self.drig
+        m = dr.num_cameras
+        obs = [dr.cams, self._target, self.bgr, self._integral, self._window, self._mode_id]
+        wp.launch(
+            kblobs.subblock_counts_kernel,
+            dim=(m, *self._sb_max),
+            inputs=[*obs, self.sb_offset],
+            outputs=[self.sb_counts],
+            device=d,
+        )
+        wp.launch(
+            kblobs.neighbourhood_sums_kernel,
+            dim=(m, *self._sb_max),
+            inputs=[dr.cams, self.sb_offset, self.sb_counts],
+            outputs=[self.sb_keys],
+            device=d,
+        )
+        wp.launch_tiled(
+            kblobs.blob_peaks_kernel,
+            dim=[m, self._chunks],
+            inputs=[dr.cams, self.sb_offset, self.sb_counts, self.sb_keys, cfg.min_blob_pixels],
+            outputs=[self.peaks, self.part_score, self.part_index, self.part_uv],
+            block_dim=BLOCK,
+            device=d,
+        )
+        lo, hi = (wp.vec3(*v) for v in self.candidate_volume)
+        wp.launch_tiled(
+            kblobs.detect_tail_kernel,
+            dim=[1],
+            inputs=[*obs, self.part_score, self.part_index, self.part_uv, self.pair_a, self.pair_b, self._pairs]
+            + [cfg.epipolar_px, lo, hi, 2.0 * cfg.detection_sigma, self.est, self.frame, self.uniform_frame]
+            + [self._thresholds, cfg.jump_margin, cfg.jump_evidence, 3.0 * cfg.detection_sigma],
+            outputs=[self.blob_score, self.blob_uv, self.cand_pos, self.cand_score, self.cand_keep, self.det_pos]
+            + [self.det_score, self.det_cum, self.det_count, self.mix],
+            block_dim=BLOCK,
+            device=d,
+        )
+
+    def stages(self, src: int, dst: int):
+        """The frame chain as named stages (for profiling); with the mixture proposal a ``detect`` stage (blobs,
+        candidates, mode test) runs between ``observe`` and ``predict_score``."""
+        stages = super().stages(src, dst)
+        if self.config.proposal == "prior":
+            return stages
+        return [stages[0], ("detect", self._launch_detection), *stages[1:]]
+
     def _launch_predict_score(self, src: int, dst: int) -> None:
         observation = [self.drig.cams, self._target, self.bgr, self._integral, self._window, self._mode_id]
         cfg = self.config
+        map_set = self.score_mode == "map" and self.drig.cam_set.count > 0
         if cfg.proposal == "prior":
-            if self.score_mode == "map" and self.drig.cam_set.count > 0:  # the large-N kernel (cameras by value)
+            if map_set:  # the large-N kernel (cameras by value)
                 kernel = kscoring.colour_predict_score_map_kernel(self.drig.cam_set.count)
                 self._launch_fused(kernel, [self.drig.cam_set, self._window], src, dst)
                 return
             self._launch_fused(kscoring.colour_predict_score_kernel, observation, src, dst)
             return
-        d = self.device
-        k = cfg.detection_components
-        lo, hi = (np.asarray(v, dtype=np.float64) for v in self.volume)
-        depth_hi = float(np.linalg.norm(hi - lo))
-        wp.launch(
-            kproposal.detection_components_kernel,
-            dim=k,
-            inputs=[self.drig.cams, self._target, self.bgr, self.seed, self.frame, cfg.detection_tries]
-            + [cfg.max_gap, 0.1, depth_hi],
-            outputs=[self.det_centres, self.det_valid],
-            device=d,
-        )
-        wp.launch(kproposal.detection_count_kernel, dim=1, inputs=[self.det_valid], outputs=[self.det_count], device=d)
-        observation += [self.det_centres, self.det_valid, self.det_count, cfg.detection_sigma, cfg.mixture]
-        observation += [cfg.reset_rate, self.uniform_frame, wp.vec3(*lo), wp.vec3(*hi)]
-        self._launch_fused(kproposal.colour_mixture_predict_score_kernel, observation, src, dst)
+        lo, hi = (wp.vec3(*v) for v in self.volume)
+        jumps = [self.det_pos, self.det_cum, self.det_count, self.mix, cfg.detection_sigma, self.uniform_frame, lo, hi]
+        if map_set:
+            kernel = kproposal.colour_jump_predict_score_map_kernel(self.drig.cam_set.count)
+            self._launch_fused(kernel, [self.drig.cam_set, self._window, *jumps], src, dst)
+            return
+        self._launch_fused(kproposal.colour_jump_predict_score_kernel, observation + jumps, src, dst)
 
     def _readback(self) -> None:
         super()._readback()
         if self.config.proposal != "prior":
             wp.copy(self.det_count_host, self.det_count)
+            wp.copy(self.mix_host, self.mix)
 
     def advance(self) -> Estimate:
-        """One frame on the uploaded images; ``Estimate.detection`` is the number of valid detection components
-        (0 = no target pixel in any camera; the proposal fell back to the prior) or -1 with ``proposal='prior'``."""
+        """One frame on the uploaded images; ``Estimate.detection`` is the number of detection candidates kept (0 = no
+        candidate: the frame was the paper's) or -1 with ``proposal='prior'``; ``Estimate.jump`` whether the frame
+        jumped (mode test fired, or first frame after a random initialisation)."""
         est = super().advance()
-        est.detection = int(self.det_count_host.numpy()[0]) if self.config.proposal != "prior" else -1
+        if self.config.proposal != "prior":
+            est.detection = int(self.det_count_host.numpy()[0])
+            est.jump = bool(self.mix_host.numpy()[int(kproposal.MIX_JUMP)] > 0.5)
         return est
 
     # --- public API -----------------------------------------------------------------------------------
