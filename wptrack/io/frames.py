@@ -158,6 +158,8 @@ class VideoSource(FrameSource):
     The frame count is ``CAP_PROP_FRAME_COUNT`` (counted by decoding the file when the container does not report
     it). When reading, at most that many frames are yielded; a video that ends earlier stops early with a
     warning in the log (:class:`SyncedFrames` turns that into an error when other cameras continue).
+    A video whose timestamps depart from its rate (variable frame rate: the trackers take each frame as ``1 / fps``)
+    is read all the same, with one warning per pass and :attr:`variable_rate` saying where.
 
     Args:
         path: Video file path (or any string ``cv2.VideoCapture`` opens, e.g. a URL).
@@ -216,11 +218,20 @@ class VideoSource(FrameSource):
         return self._count
 
     def __iter__(self) -> Iterator[np.ndarray]:
+        import cv2
+
         self.stopped_early = None
+        self.variable_rate = None
         cap = self._open()
+        last_ms = None
         try:
             for i in range(self._count):
                 ok, frame = cap.read()
+                if ok and self.fps and self.variable_rate is None:  # the decoder's timestamps against 1 / fps
+                    ms = cap.get(cv2.CAP_PROP_POS_MSEC)
+                    if last_ms is not None and ms > last_ms:
+                        self._check_rate(i, ms - last_ms)
+                    last_ms = ms
                 if not ok or frame is None:
                     log.warning("video %s ended after %d frames, although it reports %d", self.path, i, self._count)
                     self.stopped_early = {
@@ -235,6 +246,32 @@ class VideoSource(FrameSource):
                 yield frame
         finally:
             cap.release()
+
+    variable_rate: dict[str, Any] | None = None
+    """After an iteration: None, or where the frame intervals first departed from ``1 / fps`` by more than
+    :data:`RATE_TOLERANCE` (a variable-frame-rate recording): ``{"frame", "interval_ms", "expected_ms", "reason"}``."""
+
+    def _check_rate(self, index: int, interval_ms: float) -> None:
+        expected = 1000.0 / float(self.fps)
+        if abs(interval_ms - expected) <= RATE_TOLERANCE * expected:
+            return
+        reason = (
+            f"variable frame rate: frame {index} comes {interval_ms:.0f} ms after frame {index - 1}, the video's rate "
+            f"{self.fps:g} frames/s says {expected:.0f} ms; the trackers take every frame as one time step of "
+            f"1/fps, so motion across such gaps is misjudged (re-encode at a constant rate, e.g. ffmpeg -fps_mode cfr)"
+        )
+        self.variable_rate = {
+            "frame": index,
+            "interval_ms": round(interval_ms, 3),
+            "expected_ms": round(expected, 3),
+            "reason": reason,
+        }
+        log.warning("%s: %s", self.name, reason)
+
+
+RATE_TOLERANCE = 0.5
+"""A frame interval departing from ``1 / fps`` by more than this fraction marks a variable-frame-rate video (a
+warning once per pass, :attr:`VideoSource.variable_rate`); decoders' timestamps jitter by a millisecond or so."""
 
 
 class VideoReader:

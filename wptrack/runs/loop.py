@@ -157,6 +157,17 @@ class TrackerRun:
                     return info
         return None
 
+    def variable_rate(self) -> dict[str, Any] | None:
+        """Where a video of the run first showed a variable frame rate (``VideoSource.variable_rate``, with its
+        ``camera``), or None. Recorded in run.json (``variable_frame_rate``)."""
+        candidates = [getattr(self, "_frames", None), getattr(self, "_stream", None), *getattr(self, "_masks", [])]
+        for obj in candidates:
+            for src in (obj, getattr(obj, "source", None), *getattr(obj, "sources", [])):
+                info = getattr(src, "variable_rate", None)
+                if isinstance(info, dict):
+                    return {"camera": getattr(src, "name", "?"), **info}
+        return None
+
     def state_dict(self) -> dict[str, Any]:
         """Everything needed to continue after the last frame: the tracker's state (``self.tracker.state_dict()``)
         and the job's own accumulators (summary inputs) as NumPy arrays, keys prefixed ``job.``."""
@@ -430,7 +441,7 @@ def _run_locked(
                     job.finish()  # the writer threads finish their queues here: on the timeline, in the wall time
                     clock.stop()
         finally:
-            out.set_info(timeline=clock.summary())
+            out.set_info(timeline=clock.summary(), variable_frame_rate=job.variable_rate())
             stopped = job.stopped_early()
             out.set_info(stopped_early=stopped)  # None: the source gave every frame it announced
             if stopped:
