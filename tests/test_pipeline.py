@@ -505,8 +505,11 @@ def test_a_failed_run_leaves_no_pipeline_thread_behind(tmp_path):
     from wptrack.runs import run_tracker
 
     class Failing(_FakeRun):
+        steps = 0
+
         def step(self, item):
-            if self.made >= 3:
+            self.steps += 1
+            if self.steps > 3:
                 raise RuntimeError("device lost")
             return super().step(item)
 

@@ -218,21 +218,22 @@ class VideoSource(FrameSource):
         return self._count
 
     def __iter__(self) -> Iterator[np.ndarray]:
-        import cv2
+        from wptrack.io.decode import CHUNK, INTRA_CODECS, decode_workers, fourcc, parallel_frames, read_sequential
 
         self.stopped_early = None
         self.variable_rate = None
         cap = self._open()
+        workers = decode_workers()
+        if workers > 1 and self._count >= 2 * CHUNK and fourcc(cap) in INTRA_CODECS:
+            cap.release()  # several captures, each decoding chunks of the video (wptrack.io.decode)
+            cap = None
+            items = parallel_frames(self._open, self._count, workers)
+        else:
+            items = read_sequential(cap, self._count)
         last_ms = None
         try:
-            for i in range(self._count):
-                ok, frame = cap.read()
-                if ok and self.fps and self.variable_rate is None:  # the decoder's timestamps against 1 / fps
-                    ms = cap.get(cv2.CAP_PROP_POS_MSEC)
-                    if last_ms is not None and ms > last_ms:
-                        self._check_rate(i, ms - last_ms)
-                    last_ms = ms
-                if not ok or frame is None:
+            for i, ok, frame, ms in items:
+                if not ok:
                     log.warning("video %s ended after %d frames, although it reports %d", self.path, i, self._count)
                     self.stopped_early = {
                         "camera": self.name,
@@ -241,11 +242,17 @@ class VideoSource(FrameSource):
                         "reason": f"video ended after {i} of its {self._count} reported frames (truncated or corrupt)",
                     }
                     return
+                if self.fps and self.variable_rate is None:  # the decoder's timestamps against 1 / fps
+                    if last_ms is not None and ms > last_ms:
+                        self._check_rate(i, ms - last_ms)
+                    last_ms = ms
                 frame = _to_bgr(frame)
                 self._check_size(frame, i)
                 yield frame
         finally:
-            cap.release()
+            items.close()
+            if cap is not None:
+                cap.release()
 
     variable_rate: dict[str, Any] | None = None
     """After an iteration: None, or where the frame intervals first departed from ``1 / fps`` by more than
