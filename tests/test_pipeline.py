@@ -521,3 +521,25 @@ def test_a_failed_run_leaves_no_pipeline_thread_behind(tmp_path):
     assert not left, left
     run = json.loads((tmp_path / "fail" / "run.json").read_text())
     assert run["status"] == "failed" and run["timeline"]["stages"]["filter"]["count"] >= 2
+
+
+def test_bench_pipeline_people_from_several_videos(tmp_path, capsys):
+    """Several --video with their --rig: the people tracker's command against decoding the cameras in turn."""
+    import json
+
+    from wptrack.bench.pipeline import scene_cameras, scene_rig, write_scene
+    from wptrack.cli import main
+
+    cams = scene_cameras(96, 72, 2)
+    videos = [str(write_scene(tmp_path / f"cam{k}.avi", 96, 72, 5, camera=c)) for k, c in enumerate(cams)]
+    rig = scene_rig(96, 72, tmp_path / "rig.yaml", cameras=2)
+    out = tmp_path / "people.json"
+    argv = ["bench", "--tracker", "pipeline", "--device", "cpu", "-q", "--video", *videos, "--rig", str(rig)]
+    assert main([*argv, "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "wptrack track people --video (2 cameras, defaults)" in printed and "target people_ratio" in printed
+    (r,) = json.loads(out.read_text())["results"]
+    assert r["cameras"] == 2 and r["frames"] == 5 and r["people"]["fps"] > 0
+    stages = r["people"]["timeline"]["stages"]
+    assert stages["masks"]["count"] >= 2 * 5 and stages["decode"]["count"] >= 5 and stages["filter"]["count"] == 5
+    assert main(["bench", "--tracker", "pipeline", "--device", "cpu", "-q", "--video", *videos]) == 2  # no --rig

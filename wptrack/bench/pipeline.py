@@ -16,6 +16,11 @@ times exactly the CLI pipeline, in this process, through :func:`wptrack.cli.main
 5. **track from masks**: ``wptrack track templates --masks masks.avi --no-virtual`` (the filter fed by the masks of
    step 3: decoding a mask video instead of making the masks).
 
+With several videos (``--video A B C --rig R``, one per rig camera, e.g. a ``wptrack synth s2-office`` scene) the
+command is the people tracker's, ``wptrack track people --rig R --video A B C`` with its defaults (each camera's
+masks by the offline model), against decoding the cameras' videos frame by frame in one thread (issue 27's target:
+within 1.5x of that, ratio >= 0.67).
+
 Each command is warmed up first on 3 frames (kernels compiled and cached, not timed). Reported per command: wall
 time of ``main()``, frames/s, and ``ratio`` = its frames/s over the decode-only frames/s (issue 27's targets on
 one H100 at 1080p: track >= 100 frames/s and ratio >= 0.65, masks >= 120 frames/s; on the 2-core CPU at 480x360:
@@ -58,11 +63,12 @@ WARM_FRAMES = 3
 
 @dataclass(frozen=True)
 class Case:
-    """One recording: its frame size (pixels) and, when given, its file and rig."""
+    """One recording: its frame size (pixels; the first camera's) and, when given, its video files (one per camera)
+    and rig."""
 
     width: int
     height: int
-    video: str | None = None
+    video: tuple[str, ...] | None = None
     rig: str | None = None
 
 
@@ -90,11 +96,27 @@ def scene_camera(width: int, height: int):
     return Camera.look_at("cam0", width, height, (0.0, -8.0, 7.0), (0.0, 7.0, 0.0), f, dist=(-0.05, 0.0, 0.0, 0.0, 0.0))
 
 
-def scene_rig(width: int, height: int, path: Path) -> Path:
-    """Write the rig of :func:`scene_camera` (ground plane z = 0) to ``path`` (YAML)."""
+def scene_cameras(width: int, height: int, count: int) -> list:
+    """``count`` cameras 6 m up on a 12 m circle around the walkers' area, looking at its centre (0, 7, 0) m (for a
+    people run; one camera: :func:`scene_camera`)."""
+    from wptrack.cameras.rig import Camera
+
+    if count == 1:
+        return [scene_camera(width, height)]
+    f = 550.0 * width / 640.0
+    out = []
+    for k in range(count):
+        a = 2 * np.pi * k / count - np.pi / 2
+        pos = (12.0 * np.cos(a), 7.0 + 12.0 * np.sin(a), 6.0)
+        out.append(Camera.look_at(f"cam{k}", width, height, pos, (0.0, 7.0, 0.0), f))
+    return out
+
+
+def scene_rig(width: int, height: int, path: Path, cameras: int = 1) -> Path:
+    """Write the rig of :func:`scene_cameras` (ground plane z = 0) to ``path`` (YAML)."""
     from wptrack.cameras.rig import Rig
 
-    Rig((scene_camera(width, height),)).save(path)
+    Rig(tuple(scene_cameras(width, height, cameras))).save(path)
     return path
 
 
@@ -116,13 +138,13 @@ def _walkers(count: int, frames: int, fps: float, seed: int) -> np.ndarray:
     return out
 
 
-def scene_frames(width: int, height: int, frames: int, fps: float = 25.0, seed: int = 0):
+def scene_frames(width: int, height: int, frames: int, fps: float = 25.0, seed: int = 0, camera: Any = None):
     """``(height, width, 3)`` uint8 BGR frames of :data:`PEOPLE` people walking on a textured paving (smooth colour
     variation, a tile grid, gaussian noise of 3 levels cycling through 8 fields), drawn as a body ellipse and a head
     from their projections (1.75 m tall, 0.5 m wide) in :func:`scene_camera`, nearest last."""
     import cv2
 
-    cam = scene_camera(width, height)
+    cam = camera if camera is not None else scene_camera(width, height)
     rng = np.random.default_rng(seed)
     base = cv2.resize(rng.uniform(70, 180, (max(height // 24, 2), max(width // 24, 2), 3)), (width, height))
     tiles = np.zeros((height, width))
@@ -136,7 +158,7 @@ def scene_frames(width: int, height: int, frames: int, fps: float = 25.0, seed: 
     for t in range(frames):
         img = np.clip(base + bank[t % len(bank)], 0, 255).astype(np.uint8)
         g = paths[t]
-        order = np.argsort(-g[:, 1])  # far first
+        order = np.argsort(-np.linalg.norm(g - np.asarray(cam.center[:2]), axis=1))  # far first
         for j in order:
             x, y = g[j]
             pts = np.array([[x, y, 0.0], [x, y, 1.75], [x - 0.25, y, 0.9], [x + 0.25, y, 0.9], [x, y, 1.55]])
@@ -154,36 +176,40 @@ def scene_frames(width: int, height: int, frames: int, fps: float = 25.0, seed: 
         yield img
 
 
-def write_scene(path: Path, width: int, height: int, frames: int, fps: float = 25.0, seed: int = 0) -> Path:
-    """Write :func:`scene_frames` as an MJPG ``.avi`` (OpenCV's default quality)."""
+def write_scene(
+    path: Path, width: int, height: int, frames: int, fps: float = 25.0, seed: int = 0, camera: Any = None
+) -> Path:
+    """Write :func:`scene_frames` (seen by ``camera``, default :func:`scene_camera`) as an MJPG ``.avi`` (OpenCV's
+    default quality)."""
     import cv2
 
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), fps, (width, height))
     if not writer.isOpened():
         raise ConfigError(f"cannot write the benchmark video {path} (no MJPG encoder in this OpenCV)")
     try:
-        for img in scene_frames(width, height, frames, fps, seed):
+        for img in scene_frames(width, height, frames, fps, seed, camera):
             writer.write(img)
     finally:
         writer.release()
     return path
 
 
-def decode_only(video: str, frames: int) -> tuple[float, float]:
+def decode_only(video: str | tuple[str, ...], frames: int) -> tuple[float, float]:
     """``(wall seconds, process CPU seconds)`` to read ``frames`` frames (or to the end) of ``video`` with one
-    ``cv2.VideoCapture`` in this thread (OpenCV's decoder may use threads of its own: the CPU time counts them)."""
+    ``cv2.VideoCapture`` in this thread (OpenCV's decoder may use threads of its own: the CPU time counts them);
+    several videos: frame by frame in turn, as a multi-camera run reads them."""
     import cv2
 
-    cap = cv2.VideoCapture(str(video))
+    caps = [cv2.VideoCapture(str(v)) for v in ((video,) if isinstance(video, str) else video)]
     try:
         t0, c0 = time.perf_counter(), time.process_time()
         for _ in range(frames):
-            ok, _f = cap.read()
-            if not ok:
+            if not all(cap.read()[0] for cap in caps):
                 break
         return time.perf_counter() - t0, time.process_time() - c0
     finally:
-        cap.release()
+        for cap in caps:
+            cap.release()
 
 
 def _cli(argv: list[str]) -> tuple[float, float]:
@@ -218,15 +244,18 @@ class PipelineSuite:
 
     @staticmethod
     def grid_from_args(args: Any, is_cuda: bool) -> list[Case]:
-        """The case of ``--video V [--rig R]`` or ``--size WxH`` (else the default grid)."""
+        """The case of ``--video V... [--rig R]`` or ``--size WxH`` (else the default grid)."""
         video, rig, size = getattr(args, "video", None), getattr(args, "rig", None), getattr(args, "size", None)
-        if video is not None:
+        if video:
             if size is not None:
                 raise ConfigError("--size: the pipeline suite takes the size of --video; give one of them")
+            videos = (video,) if isinstance(video, str) else tuple(str(v) for v in video)
+            if len(videos) > 1 and rig is None:
+                raise ConfigError("--video: several videos are the cameras of a people run: give their --rig")
             from wptrack.io.frames import open_source
 
-            src = open_source(video)
-            return [Case(src.width, src.height, str(video), rig)]
+            src = open_source(videos[0])
+            return [Case(src.width, src.height, videos, rig)]
         if rig is not None:
             raise ConfigError("--rig: the camera of a --video; the suite's own video has its own rig")
         if size is not None:
@@ -235,7 +264,7 @@ class PipelineSuite:
 
     @staticmethod
     def describe(case: Case, frames: int, e2e: Any = None) -> str:
-        what = case.video or "synthetic MJPG"
+        what = " ".join(case.video) if case.video else "synthetic MJPG"
         return f"{case.width}x{case.height} {what}" + (f", {frames} frames" if frames else "")
 
     @staticmethod
@@ -247,6 +276,8 @@ class PipelineSuite:
         from wptrack.motion.masks import MaskConfig
 
         is_cuda = wp.get_device(device).is_cuda
+        if case.video is not None and len(case.video) > 1:
+            return _people_case(case, device, frames)
         with tempfile.TemporaryDirectory(prefix="wptrack-bench-pipeline-") as tmp:
             tmp = Path(tmp)
             if case.video is None:
@@ -256,7 +287,7 @@ class PipelineSuite:
             else:
                 from wptrack.io.frames import open_source
 
-                video = case.video
+                video = case.video[0]
                 frames = min(frames, len(open_source(video))) if frames else len(open_source(video))
                 rig = case.rig or str(scene_rig(case.width, case.height, tmp / "rig.yaml"))
             limit = ["--max-frames", str(frames)]
@@ -292,7 +323,7 @@ class PipelineSuite:
             "device": device,
             "width": case.width,
             "height": case.height,
-            "video": case.video or "synthetic MJPG",
+            "video": case.video[0] if case.video else "synthetic MJPG",
             "frames": frames,
             "cores": os.cpu_count(),
             "load": load,
@@ -326,14 +357,17 @@ class PipelineSuite:
             ("masks", "wptrack masks"),
             ("track", "wptrack track templates --video (defaults)"),
             ("track_from_masks", "wptrack track templates --masks masks.avi --no-virtual"),
+            ("people", f"wptrack track people --video ({r.get('cameras', 0)} cameras, defaults)"),
         ):
+            if key not in r:
+                continue
             c = r[key]
             lines.append(
                 f"  {label:54s} {c['fps']:8.1f} frames/s  ratio {c['ratio']:.2f}  ({c['seconds']:.2f} s; process CPU "
                 f"{c['cpu_ms']:.1f} ms/frame)"
             )
-        for key in ("track", "track_from_masks"):
-            tl = r[key].get("timeline") or {}
+        for key in ("track", "track_from_masks", "people"):
+            tl = r.get(key, {}).get("timeline") or {}
             stages = tl.get("stages", {})
             if not stages:
                 continue
@@ -354,3 +388,57 @@ class PipelineSuite:
         for k, t in r.get("targets", {}).items():
             lines.append(f"  target {k} >= {t['target']:g}: {t['got']:.2f} {'met' if t['met'] else 'NOT met'}")
         return "\n".join(lines)
+
+
+def _people_case(case: Case, device: str, frames: int) -> dict:
+    """The people tracker's command on the cameras' videos of ``case`` against decoding them (see the module)."""
+    import os
+
+    import warp as wp
+
+    from wptrack.io.frames import open_source
+    from wptrack.motion.masks import MaskConfig
+
+    videos = list(case.video)
+    count = min(len(open_source(v)) for v in videos)
+    frames = min(frames, count) if frames else count
+    with tempfile.TemporaryDirectory(prefix="wptrack-bench-pipeline-") as tmp:
+        tmp = Path(tmp)
+        track = ["track", "people", "-q", "--rig", str(case.rig), "--video", *videos, "--device", device]
+        if frames < MaskConfig().window:
+            logging.getLogger("wptrack.motion.background").setLevel(logging.ERROR)
+        quiet = logging.getLogger("wptrack.trackers.people.tracker")  # per-frame notes (a full scene): not timings
+        level = quiet.level
+        quiet.setLevel(logging.ERROR)
+        _cli([*track, "--out", str(tmp / "warm"), "--max-frames", str(WARM_FRAMES)])
+        load = os.getloadavg()[0]
+        decode = [decode_only(tuple(videos), frames)]
+        people_s = _cli([*track, "--out", str(tmp / "run"), "--max-frames", str(frames)])
+        run = _timeline(tmp / "run")
+        decode.append(decode_only(tuple(videos), frames))
+        load = max(load, os.getloadavg()[0])
+    logging.getLogger("wptrack.motion.background").setLevel(logging.NOTSET)
+    quiet.setLevel(level)
+    decode_fps = frames / float(np.mean([d[0] for d in decode]))
+    seconds, cpu = people_s
+    n = run["frames"] or frames
+    fps = n / seconds
+    target = 1.0 / 1.5  # within 1.5x of decoding the cameras
+    return {
+        "tracker": "pipeline",
+        "device": device,
+        "width": case.width,
+        "height": case.height,
+        "video": " ".join(videos),
+        "cameras": len(videos),
+        "frames": frames,
+        "cores": os.cpu_count(),
+        "load": load,
+        "decode_s": [d[0] for d in decode],
+        "decode_cpu_ms": 1000 * float(np.mean([d[1] for d in decode])) / frames,
+        "decode_fps": decode_fps,
+        "people": {"seconds": seconds, "fps": fps, "ratio": fps / decode_fps, "cpu_s": cpu, "cpu_ms": 1000 * cpu / n,
+                   **run},
+        "targets": {"people_ratio": {"target": target, "got": fps / decode_fps, "met": fps / decode_fps >= target}},
+        "is_cuda": wp.get_device(device).is_cuda,
+    }  # fmt: skip

@@ -201,7 +201,10 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="templates suite: the paper's joint filter (one weight per particle) instead of the partitioned one",
     )
-    b.add_argument("--video", default=None, help="pipeline suite: time the commands on this video (default: its own)")
+    b.add_argument(
+        "--video", nargs="+", default=None, help="pipeline suite: time the commands on this video (default: its own); "
+        "several: the cameras of a people run (with --rig)",
+    )  # fmt: skip
     b.add_argument("--rig", default=None, help="pipeline suite: the rig of --video (default: the suite's camera)")
     b.add_argument("--size", default=None, help="pipeline suite: WIDTHxHEIGHT of its own video (default 1920x1080 "
                    "on a GPU, 480x360 on the CPU)")  # fmt: skip
