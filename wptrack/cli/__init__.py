@@ -14,6 +14,8 @@ import sys
 from collections.abc import Sequence
 
 from wptrack import __version__
+from wptrack.batch import POOLS
+from wptrack.batch.videos import VIDEO_OPTIONS
 from wptrack.cli.commands import (
     cmd_batch,
     cmd_bench,
@@ -27,8 +29,9 @@ from wptrack.cli.commands import (
 from wptrack.cli.common import Parser, add_device, positive_int
 from wptrack.cli.track import add_track_parsers
 from wptrack.core.config import add_arguments
-from wptrack.core.errors import WptrackError
+from wptrack.core.errors import ConfigError, WptrackError
 from wptrack.motion.masks import MaskConfig
+from wptrack.runs.spec import add_track_arguments, command, commands
 
 __all__ = ["build_parser", "main"]
 
@@ -36,7 +39,9 @@ log = logging.getLogger("wptrack")
 
 
 # --- parser -------------------------------------------------------------------------------------------------
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(batch_tracker: str | None = None) -> argparse.ArgumentParser:
+    """The ``wptrack`` parser; ``batch_tracker``: the ``--tracker`` of ``wptrack batch --videos``, whose track options
+    the batch command then takes (:func:`_batch_tracker` finds it in argv)."""
     p = Parser(prog="wptrack", description="Particle-filter 3D object tracking from calibrated cameras (Warp).")
     p.add_argument("--version", action="version", version=f"wptrack {__version__}")
     p.add_argument("--debug", action="store_true", help="debug logging; show the traceback of errors")
@@ -152,11 +157,12 @@ def build_parser() -> argparse.ArgumentParser:
     bt = sub.add_parser(
         "batch",
         parents=[common],
-        help="many runs or a parameter grid from a YAML manifest, one Ray task per run (GPU or CPU)",
-        description="Runs the manifest's runs (wptrack track options, or grids of them) as Ray tasks, each into "
-        "OUT/<run-id>/, with OUT/summary.csv; completed runs are skipped when the manifest is run again.",
+        help="many runs or a parameter grid from a YAML manifest, or one run per recording, on Ray (GPUs or CPUs)",
+        description="Runs the manifest's runs (wptrack track options, or grids of them), or one run per video of "
+        "--videos, on Ray workers that stay warm (one per GPU), each into OUT/<run-id>/, with OUT/summary.csv; "
+        "completed runs are skipped when the batch is run again.",
     )
-    bt.add_argument("manifest", help="batch manifest (YAML): runs, grids, retries")
+    bt.add_argument("manifest", nargs="?", help="batch manifest (YAML): runs, grids, retries (or --videos)")
     bt.add_argument("--out", required=True, help="batch folder: OUT/<run-id>/ per run and OUT/summary.csv")
     bt.add_argument(
         "--address",
@@ -165,8 +171,40 @@ def build_parser() -> argparse.ArgumentParser:
         "inline (no Ray: one run after another here; also the default without Ray installed)",
     )
     bt.add_argument("--gpus-per-task", type=float, default=None, help="GPUs per run (default 1 if the cluster has any)")
-    bt.add_argument("--cpus-per-task", type=float, default=1.0, help="CPU cores reserved per run (default 1)")
+    bt.add_argument(
+        "--cpus-per-task",
+        type=float,
+        default=None,
+        help="CPU cores reserved per worker, its runs' decoding threads (default: GPU runs the cores per GPU worker, "
+        "e.g. 4 on 16 cores and 4 GPUs; CPU runs 1)",
+    )
     bt.add_argument("--retries", type=int, default=None, help="retries of a failed/killed run (default: manifest, 2)")
+    bt.add_argument(
+        "--pool",
+        choices=POOLS,
+        default="actors",
+        help="actors (default): warm workers, one per GPU (per --gpus-per-task share), that take the runs from a "
+        "queue; tasks: one Ray task in a fresh worker process per run",
+    )
+    vg = bt.add_argument_group("a batch over recordings, without a manifest")
+    vg.add_argument(
+        "--videos",
+        action="append",
+        metavar="GLOB",
+        help="one run per matching video, its id the file's stem (quote the pattern); trackers of several cameras: "
+        "one --videos per camera in rig order, files paired by stem",
+    )
+    vg.add_argument(
+        "--tracker",
+        choices=[n for c in commands().values() for n in (c.name, *c.aliases)],
+        help="the runs' tracker; the options of 'wptrack track TRACKER' then apply to every run "
+        "('wptrack batch --tracker TRACKER --help' lists them; --groundtruth may hold {stem})",
+    )
+    if batch_tracker is not None:
+        try:
+            add_track_arguments(bt, command(batch_tracker), exclude=VIDEO_OPTIONS)
+        except ConfigError:  # not a tracker: --tracker's choices say so
+            pass
     bt.set_defaults(func=cmd_batch)
 
     b = sub.add_parser("bench", parents=[common], help="benchmark suites: stage times, NumPy baseline, equivalence")
@@ -229,9 +267,21 @@ def _missing_command(parser: argparse.ArgumentParser, args) -> tuple[argparse.Ar
     return None
 
 
+def _batch_tracker(argv: Sequence[str]) -> str | None:
+    """The ``--tracker`` of a ``wptrack batch`` command line (None for other commands or without one)."""
+    argv = list(argv)
+    command_at = next((i for i, a in enumerate(argv) if not a.startswith("-")), None)
+    if command_at is None or argv[command_at] != "batch":
+        return None
+    pre = argparse.ArgumentParser(add_help=False)
+    pre.add_argument("--tracker", default=None)
+    return pre.parse_known_args(argv[command_at + 1 :])[0].tracker
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``wptrack`` console script."""
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(_batch_tracker(argv))
     try:
         args = parser.parse_args(argv)
     except SystemExit as e:  # argparse: --help, --version (0) or a usage error (2, its message already printed)

@@ -200,28 +200,95 @@ def cmd_convergence(args) -> int:
 
 
 # --- batch (Ray) -----------------------------------------------------------------------------------------------
+def _batch_manifest(args):
+    """The manifest of ``wptrack batch``: the file given, or the runs of ``--videos`` (one per recording) with the
+    track options given on the command line."""
+    if args.manifest is not None and args.videos:
+        raise ConfigError("give a manifest or --videos, not both")
+    if args.manifest is None and not args.videos:
+        raise ConfigError("give a manifest (YAML) or --videos 'PATTERN' --tracker TRACKER")
+    if args.manifest is not None:
+        if args.tracker is not None:
+            raise ConfigError("--tracker and the track options go with --videos; a manifest names its tracker")
+        return args.manifest
+    if args.tracker is None:
+        raise ConfigError("--videos: give the runs' --tracker (color, templates or people)")
+    from wptrack.batch.videos import VIDEO_OPTIONS, videos_manifest
+    from wptrack.runs.spec import command, options_from_namespace
+
+    cmd = command(args.tracker)
+    options = options_from_namespace(cmd, args, exclude=VIDEO_OPTIONS)
+    return videos_manifest(args.videos, cmd.name, options, cameras=1 if cmd.name == "templates" else None)
+
+
+def batch_table(results) -> str:
+    """The table ``wptrack batch`` prints at the end: id, status, frames, seconds, frames/s per run."""
+    rows = []
+    for r in results:
+        frames = (r.get("summary") or {}).get("frames")
+        secs = r.get("seconds")
+        ok = isinstance(frames, int) and isinstance(secs, (int, float)) and secs > 0
+        status = r["status"] + (" (reused)" if r.get("reused") else "")
+        rows.append(
+            (
+                str(r["id"]),
+                status,
+                str(frames) if isinstance(frames, int) else "-",
+                f"{secs:.1f}" if isinstance(secs, (int, float)) else "-",
+                f"{frames / secs:.1f}" if ok else "-",
+            )
+        )
+    head = ("id", "status", "frames", "seconds", "frames/s")
+    width = [max(len(x) for x in col) for col in zip(head, *rows, strict=True)]
+
+    def line(cells: tuple[str, ...]) -> str:  # id and status to the left, numbers to the right
+        cols = zip(cells, width, strict=True)
+        return "  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in enumerate(cols)).rstrip()
+
+    return "\n".join([line(head), *(line(r) for r in rows)])
+
+
 def cmd_batch(args) -> int:
+    from tqdm import tqdm
+
     from wptrack.batch import run_batch
 
+    manifest = _batch_manifest(args)
+    bar = None
+
+    def start(total: int, pending: int) -> None:
+        nonlocal bar
+        bar = tqdm(total=total, desc="runs", unit="run", disable=args.quiet, dynamic_ncols=True)
+
     def say(r: dict) -> None:
+        if bar is not None:
+            bar.update(1)
         if args.quiet:
             return
         how = "already complete" if r.get("reused") else r["status"]
         secs = f" in {r['seconds']:.1f} s" if isinstance(r.get("seconds"), (int, float)) and not r.get("reused") else ""
         tries = f" ({r['attempts']} attempts)" if (r.get("attempts") or 1) > 1 else ""
         err = f": {r['error']}" if r.get("error") else ""
-        print(f"{r['id']}: {how}{secs}{tries}{err}", flush=True)
+        tqdm.write(f"{r['id']}: {how}{secs}{tries}{err}", file=sys.stdout)
 
-    results = run_batch(
-        args.manifest,
-        args.out,
-        address=args.address,
-        gpus_per_task=args.gpus_per_task,
-        cpus_per_task=args.cpus_per_task,
-        retries=args.retries,
-        on_result=say,
-    )
+    try:
+        results = run_batch(
+            manifest,
+            args.out,
+            address=args.address,
+            gpus_per_task=args.gpus_per_task,
+            cpus_per_task=args.cpus_per_task,
+            retries=args.retries,
+            on_result=say,
+            pool=args.pool,
+            on_start=start,
+        )
+    finally:
+        if bar is not None:
+            bar.close()
     failed = [r["id"] for r in results if r["status"] != "complete"]
+    if not args.quiet:
+        print(batch_table(results))
     print(f"{len(results) - len(failed)}/{len(results)} runs complete; summary: {Path(args.out) / 'summary.csv'}")
     if failed:
         print(f"wptrack: {len(failed)} run(s) failed: {', '.join(failed)}", file=sys.stderr)

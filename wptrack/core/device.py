@@ -261,7 +261,7 @@ def warm_up(
 
     init_warp()
     if modules is None:
-        modules = sorted(m for m in sys.modules if m.startswith(__package__ + ".kernels."))
+        modules = sorted(m for m in sys.modules if m.startswith("wptrack.kernels."))  # every tracker kernel module
     names = [m if isinstance(m, str) else m.__name__ for m in modules]
     mods = [ctx.get_module(n) for n in names]
     d = wp.get_device(device)

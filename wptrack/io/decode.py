@@ -13,7 +13,9 @@ When it pays: OpenCV's FFmpeg decoder already runs threads of its own inside one
 still does the colour conversion, so more captures help when decoding is the pipeline's slowest stage and cores
 are free (a GPU host; measure with ``WPTRACK_DECODE_WORKERS=N wptrack bench --tracker pipeline``). On the 2-core CI
 machine it costs more CPU than it saves (1440x1080 MJPG, 2 captures: 19 ms of CPU per frame instead of 11 ms), so
-the default is one thread.
+the default is one thread. Each capture opens as :meth:`wptrack.io.frames.VideoSource._open` does, so a
+``WPTRACK_DECODE_THREADS`` budget (``wptrack batch`` workers) sets each capture's FFmpeg threads: with both, a video
+uses up to workers x threads.
 """
 
 from __future__ import annotations

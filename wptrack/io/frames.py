@@ -38,6 +38,24 @@ IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 _STOP_HINT = "(use --stop-at-shortest to track the common part)"
 
 
+DECODE_THREADS_ENV = "WPTRACK_DECODE_THREADS"
+"""Environment variable: the threads a run's video decoding may use (unset: OpenCV's and FFmpeg's defaults, as
+many as the machine has cores, per video). When set to N, OpenCV's thread pool gets N threads and the N are shared
+out among the run's videos (each FFmpeg decoder ``max(1, N // videos)`` threads), so several runs on one machine
+(a batch's workers) do not oversubscribe its cores. ``wptrack batch`` sets it in each worker to the cores the
+worker holds. Decoded frames do not depend on it."""
+
+
+def decode_threads() -> int | None:
+    """The thread budget of :data:`DECODE_THREADS_ENV` (None: unset, empty or not a positive integer)."""
+    text = os.environ.get(DECODE_THREADS_ENV, "").strip()
+    try:
+        n = int(text)
+    except ValueError:
+        return None
+    return n if n > 0 else None
+
+
 def _natural_key(path: str) -> list[Any]:
     """Sort key that orders ``img2.png`` before ``img10.png``."""
     return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", path)]
@@ -205,10 +223,19 @@ class VideoSource(FrameSource):
             "opened video %s: %d frames, %dx%d, %s fps", self.path, self._count, self.width, self.height, self.fps
         )
 
+    threads: int | None = None
+    """FFmpeg decoder threads of this video (None: :func:`decode_threads`, else OpenCV's default); set by
+    :class:`SyncedFrames` to its share of the budget."""
+
     def _open(self) -> Any:
         import cv2
 
-        cap = cv2.VideoCapture(self.path)
+        threads = self.threads or decode_threads()
+        if threads is None:
+            cap = cv2.VideoCapture(self.path)
+        else:
+            cv2.setNumThreads(decode_threads() or threads)
+            cap = cv2.VideoCapture(self.path, cv2.CAP_ANY, [cv2.CAP_PROP_N_THREADS, int(threads)])
         if not cap.isOpened():
             cap.release()
             raise FrameError(f"cannot open video {self.path} (not a video file, corrupt, or unsupported codec)")
@@ -515,6 +542,11 @@ class SyncedFrames:
             listing = ", ".join(f"{s.name} {r:g} fps" for s, r in zip(self.sources, rates, strict=True) if r)
             log.warning("frame rates differ (%s): frames are paired by index, check the videos are in sync", listing)
         self._len = shortest if max_frames is None else min(shortest, max_frames)
+        budget = decode_threads()
+        videos = [s for s in self.sources if isinstance(s, VideoSource)]
+        if budget is not None and videos:  # the run's decode budget shared out among its videos
+            for s in videos:
+                s.threads = max(1, budget // len(videos))
 
     @property
     def sizes(self) -> list[tuple[int, int]]:

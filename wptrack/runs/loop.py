@@ -8,7 +8,10 @@ is built (rig, videos, sizes, parameters, device), and the loop then owns what a
   atomically), with the job's extra writers opened in :meth:`TrackerRun.start` and always closed in
   :meth:`TrackerRun.finish`,
 * frames decoded ahead by a background thread (:class:`wptrack.io.prefetch.prefetch`), the time the tracker waited
-  for them recorded as the ``decode_wait`` stage, and the tracker's own per-stage timings,
+  for them recorded as the ``decode_wait`` stage, and the tracker's own per-stage timings; run.json's ``phases``:
+  the kernel modules' load time before the first frame (``module_load_s``, compilation included when the cache
+  missed them), the frame loop's wall time (``frame_loop_s``) and its start (``loop_start``, seconds since the
+  epoch),
 * the stage timeline (:mod:`wptrack.io.timeline`, run.json's ``timeline``): the wall time of every stage in every
   thread (``decode``, ``masks`` in the prefetch threads; ``upload``, ``filter``, ``record`` in the loop;
   ``write_*`` in the video writer threads), the waits between them (``wait_masks``: the filter waited for its
@@ -422,6 +425,7 @@ def _run_locked(
         out.set_info(**info)
         job.start(out.out_dir, after)
         tracker = getattr(job, "tracker", None)
+        t_load = time.perf_counter()
         if tracker is not None:  # compile the kernels missing from the cache now, not in the first frame's time
             import sys
 
@@ -431,6 +435,9 @@ def _run_locked(
             warm_up(getattr(tracker, "kernel_modules", None), tracker.device, say=say)
         bar = _progress(total, progress)
         bar.update(start)
+        # run.json "phases": what a run costs besides its frames (a batch's stage times, wptrack.batch)
+        phases = {"module_load_s": time.perf_counter() - t_load, "loop_start": time.time()}
+        t_loop = time.perf_counter()
         clock = timeline.Timeline()
         try:
             with timeline.active(clock):
@@ -451,6 +458,7 @@ def _run_locked(
                     stopped["frame"],
                     stopped["reason"],
                 )
+        out.set_info(phases={**phases, "frame_loop_s": time.perf_counter() - t_loop})
         summary = job.summary()
         out.close(
             "complete",

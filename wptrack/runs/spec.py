@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,7 +28,9 @@ from wptrack.core.config import (
 )
 from wptrack.core.errors import ConfigError
 
-__all__ = ["COMMANDS", "Part", "RunControl", "TrackCommand", "parts_from_options", "run_command"]
+__all__ = [
+    "COMMANDS", "Part", "RunControl", "TrackCommand", "options_from_namespace", "parts_from_options", "run_command",
+]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -196,13 +198,15 @@ def command(name: str) -> TrackCommand:
 
 
 # --- the command line ----------------------------------------------------------------------------------------------
-def add_track_arguments(parser: Any, cmd: TrackCommand) -> None:
+def add_track_arguments(parser: Any, cmd: TrackCommand, exclude: Sequence[str] = ()) -> None:
     """Add the options of every part of ``cmd`` to a ``wptrack track NAME`` parser, one group per part, and
     ``--config FILE`` (the tracker's config from YAML or JSON, e.g. a run.json's ``config.tracker``; options given
-    on the command line apply on top of it)."""
+    on the command line apply on top of it). ``exclude``: flags (with their part's prefix) to leave out, those a
+    command sets itself (``wptrack batch --videos``: ``out``, ``video``...)."""
     for part in cmd.parts:
         group = parser.add_argument_group(part.title or part.name)
-        add_arguments(group, part.cls, prefix=part.prefix)
+        skip = [f[len(part.prefix) :] for f in exclude if f.startswith(part.prefix)]
+        add_arguments(group, part.cls, prefix=part.prefix, exclude=skip)
         if part.name == "config":
             group.add_argument(
                 "--config",
@@ -222,6 +226,21 @@ def parts_from_namespace(cmd: TrackCommand, args: Any) -> dict[str, Any]:
         if part.name == "config" and getattr(args, "config_file", None):
             base = load_file(part.cls, args.config_file)
         out[part.name] = from_namespace(part.cls, args, base=base, prefix=part.prefix)
+    return out
+
+
+def options_from_namespace(cmd: TrackCommand, args: Any, exclude: Sequence[str] = ()) -> dict[str, Any]:
+    """The options given on a command line parsed with :func:`add_track_arguments` (with the same ``exclude``), as
+    a flat mapping by flag (what a batch manifest's ``args`` hold, :func:`parts_from_options`): only those given (an
+    option left out keeps its default), ``config`` for ``--config FILE``."""
+    out: dict[str, Any] = {}
+    for part in cmd.parts:
+        for flag in option_map(part.cls, part.prefix):
+            v = None if flag in exclude else getattr(args, flag.replace("-", "_"), None)
+            if v is not None:
+                out[flag] = list(v) if isinstance(v, (list, tuple)) else v
+    if getattr(args, "config_file", None):
+        out["config"] = args.config_file
     return out
 
 
