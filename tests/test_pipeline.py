@@ -202,8 +202,16 @@ def test_background_writer_error_is_raised_by_the_caller_and_aborts():
             bw.write(np.zeros(10, dtype=np.uint8))
             time.sleep(0.002)
         bw.close()
-    bw.abort()
+    assert bw.close() is None  # the run's finish() after the error: the file deleted, the error not raised again
     assert slow.aborted and not slow.closed
+
+    failing = _SlowWriter(0.0, fail_at=1)
+    bw = BackgroundWriter(failing, depth=8)
+    bw.write(np.zeros(10, dtype=np.uint8))
+    bw.write(np.zeros(10, dtype=np.uint8))
+    with pytest.raises(OSError, match="disk full"):  # the error surfaces at close when no write saw it
+        bw.close()
+    assert failing.aborted and not failing.closed
 
 
 def test_background_writer_abort_leaves_nothing(tmp_path):

@@ -205,6 +205,7 @@ class BackgroundWriter:
         self.depth = int(depth)
         self._queue: queue.Queue = queue.Queue(maxsize=depth)
         self._error: BaseException | None = None
+        self._failed = False  # an encoding error happened: close() then deletes the file instead of keeping it
         self._closed = False
         self._thread = threading.Thread(target=self._run, name=f"wptrack-{stage}", daemon=True)
         self._thread.start()
@@ -237,6 +238,7 @@ class BackgroundWriter:
                     self.writer.write(prepare(frame) if prepare is not None else frame)
                 except BaseException as e:  # noqa: BLE001 - raised by the caller's next call
                     self._error = e
+                    self._failed = True
                 timeline.record(self.stage, time.perf_counter() - t0)
             finally:
                 self._queue.task_done()
@@ -276,12 +278,16 @@ class BackgroundWriter:
         self._thread.join()
 
     def close(self) -> Path | None:
-        """Encode what is queued and close the file (see :meth:`VideoWriter.close`; idempotent)."""
+        """Encode what is queued and close the file (see :meth:`VideoWriter.close`; idempotent). After an encoding
+        error the file is deleted instead (nothing half-written), and the error is raised unless the caller has had
+        it already."""
         if not self._closed:
             self._stop()
-        if self._error is not None:
+        if self._failed:
             self.writer.abort()
             self._raise()
+            log.warning("%s not written: its encoding failed", self.path)
+            return None
         return self.writer.close()
 
     def abort(self) -> None:
