@@ -551,3 +551,23 @@ def test_bench_pipeline_people_from_several_videos(tmp_path, capsys):
     stages = r["people"]["timeline"]["stages"]
     assert stages["masks"]["count"] >= 2 * 5 and stages["decode"]["count"] >= 5 and stages["filter"]["count"] == 5
     assert main(["bench", "--tracker", "pipeline", "--device", "cpu", "-q", "--video", *videos]) == 2  # no --rig
+
+
+def test_track_prints_where_the_time_went(tmp_path, capsys):
+    """``wptrack track templates`` ends with one line from the run's timeline: frames/s, each stage's ms per frame
+    and the filter's wait for its masks."""
+    import json
+
+    from wptrack.bench.pipeline import scene_rig, write_scene
+    from wptrack.cli import main
+
+    video = write_scene(tmp_path / "v.avi", 96, 72, 4)
+    rig = scene_rig(96, 72, tmp_path / "rig.yaml")
+    out = tmp_path / "run"
+    argv = ["track", "templates", "-q", "--rig", str(rig), "--video", str(video), "--device", "cpu", "--out", str(out)]
+    assert main(argv) == 0
+    lines = capsys.readouterr().out.splitlines()
+    speed = next(line for line in lines if line.startswith("speed: "))
+    assert "frames/s" in speed and "filter " in speed and "masks " in speed and "waited for masks" in speed
+    tl = json.loads((out / "run.json").read_text())["timeline"]
+    assert tl["source"] == "masks" and tl["stages"]["wait_masks"]["count"] >= 4

@@ -11,6 +11,7 @@ video writers (:class:`wptrack.io.video.BackgroundWriter`) and the loop itself. 
 run.json's ``timeline`` (:meth:`Timeline.summary`): per stage the total seconds, the count, the mean in ms and the
 share of the run's wall time; ``wall_s`` (from the first frame asked for to the last frame written) and
 ``overlap``: the busy stages' total over the wall time (1: one stage at a time; 2: two threads busy on average);
+``source``: the stage the run loop takes its items from (``wait_<source>``: the time the filter waited for them);
 ``cpu_s``: the CPU time of each of the pipeline's threads (``main``: the loop; ``decode``, ``masks``: the prefetch
 threads; ``write_*``: the writers) and ``process`` (every thread of the process, OpenCV's and the background
 model's workers included). On a shared machine the wall times of the stages include the time other processes had
@@ -53,6 +54,7 @@ class Timeline:
         self.stopped: float | None = None
         self._process_cpu = time.process_time()
         self._process_cpu_end: float | None = None
+        self.source: str | None = None  # the stage the run loop consumes (its wait is wait_<source>)
 
     def start(self) -> None:
         """Start the wall clock now (the run's first frame is asked for)."""
@@ -107,7 +109,10 @@ class Timeline:
             cpu = {name: round(seconds, 6) for name, seconds in sorted(self._cpu.items())}
         end_cpu = self._process_cpu_end if self._process_cpu_end is not None else time.process_time()
         cpu["process"] = round(end_cpu - self._process_cpu, 6)
-        return {"wall_s": round(wall, 6), "overlap": round(busy / wall, 3), "stages": stages, "cpu_s": cpu}
+        out = {"wall_s": round(wall, 6), "overlap": round(busy / wall, 3), "stages": stages, "cpu_s": cpu}
+        if self.source is not None:
+            out["source"] = self.source
+        return out
 
 
 _active: Timeline | None = None

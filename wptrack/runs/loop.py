@@ -509,6 +509,7 @@ def _frames(
     source = job.frames()
     stage = job.source_stage or getattr(source, "stage", None) or "source"
     frames = itertools.islice(source, start, max_frames)  # decoded and skipped when resuming
+    clock.source = stage
     clock.start()
     t_wait = time.perf_counter()
     # "decode_wait": the time the tracker waited for the next decoded frame (the timeline's wait_<stage>)
