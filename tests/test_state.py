@@ -122,3 +122,55 @@ def test_every_tracker_keeps_the_contract(lab, plaza):
     masks = [np.zeros(img.shape[:2], np.uint8) for img in frames[0]]
     ests = list(people.track(((f, masks) for f in frames), max_frames=3))
     assert [e.frame for e in ests] == [0, 1, 2] and all(e.people == [] for e in ests)
+
+
+def test_garbage_collection_is_off_while_a_graph_is_captured(monkeypatch):
+    """A CUDA graph capture runs with the collector off (after one collection), so the frees of an earlier run's
+    arrays cannot land in the capture (the batch workers' "Cannot synchronize stream while graph capture is
+    active"); the collector's state is restored, also after an error."""
+    import gc
+
+    from wptrack.core.filter import no_gc
+
+    seen = []
+    assert gc.isenabled()
+    with no_gc():
+        seen.append(gc.isenabled())
+    assert seen == [False] and gc.isenabled()
+    with pytest.raises(RuntimeError), no_gc():
+        raise RuntimeError("capture failed")
+    assert gc.isenabled()
+    gc.disable()
+    try:
+        with no_gc():
+            pass
+        assert not gc.isenabled()  # off before, off after
+    finally:
+        gc.enable()
+
+
+def test_the_frame_chain_captures_with_the_collector_off(monkeypatch):
+    import contextlib
+    import gc
+
+    import warp as wp
+
+    from wptrack.core.filter import FrameChain
+
+    states = []
+
+    class Chain(FrameChain):
+        def stages(self, src, dst):
+            return [("record", lambda: states.append(gc.isenabled()))]
+
+    @contextlib.contextmanager
+    def fake_capture(device):
+        yield type("Capture", (), {"graph": "graph"})()
+
+    monkeypatch.setattr(wp, "ScopedCapture", fake_capture)
+    monkeypatch.setattr(wp, "capture_launch", lambda graph: states.append(graph))
+    chain = Chain("cpu")
+    chain.use_graph, chain._warm = True, [True, True]  # as on CUDA after the warm-up frame
+    chain._run_chain(0, 1)  # captures, then replays
+    chain._run_chain(0, 1)  # replays
+    assert states == [False, "graph", "graph"] and gc.isenabled()

@@ -13,6 +13,10 @@ non-monotone by an ulp (see :func:`positive_parent`).
 The scatter kernels (systematic, residual) write short offspring ranges from the parent's thread and leave ranges
 longer than ``long_range`` slots to :func:`long_ranges_fill_kernel`, which spreads them over its whole grid (one
 parent owning most of the slots no longer serialises the pass).
+
+Length: one module for the resampling family on purpose: the four float64-CDF schemes, the exact-integer systematic
+pass from log-weights and the grouped one per row of weights share the long-range bookkeeping, the offspring-slot
+search and the block scans defined here, and ``wptrack.core.resampling`` picks among them by name.
 """
 
 import warp as wp

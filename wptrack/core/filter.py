@@ -19,6 +19,8 @@ estimate vector (and, when asked for, a small subsample of particles for reports
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import logging
 import math
 import time
@@ -151,6 +153,23 @@ def load_arrays(arrays: dict[str, wp.array], state: dict[str, np.ndarray]) -> No
         arr.assign(np.asarray(state[name]))
 
 
+@contextlib.contextmanager
+def no_gc() -> Iterator[None]:
+    """Python's garbage collector off for the block, after one collection: a CUDA graph capture must not record the
+    frees of another run's Warp arrays or graphs that the collector finalises meanwhile (on any thread): such a free
+    synchronises the stream ("Cannot synchronize stream while graph capture is active") or corrupts the graph. Seen
+    in a batch worker that tracks run after run in one process (NVIDIA/warp#1714; Newton and mjlab suspend the
+    collector the same way)."""
+    enabled = gc.isenabled()
+    gc.collect()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
 class FrameChain:
     """A filter whose frame is a fixed chain of device launches over ping-pong buffers (parity 0/1).
 
@@ -196,8 +215,9 @@ class FrameChain:
             self._warm[src] = True
             return
         if self._graphs[src] is None:
-            with wp.ScopedCapture(device=self.device) as capture:
-                self._chain(src, dst)
+            with no_gc():
+                with wp.ScopedCapture(device=self.device) as capture:
+                    self._chain(src, dst)
             self._graphs[src] = capture.graph
         wp.capture_launch(self._graphs[src])
 

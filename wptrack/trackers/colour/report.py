@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from wptrack.report import overlays, plots, scene3d
+from wptrack.report import overlays, plots, scene3d, scene_movie
 from wptrack.report.model import register_reporter
 
 COLOR_SECTIONS = (
@@ -10,7 +10,7 @@ COLOR_SECTIONS = (
     overlays.section_overlays,
     plots.section_birdseye,
     plots.section_errors,
-    scene3d.section_movie,
+    scene_movie.section_movie,
     plots.section_timings,
 )
 """Section builders of the colour tracker's report, in page order."""

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from wptrack.io.atomic import atomic_imwrite
-from wptrack.report import plots, scene3d
+from wptrack.report import plots, scene3d, scene_movie
 from wptrack.report.model import Figure, ReportContext, Section, register_reporter
 from wptrack.report.offscreen import import_pyvista, new_plotter, renderer_info
 from wptrack.trackers.templates.report import id_bgr
@@ -314,7 +314,7 @@ PEOPLE_SECTIONS = (
     plots.section_birdseye,
     section_metrics,
     plots.section_errors,
-    scene3d.section_movie,
+    scene_movie.section_movie,
     plots.section_timings,
 )
 """Section builders of the people tracker's report, in page order."""
