@@ -571,3 +571,84 @@ def test_track_prints_where_the_time_went(tmp_path, capsys):
     assert "frames/s" in speed and "filter " in speed and "masks " in speed and "waited for masks" in speed
     tl = json.loads((out / "run.json").read_text())["timeline"]
     assert tl["source"] == "masks" and tl["stages"]["wait_masks"]["count"] >= 4
+
+
+@pytest.mark.parametrize("codec", ["MJPG", "FFV1"])
+def test_parallel_decode_gives_the_sequential_frames(tmp_path, rng, monkeypatch, codec):
+    """Decoding in worker threads (WPTRACK_DECODE_WORKERS): several captures on chunks of an intra-only video give the
+    frames of one sequential read, in order; a truncated video stops at the same frame; a consumer that stops early
+    leaves no decoding thread behind."""
+    from wptrack.io import decode
+    from wptrack.io.frames import open_source
+
+    n = 45  # chunks of 8: the last one partial
+    path = tmp_path / f"v_{codec}.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*codec), 25, (40, 32))
+    if not writer.isOpened():
+        pytest.skip(f"no {codec} writer")
+    for _ in range(n):
+        writer.write(rng.integers(0, 256, (32, 40, 3), dtype=np.uint8))
+    writer.release()
+    src = open_source(path)
+    monkeypatch.setenv("WPTRACK_DECODE_WORKERS", "1")
+    one = list(src)
+    assert len(one) == n
+    for workers in ("2", "3"):
+        monkeypatch.setenv("WPTRACK_DECODE_WORKERS", workers)
+        assert decode.decode_workers() == int(workers)
+        many = list(src)
+        assert len(many) == n and src.stopped_early is None
+        for a, b in zip(one, many, strict=True):
+            np.testing.assert_array_equal(a, b)
+    before = {t.name for t in threading.enumerate()}
+    it = iter(src)
+    for _ in range(11):
+        next(it)
+    it.close()
+    time.sleep(0.3)
+    assert not [t.name for t in threading.enumerate() if t.name.startswith("wptrack-decode") and t.name not in before]
+
+    cut = tmp_path / f"cut_{codec}.avi"  # cut short: no index at the end of the AVI
+    data = path.read_bytes()
+    cut.write_bytes(data[: len(data) * 2 // 3])
+    monkeypatch.setenv("WPTRACK_DECODE_WORKERS", "1")
+    src = open_source(cut)
+    seq = list(src)
+    seq_stop = src.stopped_early
+    monkeypatch.setenv("WPTRACK_DECODE_WORKERS", "3")
+    par = list(src)
+    assert 0 < len(par) == len(seq) < n and src.stopped_early == seq_stop
+    for a, b in zip(seq, par, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_parallel_decode_reads_forward_where_seeking_is_inexact(monkeypatch):
+    """A capture whose seeks land elsewhere (reported position != the frame asked for) makes the worker read forward
+    from the start: still the sequential frames."""
+    from wptrack.io.decode import parallel_frames
+
+    class Fake:  # frame i is the number i; seeks are reported as landing one frame early
+        def __init__(self):
+            self.pos = 0
+
+        def set(self, prop, value):
+            self.pos = int(value) - 1
+
+        def get(self, prop):
+            return float(self.pos) if prop == cv2.CAP_PROP_POS_FRAMES else 40.0 * self.pos
+
+        def grab(self):
+            self.pos += 1
+            return self.pos <= 30
+
+        def read(self):
+            if self.pos >= 30:
+                return False, None
+            self.pos += 1
+            return True, np.full((2, 2), self.pos - 1, np.uint8)
+
+        def release(self):
+            pass
+
+    got = [int(f[0, 0]) for _, ok, f, _ in parallel_frames(Fake, 30, 3) if ok]
+    assert got == list(range(30))

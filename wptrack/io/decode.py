@@ -6,8 +6,9 @@ k + 2W, ...`` with a ``cv2.VideoCapture`` of its own (a seek to each chunk's fir
 the frames come out in order. Each worker holds at most :data:`CHUNK` decoded frames ahead (a bounded queue of its
 own), so memory is at most ``W (CHUNK + 1)`` frames whatever the consumer's speed; a consumer that stops early
 stops the workers. Only for codecs whose every frame is a keyframe (:data:`INTRA_CODECS`): their seeks land exactly
-on the frame asked for, so the frames are those of one sequential read (tested); other codecs are read by one
-thread.
+on the frame asked for, so the frames are those of one sequential read (tested); a seek whose reported position is
+not the frame asked for (a truncated AVI without its index) is replaced by reading forward from the start; other
+codecs are read by one thread.
 
 When it pays: OpenCV's FFmpeg decoder already runs threads of its own inside one capture, and the calling thread
 still does the colour conversion, so more captures help when decoding is the pipeline's slowest stage and cores
@@ -89,12 +90,19 @@ def parallel_frames(open_capture: Any, count: int, workers: int, stop: threading
             put(q, e)
             return
         try:
-            pos = 0
+            pos, exact = 0, True
             for c in range(k, chunks, workers):
                 first = c * CHUNK
-                if pos != first:
+                if pos != first and exact:
                     cap.set(cv2.CAP_PROP_POS_FRAMES, float(first))
                     pos = first
+                    if int(round(cap.get(cv2.CAP_PROP_POS_FRAMES))) != first:  # inexact (an AVI without index):
+                        exact = False  # from the start again, and read forward from now on
+                        cap.release()
+                        cap = open_capture()
+                        pos = 0
+                while pos < first and cap.grab():
+                    pos += 1
                 for i in range(first, min(first + CHUNK, count)):
                     ok, frame = cap.read()
                     pos += 1
