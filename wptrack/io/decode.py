@@ -1,5 +1,6 @@
 """One video decoded by several threads at once, frames in order (:func:`parallel_frames`), for
-:class:`wptrack.io.frames.VideoSource` when :func:`decode_workers` says so.
+:class:`wptrack.io.frames.VideoSource` when :func:`decode_workers` says so; its timestamps checked against its rate
+(:func:`rate_note`).
 
 A video is cut into chunks of :data:`CHUNK` consecutive frames; worker ``k`` of ``W`` decodes chunks ``k, k + W,
 k + 2W, ...`` with a ``cv2.VideoCapture`` of its own (a seek to each chunk's first frame, then sequential reads), and
@@ -37,6 +38,26 @@ CHUNK = 8
 
 INTRA_CODECS = frozenset({"MJPG", "FFV1", "MJPA", "AVRN", "LJPG", "HFYU", "FFVH", "PNG ", "MPNG", "RGBA", "DIB "})
 """FOURCCs of codecs whose frames are all keyframes (exact seeks)."""
+
+
+RATE_TOLERANCE = 0.5
+"""A frame interval departing from ``1 / fps`` by more than this fraction marks a variable-frame-rate video
+(:func:`rate_note`); decoders' timestamps jitter by a millisecond or so."""
+
+
+def rate_note(fps: float, index: int, interval_ms: float) -> dict[str, Any] | None:
+    """``{"frame", "interval_ms", "expected_ms", "reason"}`` when frame ``index`` comes ``interval_ms`` after the one
+    before it, more than :data:`RATE_TOLERANCE` away from ``1 / fps`` (a variable frame rate: the trackers take
+    every frame as one time step of ``1 / fps``); None otherwise."""
+    expected = 1000.0 / float(fps)
+    if abs(interval_ms - expected) <= RATE_TOLERANCE * expected:
+        return None
+    reason = (
+        f"variable frame rate: frame {index} comes {interval_ms:.0f} ms after frame {index - 1}, the video's rate "
+        f"{fps:g} frames/s says {expected:.0f} ms; the trackers take every frame as one time step of 1/fps, so "
+        "motion across such gaps is misjudged (re-encode at a constant rate, e.g. ffmpeg -fps_mode cfr)"
+    )
+    return {"frame": index, "interval_ms": round(interval_ms, 3), "expected_ms": round(expected, 3), "reason": reason}
 
 
 def decode_workers() -> int:
@@ -140,6 +161,23 @@ def parallel_frames(open_capture: Any, count: int, workers: int, stop: threading
         halt.set()
         for t in threads:
             t.join(timeout=5.0)
+
+
+def frame_items(open_capture: Any, count: int, workers: int | None = None) -> Iterator[Any]:
+    """The items of :func:`parallel_frames` for a video's first ``count`` frames: decoded by ``workers`` captures
+    (default :func:`decode_workers`) when it is more than one, the video long enough and its codec intra-only, else by
+    one capture in this thread (:func:`read_sequential`). The captures are released when the iteration ends or is
+    closed."""
+    workers = decode_workers() if workers is None else workers
+    cap = open_capture()
+    if workers > 1 and count >= 2 * CHUNK and fourcc(cap) in INTRA_CODECS:
+        cap.release()
+        yield from parallel_frames(open_capture, count, workers)
+        return
+    try:
+        yield from read_sequential(cap, count)
+    finally:
+        cap.release()
 
 
 def read_sequential(cap: Any, count: int) -> Iterator[tuple[int, bool, np.ndarray | None, float]]:

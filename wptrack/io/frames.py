@@ -144,6 +144,7 @@ class FrameSource:
     height: int
     fps: float | None = None
     stopped_early: dict[str, Any] | None = None
+    variable_rate: dict[str, Any] | None = None  # videos: where a pass found a variable frame rate
     stage = "decode"  # the timeline stage of a thread iterating it (wptrack.io.prefetch)
 
     def __len__(self) -> int:
@@ -177,7 +178,8 @@ class VideoSource(FrameSource):
     it). When reading, at most that many frames are yielded; a video that ends earlier stops early with a
     warning in the log (:class:`SyncedFrames` turns that into an error when other cameras continue).
     A video whose timestamps depart from its rate (variable frame rate: the trackers take each frame as ``1 / fps``)
-    is read all the same, with one warning per pass and :attr:`variable_rate` saying where.
+    is read all the same, with one warning per pass; ``variable_rate`` then says where
+    (:func:`wptrack.io.decode.rate_note`).
 
     Args:
         path: Video file path (or any string ``cv2.VideoCapture`` opens, e.g. a URL).
@@ -245,18 +247,11 @@ class VideoSource(FrameSource):
         return self._count
 
     def __iter__(self) -> Iterator[np.ndarray]:
-        from wptrack.io.decode import CHUNK, INTRA_CODECS, decode_workers, fourcc, parallel_frames, read_sequential
+        from wptrack.io.decode import frame_items, rate_note
 
         self.stopped_early = None
         self.variable_rate = None
-        cap = self._open()
-        workers = decode_workers()
-        if workers > 1 and self._count >= 2 * CHUNK and fourcc(cap) in INTRA_CODECS:
-            cap.release()  # several captures, each decoding chunks of the video (wptrack.io.decode)
-            cap = None
-            items = parallel_frames(self._open, self._count, workers)
-        else:
-            items = read_sequential(cap, self._count)
+        items = frame_items(self._open, self._count)  # one capture, or several (WPTRACK_DECODE_WORKERS)
         last_ms = None
         try:
             for i, ok, frame, ms in items:
@@ -269,43 +264,16 @@ class VideoSource(FrameSource):
                         "reason": f"video ended after {i} of its {self._count} reported frames (truncated or corrupt)",
                     }
                     return
-                if self.fps and self.variable_rate is None:  # the decoder's timestamps against 1 / fps
-                    if last_ms is not None and ms > last_ms:
-                        self._check_rate(i, ms - last_ms)
-                    last_ms = ms
+                if self.fps and self.variable_rate is None and last_ms is not None and ms > last_ms:
+                    self.variable_rate = rate_note(self.fps, i, ms - last_ms)  # timestamps against 1 / fps
+                    if self.variable_rate is not None:
+                        log.warning("%s: %s", self.name, self.variable_rate["reason"])
+                last_ms = ms
                 frame = _to_bgr(frame)
                 self._check_size(frame, i)
                 yield frame
         finally:
             items.close()
-            if cap is not None:
-                cap.release()
-
-    variable_rate: dict[str, Any] | None = None
-    """After an iteration: None, or where the frame intervals first departed from ``1 / fps`` by more than
-    :data:`RATE_TOLERANCE` (a variable-frame-rate recording): ``{"frame", "interval_ms", "expected_ms", "reason"}``."""
-
-    def _check_rate(self, index: int, interval_ms: float) -> None:
-        expected = 1000.0 / float(self.fps)
-        if abs(interval_ms - expected) <= RATE_TOLERANCE * expected:
-            return
-        reason = (
-            f"variable frame rate: frame {index} comes {interval_ms:.0f} ms after frame {index - 1}, the video's rate "
-            f"{self.fps:g} frames/s says {expected:.0f} ms; the trackers take every frame as one time step of "
-            f"1/fps, so motion across such gaps is misjudged (re-encode at a constant rate, e.g. ffmpeg -fps_mode cfr)"
-        )
-        self.variable_rate = {
-            "frame": index,
-            "interval_ms": round(interval_ms, 3),
-            "expected_ms": round(expected, 3),
-            "reason": reason,
-        }
-        log.warning("%s: %s", self.name, reason)
-
-
-RATE_TOLERANCE = 0.5
-"""A frame interval departing from ``1 / fps`` by more than this fraction marks a variable-frame-rate video (a
-warning once per pass, :attr:`VideoSource.variable_rate`); decoders' timestamps jitter by a millisecond or so."""
 
 
 class VideoReader:
