@@ -652,3 +652,77 @@ def test_parallel_decode_reads_forward_where_seeking_is_inexact(monkeypatch):
 
     got = [int(f[0, 0]) for _, ok, f, _ in parallel_frames(Fake, 30, 3) if ok]
     assert got == list(range(30))
+
+
+# ------------------------------------------------------------------------------------------------ masks in threads
+
+
+def _moving_boxes(rng, frames: int = 48, h: int = 48, w: int = 64) -> np.ndarray:
+    base = cv2.resize(rng.uniform(60, 200, (h // 8, w // 8, 3)).astype(np.float32), (w, h))
+    video = np.clip(base + rng.normal(0, 3, (frames, h, w, 3)), 0, 255).astype(np.uint8)
+    for t in range(frames):
+        x = (4 + 2 * t) % (w - 10)
+        video[t, 10:30, x : x + 8] = (40, 200, 40)
+        video[t, 30:44, w - 12 - x // 2 : w - 4 - x // 2] = (200, 40, 90)
+    return video
+
+
+@pytest.mark.parametrize("workers", ["2", "3"])
+def test_masks_in_several_threads_equal_one_model(tmp_path, rng, monkeypatch, workers):
+    """WPTRACK_MASK_WORKERS: the offline masks made by several models in threads (frames round robin) equal one
+    model's, mask and probability, frame for frame, over several background windows; the first model's windows
+    are the stream's (its on_build still called)."""
+    from wptrack.io.video import write_video
+    from wptrack.motion.masks import MaskConfig, open_masks
+
+    path = tmp_path / "v.avi"
+    write_video(path, _moving_boxes(rng))
+    config = MaskConfig(window=16, samples=5, device="cpu")  # 5 windows over 48 frames
+    monkeypatch.setenv("WPTRACK_MASK_WORKERS", "1")
+    one = list(open_masks(video=path, config=config).evidence())
+    monkeypatch.setenv("WPTRACK_MASK_WORKERS", workers)
+    stream = open_masks(video=path, config=config)
+    assert stream.workers == int(workers)
+    built = []
+    stream.model.on_build = lambda window, centre, image: built.append(window)
+    many = list(stream.evidence())
+    assert len(many) == len(one) == 48 and len(stream.model.windows) >= 4
+    assert sorted(set(built)) == list(range(len(stream.model.windows)))
+    assert sum(int(m.sum()) for m, _ in one) > 0
+    for (m1, p1), (m2, p2) in zip(one, many, strict=True):
+        np.testing.assert_array_equal(m1, m2)
+        np.testing.assert_array_equal(p1, p2)
+    assert [m.tolist() for m in stream] == [m.tolist() for m, _ in one]  # iterating: the same masks, no probability
+
+
+def test_masks_in_threads_raise_at_the_failing_frame_and_stop(tmp_path, rng, monkeypatch):
+    from wptrack.io.video import write_video
+    from wptrack.motion.background import OfflineBackground
+    from wptrack.motion.masks import MaskConfig, open_masks
+
+    path = tmp_path / "v.avi"
+    write_video(path, _moving_boxes(rng, frames=30))
+    config = MaskConfig(window=16, samples=5, device="cpu")
+    monkeypatch.setenv("WPTRACK_MASK_WORKERS", "2")
+    evidence = OfflineBackground.evidence
+
+    def failing(self, t, frame):
+        if t == 7:
+            raise RuntimeError("device lost at frame 7")
+        return evidence(self, t, frame)
+
+    monkeypatch.setattr(OfflineBackground, "evidence", failing)
+    got = []
+    with pytest.raises(RuntimeError, match="frame 7"):
+        for mask in open_masks(video=path, config=config):
+            got.append(mask)
+    assert len(got) == 7  # every mask before the failing frame, in order
+    monkeypatch.setattr(OfflineBackground, "evidence", evidence)
+
+    before = {t.name for t in threading.enumerate()}
+    it = iter(open_masks(video=path, config=config))
+    for _ in range(5):
+        next(it)
+    it.close()  # the consumer leaves early: the feeder, the workers and the extra model stop
+    time.sleep(0.3)
+    assert not [t.name for t in threading.enumerate() if t.name.startswith("wptrack-masks") and t.name not in before]

@@ -249,6 +249,9 @@ class MotionMasks:
         self.config = config
         self.camera = camera
         self.prefetch_depth = int(prefetch_depth)
+        from wptrack.motion.parallel import mask_workers
+
+        self.workers = mask_workers()  # offline masks: threads making them (wptrack.motion.parallel), default 1
         self._model: Any = None
         if camera is not None and (source.width, source.height) != (camera.width, camera.height):
             where = f" in {rig_source}" if rig_source else ""
@@ -323,6 +326,11 @@ class MotionMasks:
         frames = prefetch(self.source, depth=self.prefetch_depth) if self.prefetch_depth else self.source
         subtractor = None if c.method in ("given", "offline") else self._subtractor()
         try:
+            if model is not None and self.workers > 1:  # several models in threads, masks in frame order
+                from wptrack.motion.parallel import parallel_evidence
+
+                yield from parallel_evidence(self, frames, self.workers, lambda raw: clean_mask(raw, c), probability)
+                return
             for index, frame in enumerate(frames):
                 if frame.shape[:2] != (height, width):
                     raise FrameError(
