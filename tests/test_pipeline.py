@@ -354,6 +354,19 @@ def test_cpu_split_ranges_and_errors():
     assert cpu_split_threads(CPU_SPLIT_MIN - 1) == 1
 
 
+def test_cpu_split_threads_follow_the_environment(monkeypatch):
+    from wptrack.core.device import CPU_SPLIT_MIN, cpu_split_threads
+
+    monkeypatch.delenv("WPTRACK_DECODE_THREADS", raising=False)
+    monkeypatch.setenv("WPTRACK_CPU_THREADS", "3")
+    assert cpu_split_threads(100 * CPU_SPLIT_MIN) == 3
+    monkeypatch.setenv("WPTRACK_CPU_THREADS", "1")
+    assert cpu_split_threads(100 * CPU_SPLIT_MIN) == 1
+    monkeypatch.delenv("WPTRACK_CPU_THREADS")
+    monkeypatch.setenv("WPTRACK_DECODE_THREADS", "1")  # a batch worker holding one core: no split
+    assert cpu_split_threads(100 * CPU_SPLIT_MIN) == 1
+
+
 def test_split_hulls_equal_one_launch(monkeypatch):
     """The template tracker's hull projection over particle ranges in threads (CPU backend) writes the same hulls."""
     from wptrack.bench.templates import bench_objects, bench_particles, bench_rig

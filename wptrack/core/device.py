@@ -157,12 +157,19 @@ CPU_SPLIT_MAX = 4
 
 def cpu_split_threads(n: int) -> int:
     """Threads over which :class:`CpuSplit` runs a per-particle launch of ``n`` particles on the CPU backend: the
-    cores (``os.cpu_count()``, or the environment variable ``WPTRACK_CPU_THREADS``; 1 turns the split off), at most
-    :data:`CPU_SPLIT_MAX`, with at least :data:`CPU_SPLIT_MIN` particles each."""
+    environment variable ``WPTRACK_CPU_THREADS`` (1 turns the split off), else the cores this process may use
+    (its CPU affinity), no more than a batch worker holds (``WPTRACK_DECODE_THREADS``, set by ``wptrack batch``);
+    at most :data:`CPU_SPLIT_MAX`, with at least :data:`CPU_SPLIT_MIN` particles each."""
     import os
 
+    from wptrack.io.frames import decode_threads
+
     env = os.environ.get("WPTRACK_CPU_THREADS", "").strip()
-    cores = int(env) if env.isdigit() and int(env) > 0 else (os.cpu_count() or 1)
+    if env.isdigit() and int(env) > 0:
+        cores = int(env)
+    else:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        cores = min(cores, decode_threads() or cores)
     return max(1, min(cores, CPU_SPLIT_MAX, n // CPU_SPLIT_MIN))
 
 
