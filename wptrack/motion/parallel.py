@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from wptrack.core.errors import FrameError
+from wptrack.io import timeline
 
 MASK_WORKERS_ENV = "WPTRACK_MASK_WORKERS"
 """Environment variable: threads making the offline masks of one video (default 1)."""
@@ -95,6 +96,10 @@ def parallel_evidence(
             put(inbox[count % workers], e)
 
     def work(k: int) -> None:
+        with timeline.thread_cpu("mask_workers"):  # the run's timeline: these threads' CPU time
+            _work(k)
+
+    def _work(k: int) -> None:
         model = models[k]
         while True:
             item = get(inbox[k])
