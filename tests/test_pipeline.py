@@ -272,10 +272,15 @@ def test_bench_pipeline_tiny(tmp_path, capsys):
 
     out = tmp_path / "pipe.json"
     argv = ["bench", "--tracker", "pipeline", "--device", "cpu", "--size", "96x72", "--frames", "6", "-q"]
-    assert main([*argv, "--out", str(out)]) == 0
+    assert main([*argv, "--variant", "WPTRACK_MASK_WORKERS=2,WPTRACK_CPU_THREADS=1", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "decode only (cv2.VideoCapture, one thread)" in printed and "target track_fps >= 30" in printed
+    assert "WPTRACK_MASK_WORKERS=2,WPTRACK_CPU_THREADS=1: track templates --video" in printed
     (r,) = json.loads(out.read_text())["results"]
+    (v,) = r["variants"]
+    assert v["env"] == {"WPTRACK_MASK_WORKERS": "2", "WPTRACK_CPU_THREADS": "1"} and v["track"]["fps"] > 0
+    assert "mask_workers" in v["track"]["timeline"]["cpu_s"]  # the variant's run made its masks in two threads
+    assert "WPTRACK_MASK_WORKERS" not in __import__("os").environ  # restored
     assert (r["width"], r["height"], r["frames"]) == (96, 72, 6)
     assert r["decode_fps"] > 0 and len(r["decode_s"]) == 2
     for key in ("masks", "track", "track_from_masks"):
@@ -290,10 +295,15 @@ def test_bench_pipeline_tiny(tmp_path, capsys):
 
 
 def test_bench_pipeline_options(tmp_path, capsys):
-    from wptrack.bench.pipeline import parse_size, scene_rig, write_scene
+    from wptrack.bench.pipeline import parse_size, parse_variant, scene_rig, write_scene
     from wptrack.cli import main
     from wptrack.core.errors import ConfigError
 
+    assert parse_variant("WPTRACK_MASK_WORKERS=2, WPTRACK_DECODE_WORKERS=4") == (
+        ("WPTRACK_MASK_WORKERS", "2"), ("WPTRACK_DECODE_WORKERS", "4"))  # fmt: skip
+    for bad in ("PATH=/bin", "WPTRACK_MASK_WORKERS", "WPTRACK_MASK_WORKERS=two"):
+        with pytest.raises(ConfigError, match="--variant"):
+            parse_variant(bad)
     assert parse_size("1920x1080") == (1920, 1080)
     for bad in ("1920", "axb", "8x8"):
         with pytest.raises(ConfigError, match="--size"):

@@ -21,6 +21,11 @@ command is the people tracker's, ``wptrack track people --rig R --video A B C`` 
 masks by the offline model), against decoding the cameras' videos frame by frame in one thread (issue 27's target:
 within 1.5x of that, ratio >= 0.67).
 
+With ``--variant ENV=VALUE[,ENV=VALUE...]`` (repeatable) the masks and track commands run again under each set of
+environment variables (the thread levers of issue 27: ``WPTRACK_MASK_WORKERS``, ``WPTRACK_DECODE_WORKERS``,
+``WPTRACK_CPU_THREADS``, ``WPTRACK_DECODE_THREADS``), on the same video in the same run, so one command compares
+them against the defaults and the same decode rate.
+
 Each command is warmed up first on 3 frames (kernels compiled and cached, not timed). Reported per command: wall
 time of ``main()``, frames/s, and ``ratio`` = its frames/s over the decode-only frames/s (issue 27's targets on
 one H100 at 1080p: track >= 100 frames/s and ratio >= 0.65, masks >= 120 frames/s; on the 2-core CPU at 480x360:
@@ -70,6 +75,7 @@ class Case:
     height: int
     video: tuple[str, ...] | None = None
     rig: str | None = None
+    variants: tuple[tuple[tuple[str, str], ...], ...] = ()  # environment settings to run the commands again under
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -227,6 +233,43 @@ def _cli(argv: list[str]) -> tuple[float, float]:
     return seconds, cpu
 
 
+VARIANT_ENV = ("WPTRACK_MASK_WORKERS", "WPTRACK_DECODE_WORKERS", "WPTRACK_CPU_THREADS", "WPTRACK_DECODE_THREADS")
+"""The environment variables ``--variant`` may set."""
+
+
+def parse_variant(text: str) -> tuple[tuple[str, str], ...]:
+    """``"WPTRACK_MASK_WORKERS=2,WPTRACK_DECODE_WORKERS=4"`` -> ``(("WPTRACK_MASK_WORKERS", "2"), ...)``.
+
+    Raises:
+        ConfigError: not ``NAME=VALUE`` pairs of :data:`VARIANT_ENV` names with non-negative integer values.
+    """
+    out = []
+    for part in str(text).split(","):
+        name, sep, value = part.strip().partition("=")
+        if not sep or name not in VARIANT_ENV or not value.strip().isdigit():
+            raise ConfigError(
+                f"--variant: expected NAME=N[,NAME=N...] with NAME one of {', '.join(VARIANT_ENV)}, got {text!r}"
+            )
+        out.append((name, value.strip()))
+    return tuple(out)
+
+
+@contextlib.contextmanager
+def _environment(settings: tuple[tuple[str, str], ...]):
+    import os
+
+    old = {name: os.environ.get(name) for name, _ in settings}
+    os.environ.update(dict(settings))
+    try:
+        yield
+    finally:
+        for name, value in old.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+
 def _timeline(run_dir: Path) -> dict[str, Any]:
     run = json.loads((run_dir / "run.json").read_text(encoding="utf-8"))
     return {"timeline": run.get("timeline", {}), "frames": int(run.get("frames") or 0), "summary": run.get("summary")}
@@ -244,7 +287,18 @@ class PipelineSuite:
 
     @staticmethod
     def grid_from_args(args: Any, is_cuda: bool) -> list[Case]:
-        """The case of ``--video V... [--rig R]`` or ``--size WxH`` (else the default grid)."""
+        """The case of ``--video V... [--rig R]`` or ``--size WxH`` (else the default grid), with the ``--variant``
+        settings."""
+        from dataclasses import replace
+
+        variants = tuple(parse_variant(v) for v in (getattr(args, "variant", None) or ()))
+        cases = [replace(case, variants=variants) for case in PipelineSuite._cases(args, is_cuda)]
+        if variants and any(c.video is not None and len(c.video) > 1 for c in cases):
+            raise ConfigError("--variant: the template commands' settings; a people run (several --video) takes none")
+        return cases
+
+    @staticmethod
+    def _cases(args: Any, is_cuda: bool) -> list[Case]:
         video, rig, size = getattr(args, "video", None), getattr(args, "rig", None), getattr(args, "size", None)
         if video:
             if size is not None:
@@ -308,6 +362,12 @@ class PipelineSuite:
                  *limit]
             )  # fmt: skip
             run_masks = _timeline(tmp / "run-masks")
+            variants = []
+            for k, settings in enumerate(case.variants):
+                with _environment(settings):
+                    v_masks = _cli(["masks", "--video", video, "--out", str(tmp / f"masks-v{k}"), *limit, *dev])
+                    v_track = _cli([*track, "--video", video, "--out", str(tmp / f"run-v{k}"), *limit])
+                variants.append((settings, v_masks, v_track, _timeline(tmp / f"run-v{k}")))
             decode.append(decode_only(video, frames))
             load = max(load, os.getloadavg()[0])
         logging.getLogger("wptrack.motion.background").setLevel(logging.NOTSET)
@@ -333,7 +393,12 @@ class PipelineSuite:
             "masks": rate(masks_s),
             "track": {**rate(track_s, run["frames"] or frames), **run},
             "track_from_masks": {**rate(from_masks_s, run_masks["frames"] or frames), **run_masks},
-        }
+            "variants": [
+                {"env": dict(settings), "masks": rate(v_masks), "track": {**rate(v_track, v_run["frames"] or frames),
+                                                                           **v_run}}
+                for settings, v_masks, v_track, v_run in variants
+            ],
+        }  # fmt: skip
         targets = TARGETS["cuda" if is_cuda else "cpu"]
         checks = {
             "track_fps": result["track"]["fps"],
@@ -366,6 +431,14 @@ class PipelineSuite:
                 f"  {label:54s} {c['fps']:8.1f} frames/s  ratio {c['ratio']:.2f}  ({c['seconds']:.2f} s; process CPU "
                 f"{c['cpu_ms']:.1f} ms/frame)"
             )
+        for v in r.get("variants", []):
+            env = ",".join(f"{k}={val}" for k, val in v["env"].items())
+            for key in ("masks", "track"):
+                c = v[key]
+                lines.append(
+                    f"  {env}: {'wptrack masks' if key == 'masks' else 'track templates --video':24s} {c['fps']:8.1f} "
+                    f"frames/s  ratio {c['ratio']:.2f}  (process CPU {c['cpu_ms']:.1f} ms/frame)"
+                )
         for key in ("track", "track_from_masks", "people"):
             tl = r.get(key, {}).get("timeline") or {}
             stages = tl.get("stages", {})

@@ -244,6 +244,11 @@ def build_parser(batch_tracker: str | None = None) -> argparse.ArgumentParser:
         "several: the cameras of a people run (with --rig)",
     )  # fmt: skip
     b.add_argument("--rig", default=None, help="pipeline suite: the rig of --video (default: the suite's camera)")
+    b.add_argument(
+        "--variant", action="append", default=None, metavar="ENV=N[,ENV=N]",
+        help="pipeline suite: also run the commands with these environment settings (repeatable), e.g. "
+        "WPTRACK_MASK_WORKERS=2",
+    )  # fmt: skip
     b.add_argument("--size", default=None, help="pipeline suite: WIDTHxHEIGHT of its own video (default 1920x1080 "
                    "on a GPU, 480x360 on the CPU)")  # fmt: skip
     add_device(b)

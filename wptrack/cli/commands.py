@@ -327,7 +327,7 @@ def cmd_bench(args) -> int:
             raise ConfigError(f"--{flag}: the {args.tracker!r} suite's cases are particles x {second}; use --{second}")
     own_grid = getattr(suite, "grid_from_args", None)  # a suite whose cases are not particles x second (pipeline)
     if own_grid is None:
-        for flag in ("video", "rig", "size"):
+        for flag in ("video", "rig", "size", "variant"):
             if getattr(args, flag, None) is not None:
                 raise ConfigError(f"--{flag}: only the 'pipeline' suite takes it, not {args.tracker!r}")
     elif args.particles or getattr(args, second, None):
