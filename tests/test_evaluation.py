@@ -299,7 +299,8 @@ def _pts(rows):
 
 
 def test_hota_perfect_tracking_is_one():
-    from wptrack.evaluation.mot import HOTA_ALPHAS, hota
+    from wptrack.evaluation.hota import HOTA_ALPHAS
+    from wptrack.evaluation.mot import hota
 
     gt = [(f, 1, 0.1 * f, 0.0) for f in range(5)] + [(f, 2, 3.0, 0.2 * f) for f in range(2, 6)]
     r = hota(_pts(gt), _pts([(f, i + 10, x, y) for f, i, x, y in gt]))  # other ids: HOTA does not care
@@ -410,7 +411,7 @@ def _template_camera():
 def test_mot_files_world_and_image_boxes(tmp_path, mm):
     """world.txt: 1-based frames, ids, no box, the world position; <camera>.txt: the bounding box of the projected
     3D box corners; both read back by motmetrics' MOT15 loader."""
-    from wptrack.evaluation.mot import write_mot_files
+    from wptrack.evaluation.motfiles import write_mot_files
 
     cam, plane = _template_camera()
     rows = {

@@ -37,7 +37,12 @@ import functools
 import warp as wp
 
 from wptrack.kernels.colour.hsi import ColourTarget
-from wptrack.kernels.colour.scoring import LOG_WINDOW_AREA, colour_log_likelihood, map_log_likelihood, window_count
+from wptrack.kernels.colour.scoring import (
+    LOG_WINDOW_AREA,
+    camera_set_log_likelihood,
+    colour_log_likelihood,
+    window_count,
+)
 from wptrack.kernels.colour.walk import STREAM_MOTION
 from wptrack.kernels.core.camera import CAMERA_SET_SIZE, Camera, CameraSet
 from wptrack.kernels.core.random import normal4, uniform4
@@ -450,6 +455,8 @@ def colour_jump_predict_score_map_kernel(count: int) -> wp.Kernel:
     if not 1 <= count <= CAMERA_SET_SIZE:
         raise ValueError(f"camera count {count}: the camera-set kernel takes 1 to {CAMERA_SET_SIZE} cameras")
 
+    set_loglik = camera_set_log_likelihood(count)
+
     @wp.kernel(enable_backward=False, module="unique", module_options={"fast_math": True})
     def colour_jump_predict_score_map_kernel(
         cams: CameraSet,
@@ -493,21 +500,7 @@ def colour_jump_predict_score_map_kernel(count: int) -> wp.Kernel:
             z = normal4(seed, i, f, STREAM_MOTION)
             x = jump_sample(particles[ancestors[i]], z, seed, i, f, s, thr, uni, lo, hi, det_pos, det_cum, kv, sigma_d)
             particles_out[i] = x
-            lw = map_log_likelihood(cams.c0, window, x)  # eqs. 5-7, camera by camera as colour_log_likelihood
-            if wp.static(count > 1):
-                lw += map_log_likelihood(cams.c1, window, x)
-            if wp.static(count > 2):
-                lw += map_log_likelihood(cams.c2, window, x)
-            if wp.static(count > 3):
-                lw += map_log_likelihood(cams.c3, window, x)
-            if wp.static(count > 4):
-                lw += map_log_likelihood(cams.c4, window, x)
-            if wp.static(count > 5):
-                lw += map_log_likelihood(cams.c5, window, x)
-            if wp.static(count > 6):
-                lw += map_log_likelihood(cams.c6, window, x)
-            if wp.static(count > 7):
-                lw += map_log_likelihood(cams.c7, window, x)
+            lw = set_loglik(cams, window, x)  # eqs. 5-7, camera by camera as colour_log_likelihood
             if keep:
                 lw += logw_prev[i]
             lw = finite_logw(lw)

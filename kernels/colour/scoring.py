@@ -199,6 +199,34 @@ def colour_predict_score_kernel(
 
 
 @functools.cache
+def camera_set_log_likelihood(count: int):
+    """``sum_c map_log_likelihood(c, window, x)`` over the ``count`` cameras of a :class:`CameraSet` (eqs. 5-7), the
+    cameras passed by value and the sum unrolled at compile time; one ``@wp.func`` per count, shared by the paper's
+    large-N kernel and the mixture's."""
+
+    @wp.func
+    def camera_set_loglik(cams: CameraSet, window: wp.array(dtype=wp.uint8), x: wp.vec3):
+        lw = map_log_likelihood(cams.c0, window, x)
+        if wp.static(count > 1):
+            lw += map_log_likelihood(cams.c1, window, x)
+        if wp.static(count > 2):
+            lw += map_log_likelihood(cams.c2, window, x)
+        if wp.static(count > 3):
+            lw += map_log_likelihood(cams.c3, window, x)
+        if wp.static(count > 4):
+            lw += map_log_likelihood(cams.c4, window, x)
+        if wp.static(count > 5):
+            lw += map_log_likelihood(cams.c5, window, x)
+        if wp.static(count > 6):
+            lw += map_log_likelihood(cams.c6, window, x)
+        if wp.static(count > 7):
+            lw += map_log_likelihood(cams.c7, window, x)
+        return lw
+
+    return camera_set_loglik
+
+
+@functools.cache
 def colour_predict_score_map_kernel(count: int) -> wp.Kernel:
     """:func:`colour_predict_score_kernel` specialised for the large-N case, compiled once per camera count:
     ``SCORE_MAP``
@@ -214,6 +242,8 @@ def colour_predict_score_map_kernel(count: int) -> wp.Kernel:
     """
     if not 1 <= count <= CAMERA_SET_SIZE:
         raise ValueError(f"camera count {count}: the camera-set kernel takes 1 to {CAMERA_SET_SIZE} cameras")
+
+    set_loglik = camera_set_log_likelihood(count)
 
     @wp.kernel(enable_backward=False, module="unique", module_options={"fast_math": True})
     def colour_predict_score_map_kernel(
@@ -244,21 +274,7 @@ def colour_predict_score_map_kernel(count: int) -> wp.Kernel:
         for i in range(start + lane, stop, wp.block_dim()):
             x = gaussian_walk(particles[ancestors[i]], s, seed, i, f)  # eqs. 1-3
             particles_out[i] = x
-            lw = map_log_likelihood(cams.c0, window, x)  # eqs. 5-7, camera by camera as colour_log_likelihood
-            if wp.static(count > 1):
-                lw += map_log_likelihood(cams.c1, window, x)
-            if wp.static(count > 2):
-                lw += map_log_likelihood(cams.c2, window, x)
-            if wp.static(count > 3):
-                lw += map_log_likelihood(cams.c3, window, x)
-            if wp.static(count > 4):
-                lw += map_log_likelihood(cams.c4, window, x)
-            if wp.static(count > 5):
-                lw += map_log_likelihood(cams.c5, window, x)
-            if wp.static(count > 6):
-                lw += map_log_likelihood(cams.c6, window, x)
-            if wp.static(count > 7):
-                lw += map_log_likelihood(cams.c7, window, x)
+            lw = set_loglik(cams, window, x)  # eqs. 5-7, camera by camera as colour_log_likelihood
             if keep:
                 lw += logw_prev[i]
             lw = finite_logw(lw)

@@ -45,7 +45,8 @@ def _run_camera(run_dir: Path, rig_path, camera_arg):
 
 
 def cmd_evaluate(args) -> int:
-    from wptrack.evaluation.mot import MOT_DIR, average, evaluate, write_mot_files
+    from wptrack.evaluation.mot import average, evaluate
+    from wptrack.evaluation.motfiles import MOT_DIR, write_mot_files
     from wptrack.io.atomic import atomic_write_json
 
     runs = []

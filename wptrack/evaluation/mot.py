@@ -53,31 +53,7 @@ objects, and the classification accuracy defined as the percentage of objects mo
 * ``accuracy`` = ``tracking_accuracy * classification_accuracy``; when ``classification_accuracy`` is ``None`` it is
   ``tracking_accuracy`` alone (classification not scored; with no correctly tracked track that is 0).
 
-**HOTA** (Luiten et al., *HOTA: A Higher Order Metric for Evaluating Multi-Object Tracking*, IJCV 2020), on the
-ground plane with a distance similarity ``S = max(0, 1 - d / threshold)`` (``d`` the ground-plane distance above, in
-metres; 1 at the same point, 0 at the threshold and beyond) in place of the paper's box IoU (:func:`hota`):
-
-* Matching (paper section 5; the authors' TrackEval does the same): per frame, one Hungarian assignment maximising
-  ``A_global(o, h) * S(o, h)``, where ``A_global(o, h) = P / (n_o + n_h - P)`` is the soft association IoU of the two
-  identities over the whole sequence (``n_o``, ``n_h``: their frames; ``P``: their summed per-frame soft overlaps
-  ``S / (sum_h' S(o, h') + sum_o' S(o', h) - S)``), so that the matching prefers pairs that stay together. For a
-  threshold ``alpha`` the pairs of that assignment with ``S >= alpha`` are the true positives ``TP_alpha``; the other
-  objects are misses (FN), the other hypotheses false positives (FP).
-* ``DetA_alpha = |TP| / (|TP| + |FN| + |FP|)``; per true positive ``c``, ``A(c) = |TPA(c)| / (|TPA(c)| + |FNA(c)| +
-  |FPA(c)|)`` with TPA the true positives of the same object and hypothesis ids, FNA the object's other frames,
-  FPA the hypothesis's other frames; ``AssA_alpha`` = mean of ``A(c)`` over ``TP_alpha`` (0 without true positives);
-  ``HOTA_alpha = sqrt(DetA_alpha AssA_alpha)`` (paper eqs. 3-9).
-* ``HOTA``, ``DetA``, ``AssA`` (and the recall/precision parts ``DetRe``, ``DetPr``, ``AssRe``, ``AssPr``) are the
-  means over ``alpha = 0.05, 0.10, ..., 0.95`` (eq. 10); ``LocA`` is the mean similarity of the true positives,
-  averaged over the alphas that have any (NaN when none has).
-
-**MOTChallenge files** (:func:`write_mot_files`, written by ``wptrack evaluate`` into ``RUN/mot/``): one line per row,
-``frame,id,bb_left,bb_top,bb_width,bb_height,conf,x,y,z`` with 1-based frames (the MOT15 layout that py-motmetrics
-reads with ``motmetrics.io.loadtxt(path, fmt="mot15-2D")`` and TrackEval's MOT format): ``world.txt`` with the
-world ``x, y, z`` in metres and no box (-1), and for a run of the template tracker ``<camera>.txt`` with the image
-box of each object's 3D box seen by the rig camera, in MOTChallenge's 1-based pixel coordinates (OpenCV's + 1;
-``x, y, z`` -1); the same for the ground truth in
-``RUN/mot/gt/`` (image boxes when it has the template columns ``length,width,height,orientation``).
+**HOTA** beside them: :mod:`wptrack.evaluation.hota`. **MOTChallenge files**: :mod:`wptrack.evaluation.motfiles`.
 
 The paper runs the probabilistic tracker six times per sequence and averages the results: see :func:`average`
 (mean, min, max and the standard deviation over runs, e.g. seeds).
@@ -100,6 +76,8 @@ from typing import Any
 import numpy as np
 
 from wptrack.core.errors import ConfigError, WptrackError
+from wptrack.evaluation.hota import HotaResult, _hota_tables
+from wptrack.io.atomic import jsonable
 from wptrack.io.tables import read_tracks
 
 #: Columns every ground-truth and tracks table must have.
@@ -235,20 +213,7 @@ class Evaluation:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-ready dict (``per_track`` as a list of dicts; NaN and infinities as ``None``)."""
-        return _plain(dataclasses.asdict(self))
-
-
-def _plain(obj: Any) -> Any:
-    """Replace non-finite floats by None and tuples by lists, recursively; numpy scalars become Python ones."""
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {str(k): _plain(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    return obj
+        return jsonable(dataclasses.asdict(self))
 
 
 # ----------------------------------------------------------------------------------------------- input tables
@@ -415,123 +380,6 @@ def _majority(values: Sequence[Any]) -> Any:
 
 
 # ----------------------------------------------------------------------------------------------- HOTA
-
-HOTA_ALPHAS = tuple(round(0.05 * k, 2) for k in range(1, 20))
-"""The localisation thresholds alpha = 0.05, 0.10, ..., 0.95 HOTA averages over (paper eq. 10)."""
-
-
-@dataclasses.dataclass(frozen=True)
-class HotaResult:
-    """HOTA and its parts on the ground plane (see the module docstring); each scalar is the mean over
-    :data:`HOTA_ALPHAS`, each ``*_alpha`` tuple holds the 19 per-alpha values.
-
-    Attributes:
-        hota, deta, assa: HOTA, detection accuracy, association accuracy (eqs. 3-10), in [0, 1].
-        detre, detpr: detection recall TP / (TP + FN) and precision TP / (TP + FP).
-        assre, asspr: association recall and precision (the mean over TP of TPA / (TPA + FNA), TPA / (TPA + FPA)).
-        loca: mean similarity of the true positives, over the alphas that have any (NaN when none has).
-        alphas: the thresholds.
-        threshold: distance (metres) at which the similarity reaches 0.
-    """
-
-    hota: float
-    deta: float
-    assa: float
-    detre: float
-    detpr: float
-    assre: float
-    asspr: float
-    loca: float
-    hota_alpha: tuple[float, ...]
-    deta_alpha: tuple[float, ...]
-    assa_alpha: tuple[float, ...]
-    alphas: tuple[float, ...]
-    threshold: float
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain JSON-ready dict (NaN as None)."""
-        return _plain(dataclasses.asdict(self))
-
-
-def _hota_tables(gt: _Table, hyp: _Table, eval_frames: np.ndarray, threshold: float) -> HotaResult:
-    """HOTA of two validated tables restricted to ``eval_frames`` (see the module docstring)."""
-    from scipy.optimize import linear_sum_assignment
-
-    alphas = np.asarray(HOTA_ALPHAS, dtype=np.float64)
-    gt_ids, gt_codes = np.unique(gt.ids, return_inverse=True)
-    hyp_ids, hyp_codes = np.unique(hyp.ids, return_inverse=True)
-    ng, nh = len(gt_ids), len(hyp_ids)
-    gt_count = np.bincount(gt_codes, minlength=ng).astype(np.float64)
-    hyp_count = np.bincount(hyp_codes, minlength=nh).astype(np.float64)
-    g0s, g1s = np.searchsorted(gt.frame, eval_frames, "left"), np.searchsorted(gt.frame, eval_frames, "right")
-    h0s, h1s = np.searchsorted(hyp.frame, eval_frames, "left"), np.searchsorted(hyp.frame, eval_frames, "right")
-
-    def similarity(g0: int, g1: int, h0: int, h1: int) -> np.ndarray:
-        d = np.linalg.norm(gt.xy[g0:g1, None, :] - hyp.xy[None, h0:h1, :], axis=2)
-        return np.maximum(0.0, 1.0 - d / threshold)
-
-    # the identities' soft association over the whole sequence (the matching's preference for lasting pairs)
-    potential = np.zeros((ng, nh))
-    frames = list(zip(g0s.tolist(), g1s.tolist(), h0s.tolist(), h1s.tolist(), strict=True))
-    for g0, g1, h0, h1 in frames:
-        if g1 == g0 or h1 == h0:
-            continue
-        sim = similarity(g0, g1, h0, h1)
-        denom = sim.sum(axis=0, keepdims=True) + sim.sum(axis=1, keepdims=True) - sim
-        soft = np.divide(sim, denom, out=np.zeros_like(sim), where=denom > 1e-12)
-        np.add.at(potential, (gt_codes[g0:g1, None], hyp_codes[None, h0:h1]), soft)
-    alignment = potential / np.maximum(gt_count[:, None] + hyp_count[None, :] - potential, 1e-12)
-
-    # one assignment per frame; each alpha keeps its pairs with S >= alpha
-    pair_g, pair_h, pair_s = [], [], []
-    for g0, g1, h0, h1 in frames:
-        if g1 == g0 or h1 == h0:
-            continue
-        sim = similarity(g0, g1, h0, h1)
-        rows, cols = linear_sum_assignment(-(alignment[gt_codes[g0:g1, None], hyp_codes[None, h0:h1]] * sim))
-        keep = sim[rows, cols] > 0.0
-        pair_g.append(gt_codes[g0 + rows[keep]])
-        pair_h.append(hyp_codes[h0 + cols[keep]])
-        pair_s.append(sim[rows[keep], cols[keep]])
-    pg = np.concatenate(pair_g) if pair_g else np.zeros(0, np.int64)
-    ph = np.concatenate(pair_h) if pair_h else np.zeros(0, np.int64)
-    ps = np.concatenate(pair_s) if pair_s else np.zeros(0)
-
-    n_gt, n_hyp = float(gt_count.sum()), float(hyp_count.sum())
-    per = {k: np.zeros(len(alphas)) for k in ("hota", "deta", "assa", "detre", "detpr", "assre", "asspr", "loca")}
-    for a, alpha in enumerate(alphas):
-        sel = ps >= alpha - 1e-9
-        tp = float(sel.sum())
-        fn, fp = n_gt - tp, n_hyp - tp
-        per["deta"][a] = tp / (tp + fn + fp) if tp + fn + fp > 0 else 0.0
-        per["detre"][a] = tp / n_gt if n_gt else 0.0
-        per["detpr"][a] = tp / n_hyp if n_hyp else 0.0
-        if tp > 0:
-            keys, counts = np.unique(pg[sel] * nh + ph[sel], return_counts=True)
-            g, h, c = keys // nh, keys % nh, counts.astype(np.float64)
-            per["assa"][a] = float(np.sum(c * c / (gt_count[g] + hyp_count[h] - c))) / tp
-            per["assre"][a] = float(np.sum(c * c / gt_count[g])) / tp
-            per["asspr"][a] = float(np.sum(c * c / hyp_count[h])) / tp
-            per["loca"][a] = float(ps[sel].mean())
-        else:
-            per["loca"][a] = np.nan
-        per["hota"][a] = math.sqrt(per["deta"][a] * per["assa"][a])
-    loca = per["loca"][np.isfinite(per["loca"])]
-    return HotaResult(
-        hota=float(per["hota"].mean()),
-        deta=float(per["deta"].mean()),
-        assa=float(per["assa"].mean()),
-        detre=float(per["detre"].mean()),
-        detpr=float(per["detpr"].mean()),
-        assre=float(per["assre"].mean()),
-        asspr=float(per["asspr"].mean()),
-        loca=float(loca.mean()) if loca.size else math.nan,
-        hota_alpha=tuple(float(v) for v in per["hota"]),
-        deta_alpha=tuple(float(v) for v in per["deta"]),
-        assa_alpha=tuple(float(v) for v in per["assa"]),
-        alphas=HOTA_ALPHAS,
-        threshold=threshold,
-    )
 
 
 def hota(
@@ -713,105 +561,6 @@ def evaluate(
 
 
 # ----------------------------------------------------------------------------------------------- MOTChallenge files
-
-MOT_DIR = "mot"
-"""Folder of a run where ``wptrack evaluate`` writes the MOTChallenge files (:func:`write_mot_files`)."""
-
-
-def _mot_lines(frame: np.ndarray, ids: np.ndarray, boxes: np.ndarray, conf: np.ndarray, xyz: np.ndarray) -> str:
-    rows = np.column_stack([frame + 1, ids, boxes, conf, xyz])  # MOTChallenge frames are 1-based
-    order = np.lexsort((rows[:, 1], rows[:, 0]))
-    return "".join(
-        f"{int(r[0])},{int(r[1])},{r[2]:.2f},{r[3]:.2f},{r[4]:.2f},{r[5]:.2f},{r[6]:.4g},{r[7]:.4f},{r[8]:.4f},"
-        f"{r[9]:.4f}\n"
-        for r in rows[order]
-    )
-
-
-def image_boxes(columns: Mapping[str, Any], camera: Any, plane: Any) -> tuple[np.ndarray, np.ndarray]:
-    """The image box of each row's object: the bounding box of its 3D box (ground point ``x, y, z``, the template
-    columns ``length, width, height, orientation``) projected by ``camera`` (lens distortion included).
-
-    Returns:
-        ``(boxes, ok)``: (N, 4) ``left, top, width, height`` in pixels (not clipped to the image), and (N,) whether
-        every corner is in front of the camera (other rows have no box).
-    """
-    from wptrack.trackers.templates.tracker import object_box_corners
-
-    xyz = np.column_stack([np.asarray(columns[k], dtype=np.float64) for k in ("x", "y", "z")])
-    size = np.column_stack([np.asarray(columns[k], dtype=np.float64) for k in ("length", "width", "height")])
-    corners = object_box_corners(plane, plane.to_ground(xyz), size, np.asarray(columns["orientation"], np.float64))
-    n = len(xyz)
-    if n == 0:
-        return np.zeros((0, 4)), np.zeros(0, bool)
-    uv, depth = camera.project(corners.reshape(-1, 3))
-    uv = uv.reshape(n, 8, 2)
-    lo, hi = uv.min(axis=1), uv.max(axis=1)
-    ok = np.all(depth.reshape(n, 8) > 0, axis=1) & np.all(np.isfinite(uv), axis=(1, 2))
-    return np.column_stack([lo, hi - lo]), ok
-
-
-TEMPLATE_BOX_COLUMNS = ("length", "width", "height", "orientation")
-"""Columns a table needs for its rows to have image boxes (the template tracker's tracks, the s3 ground truth)."""
-
-
-def write_mot_files(
-    table: Mapping[str, Any] | str | os.PathLike,
-    out_dir: str | os.PathLike,
-    camera: Any = None,
-    plane: Any = None,
-    what: str = "tracks",
-) -> list[Any]:
-    """Write a tracks or ground-truth table as MOTChallenge files into ``out_dir`` (see the module docstring):
-    ``world.txt`` (world ``x, y, z`` in metres, no box) and, when ``camera`` is given and the table has the template
-    columns, ``<camera name>.txt`` (image boxes in pixels). Rows without a finite position are left out; the
-    confidence is the ``existence`` column when there is one, else 1. Files are written atomically.
-
-    Args:
-        table: A dict of columns or a CSV path (``frame,id,x,y,z`` and optional columns).
-        out_dir: Folder to write into (created).
-        camera: A rig camera for the image boxes, or None.
-        plane: The rig's ground plane (``Rig.ground_plane``) for the boxes' footprints.
-        what: What the table is, in error messages (``tracks``, ``ground truth``).
-
-    Returns:
-        The paths written.
-
-    Raises:
-        ConfigError: The table is unreadable or lacks ``frame,id,x,y,z``.
-    """
-    from pathlib import Path
-
-    from wptrack.io.atomic import atomic_write_text
-
-    columns = table if isinstance(table, Mapping) else None
-    if columns is None:
-        try:
-            columns = read_tracks(table, what=f"{what} file")
-        except WptrackError as e:
-            raise ConfigError(str(e)) from None
-    missing = [c for c in REQUIRED_COLUMNS if c not in columns]
-    if missing:
-        raise ConfigError(f"{what}: missing column(s) {', '.join(missing)} for the MOTChallenge files")
-    frame = _integers(what, "frame", np.asarray(columns["frame"]), non_negative=True)
-    ids = _integers(what, "id", np.asarray(columns["id"]), non_negative=False)
-    xyz = np.column_stack([_numeric(what, k, np.asarray(columns[k])) for k in ("x", "y", "z")])
-    conf = np.asarray(columns["existence"], dtype=np.float64) if "existence" in columns else np.ones(len(frame))
-    keep = np.all(np.isfinite(xyz), axis=1)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    none = -np.ones((len(frame), 4))
-    paths = [out / "world.txt"]
-    atomic_write_text(paths[0], _mot_lines(frame[keep], ids[keep], none[keep], conf[keep], xyz[keep]))
-    if camera is not None and plane is not None and all(c in columns for c in TEMPLATE_BOX_COLUMNS):
-        sub = {k: np.asarray(columns[k])[keep] for k in ("x", "y", "z", *TEMPLATE_BOX_COLUMNS)}
-        boxes, ok = image_boxes(sub, camera, plane)
-        f, i, c = frame[keep][ok], ids[keep][ok], conf[keep][ok]
-        name = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in str(camera.name)) or "camera"
-        paths.append(out / f"{name}.txt")
-        one_based = boxes[ok] + np.array([1.0, 1.0, 0.0, 0.0])  # MOTChallenge pixel coordinates start at 1
-        atomic_write_text(paths[1], _mot_lines(f, i, one_based, c, -np.ones((len(f), 3))))
-    return paths
 
 
 def average(evaluations: Sequence[Evaluation]) -> dict[str, Any]:
