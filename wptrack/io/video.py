@@ -230,8 +230,8 @@ class BackgroundWriter:
             try:
                 if item is self._END:
                     return
-                if self._error is not None:
-                    continue  # drain: the error is raised in the caller
+                if self._failed or self._error is not None:
+                    continue  # drain: after an error (raised in the caller) or an abort nothing more is written
                 frame, prepare = item
                 t0 = time.perf_counter()
                 try:
