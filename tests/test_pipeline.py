@@ -749,3 +749,31 @@ def test_masks_in_threads_raise_at_the_failing_frame_and_stop(tmp_path, rng, mon
     it.close()  # the consumer leaves early: the feeder, the workers and the extra model stop
     time.sleep(0.3)
     assert not [t.name for t in threading.enumerate() if t.name.startswith("wptrack-masks") and t.name not in before]
+
+
+def test_device_cleanup_in_the_offline_model_gives_the_host_masks(tmp_path, rng, monkeypatch):
+    """WPTRACK_DEVICE_CLEANUP=1: the offline model resolves and cleans its masks with the device kernels
+    (wptrack.motion.cleanup) and downloads the mask: the same masks and probabilities as the host path, also with
+    the masks made in two threads, and no probability when none is asked for."""
+    from wptrack.io.video import write_video
+    from wptrack.motion.masks import MaskConfig, open_masks
+
+    path = tmp_path / "v.avi"
+    write_video(path, _moving_boxes(rng, frames=40))
+    config = MaskConfig(window=16, samples=5, device="cpu")
+    monkeypatch.delenv("WPTRACK_DEVICE_CLEANUP", raising=False)
+    monkeypatch.setenv("WPTRACK_MASK_WORKERS", "1")
+    host = list(open_masks(video=path, config=config).evidence())
+    monkeypatch.setenv("WPTRACK_DEVICE_CLEANUP", "1")
+    for workers in ("1", "2"):
+        monkeypatch.setenv("WPTRACK_MASK_WORKERS", workers)
+        stream = open_masks(video=path, config=config)
+        assert stream.model.cleanup is not None
+        got = list(stream.evidence())
+        assert len(got) == len(host) == 40 and sum(int(m.sum()) for m, _ in host) > 0
+        for (m1, p1), (m2, p2) in zip(host, got, strict=True):
+            np.testing.assert_array_equal(m1, m2)
+            np.testing.assert_array_equal(p1, p2)
+        assert all(p is None for _, p in stream.evidence(probability=False))
+    with_area = open_masks(video=path, config=MaskConfig(window=16, samples=5, min_area=20, device="cpu"))
+    assert with_area.model.cleanup is None  # min_area is a host filter: the host path

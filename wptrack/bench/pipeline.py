@@ -233,7 +233,10 @@ def _cli(argv: list[str]) -> tuple[float, float]:
     return seconds, cpu
 
 
-VARIANT_ENV = ("WPTRACK_MASK_WORKERS", "WPTRACK_DECODE_WORKERS", "WPTRACK_CPU_THREADS", "WPTRACK_DECODE_THREADS")
+VARIANT_ENV = (
+    "WPTRACK_MASK_WORKERS", "WPTRACK_DECODE_WORKERS", "WPTRACK_CPU_THREADS", "WPTRACK_DECODE_THREADS",
+    "WPTRACK_DEVICE_CLEANUP",
+)  # fmt: skip
 """The environment variables ``--variant`` may set."""
 
 

@@ -301,7 +301,17 @@ class MotionMasks:
             from wptrack.motion.background import OfflineBackground
 
             self._model = OfflineBackground(self.source, self.config, resolve_device(self.config.device))
+            self.attach_cleanup(self._model)
         return self._model
+
+    def attach_cleanup(self, model: Any) -> None:
+        """With ``WPTRACK_DEVICE_CLEANUP=1`` (issue 27, opt-in until measured on a GPU): the model resolves and cleans
+        its masks on the device (:class:`wptrack.motion.cleanup.DeviceCleanup`, the same masks) and downloads the
+        mask instead of the levels; not with ``min_area`` (a host filter)."""
+        if os.environ.get("WPTRACK_DEVICE_CLEANUP", "").strip() == "1" and self.config.min_area <= 1:
+            from wptrack.motion.cleanup import DeviceCleanup
+
+            model.cleanup = DeviceCleanup(*self.size, self.config.open_px, self.config.close_px, model.device)
 
     def background(self, window: int = 0) -> np.ndarray | None:
         """``(H, W, 3)`` uint8 BGR background of an offline window (for reports); ``None`` for other methods."""
@@ -325,6 +335,8 @@ class MotionMasks:
         model = self.model
         frames = prefetch(self.source, depth=self.prefetch_depth) if self.prefetch_depth else self.source
         subtractor = None if c.method in ("given", "offline") else self._subtractor()
+        if model is not None:
+            model.want_prob = probability
         try:
             if model is not None and self.workers > 1:  # several models in threads, masks in frame order
                 from wptrack.motion.parallel import parallel_evidence
@@ -339,7 +351,7 @@ class MotionMasks:
                     )
                 if model is not None:
                     raw, prob = model.evidence(index, frame)
-                    yield clean_mask(raw, c), prob
+                    yield (raw if model.cleanup is not None else clean_mask(raw, c)), prob
                     continue
                 if subtractor is None:
                     mask = given_mask(frame, c.threshold)

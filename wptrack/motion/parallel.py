@@ -57,6 +57,9 @@ def parallel_evidence(
     c = masks.config
     width, height = masks.size
     models = [masks.model] + [OfflineBackground(masks.source, c, masks.model.device) for _ in range(workers - 1)]
+    for model in models[1:]:  # the first model's clean-up and probability settings for every model
+        masks.attach_cleanup(model)
+        model.want_prob = masks.model.want_prob
     stop = threading.Event()
     inbox = [queue.Queue(maxsize=2) for _ in range(workers)]
     outbox = [queue.Queue(maxsize=2) for _ in range(workers)]
@@ -109,7 +112,7 @@ def parallel_evidence(
             index, frame = item
             try:
                 raw, prob = model.evidence(index, frame)
-                result = (clean(raw), prob if probability else None)
+                result = (raw if model.cleanup is not None else clean(raw), prob if probability else None)
             except BaseException as e:  # noqa: BLE001 - raised by the collector at its frame
                 put(outbox[k], e)
                 return
