@@ -71,7 +71,8 @@ class DeviceCleanup:
         self.work = wp.zeros(self.shape, dtype=wp.uint8, device=d)
         self.out = wp.zeros(self.shape, dtype=wp.uint8, device=d)
         self.changed = wp.zeros(1, dtype=wp.int32, device=d)
-        self._changed_host = wp.zeros(1, dtype=wp.int32, device="cpu", pinned=wp.get_device(d).is_cuda)
+        self._cuda = wp.get_device(d).is_cuda
+        self._changed_host = wp.zeros(1, dtype=wp.int32, device="cpu", pinned=self._cuda)
         self._no_prob = wp.zeros((1, 1), dtype=wp.float32, device=d)
 
         def runs(diameter: int) -> tuple[Any, int] | None:
@@ -106,7 +107,8 @@ class DeviceCleanup:
                 wp.launch(km.hysteresis_cols_kernel, dim=w, inputs=[self.levels, self.mask, self.changed], device=d)
                 self.sweeps += 1
             wp.copy(self._changed_host, self.changed)
-            wp.synchronize_device(d)
+            if self._cuda:  # the stream's work only, as the offline model waits for its results
+                wp.synchronize_stream(wp.get_stream(d))
             if int(self._changed_host.numpy()[0]) == 0:
                 return
 
