@@ -21,6 +21,7 @@ SUITES: dict[str, str] = {
     "color-e2e": "wptrack.bench.endtoend:EndToEndSuite",
     "templates": "wptrack.bench.templates:TemplateSuite",
     "masks": "wptrack.bench.masks:MasksSuite",
+    "pipeline": "wptrack.bench.pipeline:PipelineSuite",
     "people": "wptrack.bench.people:PeopleSuite",
     "batch": "wptrack.bench.batch:BatchSuite",
     "soak": "wptrack.bench.soak:SoakSuite",

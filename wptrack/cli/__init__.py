@@ -217,7 +217,8 @@ def build_parser(batch_tracker: str | None = None) -> argparse.ArgumentParser:
         "--frames",
         type=positive_int,
         default=None,
-        help="timed frames per case (default 50; soak 10000); masks: also the end-to-end video's length (default 600)",
+        help="timed frames per case (default 50; soak 10000); masks: also the end-to-end video's length (default 600); "
+        "pipeline: the video's frames (default 600 on a GPU, 400 on the CPU)",
     )
     b.add_argument("--numpy-max", type=int, default=100_000, help="largest N also run by the NumPy reference")
     b.add_argument("--out", default=None, help="write the results as JSON here")
@@ -238,6 +239,18 @@ def build_parser(batch_tracker: str | None = None) -> argparse.ArgumentParser:
         action="store_true",
         help="templates suite: the paper's joint filter (one weight per particle) instead of the partitioned one",
     )
+    b.add_argument(
+        "--video", nargs="+", default=None, help="pipeline suite: time the commands on this video (default: its own); "
+        "several: the cameras of a people run (with --rig)",
+    )  # fmt: skip
+    b.add_argument("--rig", default=None, help="pipeline suite: the rig of --video (default: the suite's camera)")
+    b.add_argument(
+        "--variant", action="append", default=None, metavar="ENV=N[,ENV=N]",
+        help="pipeline suite: also run the commands with these environment settings (repeatable), e.g. "
+        "WPTRACK_MASK_WORKERS=2",
+    )  # fmt: skip
+    b.add_argument("--size", default=None, help="pipeline suite: WIDTHxHEIGHT of its own video (default 1920x1080 "
+                   "on a GPU, 480x360 on the CPU)")  # fmt: skip
     add_device(b)
     b.set_defaults(func=cmd_bench)
     return p

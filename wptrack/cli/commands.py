@@ -326,8 +326,17 @@ def cmd_bench(args) -> int:
     for flag in ("cameras", "objects", "runs"):
         if flag != second and getattr(args, flag):
             raise ConfigError(f"--{flag}: the {args.tracker!r} suite's cases are particles x {second}; use --{second}")
-    grid = suite.default_grid(wp.get_device(device).is_cuda)
-    if args.particles or getattr(args, second):  # the product of the given values, the suite's defaults for the others
+    own_grid = getattr(suite, "grid_from_args", None)  # a suite whose cases are not particles x second (pipeline)
+    if own_grid is None:
+        for flag in ("video", "rig", "size", "variant"):
+            if getattr(args, flag, None) is not None:
+                raise ConfigError(f"--{flag}: only the 'pipeline' suite takes it, not {args.tracker!r}")
+    elif args.particles or getattr(args, second, None):
+        raise ConfigError(f"--particles/--{second}: the {args.tracker!r} suite runs the commands with their defaults")
+    is_cuda = wp.get_device(device).is_cuda
+    grid = suite.default_grid(is_cuda) if own_grid is None else own_grid(args, is_cuda)
+    # the product of the given values, the suite's defaults for the others
+    if own_grid is None and (args.particles or getattr(args, second)):
         counts = [int(p) for p in args.particles] if args.particles else sorted({g.particles for g in grid})
         seconds = getattr(args, second) or sorted({getattr(g, second) for g in grid})
         grid = [type(grid[0])(p, c) for c in seconds for p in counts]

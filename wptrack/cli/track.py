@@ -51,13 +51,38 @@ def colour_summary_lines(summary: dict, out_dir: str | Path) -> list[str]:
     return lines
 
 
+def speed_line(out_dir: str | Path, frames: int) -> str | None:
+    """One line on where the run's time went, from run.json's stage timeline (``wptrack.io.timeline``): frames/s of
+    the frame loop, each busy stage's wall time per frame (the stages of different threads overlap) and the wait of
+    the filter for its input; None without a timeline."""
+    import json
+
+    from wptrack.io.timeline import WAIT_PREFIX, is_wait
+
+    try:
+        tl = json.loads((Path(out_dir) / "run.json").read_text(encoding="utf-8"))["timeline"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    stages, wall = tl.get("stages") or {}, float(tl.get("wall_s") or 0.0)
+    if not stages or wall <= 0 or frames <= 0:
+        return None
+    busy = sorted(((k, v["total_s"]) for k, v in stages.items() if not is_wait(k)), key=lambda kv: -kv[1])
+    parts = ", ".join(f"{k} {1000 * t / frames:.1f}" for k, t in busy if 1000 * t / frames >= 0.05)
+    line = f"speed: {frames / wall:.1f} frames/s; ms per frame (threads overlap, x{tl.get('overlap', 0):.2f}): {parts}"
+    source = tl.get("source")
+    waited = stages.get(WAIT_PREFIX + source, {}).get("total_s", 0.0) if source else 0.0
+    if waited > 0:
+        line += f"; the filter waited for {source} {1000 * waited / frames:.1f}"
+    return line
+
+
 def summary_lines(cmd: TrackCommand, summary: dict, parts: dict[str, Any]) -> list[str]:
     """What ``wptrack track NAME`` prints when the run completes."""
     out = parts["control"].out
     if cmd.name == "color":
         return colour_summary_lines(summary, out)
     if cmd.name == "templates":
-        virtual = parts["inputs"].virtual
+        virtual = summary.get("virtual", parts["inputs"].virtual)
         return [
             f"tracked {plural(summary['frames'], 'frame')} on {summary['device']}: "
             f"{plural(summary['objects'], 'object')} ({summary['classes']['human']} human, "
@@ -80,6 +105,9 @@ def cmd_track(args: argparse.Namespace) -> int:
     summary = run_command(cmd, parts, progress=not args.quiet)
     for line in summary_lines(cmd, summary, parts):
         print(line)
+    speed = speed_line(control.out, int(summary.get("frames") or 0))
+    if speed is not None:
+        print(speed)
     failure = None  # the report is written even when scoring fails (the scoring error is raised after it)
     try:
         ev = score_run(cmd, parts)

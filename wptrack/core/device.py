@@ -148,6 +148,76 @@ def block_partition(
     return blocks, (n + blocks - 1) // blocks
 
 
+CPU_SPLIT_MIN = 256
+"""Fewest particles per thread of a launch split over threads on the CPU backend (:class:`CpuSplit`)."""
+
+CPU_SPLIT_MAX = 4
+"""Most threads a split launch uses (the CI box has 2 cores; more rarely pays beside the run's other threads)."""
+
+
+def cpu_split_threads(n: int) -> int:
+    """Threads over which :class:`CpuSplit` runs a per-particle launch of ``n`` particles on the CPU backend: the
+    environment variable ``WPTRACK_CPU_THREADS`` (1 turns the split off), else the cores this process may use
+    (its CPU affinity), no more than a batch worker holds (``WPTRACK_DECODE_THREADS``, set by ``wptrack batch``);
+    at most :data:`CPU_SPLIT_MAX`, with at least :data:`CPU_SPLIT_MIN` particles each."""
+    import os
+
+    from wptrack.io.frames import decode_threads
+
+    env = os.environ.get("WPTRACK_CPU_THREADS", "").strip()
+    if env.isdigit() and int(env) > 0:
+        cores = int(env)
+    else:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        cores = min(cores, decode_threads() or cores)
+    return max(1, min(cores, CPU_SPLIT_MAX, n // CPU_SPLIT_MIN))
+
+
+class CpuSplit:
+    """Run a launch over contiguous ranges of ``n`` items in several threads at once (the CPU backend runs a launch
+    on one core; a launch is a ctypes call, which releases the GIL, so launches from several threads overlap).
+
+    Only for plain ``wp.launch`` kernels whose outputs at item ``i`` depend on the inputs at ``i`` alone (launched on
+    views ``a[lo:hi]``): the same results bit for bit. Not for ``wp.launch_tiled`` kernels: Warp's CPU tiles share one
+    module-global shared-memory pointer (``wptrack.bench.cpu_threads``), so two tiled launches at once crash.
+
+    Args:
+        n: Items (particles).
+        threads: Ranges run at once (the calling thread runs the first; :func:`cpu_split_threads`).
+
+    ``split(fn)`` calls ``fn(k, lo, hi)`` for each range ``k`` and returns when all are done (an error of any is
+    raised). ``ranges`` lists them.
+    """
+
+    def __init__(self, n: int, threads: int) -> None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        threads = max(1, min(int(threads), int(n)))
+        bounds = [(k * n) // threads for k in range(threads + 1)]
+        self.ranges = [(bounds[k], bounds[k + 1]) for k in range(threads)]
+        self._pool = ThreadPoolExecutor(threads - 1, thread_name_prefix="wptrack-split") if threads > 1 else None
+
+    def __len__(self) -> int:
+        return len(self.ranges)
+
+    def __call__(self, fn) -> None:
+        if self._pool is None:
+            fn(0, *self.ranges[0])
+            return
+        futures = [self._pool.submit(fn, k, lo, hi) for k, (lo, hi) in enumerate(self.ranges) if k > 0]
+        try:
+            fn(0, *self.ranges[0])
+        finally:
+            for f in futures:
+                f.result()
+
+    def close(self) -> None:
+        """Stop the threads (idempotent)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+
+
 def kernel_cache_dir() -> str:
     """Warp's kernel cache folder (``$WARP_CACHE_PATH`` when set, else ``~/.cache/warp/<version>``)."""
     import warp as wp

@@ -144,6 +144,8 @@ class FrameSource:
     height: int
     fps: float | None = None
     stopped_early: dict[str, Any] | None = None
+    variable_rate: dict[str, Any] | None = None  # videos: where a pass found a variable frame rate
+    stage = "decode"  # the timeline stage of a thread iterating it (wptrack.io.prefetch)
 
     def __len__(self) -> int:
         """Number of frames (as reported by the source; a video may turn out shorter when read)."""
@@ -175,6 +177,9 @@ class VideoSource(FrameSource):
     The frame count is ``CAP_PROP_FRAME_COUNT`` (counted by decoding the file when the container does not report
     it). When reading, at most that many frames are yielded; a video that ends earlier stops early with a
     warning in the log (:class:`SyncedFrames` turns that into an error when other cameras continue).
+    A video whose timestamps depart from its rate (variable frame rate: the trackers take each frame as ``1 / fps``)
+    is read all the same, with one warning per pass; ``variable_rate`` then says where
+    (:func:`wptrack.io.decode.rate_note`).
 
     Args:
         path: Video file path (or any string ``cv2.VideoCapture`` opens, e.g. a URL).
@@ -242,12 +247,15 @@ class VideoSource(FrameSource):
         return self._count
 
     def __iter__(self) -> Iterator[np.ndarray]:
+        from wptrack.io.decode import frame_items, rate_note
+
         self.stopped_early = None
-        cap = self._open()
+        self.variable_rate = None
+        items = frame_items(self._open, self._count)  # one capture, or several (WPTRACK_DECODE_WORKERS)
+        last_ms = None
         try:
-            for i in range(self._count):
-                ok, frame = cap.read()
-                if not ok or frame is None:
+            for i, ok, frame, ms in items:
+                if not ok:
                     log.warning("video %s ended after %d frames, although it reports %d", self.path, i, self._count)
                     self.stopped_early = {
                         "camera": self.name,
@@ -256,11 +264,16 @@ class VideoSource(FrameSource):
                         "reason": f"video ended after {i} of its {self._count} reported frames (truncated or corrupt)",
                     }
                     return
+                if self.fps and self.variable_rate is None and last_ms is not None and ms > last_ms:
+                    self.variable_rate = rate_note(self.fps, i, ms - last_ms)  # timestamps against 1 / fps
+                    if self.variable_rate is not None:
+                        log.warning("%s: %s", self.name, self.variable_rate["reason"])
+                last_ms = ms
                 frame = _to_bgr(frame)
                 self._check_size(frame, i)
                 yield frame
         finally:
-            cap.release()
+            items.close()
 
 
 class VideoReader:
@@ -472,6 +485,7 @@ class SyncedFrames:
     """
 
     stopped_early: dict[str, Any] | None = None
+    stage = "decode"  # the timeline stage of a thread iterating it (wptrack.io.prefetch)
 
     def __init__(
         self, sources: list[FrameSource], stop_at_shortest: bool = False, max_frames: int | None = None

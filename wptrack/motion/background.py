@@ -589,6 +589,11 @@ class OfflineBackground:
         self._executor: ThreadPoolExecutor | None = None  # the prefetch worker (one thread), made on first use
         self._pending: tuple[int, Future] | None = None  # (window, its read) submitted to the worker
         self._prefetch = True  # False: every window read in the calling thread (tests compare the two)
+        # issue 27 (opt-in, wptrack.motion.masks.MotionMasks.attach_cleanup): a DeviceCleanup makes evidence() resolve
+        # and clean the mask on the device and download it instead of the levels; want_prob False skips the
+        # probability's download
+        self.cleanup: Any = None
+        self.want_prob = True
         self.on_build: Callable[[int, float, np.ndarray], None] | None = None
         """Called as ``on_build(window, centre, background)`` when a window is built (in the thread that asked
         for it), with its ``(H, W, 3)`` uint8 BGR background: e.g. a run saving the backgrounds for its report."""
@@ -817,6 +822,18 @@ class OfflineBackground:
             )
             packed = self._packed
         shape = (self.source.height, self.source.width)
+        if self.cleanup is not None:  # the clean-up on the device: one mask (and the probability if asked) down
+            mask_dev = self.cleanup(packed.reshape(shape), self._prob.reshape(shape))
+            if self._stage_mask is None:
+                mask_host, prob = mask_dev.numpy().reshape(-1), self._prob.numpy()
+            else:
+                wp.copy(self._stage_mask, mask_dev.reshape(-1))
+                if self.want_prob:
+                    wp.copy(self._stage_prob, self._prob)
+                wp.synchronize_stream(wp.get_stream(self.device))
+                mask_host, prob = self._stage_views[1], self._stage_views[2]
+            prob = prob.reshape(shape).copy() if self.want_prob else None
+            return mask_host.reshape(shape).copy(), prob
         if self._stage_mask is None:
             levels, prob = packed.numpy(), self._prob.numpy()
         else:

@@ -12,6 +12,11 @@ is built (rig, videos, sizes, parameters, device), and the loop then owns what a
   the kernel modules' load time before the first frame (``module_load_s``, compilation included when the cache
   missed them), the frame loop's wall time (``frame_loop_s``) and its start (``loop_start``, seconds since the
   epoch),
+* the stage timeline (:mod:`wptrack.io.timeline`, run.json's ``timeline``): the wall time of every stage in every
+  thread (``decode``, ``masks`` in the prefetch threads; ``upload``, ``filter``, ``record`` in the loop;
+  ``write_*`` in the video writer threads), the waits between them (``wait_masks``: the filter waited for its
+  masks; ``wait_decode``: the masks waited for decoding; ``*_blocked``: a producer held by a full queue) and how
+  much of it overlapped,
 * a tqdm progress bar,
 * interruption: Ctrl-C (SIGINT) and SIGTERM stop the run after the frame in progress, with ``run.json`` status
   ``interrupted`` and the last frame written (``last_frame``); the outputs written so far stay valid,
@@ -106,6 +111,9 @@ class TrackerRun:
     columns: Sequence[str]
     config: dict[str, Any]
     total: int | None = None
+    source_stage: str | None = None
+    """The timeline stage of producing one item of :meth:`frames` (``masks``, ``decode``; None: the source's own
+    ``stage`` attribute, else ``source``)."""
     particles_every: int = 0
     particles_max: int = 2000
     particles_frames: int = 500
@@ -150,6 +158,17 @@ class TrackerRun:
                 info = getattr(src, "stopped_early", None)
                 if isinstance(info, dict):
                     return info
+        return None
+
+    def variable_rate(self) -> dict[str, Any] | None:
+        """Where a video of the run first showed a variable frame rate (``VideoSource.variable_rate``, with its
+        ``camera``), or None. Recorded in run.json (``variable_frame_rate``)."""
+        candidates = [getattr(self, "_frames", None), getattr(self, "_stream", None), *getattr(self, "_masks", [])]
+        for obj in candidates:
+            for src in (obj, getattr(obj, "source", None), *getattr(obj, "sources", [])):
+                info = getattr(src, "variable_rate", None)
+                if isinstance(info, dict):
+                    return {"camera": getattr(src, "name", "?"), **info}
         return None
 
     def state_dict(self) -> dict[str, Any]:
@@ -356,10 +375,8 @@ def _run_locked(
     overwrite: bool,
 ) -> dict[str, Any]:
     """:func:`run_tracker` once the run folder is locked."""
-    import itertools
-
     from wptrack.core.errors import ConfigError, WptrackError
-    from wptrack.io.prefetch import prefetch
+    from wptrack.io import timeline
     from wptrack.io.run import RUN_FILE, RunWriter
 
     if not resume and (out_dir / RUN_FILE).exists():
@@ -418,32 +435,20 @@ def _run_locked(
             warm_up(getattr(tracker, "kernel_modules", None), tracker.device, say=say)
         bar = _progress(total, progress)
         bar.update(start)
-        last_checkpoint = time.monotonic()
         # run.json "phases": what a run costs besides its frames (a batch's stage times, wptrack.batch)
         phases = {"module_load_s": time.perf_counter() - t_load, "loop_start": time.time()}
         t_loop = time.perf_counter()
+        clock = timeline.Timeline()
         try:
-            frames = itertools.islice(job.frames(), start, max_frames)  # decoded and skipped when resuming
-            t_wait = time.perf_counter()
-            # "decode_wait": the time the tracker waited for the next decoded frame
-            for item in prefetch(frames, depth=prefetch_depth):
-                out.add_timing("decode_wait", time.perf_counter() - t_wait)
-                est = job.step(item)
-                job.record(est, out)
-                out.frame_done(est.frame)
-                for stage, seconds in est.timings.items():
-                    out.add_timing(stage, seconds)
-                bar.update(1)
-                if stop.signum:
-                    _write_checkpoint(job, out, est.frame)
-                    raise RunInterrupted(stop.signum)
-                if checkpoint_seconds > 0 and time.monotonic() - last_checkpoint >= checkpoint_seconds:
-                    _write_checkpoint(job, out, est.frame)
-                    last_checkpoint = time.monotonic()
-                t_wait = time.perf_counter()
+            with timeline.active(clock):
+                try:
+                    _frame_loop(job, out, bar, stop, clock, start, max_frames, prefetch_depth, checkpoint_seconds)
+                finally:
+                    bar.close()
+                    job.finish()  # the writer threads finish their queues here: on the timeline, in the wall time
+                    clock.stop()
         finally:
-            bar.close()
-            job.finish()
+            out.set_info(timeline=clock.summary(), variable_frame_rate=job.variable_rate())
             stopped = job.stopped_early()
             out.set_info(stopped_early=stopped)  # None: the source gave every frame it announced
             if stopped:
@@ -463,3 +468,74 @@ def _run_locked(
         )
     (out_dir / CHECKPOINT_FILE).unlink(missing_ok=True)
     return summary
+
+
+def _frame_loop(
+    job: TrackerRun,
+    out: Any,
+    bar: Any,
+    stop: _Stop,
+    clock: Any,
+    start: int,
+    max_frames: int | None,
+    prefetch_depth: int,
+    checkpoint_seconds: float,
+) -> None:
+    """The frames of :func:`run_tracker`: source (decoded ahead) -> ``job.step`` -> ``job.record``, with the
+    timings, the progress bar, checkpoints and the stop signal."""
+
+    from wptrack.io import timeline
+
+    with timeline.thread_cpu("main"):
+        _frames(job, out, bar, stop, clock, start, max_frames, prefetch_depth, checkpoint_seconds)
+
+
+def _frames(
+    job: TrackerRun,
+    out: Any,
+    bar: Any,
+    stop: _Stop,
+    clock: Any,
+    start: int,
+    max_frames: int | None,
+    prefetch_depth: int,
+    checkpoint_seconds: float,
+) -> None:
+    import itertools
+
+    from wptrack.io.prefetch import prefetch
+
+    last_checkpoint = time.monotonic()
+    source = job.frames()
+    stage = job.source_stage or getattr(source, "stage", None) or "source"
+    frames = itertools.islice(source, start, max_frames)  # decoded and skipped when resuming
+    clock.source = stage
+    clock.start()
+    t_wait = time.perf_counter()
+    # "decode_wait": the time the tracker waited for the next decoded frame (the timeline's wait_<stage>)
+    for item in prefetch(frames, depth=prefetch_depth, name=stage):
+        t_step = time.perf_counter()
+        out.add_timing("decode_wait", t_step - t_wait)
+        est = job.step(item)
+        t_record = time.perf_counter()
+        job.record(est, out)
+        out.frame_done(est.frame)
+        t_done = time.perf_counter()
+        for name, seconds in est.timings.items():
+            out.add_timing(name, seconds)
+        step_s = t_record - t_step
+        filter_s = min(est.timings.get("filter", step_s), step_s)
+        upload_s = min(est.timings.get("upload", step_s - filter_s), step_s - filter_s)
+        clock.add("filter", filter_s)
+        clock.add("upload", upload_s)  # the observation's host work and copy to the device
+        if step_s - filter_s - upload_s > 1e-4:
+            clock.add("step_other", step_s - filter_s - upload_s)  # e.g. the people tracker's population update
+        clock.add("record", t_done - t_record)
+        bar.update(1)
+        if stop.signum:
+            _write_checkpoint(job, out, est.frame)
+            raise RunInterrupted(stop.signum)
+        if checkpoint_seconds > 0 and time.monotonic() - last_checkpoint >= checkpoint_seconds:
+            _write_checkpoint(job, out, est.frame)
+            last_checkpoint = time.monotonic()
+        t_wait = time.perf_counter()

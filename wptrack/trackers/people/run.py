@@ -185,8 +185,16 @@ class PeopleRun(TrackerRun):
         tr = self.tracker
         return {"device": tr.device, "seed": tr.config.seed, "cameras": self._names}
 
+    source_stage = "gather"  # the run loop's prefetch thread only pairs the cameras' frames and masks
+
     def frames(self) -> Iterator[Any]:
-        return zip(self._frames, *self._masks, strict=False)  # the masks may run longer (checked: not shorter)
+        """The cameras' frames and each camera's masks, each made ahead in a thread of its own (issue 27: the cameras'
+        masks were made one after another in one thread), bounded queues of 2."""
+        from wptrack.io.prefetch import prefetch
+
+        streams = [prefetch(self._frames, depth=2, name="decode")]
+        streams += [prefetch(m, depth=2, name="masks") for m in self._masks]
+        return zip(*streams, strict=False)  # the masks may run longer (checked: not shorter)
 
     def start(self, out_dir: Path, resume_after: int | None = None) -> None:
         from wptrack.io.chunklog import ChunkLog

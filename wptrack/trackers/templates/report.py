@@ -317,7 +317,10 @@ def section_fig5(ctx: ReportContext) -> Section | None:
     if run.masks is None:
         sec.notes.append("no masks.avi in the run (track with --save-masks): the motion-mask panels are left out")
     if run.virtual is None:
-        sec.notes.append("no virtual.avi in the run (tracked with --no-virtual): the virtual scene is left out")
+        sec.notes.append(
+            "no virtual.avi in the run (tracked with --no-virtual, or frames above 640x480 without --virtual): the "
+            "virtual scene is left out"
+        )
     if run.masks is None and run.virtual is None:
         return sec
 

@@ -13,7 +13,8 @@ Outputs (all written incrementally or atomically, so an interrupted run leaves v
                            kept with uniform weights, the prior; run.json's summary counts such frames)
     out_dir/best.csv       the same columns for the objects of the best particle (its whole scene hypothesis)
     out_dir/virtual.avi    the best particle's virtual scene per frame (paper Fig. 5), one colour per object id
-    out_dir/masks.avi      the motion masks used (only with save_masks)
+                           (by default only for frames up to VIRTUAL_AUTO_PIXELS; --virtual / --no-virtual decide)
+    out_dir/masks.avi      the motion masks used (only with save_masks; one grey channel, 0/255)
     out_dir/backgrounds/   offline masks: the background of each window used, for the report (BackgroundSaver)
     out_dir/run.json       configuration, inputs, device, versions, timings, summary
 """
@@ -79,6 +80,18 @@ def object_row(frame: int, o, degenerate: bool = False) -> list[Any]:
     ]
 
 
+VIRTUAL_AUTO_PIXELS = 640 * 480
+"""Largest frame (pixels) for which ``virtual.avi`` is written unless told (``virtual=None``): the FFV1 encoding of a
+colour frame costs about 0.04 us per pixel of CPU (1440x1080: 57 ms on the CI machine, 12 ms at 640x480), more than
+the whole frame of tracking on a GPU at large sizes; it runs in a writer thread, but one encoder thread cannot keep
+up with 100 frames/s above about 0.25 Mpixels. ``--virtual`` writes it at any size."""
+
+
+def virtual_default(width: int, height: int) -> bool:
+    """Whether ``virtual.avi`` is written when neither ``--virtual`` nor ``--no-virtual`` is given."""
+    return int(width) * int(height) <= VIRTUAL_AUTO_PIXELS
+
+
 def label_colours(labels: np.ndarray) -> np.ndarray:
     """A distinct BGR colour (uint8) per object label (golden-angle hues, stable across frames)."""
     import cv2
@@ -89,11 +102,20 @@ def label_colours(labels: np.ndarray) -> np.ndarray:
 
 
 def colour_virtual(virtual: np.ndarray, slot_labels: np.ndarray) -> np.ndarray:
-    """Colour a virtual scene (H, W) uint8 of ``1 + slot`` values by the slots' labels -> (H, W, 3) BGR."""
+    """Colour a virtual scene (H, W) uint8 of ``1 + slot`` values by the slots' labels -> (H, W, 3) BGR (OpenCV's
+    table lookup: the same values as ``lut[virtual]``, a sixth of its time at 1440x1080)."""
+    import cv2
+
     lut = np.zeros((256, 3), dtype=np.uint8)
     n = len(slot_labels)
     lut[1 : n + 1] = label_colours(np.maximum(slot_labels, 0))
-    return lut[virtual]
+    v = np.ascontiguousarray(virtual, dtype=np.uint8)
+    return cv2.LUT(cv2.merge([v, v, v]), lut.reshape(1, 256, 3))
+
+
+def _mask_image(mask: np.ndarray) -> np.ndarray:
+    """A {0, 1} mask as the 0/255 grey frame of masks.avi."""
+    return (np.asarray(mask) != 0).view(np.uint8) * np.uint8(255)
 
 
 BACKGROUNDS_DIR = "backgrounds"
@@ -141,7 +163,9 @@ class TemplateRun(TrackerRun):
         device: ``auto``, ``cpu``, ``cuda`` or ``cuda:N``.
         max_frames: stop after this many frames.
         save_masks: also write the masks used to ``masks.avi``.
-        virtual: write the best particle's virtual scenes to ``virtual.avi``.
+        virtual: write the best particle's virtual scenes to ``virtual.avi``; None: only for frames up to
+            :data:`VIRTUAL_AUTO_PIXELS`. Both videos are encoded by writer threads
+            (:class:`wptrack.io.video.BackgroundWriter`).
         flood_guard: hold the last normal mask on flooded frames (camera shake, :mod:`wptrack.motion.flood`); the
             flooded frames are counted in run.json (``flooded_frames``).
 
@@ -162,7 +186,7 @@ class TemplateRun(TrackerRun):
         device: str = "auto",
         max_frames: int | None = None,
         save_masks: bool = False,
-        virtual: bool = True,
+        virtual: bool | None = None,
         flood_guard: bool = True,
     ) -> None:
         from dataclasses import asdict, replace
@@ -189,10 +213,18 @@ class TemplateRun(TrackerRun):
             stream = open_masks(video=video, config=mask_config, camera=camera, rig_source=rig.source)
         rig = rig.with_camera(camera)
         device = resolve_device(device)
+        if virtual is None:
+            virtual = virtual_default(camera.width, camera.height)
+            if not virtual:
+                log.info(
+                    "virtual.avi not written for %dx%d frames (more than %d pixels; --virtual writes it)",
+                    camera.width, camera.height, VIRTUAL_AUTO_PIXELS,
+                )  # fmt: skip
         self.tracker = TemplateTracker(rig, config, device=device, keep_virtual=virtual)
         self._stream = stream
         self._fps = config.frame_rate
-        self._virtual = virtual
+        self._virtual = bool(virtual)
+        self.source_stage = "decode" if masks is not None else "masks"  # what the run loop's prefetch thread does
         self._save_masks = save_masks
         self.total = len(stream) if max_frames is None else min(len(stream), max_frames)
         self.config = {
@@ -223,7 +255,7 @@ class TemplateRun(TrackerRun):
 
     def start(self, out_dir: Path, resume_after: int | None = None) -> None:
         from wptrack.io.tables import truncate_csv_after
-        from wptrack.io.video import continue_video
+        from wptrack.io.video import BackgroundWriter, continue_video
 
         best = out_dir / "best.csv"
         if resume_after is not None:
@@ -231,8 +263,14 @@ class TemplateRun(TrackerRun):
         self._best_csv = CsvAppender(best, TEMPLATE_COLUMNS, append=resume_after is not None and best.exists())
         # a resumed run rewrites its videos: the frames up to the resume point copied, then the new ones (one file)
         keep = 0 if resume_after is None else resume_after + 1
-        self._vwriter = continue_video(out_dir / "virtual.avi", keep, fps=self._fps) if self._virtual else None
-        self._mwriter = continue_video(out_dir / "masks.avi", keep, fps=self._fps) if self._save_masks else None
+        if self._virtual:
+            self._vwriter = BackgroundWriter(
+                continue_video(out_dir / "virtual.avi", keep, fps=self._fps), stage="write_virtual"
+            )
+        if self._save_masks:
+            self._mwriter = BackgroundWriter(
+                continue_video(out_dir / "masks.avi", keep, fps=self._fps, grey=True), stage="write_masks"
+            )
         model = getattr(self._stream, "model", None)
         if model is not None:  # offline masks: keep each background window for the report's Fig. 5 panels
             model.on_build = BackgroundSaver(out_dir / BACKGROUNDS_DIR)
@@ -249,14 +287,18 @@ class TemplateRun(TrackerRun):
         self._penalty_sum += int(est.penalty)  # running sums: memory bounded however long the run
         self._penalty_frames += 1
         self._degenerate += int(est.degenerate)
-        if self._vwriter is not None and est.virtual is not None:
-            self._vwriter.write(colour_virtual(est.virtual, self.tracker.host["slot_label"].numpy()))
-        if self._mwriter is not None:
-            self._mwriter.write(np.repeat((self._mask * 255).astype(np.uint8)[..., None], 3, axis=2))
+        if self._vwriter is not None and est.virtual is not None:  # est.virtual is the estimate's own copy
+            labels = self.tracker.host["slot_label"].numpy().copy()
+            self._vwriter.write(est.virtual, lambda v: colour_virtual(v, labels))
+        if self._mwriter is not None:  # each frame's mask is a new array (the mask stream's)
+            self._mwriter.write(self._mask, _mask_image)
 
     def flush(self) -> None:
         if self._best_csv is not None:
             self._best_csv.sync()
+        for writer in (self._vwriter, self._mwriter):
+            if writer is not None:
+                writer.flush()
 
     def state_dict(self) -> dict[str, Any]:
         ids = sorted(self._seen)
@@ -282,9 +324,15 @@ class TemplateRun(TrackerRun):
     def finish(self) -> None:
         if self._best_csv is not None:
             self._best_csv.close()
+        errors = []
         for writer in (self._vwriter, self._mwriter):
             if writer is not None:
-                writer.close()
+                try:
+                    writer.close()
+                except Exception as e:  # noqa: BLE001 - the other writer is still closed; the first error raised
+                    errors.append(e)
+        if errors:
+            raise errors[0]
 
     def finish_tracks(self, path: Path) -> dict[str, Any]:
         """Complete the finished run's ``tracks.csv`` offline (``wptrack.trackers.templates.backfill``): backfill the
@@ -330,6 +378,7 @@ class TemplateRun(TrackerRun):
             "mean_penalty": self._penalty_sum / self._penalty_frames if self._penalty_frames else None,
             "degenerate_frames": self._degenerate,
             "flooded_frames": len(self._flood.flooded) if self._flood is not None else None,
+            "virtual": self._virtual,
         }
 
 
@@ -343,7 +392,7 @@ def run_template_tracking(
     device: str = "auto",
     max_frames: int | None = None,
     save_masks: bool = False,
-    virtual: bool = True,
+    virtual: bool | None = None,
     progress: bool = False,
     resume: bool = False,
     checkpoint_seconds: float = 60.0,
@@ -382,7 +431,10 @@ class TemplateInputs:
         None, help="binary motion masks (video or image folder, nonzero = foreground) instead of --video"
     )
     save_masks: bool = param(False, help="write the masks used to masks.avi")
-    virtual: bool = param(True, help="write virtual.avi (the best particle's virtual image per frame)")
+    virtual: bool | None = param(
+        None, help="write virtual.avi (the best particle's virtual image per frame); unset: only for frames up to "
+        "640x480 pixels (its encoding costs more than the tracking above that)",
+    )  # fmt: skip
 
     def __post_init__(self) -> None:
         check(self)
