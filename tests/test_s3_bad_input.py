@@ -10,13 +10,13 @@ import logging
 import numpy as np
 import pytest
 
+from wptrack.cameras.rig import Camera, Rig
 from wptrack.cli import main
-from wptrack.errors import ConfigError
-from wptrack.frames import write_video
-from wptrack.rig import Camera, Rig
-from wptrack.runs.flood import FloodGuard
-from wptrack.runs.templates import run_template_tracking
-from wptrack.trackers.templates import TemplateConfig
+from wptrack.core.errors import ConfigError
+from wptrack.io.video import write_video
+from wptrack.motion.flood import FloodGuard
+from wptrack.trackers.templates.run import run_template_tracking
+from wptrack.trackers.templates.tracker import TemplateConfig
 
 W, H = 160, 120
 
@@ -161,7 +161,7 @@ def test_wrong_size_source_clear_error(tmp_path, capsys, kind, size, needle) -> 
 
 
 def test_shake_moves_only_the_chosen_frames(rng) -> None:
-    from wptrack.experiments_conditions import shake
+    from wptrack.motion.experiments import shake
 
     frames = _textured(rng, 8)
     out = shake(frames, first=2, count=3, amplitude=4)
@@ -184,10 +184,10 @@ def test_max_objects_beyond_memory_is_a_clear_error_before_allocation(tmp_path, 
     written; the R_max it names fits."""
     import re
 
-    import wptrack.pf as pf
-    from wptrack.trackers.templates import TemplateTracker, particle_bytes
+    import wptrack.core.memory as memory
+    from wptrack.trackers.templates.tracker import TemplateTracker, particle_bytes
 
-    monkeypatch.setattr(pf, "available_bytes", lambda dev: 8 * 2**20)
+    monkeypatch.setattr(memory, "available_bytes", lambda dev: 8 * 2**20)
     rig = _rig(tmp_path)
     src = tmp_path / "masks.avi"
     write_video(src, [np.zeros((H, W, 3), np.uint8)] * 3, fps=15)

@@ -41,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from wptrack.errors import ConfigError
+from wptrack.core.errors import ConfigError
 
 __all__ = ["CONDITION_NAMES", "PlazaConditions", "TimeWarp", "ease_rate", "parse_conditions"]
 
@@ -73,6 +73,20 @@ SHOT_GAIN = 0.27
 """noise: variance per DN of signal (shot noise), DN."""
 JPEG_QUALITY = 70
 """compression: JPEG quality (0-100) of cv2.imencode."""
+CROWD_AT_ONCE = (20, 40)
+"""crowd: range of the mean number of crowd people in the ground truth over the default length (one draw per scene)."""
+GROUP_SIZES = ((1, 0.4), (2, 0.4), (3, 0.2))
+"""crowd: group sizes and their shares."""
+SIDE_BY_SIDE = (0.7, 0.9)
+"""crowd: distance of neighbours walking side by side in a pair or a group of three, metres."""
+WALK_SPEEDS = (0.9, 1.5)
+"""crowd: walking speeds, m/s."""
+CYCLISTS = (2, 4)
+"""cyclists: range of their number."""
+CYCLE_SPEEDS = (3.5, 6.0)
+"""cyclists: their speeds, m/s."""
+CYCLIST_CLASS = "cyclist"
+"""cyclists: ground-truth class of a rider on a bicycle (one object)."""
 
 CONDITION_NAMES: dict[str, str] = {
     "static-start": "static_start",
@@ -165,16 +179,12 @@ class PlazaConditions:
 
 
 def _crowd_params() -> dict[str, Any]:
-    from wptrack.synth import plaza_crowd as PC
-
-    return {"at_once": list(PC.CROWD_AT_ONCE), "group_sizes": [list(g) for g in PC.GROUP_SIZES],
-            "side_by_side_m": list(PC.SIDE_BY_SIDE), "speeds": list(PC.WALK_SPEEDS)}  # fmt: skip
+    return {"at_once": list(CROWD_AT_ONCE), "group_sizes": [list(g) for g in GROUP_SIZES],
+            "side_by_side_m": list(SIDE_BY_SIDE), "speeds": list(WALK_SPEEDS)}  # fmt: skip
 
 
 def _cyclist_params() -> dict[str, Any]:
-    from wptrack.synth import plaza_crowd as PC
-
-    return {"count": list(PC.CYCLISTS), "speeds": list(PC.CYCLE_SPEEDS), "class": PC.CYCLIST_CLASS}
+    return {"count": list(CYCLISTS), "speeds": list(CYCLE_SPEEDS), "class": CYCLIST_CLASS}
 
 
 def parse_conditions(text: str | Sequence[str] | None) -> PlazaConditions:

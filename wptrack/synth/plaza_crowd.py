@@ -19,7 +19,10 @@ and every scene seed another one. Ids follow the scene's own.
   width the handlebar's, height the rider's head).
 
 The camera, plaza and clutter are the plaza's (:mod:`wptrack.synth.plaza`): 7.5 m above the ground looking 38 degrees
-down over a plaza and a road, the high camera over a street of the issue at 640x480.
+down over a plaza and a road, the high camera over a street of the issue at 640x480. The conditions' parameters
+(:data:`CROWD_AT_ONCE`, :data:`CYCLISTS` ...) are :mod:`wptrack.synth.conditions`'s, which writes them to scene.json.
+This module registers both conditions with the plaza scene (:func:`wptrack.synth.plaza.register_actor_condition`,
+cyclists first: the crowd keeps off them); ``wptrack.synth`` imports it, so the plaza does not import this module.
 """
 
 from __future__ import annotations
@@ -31,19 +34,22 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from wptrack.synth import plaza as P
+from wptrack.synth import plaza_seeds as S
 from wptrack.synth.actors import Car, Formation, Path, Person, PlazaActor, _pitch, _Prim, _Rgb, _yaw
+from wptrack.synth.conditions import (
+    CROWD_AT_ONCE,
+    CYCLE_SPEEDS,
+    CYCLIST_CLASS,
+    CYCLISTS,
+    GROUP_SIZES,
+    SIDE_BY_SIDE,
+    WALK_SPEEDS,
+)
 from wptrack.synth.plaza_background import FPS, FRAMES
 
 __all__ = ["CROWD_AT_ONCE", "CYCLISTS", "CYCLIST_CLASS", "Cyclist", "add_crowd", "add_cyclists", "scene_key"]
 
-CROWD_AT_ONCE = (20, 40)
-"""Range of the mean number of crowd people in the ground truth over the default length (one draw per scene)."""
-GROUP_SIZES = ((1, 0.4), (2, 0.4), (3, 0.2))
-"""Crowd group sizes and their shares."""
-SIDE_BY_SIDE = (0.7, 0.9)
-"""Distance of neighbours walking side by side in a pair or a group of three, metres."""
-WALK_SPEEDS = (0.9, 1.5)
-"""Crowd walking speeds, m/s."""
 CROSSING_SHARE = 0.2
 """Share of crowd groups that walk in from the bottom of the image instead of along the street."""
 PLAZA_BANDS = ((5.0, 7.3), (7.7, 9.8))
@@ -58,14 +64,8 @@ FAR_SIDEWALK = (24.2, 24.3)
 cars and cut by the top of the image), metres."""
 FAR_SHARE = 0.2
 """Share of crowd singles on the far band or the far sidewalk (half each)."""
-CYCLISTS = (2, 4)
-"""Range of the number of cyclists."""
-CYCLE_SPEEDS = (3.5, 6.0)
-"""Cyclists' speeds, m/s."""
 CYCLE_LANES = (11.35, 18.35)
 """World y of the cycle lanes along the road when the scene has cars (1 m from the cars' footprints), metres."""
-CYCLIST_CLASS = "cyclist"
-"""Ground-truth class of a rider on a bicycle (one object)."""
 TRIES = 60
 """Draws of one group or cyclist before it is given up."""
 FULL = 6
@@ -191,16 +191,12 @@ def _has_cars(actors: Sequence[PlazaActor]) -> bool:
 
 
 def _tracks(actors: Sequence[PlazaActor]):
-    from wptrack.synth import plaza_seeds as S
-
     return [S._geo(a) for a in actors]
 
 
 def _clear(new: Sequence[PlazaActor], accepted: list) -> tuple[bool, list]:
     """Whether the actors ``new`` keep the plaza's rules with each other and with ``accepted`` (tracks of the actors
     taken so far): clutter, speeds, gaps; returns their tracks too."""
-    from wptrack.synth import plaza_seeds as S
-
     tracks = [S._geo(a) for a in new]
     for t in tracks:
         if isinstance(t.actor.shape, Cyclist):
@@ -221,8 +217,6 @@ def _clear(new: Sequence[PlazaActor], accepted: list) -> tuple[bool, list]:
 
 def _gap_problem(a, b) -> bool:
     """Too close while both are on their paths (cyclists count as people with 0.5 m more room)."""
-    from wptrack.synth import plaza_seeds as S
-
     if not (isinstance(a.actor.shape, Cyclist) or isinstance(b.actor.shape, Cyclist)):
         return bool(S._pair_problems(a, b))
     both = a.active & b.active
@@ -237,8 +231,6 @@ def _gap_problem(a, b) -> bool:
 
 def _present_count(tracks: list) -> np.ndarray:
     """(FRAMES,) people of ``tracks`` seen by the camera per frame (the cheap stand-in of the ground truth)."""
-    from wptrack.synth import plaza_seeds as S
-
     out = np.zeros(FRAMES)
     for t in tracks:
         out += t.active[:FRAMES] & S._in_view(t.pos[:FRAMES])
@@ -247,8 +239,6 @@ def _present_count(tracks: list) -> np.ndarray:
 
 def _street_path(rng: np.random.Generator, band: tuple[float, float], towards: float, speed: float) -> Path:
     """A walk along the street (x) inside ``band`` from beyond one side of the image to beyond the other."""
-    from wptrack.synth import plaza_seeds as S
-
     ys = rng.uniform(*band, size=3)
     xs = [float(S.view_half_width(y)) + float(rng.uniform(2.0, 3.5)) for y in (ys[0], ys[2])]
     x0, x1 = -towards * xs[0], towards * xs[1]
@@ -259,8 +249,6 @@ def _street_path(rng: np.random.Generator, band: tuple[float, float], towards: f
 
 def _started(rng: np.random.Generator, path: Path, lead: float) -> Path:
     """``path`` started so that it is in view at a random time of the sequence (or already at its first frame)."""
-    from wptrack.synth import plaza_seeds as S
-
     window = S._view_window(path, path.end)
     if window is None:
         return path
@@ -272,8 +260,6 @@ def _started(rng: np.random.Generator, path: Path, lead: float) -> Path:
 
 def _group(rng: np.random.Generator, oid: int, looks: list[Person], scene_has_cars: bool) -> list[PlazaActor]:
     """One crowd group (1-3 people) on its path, not yet checked."""
-    from wptrack.synth import plaza_seeds as S
-
     size = int(rng.choice([s for s, _ in GROUP_SIZES], p=[w for _, w in GROUP_SIZES]))
     speed = float(rng.uniform(*WALK_SPEEDS))
     if size == 1 and rng.uniform() < FAR_SHARE:  # along the parked cars, or behind them at the top of the image
@@ -299,8 +285,6 @@ def _group(rng: np.random.Generator, oid: int, looks: list[Person], scene_has_ca
 
 def add_crowd(actors: Sequence[PlazaActor]) -> list[PlazaActor]:
     """``crowd``: the scene's objects and a crowd (module docstring)."""
-    from wptrack.synth import plaza as P
-
     actors = list(actors)
     rng = _rng("crowd", actors)
     target = float(rng.uniform(*CROWD_AT_ONCE))
@@ -328,9 +312,6 @@ def add_crowd(actors: Sequence[PlazaActor]) -> list[PlazaActor]:
 
 def add_cyclists(actors: Sequence[PlazaActor]) -> list[PlazaActor]:
     """``cyclists``: the scene's objects and :data:`CYCLISTS` cyclists (module docstring)."""
-    from wptrack.synth import plaza as P
-    from wptrack.synth import plaza_seeds as S
-
     actors = list(actors)
     rng = _rng("cyclists", actors)
     count = int(rng.integers(CYCLISTS[0], CYCLISTS[1] + 1))
@@ -363,3 +344,7 @@ def add_cyclists(actors: Sequence[PlazaActor]) -> list[PlazaActor]:
                 oid += 1
                 break
     return out
+
+
+P.register_actor_condition("cyclists", add_cyclists)  # first: the crowd is drawn around the bikes
+P.register_actor_condition("crowd", add_crowd)
