@@ -22,8 +22,8 @@ from wptrack.kernels.core.random import (
     normal4_at,
     uniform4_at,
 )
+from wptrack.kernels.templates.exclusion import disc_in_box
 from wptrack.kernels.templates.raster import KIND_CYCLIST, KIND_HUMAN, KIND_NONE, KIND_VEHICLE, PIECES
-from wptrack.kernels.templates.xor import disc_in_box
 
 wp.set_module_options({"enable_backward": False})
 

@@ -5,7 +5,8 @@ and the virtual scene v_i differ (eq. 4). It is computed without an image per pa
 ``m_i = |q| + |v_i| - 2 |q AND v_i|``, where ``|v_i|`` and ``|q AND v_i|`` are summed over the covered spans of
 each row only (``|q AND span|`` from the row prefix sums of q in O(1)). The same pass records the particle's
 spans in a per-row difference array of coverage counts (two atomic adds per span, spread over the image), from
-which ``kernels.templates.uoh`` builds the Uncovered Object Histogram.
+which ``kernels.templates.uoh`` builds the Uncovered Object Histogram. The exclusion prior added to eq. 5's
+complexity (objects of a particle on the same ground) is ``kernels.templates.exclusion``'s.
 """
 
 import functools
@@ -13,9 +14,9 @@ import functools
 import warp as wp
 
 from wptrack.kernels.core.reduce import NEG_INF, block_argmax, finite_logw
+from wptrack.kernels.templates.exclusion import pair_overlap
 from wptrack.kernels.templates.partition import group_at
 from wptrack.kernels.templates.raster import (
-    KIND_HUMAN,
     MAX_PIECES,
     PIECES,
     hull_chain_span,
@@ -75,51 +76,6 @@ def mask_total_kernel(qrow: wp.array2d(dtype=wp.int32), total: wp.array(dtype=wp
     t = wp.tile_sum(wp.tile(acc))
     if lane == 0:
         total[0] = t[0]
-
-
-@wp.func
-def disc_in_box(c: wp.vec2, r: float, centre: wp.vec2, heading: float, half: wp.vec2):
-    """Penetration of a ground disc (centre ``c``, radius ``r``, metres) into an oriented box (``centre``,
-    ``heading`` radians, half length and half width ``half``, metres), as a fraction of the disc's diameter in
-    [0, 1]: 0 when they do not overlap, 1 when the disc is pushed a whole diameter in."""
-    d = c - centre
-    ca = wp.cos(heading)
-    sa = wp.sin(heading)
-    lx = wp.abs(ca * d[0] + sa * d[1])
-    ly = wp.abs(-sa * d[0] + ca * d[1])
-    depth = wp.min(half[0] + r - lx, half[1] + r - ly)
-    return wp.clamp(depth / (2.0 * r), 0.0, 1.0)
-
-
-@wp.func
-def footprint(k: int, dims: wp.vec3):
-    """Radius of an object's ground disc (human: body radius; vehicle: half width, metres)."""
-    if k == KIND_HUMAN:
-        return dims[1]
-    return 0.5 * dims[1]
-
-
-@wp.func
-def pair_overlap(ka: int, pa: wp.vec2, ha: float, da: wp.vec3, kb: int, pb: wp.vec2, hb: float, db: wp.vec3):
-    """Ground-footprint overlap of two objects in [0, 1] (the exclusion prior of ``xor_score_kernel``).
-
-    Humans are discs of their body radius, vehicles boxes of their length and width. Two humans: ``1 - d / (r_a +
-    r_b)`` (d the distance of their centres). Human and vehicle: the disc's penetration into the box
-    (``disc_in_box``). Two vehicles: the deepest penetration of three discs of half the width along b (its centre
-    and both ends) into a's box.
-    """
-    if ka == KIND_HUMAN and kb == KIND_HUMAN:
-        return wp.clamp(1.0 - wp.length(pa - pb) / (da[1] + db[1]), 0.0, 1.0)
-    if ka == KIND_HUMAN:
-        return disc_in_box(pa, da[1], pb, hb, wp.vec2(0.5 * db[0], 0.5 * db[1]))
-    if kb == KIND_HUMAN:
-        return disc_in_box(pb, db[1], pa, ha, wp.vec2(0.5 * da[0], 0.5 * da[1]))
-    r = 0.5 * db[1]
-    along = wp.max(0.5 * db[0] - r, 0.0) * wp.vec2(wp.cos(hb), wp.sin(hb))
-    half = wp.vec2(0.5 * da[0], 0.5 * da[1])
-    o = disc_in_box(pb, r, pa, ha, half)
-    o = wp.max(o, disc_in_box(pb + along, r, pa, ha, half))
-    return wp.max(o, disc_in_box(pb - along, r, pa, ha, half))
 
 
 @wp.func
