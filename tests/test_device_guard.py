@@ -95,9 +95,16 @@ def test_new_shared_work_waits_for_a_capture_in_progress_and_one_waiting():
     assert order == ["first frame", "capture", "later frame"]
 
 
-def test_one_guard_per_device_alias():
-    assert device_guard("cpu") is device_guard("cpu")
-    assert device_guard("cuda:0") is not device_guard("cpu")
+def test_one_guard_per_device(device):
+    """Every name of a device gives its one guard (the tracker may say ``cuda``, the masks ``cuda:0``)."""
+    import warp as wp
+
+    d = wp.get_device(device)
+    assert device_guard(device) is device_guard(d) is device_guard(d.alias)
+    if d.is_cuda and d.ordinal == wp.get_cuda_device().ordinal:
+        assert device_guard("cuda") is device_guard(d.alias)
+    if d.is_cuda:
+        assert device_guard(d) is not device_guard("cpu")
 
 
 def test_the_frame_chain_captures_under_the_exclusive_guard(monkeypatch):

@@ -337,8 +337,11 @@ _guards_lock = threading.Lock()
 
 
 def device_guard(device: object) -> DeviceGuard:
-    """The process's :class:`DeviceGuard` of ``device`` (a Warp device or its alias; one per alias)."""
-    key = str(getattr(device, "alias", device))
+    """The process's :class:`DeviceGuard` of ``device`` (a Warp device or any name of it: ``cuda`` and ``cuda:0``
+    are one device, one guard)."""
+    import warp as wp
+
+    key = wp.get_device(device).alias
     with _guards_lock:
         guard = _guards.get(key)
         if guard is None:
