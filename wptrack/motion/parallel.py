@@ -52,11 +52,14 @@ def parallel_evidence(
         clean: The clean-up of a model's raw mask (``clean_mask`` with the stream's config).
         probability: Yield the probability image (else None).
     """
+    from wptrack.core.device import device_guard
     from wptrack.motion.background import OfflineBackground
 
     c = masks.config
     width, height = masks.size
-    models = [masks.model] + [OfflineBackground(masks.source, c, masks.model.device) for _ in range(workers - 1)]
+    guard = device_guard(masks.model.device)  # a tracker's graph capture waits for the workers' device work
+    with guard.shared():
+        models = [masks.model] + [OfflineBackground(masks.source, c, masks.model.device) for _ in range(workers - 1)]
     for model in models[1:]:  # the first model's clean-up and probability settings for every model
         masks.attach_cleanup(model)
         model.want_prob = masks.model.want_prob
@@ -111,7 +114,8 @@ def parallel_evidence(
                 return
             index, frame = item
             try:
-                raw, prob = model.evidence(index, frame)
+                with guard.shared():
+                    raw, prob = model.evidence(index, frame)
                 result = (raw if model.cleanup is not None else clean(raw), prob if probability else None)
             except BaseException as e:  # noqa: BLE001 - raised by the collector at its frame
                 put(outbox[k], e)
