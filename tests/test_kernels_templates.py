@@ -1180,6 +1180,7 @@ def quiet_dynamics(**overrides):
     dyn.occlusion_noise = 0.0
     dyn.unseen_del = 0.0
     dyn.absorb = 0
+    dyn.speed_min = wp.vec4(0.0, 0.0, 0.0, 0.0)  # the cyclist's speed floor: its own test
     for k, v in overrides.items():
         setattr(dyn, k, v)
     return dyn
@@ -1292,6 +1293,10 @@ def random_population(rng, n: int, r: int, p_empty: float = 0.25):
         arrays["vel"][0, 3] = (15.0, 0.2)
         arrays["dims"][0, 3] = 0.7 * np.array(cfg.cyclist.dims_min)
         assert 15.0 > cfg.cyclist.speed_max
+    if r > 5:  # slow cyclists (particle 0, slots 4 and 5): below the speed floor, either way
+        arrays["kind"][0, 4:6], arrays["label"][0, 4:6] = CYCLIST, (5, 6)
+        arrays["vel"][0, 4], arrays["vel"][0, 5] = (0.5, 0.1), (-0.3, 0.0)
+        arrays["dims"][0, 4:6] = mid_c
     return {k: np.asarray(v).astype(np.float32) if k not in ("kind", "label") else v for k, v in arrays.items()}
 
 
@@ -1318,7 +1323,10 @@ def drift_reference(src: dict, dyn, anc, resampled: int) -> dict[str, np.ndarray
     vmax_v, tmax = float(np.float32(dyn.speed_max[VEHICLE])), float(np.float32(dyn.turn_max))
     vmax_c = float(np.float32(dyn.speed_max[CYCLIST]))
     vmax = np.where(cyc, vmax_c, vmax_v)  # a cyclist moves as a vehicle (eq. 9) with its own limits
-    vel_v = np.stack([np.clip(vel[..., 0], -vmax, vmax), np.clip(vel[..., 1], -tmax, tmax)], axis=-1)
+    speed = np.clip(vel[..., 0], -vmax, vmax)
+    vmin_c = float(np.float32(dyn.speed_min[CYCLIST]))  # the cyclist's speed floor, either way
+    speed = np.where(cyc & (np.abs(speed) < vmin_c), np.where(speed < 0, -vmin_c, vmin_c), speed)
+    vel_v = np.stack([speed, np.clip(vel[..., 1], -tmax, tmax)], axis=-1)
     box = (veh | cyc)[..., None]
     lo_c, hi_c = np.array(dyn.dims_min_cyclist, np.float64), np.array(dyn.dims_max_cyclist, np.float64)
     out["pos"] = np.where(hum[..., None], pos + vh * dt, np.where(box, pos_v, 0.0))
@@ -1344,7 +1352,7 @@ def test_predict_deterministic_drift_matches_eqs_8_9(device, rng, resampled):
     n, r = 64, 6
     arrays = random_population(rng, n, r)
     src = make_state(device, n, r, **arrays)
-    dyn = quiet_dynamics()
+    dyn = quiet_dynamics(speed_min=wp.vec4(0.0, 0.0, 0.0, 2.0))  # a cyclist speed floor above the slow ones
     anc = rng.integers(0, n, n)
     anc[:3] = 0  # particle 0 holds the limit cases
     got = predict(device, dyn, src, n, r, ancestors=anc, resampled=resampled)
@@ -1361,6 +1369,8 @@ def test_predict_deterministic_drift_matches_eqs_8_9(device, rng, resampled):
     np.testing.assert_allclose(got["dims"][:3, 2], [list(dyn.dims_max_human)] * 3, rtol=1e-6)
     np.testing.assert_allclose(got["vel"][:3, 3, 0], dyn.speed_max[CYCLIST], rtol=1e-6)  # the cyclist's own limit
     np.testing.assert_allclose(got["dims"][:3, 3], [list(dyn.dims_min_cyclist)] * 3, rtol=1e-6)
+    vmin = float(np.float32(dyn.speed_min[CYCLIST]))
+    np.testing.assert_allclose(got["vel"][:3, 4:6, 0], [[vmin, -vmin]] * 3, rtol=1e-6)  # raised to the floor
     assert (ref["kind"] == CYCLIST).sum() > 10
     assert np.all(got["pos"][~alive] == 0) and np.all(got["age"][~alive] == 0)
 

@@ -88,6 +88,7 @@ class Dynamics:
     init_speed_sd: wp.vec4  # initial velocity deviation of an added object by kind, m/s
     init_heading_sd: float  # initial heading deviation of an added vehicle or cyclist, rad
     speed_max: wp.vec4  # |velocity| (human) / |speed| (vehicle, cyclist) limit by kind, m/s
+    speed_min: wp.vec4  # |speed| floor of the box kinds (the cyclist's; beyond the paper; 0: none), m/s
     turn_max: float  # |theta| limit, rad/s
     t_add: float  # T_add of eq. 12
     t_del: float  # T_del of eq. 13
@@ -275,10 +276,11 @@ def template_predict_kernel(
             alpha = alpha + turn * dyn.dt
             p = p + speed * dyn.dt * wp.vec2(wp.cos(alpha), wp.sin(alpha)) + sig_pos * wp.vec2(n2[1], n2[2])
             vmax = dyn.speed_max[k]
-            v = wp.vec2(
-                wp.clamp(speed + ns * dyn.sigma_speed[k] * n1[3], -vmax, vmax),
-                wp.clamp(turn + ns * dyn.sigma_turn * n2[0], -dyn.turn_max, dyn.turn_max),
-            )
+            speed = wp.clamp(speed + ns * dyn.sigma_speed[k] * n1[3], -vmax, vmax)
+            vmin = dyn.speed_min[k]  # beyond the paper: a cyclist is never slower than this (0: no floor)
+            if wp.abs(speed) < vmin:
+                speed = wp.where(speed < 0.0, -vmin, vmin)
+            v = wp.vec2(speed, wp.clamp(turn + ns * dyn.sigma_turn * n2[0], -dyn.turn_max, dyn.turn_max))
         age = age + dyn.dt
     else:
         label = -1

@@ -154,6 +154,7 @@ def _dynamics_struct(config: TemplateConfig) -> kdyn.Dynamics:
     s.init_speed_sd = wp.vec4(0.0, h.init_speed_sd, v.init_speed_sd, c.init_speed_sd)
     s.init_heading_sd = v.init_heading_sd
     s.speed_max = wp.vec4(1.0, h.speed_max, v.speed_max, c.speed_max)
+    s.speed_min = wp.vec4(0.0, 0.0, 0.0, c.speed_min)
     s.turn_max = v.turn_max
     s.t_add = config.t_add
     s.t_del = config.t_del
