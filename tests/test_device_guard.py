@@ -157,3 +157,22 @@ def test_the_masks_model_works_under_the_shared_guard(monkeypatch):
         masks = open_masks(frames, config=MaskConfig(method="offline", window=6, samples=3, device="cpu"))
         assert len(list(masks)) == 12
     assert len(seen) == 24 and all(seen)
+
+
+def test_download_copies_without_switching_the_current_stream(device):
+    import numpy as np
+    import warp as wp
+
+    from wptrack.core.device import download
+
+    values = np.arange(24, dtype=np.float32).reshape(4, 6) - 3.5
+    a = wp.array(values, dtype=wp.float32, device=device)
+    d = wp.get_device(device)
+    before = d.stream if d.is_cuda else None
+    got = download(a)
+    assert isinstance(got, np.ndarray) and got.shape == (4, 6) and got.dtype == np.float32
+    np.testing.assert_array_equal(got, values)
+    if d.is_cuda:
+        assert d.stream is before
+    v = wp.array(np.arange(9, dtype=np.uint8), dtype=wp.uint8, device=device)
+    np.testing.assert_array_equal(download(v), np.arange(9, dtype=np.uint8))
