@@ -119,3 +119,61 @@ def test_bad_input_is_one_line_and_writes_nothing(scene, tmp_path, capsys, chang
     err = capsys.readouterr().err
     assert err.startswith("wptrack: error:") and message in err and "Traceback" not in err
     assert not out.exists()
+
+
+def test_person_removed_in_a_frame_with_occupancy_grids(scene, tmp_path):
+    """The crash of issue 31: a person removed after a frame whose occupancy grids are written (everybody leaves
+    while ``--occupancy-every 1`` asks for every frame's grids). The grids come with the frame's estimate, so
+    every person of a frame has one, also the ones removed after it."""
+    root = tmp_path / "leave"
+    root.mkdir()
+    rig = Rig.load(scene / "rig.yaml")
+    rig.save(root / "rig.yaml")
+    rng = np.random.default_rng(4)
+    frames, masks = [[], [], []], [[], [], []]
+    for t in range(40):
+        people = [(np.array([0.6 + 0.05 * t, 1.65]), COLOURS[0]), (np.array([3.4 - 0.05 * t, 2.35]), COLOURS[1])]
+        images, ms = render(rig, people if t < 20 else [], rng)  # everybody vanishes at frame 20
+        for k in range(3):
+            frames[k].append(images[k])
+            masks[k].append(np.repeat(ms[k][..., None], 3, axis=2))
+    for k in range(3):
+        write_video(root / f"cam{k}.avi", frames[k], fps=25)
+        write_video(root / f"mask{k}.avi", masks[k], fps=25)
+    out = tmp_path / "run"
+    assert main([*_args(root, out), "--occupancy-every", "1"]) == 0
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "complete" and run["summary"]["people"] == 2
+    t = read_tracks(out / "tracks.csv")
+    with np.load(out / "occupancy.npz") as z:
+        index = {(int(f), int(i)) for f, i in z["index"]}
+    rows = set(zip(t["frame"].tolist(), t["id"].tolist(), strict=True))
+    assert index == rows  # one grid per (frame, person) row, the last frames of both people included
+    assert max(f for f, _ in rows) >= 20  # they were still reported when the masks emptied, then removed
+
+
+def test_internal_error_is_not_a_user_error_and_keeps_the_run(scene, tmp_path, capsys, monkeypatch):
+    """A bug in the middle of a run: exit code 70 (not 2), the traceback and one 'internal error' line; the rows
+    written so far stay readable and run.json says 'failed' with the reason."""
+    from wptrack.cli import EXIT_INTERNAL
+    from wptrack.trackers.people import PeopleTracker
+
+    step = PeopleTracker.step
+
+    def failing(self, images, masks, **kw):
+        if self.frames_done == 25:
+            raise RuntimeError("injected fault")
+        return step(self, images, masks, **kw)
+
+    monkeypatch.setattr(PeopleTracker, "step", failing)
+    out = tmp_path / "run"
+    assert main(_args(scene, out)) == EXIT_INTERNAL != 2
+    err = capsys.readouterr().err
+    assert "Traceback" in err and "wptrack: internal error: RuntimeError: injected fault" in err
+    assert "wptrack: error:" not in err
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "failed" and "injected fault" in run["error"] and run["last_frame"] == 24
+    t = read_tracks(out / "tracks.csv")
+    assert t["frame"].max() == 24 and set(np.unique(t["id"])) == {0, 1}
+    idx, _ = read_chunks(out / "hulls")
+    assert len(idx) == len(t["frame"])

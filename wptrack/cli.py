@@ -2,7 +2,9 @@
 
 User mistakes (bad rig field, missing video, out-of-range parameter, no CUDA, unwritable output) print one
 line ``wptrack: error: ...`` on stderr and exit with code 2, without a traceback and before any output is
-written. Ctrl-C exits with 130 and leaves valid partial outputs.
+written. Ctrl-C exits with 130 and leaves valid partial outputs. Anything else is a bug in wptrack, never reported
+as a user mistake: the traceback, then ``wptrack: internal error: ...``, exit code :data:`EXIT_INTERNAL` (70,
+sysexits' EX_SOFTWARE); a run it stops keeps its outputs so far and says ``failed`` with the error in run.json.
 """
 
 from __future__ import annotations
@@ -18,6 +20,9 @@ from .errors import ConfigError, WptrackError
 from .runs.colour import TRACK_COLUMNS, run_color_tracking  # noqa: F401  (re-exported API)
 
 log = logging.getLogger("wptrack")
+
+EXIT_INTERNAL = 70
+"""Exit code of an internal error (a bug, not a user mistake): sysexits' EX_SOFTWARE."""
 
 
 # --- argument helpers ---------------------------------------------------------------------------------
@@ -894,6 +899,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM during a run (RunInterrupted)
         print("wptrack: interrupted; partial results were kept", file=sys.stderr)
         return int(getattr(e, "exit_code", 130))
+    except Exception as e:  # a bug: never a user mistake (exit 2); the run loop has closed its outputs ("failed")
+        import traceback
+
+        traceback.print_exc(file=sys.stderr)
+        print(
+            f"wptrack: internal error: {type(e).__name__}: {e} (a bug in wptrack, not in the input; please report "
+            "it with the traceback above; a run keeps its outputs so far and run.json says 'failed')",
+            file=sys.stderr,
+        )
+        return EXIT_INTERNAL
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -204,7 +204,8 @@ class PeopleRun(TrackerRun):
     def step(self, item: Any) -> Any:
         images, *masks = item
         self._frame_masks = masks
-        return self.tracker.step(images, masks)
+        every = self._occupancy_every
+        return self.tracker.step(images, masks, occupancy=bool(every) and self.tracker.frames_done % every == 0)
 
     def record(self, est: Any, out: Any) -> None:
         p_h = self.tracker.config.occupancy.p_h
@@ -220,9 +221,8 @@ class PeopleRun(TrackerRun):
             if person.particles is not None:
                 self._hulls.add(est.frame, person.id, hull_points(person.particles, person.weights, p_h))
         out.add_rows(rows)
-        if self._occupancy_every and est.frame % self._occupancy_every == 0:
-            occ = self.tracker.occupancies([p.id for p in est.people])
-            grids = [(pid, origin, grid) for pid, (origin, grid) in occ.items()]
+        grids = [(p.id, *p.occupancy) for p in est.people if p.occupancy is not None]  # computed with the frame
+        if grids:
             self._occupancy.add(est.frame, grids)
         for writer, m in zip(self._mask_writers, self._frame_masks, strict=False):
             writer.write(np.repeat(((np.asarray(m) != 0) * 255).astype(np.uint8)[..., None], 3, axis=2))

@@ -74,6 +74,10 @@ class PersonEstimate:
         age: frames since the person was added.
         particles: (K, 3) subsample of the particles (before resampling), metres, or None.
         weights: (K,) their weights relative to the best particle, or None.
+        occupancy: ``(origin (3,), grid (nx, ny, nz) float32)``: the occupancy pdf of this frame's particles (see
+            :meth:`PeopleTracker.occupancy`), when the frame was stepped with ``occupancy=True``, else None. It is
+            computed before the population update, so every person of the estimate has one, also a person removed
+            after this frame.
         degenerate: every particle's log-weight was -inf/NaN this frame (floored to ``kernels.reduce.LOGW_FLOOR``):
             the person's predicted particles were kept with uniform weights (the prior), the estimate is finite.
     """
@@ -89,6 +93,7 @@ class PersonEstimate:
     age: int
     particles: np.ndarray | None = None
     weights: np.ndarray | None = None
+    occupancy: tuple[np.ndarray, np.ndarray] | None = None
     degenerate: bool = False
 
 
@@ -567,9 +572,12 @@ class PeopleTracker:
             wp.copy(self._top_host, self.top)
 
     # --- the frame --------------------------------------------------------------------------------------
-    def step(self, images: Sequence[np.ndarray], masks: Sequence[np.ndarray]) -> PeopleEstimate:
+    def step(
+        self, images: Sequence[np.ndarray], masks: Sequence[np.ndarray], occupancy: bool = False
+    ) -> PeopleEstimate:
         """Track one synchronised set of frames: one (H, W, 3) uint8 BGR image and one (H, W) motion mask
-        (nonzero = motion) per camera, in rig order."""
+        (nonzero = motion) per camera, in rig order. With ``occupancy``, every person of the returned estimate
+        carries its occupancy grid (``PersonEstimate.occupancy``), computed before anybody is removed."""
         t0 = time.perf_counter()
         self.upload(images, masks)
         t1 = time.perf_counter()
@@ -603,6 +611,10 @@ class PeopleTracker:
                 if body.centroid == "standing":
                     person.centroid[2] = body.ratio * person.top  # standing-person model (BodyConfig)
             people.append(person)
+        if occupancy and active:  # before the population update: the grids belong to this frame's estimates
+            grids = self._occupancy_grids(active)
+            for person, grid in zip(people, grids, strict=True):
+                person.occupancy = grid
         est = PeopleEstimate(frame=self.frames_done, people=people, sigma_n=float(self._sigma_host.numpy()[0]))
         self._update_population(est, active, tops[: len(active)] > 0)
         self.frames_done += 1
@@ -734,20 +746,28 @@ class PeopleTracker:
         """:meth:`occupancy` of several people (default: everybody tracked): every grid is launched into the
         person's buffer (allocated once), then one synchronisation and the copies back."""
         ids = self.tracked_ids if person_ids is None else [int(i) for i in person_ids]
-        oc = self.config.occupancy
-        launched = {}
+        slots = []
         for pid in ids:
-            slots = np.nonzero(self.slot_id == pid)[0]
-            if not slots.size:
-                raise ConfigError(f"person {pid} is not tracked")
-            p = self.pool[int(slots[0])]
+            found = np.nonzero(self.slot_id == pid)[0]
+            if not found.size:
+                raise ConfigError(f"person {pid} is not tracked (tracked now: {self.tracked_ids})")
+            slots.append(int(found[0]))
+        return dict(zip(ids, self._occupancy_grids(slots), strict=True))
+
+    def _occupancy_grids(self, slots: Sequence[int]) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The occupancy grids of the filters in pool ``slots`` around their last estimates (host copies): every
+        grid is launched into its filter's buffer (allocated once), then one synchronisation and the copies."""
+        oc = self.config.occupancy
+        launched = []
+        for k in slots:
+            p = self.pool[k]
             centre = p.est_host.numpy()[kreduce.EST_MEAN : kreduce.EST_MEAN + 3]
             dims = np.asarray(p.grid_dims)
             origin = np.floor((centre - 0.5 * dims * oc.voxel) / oc.voxel) * oc.voxel  # on the voxel lattice
             p.launch_occupancy(origin)
-            launched[pid] = (origin, p)
+            launched.append((origin, p))
         wp.synchronize_device(self.device)
-        return {pid: (origin, p.grid_host.numpy().copy()) for pid, (origin, p) in launched.items()}
+        return [(origin, p.grid_host.numpy().copy()) for origin, p in launched]
 
     def add_person(self, xy: Sequence[float]) -> int:
         """Start tracking a person standing at ``xy`` (ground x, y, metres) now, as if added by the evidence (e.g.
