@@ -1,11 +1,12 @@
 """S2 people tracker (Lopez-Cifuentes et al.): particle dynamics and the motion observation model.
 
 Map to the paper:
-- :func:`constant_velocity`: eq. 5, P_t = P_{t-1} + Pdot_{t-1} + n_P, Pdot_t = Pdot_{t-1} + n_V (velocity in metres
-  per frame: the paper's uniform frame rate makes it a position difference). n_t (6 x 1) has independent
-  components, deviation ``sigma_pos`` on the position and ``sigma_vel`` on the velocity (the paper gives no
-  covariance). Noise: Philox streams ``(seed, particle, frame, STREAM_MOTION)`` for the position and
-  ``STREAM_PEOPLE_VELOCITY`` for the velocity.
+- :func:`constant_velocity`: eq. 5 with the frame interval dt made explicit, P_t = P_{t-1} + dt Pdot_{t-1} + n_P,
+  Pdot_t = Pdot_{t-1} + n_V (velocity in metres per second; the paper's uniform frame rate makes its eq. 5 the
+  case dt = 1 frame). n_t (6 x 1) has independent components, deviation ``sigma_pos`` on the position and
+  ``sigma_vel`` on the velocity, per frame (the paper gives no covariance; the driver scales both with sqrt(dt)).
+  Noise: Philox streams ``(seed, particle, frame, STREAM_MOTION)`` for the position and ``STREAM_PEOPLE_VELOCITY``
+  for the velocity.
 - :func:`predict_kernel`: resampled gather + eq. 5 + the appearance update of eq. 6,
   C_t = alpha A_{t-1} + (1 - alpha) C_{t-1}, where A_{t-1} is the descriptor observed at P_{t-1}
   (``kernels.descriptor.descriptor_kernel``). A particle whose A_{t-1} was unseen (mass 0) keeps C_{t-1}.
@@ -36,12 +37,13 @@ wp.set_module_options({"enable_backward": False})
 
 @wp.func
 def constant_velocity(
-    pos: wp.vec3, vel: wp.vec3, sigma_pos: float, sigma_vel: float, seed: wp.vec2ui, index: int, frame: int
+    pos: wp.vec3, vel: wp.vec3, dt: float, sigma_pos: float, sigma_vel: float, seed: wp.vec2ui, index: int, frame: int
 ):
-    """Eq. 5: returns (P_t, Pdot_t) = (P + Pdot + n_P, Pdot + n_V); metres and metres per frame."""
+    """Eq. 5: returns (P_t, Pdot_t) = (P + dt Pdot + n_P, Pdot + n_V); metres, metres per second, dt in seconds,
+    ``sigma_pos`` (metres) and ``sigma_vel`` (metres per second) the deviations of this frame's noise."""
     zp = normal4(seed, index, frame, STREAM_MOTION)
     zv = normal4(seed, index, frame, STREAM_PEOPLE_VELOCITY)
-    p = pos + vel + sigma_pos * wp.vec3(zp[0], zp[1], zp[2])
+    p = pos + dt * vel + sigma_pos * wp.vec3(zp[0], zp[1], zp[2])
     v = vel + sigma_vel * wp.vec3(zv[0], zv[1], zv[2])
     return p, v
 
@@ -76,7 +78,8 @@ def predict_kernel(
     ancestors: wp.array(dtype=wp.int32),
     sigma_pos: wp.array(dtype=wp.float32),
     sigma_vel: wp.array(dtype=wp.float32),
-    alpha: float,
+    dt: wp.array(dtype=wp.float32),
+    alpha: wp.array(dtype=wp.float32),
     seed: wp.vec2ui,
     frame: wp.array(dtype=wp.int32),
     pos_out: wp.array(dtype=wp.vec3),
@@ -88,19 +91,20 @@ def predict_kernel(
     ``mass[a] == 0``).
 
     Args:
-        pos, vel: (N,) P_{t-1} (metres), Pdot_{t-1} (metres/frame). model: (N, 3 N_b) C_{t-1}.
+        pos, vel: (N,) P_{t-1} (metres), Pdot_{t-1} (metres/second). model: (N, 3 N_b) C_{t-1}.
         desc, mass: (N, 3 N_b), (N,) A_{t-1} and its mass from ``descriptor.descriptor_kernel`` at P_{t-1}.
-        ancestors: (N,) resampled parents (identity without resampling). sigma_pos, sigma_vel: [0] noise deviations
-            (metres, metres/frame), device arrays so that CUDA graphs see updates. alpha: forgetting factor of eq. 6.
+        ancestors: (N,) resampled parents (identity without resampling). sigma_pos, sigma_vel: [0] this frame's noise
+            deviations (metres, metres/second). dt: [0] the frame interval, seconds. alpha: [0] this frame's
+            forgetting factor of eq. 6. All four are device arrays so that CUDA graphs see updates.
         seed: 64-bit run seed. frame: [0] frame number (the noise counter).
         pos_out, vel_out, model_out: the predicted state (must not alias the inputs).
     """
     i = wp.tid()
     a = ancestors[i]
-    p, v = constant_velocity(pos[a], vel[a], sigma_pos[0], sigma_vel[0], seed, i, frame[0])
+    p, v = constant_velocity(pos[a], vel[a], dt[0], sigma_pos[0], sigma_vel[0], seed, i, frame[0])
     pos_out[i] = p
     vel_out[i] = v
-    appearance_update(model, desc, mass, a, alpha, model_out, i)  # eq. 6
+    appearance_update(model, desc, mass, a, alpha[0], model_out, i)  # eq. 6
 
 
 @wp.func
@@ -203,7 +207,8 @@ def step_kernel(
     resampled: wp.array(dtype=wp.int32),
     sigma_pos: wp.array(dtype=wp.float32),
     sigma_vel: wp.array(dtype=wp.float32),
-    alpha: float,
+    dt: wp.array(dtype=wp.float32),
+    alpha: wp.array(dtype=wp.float32),
     sigma_n: wp.array(dtype=wp.float32),
     sigma_p: float,
     seed: wp.vec2ui,
@@ -235,16 +240,18 @@ def step_kernel(
     stop = wp.min(start + chunk, n)
     sp = sigma_pos[0]
     sv = sigma_vel[0]
+    h = dt[0]
+    al = alpha[0]
     sn = sigma_n[0]
     f = frame[0]
     keep = resampled[0] == 0
     best, arg, sw, sw2, sx, sxx = moments_zero()
     for i in range(start + lane, stop, wp.block_dim()):
         a = ancestors[i]
-        x, u = constant_velocity(pos[a], vel[a], sp, sv, seed, i, f)  # eq. 5
+        x, u = constant_velocity(pos[a], vel[a], h, sp, sv, seed, i, f)  # eq. 5
         pos_out[i] = x
         vel_out[i] = u
-        appearance_update(model, desc, mass, a, alpha, model_out, i)  # eq. 6
+        appearance_update(model, desc, mass, a, al, model_out, i)  # eq. 6
         m, rgb = descriptor_at(cams, bgr, x, r_n, n_bins, r_min, r_max, step, desc_out, i)  # eqs. 19-22
         mass_out[i] = m
         rgb_out[i] = rgb

@@ -177,3 +177,33 @@ def test_internal_error_is_not_a_user_error_and_keeps_the_run(scene, tmp_path, c
     assert t["frame"].max() == 24 and set(np.unique(t["id"])) == {0, 1}
     idx, _ = read_chunks(out / "hulls")
     assert len(idx) == len(t["frame"])
+
+
+def test_image_folders_need_a_frame_rate(scene, tmp_path, capsys):
+    """Image folders carry no frame rate: without --fps a clear one-line error, with --fps the run records it."""
+    import cv2
+
+    from wptrack.frames import open_source
+
+    folders = []
+    for k in range(3):
+        folder = tmp_path / f"img{k}"
+        folder.mkdir()
+        for i, frame in enumerate(open_source(str(scene / f"cam{k}.avi"))):
+            if i >= 20:
+                break
+            cv2.imwrite(str(folder / f"{i:04d}.png"), frame)
+        folders.append(folder)
+    argv = ["track", "people", "--rig", str(scene / "rig.yaml"), "--device", "cpu", "-q", "--particles", "200"]
+    for k in range(3):
+        argv += ["--video", str(folders[k]), "--masks", str(scene / f"mask{k}.avi")]
+    out = tmp_path / "run"
+    assert main([*argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("wptrack: error:") and "--fps" in err and not out.exists()
+    assert main([*argv, "--out", str(out), "--fps", "12.5"]) == 0
+    run = json.loads((out / "run.json").read_text())
+    assert run["config"]["tracker"]["fps"] == 12.5
+    video = tmp_path / "video"
+    assert main([*_args(scene, video), "--max-frames", "5"]) == 0
+    assert json.loads((video / "run.json").read_text())["config"]["tracker"]["fps"] == 25.0  # the videos' own

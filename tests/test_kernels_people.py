@@ -465,7 +465,7 @@ def test_observation_is_motion_plus_appearance(device, rng):
     np.testing.assert_allclose(lo.numpy(), lm.numpy() + la.numpy(), rtol=1e-6, atol=1e-6)
 
 
-def run_predict(device, pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, frame):
+def run_predict(device, pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, frame, dt=1.0):
     n = len(pos)
     outs = [
         wp.zeros(n, dtype=wp.vec3, device=device),
@@ -484,7 +484,8 @@ def run_predict(device, pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, f
             wp.array(anc, device=device),
             wp.array([sp], dtype=wp.float32, device=device),
             wp.array([sv], dtype=wp.float32, device=device),
-            alpha,
+            wp.array([dt], dtype=wp.float32, device=device),
+            wp.array([alpha], dtype=wp.float32, device=device),
             wp.vec2ui(seed, 0),
             wp.array([frame], dtype=wp.int32, device=device),
         ],
@@ -593,9 +594,9 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     anc = wp.array(rng.integers(0, n, n).astype(np.int32), device=device)
     logw_prev = wp.array(rng.normal(0, 1, n).astype(np.float32), device=device)
     flag = wp.array([resampled], dtype=wp.int32, device=device)
-    sp, sv, sn = (wp.array([x], dtype=wp.float32, device=device) for x in (0.02, 0.004, 0.01))
+    sp, sv, sn, dt, alpha = (wp.array([x], dtype=wp.float32, device=device) for x in (0.02, 0.004, 0.01, 0.3, 0.05))
     seed, frame = wp.vec2ui(3, 4), wp.array([7], dtype=wp.int32, device=device)
-    p_b, alpha, sigma_p = 0.1, 0.05, 0.3
+    p_b, sigma_p = 0.1, 0.3
 
     def zeros(shape, dtype=wp.float32):
         return wp.zeros(shape, dtype=dtype, device=device)
@@ -616,7 +617,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
         kpeople.step_kernel,
         dim=[nbk],
         inputs=[drig.cams, mask, p_b, 0.0, 1, B, R_N, NB, R_MIN, R_MAX, 2, pos, vel, model, desc, mass, anc]
-        + [logw_prev, flag, sp, sv, alpha, sn, sigma_p, seed, frame, n, chunk],
+        + [logw_prev, flag, sp, sv, dt, alpha, sn, sigma_p, seed, frame, n, chunk],
         outputs=list(fused.values()),
         block_dim=block,
         device=device,
@@ -625,7 +626,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     wp.launch(
         kpeople.predict_kernel,
         dim=n,
-        inputs=[pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, frame],
+        inputs=[pos, vel, model, desc, mass, anc, sp, sv, dt, alpha, seed, frame],
         outputs=[sep["pos"], sep["vel"], sep["model"]],
         device=device,
     )
@@ -664,7 +665,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     wp.launch(
         kpeople.predict_kernel,
         dim=n,
-        inputs=[pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, frame],
+        inputs=[pos, vel, model, desc, mass, anc, sp, sv, dt, alpha, seed, frame],
         outputs=[gpu["pos"], gpu["vel"], gpu["model"]],
         device=device,
     )

@@ -320,19 +320,21 @@ def test_person_xy_copies_the_estimate_mean(device):
 # ------------------------------------------------------------------------------------------ predict, score_moments
 
 
-def test_predict_constant_velocity_matches_numpy_philox(device, rng):
-    """Eq. 5 draw by draw: P = P_a + Pdot_a + sigma_pos z_P, Pdot = Pdot_a + sigma_vel z_V with z_P, z_V the first
-    three normals of the (seed, i, frame, STREAM_MOTION) and (..., STREAM_PEOPLE_VELOCITY) blocks."""
+@pytest.mark.parametrize("dt", [1.0, 0.32])
+def test_predict_constant_velocity_matches_numpy_philox(device, rng, dt):
+    """Eq. 5 draw by draw: P = P_a + dt Pdot_a + sigma_pos z_P, Pdot = Pdot_a + sigma_vel z_V with z_P, z_V the first
+    three normals of the (seed, i, frame, STREAM_MOTION) and (..., STREAM_PEOPLE_VELOCITY) blocks (dt = 1: the
+    paper's per-frame form)."""
     n, sp, sv, seed, frame = 2000, 0.02, 0.005, 11, 5
     pos = rng.uniform(-1, 1, (n, 3)).astype(np.float32)
     vel = rng.normal(0, 0.05, (n, 3)).astype(np.float32)
     model, desc = random_histograms(rng, n), random_histograms(rng, n)
     anc = rng.integers(0, n, n).astype(np.int32)
-    p, v, _ = run_predict(device, pos, vel, model, desc, np.ones(n, np.float32), anc, sp, sv, 0.1, seed, frame)
+    p, v, _ = run_predict(device, pos, vel, model, desc, np.ones(n, np.float32), anc, sp, sv, 0.1, seed, frame, dt)
     zp = normal4_ref((seed, 0), n, frame, int(krand.STREAM_MOTION))[:, :3]
     zv = normal4_ref((seed, 0), n, frame, int(krand.STREAM_PEOPLE_VELOCITY))[:, :3]
     p64, v64 = pos.astype(np.float64)[anc], vel.astype(np.float64)[anc]
-    np.testing.assert_allclose(p, p64 + v64 + np.float32(sp) * zp, rtol=0, atol=3e-6)
+    np.testing.assert_allclose(p, p64 + np.float32(dt) * v64 + np.float32(sp) * zp, rtol=0, atol=3e-6)
     np.testing.assert_allclose(v, v64 + np.float32(sv) * zv, rtol=0, atol=1e-6)
 
 

@@ -188,3 +188,44 @@ def test_hull_points_holds_the_weight():
     inside = Delaunay(hull).find_simplex(kept) >= 0
     assert inside.all()  # the hull holds the whole 95 % set
     assert not (Delaunay(hull).find_simplex(pts[order[-20:]]) >= 0).all()  # but not the light tail
+
+
+def _low_rate_errors(device, fps: float, every: int = 5, frames: int = 80):
+    """Median ground error (metres) per person id over the later frames of the crossing scene seen every
+    ``every``-th frame (25 / every frames/s), tracked as ``fps`` frames/s, and the ids seen."""
+    rng = np.random.default_rng(7)
+    rig = rig3()
+    tr = PeopleTracker(rig, _config(fps=fps), device=device, keep_particles=0)
+    errors: dict[int, list[float]] = {}
+    for t, people in crossing(frames):
+        if t % every:
+            continue
+        est = tr.step(*render(rig, people, rng))
+        for p in est.people:
+            d = min(np.hypot(*(p.mean[:2] - xy)) for xy, _ in people)
+            errors.setdefault(p.id, []).append(d)
+    return {pid: float(np.median(e[len(e) // 2 :])) for pid, e in errors.items()}
+
+
+def test_low_frame_rate_in_seconds(device):
+    """Dynamics in seconds: at 5 frames/s (people move 0.25 m between frames) the tracker follows both people with
+    two ids when told the frame rate, and lags behind them when it assumes 25 frames/s (the per-frame noise and the
+    velocity integration of 0.04 s)."""
+    right = _low_rate_errors(device, fps=5.0)
+    assert sorted(right) == [0, 1] and max(right.values()) < 0.25
+    wrong = _low_rate_errors(device, fps=25.0)
+    assert max(wrong.values()) > 2 * max(right.values())
+
+
+def test_timestamps_set_the_frame_interval(device, scene):
+    rig, frames = scene
+    tr = PeopleTracker(rig, _config(fps=25.0), device=device)
+    _, images, masks = frames[0]
+    tr.step(images, masks, timestamp=10.0)
+    assert tr.frame_dt == pytest.approx(0.04)  # the first timestamp only starts the clock
+    tr.step(images, masks, timestamp=10.2)
+    assert tr.frame_dt == pytest.approx(0.2)
+    sp, _, _ = tr.config.dynamics.per_frame(0.2)
+    assert tr.pool[0].sigma.numpy()[0] == pytest.approx(sp) and tr.dt.numpy()[0] == pytest.approx(0.2)
+    with pytest.raises(FrameError, match="not after the previous"):
+        tr.step(images, masks, timestamp=10.2)

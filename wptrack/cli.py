@@ -230,7 +230,7 @@ def _people_config_from_args(args):
 
     from .trackers.people_model import PeopleConfig
 
-    cfg = PeopleConfig(particles=args.particles, seed=args.seed)
+    cfg = PeopleConfig(particles=args.particles, seed=args.seed, fps=args.fps)
     dyn = {
         k: v
         for k, v in (("sigma_pos", args.sigma_pos), ("sigma_vel", args.sigma_vel), ("alpha", args.alpha))
@@ -727,9 +727,17 @@ def build_parser() -> argparse.ArgumentParser:
     tp.add_argument("--masks", action="append", default=None, help="given motion masks per camera (rig order)")
     tp.add_argument("--particles", type=_positive_int, default=500, help="particles per person N_S (default 500)")
     tp.add_argument("--max-people", type=_positive_int, default=None, help="people tracked at once (default 8)")
-    tp.add_argument("--sigma-pos", type=float, default=None, help="position noise, metres/frame (default 0.03)")
-    tp.add_argument("--sigma-vel", type=float, default=None, help="velocity noise, metres/frame^2 (default 0.01)")
-    tp.add_argument("--alpha", type=float, default=None, help="appearance forgetting factor of eq. 6 (default 0.05)")
+    tp.add_argument(
+        "--fps",
+        type=float,
+        default=None,
+        help="frame rate of the recording, frames/s (default: the videos'; needed for image folders)",
+    )
+    tp.add_argument("--sigma-pos", type=float, default=None, help="position noise, m per sqrt(s) (default 0.15)")
+    tp.add_argument("--sigma-vel", type=float, default=None, help="velocity noise, m/s per sqrt(s) (default 1.25)")
+    tp.add_argument(
+        "--alpha", type=float, default=None, help="appearance forgetting factor of eq. 6 per 0.04 s (default 0.05)"
+    )
     tp.add_argument("--p-b", type=float, default=None, help="background probability p_B of eq. 10 (default 0.05)")
     tp.add_argument("--r-n", type=float, default=None, help="descriptor neighbourhood radius r_N, metres (0.1)")
     tp.add_argument("--bins", type=int, default=None, help="histogram bins N_b (default 8)")

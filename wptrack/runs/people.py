@@ -20,7 +20,7 @@ Outputs::
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
@@ -79,6 +79,25 @@ def hull_points(points: np.ndarray, weights: np.ndarray, p_h: float) -> np.ndarr
         return sel[ConvexHull(sel).vertices]
     except QhullError:  # all points on a plane or a line
         return sel
+
+
+def recording_fps(given: float | None, frames: Any) -> float:
+    """The frame rate of a run: ``given`` (``--fps``) if set, else the videos' own (the first camera's that knows
+    one; ``wptrack.frames.SyncedFrames`` warns when they differ).
+
+    Raises:
+        ConfigError: no rate given and none known (image folders and arrays carry none).
+    """
+    if given is not None:
+        return float(given)
+    for source in frames.sources:
+        if getattr(source, "fps", None):
+            return float(source.fps)
+    names = ", ".join(str(n) for n in frames.names)
+    raise ConfigError(
+        f"the frame rate of {names} is unknown (image folders carry none): give it with --fps (PeopleConfig.fps); "
+        "the dynamics and the birth and removal times are in seconds"
+    )
 
 
 class _Thinned:
@@ -147,6 +166,7 @@ class PeopleRun(TrackerRun):
         self._frames = open_frames(list(videos), stop_at_shortest=stop_at_shortest, max_frames=max_frames)
         for i, (w, h) in enumerate(self._frames.sizes):
             rig.check_frame_size(i, w, h, str(self._frames.names[i]))
+        config = replace(config, fps=recording_fps(config.fps, self._frames))
         mask_config = mask_config if mask_config is not None else MaskConfig()
         self._masks = [
             open_masks(masks=masks[i], config=mask_config, camera=cam, rig_source=rig.source)
@@ -165,6 +185,7 @@ class PeopleRun(TrackerRun):
         self._occupancy_every = occupancy_every
         self._save_masks = save_masks
         self._names = rig.names
+        self._fps = config.fps
         self.config = {
             "rig": str(Path(rig_path).resolve()),
             "videos": [str(v) for v in videos],
@@ -198,7 +219,7 @@ class PeopleRun(TrackerRun):
             self._load_npz_logs(out_dir, resume_after)
         if self._save_masks:
             suffix = "" if resume_after is None else f".from{resume_after + 1}"
-            fps = 25.0
+            fps = self._fps
             self._mask_writers = [VideoWriter(out_dir / f"masks_{n}{suffix}.avi", fps=fps) for n in self._names]
 
     def step(self, item: Any) -> Any:

@@ -13,7 +13,8 @@ One frame::
     -> ground evidence map (ours): cameras whose masks agree on a column over each ground cell
     -> host: estimates; people added where the evidence is unexplained, removed where it is gone (ours)
 
-Units: metres (world frame, z up for the ground evidence map: the rig's ground is z = 0), pixels, frames.
+Units: metres (world frame, z up for the ground evidence map: the rig's ground is z = 0), pixels, seconds (the
+frame interval dt from ``PeopleConfig.fps`` or the frames' timestamps).
 """
 
 from __future__ import annotations
@@ -42,8 +43,12 @@ from .people_model import PeopleConfig
 log = logging.getLogger(__name__)
 
 _GOLDEN = 0x9E3779B97F4A7C15
+DEFAULT_FPS = 25.0
+"""Frame rate assumed by a tracker built without ``PeopleConfig.fps`` and stepped without timestamps."""
 DESCRIPTOR_BLOCK = 64
 """Lanes per particle of the GPU descriptor (they share the disc pixels)."""
+MAX_SPEED = 2.0
+"""A brisk walk, metres per second: how far evidence may move between frames and stay the same candidate."""
 NOISE_STRIDE = 4
 """Pixels between the samples of the image-noise estimate (eq. 18)."""
 
@@ -125,7 +130,7 @@ def _all_pixel_rays(cam) -> np.ndarray:
 
 class PersonFilter(ParticleFilter):
     """One person's particle set (a slot of the tracker's pool): positions and log-weights from
-    :class:`ParticleFilter`, plus, as (N, ...) ping-pong pairs: ``vel`` (metres/frame), ``model`` (appearance C,
+    :class:`ParticleFilter`, plus, as (N, ...) ping-pong pairs: ``vel`` (metres/second), ``model`` (appearance C,
     (N, 3 N_b)), ``desc`` (descriptor A at the particle, (N, 3 N_b)), ``mass`` (its total weight); ``rgb`` (N,)
     the patch's mean colour (eq. 17)."""
 
@@ -133,7 +138,7 @@ class PersonFilter(ParticleFilter):
         cfg = tracker.config
         super().__init__(
             cfg.particles,
-            cfg.dynamics.sigma_pos,
+            tracker.frame_dynamics[0],
             tracker.device,
             seed=person_seed(cfg.seed, slot),
             resampling="systematic",
@@ -149,7 +154,6 @@ class PersonFilter(ParticleFilter):
         self.desc = [wp.zeros((n, cols), dtype=wp.float32, device=d) for _ in range(2)]
         self.mass = [wp.zeros(n, dtype=wp.float32, device=d) for _ in range(2)]
         self.rgb = wp.zeros(n, dtype=wp.vec3, device=d)
-        self.sigma_vel = wp.array([cfg.dynamics.sigma_vel], dtype=wp.float32, device=d)
         oc = cfg.occupancy
         self.grid_dims = tuple(int(v) for v in np.maximum(np.round(np.asarray(oc.extent) / oc.voxel), 1))
         self.grid = wp.zeros(self.grid_dims, dtype=wp.float32, device=d)  # occupancy pdf around the person, 1/m^3
@@ -259,8 +263,9 @@ class PersonFilter(ParticleFilter):
                     self.logw[src],
                     self.resampled,
                     self.sigma,
-                    self.sigma_vel,
-                    cfg.dynamics.alpha,
+                    tr.sigma_vel,
+                    tr.dt,
+                    tr.alpha,
                     tr.sigma_n,
                     dc.sigma_p,
                     self.seed,
@@ -295,8 +300,9 @@ class PersonFilter(ParticleFilter):
                 self.mass[src],
                 self.ancestors,
                 self.sigma,
-                self.sigma_vel,
-                cfg.dynamics.alpha,
+                tr.sigma_vel,
+                tr.dt,
+                tr.alpha,
                 self.seed,
                 self.frame,
             ],
@@ -370,6 +376,9 @@ class PeopleTracker:
         use_graph: capture each person's frame chain as a CUDA graph (default: on CUDA).
         keep_particles: particles per person and frame returned for reports and hulls (0: none).
 
+    Time: the frame interval dt is ``1 / config.fps`` (``DEFAULT_FPS`` when None) unless :meth:`step` is given
+    timestamps; the dynamics (``DynamicsConfig.per_frame``) and the birth and removal times follow it.
+
     Device buffers (P = pixels of all cameras):
         bgr, bgr_prev: (3 P,) uint8 this and the previous frame. mask: (P,) uint8 motion masks (nonzero = motion).
         sigma_n: (1,) float32 image noise (eq. 18, from every ``NOISE_STRIDE``-th pixel).
@@ -406,6 +415,14 @@ class PeopleTracker:
         self.is_cuda = dev.is_cuda
         self.use_graph = self.is_cuda if use_graph is None else (bool(use_graph) and self.is_cuda)
         self.keep_particles = min(int(keep_particles), config.particles)
+        self.fps = float(config.fps) if config.fps is not None else DEFAULT_FPS
+        self.frame_dt = 1.0 / self.fps  # seconds; :meth:`step` with timestamps changes it
+        self.frame_dynamics = config.dynamics.per_frame(self.frame_dt)
+        sp, sv, al = self.frame_dynamics
+        self.dt = wp.array([self.frame_dt], dtype=wp.float32, device=d)  # [0] dt, seconds
+        self.sigma_vel = wp.array([sv], dtype=wp.float32, device=d)  # [0] velocity noise of one frame, m/s
+        self.alpha = wp.array([al], dtype=wp.float32, device=d)  # [0] eq. 6's factor of one frame
+        self._last_timestamp: float | None = None
         self.drig = DeviceRig(rig, d)
         npx = self.drig.total_pixels
         self.bgr = wp.zeros(3 * npx, dtype=wp.uint8, device=d)
@@ -448,16 +465,19 @@ class PeopleTracker:
         self.pool = [PersonFilter(self, k) for k in range(b.max_people)]
         self.slot_id = np.full(b.max_people, -1, dtype=np.int64)  # person id per slot, -1 = free
         self.slot_age = np.zeros(b.max_people, dtype=np.int64)
-        self.slot_miss = np.zeros(b.max_people, dtype=np.int64)
-        self.slot_close = np.zeros(b.max_people, dtype=np.int64)
-        self.pending = np.zeros((0, 3), dtype=np.float64)  # x, y, consecutive frames of unexplained evidence
+        self.slot_miss = np.zeros(b.max_people, dtype=np.float64)  # seconds without support
+        self.slot_close = np.zeros(b.max_people, dtype=np.float64)  # seconds closer than merge_distance to another
+        self.pending = np.zeros((0, 3), dtype=np.float64)  # x, y, seconds of unexplained evidence in a row
         self.next_id = 0
         self.frames_done = 0
         log.info(
-            "people tracker: %d particles per person, up to %d people, %d cameras, evidence map %dx%d, device %s",
+            "people tracker: %d particles per person, up to %d people, %d cameras, %g frames/s%s, evidence map %dx%d, "
+            "device %s",
             config.particles,
             b.max_people,
             len(rig),
+            self.fps,
+            "" if config.fps is not None else " (assumed: no PeopleConfig.fps)",
             self.nx,
             self.ny,
             self.device,
@@ -573,12 +593,25 @@ class PeopleTracker:
 
     # --- the frame --------------------------------------------------------------------------------------
     def step(
-        self, images: Sequence[np.ndarray], masks: Sequence[np.ndarray], occupancy: bool = False
+        self,
+        images: Sequence[np.ndarray],
+        masks: Sequence[np.ndarray],
+        occupancy: bool = False,
+        timestamp: float | None = None,
     ) -> PeopleEstimate:
         """Track one synchronised set of frames: one (H, W, 3) uint8 BGR image and one (H, W) motion mask
         (nonzero = motion) per camera, in rig order. With ``occupancy``, every person of the returned estimate
-        carries its occupancy grid (``PersonEstimate.occupancy``), computed before anybody is removed."""
+        carries its occupancy grid (``PersonEstimate.occupancy``), computed before anybody is removed.
+
+        Args:
+            timestamp: the frames' time, seconds (any origin): dt is the time since the previous frame's timestamp
+                (the first frame, and frames without one, keep the current dt).
+
+        Raises:
+            FrameError: bad images or masks (see :meth:`upload`), or a timestamp not after the previous one.
+        """
         t0 = time.perf_counter()
+        self._set_time(timestamp)
         self.upload(images, masks)
         t1 = time.perf_counter()
         self._observe()
@@ -621,6 +654,44 @@ class PeopleTracker:
         est.timings.update(upload=t1 - t0, filter=t2 - t1, population=time.perf_counter() - t2)
         return est
 
+    def _set_time(self, timestamp: float | None) -> None:
+        """Take dt from ``timestamp`` (seconds) and the previous one; update the device copies when it changes."""
+        if timestamp is None:
+            return
+        t = float(timestamp)
+        if not math.isfinite(t):
+            raise FrameError(f"frame {self.frames_done}: timestamp {timestamp!r} is not a finite number of seconds")
+        last, self._last_timestamp = self._last_timestamp, t
+        if last is None:
+            return
+        if t <= last:
+            raise FrameError(
+                f"frame {self.frames_done}: timestamp {t:.6f} s is not after the previous one {last:.6f} s"
+            )
+        self.set_frame_interval(t - last)
+
+    def set_frame_interval(self, dt: float) -> None:
+        """Use the frame interval ``dt`` (seconds) from the next frame on: the dynamics' per-frame noise and eq. 6's
+        factor (``DynamicsConfig.per_frame``) and the birth and removal clocks. A device fill per changed value, no
+        host copy (CUDA graphs read the arrays)."""
+        dt = float(dt)
+        if not (math.isfinite(dt) and dt > 0):
+            raise ConfigError(f"frame interval: expected seconds > 0, got {dt!r}")
+        if dt == self.frame_dt:
+            return
+        self.frame_dt = dt
+        self.frame_dynamics = sp, sv, al = self.config.dynamics.per_frame(dt)
+        self.dt.fill_(dt)
+        self.sigma_vel.fill_(sv)
+        self.alpha.fill_(al)
+        for p in self.pool:
+            p.set_sigma(sp)
+
+    def _elapsed(self, seconds: float, limit: float) -> bool:
+        """Whether ``seconds`` (a sum of frame intervals) has reached ``limit``, to half a frame: a time rounds to
+        whole frames, and any limit is reached after one frame at a low frame rate."""
+        return seconds >= limit - 0.5 * self.frame_dt
+
     # --- who is there (ours) ---------------------------------------------------------------------------------
     def _cell_centres(self) -> tuple[np.ndarray, np.ndarray]:
         """(x, y) of the evidence map's cell centres, metres, (ny, nx) each (computed once)."""
@@ -639,6 +710,7 @@ class PeopleTracker:
         (``column[j]``: the column-top search found a point, which stays true when furniture hides everything
         but the head and shoulders) or in a cell of the evidence map within ``support_radius``."""
         b = self.config.birth
+        dt = self.frame_dt
         votes = self._votes_host.numpy().reshape(self.ny, self.nx)
         free_votes = self._free_host.numpy().reshape(self.ny, self.nx)
         support = votes >= self.min_votes
@@ -649,9 +721,9 @@ class PeopleTracker:
         for j, (k, e) in enumerate(by_slot.items()):
             x, y = e.mean[0], e.mean[1]
             near = (gx - x) ** 2 + (gy - y) ** 2 <= b.support_radius**2
-            self.slot_miss[k] = 0 if column[j] or np.any(support & near) else self.slot_miss[k] + 1
+            self.slot_miss[k] = 0.0 if column[j] or np.any(support & near) else self.slot_miss[k] + dt
             outside = np.any(e.mean[:2] < lo[:2] - margin) or np.any(e.mean[:2] > hi[:2] + margin)
-            if self.slot_miss[k] >= b.frames_to_remove or outside or not np.all(np.isfinite(e.mean)):
+            if self._elapsed(self.slot_miss[k], b.remove_seconds) or outside or not np.all(np.isfinite(e.mean)):
                 self._remove(k, est)
         # duplicates: two filters on one person
         alive = [k for k in active if self.slot_id[k] >= 0]
@@ -661,12 +733,12 @@ class PeopleTracker:
                 for j in alive
                 if j != k and self.slot_id[j] >= 0
             )
-            self.slot_close[k] = self.slot_close[k] + 1 if close else 0
+            self.slot_close[k] = self.slot_close[k] + dt if close else 0.0
         for k in sorted(alive, key=lambda s: -self.slot_id[s]):  # the younger of a pair goes
-            if self.slot_id[k] >= 0 and self.slot_close[k] >= b.frames_to_remove:
+            if self.slot_id[k] >= 0 and self._elapsed(self.slot_close[k], b.remove_seconds):
                 self._remove(k, est)
                 for j in alive:
-                    self.slot_close[j] = 0
+                    self.slot_close[j] = 0.0
         # unexplained evidence -> candidates; at most one person added per frame, the strongest (see BirthConfig)
         free = free_votes >= self.min_votes
         for k in range(len(self.pool)):  # people added or kept this frame explain their surroundings
@@ -675,18 +747,19 @@ class PeopleTracker:
                 free &= (gx - e.mean[0]) ** 2 + (gy - e.mean[1]) ** 2 > b.exclusion**2
         candidates = self._blobs(free, free_votes, gx, gy)
         pending, added = [], False
+        reach = max(0.5, MAX_SPEED * dt)  # the same evidence one frame later: within a walk of one frame interval
         for cx, cy, _strength in sorted(candidates, key=lambda c: -c[2]):
-            count = 1.0
+            seen = dt
             if len(self.pending):
                 dist = np.hypot(self.pending[:, 0] - cx, self.pending[:, 1] - cy)
                 j = int(np.argmin(dist))
-                if dist[j] < 0.5:
-                    count = self.pending[j, 2] + 1
-            if count >= b.frames_to_add and not added:
+                if dist[j] < reach:
+                    seen = self.pending[j, 2] + dt
+            if self._elapsed(seen, b.add_seconds) and not added:
                 self._add(np.array([cx, cy]), est)
                 added = True
             else:
-                pending.append((cx, cy, min(count, b.frames_to_add)))
+                pending.append((cx, cy, min(seen, b.add_seconds)))
         self.pending = np.asarray(pending, dtype=np.float64).reshape(-1, 3)
 
     def _blobs(

@@ -45,25 +45,43 @@ def _int_at_least(value: object, name: str, lo: int, what: str) -> None:
 
 @dataclass(frozen=True)
 class DynamicsConfig:
-    """Particle dynamics (section 2.1).
+    """Particle dynamics (section 2.1) in metres and seconds, so that one configuration works at any frame rate.
+
+    Eq. 5 with the frame interval dt (seconds) made explicit: P_t = P_{t-1} + dt Pdot_{t-1} + n_P, Pdot_t = Pdot_{t-1}
+    + n_V, velocity in metres per second. The noises are random walks: their per-frame deviations grow with sqrt(dt),
+    so the spread they add over one second is the same at 3 and at 25 frames/s.
 
     Attributes:
-        sigma_pos: deviation of the position noise n_P per axis (eq. 5), metres per frame. Ours: 0.03.
-        sigma_vel: deviation of the velocity noise n_V per axis (eq. 5), metres per frame per frame. Ours: 0.01.
-        alpha: forgetting factor of the appearance update C_t = alpha A_{t-1} + (1 - alpha) C_{t-1} (eq. 6);
-            the paper asks for a value close to zero. Ours: 0.05. Must lie in [0, 1).
+        sigma_pos: position noise n_P per axis, metres per sqrt(second) (per frame: sigma_pos sqrt(dt)). Ours: 0.15
+            (0.03 m per frame at 25 frames/s, the value the synthetic office was built with).
+        sigma_vel: velocity noise n_V per axis, metres per second per sqrt(second) (per frame: sigma_vel sqrt(dt)).
+            Ours: 1.25 (0.01 m per frame per frame at 25 frames/s).
+        alpha: forgetting factor of the appearance update C_t = alpha A_{t-1} + (1 - alpha) C_{t-1} (eq. 6) per
+            ``alpha_interval`` seconds; the paper asks for a value close to zero. At a frame interval dt the factor
+            is 1 - (1 - alpha)^(dt / alpha_interval), so the appearance's memory is the same time at any frame rate.
+            Ours: 0.05. Must lie in [0, 1).
+        alpha_interval: the interval ``alpha`` is given for, seconds. Ours: 0.04 (one frame at 25 frames/s).
     """
 
-    sigma_pos: float = 0.03
-    sigma_vel: float = 0.01
+    sigma_pos: float = 0.15
+    sigma_vel: float = 1.25
     alpha: float = 0.05
+    alpha_interval: float = 0.04
 
     def __post_init__(self) -> None:
-        _positive(self.sigma_pos, "dynamics.sigma_pos", "a position noise deviation in metres")
-        _non_negative(self.sigma_vel, "dynamics.sigma_vel", "a velocity noise deviation in metres/frame")
+        _positive(self.sigma_pos, "dynamics.sigma_pos", "a position noise in metres per sqrt(second)")
+        _non_negative(self.sigma_vel, "dynamics.sigma_vel", "a velocity noise in metres/second per sqrt(second)")
         a = _number(self.alpha, "dynamics.alpha")
         if not (0.0 <= a < 1.0):
             raise ConfigError(f"dynamics.alpha: expected a forgetting factor in [0, 1), got {self.alpha!r}")
+        _positive(self.alpha_interval, "dynamics.alpha_interval", "an interval in seconds")
+
+    def per_frame(self, dt: float) -> tuple[float, float, float]:
+        """``(sigma_pos, sigma_vel, alpha)`` of one frame interval ``dt`` (seconds): metres, metres/second and the
+        factor of eq. 6."""
+        root = math.sqrt(dt)
+        alpha = 1.0 - (1.0 - self.alpha) ** (dt / self.alpha_interval)
+        return self.sigma_pos * root, self.sigma_vel * root, alpha
 
 
 @dataclass(frozen=True)
@@ -179,12 +197,14 @@ class BirthConfig:
         min_cameras: cameras that must vote (at least 2, and at most the rig's cameras). Ours: 2.
         exclusion: no birth within this distance of a tracked person (ground plane), metres. Ours: 0.7.
         min_area: connected cells with enough votes needed for a birth, cells. Ours: 4.
-        frames_to_add: consecutive frames of unexplained evidence near the same place before adding. Ours: 3.
-        frames_to_remove: consecutive frames without evidence within ``support_radius`` before removing. Ours: 5.
+        add_seconds: unexplained evidence near the same place for this long before adding, seconds. Ours: 0.12 (3
+            frames at 25 frames/s; at least one frame at any rate).
+        remove_seconds: no evidence within ``support_radius`` for this long before removing, seconds. Ours: 0.2 (5
+            frames at 25 frames/s).
         support_radius: radius around a person's ground position searched for its evidence, metres. Ours: 0.4.
         init_radius: radius of the cylinder a new person's particles start in, metres. Ours: 0.25.
         init_z: heights of that cylinder, metres. Ours: (0.3, 1.6).
-        merge_distance: two people whose ground positions stay closer than this for ``frames_to_remove`` frames
+        merge_distance: two people whose ground positions stay closer than this for ``remove_seconds``
             follow one person: the younger is removed, metres. Ours: 0.3 (people shaking hands stand ~0.6 m apart).
         person_radius: motion whose viewing ray passes within this distance of a tracked person's vertical axis
             is explained by that person (no birth from it), metres. Ours: 0.4.
@@ -202,8 +222,8 @@ class BirthConfig:
     min_cameras: int = 2
     exclusion: float = 0.7
     min_area: int = 4
-    frames_to_add: int = 3
-    frames_to_remove: int = 5
+    add_seconds: float = 0.12
+    remove_seconds: float = 0.2
     support_radius: float = 0.4
     init_radius: float = 0.25
     init_z: tuple[float, float] = (0.3, 1.6)
@@ -220,8 +240,8 @@ class BirthConfig:
         _int_at_least(self.min_cameras, "birth.min_cameras", 1, "a camera count")
         _positive(self.exclusion, "birth.exclusion", "a distance in metres")
         _int_at_least(self.min_area, "birth.min_area", 1, "a cell count")
-        _int_at_least(self.frames_to_add, "birth.frames_to_add", 1, "a frame count")
-        _int_at_least(self.frames_to_remove, "birth.frames_to_remove", 1, "a frame count")
+        _non_negative(self.add_seconds, "birth.add_seconds", "a time in seconds")
+        _non_negative(self.remove_seconds, "birth.remove_seconds", "a time in seconds")
         _positive(self.support_radius, "birth.support_radius", "a distance in metres")
         _positive(self.init_radius, "birth.init_radius", "a radius in metres")
         if len(self.init_z) != 2 or not (
@@ -283,6 +303,10 @@ class PeopleConfig:
     Attributes:
         particles: particles per tracked person [N_S] (section 4: 500).
         seed: seed of the counter-based random streams (same seed + device -> identical output).
+        fps: frame rate of the recording, frames per second (the frame interval dt = 1 / fps of the dynamics and of
+            every time in seconds). None: the recording's own (the videos' frame rate in a run; ``--fps`` for image
+            folders); a :class:`~wptrack.trackers.people.PeopleTracker` built without one assumes 25 frames/s.
+            ``PeopleTracker.step(..., timestamp=...)`` takes dt from the frames' timestamps instead.
         dynamics, motion, descriptor, occupancy, birth, body: the sections above.
 
     Resampling runs every frame (section 2.1: "particle resampling should be performed at each time step").
@@ -290,6 +314,7 @@ class PeopleConfig:
 
     particles: int = 500
     seed: int = 0
+    fps: float | None = None
     dynamics: DynamicsConfig = field(default_factory=DynamicsConfig)
     motion: MotionConfig = field(default_factory=MotionConfig)
     descriptor: DescriptorConfig = field(default_factory=DescriptorConfig)
@@ -301,6 +326,8 @@ class PeopleConfig:
         _int_at_least(self.particles, "particles", 1, "a particle count")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not (0 <= self.seed < 2**64):
             raise ConfigError(f"seed: expected an integer in [0, 2^64), got {self.seed!r}")
+        if self.fps is not None:
+            _positive(self.fps, "fps", "a frame rate in frames per second")
         for name, cls in (
             ("dynamics", DynamicsConfig),
             ("motion", MotionConfig),
