@@ -94,6 +94,10 @@ def test_resume_of_a_complete_people_run_is_refused(scene, tmp_path):
         ("one_camera", "two or more"),
         ("wrong_mask_size", "size"),
         ("camera_count", "video(s) given for a rig of 3"),
+        ("no_overlap", "see no common ground"),
+        ("volume_outside", "outside every camera's view"),
+        ("different_lengths", "different frame counts"),
+        ("frame_size", "differs from camera 'c2' calibration"),
     ],
 )
 def test_bad_input_is_one_line_and_writes_nothing(scene, tmp_path, capsys, change, message):
@@ -113,6 +117,30 @@ def test_bad_input_is_one_line_and_writes_nothing(scene, tmp_path, capsys, chang
             str(scene / "mask1.avi"),
         ]
         argv += ["--masks", str(tmp_path / "small.avi")]
+    elif change in ("no_overlap", "volume_outside"):
+        from wptrack.rig import Camera
+
+        rig = Rig.load(scene / "rig.yaml")
+        if change == "no_overlap":  # each camera looks away from the others
+            cams = tuple(
+                Camera.look_at(c.name, c.width, c.height, c.center, c.center + [3 * dx, 3 * dy, -1.5], 90.0)
+                for c, (dx, dy) in zip(rig.cameras, ((-1, 0), (1, 0), (0, 1)), strict=True)
+            )
+            bad = Rig(cams)
+        else:
+            bad = Rig(rig.cameras, volume=(np.array([40.0, 40.0, 0.0]), np.array([42.0, 42.0, 2.0])))
+        bad.save(tmp_path / "bad.yaml")
+        argv = _args(scene, out, masks=False)
+        argv[argv.index("--rig") + 1] = str(tmp_path / "bad.yaml")
+    elif change == "different_lengths":
+        from wptrack.frames import open_source
+
+        short = [f for i, f in enumerate(open_source(str(scene / "cam2.avi"))) if i < 50]
+        write_video(tmp_path / "short.avi", short, fps=25)
+        argv = _args(scene, out, masks=False, cams=(0, 1)) + ["--video", str(tmp_path / "short.avi")]
+    elif change == "frame_size":
+        write_video(tmp_path / "big.avi", [np.zeros((240, 320, 3), np.uint8)] * 60, fps=25)
+        argv = _args(scene, out, masks=False, cams=(0, 1)) + ["--video", str(tmp_path / "big.avi")]
     else:
         argv = _args(scene, out, masks=False, cams=(0, 1))
     assert main(argv) == 2

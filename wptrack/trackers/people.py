@@ -38,6 +38,7 @@ from wptrack.pf import BLOCK, MAX_BLOCKS, ParticleFilter, _device_arrays
 from wptrack.rig import Rig
 from wptrack.warpcams import DeviceRig
 
+from .people_area import working_area
 from .people_model import PeopleConfig
 
 log = logging.getLogger(__name__)
@@ -49,6 +50,8 @@ DESCRIPTOR_BLOCK = 64
 """Lanes per particle of the GPU descriptor (they share the disc pixels)."""
 MAX_SPEED = 2.0
 """A brisk walk, metres per second: how far evidence may move between frames and stay the same candidate."""
+LEAVE_MARGIN = 0.5
+"""A person whose ground position is farther than this from the working area has left it, metres."""
 NOISE_STRIDE = 4
 """Pixels between the samples of the image-noise estimate (eq. 18)."""
 
@@ -437,13 +440,17 @@ class PeopleTracker:
         self._bgr_host = wp.zeros(3 * npx, dtype=wp.uint8, device="cpu", pinned=pinned)
         self._mask_host = wp.zeros(npx, dtype=wp.uint8, device="cpu", pinned=pinned)
         self._sigma_host = wp.zeros(1, dtype=wp.float32, device="cpu", pinned=pinned)
-        # ground evidence map over the rig's working volume
+        # ground evidence map over the working area (the rig's volume, else the ground two cameras see)
         b = config.birth
-        lo, hi = rig.bounds()
+        self.area = working_area(rig, config.area)
+        log.info("%s", self.area.describe())
+        lo, hi = self.area.bounds
         self.grid_origin = np.array([lo[0], lo[1]], dtype=np.float64)
-        self.nx = max(1, int(math.ceil((hi[0] - lo[0]) / b.cell)))
-        self.ny = max(1, int(math.ceil((hi[1] - lo[1]) / b.cell)))
-        self.volume = (np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))
+        self.nx = max(1, int(math.ceil((hi[0] - lo[0]) / b.cell - 1e-9)))
+        self.ny = max(1, int(math.ceil((hi[1] - lo[1]) / b.cell - 1e-9)))
+        self.area_map = self.area.resample(self.grid_origin, b.cell, self.nx, self.ny)  # (ny, nx) bool
+        self.keep_area = self.area.grown(LEAVE_MARGIN)  # a person beyond it has left
+        self.volume = (np.array([lo[0], lo[1], 0.0]), np.array([hi[0], hi[1], self.area.z_top]))
         self.heights = wp.array(np.asarray(b.heights, dtype=np.float32), dtype=wp.float32, device=d)
         self.votes = wp.zeros(self.nx * self.ny, dtype=wp.int32, device=d)
         self.free_votes = wp.zeros(self.nx * self.ny, dtype=wp.int32, device=d)
@@ -715,14 +722,12 @@ class PeopleTracker:
         free_votes = self._free_host.numpy().reshape(self.ny, self.nx)
         support = votes >= self.min_votes
         gx, gy = self._cell_centres()
-        lo, hi = self.volume
-        margin = 0.5
         by_slot = {k: e for k, e in zip(active, est.people, strict=True)}
         for j, (k, e) in enumerate(by_slot.items()):
             x, y = e.mean[0], e.mean[1]
             near = (gx - x) ** 2 + (gy - y) ** 2 <= b.support_radius**2
             self.slot_miss[k] = 0.0 if column[j] or np.any(support & near) else self.slot_miss[k] + dt
-            outside = np.any(e.mean[:2] < lo[:2] - margin) or np.any(e.mean[:2] > hi[:2] + margin)
+            outside = not self.keep_area.contains(e.mean[:2])
             if self._elapsed(self.slot_miss[k], b.remove_seconds) or outside or not np.all(np.isfinite(e.mean)):
                 self._remove(k, est)
         # duplicates: two filters on one person
@@ -740,7 +745,7 @@ class PeopleTracker:
                 for j in alive:
                     self.slot_close[j] = 0.0
         # unexplained evidence -> candidates; at most one person added per frame, the strongest (see BirthConfig)
-        free = free_votes >= self.min_votes
+        free = (free_votes >= self.min_votes) & self.area_map
         for k in range(len(self.pool)):  # people added or kept this frame explain their surroundings
             if self.slot_id[k] >= 0 and k in by_slot:
                 e = by_slot[k]

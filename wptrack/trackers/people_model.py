@@ -254,6 +254,41 @@ class BirthConfig:
         _int_at_least(self.max_people, "birth.max_people", 1, "a number of people")
 
 
+@dataclass(frozen=True)
+class AreaConfig:
+    """The working area when the rig has no ``volume`` (ours; ``wptrack.trackers.people_area``): the ground seen by
+    ``min_cameras`` cameras, from the calibration.
+
+    Attributes:
+        min_cameras: cameras that must see a ground point for it to be in the area (at most the rig's cameras).
+            Ours: 2 (people are added where two views agree).
+        person_height: height of the standing person whose visibility decides, metres. Ours: 1.7.
+        min_visible: fraction of the person's vertical axis that must project inside a camera's image for the
+            camera to see the point (a person cut by the image border is still tracked). Ours: 0.5.
+        min_person_px: a camera sees a point only where that person would be at least this tall in its image,
+            pixels: the area ends where people become too small to track. Ours: 30.
+        max_distance: and only within this ground distance of the camera, metres. Ours: 50.
+        cell: resolution of the area, metres. Ours: 0.25.
+    """
+
+    min_cameras: int = 2
+    person_height: float = 1.7
+    min_visible: float = 0.5
+    min_person_px: float = 30.0
+    max_distance: float = 50.0
+    cell: float = 0.25
+
+    def __post_init__(self) -> None:
+        _int_at_least(self.min_cameras, "area.min_cameras", 1, "a camera count")
+        _positive(self.person_height, "area.person_height", "a height in metres")
+        v = _number(self.min_visible, "area.min_visible")
+        if not (0.0 < v <= 1.0):
+            raise ConfigError(f"area.min_visible: expected a fraction in (0, 1], got {self.min_visible!r}")
+        _positive(self.min_person_px, "area.min_person_px", "a height in pixels")
+        _positive(self.max_distance, "area.max_distance", "a distance in metres")
+        _positive(self.cell, "area.cell", "a cell size in metres")
+
+
 CENTROID_MODES = ("standing", "particles")
 
 
@@ -307,7 +342,7 @@ class PeopleConfig:
             every time in seconds). None: the recording's own (the videos' frame rate in a run; ``--fps`` for image
             folders); a :class:`~wptrack.trackers.people.PeopleTracker` built without one assumes 25 frames/s.
             ``PeopleTracker.step(..., timestamp=...)`` takes dt from the frames' timestamps instead.
-        dynamics, motion, descriptor, occupancy, birth, body: the sections above.
+        dynamics, motion, descriptor, occupancy, birth, body, area: the sections above.
 
     Resampling runs every frame (section 2.1: "particle resampling should be performed at each time step").
     """
@@ -321,6 +356,7 @@ class PeopleConfig:
     occupancy: OccupancyConfig = field(default_factory=OccupancyConfig)
     birth: BirthConfig = field(default_factory=BirthConfig)
     body: BodyConfig = field(default_factory=BodyConfig)
+    area: AreaConfig = field(default_factory=AreaConfig)
 
     def __post_init__(self) -> None:
         _int_at_least(self.particles, "particles", 1, "a particle count")
@@ -335,6 +371,7 @@ class PeopleConfig:
             ("occupancy", OccupancyConfig),
             ("birth", BirthConfig),
             ("body", BodyConfig),
+            ("area", AreaConfig),
         ):
             if not isinstance(getattr(self, name), cls):
                 raise ConfigError(f"{name}: expected a {cls.__name__}, got {type(getattr(self, name)).__name__}")
