@@ -28,6 +28,7 @@ array (H bins, S bins, V bins; each block sums to 1). At initialisation C_0 is t
 import warp as wp
 
 from .camera import Camera, pixel_index
+from .coverage import PersonTerms, person_log_terms
 from .descriptor import appearance_log_prob, descriptor_at
 from .random import STREAM_MOTION, STREAM_PEOPLE_VELOCITY, normal4, uniform4
 from .reduce import finite_logw, moments_push, moments_store, moments_zero
@@ -80,6 +81,8 @@ def predict_kernel(
     sigma_vel: wp.array(dtype=wp.float32),
     dt: wp.array(dtype=wp.float32),
     alpha: wp.array(dtype=wp.float32),
+    observe: wp.array(dtype=wp.int32),
+    decay: wp.array(dtype=wp.float32),
     seed: wp.vec2ui,
     frame: wp.array(dtype=wp.int32),
     pos_out: wp.array(dtype=wp.vec3),
@@ -95,16 +98,23 @@ def predict_kernel(
         desc, mass: (N, 3 N_b), (N,) A_{t-1} and its mass from ``descriptor.descriptor_kernel`` at P_{t-1}.
         ancestors: (N,) resampled parents (identity without resampling). sigma_pos, sigma_vel: [0] this frame's noise
             deviations (metres, metres/second). dt: [0] the frame interval, seconds. alpha: [0] this frame's
-            forgetting factor of eq. 6. All four are device arrays so that CUDA graphs see updates.
+            forgetting factor of eq. 6. observe: [0] 0 when this frame's masks do not show the person, [1] the
+            same for the previous frame (``coverage.gate_kernel``): with [0] = 0 the parent's velocity is first
+            multiplied by decay[0] (ours: a person nobody sees is more likely to stand than to walk on); with [1] = 0
+            the appearance model is kept (A_{t-1} was read where the person was not seen). All are device arrays
+            so that CUDA graphs see updates.
         seed: 64-bit run seed. frame: [0] frame number (the noise counter).
         pos_out, vel_out, model_out: the predicted state (must not alias the inputs).
     """
     i = wp.tid()
     a = ancestors[i]
-    p, v = constant_velocity(pos[a], vel[a], dt[0], sigma_pos[0], sigma_vel[0], seed, i, frame[0])
+    va = vel[a]
+    if observe[0] == 0:
+        va = va * decay[0]
+    p, v = constant_velocity(pos[a], va, dt[0], sigma_pos[0], sigma_vel[0], seed, i, frame[0])
     pos_out[i] = p
     vel_out[i] = v
-    appearance_update(model, desc, mass, a, alpha[0], model_out, i)  # eq. 6
+    appearance_update(model, desc, mass, a, wp.where(observe[1] != 0, alpha[0], 0.0), model_out, i)  # eq. 6
 
 
 @wp.func
@@ -174,14 +184,23 @@ def observation_kernel(
     n_bins: int,
     sigma_n: wp.array(dtype=wp.float32),
     sigma_p: float,
+    integral: wp.array(dtype=wp.int32),
+    others: wp.array(dtype=wp.vec2),
+    alive: wp.array(dtype=wp.int32),
+    boxes: wp.array2d(dtype=wp.vec4),
+    own: int,
+    terms: PersonTerms,
     loglik: wp.array(dtype=wp.float32),
 ):
-    """log p(z_t | x_t) = log p(M_t | x_t) + log p(A_t | x_t) (eq. 11) of every particle; the descriptor
-    (``desc``, ``mass``, ``mean_rgb``) must have been computed at ``points`` by ``descriptor.descriptor_kernel``."""
+    """log p(z_t | x_t) = log p(M_t | x_t) + log p(A_t | x_t) (eq. 11) of every particle, plus the person-level terms
+    (ours: ``coverage.person_log_terms`` with the masks' integral images ``integral``, the other people's ground
+    positions ``others``/``alive`` and this person's slot ``own``); the descriptor (``desc``, ``mass``,
+    ``mean_rgb``) must have been computed at ``points`` by ``descriptor.descriptor_kernel``."""
     i = wp.tid()
-    lm = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, points[i])
+    x = points[i]
+    lm = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, x)
     la = appearance_log_prob(model, i, desc, i, mass[i], mean_rgb[i], n_bins, sigma_n[0], sigma_p)
-    loglik[i] = lm + la
+    loglik[i] = lm + la + person_log_terms(cams, integral, others, alive, boxes, own, terms, x)
 
 
 @wp.kernel
@@ -209,10 +228,18 @@ def step_kernel(
     sigma_vel: wp.array(dtype=wp.float32),
     dt: wp.array(dtype=wp.float32),
     alpha: wp.array(dtype=wp.float32),
+    observe: wp.array(dtype=wp.int32),
+    decay: wp.array(dtype=wp.float32),
     sigma_n: wp.array(dtype=wp.float32),
     sigma_p: float,
     seed: wp.vec2ui,
     frame: wp.array(dtype=wp.int32),
+    integral: wp.array(dtype=wp.int32),
+    others: wp.array(dtype=wp.vec2),
+    alive: wp.array(dtype=wp.int32),
+    boxes: wp.array2d(dtype=wp.vec4),
+    own: int,
+    terms: PersonTerms,
     n: int,
     chunk: int,
     pos_out: wp.array(dtype=wp.vec3),
@@ -241,22 +268,30 @@ def step_kernel(
     sp = sigma_pos[0]
     sv = sigma_vel[0]
     h = dt[0]
-    al = alpha[0]
+    al = wp.where(observe[1] != 0, alpha[0], 0.0)  # eq. 6, unless the person was not seen in the last frame
+    seen = observe[0] != 0
+    dv = decay[0]
     sn = sigma_n[0]
     f = frame[0]
     keep = resampled[0] == 0
     best, arg, sw, sw2, sx, sxx = moments_zero()
     for i in range(start + lane, stop, wp.block_dim()):
         a = ancestors[i]
-        x, u = constant_velocity(pos[a], vel[a], h, sp, sv, seed, i, f)  # eq. 5
+        va = vel[a]
+        if not seen:
+            va = va * dv
+        x, u = constant_velocity(pos[a], va, h, sp, sv, seed, i, f)  # eq. 5
         pos_out[i] = x
         vel_out[i] = u
         appearance_update(model, desc, mass, a, al, model_out, i)  # eq. 6
         m, rgb = descriptor_at(cams, bgr, x, r_n, n_bins, r_min, r_max, step, desc_out, i)  # eqs. 19-22
         mass_out[i] = m
         rgb_out[i] = rgb
-        lw = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, x)  # eqs. 9-10
-        lw += appearance_log_prob(model_out, i, desc_out, i, m, rgb, n_bins, sn, sigma_p)  # eqs. 23-26, eq. 11
+        lw = float(0.0)
+        if seen:
+            lw = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, x)  # eqs. 9-10
+            lw += appearance_log_prob(model_out, i, desc_out, i, m, rgb, n_bins, sn, sigma_p)  # eqs. 23-26, eq. 11
+            lw += person_log_terms(cams, integral, others, alive, boxes, own, terms, x)  # ours
         if keep:
             lw += logw_prev[i]
         lw = finite_logw(lw)  # -inf/NaN -> the floor, as the estimate and the resampler read it
@@ -456,6 +491,13 @@ def score_moments_kernel(
     resampled: wp.array(dtype=wp.int32),
     sigma_n: wp.array(dtype=wp.float32),
     sigma_p: float,
+    integral: wp.array(dtype=wp.int32),
+    others: wp.array(dtype=wp.vec2),
+    alive: wp.array(dtype=wp.int32),
+    boxes: wp.array2d(dtype=wp.vec4),
+    own: int,
+    terms: PersonTerms,
+    observe: wp.array(dtype=wp.int32),
     n: int,
     chunk: int,
     logw_out: wp.array(dtype=wp.float32),
@@ -472,11 +514,15 @@ def score_moments_kernel(
     stop = wp.min(start + chunk, n)
     sn = sigma_n[0]
     keep = resampled[0] == 0
+    seen = observe[0] != 0
     best, arg, sw, sw2, sx, sxx = moments_zero()
     for i in range(start + lane, stop, wp.block_dim()):
         x = pos[i]
-        lw = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, x)  # eqs. 9-10
-        lw += appearance_log_prob(model, i, desc, i, mass[i], rgb[i], n_bins, sn, sigma_p)  # eqs. 23-26, eq. 11
+        lw = float(0.0)
+        if seen:
+            lw = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, x)  # eqs. 9-10
+            lw += appearance_log_prob(model, i, desc, i, mass[i], rgb[i], n_bins, sn, sigma_p)  # eqs. 23-26, eq. 11
+            lw += person_log_terms(cams, integral, others, alive, boxes, own, terms, x)  # ours
         if keep:
             lw += logw_prev[i]
         lw = finite_logw(lw)  # -inf/NaN -> the floor, as the estimate and the resampler read it

@@ -433,11 +433,51 @@ def test_motion_likelihood(device, neutral, drop_worst):
     assert len(np.unique(np.round(full, 5))) >= 4
 
 
+def person_inputs(rig: Rig, drig: DeviceRig, mask: np.ndarray, device, rng, slope=0.02, weight=5.0) -> list:
+    """The person-level inputs of the S2 kernels (kernels/coverage.py): the masks' integral images, three other
+    people (one not alive) with their rectangles, this person's slot 0 and the terms."""
+    from test_kernels_coverage import integral, make_terms
+
+    from wptrack.kernels import coverage as kcov
+
+    I = integral(rig, drig, (mask != 0).astype(np.uint8), device)  # noqa: E741
+    others = wp.array(rng.uniform(0.0, 1.0, (3, 2)).astype(np.float32), dtype=wp.vec2, device=device)
+    alive = wp.array(np.array([1, 0, 1], np.int32), device=device)
+    boxes = wp.zeros((3, drig.num_cameras), dtype=wp.vec4, device=device)
+    wp.launch(
+        kcov.person_boxes_kernel,
+        dim=boxes.shape,
+        inputs=[drig.cams, others, alive, 0.25, 1.75],
+        outputs=[boxes],
+        device=device,
+    )
+    terms = make_terms(slope=slope, weight=weight)
+    terms.half_width, terms.height = 0.25, 1.75
+    return [I, others, alive, boxes, 0, terms]
+
+
+def person_terms_ref(drig: DeviceRig, inputs: list, pts: np.ndarray, device) -> np.ndarray:
+    """The person-level terms of ``pts`` by test_kernels_coverage's kernel (checked there against NumPy)."""
+    from test_kernels_coverage import _terms_kernel
+
+    out = wp.zeros(len(pts), dtype=wp.float32, device=device)
+    wp.launch(
+        _terms_kernel,
+        dim=len(pts),
+        inputs=[drig.cams, *inputs, wp.array(pts, dtype=wp.vec3, device=device)],
+        outputs=[out],
+        device=device,
+    )
+    return out.numpy().astype(np.float64)
+
+
 def test_observation_is_motion_plus_appearance(device, rng):
     rig = make_rig()
     drig = DeviceRig(rig, device)
     bgr = random_frames(rig, rng)
-    mask = wp.array(motion_masks(rig, rng), dtype=wp.uint8, device=device)
+    flat = motion_masks(rig, rng)
+    mask = wp.array(flat, dtype=wp.uint8, device=device)
+    person = person_inputs(rig, drig, flat, device, rng)
     pts = random_points(rng, 100)
     P = wp.array(pts, dtype=wp.vec3, device=device)
     desc, mass, rgb = run_descriptor(drig, bgr, pts, device)
@@ -458,14 +498,18 @@ def test_observation_is_motion_plus_appearance(device, rng):
     wp.launch(
         kpeople.observation_kernel,
         dim=len(pts),
-        inputs=[drig.cams, mask, p_b, 0.0, 0, P, model, desc, mass, rgb, NB, sn, 0.25],
+        inputs=[drig.cams, mask, p_b, 0.0, 0, P, model, desc, mass, rgb, NB, sn, 0.25, *person],
         outputs=[lo],
         device=device,
     )
-    np.testing.assert_allclose(lo.numpy(), lm.numpy() + la.numpy(), rtol=1e-6, atol=1e-6)
+    lt = person_terms_ref(drig, person, pts, device)
+    assert np.ptp(lt) > 1.0  # the person-level terms vary over the points
+    np.testing.assert_allclose(lo.numpy(), lm.numpy() + la.numpy() + lt, rtol=1e-5, atol=1e-4)
 
 
-def run_predict(device, pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, frame, dt=1.0):
+def run_predict(
+    device, pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, frame, dt=1.0, observe=(1, 1), decay=1.0
+):
     n = len(pos)
     outs = [
         wp.zeros(n, dtype=wp.vec3, device=device),
@@ -486,6 +530,8 @@ def run_predict(device, pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, f
             wp.array([sv], dtype=wp.float32, device=device),
             wp.array([dt], dtype=wp.float32, device=device),
             wp.array([alpha], dtype=wp.float32, device=device),
+            wp.array(np.asarray(observe, np.int32), device=device),
+            wp.array([decay], dtype=wp.float32, device=device),
             wp.vec2ui(seed, 0),
             wp.array([frame], dtype=wp.int32, device=device),
         ],
@@ -525,6 +571,24 @@ def test_predict_statistics_and_appearance_update(device, rng):
     p3, _, _ = run_predict(device, pos, vel, model, desc, mass, anc, sp, sv, alpha, 12, 5)
     assert not np.any(np.all(p2 == p, axis=1)) and not np.any(np.all(v2 == v, axis=1))
     assert not np.any(np.all(p3 == p, axis=1))
+
+
+def test_predict_unseen_person_slows_down_and_keeps_its_appearance(device, rng):
+    """observe[0] = 0 (this frame's masks do not show the person): the parent's velocity is multiplied by the decay
+    before eq. 5; observe[1] = 0 (nor the last frame's): eq. 6 keeps the appearance model C_{t-1}."""
+    n = 2000
+    pos = rng.uniform(-1, 1, (n, 3)).astype(np.float32)
+    vel = rng.normal(0, 0.5, (n, 3)).astype(np.float32)
+    model, desc = random_histograms(rng, n), random_histograms(rng, n)
+    anc = rng.integers(0, n, n).astype(np.int32)
+    args = (device, pos, vel, model, desc, np.ones(n, np.float32), anc, 0.02, 0.01, 0.3, 3, 9)
+    p1, v1, c1 = run_predict(*args, dt=0.2, observe=(1, 1), decay=0.5)
+    p0, v0, c0 = run_predict(*args, dt=0.2, observe=(0, 0), decay=0.5)
+    # the same noise draws: the differences are the decayed velocity (position: times dt)
+    np.testing.assert_allclose(v1 - v0, 0.5 * vel[anc], rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(p1 - p0, 0.2 * 0.5 * vel[anc], rtol=1e-4, atol=1e-5)
+    np.testing.assert_array_equal(c0, model[anc])  # kept
+    np.testing.assert_allclose(c1, 0.3 * desc[anc] + 0.7 * model[anc], rtol=1e-6, atol=1e-7)
 
 
 def run_occupancy(device, pts, logw, sigma, cutoff, origin, voxel, shape):
@@ -583,7 +647,11 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     nbk = (n + chunk - 1) // chunk
     bgr = random_frames(rig, rng)
     B = wp.array(bgr, dtype=wp.uint8, device=device)
-    mask = wp.array(motion_masks(rig, rng), dtype=wp.uint8, device=device)
+    flat = motion_masks(rig, rng)
+    mask = wp.array(flat, dtype=wp.uint8, device=device)
+    person = person_inputs(rig, drig, flat, device, rng)
+    observe = wp.array(np.array([1, 1], np.int32), device=device)
+    decay = wp.array([0.5], dtype=wp.float32, device=device)
     pos = wp.array(random_points(rng, n), dtype=wp.vec3, device=device)
     vel = wp.array(rng.normal(0, 0.02, (n, 3)).astype(np.float32), dtype=wp.vec3, device=device)
     model = wp.array(random_histograms(rng, n), device=device)
@@ -617,7 +685,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
         kpeople.step_kernel,
         dim=[nbk],
         inputs=[drig.cams, mask, p_b, 0.0, 1, B, R_N, NB, R_MIN, R_MAX, 2, pos, vel, model, desc, mass, anc]
-        + [logw_prev, flag, sp, sv, dt, alpha, sn, sigma_p, seed, frame, n, chunk],
+        + [logw_prev, flag, sp, sv, dt, alpha, observe, decay, sn, sigma_p, seed, frame, *person, n, chunk],
         outputs=list(fused.values()),
         block_dim=block,
         device=device,
@@ -626,7 +694,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     wp.launch(
         kpeople.predict_kernel,
         dim=n,
-        inputs=[pos, vel, model, desc, mass, anc, sp, sv, dt, alpha, seed, frame],
+        inputs=[pos, vel, model, desc, mass, anc, sp, sv, dt, alpha, observe, decay, seed, frame],
         outputs=[sep["pos"], sep["vel"], sep["model"]],
         device=device,
     )
@@ -641,7 +709,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
         kpeople.observation_kernel,
         dim=n,
         inputs=[drig.cams, mask, p_b, 0.0, 1, sep["pos"], sep["model"], sep["desc"], sep["mass"], sep["rgb"], NB, sn]
-        + [sigma_p],
+        + [sigma_p, *person],
         outputs=[sep["logw"]],
         device=device,
     )
@@ -665,7 +733,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     wp.launch(
         kpeople.predict_kernel,
         dim=n,
-        inputs=[pos, vel, model, desc, mass, anc, sp, sv, dt, alpha, seed, frame],
+        inputs=[pos, vel, model, desc, mass, anc, sp, sv, dt, alpha, observe, decay, seed, frame],
         outputs=[gpu["pos"], gpu["vel"], gpu["model"]],
         device=device,
     )
@@ -681,7 +749,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
         kpeople.score_moments_kernel,
         dim=[nbk],
         inputs=[drig.cams, mask, p_b, 0.0, 1, gpu["pos"], gpu["model"], gpu["desc"], gpu["mass"], gpu["rgb"], NB]
-        + [logw_prev, flag, sn, sigma_p, n, chunk],
+        + [logw_prev, flag, sn, sigma_p, *person, observe, n, chunk],
         outputs=[gpu["logw"], gpu["pmax"], gpu["parg"], gpu["part"]],
         block_dim=block,
         device=device,
@@ -691,6 +759,35 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     for k in ("desc", "mass", "rgb", "logw", "pmax"):  # the block sums the disc pixels in another order
         np.testing.assert_allclose(gpu[k].numpy(), fused[k].numpy(), rtol=1e-4, atol=1e-5, err_msg=k)
     np.testing.assert_allclose(gpu["part"].numpy(), fused["part"].numpy(), rtol=1e-4, atol=1e-9)
+
+    # a frame whose masks do not show the person: no weighting (the previous log-weights, or 0 after resampling),
+    # the velocity decayed, the appearance model kept; the GPU chain's score kernel agrees
+    observe.assign(np.array([0, 0], np.int32))
+    unseen = {k: zeros(v.shape, v.dtype) for k, v in fused.items()}
+    wp.launch_tiled(
+        kpeople.step_kernel,
+        dim=[nbk],
+        inputs=[drig.cams, mask, p_b, 0.0, 1, B, R_N, NB, R_MIN, R_MAX, 2, pos, vel, model, desc, mass, anc]
+        + [logw_prev, flag, sp, sv, dt, alpha, observe, decay, sn, sigma_p, seed, frame, *person, n, chunk],
+        outputs=list(unseen.values()),
+        block_dim=block,
+        device=device,
+    )
+    expect = np.zeros(n, np.float32) if resampled else logw_prev.numpy()
+    np.testing.assert_array_equal(unseen["logw"].numpy(), expect)
+    a = anc.numpy()
+    np.testing.assert_array_equal(unseen["model"].numpy(), model.numpy()[a])
+    np.testing.assert_allclose(fused["vel"].numpy() - unseen["vel"].numpy(), 0.5 * vel.numpy()[a], atol=1e-6)
+    wp.launch_tiled(
+        kpeople.score_moments_kernel,
+        dim=[nbk],
+        inputs=[drig.cams, mask, p_b, 0.0, 1, unseen["pos"], unseen["model"], unseen["desc"], unseen["mass"]]
+        + [unseen["rgb"], NB, logw_prev, flag, sn, sigma_p, *person, observe, n, chunk],
+        outputs=[gpu["logw"], gpu["pmax"], gpu["parg"], gpu["part"]],
+        block_dim=block,
+        device=device,
+    )
+    np.testing.assert_array_equal(gpu["logw"].numpy(), expect)
 
 
 def test_occupancy_hashgrid_equals_brute_force(device, rng):

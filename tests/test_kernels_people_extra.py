@@ -3,7 +3,8 @@ against NumPy references on every device: the ground-grid motion votes used to a
 (``ground_votes_kernel``), the birth draw uniform in a vertical cylinder (``init_cylinder_kernel``: exact against a
 NumPy Philox, and statistically: radial CDF r^2/R^2, uniform angle and height), the estimate -> ground position copy
 (``person_xy_kernel``), the constant-velocity draw of ``predict_kernel`` (eq. 5) draw by draw, and
-``score_moments_kernel`` (eq. 11 = eqs. 9-10 + eqs. 23-26, and its block partials, MAP index included)."""
+``score_moments_kernel`` (eq. 11 = eqs. 9-10 + eqs. 23-26, plus the person-level terms of kernels/coverage.py, and
+its block partials, MAP index included)."""
 
 from __future__ import annotations
 
@@ -18,6 +19,8 @@ from test_kernels_people import (
     make_rig,
     motion_masks,
     motion_ref,
+    person_inputs,
+    person_terms_ref,
     project_all,
     random_frames,
     random_histograms,
@@ -348,6 +351,7 @@ def test_score_moments_matches_numpy(device, rng, resampled, drop_worst):
     blocks = (n + chunk - 1) // chunk
     bgr = random_frames(rig, rng)
     mask = motion_masks(rig, rng)
+    person = person_inputs(rig, drig, mask, device, rng)
     pts = random_points(rng, n)
     desc, mass, rgb = run_descriptor(drig, bgr, pts, device)
     model = random_histograms(rng, n)
@@ -363,7 +367,8 @@ def test_score_moments_matches_numpy(device, rng, resampled, drop_worst):
         inputs=[drig.cams, wp.array(mask, dtype=wp.uint8, device=device), p_b, 0.0, drop_worst]
         + [wp.array(pts, dtype=wp.vec3, device=device), wp.array(model, device=device), desc, mass, rgb, NB]
         + [wp.array(logw_prev, device=device), wp.array([resampled], dtype=wp.int32, device=device)]
-        + [wp.array([sn], dtype=wp.float32, device=device), sigma_p, n, chunk],
+        + [wp.array([sn], dtype=wp.float32, device=device), sigma_p, *person]
+        + [wp.array(np.array([1, 1], np.int32), device=device), n, chunk],
         outputs=[logw, pm, pa, part],
         block_dim=block,
         device=device,
@@ -371,7 +376,7 @@ def test_score_moments_matches_numpy(device, rng, resampled, drop_worst):
     uvz = project_all(drig, pts, device)
     lm = motion_ref(rig, uvz, mask, drig.pixel_offsets, p_b, 0.0, drop_worst)
     la = appearance_ref(model, desc.numpy(), mass.numpy(), rgb.numpy(), sn, sigma_p)
-    ref = lm + la + (0.0 if resampled else logw_prev)
+    ref = lm + la + person_terms_ref(drig, person, pts, device) + (0.0 if resampled else logw_prev)
     got = logw.numpy()
     np.testing.assert_allclose(got, ref, rtol=1e-5, atol=1e-4)
     assert (mass.numpy() == 0).sum() >= 3 and len(np.unique(np.round(lm, 4))) >= 4  # unseen and varied particles

@@ -30,6 +30,8 @@ import warp as wp
 
 from wptrack.device import block_partition, resolve_device
 from wptrack.errors import ConfigError, FrameError
+from wptrack.kernels import colour as kcolour
+from wptrack.kernels import coverage as kcov
 from wptrack.kernels import descriptor as kdesc
 from wptrack.kernels import occupancy as kocc
 from wptrack.kernels import people as kpeople
@@ -48,10 +50,15 @@ DEFAULT_FPS = 25.0
 """Frame rate assumed by a tracker built without ``PeopleConfig.fps`` and stepped without timestamps."""
 DESCRIPTOR_BLOCK = 64
 """Lanes per particle of the GPU descriptor (they share the disc pixels)."""
+MIN_APPEARANCE_PX = 100
+"""Pixels of its own a body part needs in a frame to update a person's appearance (all cameras together)."""
+WALK_SPEED = 1.5
+"""Walking speed, metres per second: how far a lost person may have gone (re-identification)."""
 MAX_SPEED = 2.0
 """A brisk walk, metres per second: how far evidence may move between frames and stay the same candidate."""
 LEAVE_MARGIN = 0.5
-"""A person whose ground position is farther than this from the working area has left it, metres."""
+"""A person farther than this from the ground that any camera sees (the rig's volume when it has one) has left,
+metres."""
 NOISE_STRIDE = 4
 """Pixels between the samples of the image-noise estimate (eq. 18)."""
 
@@ -80,6 +87,8 @@ class PersonEstimate:
         ess: effective sample size of the frame's weights.
         loglik: log of the mean weight (eq. 11 averaged over the particles).
         age: frames since the person was added.
+        support: the rectangle term of the masks at the person's last position (``kernels.coverage.gate_kernel``:
+            what the other people's rectangles leave), nats; <= ``PersonConfig.gate``: not seen this frame.
         particles: (K, 3) subsample of the particles (before resampling), metres, or None.
         weights: (K,) their weights relative to the best particle, or None.
         occupancy: ``(origin (3,), grid (nx, ny, nz) float32)``: the occupancy pdf of this frame's particles (see
@@ -99,6 +108,7 @@ class PersonEstimate:
     ess: float
     loglik: float
     age: int
+    support: float = 0.0
     particles: np.ndarray | None = None
     weights: np.ndarray | None = None
     occupancy: tuple[np.ndarray, np.ndarray] | None = None
@@ -157,6 +167,9 @@ class PersonFilter(ParticleFilter):
         self.desc = [wp.zeros((n, cols), dtype=wp.float32, device=d) for _ in range(2)]
         self.mass = [wp.zeros(n, dtype=wp.float32, device=d) for _ in range(2)]
         self.rgb = wp.zeros(n, dtype=wp.vec3, device=d)
+        self.observe = wp.ones(2, dtype=wp.int32, device=d)  # [0] this frame's masks show the person, [1] the last
+        self.support = wp.zeros(1, dtype=wp.float32, device=d)  # [0] the gate's best rectangle term, nats
+        self.support_host = wp.zeros(1, dtype=wp.float32, device="cpu", pinned=tracker.is_cuda)
         oc = cfg.occupancy
         self.grid_dims = tuple(int(v) for v in np.maximum(np.round(np.asarray(oc.extent) / oc.voxel), 1))
         self.grid = wp.zeros(self.grid_dims, dtype=wp.float32, device=d)  # occupancy pdf around the person, 1/m^3
@@ -193,6 +206,21 @@ class PersonFilter(ParticleFilter):
         norm.launch()
         grid.launch()
         wp.copy(self.grid_host, self.grid)  # asynchronous on CUDA (pinned)
+
+    def _launch_observation(self) -> None:
+        """Whether this frame's masks show the person (``kernels.coverage.gate_kernel``, into :attr:`observe`)."""
+        tr, pc = self.tracker, self.tracker.config.person
+        wp.launch(
+            kcov.gate_kernel,
+            dim=1,
+            inputs=[tr.drig.cams, tr.integral, tr.boxes, tr.slot_xy, self.slot, tr.terms] + [pc.gate_reach, pc.gate],
+            outputs=[self.observe, self.support],
+            device=self.device,
+        )
+
+    def _readback(self) -> None:
+        super()._readback()
+        wp.copy(self.support_host, self.support)
 
     def spawn(self, xy: np.ndarray, frame: int) -> None:
         """Start the filter on a new person standing at ``xy`` (ground, metres): particles uniform in the
@@ -231,6 +259,7 @@ class PersonFilter(ParticleFilter):
             device=d,
         )
         wp.copy(self.model[cur], self.desc[cur])  # C_0 = A_0
+        self.observe.fill_(1)
         self._reset_weights()
 
     def _launch_predict_score(self, src: int, dst: int) -> None:
@@ -269,10 +298,18 @@ class PersonFilter(ParticleFilter):
                     tr.sigma_vel,
                     tr.dt,
                     tr.alpha,
+                    self.observe,
+                    tr.decay,
                     tr.sigma_n,
                     dc.sigma_p,
                     self.seed,
                     self.frame,
+                    tr.integral,
+                    tr.slot_xy,
+                    tr.slot_alive,
+                    tr.boxes,
+                    self.slot,
+                    tr.terms,
                     self.n,
                     self.chunk,
                 ],
@@ -306,6 +343,8 @@ class PersonFilter(ParticleFilter):
                 tr.sigma_vel,
                 tr.dt,
                 tr.alpha,
+                self.observe,
+                tr.decay,
                 self.seed,
                 self.frame,
             ],
@@ -339,6 +378,13 @@ class PersonFilter(ParticleFilter):
                 self.resampled,
                 tr.sigma_n,
                 dc.sigma_p,
+                tr.integral,
+                tr.slot_xy,
+                tr.slot_alive,
+                tr.boxes,
+                self.slot,
+                tr.terms,
+                self.observe,
                 self.n,
                 self.chunk,
             ],
@@ -361,6 +407,7 @@ class PersonFilter(ParticleFilter):
             ess=float(e[kreduce.EST_ESS]),
             loglik=float(e[kreduce.EST_LOGLIK]),
             age=age,
+            support=float(self.support_host.numpy()[0]),
             degenerate=bool(e[kreduce.EST_DEGENERATE]),
         )
         if self.keep:
@@ -425,6 +472,7 @@ class PeopleTracker:
         self.dt = wp.array([self.frame_dt], dtype=wp.float32, device=d)  # [0] dt, seconds
         self.sigma_vel = wp.array([sv], dtype=wp.float32, device=d)  # [0] velocity noise of one frame, m/s
         self.alpha = wp.array([al], dtype=wp.float32, device=d)  # [0] eq. 6's factor of one frame
+        self.decay = wp.array([self._decay(self.frame_dt)], dtype=wp.float32, device=d)  # [0] unseen velocity factor
         self._last_timestamp: float | None = None
         self.drig = DeviceRig(rig, d)
         npx = self.drig.total_pixels
@@ -449,15 +497,47 @@ class PeopleTracker:
         self.nx = max(1, int(math.ceil((hi[0] - lo[0]) / b.cell - 1e-9)))
         self.ny = max(1, int(math.ceil((hi[1] - lo[1]) / b.cell - 1e-9)))
         self.area_map = self.area.resample(self.grid_origin, b.cell, self.nx, self.ny)  # (ny, nx) bool
-        self.keep_area = self.area.grown(LEAVE_MARGIN)  # a person beyond it has left
+        self.keep_area = self.area.followed.grown(LEAVE_MARGIN)  # a person beyond it has left
         self.volume = (np.array([lo[0], lo[1], 0.0]), np.array([hi[0], hi[1], self.area.z_top]))
-        self.heights = wp.array(np.asarray(b.heights, dtype=np.float32), dtype=wp.float32, device=d)
-        self.votes = wp.zeros(self.nx * self.ny, dtype=wp.int32, device=d)
-        self.free_votes = wp.zeros(self.nx * self.ny, dtype=wp.int32, device=d)
-        self._votes_host = wp.zeros(self.nx * self.ny, dtype=wp.int32, device="cpu", pinned=pinned)
-        self._free_host = wp.zeros(self.nx * self.ny, dtype=wp.int32, device="cpu", pinned=pinned)
-        rays = np.concatenate([_all_pixel_rays(cam) for cam in rig.cameras]).astype(np.float32)
-        self.rays = wp.array(rays, dtype=wp.vec3, device=d)  # (P,) world direction of every pixel's viewing ray
+        # the masks' integral images (all motion, and the motion the tracked people's rectangles leave), the person
+        # rectangles' coverage on the evidence map's cells, and the person-level terms of the particles' weights
+        ncam = len(rig)
+        self.integral = wp.zeros(self.drig.total_integral, dtype=wp.int32, device=d)
+        self.free_mask = wp.zeros(npx, dtype=wp.uint8, device=d)
+        self.free_integral = wp.zeros(self.drig.total_integral, dtype=wp.int32, device=d)
+        maxw, maxh = max(c.width for c in rig.cameras), max(c.height for c in rig.cameras)
+        seg = int(kcolour.SEGMENT)
+        self._row_dims = (ncam, maxh, -(-maxw // seg))
+        self._col_dims = (ncam, maxw + 1, -(-maxh // seg))
+        self._row_seg = wp.zeros(self._row_dims, dtype=wp.int32, device=d)
+        self._col_seg = wp.zeros(self._col_dims, dtype=wp.int32, device=d)
+        self._pixel_dims = (ncam, maxh, maxw)
+        cells = self.nx * self.ny
+        self.cover = wp.zeros((ncam, cells), dtype=wp.float32, device=d)  # coverage of all motion, -1: unseen
+        self.free_cover = wp.zeros((ncam, cells), dtype=wp.float32, device=d)  # of the unexplained motion
+        self._cover_host = wp.zeros((ncam, cells), dtype=wp.float32, device="cpu", pinned=pinned)
+        cell_area = wp.zeros((ncam, cells), dtype=wp.float32, device=d)
+        wp.launch(
+            kcov.box_area_kernel,
+            dim=(ncam, cells),
+            inputs=[self.drig.cams, wp.vec2(*self.grid_origin), b.cell, self.nx]
+            + [config.person.half_width, config.person.height, config.person.min_visible],
+            outputs=[cell_area],
+            device=d,
+        )
+        self.cell_area = cell_area.numpy().reshape(ncam, self.ny, self.nx)  # pixels of each cell's rectangle
+        self._free_cover_host = wp.zeros((ncam, cells), dtype=wp.float32, device="cpu", pinned=pinned)
+        self.boxes = wp.zeros((b.max_people, ncam), dtype=wp.vec4, device=d)  # tracked people's rectangles per slot
+        pc = config.person
+        self.terms = kcov.PersonTerms()
+        self.terms.half_width, self.terms.height, self.terms.min_visible = pc.half_width, pc.height, pc.min_visible
+        self.terms.slope, self.terms.offset = pc.slope_offset
+        self.terms.exclusion_radius, self.terms.exclusion_weight = pc.exclusion_radius, pc.exclusion_weight
+        nb = int(kcov.HIST_BINS)
+        self.hist = wp.zeros((b.max_people, ncam, int(kcov.HIST_PARTS), nb + 1), dtype=wp.float32, device=d)
+        self._hist_host = wp.zeros(self.hist.shape, dtype=wp.float32, device="cpu", pinned=pinned)
+        self.slot_xy = wp.zeros(b.max_people, dtype=wp.vec2, device=d)  # ground position per pool slot
+        self.slot_alive = wp.zeros(b.max_people, dtype=wp.int32, device=d)  # 1 where the slot tracks somebody
         self.people_xy = wp.zeros(b.max_people, dtype=wp.vec2, device=d)  # the tracked people's ground positions
         body = config.body
         self.column_z_lo = 0.05
@@ -475,6 +555,12 @@ class PeopleTracker:
         self.slot_miss = np.zeros(b.max_people, dtype=np.float64)  # seconds without support
         self.slot_close = np.zeros(b.max_people, dtype=np.float64)  # seconds closer than merge_distance to another
         self.pending = np.zeros((0, 3), dtype=np.float64)  # x, y, seconds of unexplained evidence in a row
+        nparts = int(kcov.HIST_PARTS)
+        self.slot_app = np.zeros((b.max_people, nparts, nb))  # appearance per slot: normalised histograms
+        self.slot_app_seen = np.zeros((b.max_people, nparts), dtype=bool)  # the part has been seen
+        self.slot_new = np.zeros(b.max_people, dtype=bool)  # added last frame: may be somebody lost before
+        self.lost: list[dict] = []  # people removed for lack of support: id, time, x, y, appearance (re-id)
+        self.clock = 0.0  # seconds since the first frame (sum of the frame intervals)
         self.next_id = 0
         self.frames_done = 0
         log.info(
@@ -519,7 +605,7 @@ class PeopleTracker:
                         f"{cam.width}x{cam.height}"
                     )
             bgr[3 * offs[c] : 3 * offs[c + 1]] = img.reshape(-1)
-            msk[offs[c] : offs[c + 1]] = m.reshape(-1)  # the kernels read nonzero as motion
+            np.not_equal(m.reshape(-1), 0, out=msk[offs[c] : offs[c + 1]].view(np.bool_))  # 0/1: counted
         wp.copy(self.bgr, self._bgr_host)
         wp.copy(self.mask, self._mask_host)
 
@@ -544,34 +630,69 @@ class PeopleTracker:
             device=d,
         )
         wp.copy(self.bgr_prev, self.bgr)
+        self._integral(self.mask, self.integral)
+
+    def _integral(self, mask: wp.array, out: wp.array) -> None:
+        """The (H+1) x (W+1) integral image of every camera's 0/1 ``mask`` into ``out`` (``kernels.colour``'s four
+        segmented scans)."""
+        cams, d = self.drig.cams, self.device
+        wp.launch(
+            kcolour.row_segment_sums_kernel, dim=self._row_dims, inputs=[cams, mask], outputs=[self._row_seg], device=d
+        )
+        wp.launch(
+            kcolour.row_scan_kernel, dim=self._row_dims, inputs=[cams, mask, self._row_seg], outputs=[out], device=d
+        )
+        wp.launch(
+            kcolour.col_segment_sums_kernel, dim=self._col_dims, inputs=[cams, out], outputs=[self._col_seg], device=d
+        )
+        wp.launch(kcolour.col_scan_kernel, dim=self._col_dims, inputs=[cams, self._col_seg], outputs=[out], device=d)
+
+    def _coverage(self) -> None:
+        """The tracked people's rectangles after this frame (``boxes``: what the others explain in the next frame's
+        rectangle terms) and the person rectangles' coverage on the evidence map's cells (``kernels.coverage``): of
+        all motion, and of the motion outside the tracked people's rectangles; copied to the host asynchronously."""
+        pc, b, d = self.config.person, self.config.birth, self.device
+        cams = self.drig.cams
+        origin = wp.vec2(*self.grid_origin)
+        dims = (len(self.rig), self.nx * self.ny)
+        common = [origin, b.cell, self.nx, pc.half_width, pc.height, pc.min_visible]
+        wp.launch(kcov.coverage_kernel, dim=dims, inputs=[cams, self.integral, *common], outputs=[self.cover], device=d)
+        wp.launch(
+            kcov.person_boxes_kernel,
+            dim=(len(self.pool), len(self.rig)),
+            inputs=[cams, self.slot_xy, self.slot_alive, pc.half_width, pc.height],
+            outputs=[self.boxes],
+            device=d,
+        )
+        wp.launch(
+            kcov.explained_mask_kernel,
+            dim=self._pixel_dims,
+            inputs=[cams, self.mask, self.boxes, len(self.pool)],
+            outputs=[self.free_mask],
+            device=d,
+        )
+        self._integral(self.free_mask, self.free_integral)
+        wp.launch(
+            kcov.coverage_kernel,
+            dim=dims,
+            inputs=[cams, self.free_integral, *common],
+            outputs=[self.free_cover],
+            device=d,
+        )
+        wp.copy(self._cover_host, self.cover)
+        wp.copy(self._free_cover_host, self.free_cover)
+        wp.launch(
+            kcov.person_histogram_kernel,
+            dim=(len(self.pool), len(self.rig), int(kcov.HIST_PARTS)),
+            inputs=[cams, self.bgr, self.mask, self.boxes],
+            outputs=[self.hist],
+            device=d,
+        )
+        wp.copy(self._hist_host, self.hist)
 
     def _evidence(self, n: int) -> None:
-        """The ground evidence map and the column tops, with the motion of the ``n`` people tracked after this
-        frame's prediction explained (``people_xy[:n]``, filled on the device from their estimates); the results are
-        copied to the host asynchronously (the frame's one synchronisation follows)."""
-        b = self.config.birth
-        wp.launch(
-            kpeople.ground_votes_kernel,
-            dim=self.nx * self.ny,
-            inputs=[
-                self.drig.cams,
-                self.mask,
-                self.rays,
-                self.heights,
-                self.people_xy,
-                n,
-                b.person_radius,
-                b.person_height,
-                wp.vec2(*self.grid_origin),
-                b.cell,
-                self.nx,
-                b.min_fraction,
-            ],
-            outputs=[self.votes, self.free_votes],
-            device=self.device,
-        )
-        wp.copy(self._votes_host, self.votes)
-        wp.copy(self._free_host, self.free_votes)
+        """The silhouette column tops of the ``n`` people tracked after this frame (``people_xy[:n]``, filled on the
+        device from their estimates), copied to the host asynchronously (the frame's one synchronisation follows)."""
         if n:
             body = self.config.body
             axes = kpeople.COLUMN_AXES
@@ -629,18 +750,22 @@ class PeopleTracker:
             p._run_chain(src, dst)
             p.parity = dst
             p.frames_done += 1
-            wp.launch(
-                kpeople.person_xy_kernel,
-                dim=1,
-                inputs=[p.est, int(kreduce.EST_MEAN), j],
-                outputs=[self.people_xy],
-                device=self.device,
-            )
+            for index, out in ((j, self.people_xy), (k, self.slot_xy)):
+                wp.launch(
+                    kpeople.person_xy_kernel,
+                    dim=1,
+                    inputs=[p.est, int(kreduce.EST_MEAN), index],
+                    outputs=[out],
+                    device=self.device,
+                )
+        self._coverage()
         self._evidence(len(active))
         wp.copy(self._sigma_host, self.sigma_n)
         wp.synchronize_device(self.device)  # the frame's one synchronisation: estimates, evidence, tops on the host
         t2 = time.perf_counter()
         people = []
+        self.clock += self.frame_dt
+        self._update_appearance(active)
         tops = self._top_host.numpy().max(axis=1)  # the highest of each person's axes
         body = self.config.body
         for j, k in enumerate(active):
@@ -691,8 +816,13 @@ class PeopleTracker:
         self.dt.fill_(dt)
         self.sigma_vel.fill_(sv)
         self.alpha.fill_(al)
+        self.decay.fill_(self._decay(dt))
         for p in self.pool:
             p.set_sigma(sp)
+
+    def _decay(self, dt: float) -> float:
+        """Factor of an unseen person's velocity over one frame interval ``dt``: exp(-dt / stop_seconds)."""
+        return math.exp(-dt / self.config.person.stop_seconds)
 
     def _elapsed(self, seconds: float, limit: float) -> bool:
         """Whether ``seconds`` (a sum of frame intervals) has reached ``limit``, to half a frame: a time rounds to
@@ -709,27 +839,103 @@ class PeopleTracker:
             self._centres = tuple(np.meshgrid(xs, ys))
         return self._centres
 
+    def _update_appearance(self, active: list[int]) -> None:
+        """Fold this frame's appearance histograms (``kernels.coverage.person_histogram_kernel``, the cameras' counts
+        added) into each tracked person's exponential average (``BirthConfig.appearance_seconds``); a part needs
+        ``MIN_APPEARANCE_PX`` pixels of its own. A person added last frame is first compared with the people lost
+        recently (:meth:`_reidentify`)."""
+        b = self.config.birth
+        counts = self._hist_host.numpy().sum(axis=1)  # (people, parts, bins + 1)
+        rate = 1.0 - math.exp(-self.frame_dt / b.appearance_seconds)
+        nh, ns = int(kcov.HIST_H), int(kcov.HIST_S)
+        for k in active:
+            for part in range(counts.shape[1]):
+                c = counts[k, part]
+                if c[-1] < MIN_APPEARANCE_PX:
+                    continue
+                h = c[:-1].copy()
+                for lo, hi in ((0, nh), (nh, nh + ns), (nh + ns, len(h))):
+                    total = h[lo:hi].sum()
+                    h[lo:hi] = h[lo:hi] / total if total > 0 else 1.0 / (hi - lo)
+                if self.slot_app_seen[k, part]:
+                    self.slot_app[k, part] += rate * (h - self.slot_app[k, part])
+                else:
+                    self.slot_app[k, part] = h
+                    self.slot_app_seen[k, part] = True
+            if self.slot_new[k]:
+                self.slot_new[k] = False
+                self._reidentify(k)
+
+    def _similarity(self, a: np.ndarray, seen_a: np.ndarray, b: np.ndarray, seen_b: np.ndarray) -> float:
+        """Appearance similarity of two people: the mean Bhattacharyya coefficient of their hue, saturation and value
+        histograms over the body parts both have seen (0 when none)."""
+        nh, ns = int(kcov.HIST_H), int(kcov.HIST_S)
+        values = [
+            float(np.sum(np.sqrt(a[p, lo:hi] * b[p, lo:hi])))
+            for p in range(a.shape[0])
+            if seen_a[p] and seen_b[p]
+            for lo, hi in ((0, nh), (nh, nh + ns), (nh + ns, a.shape[1]))
+        ]
+        return float(np.mean(values)) if values else 0.0
+
+    def _reidentify(self, k: int) -> None:
+        """Give the person just added in slot ``k`` the id of a person lost within ``reid_seconds`` and within reach
+        (1 m + ``WALK_SPEED`` x the time since) whose appearance is the most similar, if at least
+        ``reid_similarity``."""
+        b = self.config.birth
+        self.lost = [p for p in self.lost if self.clock - p["time"] <= b.reid_seconds]
+        if not self.lost or not self.slot_app_seen[k].any():
+            return
+        xy = self.pool[k].est_host.numpy()[kreduce.EST_MEAN : kreduce.EST_MEAN + 2]
+        best, score = None, b.reid_similarity
+        for p in self.lost:
+            if np.hypot(*(xy - p["xy"])) > 1.0 + WALK_SPEED * (self.clock - p["time"]):
+                continue
+            sim = self._similarity(self.slot_app[k], self.slot_app_seen[k], p["app"], p["seen"])
+            if sim >= score:
+                best, score = p, sim
+        if best is None:
+            return
+        self.lost.remove(best)
+        log.info("person %d is person %d again (appearance similarity %.2f)", self.slot_id[k], best["id"], score)
+        self.slot_id[k] = best["id"]
+
+    def _evidence_maps(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """From this frame's coverage maps (host copies): ``(evidence, free_evidence, births)``, (ny, nx) each.
+        ``evidence``: the sum over the cameras that see each cell's person rectangle of the rectangle term of
+        :class:`~.people_model.PersonConfig` (``(slope f - offset) area``, nats: > 0 where a person explains the masks
+        better than nobody); ``free_evidence`` the same for the motion the tracked people leave unexplained;
+        ``births``: cells of the working area seen by ``min_cameras`` cameras where every camera that sees them
+        finds more unexplained motion than an empty rectangle would have (its term > 0)."""
+        slope, offset = self.config.person.slope_offset
+        shape = (len(self.rig), self.ny, self.nx)
+        cover = self._cover_host.numpy().reshape(shape)
+        free = self._free_cover_host.numpy().reshape(shape)
+        seen = cover >= 0
+        evidence = np.where(seen, (slope * cover - offset) * self.cell_area, 0.0).sum(axis=0)
+        terms = np.where(seen, (slope * free - offset) * self.cell_area, 0.0)
+        free_evidence = terms.sum(axis=0)
+        births = (seen.sum(axis=0) >= self.min_votes) & np.all(~seen | (terms > 0), axis=0) & self.area_map
+        return evidence, free_evidence, births
+
     def _update_population(self, est: PeopleEstimate, active: list[int], column: np.ndarray) -> None:
         """Remove people without multi-view support, duplicates and people who left; add people where the
-        evidence is unexplained for several frames. Host code on the small evidence map.
+        evidence is unexplained for a while. Host code on the small evidence map.
 
-        A person is supported while motion seen by several cameras is found either on its silhouette column
-        (``column[j]``: the column-top search found a point, which stays true when furniture hides everything
-        but the head and shoulders) or in a cell of the evidence map within ``support_radius``."""
+        A person is supported while this frame's masks show it (``PersonEstimate.support`` above
+        ``PersonConfig.gate``: the rectangle term of what the other people's rectangles leave, at its position or
+        near it)."""
         b = self.config.birth
         dt = self.frame_dt
-        votes = self._votes_host.numpy().reshape(self.ny, self.nx)
-        free_votes = self._free_host.numpy().reshape(self.ny, self.nx)
-        support = votes >= self.min_votes
+        _evidence, free_evidence, births = self._evidence_maps()
+        gate = self.config.person.gate
         gx, gy = self._cell_centres()
         by_slot = {k: e for k, e in zip(active, est.people, strict=True)}
-        for j, (k, e) in enumerate(by_slot.items()):
-            x, y = e.mean[0], e.mean[1]
-            near = (gx - x) ** 2 + (gy - y) ** 2 <= b.support_radius**2
-            self.slot_miss[k] = 0.0 if column[j] or np.any(support & near) else self.slot_miss[k] + dt
+        for k, e in by_slot.items():
+            self.slot_miss[k] = 0.0 if e.support > gate else self.slot_miss[k] + dt
             outside = not self.keep_area.contains(e.mean[:2])
             if self._elapsed(self.slot_miss[k], b.remove_seconds) or outside or not np.all(np.isfinite(e.mean)):
-                self._remove(k, est)
+                self._remove(k, est, remember=e.mean[:2] if np.all(np.isfinite(e.mean)) else None)
         # duplicates: two filters on one person
         alive = [k for k in active if self.slot_id[k] >= 0]
         for k in alive:
@@ -739,18 +945,18 @@ class PeopleTracker:
                 if j != k and self.slot_id[j] >= 0
             )
             self.slot_close[k] = self.slot_close[k] + dt if close else 0.0
-        for k in sorted(alive, key=lambda s: -self.slot_id[s]):  # the younger of a pair goes
+        for k in sorted(alive, key=lambda s: self.slot_age[s]):  # the younger of a pair goes
             if self.slot_id[k] >= 0 and self._elapsed(self.slot_close[k], b.remove_seconds):
                 self._remove(k, est)
                 for j in alive:
                     self.slot_close[j] = 0.0
         # unexplained evidence -> candidates; at most one person added per frame, the strongest (see BirthConfig)
-        free = (free_votes >= self.min_votes) & self.area_map
+        free = births.copy()
         for k in range(len(self.pool)):  # people added or kept this frame explain their surroundings
             if self.slot_id[k] >= 0 and k in by_slot:
                 e = by_slot[k]
                 free &= (gx - e.mean[0]) ** 2 + (gy - e.mean[1]) ** 2 > b.exclusion**2
-        candidates = self._blobs(free, free_votes, gx, gy)
+        candidates = self._blobs(free, free_evidence, gx, gy)
         pending, added = [], False
         reach = max(0.5, MAX_SPEED * dt)  # the same evidence one frame later: within a walk of one frame interval
         for cx, cy, _strength in sorted(candidates, key=lambda c: -c[2]):
@@ -782,7 +988,7 @@ class PeopleTracker:
             if stats[lab, cv2.CC_STAT_AREA] < self.config.birth.min_area:
                 continue
             sel = labels == lab
-            w = votes[sel].astype(np.float64)
+            w = np.maximum(votes[sel].astype(np.float64), 1e-9)
             out.append((float(np.sum(gx[sel] * w) / w.sum()), float(np.sum(gy[sel] * w) / w.sum()), float(w.sum())))
         return out
 
@@ -793,7 +999,11 @@ class PeopleTracker:
             return
         k = int(free[0])
         self.pool[k].spawn(xy, self.frames_done)
+        self.slot_xy[k : k + 1].fill_(wp.vec2(float(xy[0]), float(xy[1])))
+        self.slot_app_seen[k] = False
+        self.slot_new[k] = True
         self.slot_id[k] = self.next_id
+        self.slot_alive.assign((self.slot_id >= 0).astype(np.int32))
         self.slot_age[k] = 0
         self.slot_miss[k] = 0
         self.slot_close[k] = 0
@@ -801,10 +1011,23 @@ class PeopleTracker:
         log.info("frame %d: person %d added at (%.2f, %.2f)", est.frame, self.next_id, xy[0], xy[1])
         self.next_id += 1
 
-    def _remove(self, k: int, est: PeopleEstimate) -> None:
+    def _remove(self, k: int, est: PeopleEstimate, remember: np.ndarray | None = None) -> None:
+        """Stop tracking slot ``k``; with ``remember`` (its last ground position) the person may be re-identified
+        (:meth:`_reidentify`)."""
         est.removed.append(int(self.slot_id[k]))
         log.info("frame %d: person %d removed", est.frame, self.slot_id[k])
+        if remember is not None and self.config.birth.reid_seconds > 0 and self.slot_app_seen[k].any():
+            self.lost.append(
+                dict(
+                    id=int(self.slot_id[k]),
+                    time=self.clock,
+                    xy=np.array(remember, dtype=np.float64),
+                    app=self.slot_app[k].copy(),
+                    seen=self.slot_app_seen[k].copy(),
+                )
+            )
         self.slot_id[k] = -1
+        self.slot_alive.assign((self.slot_id >= 0).astype(np.int32))
 
     # --- outputs beyond the estimate ------------------------------------------------------------------------
     def occupancy(self, person_id: int) -> tuple[np.ndarray, np.ndarray]:

@@ -46,6 +46,8 @@ class WorkingArea:
         cameras: (ny, nx) int: cameras seeing each cell's centre (0 where not computed: a rig volume).
         source: ``"calibration"`` or ``"volume"``.
         z_top: top of the working volume, metres (the rig volume's, else ``person_height`` + 0.2).
+        visible: the ground seen by at least one camera (``"calibration"``: where tracked people are followed;
+            people are added only in ``mask``), or None (a rig volume: the volume is both).
     """
 
     origin: np.ndarray
@@ -54,6 +56,12 @@ class WorkingArea:
     cameras: np.ndarray
     source: str
     z_top: float
+    visible: WorkingArea | None = None
+
+    @property
+    def followed(self) -> WorkingArea:
+        """Where tracked people are followed: :attr:`visible`, or the area itself."""
+        return self.visible if self.visible is not None else self
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -234,10 +242,14 @@ def working_area(rig: Rig, config) -> WorkingArea:
             shared = s & (count.ravel() >= 2)
             if len(cams) > 2 and not shared.any():
                 log.warning("%s: camera '%s' shares no ground with the other cameras", rig.source, c.name)
-        rows, cols = np.nonzero(mask)  # crop to the area's bounding box
-        r0, r1, c0, c1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
-        origin = lo + cell * np.array([c0, r0], dtype=np.float64)
-        crop = (slice(r0, r1), slice(c0, c1))
         z_top = config.person_height + 0.2
-        area = WorkingArea(origin, cell, mask[crop].copy(), count[crop].copy(), "calibration", z_top)
+
+        def cropped(m: np.ndarray, visible: WorkingArea | None = None) -> WorkingArea:
+            rows, cols = np.nonzero(m)  # crop to the mask's bounding box
+            r0, r1, c0, c1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
+            origin = lo + cell * np.array([c0, r0], dtype=np.float64)
+            crop = (slice(r0, r1), slice(c0, c1))
+            return WorkingArea(origin, cell, m[crop].copy(), count[crop].copy(), "calibration", z_top, visible)
+
+        area = cropped(mask, visible=cropped(count >= 1))
     return area

@@ -210,6 +210,14 @@ class BirthConfig:
             is explained by that person (no birth from it), metres. Ours: 0.4.
         person_height: height of that axis, metres. Ours: 2.0.
         max_people: people tracked at once (a pool of filters allocated once). Ours: 8.
+        reid_seconds: a person removed for lack of support is remembered this long: a person added later within
+            reach of where it was lost (1 m + 1.5 m/s of the time since) whose appearance is similar enough takes its
+            id again (re-identification after an occlusion), seconds (0: never). Ours: 10.
+        reid_similarity: the smallest appearance similarity for that (the mean Bhattacharyya coefficient of the
+            hue, saturation and value histograms of the legs and the torso, ``kernels.coverage``), in (0, 1]. Ours:
+            0.8.
+        appearance_seconds: memory of a person's appearance histograms (an exponential average over the frames
+            where enough of its pixels are its own), seconds. Ours: 3.
 
     At most one person is added per frame (the strongest unexplained region): the motion the new person explains
     is discounted from the next frame on, so the ghosts that two real people's silhouettes make where other
@@ -231,6 +239,9 @@ class BirthConfig:
     person_radius: float = 0.4
     person_height: float = 2.0
     max_people: int = 8
+    reid_seconds: float = 10.0
+    reid_similarity: float = 0.8
+    appearance_seconds: float = 3.0
 
     def __post_init__(self) -> None:
         _positive(self.cell, "birth.cell", "a grid pitch in metres")
@@ -252,6 +263,82 @@ class BirthConfig:
         _positive(self.person_radius, "birth.person_radius", "a radius in metres")
         _positive(self.person_height, "birth.person_height", "a height in metres")
         _int_at_least(self.max_people, "birth.max_people", 1, "a number of people")
+        _non_negative(self.reid_seconds, "birth.reid_seconds", "a time in seconds")
+        v = _number(self.reid_similarity, "birth.reid_similarity")
+        if not (0.0 < v <= 1.0):
+            raise ConfigError(f"birth.reid_similarity: expected a similarity in (0, 1], got {self.reid_similarity!r}")
+        _positive(self.appearance_seconds, "birth.appearance_seconds", "a time in seconds")
+
+
+@dataclass(frozen=True)
+class PersonConfig:
+    """The whole person beyond its particles (ours; ``kernels/coverage.py``): the image rectangle of a standing
+    person, as in the Probabilistic Occupancy Map of Fleuret, Berclaz, Lengagne and Fua (PAMI 2008, section 4.2), and
+    how it enters each particle's weight.
+
+    A particle's log-weight gets, per camera that sees the rectangle of a person standing at the particle's ground
+    position, the log-likelihood ratio of "a person here" (each rectangle pixel on the motion mask with probability
+    ``p_person``) against "nobody" (``p_empty``) summed over the rectangle's pixels and divided by ``pixels`` (one
+    independent sample per ``pixels`` pixels: mask pixels come in blobs), and a penalty when it lies within
+    ``exclusion_radius`` of another tracked person.
+
+    Attributes:
+        half_width: half the rectangle's width across the viewing direction, metres. Ours: 0.25 (POM: 0.5 m wide).
+        height: the rectangle's height, metres. Ours: 1.75 (POM's average human).
+        min_visible: a camera sees a rectangle when this fraction of it is inside its image. Ours: 0.5.
+        p_person: fraction of a person's rectangle that the motion masks cover. Ours: 0.35 (a person fills about
+            half of the rectangle and the masks of real footage find part of that).
+        p_empty: fraction of an empty rectangle that the masks cover. Ours: 0.05.
+        pixels: pixels per independent sample of the rectangle term (0: the term is off, the paper's per-point
+            likelihood alone). Ours: 100 (a person's rectangle at 5-10 m in a 360 x 288 image holds 2000-6000 pixels:
+            20-60 samples).
+        exclusion_radius: two people's ground positions closer than this repel, metres. Ours: 0.4.
+        exclusion_weight: the penalty at distance 0, nats (0: off). Ours: 5.
+        gate: a frame's masks show a person when the rectangle term exceeds this at its last position or within
+            ``gate_reach`` of it, nats; otherwise the filter predicts without weighting (a person the background
+            model absorbed while standing, or hidden, is not pulled onto the nearest other silhouette). Ours: 0.
+        gate_reach: see ``gate``, metres. Ours: 0.25.
+        stop_seconds: an unseen person's velocity decays with this time constant, seconds (people stop more
+            often than they walk on unseen). Ours: 1.
+    """
+
+    half_width: float = 0.25
+    height: float = 1.75
+    min_visible: float = 0.5
+    p_person: float = 0.35
+    p_empty: float = 0.05
+    pixels: float = 100.0
+    exclusion_radius: float = 0.4
+    exclusion_weight: float = 5.0
+    gate: float = 0.0
+    gate_reach: float = 0.25
+    stop_seconds: float = 1.0
+
+    def __post_init__(self) -> None:
+        _positive(self.half_width, "person.half_width", "a half width in metres")
+        _positive(self.height, "person.height", "a height in metres")
+        v = _number(self.min_visible, "person.min_visible")
+        if not (0.0 < v <= 1.0):
+            raise ConfigError(f"person.min_visible: expected a fraction in (0, 1], got {self.min_visible!r}")
+        _open_fraction(self.p_person, "person.p_person", "a probability")
+        _open_fraction(self.p_empty, "person.p_empty", "a probability")
+        if self.p_empty >= self.p_person:
+            raise ConfigError(f"person.p_empty: expected < p_person ({self.p_person!r}), got {self.p_empty!r}")
+        _non_negative(self.pixels, "person.pixels", "a weight in pixels")
+        _positive(self.exclusion_radius, "person.exclusion_radius", "a distance in metres")
+        _non_negative(self.exclusion_weight, "person.exclusion_weight", "a penalty in nats")
+        _number(self.gate, "person.gate")
+        _non_negative(self.gate_reach, "person.gate_reach", "a distance in metres")
+        _positive(self.stop_seconds, "person.stop_seconds", "a time in seconds")
+
+    @property
+    def slope_offset(self) -> tuple[float, float]:
+        """``(slope, offset)`` of ``kernels.coverage.box_log_likelihood``: log(p1 (1 - p0) / (p0 (1 - p1))) /
+        ``pixels`` and -log((1 - p1) / (1 - p0)) / ``pixels`` (both 0 when ``pixels`` is 0: the term is off)."""
+        p1, p0, k = self.p_person, self.p_empty, self.pixels
+        if k == 0:
+            return 0.0, 0.0
+        return math.log(p1 * (1 - p0) / (p0 * (1 - p1))) / k, -math.log((1 - p1) / (1 - p0)) / k
 
 
 @dataclass(frozen=True)
@@ -342,7 +429,7 @@ class PeopleConfig:
             every time in seconds). None: the recording's own (the videos' frame rate in a run; ``--fps`` for image
             folders); a :class:`~wptrack.trackers.people.PeopleTracker` built without one assumes 25 frames/s.
             ``PeopleTracker.step(..., timestamp=...)`` takes dt from the frames' timestamps instead.
-        dynamics, motion, descriptor, occupancy, birth, body, area: the sections above.
+        dynamics, motion, descriptor, occupancy, birth, body, person, area: the sections above.
 
     Resampling runs every frame (section 2.1: "particle resampling should be performed at each time step").
     """
@@ -356,6 +443,7 @@ class PeopleConfig:
     occupancy: OccupancyConfig = field(default_factory=OccupancyConfig)
     birth: BirthConfig = field(default_factory=BirthConfig)
     body: BodyConfig = field(default_factory=BodyConfig)
+    person: PersonConfig = field(default_factory=PersonConfig)
     area: AreaConfig = field(default_factory=AreaConfig)
 
     def __post_init__(self) -> None:
@@ -371,6 +459,7 @@ class PeopleConfig:
             ("occupancy", OccupancyConfig),
             ("birth", BirthConfig),
             ("body", BodyConfig),
+            ("person", PersonConfig),
             ("area", AreaConfig),
         ):
             if not isinstance(getattr(self, name), cls):
