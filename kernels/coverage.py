@@ -242,6 +242,42 @@ def overlap(a: wp.vec4, b: wp.vec4):
 
 
 @wp.func
+def box_counts_left(
+    cams: wp.array(dtype=Camera),
+    integral: wp.array(dtype=wp.int32),
+    boxes: wp.array2d(dtype=wp.vec4),
+    own: int,
+    x: wp.vec3,
+    half_width: float,
+    height: float,
+    min_visible: float,
+):
+    """``(on, area, full)`` summed over the cameras that see the rectangle of a person standing at (x[0], x[1]): its
+    mask pixels and its pixels inside the image, both without the parts inside the other tracked people's
+    rectangles (``boxes`` from :func:`person_boxes_kernel`, all rows but ``own``; overlapping ones are subtracted
+    each, floored at 0 per camera), and its pixels inside the image before that (:func:`box_log_likelihood`)."""
+    on_sum = float(0.0)
+    area_sum = float(0.0)
+    full_sum = float(0.0)
+    for c in range(cams.shape[0]):
+        cam = cams[c]
+        box, full = person_box(cam, x[0], x[1], half_width, height)
+        area = (box[2] - box[0]) * (box[3] - box[1])
+        if full > 0.0 and area > 0.0 and area >= min_visible * full:
+            full_sum += area
+            on = float(box_count(cam, integral, box))
+            for k in range(boxes.shape[0]):
+                if k != own:
+                    shared = overlap(box, boxes[k, c])
+                    if shared[2] > shared[0] and shared[3] > shared[1]:
+                        on -= float(box_count(cam, integral, shared))
+                        area -= (shared[2] - shared[0]) * (shared[3] - shared[1])
+            on_sum += wp.max(on, 0.0)
+            area_sum += wp.max(area, 0.0)
+    return on_sum, area_sum, full_sum
+
+
+@wp.func
 def box_log_likelihood(
     cams: wp.array(dtype=Camera),
     integral: wp.array(dtype=wp.int32),
@@ -254,10 +290,10 @@ def box_log_likelihood(
     slope: float,
     offset: float,
 ):
-    """The person-level term of a particle's log-weight (ours): over the cameras that see the rectangle of a person
-    standing at the particle's ground position (x[0], x[1]), the sum of ``slope * on - offset * area`` with ``on``
-    its mask pixels and ``area`` its pixels (:func:`box_counts`), both without the parts inside the other tracked
-    people's rectangles (``boxes`` from :func:`person_boxes_kernel`, all rows but ``own``).
+    """The person-level term of a particle's log-weight (ours): ``slope * on - offset * area`` with ``on`` the mask
+    pixels and ``area`` the pixels of the rectangle of a person standing at the particle's ground position (x[0],
+    x[1]), over the cameras that see it, both without the parts inside the other tracked people's rectangles
+    (:func:`box_counts_left`).
 
     It is the gain of POM's generative model (the masks as the union of the people's rectangles) when this person is
     added to the others: pixels another person already explains are neither evidence for this one nor against it,
@@ -267,23 +303,9 @@ def box_log_likelihood(
     probability p1) against "nobody" (p0), summed over the pixels and tempered by ``s`` (neighbouring mask pixels
     are not independent: one sample per ``s`` pixels). Summed, not averaged: a rectangle too small (a person placed
     too far, inside another silhouette) leaves the legs unexplained, one too large (too near) takes in floor, so the
-    sum peaks where the person stands. Overlapping rectangles of others are subtracted each (the counts are floored
-    at 0)."""
-    total = float(0.0)
-    for c in range(cams.shape[0]):
-        cam = cams[c]
-        box, full = person_box(cam, x[0], x[1], half_width, height)
-        area = (box[2] - box[0]) * (box[3] - box[1])
-        if full > 0.0 and area > 0.0 and area >= min_visible * full:
-            on = float(box_count(cam, integral, box))
-            for k in range(boxes.shape[0]):
-                if k != own:
-                    shared = overlap(box, boxes[k, c])
-                    if shared[2] > shared[0] and shared[3] > shared[1]:
-                        on -= float(box_count(cam, integral, shared))
-                        area -= (shared[2] - shared[0]) * (shared[3] - shared[1])
-            total += slope * wp.max(on, 0.0) - offset * wp.max(area, 0.0)
-    return total
+    sum peaks where the person stands."""
+    on, area, _full = box_counts_left(cams, integral, boxes, own, x, half_width, height, min_visible)
+    return slope * on - offset * area
 
 
 @wp.func
@@ -346,40 +368,41 @@ def gate_kernel(
     own: int,
     terms: PersonTerms,
     reach: float,
-    min_llr: float,
+    speed: float,
+    dt: wp.array(dtype=wp.float32),
+    spacing: float,
+    min_coverage: float,
+    min_left: float,
     observe: wp.array(dtype=wp.int32),
     support: wp.array(dtype=wp.float32),
 ):
-    """Whether this frame's masks show the person of slot ``own`` (ours): ``observe[1]`` takes the previous frame's
-    ``observe[0]``, and ``observe[0]`` = 1 when the rectangle term (:func:`box_log_likelihood`: what the other
-    people's rectangles leave) exceeds ``min_llr`` nats at its last ground position ``people[own]`` or at one of the
-    8 points ``reach`` metres around it, else 0 (a person standing still whom the background model has absorbed, or
-    hidden: the filter then predicts without weighting, instead of following the nearest other silhouette). Always
-    1 when the term is off (``terms.slope == 0``). ``support[0]`` = that best rectangle term, nats (0 when off).
-    Launch dim 1."""
+    """Whether this frame's masks show the person of slot ``own`` (ours). ``observe[1]`` takes the previous frame's
+    ``observe[0]``; ``observe[0]`` = 1 when, somewhere on the grid of ``spacing`` metres within ``reach + speed dt[0]``
+    metres (a square, per axis) of its last ground position ``people[own]`` (where the person may have walked in
+    one frame interval), the rectangle of a person standing there is covered by the masks over more than
+    ``min_coverage`` of what the other people's rectangles leave of it (:func:`box_counts_left`, all cameras that
+    see it together), that part being at least ``min_left`` of the rectangle; else 0 (a person standing still whom
+    the background model has absorbed, or hidden: the filter then predicts without weighting, instead of following
+    the nearest other silhouette). A fraction, so the rule does not depend on the images' resolution. Always 1 when
+    the rectangle term is off (``terms.slope == 0``). ``support[0]`` = the best such coverage (0 when off). Launch
+    dim 1."""
     observe[1] = observe[0]
     if terms.slope == 0.0:
         observe[0] = 1
         support[0] = 0.0
         return
-    best = float(-1.0e30)
+    best = float(0.0)
     p = people[own]
-    for a in range(9):
-        x = wp.vec3(p[0] + reach * float(a // 3 - 1), p[1] + reach * float(a % 3 - 1), 0.0)
-        llr = box_log_likelihood(
-            cams,
-            integral,
-            boxes,
-            own,
-            x,
-            terms.half_width,
-            terms.height,
-            terms.min_visible,
-            terms.slope,
-            terms.offset,
-        )
-        best = wp.max(best, llr)
-    observe[0] = wp.where(best > min_llr, 1, 0)
+    m = int(wp.ceil((reach + speed * dt[0]) / spacing))
+    for a in range(-m, m + 1):
+        for b in range(-m, m + 1):
+            x = wp.vec3(p[0] + spacing * float(a), p[1] + spacing * float(b), 0.0)
+            on, area, full = box_counts_left(
+                cams, integral, boxes, own, x, terms.half_width, terms.height, terms.min_visible
+            )
+            if area > 0.0 and area >= min_left * full:
+                best = wp.max(best, on / area)
+    observe[0] = wp.where(best > min_coverage, 1, 0)
     support[0] = wp.float32(best)
 
 

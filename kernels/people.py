@@ -300,94 +300,6 @@ def step_kernel(
     moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)
 
 
-@wp.func
-def ray_near_axis(centre: wp.vec3, ray: wp.vec3, axis: wp.vec2, z_top: float, radius: float):
-    """Whether the viewing ray ``centre + s ray`` (s > 0) passes within ``radius`` (horizontally) of the vertical
-    segment at ``axis`` = (x, y) from z = 0 to ``z_top`` (metres): the part of the ray between those heights is
-    projected on the ground and its distance to the axis compared with ``radius``."""
-    s0 = float(0.0)
-    s1 = float(1.0e6)
-    if wp.abs(ray[2]) > 1.0e-9:
-        a = (0.0 - centre[2]) / ray[2]
-        b = (z_top - centre[2]) / ray[2]
-        s0 = wp.max(wp.min(a, b), 0.0)
-        s1 = wp.max(a, b)
-    elif centre[2] < 0.0 or centre[2] > z_top:
-        return False
-    if s1 <= s0:
-        return False
-    p = wp.vec2(centre[0] + s0 * ray[0], centre[1] + s0 * ray[1])
-    d = wp.vec2(ray[0], ray[1]) * (s1 - s0)
-    dd = wp.dot(d, d)
-    u = float(0.0)
-    if dd > 1.0e-12:
-        u = wp.clamp(wp.dot(axis - p, d) / dd, 0.0, 1.0)
-    q = p + u * d - axis
-    return wp.dot(q, q) <= radius * radius
-
-
-@wp.kernel
-def ground_votes_kernel(
-    cams: wp.array(dtype=Camera),
-    mask: wp.array(dtype=wp.uint8),
-    rays: wp.array(dtype=wp.vec3),
-    heights: wp.array(dtype=wp.float32),
-    people: wp.array(dtype=wp.vec2),
-    n_people: int,
-    person_radius: float,
-    person_height: float,
-    origin: wp.vec2,
-    cell: float,
-    nx: int,
-    min_fraction: float,
-    votes: wp.array(dtype=wp.int32),
-    free_votes: wp.array(dtype=wp.int32),
-):
-    """Multi-view motion evidence on a ground grid (ours, for adding and removing people; the paper does not say
-    how targets appear): for the vertical column over the centre of cell (ix, iy) (z = ``heights``), each camera that
-    sees at least one of its points votes when at least ``min_fraction`` of the points it sees fall on its motion
-    mask. ``free_votes`` counts only motion not explained by a tracked person: a motion pixel whose viewing ray
-    (``rays``: world direction per pixel) passes within ``person_radius`` of a tracked person's vertical axis
-    (``people[:n_people]``, ground x, y; up to ``person_height``) is explained. Furniture that hides a person's
-    legs in one camera removes some of its points, not its vote, while the fraction stays above ``min_fraction``.
-
-    Launch one thread per cell (nx * ny). Outputs (nx * ny,): ``votes`` (all motion), ``free_votes`` (unexplained
-    motion). Cell (ix, iy) has centre ``origin + cell (ix + 1/2, iy + 1/2)`` on the world plane z = 0, metres."""
-    t = wp.tid()
-    ix = t % nx
-    iy = t / nx
-    cx = origin[0] + cell * (float(ix) + 0.5)
-    cy = origin[1] + cell * (float(iy) + 0.5)
-    npeople = n_people
-    v = int(0)
-    vf = int(0)
-    for c in range(cams.shape[0]):
-        cam = cams[c]
-        centre = -(wp.transpose(cam.R) * cam.t)
-        vis = int(0)
-        hit = int(0)
-        free = int(0)
-        for k in range(heights.shape[0]):
-            pix = pixel_index(cam, wp.vec3(cx, cy, heights[k]))
-            if pix >= 0:
-                vis += 1
-                if mask[pix] != wp.uint8(0):
-                    hit += 1
-                    explained = int(0)
-                    for j in range(npeople):
-                        if ray_near_axis(centre, rays[pix], people[j], person_height, person_radius):
-                            explained = 1
-                    if explained == 0:
-                        free += 1
-        if vis > 0:
-            if float(hit) >= min_fraction * float(vis):
-                v += 1
-            if float(free) >= min_fraction * float(vis):
-                vf += 1
-    votes[t] = v
-    free_votes[t] = vf
-
-
 @wp.kernel
 def init_cylinder_kernel(
     centre: wp.vec3,
@@ -534,6 +446,6 @@ def score_moments_kernel(
 @wp.kernel
 def person_xy_kernel(est: wp.array(dtype=wp.float64), mean_slot: int, j: int, people: wp.array(dtype=wp.vec2)):
     """``people[j]`` = the (x, y) of a filter's estimate vector (``est[mean_slot]``, ``est[mean_slot + 1]``, e.g.
-    ``kernels.reduce.EST_MEAN``): the tracked people's ground positions for :func:`ground_votes_kernel` and
+    ``kernels.reduce.EST_MEAN``): the tracked people's ground positions for ``kernels.coverage`` and
     :func:`column_top_kernel` without a round trip through the host. Launch dim 1."""
     people[j] = wp.vec2(wp.float32(est[mean_slot]), wp.float32(est[mean_slot + 1]))

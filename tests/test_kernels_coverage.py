@@ -235,6 +235,20 @@ def _terms_kernel(
     out[i] = wp.float32(kcov.person_log_terms(cams, integral, others, alive, boxes, own, terms, points[i]))
 
 
+@wp.kernel
+def _counts_kernel(
+    cams: wp.array(dtype=kcam.Camera),
+    integral: wp.array(dtype=wp.int32),
+    boxes: wp.array2d(dtype=wp.vec4),
+    own: int,
+    points: wp.array(dtype=wp.vec3),
+    out: wp.array(dtype=wp.vec3),
+):
+    i = wp.tid()
+    on, area, full = kcov.box_counts_left(cams, integral, boxes, own, points[i], HW, HEIGHT, VIS)
+    out[i] = wp.vec3(on, area, full)
+
+
 def make_terms(slope=0.02, offset=0.004, radius=0.4, weight=5.0) -> kcov.PersonTerms:
     t = kcov.PersonTerms()
     t.half_width, t.height, t.min_visible = HW, HEIGHT, VIS
@@ -274,10 +288,19 @@ def test_person_log_terms_match_numpy(device, rng, slope, weight):
         outputs=[out],
         device=device,
     )
+    counts = wp.zeros(len(pts), dtype=wp.vec3, device=device)
+    wp.launch(
+        _counts_kernel,
+        dim=len(pts),
+        inputs=[drig.cams, I, boxes, own, wp.array(pts, dtype=wp.vec3, device=device)],
+        outputs=[counts],
+        device=device,
+    )
     mine, full = box_ref(rig, drig, pts[:, :2].astype(np.float64), device)
     obox = boxes.numpy()
     masks = masks_2d(rig, flat)
     ref = np.zeros(len(pts))
+    ref_counts = np.zeros((len(pts), 3))
     for i in range(len(pts)):
         if slope:
             for c in range(2):
@@ -285,6 +308,7 @@ def test_person_log_terms_match_numpy(device, rng, slope, weight):
                 area = (b[2] - b[0]) * (b[3] - b[1])
                 if not (full[c, i] > 0 and area > 0 and area >= VIS * full[c, i]):
                     continue
+                ref_counts[i, 2] += area
                 on = count_ref(masks[c], b)
                 for k in range(4):
                     if k == own:
@@ -295,6 +319,7 @@ def test_person_log_terms_match_numpy(device, rng, slope, weight):
                         on -= count_ref(masks[c], s)
                         area -= (s[2] - s[0]) * (s[3] - s[1])
                 ref[i] += slope * max(on, 0) - 0.004 * max(area, 0)
+                ref_counts[i, :2] += (max(on, 0), max(area, 0))
         if weight:
             for k in range(4):
                 if k != own and alive[k]:
@@ -304,13 +329,20 @@ def test_person_log_terms_match_numpy(device, rng, slope, weight):
     got = out.numpy()
     ok = np.isclose(got, ref, rtol=1e-4, atol=1e-3)
     assert ok.mean() > 0.97  # a rectangle edge on a rounding tie moves a pixel column
+    if slope:
+        same = np.all(np.isclose(counts.numpy(), ref_counts), axis=1)
+        assert same.mean() > 0.97 and (ref_counts[:, 1] < ref_counts[:, 2]).sum() >= 5  # some rectangles shared
     if weight:
         assert (ref < -0.5).sum() >= 5
     if slope:
         assert (ref > 0).sum() >= 5 and (ref < 0).sum() >= 5
 
 
-def test_gate_picks_the_best_of_nine_points_and_shifts(device, rng):
+@pytest.mark.parametrize("dt", [0.04, 0.32])
+def test_gate_picks_the_best_point_within_reach_and_shifts(device, rng, dt):
+    """The gate's support is the best coverage of what the others leave of the rectangle (where that is at least
+    ``min_left`` of it) on the grid of ``spacing`` within ``reach + speed dt`` of the person's last position (a slower
+    frame rate searches farther); observe[1] takes the old observe[0]."""
     rig = make_rig()
     drig = DeviceRig(rig, device)
     flat = blob_masks(rig, rng)
@@ -327,38 +359,43 @@ def test_gate_picks_the_best_of_nine_points_and_shifts(device, rng):
         device=device,
     )
     terms = make_terms(weight=0.0)
-    reach = 0.3
-    pts = np.array(
-        [[people[0, 0] + reach * (a // 3 - 1), people[0, 1] + reach * (a % 3 - 1), 0.0] for a in range(9)], np.float32
-    )
-    vals = wp.zeros(9, dtype=wp.float32, device=device)
+    reach, speed, spacing, min_left = 0.25, 1.5, 0.125, 0.25
+    m = int(np.ceil((reach + speed * np.float32(dt)) / spacing))
+    grid = [(a, b) for a in range(-m, m + 1) for b in range(-m, m + 1)]
+    assert len(grid) == (49 if dt < 0.1 else 169)
+    pts = np.array([[people[0, 0] + spacing * a, people[0, 1] + spacing * b, 0.0] for a, b in grid], np.float32)
+    counts = wp.zeros(len(pts), dtype=wp.vec3, device=device)
     wp.launch(
-        _terms_kernel,
-        dim=9,
-        inputs=[drig.cams, I, pdev, alive, boxes, 0, terms, wp.array(pts, dtype=wp.vec3, device=device)],
-        outputs=[vals],
+        _counts_kernel,
+        dim=len(pts),
+        inputs=[drig.cams, I, boxes, 0, wp.array(pts, dtype=wp.vec3, device=device)],
+        outputs=[counts],
         device=device,
     )
-    best = float(vals.numpy().max())
-    for threshold, expect in ((best - 1.0, 1), (best + 1.0, 0)):
+    c = counts.numpy().astype(np.float64)
+    ok = (c[:, 1] > 0) & (c[:, 1] >= min_left * c[:, 2])
+    best = float(np.max(np.where(ok, c[:, 0] / np.maximum(c[:, 1], 1), 0.0)))
+    assert 0 < best < 1
+    dt_dev = wp.array([dt], dtype=wp.float32, device=device)
+    for threshold, expect in ((best - 0.01, 1), (best + 0.01, 0)):
         observe = wp.array(np.array([7, 5], np.int32), device=device)
         support = wp.zeros(1, dtype=wp.float32, device=device)
         wp.launch(
             kcov.gate_kernel,
             dim=1,
-            inputs=[drig.cams, I, boxes, pdev, 0, terms, reach, threshold],
+            inputs=[drig.cams, I, boxes, pdev, 0, terms, reach, speed, dt_dev, spacing, threshold, min_left],
             outputs=[observe, support],
             device=device,
         )
         np.testing.assert_array_equal(observe.numpy(), [expect, 7])  # [1] takes the old [0]
-        assert support.numpy()[0] == pytest.approx(best, rel=1e-5, abs=1e-4)
+        assert support.numpy()[0] == pytest.approx(best, rel=1e-5, abs=1e-6)
     off = make_terms(slope=0.0)
     observe = wp.array(np.array([0, 0], np.int32), device=device)
     support = wp.zeros(1, dtype=wp.float32, device=device)
     wp.launch(
         kcov.gate_kernel,
         dim=1,
-        inputs=[drig.cams, I, boxes, pdev, 0, off, reach, 1e9],
+        inputs=[drig.cams, I, boxes, pdev, 0, off, reach, speed, dt_dev, spacing, 0.99, min_left],
         outputs=[observe, support],
         device=device,
     )

@@ -59,7 +59,7 @@ def test_bad_values_name_the_field(make, field):
 
 
 def test_dynamics_per_frame_is_the_office_value_at_25_fps_and_scales_with_time():
-    """The defaults in seconds are the per-frame values the office was built with at 25 frames/s (0.03 m, 0.01 m
+    """The values in seconds are the per-frame values the office was built with at 25 frames/s (0.03 m, 0.01 m
     per frame per frame = 0.25 m/s, alpha 0.05); at another rate the noise is a random walk (variance in proportion
     to dt) and the appearance keeps the same memory in seconds."""
     d = DynamicsConfig()

@@ -128,7 +128,7 @@ def test_person_leaving_is_removed(device, scene):
         tr.step(images, masks)
     assert len(tr.tracked_ids) == 2
     removed = []
-    for _ in range(10):  # everybody gone
+    for _ in range(int(1.5 * tr.config.birth.remove_seconds * tr.fps) + 2):  # everybody gone
         removed += tr.step(*render(rig, [], rng)).removed
     assert sorted(removed) == [0, 1] and tr.tracked_ids == []
 
@@ -229,3 +229,56 @@ def test_timestamps_set_the_frame_interval(device, scene):
     assert tr.pool[0].sigma.numpy()[0] == pytest.approx(sp) and tr.dt.numpy()[0] == pytest.approx(0.2)
     with pytest.raises(FrameError, match="not after the previous"):
         tr.step(images, masks, timestamp=10.2)
+
+
+def _vanish_and_return(device, reid_seconds: float) -> list[list[int]]:
+    """One red person walking along y = 2; the masks and the image lose it for 40 frames (1.6 s: longer than the
+    1 s after which an unseen person is removed), then it walks on. Returns the ids of each frame."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(11)
+    rig = rig3()
+    cfg = _config()
+    cfg = replace(cfg, birth=replace(cfg.birth, reid_seconds=reid_seconds))
+    tr = PeopleTracker(rig, cfg, device=device, keep_particles=0)
+    ids = []
+    for t in range(95):
+        xy = np.array([0.8 + 0.025 * t, 2.0])
+        people = [] if 30 <= t < 70 else [(xy, COLOURS[0])]
+        ids.append([p.id for p in tr.step(*render(rig, people, rng)).people])
+    return ids
+
+
+def test_person_lost_briefly_is_reidentified(device):
+    """A person the masks lose for half a second is removed and, coming back where it could have walked meanwhile
+    with the same appearance, takes its id again; without re-identification it gets a new one."""
+    ids = _vanish_and_return(device, reid_seconds=10.0)
+    assert ids[25] == [0] and [] in ids[30:70]  # tracked, then removed while unseen
+    assert ids[-1] == [0] and {i for f in ids for i in f} == {0}
+    fresh = _vanish_and_return(device, reid_seconds=0.0)
+    assert fresh[25] == [0] and fresh[-1] == [1]
+
+
+def test_unseen_person_holds_its_place(device):
+    """A person standing still whose masks vanish (the background model absorbed it) is not pulled onto another
+    person walking past 0.8 m away: the gate stops the weighting and the filter holds the place."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(12)
+    rig = rig3()
+    cfg = _config()
+    cfg = replace(cfg, birth=replace(cfg.birth, remove_seconds=100.0))
+    tr = PeopleTracker(rig, cfg, device=device, keep_particles=0)
+    still = np.array([2.0, 1.6])
+    for t in range(50):
+        walker = np.array([0.6 + 0.05 * t, 2.4])
+        images, masks = render(rig, [(still, COLOURS[0]), (walker, COLOURS[1])], rng)
+        if t >= 20:  # the standing person leaves the masks, stays in the images
+            _, only_walker = render(rig, [(walker, COLOURS[1])], np.random.default_rng(0))
+            masks = only_walker
+        est = tr.step(images, masks)
+        if t == 19:
+            pid = min(est.people, key=lambda p: np.hypot(*(p.mean[:2] - still))).id
+    person = next(p for p in est.people if p.id == pid)
+    assert np.hypot(*(person.mean[:2] - still)) < 0.3
+    assert person.support <= tr.config.person.gate  # not seen

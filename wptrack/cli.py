@@ -634,7 +634,7 @@ def build_parser() -> argparse.ArgumentParser:
     tt.add_argument("--t-add", type=float, default=None, help="T_add of eq. 12 (default 0.3)")
     tt.add_argument("--t-del", type=float, default=None, help="T_del of eq. 13 (default 0.02)")
     tt.add_argument("--add-min-gain", type=float, default=None, help="candidate gain / area to add (default 0.2)")
-    tt.add_argument("--min-existence", type=float, default=None, help="report objects above this (default 0.5)")
+    tt.add_argument("--min-existence", type=float, default=None, help="report objects above this (default 1.25)")
     tt.add_argument(
         "--min-in-image",
         type=float,

@@ -1,17 +1,22 @@
 """S2: multi-camera 3D people tracker (Lopez-Cifuentes et al., multi-camera 3D particle filters with motion and
 colour). Several people are tracked directly in 3D from two or more calibrated cameras with overlapping views; each
 person has its own particle filter whose particles are 3D points inside the person, weighted by the motion masks of
-all cameras and a multi-view HSV colour descriptor.
+all cameras and a multi-view HSV colour descriptor; beyond the paper (ours, after the Probabilistic Occupancy Map of
+Fleuret, Berclaz, Lengagne and Fua, PAMI 2008) each particle's weight also judges the whole person: the rectangle of
+a person standing at its ground position must explain motion the other tracked people do not (``kernels/coverage.py``).
 
 One frame::
 
     BGR frames + motion masks of every camera  -> device (one copy each)
-    -> sigma_n from the previous frame (eq. 18)
-    -> per person (one CUDA graph each on GPUs): gather + constant velocity (eq. 5) + appearance update (eq. 6)
-       + descriptor (eqs. 19-22; HSV of eqs. 12-14 for the disc pixels) + motion x appearance likelihood
-       (eqs. 7-11, 23-26) + block moments (fused), estimate, systematic resampling (every frame, section 2.1)
-    -> ground evidence map (ours): cameras whose masks agree on a column over each ground cell
-    -> host: estimates; people added where the evidence is unexplained, removed where it is gone (ours)
+    -> sigma_n from the previous frame (eq. 18); the masks' integral images
+    -> per person (one CUDA graph each on GPUs): the gate (do this frame's masks show the person?) + gather +
+       constant velocity (eq. 5, dt in seconds) + appearance update (eq. 6) + descriptor (eqs. 19-22; HSV of eqs.
+       12-14 for the disc pixels) + motion x appearance likelihood (eqs. 7-11, 23-26) x the person terms (ours) +
+       block moments (fused), estimate, systematic resampling (every frame, section 2.1)
+    -> the tracked people's rectangles; the evidence map (ours): coverage of a person's rectangle at each ground
+       cell by the motion nobody explains; the people's appearance histograms (re-identification)
+    -> host: estimates; people added where the evidence is unexplained, removed when the masks stop showing them,
+       re-identified when they come back (ours)
 
 Units: metres (world frame, z up for the ground evidence map: the rig's ground is z = 0), pixels, seconds (the
 frame interval dt from ``PeopleConfig.fps`` or the frames' timestamps).
@@ -50,6 +55,8 @@ DEFAULT_FPS = 25.0
 """Frame rate assumed by a tracker built without ``PeopleConfig.fps`` and stepped without timestamps."""
 DESCRIPTOR_BLOCK = 64
 """Lanes per particle of the GPU descriptor (they share the disc pixels)."""
+GATE_SPACING = 0.125
+"""Spacing of the points the gate tries around a person's last position, metres (``kernels.coverage.gate_kernel``)."""
 MIN_APPEARANCE_PX = 100
 """Pixels of its own a body part needs in a frame to update a person's appearance (all cameras together)."""
 WALK_SPEED = 1.5
@@ -87,8 +94,9 @@ class PersonEstimate:
         ess: effective sample size of the frame's weights.
         loglik: log of the mean weight (eq. 11 averaged over the particles).
         age: frames since the person was added.
-        support: the rectangle term of the masks at the person's last position (``kernels.coverage.gate_kernel``:
-            what the other people's rectangles leave), nats; <= ``PersonConfig.gate``: not seen this frame.
+        support: how much of its rectangle (what the other people's rectangles leave of it) the masks cover near the
+            person's last position (``kernels.coverage.gate_kernel``), a fraction; <= ``PersonConfig.gate``: not seen
+            this frame.
         particles: (K, 3) subsample of the particles (before resampling), metres, or None.
         weights: (K,) their weights relative to the best particle, or None.
         occupancy: ``(origin (3,), grid (nx, ny, nz) float32)``: the occupancy pdf of this frame's particles (see
@@ -133,12 +141,6 @@ class PeopleEstimate:
     added: list[int] = field(default_factory=list)
     removed: list[int] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
-
-
-def _all_pixel_rays(cam) -> np.ndarray:
-    """(H W, 3) world directions of the viewing rays of every pixel of ``cam`` (row-major), distortion removed."""
-    u, v = np.meshgrid(np.arange(cam.width, dtype=np.float64), np.arange(cam.height, dtype=np.float64))
-    return cam.pixel_rays(np.column_stack([u.ravel(), v.ravel()]))
 
 
 class PersonFilter(ParticleFilter):
@@ -213,7 +215,8 @@ class PersonFilter(ParticleFilter):
         wp.launch(
             kcov.gate_kernel,
             dim=1,
-            inputs=[tr.drig.cams, tr.integral, tr.boxes, tr.slot_xy, self.slot, tr.terms] + [pc.gate_reach, pc.gate],
+            inputs=[tr.drig.cams, tr.integral, tr.boxes, tr.slot_xy, self.slot, tr.terms]
+            + [pc.gate_reach, WALK_SPEED, tr.dt, GATE_SPACING, pc.gate, pc.gate_left],
             outputs=[self.observe, self.support],
             device=self.device,
         )
@@ -432,9 +435,12 @@ class PeopleTracker:
     Device buffers (P = pixels of all cameras):
         bgr, bgr_prev: (3 P,) uint8 this and the previous frame. mask: (P,) uint8 motion masks (nonzero = motion).
         sigma_n: (1,) float32 image noise (eq. 18, from every ``NOISE_STRIDE``-th pixel).
-        rays: (P,) vec3 world direction of every pixel's viewing ray.
-        votes, free_votes: (nx * ny,) int32 ground evidence map: cameras voting for each cell, with all motion /
-            with the motion not explained by a tracked person.
+        integral, free_integral: the (H+1) x (W+1) integral images of the masks and of the motion the tracked people's
+            rectangles leave (``free_mask``). boxes: (max_people, cameras) vec4 those rectangles.
+        cover, free_cover: (cameras, nx * ny) float32 the evidence map: coverage of a person's rectangle at each cell
+            by all motion / by the unexplained motion, -1 where the camera does not see it.
+        hist: (max_people, cameras, 2, 17) float32 the people's appearance histograms (``kernels.coverage``).
+        slot_xy, slot_alive: (max_people,) each pool slot's ground position and whether it tracks somebody.
 
     Raises:
         ConfigError: fewer than two cameras, a bad configuration or a pool that does not fit the device.
