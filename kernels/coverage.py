@@ -444,37 +444,42 @@ def person_histogram_kernel(
     with S >= 0.2 and V >= 0.15: the hue of a grey is noise), ``HIST_S`` saturation and ``HIST_V`` value bins,
     unnormalised pixel counts.
 
-    Launch dim ``(people, cameras, HIST_PARTS)``, one thread per rectangle part (a few thousand pixels each; the
-    caller runs it for a few tens of rectangles). ``boxes`` (people, cameras) from :func:`person_boxes_kernel`
-    (empty rectangles give zeros). ``hist`` (people, cameras, HIST_PARTS, HIST_BINS + 1) out: the counts, and in the
-    last slot the number of pixels counted."""
-    i, c, part = wp.tid()
+    Launch dim ``(people, cameras, HIST_PARTS, max image height)``: one thread per image row of a rectangle part,
+    adding its counts with ``wp.atomic_add`` (whole numbers in float32: exact, so the result does not depend on the
+    order). ``hist`` (people, cameras, HIST_PARTS, HIST_BINS + 1) must be zero before the launch: the counts, and in
+    the last slot the number of pixels counted. ``boxes`` (people, cameras) from :func:`person_boxes_kernel` (empty
+    rectangles count nothing)."""
+    i, c, part, v = wp.tid()
     cam = cams[c]
     b = boxes[i, c]
+    if b[2] <= b[0] or b[3] <= b[1]:
+        return
+    h = b[3] - b[1]
+    v0 = int(b[1])
+    v1 = int(b[1] + 0.5 * h)
+    if part == 0:
+        v0 = int(b[1] + 0.5 * h)
+        v1 = int(b[3] - 0.05 * h)
+    if v < v0 or v >= v1:
+        return
     acc = hist_bins()
     n = float(0.0)
-    if b[2] > b[0] and b[3] > b[1]:
-        h = b[3] - b[1]
-        v0 = b[1]
-        v1 = b[1] + 0.5 * h
-        if part == 0:
-            v0 = b[1] + 0.5 * h
-            v1 = b[3] - 0.05 * h
-        for v in range(int(v0), int(v1)):
-            for u in range(int(b[0]), int(b[2])):
-                p = cam.pixel_offset + v * cam.width + u
-                if mask[p] != wp.uint8(0):
-                    if not in_any_other(boxes, i, c, float(u), float(v)):
-                        q = 3 * p
-                        hsv = rgb_to_hsv(float(bgr[q + 2]) / 255.0, float(bgr[q + 1]) / 255.0, float(bgr[q]) / 255.0)
-                        if hsv[1] >= 0.2 and hsv[2] >= 0.15:
-                            k = wp.min(int(hsv[0] * float(HIST_H)), HIST_H - 1)
-                            acc[k] = acc[k] + 1.0
-                        ks = wp.min(int(hsv[1] * float(HIST_S)), HIST_S - 1)
-                        kv = wp.min(int(hsv[2] * float(HIST_V)), HIST_V - 1)
-                        acc[HIST_H + ks] = acc[HIST_H + ks] + 1.0
-                        acc[HIST_H + HIST_S + kv] = acc[HIST_H + HIST_S + kv] + 1.0
-                        n += 1.0
-    for k in range(HIST_BINS):
-        hist[i, c, part, k] = acc[k]
-    hist[i, c, part, HIST_BINS] = n
+    for u in range(int(b[0]), int(b[2])):
+        p = cam.pixel_offset + v * cam.width + u
+        if mask[p] != wp.uint8(0):
+            if not in_any_other(boxes, i, c, float(u), float(v)):
+                q = 3 * p
+                hsv = rgb_to_hsv(float(bgr[q + 2]) / 255.0, float(bgr[q + 1]) / 255.0, float(bgr[q]) / 255.0)
+                if hsv[1] >= 0.2 and hsv[2] >= 0.15:
+                    k = wp.min(int(hsv[0] * float(HIST_H)), HIST_H - 1)
+                    acc[k] = acc[k] + 1.0
+                ks = wp.min(int(hsv[1] * float(HIST_S)), HIST_S - 1)
+                kv = wp.min(int(hsv[2] * float(HIST_V)), HIST_V - 1)
+                acc[HIST_H + ks] = acc[HIST_H + ks] + 1.0
+                acc[HIST_H + HIST_S + kv] = acc[HIST_H + HIST_S + kv] + 1.0
+                n += 1.0
+    if n > 0.0:
+        for k in range(HIST_BINS):
+            if acc[k] > 0.0:
+                wp.atomic_add(hist, i, c, part, k, acc[k])
+        wp.atomic_add(hist, i, c, part, HIST_BINS, n)

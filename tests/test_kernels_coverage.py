@@ -425,7 +425,7 @@ def test_person_histograms_match_numpy(device, rng):
     hist = wp.zeros((3, 2, 2, nb + 1), dtype=wp.float32, device=device)
     wp.launch(
         kcov.person_histogram_kernel,
-        dim=(3, 2, 2),
+        dim=(3, 2, 2, 72),
         inputs=[drig.cams, wp.array(bgr, dtype=wp.uint8, device=device), wp.array(flat, dtype=wp.uint8, device=device)]
         + [boxes],
         outputs=[hist],
@@ -457,6 +457,7 @@ def test_person_histograms_match_numpy(device, rng):
                         ref[nh + min(int(ss * ns), ns - 1)] += 1
                         ref[nh + ns + min(int(vv * 4), 3)] += 1
                         ref[nb] += 1
-                near = np.abs(got[i, c, part] - ref) <= 1  # hue on a bin edge may round the other way
-                assert near.all() or np.abs(got[i, c, part] - ref).sum() <= 4, (i, c, part)
+                # a hue or a value on a bin edge may round the other way in float32
+                assert np.abs(got[i, c, part] - ref).sum() <= 4, (i, c, part)
+                assert got[i, c, part, nb] == ref[nb]
     assert got[..., nb].sum() > 50

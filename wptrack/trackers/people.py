@@ -687,9 +687,10 @@ class PeopleTracker:
         )
         wp.copy(self._cover_host, self.cover)
         wp.copy(self._free_cover_host, self.free_cover)
+        self.hist.zero_()
         wp.launch(
             kcov.person_histogram_kernel,
-            dim=(len(self.pool), len(self.rig), int(kcov.HIST_PARTS)),
+            dim=(len(self.pool), len(self.rig), int(kcov.HIST_PARTS), self._pixel_dims[1]),
             inputs=[cams, self.bgr, self.mask, self.boxes],
             outputs=[self.hist],
             device=d,
