@@ -4,7 +4,9 @@ Map to the paper:
 - :func:`constant_velocity`: eq. 5 with the frame interval dt made explicit, P_t = P_{t-1} + dt Pdot_{t-1} + n_P,
   Pdot_t = Pdot_{t-1} + n_V (velocity in metres per second; the paper's uniform frame rate makes its eq. 5 the
   case dt = 1 frame). n_t (6 x 1) has independent components, deviation ``sigma_pos`` on the position and
-  ``sigma_vel`` on the velocity, per frame (the paper gives no covariance; the driver scales both with sqrt(dt)).
+  ``sigma_vel`` on the velocity, per frame (the paper gives no covariance; the driver scales both with sqrt(dt)); the
+  velocity noise has its own vertical deviation (ours: a person walks on the floor, but its points must keep mixing
+  over the body's height).
   Noise: Philox streams ``(seed, particle, frame, STREAM_MOTION)`` for the position and ``STREAM_PEOPLE_VELOCITY``
   for the velocity.
 - :func:`predict_kernel`: resampled gather + eq. 5 + the appearance update of eq. 6,
@@ -30,7 +32,7 @@ import warp as wp
 from .camera import Camera, pixel_index
 from .coverage import PersonTerms, person_log_terms
 from .descriptor import appearance_log_prob, descriptor_at
-from .random import STREAM_MOTION, STREAM_PEOPLE_VELOCITY, normal4, uniform4
+from .random import STREAM_INIT, STREAM_MOTION, STREAM_PEOPLE_VELOCITY, normal4, uniform4
 from .reduce import finite_logw, moments_push, moments_store, moments_zero
 
 wp.set_module_options({"enable_backward": False})
@@ -38,14 +40,23 @@ wp.set_module_options({"enable_backward": False})
 
 @wp.func
 def constant_velocity(
-    pos: wp.vec3, vel: wp.vec3, dt: float, sigma_pos: float, sigma_vel: float, seed: wp.vec2ui, index: int, frame: int
+    pos: wp.vec3,
+    vel: wp.vec3,
+    dt: float,
+    sigma_pos: float,
+    sigma_vel: float,
+    sigma_vel_z: float,
+    seed: wp.vec2ui,
+    index: int,
+    frame: int,
 ):
     """Eq. 5: returns (P_t, Pdot_t) = (P + dt Pdot + n_P, Pdot + n_V); metres, metres per second, dt in seconds,
-    ``sigma_pos`` (metres) and ``sigma_vel`` (metres per second) the deviations of this frame's noise."""
+    ``sigma_pos`` (metres), ``sigma_vel`` (horizontal) and ``sigma_vel_z`` (vertical, metres per second) the
+    deviations of this frame's noise."""
     zp = normal4(seed, index, frame, STREAM_MOTION)
     zv = normal4(seed, index, frame, STREAM_PEOPLE_VELOCITY)
     p = pos + dt * vel + sigma_pos * wp.vec3(zp[0], zp[1], zp[2])
-    v = vel + sigma_vel * wp.vec3(zv[0], zv[1], zv[2])
+    v = vel + wp.vec3(sigma_vel * zv[0], sigma_vel * zv[1], sigma_vel_z * zv[2])
     return p, v
 
 
@@ -96,13 +107,13 @@ def predict_kernel(
     Args:
         pos, vel: (N,) P_{t-1} (metres), Pdot_{t-1} (metres/second). model: (N, 3 N_b) C_{t-1}.
         desc, mass: (N, 3 N_b), (N,) A_{t-1} and its mass from ``descriptor.descriptor_kernel`` at P_{t-1}.
-        ancestors: (N,) resampled parents (identity without resampling). sigma_pos, sigma_vel: [0] this frame's noise
-            deviations (metres, metres/second). dt: [0] the frame interval, seconds. alpha: [0] this frame's
-            forgetting factor of eq. 6. observe: [0] 0 when this frame's masks do not show the person, [1] the
-            same for the previous frame (``coverage.gate_kernel``): with [0] = 0 the parent's velocity is first
-            multiplied by decay[0] (ours: a person nobody sees is more likely to stand than to walk on); with [1] = 0
-            the appearance model is kept (A_{t-1} was read where the person was not seen). All are device arrays
-            so that CUDA graphs see updates.
+        ancestors: (N,) resampled parents (identity without resampling). sigma_pos: [0], sigma_vel: [0] horizontal,
+            [1] vertical: this frame's noise deviations (metres, metres/second). dt: [0] the frame interval, seconds.
+            alpha: [0] this frame's forgetting factor of eq. 6. observe: [0] 0 when this frame's masks do not show the
+            person, [1] the same for the previous frame (``coverage.gate_kernel``): with [0] = 0 the parent's
+            velocity is first multiplied by decay[0] (ours: a person nobody sees is more likely to stand than to walk
+            on); with [1] = 0 the appearance model is kept (A_{t-1} was read where the person was not seen). All are
+            device arrays so that CUDA graphs see updates.
         seed: 64-bit run seed. frame: [0] frame number (the noise counter).
         pos_out, vel_out, model_out: the predicted state (must not alias the inputs).
     """
@@ -111,7 +122,7 @@ def predict_kernel(
     va = vel[a]
     if observe[0] == 0:
         va = va * decay[0]
-    p, v = constant_velocity(pos[a], va, dt[0], sigma_pos[0], sigma_vel[0], seed, i, frame[0])
+    p, v = constant_velocity(pos[a], va, dt[0], sigma_pos[0], sigma_vel[0], sigma_vel[1], seed, i, frame[0])
     pos_out[i] = p
     vel_out[i] = v
     appearance_update(model, desc, mass, a, wp.where(observe[1] != 0, alpha[0], 0.0), model_out, i)  # eq. 6
@@ -267,6 +278,7 @@ def step_kernel(
     stop = wp.min(start + chunk, n)
     sp = sigma_pos[0]
     sv = sigma_vel[0]
+    svz = sigma_vel[1]
     h = dt[0]
     al = wp.where(observe[1] != 0, alpha[0], 0.0)  # eq. 6, unless the person was not seen in the last frame
     seen = observe[0] != 0
@@ -280,7 +292,7 @@ def step_kernel(
         va = vel[a]
         if not seen:
             va = va * dv
-        x, u = constant_velocity(pos[a], va, h, sp, sv, seed, i, f)  # eq. 5
+        x, u = constant_velocity(pos[a], va, h, sp, sv, svz, seed, i, f)  # eq. 5
         pos_out[i] = x
         vel_out[i] = u
         appearance_update(model, desc, mass, a, al, model_out, i)  # eq. 6
@@ -306,19 +318,23 @@ def init_cylinder_kernel(
     radius: float,
     z_lo: float,
     z_hi: float,
+    speed: float,
     seed: wp.vec2ui,
     frame: int,
     pos: wp.array(dtype=wp.vec3),
     vel: wp.array(dtype=wp.vec3),
 ):
     """A new person's particles: uniform in the vertical cylinder of ``radius`` around ``centre`` (x, y) between
-    heights ``z_lo`` and ``z_hi`` (metres), at rest. The draw is keyed by (seed, particle, frame, STREAM_MOTION)."""
+    heights ``z_lo`` and ``z_hi`` (metres), keyed by (seed, particle, frame, STREAM_MOTION); horizontal velocities
+    normal with deviation ``speed`` per axis (metres per second; ours: a newcomer's walking direction is unknown, the
+    weights pick it from the first frames), keyed by (seed, particle, frame, STREAM_INIT); no vertical velocity."""
     i = wp.tid()
     u = uniform4(seed, i, frame, STREAM_MOTION)
     r = radius * wp.sqrt(u[0])
     a = 6.283185307179586 * u[1]
     pos[i] = wp.vec3(centre[0] + r * wp.cos(a), centre[1] + r * wp.sin(a), z_lo + (z_hi - z_lo) * u[2])
-    vel[i] = wp.vec3(0.0, 0.0, 0.0)
+    z = normal4(seed, i, frame, STREAM_INIT)
+    vel[i] = wp.vec3(speed * z[0], speed * z[1], 0.0)
 
 
 COLUMN_AXES = 9

@@ -527,7 +527,7 @@ def run_predict(
             wp.array(mass, device=device),
             wp.array(anc, device=device),
             wp.array([sp], dtype=wp.float32, device=device),
-            wp.array([sv], dtype=wp.float32, device=device),
+            wp.array(np.broadcast_to(np.asarray(sv, np.float32), 2).copy(), dtype=wp.float32, device=device),
             wp.array([dt], dtype=wp.float32, device=device),
             wp.array([alpha], dtype=wp.float32, device=device),
             wp.array(np.asarray(observe, np.int32), device=device),
@@ -550,11 +550,11 @@ def test_predict_statistics_and_appearance_update(device, rng):
     mass = np.ones(n, np.float32)
     mass[::7] = 0  # unseen parents keep their appearance
     anc = rng.integers(0, n, n).astype(np.int32)
-    sp, sv, alpha = 0.02, 0.005, 0.1
+    sp, sv, alpha = 0.02, (0.005, 0.012), 0.1  # horizontal and vertical velocity noise
     p, v, c = run_predict(device, pos, vel, model, desc, mass, anc, sp, sv, alpha, 11, 5)
     npos = p.astype(np.float64) - pos[anc] - vel[anc]  # eq. 5: position noise
     nvel = v.astype(np.float64) - vel[anc]  # velocity noise
-    for noise, s in ((npos, sp), (nvel, sv)):
+    for noise, s in ((npos, np.full(3, sp)), (nvel, np.array([sv[0], sv[0], sv[1]]))):
         assert np.all(np.abs(noise.mean(0)) < 5 * s / np.sqrt(n))
         np.testing.assert_allclose(noise.std(0), s, rtol=0.03)  # sd of the sd estimate: 0.5 %
     # the 6 components are uncorrelated (|r| < 0.03 is ~4 standard errors at n = 20000)
@@ -662,7 +662,8 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     anc = wp.array(rng.integers(0, n, n).astype(np.int32), device=device)
     logw_prev = wp.array(rng.normal(0, 1, n).astype(np.float32), device=device)
     flag = wp.array([resampled], dtype=wp.int32, device=device)
-    sp, sv, sn, dt, alpha = (wp.array([x], dtype=wp.float32, device=device) for x in (0.02, 0.004, 0.01, 0.3, 0.05))
+    sp, sn, dt, alpha = (wp.array([x], dtype=wp.float32, device=device) for x in (0.02, 0.01, 0.3, 0.05))
+    sv = wp.array([0.004, 0.009], dtype=wp.float32, device=device)
     seed, frame = wp.vec2ui(3, 4), wp.array([7], dtype=wp.int32, device=device)
     p_b, sigma_p = 0.1, 0.3
 

@@ -37,13 +37,13 @@ from wptrack.warpcams import DeviceRig
 # ------------------------------------------------------------------------------------------ birth cylinder
 
 
-def init_cylinder(device, centre, radius, z_lo, z_hi, seed, frame, n):
+def init_cylinder(device, centre, radius, z_lo, z_hi, seed, frame, n, speed=0.0):
     pos = wp.full(n, wp.vec3(7.0, 7.0, 7.0), dtype=wp.vec3, device=device)
     vel = wp.full(n, wp.vec3(7.0, 7.0, 7.0), dtype=wp.vec3, device=device)
     wp.launch(
         kpeople.init_cylinder_kernel,
         dim=n,
-        inputs=[wp.vec3(*centre), radius, z_lo, z_hi, wp.vec2ui(*seed), frame],
+        inputs=[wp.vec3(*centre), radius, z_lo, z_hi, speed, wp.vec2ui(*seed), frame],
         outputs=[pos, vel],
         device=device,
     )
@@ -52,7 +52,8 @@ def init_cylinder(device, centre, radius, z_lo, z_hi, seed, frame, n):
 
 def test_init_cylinder_matches_numpy_philox(device):
     """Exact draw: r = R sqrt(u0), angle 2 pi u1, z = z_lo + (z_hi - z_lo) u2 of the (seed, i, frame, STREAM_MOTION)
-    Philox block, velocity 0; the centre's z is ignored (heights are absolute)."""
+    Philox block; the centre's z is ignored (heights are absolute); the horizontal velocity speed (z0, z1) of the
+    (seed, i, frame, STREAM_INIT) normals (0 with speed 0), no vertical velocity."""
     n, seed, frame = 1000, (123, 456), 9
     centre, radius, z_lo, z_hi = (2.0, -1.0, 5.0), 0.3, 0.2, 1.6
     pos, vel = init_cylinder(device, centre, radius, z_lo, z_hi, seed, frame, n)
@@ -62,6 +63,11 @@ def test_init_cylinder_matches_numpy_philox(device):
     ref = np.column_stack([centre[0] + r * np.cos(a), centre[1] + r * np.sin(a), z_lo + (z_hi - z_lo) * u[:, 2]])
     np.testing.assert_allclose(pos, ref, rtol=0, atol=2e-6)
     np.testing.assert_array_equal(vel, 0.0)
+    pos2, vel2 = init_cylinder(device, centre, radius, z_lo, z_hi, seed, frame, n, speed=1.5)
+    np.testing.assert_array_equal(pos2, pos)  # the velocities do not change the positions' draws
+    zv = normal4_ref(seed, n, frame, int(krand.STREAM_INIT))
+    np.testing.assert_allclose(vel2[:, :2], 1.5 * zv[:, :2], rtol=1e-6, atol=1e-5)  # float32 products of normals
+    np.testing.assert_array_equal(vel2[:, 2], 0.0)
 
 
 def test_init_cylinder_is_uniform_in_the_cylinder(device):
@@ -127,6 +133,11 @@ def test_predict_constant_velocity_matches_numpy_philox(device, rng, dt):
     p64, v64 = pos.astype(np.float64)[anc], vel.astype(np.float64)[anc]
     np.testing.assert_allclose(p, p64 + np.float32(dt) * v64 + np.float32(sp) * zp, rtol=0, atol=3e-6)
     np.testing.assert_allclose(v, v64 + np.float32(sv) * zv, rtol=0, atol=1e-6)
+    pz, vz, _ = run_predict(
+        device, pos, vel, model, desc, np.ones(n, np.float32), anc, sp, (sv, 3 * sv), 0.1, seed, frame, dt
+    )
+    np.testing.assert_array_equal(pz, p)  # the vertical velocity noise does not move the particle this frame
+    np.testing.assert_allclose(vz[:, 2], v64[:, 2] + np.float32(3 * sv) * zv[:, 2], rtol=0, atol=1e-6)
 
 
 @pytest.mark.parametrize(("resampled", "drop_worst"), [(1, 1), (0, 0)])

@@ -734,7 +734,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="frame rate of the recording, frames/s (default: the videos'; needed for image folders)",
     )
     tp.add_argument("--sigma-pos", type=float, default=None, help="position noise, m per sqrt(s) (default 0.15)")
-    tp.add_argument("--sigma-vel", type=float, default=None, help="velocity noise, m/s per sqrt(s) (default 1.25)")
+    tp.add_argument(
+        "--sigma-vel", type=float, default=None, help="horizontal velocity noise, m/s per sqrt(s) (default 0.5)"
+    )
     tp.add_argument(
         "--alpha", type=float, default=None, help="appearance forgetting factor of eq. 6 per 0.04 s (default 0.05)"
     )

@@ -227,7 +227,8 @@ class PersonFilter(ParticleFilter):
 
     def spawn(self, xy: np.ndarray, frame: int) -> None:
         """Start the filter on a new person standing at ``xy`` (ground, metres): particles uniform in the
-        configured cylinder, at rest, each with the descriptor at its position as appearance model C_0."""
+        configured cylinder, with random horizontal velocities (``BirthConfig.init_speed``), each with the
+        descriptor at its position as appearance model C_0."""
         tr, b = self.tracker, self.tracker.config.birth
         cur, d = self.parity, self.device
         wp.launch(
@@ -238,6 +239,7 @@ class PersonFilter(ParticleFilter):
                 b.init_radius,
                 b.init_z[0],
                 b.init_z[1],
+                b.init_speed,
                 self.seed,
                 frame,
             ],
@@ -476,7 +478,7 @@ class PeopleTracker:
         self.frame_dynamics = config.dynamics.per_frame(self.frame_dt)
         sp, sv, al = self.frame_dynamics
         self.dt = wp.array([self.frame_dt], dtype=wp.float32, device=d)  # [0] dt, seconds
-        self.sigma_vel = wp.array([sv], dtype=wp.float32, device=d)  # [0] velocity noise of one frame, m/s
+        self.sigma_vel = wp.array(list(sv), dtype=wp.float32, device=d)  # velocity noise of one frame, m/s: xy, z
         self.alpha = wp.array([al], dtype=wp.float32, device=d)  # [0] eq. 6's factor of one frame
         self.decay = wp.array([self._decay(self.frame_dt)], dtype=wp.float32, device=d)  # [0] unseen velocity factor
         self._last_timestamp: float | None = None
@@ -821,7 +823,8 @@ class PeopleTracker:
         self.frame_dt = dt
         self.frame_dynamics = sp, sv, al = self.config.dynamics.per_frame(dt)
         self.dt.fill_(dt)
-        self.sigma_vel.fill_(sv)
+        self.sigma_vel[0:1].fill_(sv[0])
+        self.sigma_vel[1:2].fill_(sv[1])
         self.alpha.fill_(al)
         self.decay.fill_(self._decay(dt))
         for p in self.pool:
