@@ -102,28 +102,70 @@ def box_count(cam: Camera, integral: wp.array(dtype=wp.int32), box: wp.vec4):
 
 @wp.func
 def box_counts(
-    cam: Camera, integral: wp.array(dtype=wp.int32), x: float, y: float, half_width: float, height: float, vis: float
+    cam: Camera,
+    integral: wp.array(dtype=wp.int32),
+    x: float,
+    y: float,
+    half_width: float,
+    height: float,
+    vis: float,
+    unit: float,
 ):
     """``(on, area)``: mask pixels inside the rectangle of a person at (x, y) and the rectangle's area, both counted
     inside the image, or ``(0, -1)`` when the camera does not see it (a corner not projected, or less than ``vis``
-    of the rectangle inside the image)."""
+    of the rectangle inside the image). ``unit``: pixels each of the integral's pixels stands for (the mask
+    block-summed, see :func:`downsample_mask_kernel`; the area is multiplied by it, the counts already hold it)."""
     box, full = person_box(cam, x, y, half_width, height)
     area = (box[2] - box[0]) * (box[3] - box[1])
     if full <= 0.0 or area <= 0.0 or area < vis * full:
         return float(0.0), float(-1.0)
-    return float(box_count(cam, integral, box)), area
+    return float(box_count(cam, integral, box)), area * unit
 
 
 @wp.func
 def box_coverage(
-    cam: Camera, integral: wp.array(dtype=wp.int32), x: float, y: float, half_width: float, height: float, vis: float
+    cam: Camera,
+    integral: wp.array(dtype=wp.int32),
+    x: float,
+    y: float,
+    half_width: float,
+    height: float,
+    vis: float,
+    unit: float,
 ):
     """Fraction of the rectangle of a person at (x, y) that the mask covers (its part inside the image), or -1 when
     the camera does not see it (:func:`box_counts`)."""
-    on, area = box_counts(cam, integral, x, y, half_width, height, vis)
+    on, area = box_counts(cam, integral, x, y, half_width, height, vis, unit)
     if area <= 0.0:
         return float(-1.0)
     return on / area
+
+
+@wp.kernel
+def downsample_mask_kernel(
+    cams: wp.array(dtype=Camera),
+    mask: wp.array(dtype=wp.uint8),
+    scale: int,
+    small_cams: wp.array(dtype=Camera),
+    small: wp.array(dtype=wp.uint8),
+):
+    """Block sums of the 0/1 masks: ``small`` pixel (u, v) of camera c = the motion pixels of the ``scale`` x
+    ``scale`` block of ``mask`` from (scale u, scale v) (0 .. scale^2 <= 255). ``small_cams``: the same cameras at
+    the reduced size (``pixel_offset`` into ``small``; the rectangles are projected with them). A person's
+    rectangle is tens of pixels wide, so its coverage counted on blocks is as good and ``scale^2`` times cheaper
+    to integrate (POM, too, works on reduced images). Launch dim ``(cameras, small max height, small max
+    width)``."""
+    c, v, u = wp.tid()
+    sc = small_cams[c]
+    if v >= sc.height or u >= sc.width:
+        return
+    cam = cams[c]
+    n = int(0)
+    for dv in range(scale):
+        row = cam.pixel_offset + (scale * v + dv) * cam.width + scale * u
+        for du in range(scale):
+            n += int(mask[row + du])
+    small[sc.pixel_offset + v * sc.width + u] = wp.uint8(n)
 
 
 @wp.kernel
@@ -136,6 +178,7 @@ def coverage_kernel(
     half_width: float,
     height: float,
     min_visible: float,
+    unit: float,
     coverage: wp.array2d(dtype=wp.float32),
 ):
     """Coverage of a person's rectangle at every cell of a ground grid in every camera (:func:`box_coverage`).
@@ -146,7 +189,7 @@ def coverage_kernel(
     c, t = wp.tid()
     x = origin[0] + cell * (float(t % nx) + 0.5)
     y = origin[1] + cell * (float(t / nx) + 0.5)
-    coverage[c, t] = wp.float32(box_coverage(cams[c], integral, x, y, half_width, height, min_visible))
+    coverage[c, t] = wp.float32(box_coverage(cams[c], integral, x, y, half_width, height, min_visible, unit))
 
 
 @wp.kernel
@@ -158,11 +201,12 @@ def box_area_kernel(
     half_width: float,
     height: float,
     min_visible: float,
+    unit: float,
     area: wp.array2d(dtype=wp.float32),
 ):
-    """The area (pixels inside the image) of a person's rectangle at every cell of the grid of
-    :func:`coverage_kernel` in every camera, -1 where the camera does not see it (the same rule). Launch dim
-    ``(cameras, nx * ny)``."""
+    """The area (pixels inside the image, times ``unit``: see :func:`box_counts`) of a person's rectangle at every
+    cell of the grid of :func:`coverage_kernel` in every camera, -1 where the camera does not see it (the same
+    rule). Launch dim ``(cameras, nx * ny)``."""
     c, t = wp.tid()
     cam = cams[c]
     x = origin[0] + cell * (float(t % nx) + 0.5)
@@ -170,8 +214,9 @@ def box_area_kernel(
     box, full = person_box(cam, x, y, half_width, height)
     a = (box[2] - box[0]) * (box[3] - box[1])
     if full <= 0.0 or a <= 0.0 or a < min_visible * full:
-        a = -1.0
-    area[c, t] = wp.float32(a)
+        area[c, t] = wp.float32(-1.0)
+    else:
+        area[c, t] = wp.float32(a * unit)
 
 
 @wp.kernel
@@ -229,6 +274,7 @@ class PersonTerms:
     half_width: float  # half the person's width, metres
     height: float  # the person's height, metres
     min_visible: float  # fraction of a rectangle inside the image for the camera to see it
+    unit: float  # pixels each pixel of the masks' integral images stands for (box_counts)
     slope: float  # rectangle term: slope * on - offset * area per camera (box_log_likelihood)
     offset: float
     exclusion_radius: float  # metres (exclusion_log_penalty)
@@ -251,11 +297,13 @@ def box_counts_left(
     half_width: float,
     height: float,
     min_visible: float,
+    unit: float,
 ):
     """``(on, area, full)`` summed over the cameras that see the rectangle of a person standing at (x[0], x[1]): its
     mask pixels and its pixels inside the image, both without the parts inside the other tracked people's
     rectangles (``boxes`` from :func:`person_boxes_kernel`, all rows but ``own``; overlapping ones are subtracted
-    each, floored at 0 per camera), and its pixels inside the image before that (:func:`box_log_likelihood`)."""
+    each, floored at 0 per camera), and its pixels inside the image before that (:func:`box_log_likelihood`); areas
+    times ``unit`` (:func:`box_counts`)."""
     on_sum = float(0.0)
     area_sum = float(0.0)
     full_sum = float(0.0)
@@ -274,7 +322,7 @@ def box_counts_left(
                         area -= (shared[2] - shared[0]) * (shared[3] - shared[1])
             on_sum += wp.max(on, 0.0)
             area_sum += wp.max(area, 0.0)
-    return on_sum, area_sum, full_sum
+    return on_sum, area_sum * unit, full_sum * unit
 
 
 @wp.func
@@ -287,6 +335,7 @@ def box_log_likelihood(
     half_width: float,
     height: float,
     min_visible: float,
+    unit: float,
     slope: float,
     offset: float,
 ):
@@ -304,7 +353,7 @@ def box_log_likelihood(
     are not independent: one sample per ``s`` pixels). Summed, not averaged: a rectangle too small (a person placed
     too far, inside another silhouette) leaves the legs unexplained, one too large (too near) takes in floor, so the
     sum peaks where the person stands."""
-    on, area, _full = box_counts_left(cams, integral, boxes, own, x, half_width, height, min_visible)
+    on, area, _full = box_counts_left(cams, integral, boxes, own, x, half_width, height, min_visible, unit)
     return slope * on - offset * area
 
 
@@ -351,6 +400,7 @@ def person_log_terms(
             terms.half_width,
             terms.height,
             terms.min_visible,
+            terms.unit,
             terms.slope,
             terms.offset,
         )
@@ -398,7 +448,7 @@ def gate_kernel(
         for b in range(-m, m + 1):
             x = wp.vec3(p[0] + spacing * float(a), p[1] + spacing * float(b), 0.0)
             on, area, full = box_counts_left(
-                cams, integral, boxes, own, x, terms.half_width, terms.height, terms.min_visible
+                cams, integral, boxes, own, x, terms.half_width, terms.height, terms.min_visible, terms.unit
             )
             if area > 0.0 and area >= min_left * full:
                 best = wp.max(best, on / area)

@@ -195,6 +195,7 @@ def observation_kernel(
     n_bins: int,
     sigma_n: wp.array(dtype=wp.float32),
     sigma_p: float,
+    box_cams: wp.array(dtype=Camera),
     integral: wp.array(dtype=wp.int32),
     others: wp.array(dtype=wp.vec2),
     alive: wp.array(dtype=wp.int32),
@@ -204,14 +205,15 @@ def observation_kernel(
     loglik: wp.array(dtype=wp.float32),
 ):
     """log p(z_t | x_t) = log p(M_t | x_t) + log p(A_t | x_t) (eq. 11) of every particle, plus the person-level terms
-    (ours: ``coverage.person_log_terms`` with the masks' integral images ``integral``, the other people's ground
+    (ours: ``coverage.person_log_terms`` with the masks' integral images ``integral`` of the cameras ``box_cams``
+    (the rig at the integral's reduced size, ``coverage.downsample_mask_kernel``), the other people's ground
     positions ``others``/``alive`` and this person's slot ``own``); the descriptor (``desc``, ``mass``,
     ``mean_rgb``) must have been computed at ``points`` by ``descriptor.descriptor_kernel``."""
     i = wp.tid()
     x = points[i]
     lm = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, x)
     la = appearance_log_prob(model, i, desc, i, mass[i], mean_rgb[i], n_bins, sigma_n[0], sigma_p)
-    loglik[i] = lm + la + person_log_terms(cams, integral, others, alive, boxes, own, terms, x)
+    loglik[i] = lm + la + person_log_terms(box_cams, integral, others, alive, boxes, own, terms, x)
 
 
 @wp.kernel
@@ -245,6 +247,7 @@ def step_kernel(
     sigma_p: float,
     seed: wp.vec2ui,
     frame: wp.array(dtype=wp.int32),
+    box_cams: wp.array(dtype=Camera),
     integral: wp.array(dtype=wp.int32),
     others: wp.array(dtype=wp.vec2),
     alive: wp.array(dtype=wp.int32),
@@ -303,7 +306,7 @@ def step_kernel(
         if seen:
             lw = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, x)  # eqs. 9-10
             lw += appearance_log_prob(model_out, i, desc_out, i, m, rgb, n_bins, sn, sigma_p)  # eqs. 23-26, eq. 11
-            lw += person_log_terms(cams, integral, others, alive, boxes, own, terms, x)  # ours
+            lw += person_log_terms(box_cams, integral, others, alive, boxes, own, terms, x)  # ours
         if keep:
             lw += logw_prev[i]
         lw = finite_logw(lw)  # -inf/NaN -> the floor, as the estimate and the resampler read it
@@ -419,6 +422,7 @@ def score_moments_kernel(
     resampled: wp.array(dtype=wp.int32),
     sigma_n: wp.array(dtype=wp.float32),
     sigma_p: float,
+    box_cams: wp.array(dtype=Camera),
     integral: wp.array(dtype=wp.int32),
     others: wp.array(dtype=wp.vec2),
     alive: wp.array(dtype=wp.int32),
@@ -450,7 +454,7 @@ def score_moments_kernel(
         if seen:
             lw = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, x)  # eqs. 9-10
             lw += appearance_log_prob(model, i, desc, i, mass[i], rgb[i], n_bins, sn, sigma_p)  # eqs. 23-26, eq. 11
-            lw += person_log_terms(cams, integral, others, alive, boxes, own, terms, x)  # ours
+            lw += person_log_terms(box_cams, integral, others, alive, boxes, own, terms, x)  # ours
         if keep:
             lw += logw_prev[i]
         lw = finite_logw(lw)  # -inf/NaN -> the floor, as the estimate and the resampler read it

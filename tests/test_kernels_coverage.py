@@ -165,7 +165,7 @@ def test_coverage_and_area_maps_match_numpy(device, rng):
     origin, cell, nx, ny = (-0.5, -0.5), 0.2, 25, 22
     cov = wp.zeros((2, nx * ny), dtype=wp.float32, device=device)
     area = wp.zeros((2, nx * ny), dtype=wp.float32, device=device)
-    common = [wp.vec2(*origin), cell, nx, HW, HEIGHT, VIS]
+    common = [wp.vec2(*origin), cell, nx, HW, HEIGHT, VIS, 1.0]
     wp.launch(kcov.coverage_kernel, dim=(2, nx * ny), inputs=[drig.cams, I, *common], outputs=[cov], device=device)
     wp.launch(kcov.box_area_kernel, dim=(2, nx * ny), inputs=[drig.cams, *common], outputs=[area], device=device)
     t = np.arange(nx * ny)
@@ -245,13 +245,13 @@ def _counts_kernel(
     out: wp.array(dtype=wp.vec3),
 ):
     i = wp.tid()
-    on, area, full = kcov.box_counts_left(cams, integral, boxes, own, points[i], HW, HEIGHT, VIS)
+    on, area, full = kcov.box_counts_left(cams, integral, boxes, own, points[i], HW, HEIGHT, VIS, 1.0)
     out[i] = wp.vec3(on, area, full)
 
 
 def make_terms(slope=0.02, offset=0.004, radius=0.4, weight=5.0) -> kcov.PersonTerms:
     t = kcov.PersonTerms()
-    t.half_width, t.height, t.min_visible = HW, HEIGHT, VIS
+    t.half_width, t.height, t.min_visible, t.unit = HW, HEIGHT, VIS, 1.0
     t.slope, t.offset = slope, offset
     t.exclusion_radius, t.exclusion_weight = radius, weight
     return t
@@ -461,3 +461,57 @@ def test_person_histograms_match_numpy(device, rng):
                 assert np.abs(got[i, c, part] - ref).sum() <= 4, (i, c, part)
                 assert got[i, c, part, nb] == ref[nb]
     assert got[..., nb].sum() > 50
+
+
+@pytest.mark.parametrize("scale", [2, 3])
+def test_reduced_masks_count_blocks_and_their_rectangles_scale(device, rng, scale):
+    """The reduced masks hold the motion pixels of each scale x scale block (the remainder columns and rows left
+    out), and a person's rectangle projected with the reduced camera is the full rectangle divided by the scale
+    (to the pixel): the coverage counted on blocks matches the full-size coverage."""
+    from wptrack.trackers.people import reduced_camera
+
+    rig = make_rig()
+    drig = DeviceRig(rig, device)
+    small_rig = Rig(tuple(reduced_camera(c, scale) for c in rig.cameras))
+    sdrig = DeviceRig(small_rig, device)
+    flat = blob_masks(rig, rng)
+    small = wp.zeros(sdrig.total_pixels, dtype=wp.uint8, device=device)
+    dims = (2, max(c.height for c in small_rig.cameras), max(c.width for c in small_rig.cameras))
+    wp.launch(
+        kcov.downsample_mask_kernel,
+        dim=dims,
+        inputs=[drig.cams, wp.array(flat, dtype=wp.uint8, device=device), scale, sdrig.cams],
+        outputs=[small],
+        device=device,
+    )
+    got = small.numpy()
+    for c, (full_m, scam) in enumerate(zip(masks_2d(rig, flat), small_rig.cameras, strict=True)):
+        h, w = scam.height, scam.width
+        ref = full_m[: h * scale, : w * scale].reshape(h, scale, w, scale).sum(axis=(1, 3))
+        off = sdrig.pixel_offsets[c]
+        np.testing.assert_array_equal(got[off : off + h * w].reshape(h, w), ref)
+    xy = rng.uniform(0.5, 3.5, (60, 2))
+    full_boxes, _ = box_ref(rig, drig, xy, device)
+    small_boxes, small_full = box_ref(small_rig, sdrig, xy, device)
+    seen = small_full > 0
+    assert seen.sum() > 60
+    err = np.abs(small_boxes * scale - full_boxes)[seen]
+    assert np.median(err) <= scale and err.max() <= 2 * scale  # rounding to blocks, and the clipped remainder
+    # coverage counted on blocks (unit = scale^2 pixels per block) against the full-size count
+    I_full = integral(rig, drig, flat, device)
+    I_small = integral(small_rig, sdrig, got, device)
+    origin, cell, nx, ny = (0.5, 0.5), 0.25, 12, 12
+    covs = []
+    for cams, I, unit in ((drig.cams, I_full, 1.0), (sdrig.cams, I_small, float(scale * scale))):  # noqa: E741
+        cov = wp.zeros((2, nx * ny), dtype=wp.float32, device=device)
+        wp.launch(
+            kcov.coverage_kernel,
+            dim=(2, nx * ny),
+            inputs=[cams, I, wp.vec2(*origin), cell, nx, HW, HEIGHT, VIS, unit],
+            outputs=[cov],
+            device=device,
+        )
+        covs.append(cov.numpy())
+    both = (covs[0] >= 0) & (covs[1] >= 0)
+    assert both.sum() > 100
+    assert np.median(np.abs(covs[0] - covs[1])[both]) < 0.03

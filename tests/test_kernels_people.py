@@ -453,7 +453,7 @@ def person_inputs(rig: Rig, drig: DeviceRig, mask: np.ndarray, device, rng, slop
     )
     terms = make_terms(slope=slope, weight=weight)
     terms.half_width, terms.height = 0.25, 1.75
-    return [I, others, alive, boxes, 0, terms]
+    return [drig.cams, I, others, alive, boxes, 0, terms]
 
 
 def person_terms_ref(drig: DeviceRig, inputs: list, pts: np.ndarray, device) -> np.ndarray:
@@ -464,7 +464,7 @@ def person_terms_ref(drig: DeviceRig, inputs: list, pts: np.ndarray, device) -> 
     wp.launch(
         _terms_kernel,
         dim=len(pts),
-        inputs=[drig.cams, *inputs, wp.array(pts, dtype=wp.vec3, device=device)],
+        inputs=[*inputs, wp.array(pts, dtype=wp.vec3, device=device)],
         outputs=[out],
         device=device,
     )

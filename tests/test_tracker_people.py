@@ -303,3 +303,31 @@ def test_unseen_person_holds_its_place(device):
     person = next(p for p in est.people if p.id == pid)
     assert np.hypot(*(person.mean[:2] - still)) < 0.3
     assert person.support <= tr.config.person.gate  # not seen
+
+
+def test_standing_person_lost_from_the_masks_is_held_longer(device):
+    """The masks lose two people at once (the background model absorbed them, or they are hidden): the one who was
+    standing still is held for ``hold_seconds`` (it has not left), the one who was walking is removed after
+    ``remove_seconds``."""
+    rng = np.random.default_rng(13)
+    rig = rig3()
+    tr = PeopleTracker(rig, _config(), device=device, keep_particles=0)
+    still = np.array([1.2, 1.5])
+    removed: dict[int, int] = {}
+    for t in range(120):
+        walker = np.array([0.8 + 0.04 * min(t, 50), 2.6])
+        images, masks = render(rig, [(still, COLOURS[0]), (walker, COLOURS[1])], rng)
+        if t >= 50:  # both leave the masks at frame 50 (the walker while walking at 1 m/s)
+            masks = [np.zeros_like(m) for m in masks]
+        est = tr.step(images, masks)
+        if t == 49:
+            ids = {
+                min(est.people, key=lambda p: np.hypot(*(p.mean[:2] - xy))).id: name
+                for name, xy in (("still", still), ("walker", walker))
+            }
+        for pid in est.removed:
+            removed[pid] = t
+    b = tr.config.birth
+    by_name = {name: removed.get(pid) for pid, name in ids.items()}
+    assert by_name["walker"] is not None and by_name["walker"] - 50 <= b.remove_seconds * tr.fps + 2
+    assert by_name["still"] is None or by_name["still"] - 50 >= min(b.hold_seconds * tr.fps, 60)

@@ -55,6 +55,12 @@ DEFAULT_FPS = 25.0
 """Frame rate assumed by a tracker built without ``PeopleConfig.fps`` and stepped without timestamps."""
 DESCRIPTOR_BLOCK = 64
 """Lanes per particle of the GPU descriptor (they share the disc pixels)."""
+STILL_SPEED = 0.3
+"""A person walking slower than this (metres per second) when the masks lose it is taken to stand still."""
+STILL_WINDOW = 1.0
+"""Seconds over which a person's ground speed is measured."""
+COVERAGE_ROWS = 120
+"""The person rectangles are counted on masks reduced to about this many rows (``coverage_scale``)."""
 GATE_SPACING = 0.125
 """Spacing of the points the gate tries around a person's last position, metres (``kernels.coverage.gate_kernel``)."""
 MIN_APPEARANCE_PX = 100
@@ -143,6 +149,32 @@ class PeopleEstimate:
     timings: dict[str, float] = field(default_factory=dict)
 
 
+def coverage_scale(rig: Rig) -> int:
+    """Block size of the reduced masks the person rectangles are counted on: about ``COVERAGE_ROWS`` rows for the
+    smallest camera (1: full size for images of up to 180 rows; at most 15, so a block count fits a byte)."""
+    rows = min(cam.height for cam in rig.cameras)
+    return int(min(15, max(1, round(rows / COVERAGE_ROWS))))
+
+
+def reduced_camera(cam, scale: int):
+    """``cam`` for its image reduced by ``scale`` x ``scale`` blocks (``kernels.coverage.downsample_mask_kernel``):
+    the block (u, v) covers the full pixels (scale u .. scale u + scale - 1, ...), whose centre is at full
+    coordinate scale u + (scale - 1) / 2, so f' = f / scale and c' = (c - (scale - 1) / 2) / scale; the remainder
+    columns and rows (width % scale, height % scale) are left out."""
+    from wptrack.rig import Camera
+
+    if scale == 1:
+        return cam
+    K = np.array(cam.K, dtype=np.float64)
+    K[0, 0] /= scale
+    K[1, 1] /= scale
+    K[0, 2] = (K[0, 2] - 0.5 * (scale - 1)) / scale
+    K[1, 2] = (K[1, 2] - 0.5 * (scale - 1)) / scale
+    return Camera(
+        name=cam.name, width=cam.width // scale, height=cam.height // scale, K=K, dist=cam.dist, R=cam.R, t=cam.t
+    )
+
+
 class PersonFilter(ParticleFilter):
     """One person's particle set (a slot of the tracker's pool): positions and log-weights from
     :class:`ParticleFilter`, plus, as (N, ...) ping-pong pairs: ``vel`` (metres/second), ``model`` (appearance C,
@@ -215,7 +247,7 @@ class PersonFilter(ParticleFilter):
         wp.launch(
             kcov.gate_kernel,
             dim=1,
-            inputs=[tr.drig.cams, tr.integral, tr.boxes, tr.slot_xy, self.slot, tr.terms]
+            inputs=[tr.sdrig.cams, tr.integral, tr.boxes, tr.slot_xy, self.slot, tr.terms]
             + [pc.gate_reach, WALK_SPEED, tr.dt, GATE_SPACING, pc.gate, pc.gate_left],
             outputs=[self.observe, self.support],
             device=self.device,
@@ -309,6 +341,7 @@ class PersonFilter(ParticleFilter):
                     dc.sigma_p,
                     self.seed,
                     self.frame,
+                    tr.sdrig.cams,
                     tr.integral,
                     tr.slot_xy,
                     tr.slot_alive,
@@ -383,6 +416,7 @@ class PersonFilter(ParticleFilter):
                 self.resampled,
                 tr.sigma_n,
                 dc.sigma_p,
+                tr.sdrig.cams,
                 tr.integral,
                 tr.slot_xy,
                 tr.slot_alive,
@@ -510,16 +544,20 @@ class PeopleTracker:
         # the masks' integral images (all motion, and the motion the tracked people's rectangles leave), the person
         # rectangles' coverage on the evidence map's cells, and the person-level terms of the particles' weights
         ncam = len(rig)
-        self.integral = wp.zeros(self.drig.total_integral, dtype=wp.int32, device=d)
-        self.free_mask = wp.zeros(npx, dtype=wp.uint8, device=d)
-        self.free_integral = wp.zeros(self.drig.total_integral, dtype=wp.int32, device=d)
-        maxw, maxh = max(c.width for c in rig.cameras), max(c.height for c in rig.cameras)
+        self.box_scale = s = coverage_scale(rig)  # the rectangles are counted on s x s blocks of the masks
+        self.sdrig = DeviceRig(Rig(tuple(reduced_camera(c, s) for c in rig.cameras)), d)  # the rig at that size
+        self.small_mask = wp.zeros(self.sdrig.total_pixels, dtype=wp.uint8, device=d)
+        self.integral = wp.zeros(self.sdrig.total_integral, dtype=wp.int32, device=d)
+        self.free_mask = wp.zeros(self.sdrig.total_pixels, dtype=wp.uint8, device=d)
+        self.free_integral = wp.zeros(self.sdrig.total_integral, dtype=wp.int32, device=d)
+        maxw, maxh = self.sdrig.max_width, self.sdrig.max_height
         seg = int(kcolour.SEGMENT)
         self._row_dims = (ncam, maxh, -(-maxw // seg))
         self._col_dims = (ncam, maxw + 1, -(-maxh // seg))
         self._row_seg = wp.zeros(self._row_dims, dtype=wp.int32, device=d)
         self._col_seg = wp.zeros(self._col_dims, dtype=wp.int32, device=d)
-        self._pixel_dims = (ncam, maxh, maxw)
+        self._pixel_dims = (ncam, maxh, maxw)  # of the reduced masks
+        self._rows = max(c.height for c in rig.cameras)  # of the full images
         cells = self.nx * self.ny
         self.cover = wp.zeros((ncam, cells), dtype=wp.float32, device=d)  # coverage of all motion, -1: unseen
         self.free_cover = wp.zeros((ncam, cells), dtype=wp.float32, device=d)  # of the unexplained motion
@@ -528,17 +566,19 @@ class PeopleTracker:
         wp.launch(
             kcov.box_area_kernel,
             dim=(ncam, cells),
-            inputs=[self.drig.cams, wp.vec2(*self.grid_origin), b.cell, self.nx]
-            + [config.person.half_width, config.person.height, config.person.min_visible],
+            inputs=[self.sdrig.cams, wp.vec2(*self.grid_origin), b.cell, self.nx]
+            + [config.person.half_width, config.person.height, config.person.min_visible, float(s * s)],
             outputs=[cell_area],
             device=d,
         )
         self.cell_area = cell_area.numpy().reshape(ncam, self.ny, self.nx)  # pixels of each cell's rectangle
         self._free_cover_host = wp.zeros((ncam, cells), dtype=wp.float32, device="cpu", pinned=pinned)
         self.boxes = wp.zeros((b.max_people, ncam), dtype=wp.vec4, device=d)  # tracked people's rectangles per slot
+        self.full_boxes = wp.zeros((b.max_people, ncam), dtype=wp.vec4, device=d)  # the same in the full images
         pc = config.person
         self.terms = kcov.PersonTerms()
         self.terms.half_width, self.terms.height, self.terms.min_visible = pc.half_width, pc.height, pc.min_visible
+        self.terms.unit = float(s * s)
         self.terms.slope, self.terms.offset = pc.slope_offset
         self.terms.exclusion_radius, self.terms.exclusion_weight = pc.exclusion_radius, pc.exclusion_weight
         nb = int(kcov.HIST_BINS)
@@ -562,6 +602,9 @@ class PeopleTracker:
         self.slot_age = np.zeros(b.max_people, dtype=np.int64)
         self.slot_miss = np.zeros(b.max_people, dtype=np.float64)  # seconds without support
         self.slot_close = np.zeros(b.max_people, dtype=np.float64)  # seconds closer than merge_distance to another
+        self.slot_track = np.zeros((b.max_people, 3))  # ground x, y and time (seconds) of the walk's reference point
+        self.slot_speed = np.zeros(b.max_people)  # ground speed over the last STILL_WINDOW seconds, m/s
+        self.slot_still = np.zeros(b.max_people, dtype=bool)  # lost from sight while standing: held longer
         self.pending = np.zeros((0, 3), dtype=np.float64)  # x, y, seconds of unexplained evidence in a row
         nparts = int(kcov.HIST_PARTS)
         self.slot_app = np.zeros((b.max_people, nparts, nb))  # appearance per slot: normalised histograms
@@ -638,12 +681,19 @@ class PeopleTracker:
             device=d,
         )
         wp.copy(self.bgr_prev, self.bgr)
-        self._integral(self.mask, self.integral)
+        wp.launch(
+            kcov.downsample_mask_kernel,
+            dim=self._pixel_dims,
+            inputs=[self.drig.cams, self.mask, self.box_scale, self.sdrig.cams],
+            outputs=[self.small_mask],
+            device=d,
+        )
+        self._integral(self.small_mask, self.integral)
 
     def _integral(self, mask: wp.array, out: wp.array) -> None:
-        """The (H+1) x (W+1) integral image of every camera's 0/1 ``mask`` into ``out`` (``kernels.colour``'s four
-        segmented scans)."""
-        cams, d = self.drig.cams, self.device
+        """The (H+1) x (W+1) integral image of every camera's reduced ``mask`` (block counts) into ``out``
+        (``kernels.colour``'s four segmented scans)."""
+        cams, d = self.sdrig.cams, self.device
         wp.launch(
             kcolour.row_segment_sums_kernel, dim=self._row_dims, inputs=[cams, mask], outputs=[self._row_seg], device=d
         )
@@ -660,10 +710,10 @@ class PeopleTracker:
         rectangle terms) and the person rectangles' coverage on the evidence map's cells (``kernels.coverage``): of
         all motion, and of the motion outside the tracked people's rectangles; copied to the host asynchronously."""
         pc, b, d = self.config.person, self.config.birth, self.device
-        cams = self.drig.cams
+        cams = self.sdrig.cams
         origin = wp.vec2(*self.grid_origin)
         dims = (len(self.rig), self.nx * self.ny)
-        common = [origin, b.cell, self.nx, pc.half_width, pc.height, pc.min_visible]
+        common = [origin, b.cell, self.nx, pc.half_width, pc.height, pc.min_visible, self.terms.unit]
         wp.launch(kcov.coverage_kernel, dim=dims, inputs=[cams, self.integral, *common], outputs=[self.cover], device=d)
         wp.launch(
             kcov.person_boxes_kernel,
@@ -675,7 +725,7 @@ class PeopleTracker:
         wp.launch(
             kcov.explained_mask_kernel,
             dim=self._pixel_dims,
-            inputs=[cams, self.mask, self.boxes, len(self.pool)],
+            inputs=[cams, self.small_mask, self.boxes, len(self.pool)],
             outputs=[self.free_mask],
             device=d,
         )
@@ -691,9 +741,16 @@ class PeopleTracker:
         wp.copy(self._free_cover_host, self.free_cover)
         self.hist.zero_()
         wp.launch(
+            kcov.person_boxes_kernel,
+            dim=(len(self.pool), len(self.rig)),
+            inputs=[self.drig.cams, self.slot_xy, self.slot_alive, pc.half_width, pc.height],
+            outputs=[self.full_boxes],
+            device=d,
+        )
+        wp.launch(
             kcov.person_histogram_kernel,
-            dim=(len(self.pool), len(self.rig), int(kcov.HIST_PARTS), self._pixel_dims[1]),
-            inputs=[cams, self.bgr, self.mask, self.boxes],
+            dim=(len(self.pool), len(self.rig), int(kcov.HIST_PARTS), self._rows),
+            inputs=[self.drig.cams, self.bgr, self.mask, self.full_boxes],
             outputs=[self.hist],
             device=d,
         )
@@ -910,6 +967,15 @@ class PeopleTracker:
         log.info("person %d is person %d again (appearance similarity %.2f)", self.slot_id[k], best["id"], score)
         self.slot_id[k] = best["id"]
 
+    def _update_speed(self, k: int, xy: np.ndarray) -> None:
+        """The ground speed of slot ``k`` over about the last ``STILL_WINDOW`` seconds (from its estimates)."""
+        x0, y0, t0 = self.slot_track[k]
+        span = self.clock - t0
+        if span > 0:
+            self.slot_speed[k] = float(np.hypot(xy[0] - x0, xy[1] - y0)) / span
+        if span >= STILL_WINDOW or not np.all(np.isfinite(self.slot_track[k])):
+            self.slot_track[k] = (xy[0], xy[1], self.clock)
+
     def _evidence_maps(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """From this frame's coverage maps (host copies): ``(evidence, free_evidence, births)``, (ny, nx) each.
         ``evidence``: the sum over the cameras that see each cell's person rectangle of the rectangle term of
@@ -942,9 +1008,17 @@ class PeopleTracker:
         gx, gy = self._cell_centres()
         by_slot = {k: e for k, e in zip(active, est.people, strict=True)}
         for k, e in by_slot.items():
-            self.slot_miss[k] = 0.0 if e.support > gate else self.slot_miss[k] + dt
+            self._update_speed(k, e.mean[:2])
+            if e.support > gate:
+                self.slot_miss[k] = 0.0
+                self.slot_still[k] = False
+            else:
+                if self.slot_miss[k] == 0.0:  # lost from sight now: standing (the background model took it)?
+                    self.slot_still[k] = self.slot_speed[k] < STILL_SPEED
+                self.slot_miss[k] += dt
+            limit = b.hold_seconds if self.slot_still[k] else b.remove_seconds
             outside = not self.keep_area.contains(e.mean[:2])
-            if self._elapsed(self.slot_miss[k], b.remove_seconds) or outside or not np.all(np.isfinite(e.mean)):
+            if self._elapsed(self.slot_miss[k], limit) or outside or not np.all(np.isfinite(e.mean)):
                 self._remove(k, est, remember=e.mean[:2] if np.all(np.isfinite(e.mean)) else None)
         # duplicates: two filters on one person
         alive = [k for k in active if self.slot_id[k] >= 0]
@@ -1017,6 +1091,9 @@ class PeopleTracker:
         self.slot_age[k] = 0
         self.slot_miss[k] = 0
         self.slot_close[k] = 0
+        self.slot_track[k] = (xy[0], xy[1], self.clock)
+        self.slot_speed[k] = 0.0
+        self.slot_still[k] = False
         est.added.append(self.next_id)
         log.info("frame %d: person %d added at (%.2f, %.2f)", est.frame, self.next_id, xy[0], xy[1])
         self.next_id += 1
@@ -1103,10 +1180,31 @@ class PeopleTracker:
         """The whole state after the last frame (device arrays of the tracker and its pool, and the population
         bookkeeping), for :meth:`load_state_dict`."""
         state = {name: arr.numpy().copy() for name, arr in _device_arrays(self)}
-        for name in ("slot_id", "slot_age", "slot_miss", "slot_close", "pending"):
+        for name in (
+            "slot_id",
+            "slot_age",
+            "slot_miss",
+            "slot_close",
+            "pending",
+            "slot_track",
+            "slot_speed",
+            "slot_still",
+            "slot_app",
+            "slot_app_seen",
+            "slot_new",
+        ):
             state[f"__{name}__"] = getattr(self, name).copy()
         state["__next_id__"] = np.int64(self.next_id)
         state["__frames_done__"] = np.int64(self.frames_done)
+        state["__clock__"] = np.float64(self.clock)
+        state["__frame_dt__"] = np.float64(self.frame_dt)
+        state["__last_timestamp__"] = np.float64(np.nan if self._last_timestamp is None else self._last_timestamp)
+        nparts, nb = self.slot_app.shape[1:]
+        state["__lost_id__"] = np.array([p["id"] for p in self.lost], dtype=np.int64)
+        state["__lost_time__"] = np.array([p["time"] for p in self.lost], dtype=np.float64)
+        state["__lost_xy__"] = np.array([p["xy"] for p in self.lost], dtype=np.float64).reshape(-1, 2)
+        state["__lost_app__"] = np.array([p["app"] for p in self.lost], dtype=np.float64).reshape(-1, nparts, nb)
+        state["__lost_seen__"] = np.array([p["seen"] for p in self.lost], dtype=bool).reshape(-1, nparts)
         state["__parity__"] = np.array([p.parity for p in self.pool], dtype=np.int64)
         state["__person_frames__"] = np.array([p.frames_done for p in self.pool], dtype=np.int64)
         return state
@@ -1119,10 +1217,37 @@ class PeopleTracker:
             raise ConfigError(f"checkpoint: arrays {missing[:5]} missing (a checkpoint of another configuration?)")
         for name, arr in arrays.items():
             arr.assign(np.asarray(state[name]))
-        for name in ("slot_id", "slot_age", "slot_miss", "slot_close", "pending"):
+        for name in (
+            "slot_id",
+            "slot_age",
+            "slot_miss",
+            "slot_close",
+            "pending",
+            "slot_track",
+            "slot_speed",
+            "slot_still",
+            "slot_app",
+            "slot_app_seen",
+            "slot_new",
+        ):
             setattr(self, name, np.array(state[f"__{name}__"]))
         self.next_id = int(state["__next_id__"])
         self.frames_done = int(state["__frames_done__"])
+        self.clock = float(state["__clock__"])
+        self.set_frame_interval(float(state["__frame_dt__"]))
+        last = float(state["__last_timestamp__"])
+        self._last_timestamp = None if math.isnan(last) else last
+        self.lost = [
+            dict(id=int(i), time=float(t), xy=np.array(xy), app=np.array(app), seen=np.array(seen))
+            for i, t, xy, app, seen in zip(
+                state["__lost_id__"],
+                state["__lost_time__"],
+                state["__lost_xy__"],
+                state["__lost_app__"],
+                state["__lost_seen__"],
+                strict=True,
+            )
+        ]
         for p, parity, frames in zip(self.pool, state["__parity__"], state["__person_frames__"], strict=True):
             p.parity, p.frames_done = int(parity), int(frames)
         wp.synchronize_device(self.device)

@@ -210,6 +210,9 @@ class BirthConfig:
             frames at 25 frames/s; at least one frame at any rate).
         remove_seconds: not seen for this long before removing, seconds. Ours: 1 (a filter that no longer sees its
             person soon holds somebody else's place; the person comes back with its id, ``reid_seconds``).
+        hold_seconds: the same for a person the masks lost while it stood still (slower than 0.3 m/s over the last
+            second): a person standing and talking fades from the background model's masks, it has not left, and
+            its filter holds its place (the gate stops the weighting), seconds. Ours: 10.
         init_radius: radius of the cylinder a new person's particles start in, metres. Ours: 0.25.
         init_z: heights of that cylinder, metres. Ours: (0.3, 1.6).
         init_speed: deviation of its particles' horizontal velocities per axis, metres per second (where a newcomer
@@ -239,6 +242,7 @@ class BirthConfig:
     min_area: int = 4
     add_seconds: float = 0.12
     remove_seconds: float = 1.0
+    hold_seconds: float = 10.0
     init_radius: float = 0.25
     init_z: tuple[float, float] = (0.3, 1.6)
     init_speed: float = 0.0
@@ -255,6 +259,7 @@ class BirthConfig:
         _int_at_least(self.min_area, "birth.min_area", 1, "a cell count")
         _non_negative(self.add_seconds, "birth.add_seconds", "a time in seconds")
         _non_negative(self.remove_seconds, "birth.remove_seconds", "a time in seconds")
+        _non_negative(self.hold_seconds, "birth.hold_seconds", "a time in seconds")
         _positive(self.init_radius, "birth.init_radius", "a radius in metres")
         if len(self.init_z) != 2 or not (
             0 <= _number(self.init_z[0], "birth.init_z") < _number(self.init_z[1], "birth.init_z")
