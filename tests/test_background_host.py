@@ -1,4 +1,4 @@
-"""Host side of the offline background model (wptrack.background): the fast gain, median, shadow-ratio and
+"""Host side of the offline background model (wptrack.motion.background): the fast gain, median, shadow-ratio and
 hysteresis code against the plain NumPy formulas it replaced (the same numbers, byte for byte), the sampler's
 forward reading, and the per-frame step on every device against the NumPy reference of the kernels."""
 
@@ -8,10 +8,11 @@ import cv2
 import numpy as np
 import pytest
 
-from wptrack import background as B
 from wptrack.bench import numpy_masks
-from wptrack.frames import open_source, write_video
-from wptrack.masks import MaskConfig
+from wptrack.io.frames import open_source
+from wptrack.io.video import write_video
+from wptrack.motion import background as B
+from wptrack.motion.masks import MaskConfig
 
 H, W = 60, 80
 
@@ -241,7 +242,7 @@ def test_unreadable_window_reuses_another_with_its_statistics(rng, caplog):
 
 
 def test_evidence_rejects_a_frame_of_another_size(rng):
-    from wptrack.errors import FrameError
+    from wptrack.core.errors import FrameError
 
     video = np.clip(rng.normal(120, 5, (4, H, W, 3)), 0, 255).astype(np.uint8)
     model = B.OfflineBackground(open_source(video), MaskConfig(window=4, device="cpu"), "cpu")

@@ -1,7 +1,7 @@
-"""The offline background model's prefetch worker (wptrack.background.OfflineBackground): window ``i + 1``'s samples
-read in one worker thread while the frames before it are processed. The masks and probabilities equal those of
-reading every window in the calling thread, byte for byte, for every source type; restarts work; the sampler's
-warnings and errors reach the calling thread as before; close() joins the worker."""
+"""The offline background model's prefetch worker (wptrack.motion.background.OfflineBackground): window ``i + 1``'s
+samples read in one worker thread while the frames before it are processed. The masks and probabilities equal those of
+reading every window in the calling thread, byte for byte, for every source type; restarts work; the sampler's warnings
+and errors reach the calling thread as before; close() joins the worker."""
 
 from __future__ import annotations
 
@@ -12,10 +12,11 @@ import cv2
 import numpy as np
 import pytest
 
-from wptrack import background as B
-from wptrack.errors import FrameError
-from wptrack.frames import open_source, write_video
-from wptrack.masks import MaskConfig, MotionMasks
+from wptrack.core.errors import FrameError
+from wptrack.io.frames import open_source
+from wptrack.io.video import write_video
+from wptrack.motion import background as B
+from wptrack.motion.masks import MaskConfig, MotionMasks
 
 H, W = 48, 64
 WORKER = "wptrack-background"
@@ -122,9 +123,9 @@ def _truncated_pass(path, config: MaskConfig, prefetch: bool, caplog) -> tuple[l
     source._count += 25  # the video reports 25 frames more than it has (as a truncated file's header does)
     masks = MotionMasks(source, config)
     caplog.clear()
-    with caplog.at_level(logging.WARNING, logger="wptrack.background"):
+    with caplog.at_level(logging.WARNING, logger="wptrack.motion.background"):
         out, _ = _pass(masks, prefetch=prefetch)
-    records = [(r.getMessage(), r.threadName) for r in caplog.records if r.name == "wptrack.background"]
+    records = [(r.getMessage(), r.threadName) for r in caplog.records if r.name == "wptrack.motion.background"]
     return records, out
 
 
@@ -153,7 +154,7 @@ def test_worker_error_raised_in_the_calling_thread_when_needed(device, rng, capl
 
     def run(prefetch: bool) -> tuple[int, list]:
         caplog.clear()
-        with caplog.at_level(logging.WARNING, logger="wptrack.background"):
+        with caplog.at_level(logging.WARNING, logger="wptrack.motion.background"):
             t = first_error(prefetch)
         return t, [(r.getMessage(), r.threadName) for r in caplog.records]
 

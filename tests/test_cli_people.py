@@ -11,11 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wptrack.chunklog import read_chunks
+from wptrack.cameras.rig import Rig
 from wptrack.cli import main
-from wptrack.frames import write_video
-from wptrack.io import read_tracks
-from wptrack.rig import Rig
+from wptrack.io.chunklog import read_chunks
+from wptrack.io.tables import read_tracks
+from wptrack.io.video import write_video
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_tracker_people import COLOURS, render, rig3  # noqa: E402
@@ -118,7 +118,7 @@ def test_bad_input_is_one_line_and_writes_nothing(scene, tmp_path, capsys, chang
         ]
         argv += ["--masks", str(tmp_path / "small.avi")]
     elif change in ("no_overlap", "volume_outside"):
-        from wptrack.rig import Camera
+        from wptrack.cameras.rig import Camera
 
         rig = Rig.load(scene / "rig.yaml")
         if change == "no_overlap":  # each camera looks away from the others
@@ -133,13 +133,13 @@ def test_bad_input_is_one_line_and_writes_nothing(scene, tmp_path, capsys, chang
         argv = _args(scene, out, masks=False)
         argv[argv.index("--rig") + 1] = str(tmp_path / "bad.yaml")
     elif change == "different_lengths":
-        from wptrack.frames import open_source
+        from wptrack.io.frames import open_source
 
         short = [f for i, f in enumerate(open_source(str(scene / "cam2.avi"))) if i < 50]
         write_video(tmp_path / "short.avi", short, fps=25)
         argv = _args(scene, out, masks=False, cams=(0, 1)) + ["--video", str(tmp_path / "short.avi")]
     elif change == "frame_size":
-        write_video(tmp_path / "big.avi", [np.zeros((240, 320, 3), np.uint8)] * 60, fps=25)
+        write_video(tmp_path / "big.avi", [np.zeros((240, 300, 3), np.uint8)] * 60, fps=25)  # another aspect ratio
         argv = _args(scene, out, masks=False, cams=(0, 1)) + ["--video", str(tmp_path / "big.avi")]
     else:
         argv = _args(scene, out, masks=False, cams=(0, 1))
@@ -184,7 +184,7 @@ def test_internal_error_is_not_a_user_error_and_keeps_the_run(scene, tmp_path, c
     """A bug in the middle of a run: exit code 70 (not 2), the traceback and one 'internal error' line; the rows
     written so far stay readable and run.json says 'failed' with the reason."""
     from wptrack.cli import EXIT_INTERNAL
-    from wptrack.trackers.people import PeopleTracker
+    from wptrack.trackers.people.tracker import PeopleTracker
 
     step = PeopleTracker.step
 
@@ -211,7 +211,7 @@ def test_image_folders_need_a_frame_rate(scene, tmp_path, capsys):
     """Image folders carry no frame rate: without --fps a clear one-line error, with --fps the run records it."""
     import cv2
 
-    from wptrack.frames import open_source
+    from wptrack.io.frames import open_source
 
     folders = []
     for k in range(3):

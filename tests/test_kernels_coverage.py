@@ -1,4 +1,4 @@
-"""S2 person rectangles (kernels/coverage.py, ours after POM) against NumPy references on every device: the
+"""S2 person rectangles (kernels/people/coverage.py, ours after POM) against NumPy references on every device: the
 rectangle of a standing person, its mask counts from the integral image, the coverage and area maps of a ground
 grid, the tracked people's rectangles and the motion they leave, the rectangle term of a particle's weight (what
 the other people's rectangles leave), the exclusion penalty, the gate, and the appearance histograms."""
@@ -7,15 +7,16 @@ from __future__ import annotations
 
 import colorsys
 
+import kernel_harness as harness
 import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.kernels import camera as kcam
-from wptrack.kernels import colour as kcolour
-from wptrack.kernels import coverage as kcov
-from wptrack.rig import Camera, Rig
-from wptrack.warpcams import DeviceRig
+from wptrack.cameras.rig import Camera, Rig
+from wptrack.cameras.structs import DeviceRig
+from wptrack.kernels.colour import hsi as kcolour
+from wptrack.kernels.core import camera as kcam
+from wptrack.kernels.people import coverage as kcov
 
 HW, HEIGHT, VIS = 0.25, 1.75, 0.5
 
@@ -43,7 +44,7 @@ def blob_masks(rig: Rig, rng) -> np.ndarray:
 
 
 def integral(rig: Rig, drig: DeviceRig, mask: np.ndarray, device) -> wp.array:
-    """The integral images of the flat 0/1 masks with kernels.colour's scans (tested in test_kernels_colour)."""
+    """The integral images of the flat 0/1 masks with kernels.colour.hsi's scans (tested in test_kernels_colour)."""
     m = wp.array(mask, dtype=wp.uint8, device=device)
     out = wp.zeros(drig.total_integral, dtype=wp.int32, device=device)
     cams = drig.cams
@@ -62,10 +63,10 @@ def integral(rig: Rig, drig: DeviceRig, mask: np.ndarray, device) -> wp.array:
 
 
 def project_ref(drig: DeviceRig, pts: np.ndarray, device) -> np.ndarray:
-    """(M, N, 3) (u, v, depth) by kernels.camera.project_kernel (test_kernels_camera checks it against OpenCV)."""
+    """(M, N, 3) (u, v, depth) by kernel_harness.project_kernel (test_kernels_camera checks it against OpenCV)."""
     out = wp.zeros((drig.num_cameras, len(pts)), dtype=wp.vec3, device=device)
     wp.launch(
-        kcam.project_kernel,
+        harness.project_kernel,
         dim=(drig.num_cameras, len(pts)),
         inputs=[drig.cams, wp.array(pts, dtype=wp.vec3, device=device)],
         outputs=[out],
@@ -468,7 +469,7 @@ def test_reduced_masks_count_blocks_and_their_rectangles_scale(device, rng, scal
     """The reduced masks hold the motion pixels of each scale x scale block (the remainder columns and rows left
     out), and a person's rectangle projected with the reduced camera is the full rectangle divided by the scale
     (to the pixel): the coverage counted on blocks matches the full-size coverage."""
-    from wptrack.trackers.people import reduced_camera
+    from wptrack.trackers.people.tracker import reduced_camera
 
     rig = make_rig()
     drig = DeviceRig(rig, device)

@@ -7,16 +7,16 @@ from __future__ import annotations
 
 import colorsys
 
+import kernel_harness as harness
 import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.kernels import camera as kcam
-from wptrack.kernels import descriptor as kdesc
-from wptrack.kernels import occupancy as kocc
-from wptrack.kernels import people as kpeople
-from wptrack.rig import Camera, Rig
-from wptrack.warpcams import DeviceRig
+from wptrack.cameras.rig import Camera, Rig
+from wptrack.cameras.structs import DeviceRig
+from wptrack.kernels.people import descriptor as kdesc
+from wptrack.kernels.people import filter as kpeople
+from wptrack.kernels.people import occupancy as kocc
 
 NB = 8
 R_N = 0.12
@@ -55,7 +55,7 @@ def hsv_planes(bgr: np.ndarray, device):
     n = len(bgr) // 3
     planes = [wp.zeros(n, dtype=wp.float32, device=device) for _ in range(3)]
     wp.launch(
-        kdesc.hsv_planes_kernel,
+        harness.hsv_planes_kernel,
         dim=n,
         inputs=[wp.array(bgr, dtype=wp.uint8, device=device)],
         outputs=planes,
@@ -68,7 +68,7 @@ def project_all(drig: DeviceRig, pts: np.ndarray, device) -> np.ndarray:
     """(M, N, 3) (u, v, depth) from the tested projection (test_kernels_camera checks it against OpenCV)."""
     out = wp.zeros((drig.num_cameras, len(pts)), dtype=wp.vec3, device=device)
     wp.launch(
-        kcam.project_kernel,
+        harness.project_kernel,
         dim=(drig.num_cameras, len(pts)),
         inputs=[drig.cams, wp.array(pts, dtype=wp.vec3, device=device)],
         outputs=[out],
@@ -146,7 +146,7 @@ def run_noise(a, b, chunk, device, stride=1) -> float:
 
 
 def alpha_ref(rgb: np.ndarray, sigma_n: float) -> np.ndarray:
-    """(alpha_S, alpha_H) of eq. 17 with the delta-method variances (see kernels/descriptor.py)."""
+    """(alpha_S, alpha_H) of eq. 17 with the delta-method variances (see kernels/people/descriptor.py)."""
     s = np.sort(rgb, axis=1)[:, ::-1]
     mx, mid, mn = s[:, 0], s[:, 1], s[:, 2]
     vv = sigma_n**2
@@ -165,7 +165,7 @@ def test_alpha_weights_and_noise_propagation(device, rng):
     rgb[0] = [0.5, 0.5, 0.5]  # grey: hue meaningless -> alpha_H ~ 0
     out = wp.zeros(len(rgb), dtype=wp.vec2, device=device)
     wp.launch(
-        kdesc.alpha_kernel,
+        harness.alpha_kernel,
         dim=len(rgb),
         inputs=[wp.array(rgb, dtype=wp.vec3, device=device), sigma_n],
         outputs=[out],
@@ -348,7 +348,7 @@ def test_appearance_matches_numpy(device, rng):
     sigma_n, sigma_p = 0.02, 0.3
     out = wp.zeros(n, dtype=wp.float32, device=device)
     wp.launch(
-        kdesc.appearance_kernel,
+        harness.appearance_kernel,
         dim=n,
         inputs=[
             wp.array(model, device=device),
@@ -411,7 +411,7 @@ def test_motion_likelihood(device, neutral, drop_worst):
     log_outside = 0.0 if neutral else float(np.log(p_b))
     out = wp.zeros(len(pts), dtype=wp.float32, device=device)
     wp.launch(
-        kpeople.motion_kernel,
+        harness.motion_kernel,
         dim=len(pts),
         inputs=[
             drig.cams,
@@ -438,7 +438,7 @@ def person_inputs(rig: Rig, drig: DeviceRig, mask: np.ndarray, device, rng, slop
     people (one not alive) with their rectangles, this person's slot 0 and the terms."""
     from test_kernels_coverage import integral, make_terms
 
-    from wptrack.kernels import coverage as kcov
+    from wptrack.kernels.people import coverage as kcov
 
     I = integral(rig, drig, (mask != 0).astype(np.uint8), device)  # noqa: E741
     others = wp.array(rng.uniform(0.0, 1.0, (3, 2)).astype(np.float32), dtype=wp.vec2, device=device)
@@ -486,17 +486,17 @@ def test_observation_is_motion_plus_appearance(device, rng):
     lm, la, lo = (wp.zeros(len(pts), dtype=wp.float32, device=device) for _ in range(3))
     p_b = 0.1
     wp.launch(
-        kpeople.motion_kernel, dim=len(pts), inputs=[drig.cams, mask, p_b, 0.0, 0, P], outputs=[lm], device=device
+        harness.motion_kernel, dim=len(pts), inputs=[drig.cams, mask, p_b, 0.0, 0, P], outputs=[lm], device=device
     )
     wp.launch(
-        kdesc.appearance_kernel,
+        harness.appearance_kernel,
         dim=len(pts),
         inputs=[model, desc, mass, rgb, NB, sn, 0.25],
         outputs=[la],
         device=device,
     )
     wp.launch(
-        kpeople.observation_kernel,
+        harness.observation_kernel,
         dim=len(pts),
         inputs=[drig.cams, mask, p_b, 0.0, 0, P, model, desc, mass, rgb, NB, sn, 0.25, *person],
         outputs=[lo],
@@ -638,8 +638,8 @@ def test_occupancy_matches_brute_force_and_integrates(device, rng):
 @pytest.mark.parametrize("resampled", [0, 1])
 def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     """The fused frame gives the same state, descriptor, log-weights and block partials as predict -> descriptor
-    -> observation -> reduce.block_partials_kernel launched one after another."""
-    from wptrack.kernels import reduce as kred
+    -> observation -> kernel_harness.block_partials_kernel launched one after another."""
+    from wptrack.kernels.core import reduce as kred
 
     rig = make_rig()
     drig = DeviceRig(rig, device)
@@ -707,7 +707,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
         device=device,
     )
     wp.launch(
-        kpeople.observation_kernel,
+        harness.observation_kernel,
         dim=n,
         inputs=[drig.cams, mask, p_b, 0.0, 1, sep["pos"], sep["model"], sep["desc"], sep["mass"], sep["rgb"], NB, sn]
         + [sigma_p, *person],
@@ -716,7 +716,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     )
     logw = sep["logw"].numpy() + (0 if resampled else logw_prev.numpy())
     wp.launch_tiled(
-        kred.block_partials_kernel,
+        harness.block_partials_kernel,
         dim=[nbk],
         inputs=[wp.array(logw, device=device), sep["pos"], n, chunk],
         outputs=[sep["pmax"], sep["parg"], sep["part"]],
@@ -805,7 +805,7 @@ def test_occupancy_hashgrid_equals_brute_force(device, rng):
     grid = wp.zeros(shape, dtype=wp.float32, device=device)
     args = [hg.id, P, wp.array(logw, device=device), wp.array([log_norm], dtype=wp.float64, device=device)]
     wp.launch(
-        kocc.occupancy_hashgrid_kernel,
+        harness.occupancy_hashgrid_kernel,
         dim=shape,
         inputs=[*args, sigma, cutoff, wp.vec3(*origin), voxel],
         outputs=[grid],

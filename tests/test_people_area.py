@@ -1,4 +1,4 @@
-"""The S2 tracker's working area from the calibration (wptrack.trackers.people_area): the ground seen by two
+"""The S2 tracker's working area from the calibration (wptrack.trackers.people.area): the ground seen by two
 cameras, a rig volume overriding it, and the rigs it refuses with one clear line."""
 
 from __future__ import annotations
@@ -8,10 +8,10 @@ import logging
 import numpy as np
 import pytest
 
-from wptrack.errors import RigError
-from wptrack.rig import Camera, Rig
-from wptrack.trackers.people_area import camera_coverage, working_area
-from wptrack.trackers.people_model import AreaConfig, PeopleConfig
+from wptrack.cameras.rig import Camera, Rig
+from wptrack.core.errors import RigError
+from wptrack.trackers.people.area import camera_coverage, working_area
+from wptrack.trackers.people.config import AreaConfig, PeopleConfig
 
 W, H = 160, 120
 
@@ -91,7 +91,7 @@ def test_volume_overrides_and_bad_volumes_are_refused():
 
 
 def test_tracker_logs_the_area_and_adds_nobody_outside(caplog):
-    from wptrack.trackers.people import PeopleTracker
+    from wptrack.trackers.people.tracker import PeopleTracker
 
     rig = facing_pair()
     with caplog.at_level(logging.INFO, logger="wptrack.trackers.people"):

@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from wptrack.errors import ConfigError
-from wptrack.trackers.people_model import (
+from wptrack.core.errors import ConfigError
+from wptrack.trackers.people.config import (
     BirthConfig,
     DescriptorConfig,
     DynamicsConfig,

@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from wptrack.errors import ConfigError
+from wptrack.core.errors import ConfigError
 
 __all__ = ["CONDITION_NAMES", "PlazaConditions", "TimeWarp", "ease_rate", "parse_conditions"]
 

@@ -35,7 +35,7 @@ soft shadow on the floor under each person (a darkened ellipse, stretched away f
 edged), Gaussian sensor noise (sigma 2.5 DN) and an illumination change (global gain falling by 18 % over frames
 120-150, a bank of lights switched off). The tracker is meant to make its motion masks from the videos with the
 default motion pipeline; the perfect masks ``cam*_mask.avi`` (visible pixels of the people) are for debugging
-only. With the default :class:`wptrack.masks.MaskConfig` (MOG2, shadows as background) on seed 0, after 30 frames
+only. With the default :class:`wptrack.motion.masks.MaskConfig` (MOG2, shadows as background) on seed 0, after 30 frames
 of learning, the motion masks cover about half of the people's visible pixels (mean IoU with the perfect masks
 0.48 / 0.54 / 0.67 for cam1 / cam2 / cam3 on the frames with people, no foreground on the empty frames):
 incomplete and fragmented, as the paper's Fig. 4.
@@ -65,6 +65,11 @@ three cameras takes 0.17 s median (0.15-0.21 s; 0.07 s at 320x240), before video
 synth s2-office --frames 300`` wrote the 300 frames (6 lossless videos, about 135 MB per camera video) in 3 min 40 s
 on the same loaded machine. Smaller images for quick experiments: ``OfficeScene(OfficeConfig(width=320,
 height=240))``.
+
+Length: one module because it is one specification, the synthetic counterpart of the paper's experiment: the
+room's constants (walls, doors, camera corners) place the furniture, the cameras and the people's paths alike, and
+the scene class renders exactly those; split, each part would import the others' constants and the scene could
+only be read across files. The variants at the end are a few lines each.
 """
 
 from __future__ import annotations
@@ -77,8 +82,8 @@ from typing import Any
 
 import numpy as np
 
-from wptrack.errors import ConfigError
-from wptrack.rig import Camera, Rig
+from wptrack.cameras.rig import Camera, Rig
+from wptrack.core.errors import ConfigError
 from wptrack.synth.actors import Path, Person, _Prim
 from wptrack.synth.base import Scene, register_scene
 from wptrack.synth.plaza import _image_box
