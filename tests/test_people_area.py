@@ -47,12 +47,25 @@ def test_area_is_the_ground_both_cameras_see():
 
 def test_area_ends_where_people_become_too_small():
     rig = facing_pair(gap=40.0)  # the middle is 20 m from both cameras
-    small = working_area(rig, AreaConfig(min_person_px=5.0))
+    small = working_area(rig, AreaConfig(min_person_height=5.0 / H))
     assert small.contains(np.array([[20.0, 0.0]]))[0]
     with pytest.raises(RigError, match="see no common ground"):
-        working_area(rig, AreaConfig(min_person_px=30.0))  # a 1.7 m person is ~9 px tall there
+        working_area(rig, AreaConfig(min_person_height=30.0 / H))  # a 1.7 m person is ~9 px tall there
     with pytest.raises(RigError, match="see no common ground"):
-        working_area(rig, AreaConfig(min_person_px=5.0, max_distance=15.0))  # each sees 15 m of the 40 m
+        working_area(rig, AreaConfig(min_person_height=5.0 / H, max_distance=15.0))  # each sees 15 m of the 40 m
+
+
+def test_area_does_not_depend_on_the_resolution():
+    """The same cameras at half and twice the resolution (resized copies of their videos, which a run accepts)
+    see the same ground: the smallest person is a fraction of the image height."""
+    rig = facing_pair(gap=24.0)  # far enough that the smallest-person bound ends the area
+    cfg = AreaConfig()
+    ref = working_area(rig, cfg)
+    xy = np.column_stack([np.linspace(-2.0, 26.0, 113), np.zeros(113)])
+    assert 0 < ref.contains(xy).sum() < len(xy) - 20  # the bound cuts the middle of the gap
+    for w, h in ((W // 2, H // 2), (2 * W, 2 * H)):
+        other = working_area(Rig(tuple(c.scaled(w, h) for c in rig.cameras)), cfg)
+        assert np.mean(other.contains(xy) == ref.contains(xy)) > 0.97  # cell resolution at the edges
 
 
 def test_cameras_without_common_ground_are_named():

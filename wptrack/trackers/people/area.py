@@ -4,7 +4,7 @@ By default it is derived from the calibration alone: the ground points (z = 0) a
 seen by at least ``AreaConfig.min_cameras`` cameras (two: the tracker adds people where several views agree). A
 camera *sees* a ground point when at least ``AreaConfig.min_visible`` of the person's vertical axis there (from the
 floor to ``person_height``) projects inside its image, in front of it and within the range where its lens model
-is valid (the projection kernels' fold-back guard), and when that person would be at least ``min_person_px``
+is valid (the projection kernels' fold-back guard), and when that person would be at least ``min_person_height``
 pixels tall in its image (so the area stops where people become too small to track: the "sensible distance" of
 a camera that sees the horizon; ``max_distance`` bounds it in any case). A rig's ``volume`` replaces the area by
 its ground rectangle.
@@ -47,8 +47,10 @@ class AreaConfig:
         person_height: height of the standing person whose visibility decides, metres. Ours: 1.7.
         min_visible: fraction of the person's vertical axis that must project inside a camera's image for the
             camera to see the point (a person cut by the image border is still tracked). Ours: 0.5.
-        min_person_px: a camera sees a point only where that person would be at least this tall in its image,
-            pixels: the area ends where people become too small to track. Ours: 30.
+        min_person_height: a camera sees a point only where that person would be at least this tall in its image,
+            as a fraction of the image height: the area ends where people become too small to track, and the same
+            camera at another resolution (a resized copy of its video) has the same area. Ours: 0.1 (29 pixels of
+            the EPFL terrace's 288 rows).
         max_distance: and only within this ground distance of the camera, metres. Ours: 50.
         cell: resolution of the area, metres. Ours: 0.25.
     """
@@ -68,11 +70,11 @@ class AreaConfig:
         hi=1.0,
         lo_open=True,
     )
-    min_person_px: float = param(
-        30.0,
-        help="a camera sees a point only where that person is at least this tall in its image",
-        units="px",
+    min_person_height: float = param(
+        0.1,
+        help="a camera sees a point only where that person is at least this tall in its image (of the image height)",
         lo=0.0,
+        hi=1.0,
         lo_open=True,
     )
     max_distance: float = param(
@@ -216,12 +218,12 @@ def camera_coverage(cam: Camera, xy: np.ndarray, config) -> np.ndarray:
     pts = np.concatenate([np.column_stack([xy, np.full(n, z)]) for z in heights])
     seen = camera_sees(cam, pts).reshape(AXIS_SAMPLES, n).mean(axis=0) >= config.min_visible
     near = np.hypot(xy[:, 0] - cam.center[0], xy[:, 1] - cam.center[1]) <= config.max_distance
-    return seen & near & (_person_px(cam, xy, config.person_height) >= config.min_person_px)
+    return seen & near & (_person_px(cam, xy, config.person_height) >= config.min_person_height * cam.height)
 
 
 def _reach(cam: Camera, config) -> float:
-    """Ground distance beyond which ``cam`` cannot see a person ``min_person_px`` tall (pinhole bound), metres."""
-    height_px = max(cam.fx, cam.fy) * config.person_height / config.min_person_px
+    """Ground distance beyond which ``cam`` cannot see a person ``min_person_height`` tall (pinhole bound), metres."""
+    height_px = max(cam.fx, cam.fy) * config.person_height / (config.min_person_height * cam.height)
     return float(min(config.max_distance, height_px + abs(cam.center[2])))
 
 
