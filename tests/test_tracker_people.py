@@ -280,6 +280,29 @@ def test_person_lost_briefly_is_reidentified(device):
     assert fresh[25] == [0] and fresh[-1] == [1]
 
 
+def test_checkpoint_keeps_the_people_remembered_for_reidentification(device):
+    """A state saved while the person is lost (removed, remembered for re-identification) and loaded into a new
+    tracker: it continues exactly as the uninterrupted run and gives the returning person its id again; the state
+    holds exactly the named device arrays and the host keys."""
+    rig, cfg = rig3(), _config()
+    rng = np.random.default_rng(11)
+    frames = []
+    for t in range(95):
+        xy = np.array([0.8 + 0.025 * t, 2.0])
+        frames.append(render(rig, [] if 30 <= t < 70 else [(xy, COLOURS[0])], rng))
+    a = PeopleTracker(rig, cfg, device=device, keep_particles=0)
+    ref = [[p.id for p in a.step(*f).people] for f in frames]
+    b = PeopleTracker(rig, cfg, device=device, keep_particles=0)
+    for f in frames[:62]:  # removed about 1 s after it vanished at frame 30, back at frame 70
+        b.step(*f)
+    state = b.state_dict()
+    assert set(state) == set(b.state_arrays()) | set(b.host_state()) and len(state["__lost_id__"]) == 1
+    c = PeopleTracker(rig, cfg, device=device, keep_particles=0)
+    c.load_state_dict(state)
+    ids = [[p.id for p in c.step(*f).people] for f in frames[62:]]
+    assert ids == ref[62:] and ids[0] == [] and ids[-1] == [0]
+
+
 def test_unseen_person_holds_its_place(device):
     """A person standing still whose masks vanish (the background model absorbed it) is not pulled onto another
     person walking past 0.8 m away: the gate stops the weighting and the filter holds the place."""
