@@ -157,3 +157,39 @@ def test_the_masks_model_works_under_the_shared_guard(monkeypatch):
         masks = open_masks(frames, config=MaskConfig(method="offline", window=6, samples=3, device="cpu"))
         assert len(list(masks)) == 12
     assert len(seen) == 24 and all(seen)
+
+
+def test_download_copies_without_switching_the_current_stream(device):
+    import numpy as np
+    import warp as wp
+
+    from wptrack.core.device import download
+
+    values = np.arange(24, dtype=np.float32).reshape(4, 6) - 3.5
+    a = wp.array(values, dtype=wp.float32, device=device)
+    d = wp.get_device(device)
+    before = d.stream if d.is_cuda else None
+    got = download(a)
+    assert isinstance(got, np.ndarray) and got.shape == (4, 6) and got.dtype == np.float32
+    np.testing.assert_array_equal(got, values)
+    if d.is_cuda:
+        assert d.stream is before
+    v = wp.array(np.arange(9, dtype=np.uint8), dtype=wp.uint8, device=device)
+    np.testing.assert_array_equal(download(v), np.arange(9, dtype=np.uint8))
+
+
+def test_mask_threads_default_to_three_on_a_gpu_host_only(monkeypatch):
+    import os
+
+    from wptrack.motion.parallel import GPU_MASK_WORKERS, mask_workers
+
+    monkeypatch.delenv("WPTRACK_MASK_WORKERS", raising=False)
+    monkeypatch.setattr(os, "cpu_count", lambda: 16)
+    assert mask_workers("cuda:0") == GPU_MASK_WORKERS == 3
+    assert mask_workers("cpu") == mask_workers(None) == 1
+    monkeypatch.setattr(os, "cpu_count", lambda: 4)
+    assert mask_workers("cuda:0") == 1  # few cores: the threads would take the decoder's
+    monkeypatch.setenv("WPTRACK_MASK_WORKERS", "2")
+    assert mask_workers("cpu") == mask_workers("cuda:0") == 2
+    monkeypatch.setenv("WPTRACK_MASK_WORKERS", "0")
+    assert mask_workers("cuda:0") == 1

@@ -10,8 +10,12 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from typing import TYPE_CHECKING, Any
 
 from wptrack.core.errors import DeviceError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 log = logging.getLogger(__name__)
 
@@ -347,3 +351,22 @@ def device_guard(device: object) -> DeviceGuard:
         if guard is None:
             guard = _guards[key] = DeviceGuard()
         return guard
+
+
+def download(array: Any) -> np.ndarray:
+    """A host copy of a Warp array that leaves the device's current stream alone (for threads beside a tracker).
+
+    ``wp.array.numpy()`` of a CUDA array switches the device's one current stream to the null stream and back
+    (``wp.ScopedStream``): two threads doing so at once can leave the device on the null stream, and the tracker's
+    next graph capture then fails ("Warp error: unknown stream", H100, three mask threads). This copies on the stream
+    current at the call and waits for that stream only.
+    """
+    import warp as wp
+
+    if array.device.is_cpu:
+        return array.numpy()
+    stream = wp.get_stream(array.device)
+    host = wp.empty(array.shape, dtype=array.dtype, device="cpu")
+    wp.copy(host, array, stream=stream)
+    wp.synchronize_stream(stream)
+    return host.numpy()

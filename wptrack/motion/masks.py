@@ -251,7 +251,11 @@ class MotionMasks:
         self.prefetch_depth = int(prefetch_depth)
         from wptrack.motion.parallel import mask_workers
 
-        self.workers = mask_workers()  # offline masks: threads making them (wptrack.motion.parallel), default 1
+        self.workers = 1  # offline masks: threads making them (wptrack.motion.parallel.mask_workers)
+        if config.method == "offline":
+            from wptrack.core.device import resolve_device
+
+            self.workers = mask_workers(resolve_device(config.device))
         self._model: Any = None
         if camera is not None and (source.width, source.height) != (camera.width, camera.height):
             where = f" in {rig_source}" if rig_source else ""

@@ -28,15 +28,26 @@ from wptrack.core.errors import FrameError
 from wptrack.io import timeline
 
 MASK_WORKERS_ENV = "WPTRACK_MASK_WORKERS"
-"""Environment variable: threads making the offline masks of one video (default 1)."""
+"""Environment variable: threads making the offline masks of one video (default: :func:`mask_workers`)."""
+
+GPU_MASK_WORKERS = 3
+"""Mask threads by default when the masks are made on a CUDA device and the host has >= 8 cores. H100 host (16
+cores), ``wptrack bench --tracker pipeline`` 1080p MJPG, 600 frames: ``track templates --video`` 47.3 frames/s with
+one thread, 64.1 with three (the masks thread was the limit: 19 ms of CPU per frame); the masks command alone 39.8 and
+41.3 (it is limited by writing masks.avi). On the CPU device they cost more than they save (BENCHMARKS.md)."""
 
 _END = object()
 
 
-def mask_workers() -> int:
-    """Threads making one video's offline masks: :data:`MASK_WORKERS_ENV` (default 1)."""
+def mask_workers(device: str | None = None) -> int:
+    """Threads making one video's offline masks: :data:`MASK_WORKERS_ENV` when set, else
+    :data:`GPU_MASK_WORKERS` on a CUDA ``device`` of a host with >= 8 cores, else 1."""
     text = os.environ.get(MASK_WORKERS_ENV, "").strip()
-    return int(text) if text.isdigit() and int(text) > 0 else 1
+    if text:
+        return int(text) if text.isdigit() and int(text) > 0 else 1
+    if device is not None and device.startswith("cuda") and (os.cpu_count() or 1) >= 8:
+        return GPU_MASK_WORKERS
+    return 1
 
 
 def parallel_evidence(

@@ -47,6 +47,7 @@ from wptrack.synth.conditions import (
     WALK_SPEEDS,
 )
 from wptrack.synth.plaza_background import FPS, FRAMES
+from wptrack.synth.plaza_cast import _people
 
 __all__ = ["CROWD_AT_ONCE", "CYCLISTS", "CYCLIST_CLASS", "Cyclist", "add_crowd", "add_cyclists", "scene_key"]
 
@@ -296,7 +297,7 @@ def add_crowd(actors: Sequence[PlazaActor]) -> list[PlazaActor]:
     camouflage_every = 7  # one person in seven wears ground-like colours, as in the plaza scenes
     full = 0
     while _present_count(accepted[own:]).mean() < target and full < FULL:
-        looks = P._people(3, seed=int(rng.integers(2**31)), camouflage=(0,) if oid % camouflage_every == 0 else ())
+        looks = _people(3, seed=int(rng.integers(2**31)), camouflage=(0,) if oid % camouflage_every == 0 else ())
         for _ in range(TRIES):
             group = _group(rng, oid, looks, cars)
             ok, tracks = _clear(group, accepted)
@@ -321,7 +322,7 @@ def add_cyclists(actors: Sequence[PlazaActor]) -> list[PlazaActor]:
     out = list(actors)
     frames = ((0.1, 0.1, 0.12), (0.55, 0.05, 0.05), (0.75, 0.75, 0.78), (0.1, 0.25, 0.55))
     for i in range(count):
-        rider = P._people(1, seed=int(rng.integers(2**31)))[0]
+        rider = _people(1, seed=int(rng.integers(2**31)))[0]
         shape = Cyclist(rider, frame_rgb=frames[int(rng.integers(len(frames)))])
         for _ in range(TRIES):
             speed = float(rng.uniform(*CYCLE_SPEEDS))
