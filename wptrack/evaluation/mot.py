@@ -431,8 +431,7 @@ def evaluate(
         groundtruth: Ground truth: a dict of columns as returned by :func:`wptrack.io.tables.read_tracks`, or the
             path of a CSV file. Columns ``frame,id,x,y`` required; ``z`` and ``class`` optional; other columns ignored.
             Image boxes with ground positions (TownCentre's ``frame,id,body_valid,x,y``, no ``z``): valid bodies.
-        tracks: Tracker output (e.g. a run's ``tracks.csv``), same forms and columns. Rows with a non-finite
-            ``x`` or ``y`` are dropped.
+        tracks: Tracker output (e.g. a run's ``tracks.csv``), same forms and columns; non-finite x/y rows dropped.
         threshold: Largest ground-plane distance (metres) at which an object and a hypothesis may be matched.
         min_coverage: A ground-truth track is correctly tracked when matched in at least this fraction of the
             evaluated frames in which it is present; in (0, 1].
