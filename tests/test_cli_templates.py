@@ -135,7 +135,8 @@ def test_negative_template_priors():
     with pytest.raises(ConfigError, match="human.dims_sd"):
         HumanPrior(dims_sd=(-0.1, 0.01, 0.01))
     with pytest.raises(ConfigError, match="max_objects"):
-        TemplateConfig(max_objects=17)
+        TemplateConfig(max_objects=65)
+    assert TemplateConfig(max_objects=64).max_objects == 64
 
 
 def test_empty_and_full_foreground(tmp_path):

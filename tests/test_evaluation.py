@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -489,3 +490,51 @@ def test_cli_evaluate_several_runs_spread_and_mot_files(tmp_path, capsys, mm):
         assert (tmp_path / f"run{k}" / "mot" / "gt" / "world.txt").is_file()
         assert not list((tmp_path / f"run{k}" / "mot").glob("cam*.txt"))  # no rig: no image boxes
     assert main([*argv[:2], "--groundtruth", str(tmp_path / "gt.csv"), "--no-mot"]) == 0
+
+
+# ------------------------------------------------------------------------------- box tables with ground positions
+
+TOWNCENTRE_TINY = Path(__file__).parent / "data" / "towncentre" / "groundtruth_tiny.csv"
+"""A few rows in the format of Oxford TownCentre's groundtruth.csv (frame, orig_frame, id, head/body validity,
+head and body boxes, ground x, y): ids 6 and 18 have valid bodies in frames 0-2, id 30's body is never valid."""
+
+
+def test_box_ground_table_keeps_valid_bodies_at_their_ground_positions():
+    from wptrack.evaluation.groundtruth import box_ground_table, is_box_ground_table
+    from wptrack.io.tables import read_tracks
+
+    columns = read_tracks(TOWNCENTRE_TINY)
+    assert is_box_ground_table(columns)
+    assert not is_box_ground_table(_table([(0, 1, 0.0, 0.0, "human")]))  # a wptrack table (z column)
+    t = box_ground_table(columns)
+    assert t["frame"].tolist() == [0, 0, 1, 1, 2, 2]
+    assert t["id"].tolist() == [6, 18, 6, 18, 6, 18]  # id 30 (body not valid) left out
+    np.testing.assert_allclose(t["x"], [23.761, 21.390, 23.661, 21.390, 23.561, 21.390])
+    np.testing.assert_allclose(t["y"], [3.069, 11.470, 3.069, 11.370, 3.069, 11.270])
+    assert (t["z"] == 0).all()
+    bad = dict(columns, body_valid=np.where(columns["body_valid"] == 0, 2, 1))
+    with pytest.raises(ConfigError, match="body_valid"):
+        box_ground_table(bad)
+
+
+def test_evaluate_reads_a_towncentre_groundtruth_csv(mm, tmp_path):
+    """The format is found by the header; people whose body box is not valid are not scored (a track on id 30's
+    position is a false positive, a miss there would not count)."""
+    rows = [(f, 1, 23.761 - 0.1 * f + 0.2, 3.069) for f in range(3)]  # on id 6, 0.2 m off
+    rows += [(f, 2, 5.0, 5.0 + 0.1 * f) for f in range(2)]  # on id 30 (not valid)
+    tracks = _write_csv(tmp_path / "tracks.csv", ["frame", "id", "x", "y", "z"], [(*r, 0.0) for r in rows])
+    ev = evaluate(TOWNCENTRE_TINY, tracks)
+    assert ev.num_objects == 6 and ev.num_gt_tracks == 2
+    assert ev.num_matches == 3 and ev.num_misses == 3 and ev.num_false_positives == 2
+    assert ev.motp == pytest.approx(0.2, abs=1e-9)
+    assert ev.mota == pytest.approx(1 - 5 / 6)
+
+
+def test_cli_evaluate_reads_a_towncentre_groundtruth_csv(mm, tmp_path, capsys):
+    from wptrack.cli import main
+
+    rows = [(0, 7, 23.761, 3.069, 0.0), (0, 8, 21.39, 11.47, 0.0), (1, 7, 23.661, 3.069, 0.0)]
+    rows += [(1, 8, 21.39, 11.37, 0.0), (2, 7, 23.561, 3.069, 0.0), (2, 8, 21.39, 11.27, 0.0)]
+    tracks = _write_csv(tmp_path / "tracks.csv", ["frame", "id", "x", "y", "z"], rows)
+    assert main(["evaluate", str(tracks), "--groundtruth", str(TOWNCENTRE_TINY)]) == 0
+    assert "MOTA 1.000, IDF1 1.000" in capsys.readouterr().out

@@ -143,9 +143,9 @@ def test_predict_noise_lowered_by_occlusion(device):
     src = make_state(device, n, r, kind=kind, dims=dims, vel=vel, label=np.zeros((n, r)))
     for w, o in ((0.6, 0.5), (0.6, 1.0), (0.0, 1.0)):
         dyn = quiet_dynamics(
-            sigma_speed=wp.vec3(0.0, sh, sv),
+            sigma_speed=wp.vec4(0.0, sh, sv, sv),
             sigma_turn=st,
-            speed_max=wp.vec3(1.0, 1e6, 1e6),
+            speed_max=wp.vec4(1.0, 1e6, 1e6, 1e6),
             turn_max=1e6,
             occlusion_noise=w,
         )

@@ -89,6 +89,42 @@ def jittered_scene(rng, cam: Camera, n: int):
     return kind, pos, heading, dims
 
 
+def crowd_scene(rng, cam: Camera, n: int, r: int = 64):
+    """N particles around a crowd of R = 64 slots (the kernels' ``MAX_SLOTS``): 48 humans on a grid over the image
+    (every sixth column a pair side by side), two vehicles, a human held by a third of the particles, a human never
+    in the image, and empty slots; each particle moves every object by a few centimetres."""
+    plane = GroundPlane()
+    us, vs = np.meshgrid(np.linspace(12, W - 12, 8), np.linspace(45, H - 8, 6))
+    pixels = np.stack([us.ravel(), vs.ravel()], axis=1)
+    pixels[1::6] = pixels[::6] + [6.0, 0.0]  # beside the one before: pairs
+    ground, _ = ground_rays(cam, plane, pixels)
+    kinds = np.zeros(r, np.int32)
+    kinds[: len(ground)] = HUMAN
+    pos = np.zeros((r, 2))
+    pos[: len(ground)] = ground
+    k = len(ground)
+    kinds[k : k + 2] = VEHICLE
+    pos[k : k + 2] = ground_rays(cam, plane, np.array([[40.0, 140.0], [160.0, 30.0]]))[0]
+    kinds[k + 2 : k + 4] = HUMAN
+    pos[k + 2] = ground_rays(cam, plane, np.array([[100.0, 20.0]]))[0][0]
+    pos[k + 3] = [400.0, -300.0]  # never in the image
+    kind = np.tile(kinds, (n, 1))
+    kind[rng.uniform(size=n) > 0.35, k + 2] = 0
+    pos = (pos[None] + rng.normal(0.0, 0.04, (n, r, 2))).astype(np.float32)
+    heading = rng.uniform(-math.pi, math.pi, (n, r)).astype(np.float32)
+    dims = np.where(
+        (kinds == VEHICLE)[None, :, None],
+        rng.uniform([4.0, 1.7, 1.4], [4.6, 1.9, 1.6], (n, r, 3)),
+        rng.uniform([1.6, 0.18, 0.09], [1.85, 0.25, 0.12], (n, r, 3)),
+    ).astype(np.float32)
+    dims[kind == 0] = 0.0
+    pos[kind == 0] = 0.0
+    return kind, pos, heading, dims
+
+
+SCENES = {"jittered": jittered_scene, "crowd": crowd_scene}
+
+
 def reference_slot_boxes(hulls, kind: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(R, 4) boxes (x0, y0, x1, y1; (0, 0, -1, -1) when nothing is drawn) and (R,) alive flags from the hulls."""
     pts, nv, rows = hulls.pts.numpy(), hulls.n.numpy(), hulls.rows.numpy()
@@ -182,15 +218,16 @@ class Groups:
         self.count = int(self.n_groups.numpy()[0])
 
 
-@pytest.mark.parametrize("chunk", [256, 7])
-def test_slot_boxes_and_groups_match_numpy(device, rng, chunk):
+@pytest.mark.parametrize(("chunk", "scene"), [(256, "jittered"), (7, "jittered"), (7, "crowd")])
+def test_slot_boxes_and_groups_match_numpy(device, rng, chunk, scene):
     """The slot boxes equal the union of the hulls' boxes (block sizes 256 and 7: partials from several blocks), every
     pixel each slot draws alone lies in its box, and the groups are the reference partition: the pair side by side
     in one group, the lone objects in their own, the slot drawn by no particle a group with an empty box, the empty
-    slot in none; group boxes, first slots and activity flags as documented."""
+    slot in none; group boxes, first slots and activity flags as documented. The crowd: 64 slots, the kernels'
+    limit, in many groups."""
     cam = camera()
     n = 40
-    kind, pos, heading, dims = jittered_scene(rng, cam, n)
+    kind, pos, heading, dims = SCENES[scene](rng, cam, n)
     hulls = raster(device, cam, GroundPlane(), kind, pos, heading, dims)
     g = Groups(device, hulls, kind, chunk)
     boxes, alive = reference_slot_boxes(hulls, kind)
@@ -216,8 +253,13 @@ def test_slot_boxes_and_groups_match_numpy(device, rng, chunk):
     np.testing.assert_array_equal(g.group_first.numpy()[: g.count], first)
     assert np.all(g.group_first.numpy()[g.count :] == -1)
     np.testing.assert_array_equal(g.group_active.numpy(), np.arange(kind.shape[1]) < g.count)
-    # the scene's structure: 0 and 1 together, 2, 3 and 4 alone, 6 undrawn, 7 empty everywhere
     sg = slot_group
+    if scene == "crowd":  # 64 slots: many groups, the pairs together, the undrawn human alone, the empty slots none
+        assert kind.shape[1] == 64 and g.count >= 10, g.count
+        assert sg[0] == sg[1] and sg[6] == sg[7] and sg[2] != sg[0] and np.all(sg[52:] == -1)
+        assert got[51][2] < got[51][0] and alive[51] and sg[51] >= 0
+        return
+    # the scene's structure: 0 and 1 together, 2, 3 and 4 alone, 6 undrawn, 7 empty everywhere
     assert sg[0] == sg[1] and len({sg[0], sg[2], sg[3], sg[4], sg[6]}) == 5 and sg[7] == -1
     assert got[6][2] < got[6][0] and alive[6]
 
@@ -238,10 +280,10 @@ def test_one_group_without_partition(device, rng):
 class GroupScore:
     """A jittered scene with a random mask, scored with the group sums (row or band kernel), as the tracker does."""
 
-    def __init__(self, device, rng, n: int = 30) -> None:
+    def __init__(self, device, rng, n: int = 30, scene: str = "jittered") -> None:
         self.device = d = device
         self.cam = cam = camera()
-        self.kind, self.pos, self.heading, self.dims = jittered_scene(rng, cam, n)
+        self.kind, self.pos, self.heading, self.dims = SCENES[scene](rng, cam, n)
         self.n, self.r = self.kind.shape
         self.age = rng.uniform(0.0, 2.0, self.kind.shape).astype(np.float32)
         self.q = random_mask(rng, W, H)
@@ -251,8 +293,8 @@ class GroupScore:
         self.qrow = wp.zeros((H, W + 1), dtype=wp.int32, device=d)
         self.qtotal = wp.zeros(1, dtype=wp.int32, device=d)
         launch_mask_rows(self.qd, self.qrow, self.qtotal, d)
-        self.cost_a = np.array([1.0e6, 17.5, 43.25], np.float32)
-        self.cost_b = np.array([1.0e6, 61.0, 119.5], np.float32)
+        self.cost_a = np.array([1.0e6, 17.5, 43.25, 23.5], np.float32)
+        self.cost_b = np.array([1.0e6, 61.0, 119.5, 71.0], np.float32)
         self.scale = 5000.0 / (W * H)
         self.arrays = [
             wp.array(self.kind, dtype=wp.int32, device=d),
@@ -272,7 +314,7 @@ class GroupScore:
         group_sums = wp.zeros((n, self.r), dtype=wp.vec2i, device=d)
         g = self.groups
         launch_xor_score(
-            self.hulls, *self.arrays, self.qrow, self.qtotal, wp.vec3(*self.cost_a), wp.vec3(*self.cost_b),
+            self.hulls, *self.arrays, self.qrow, self.qtotal, wp.vec4(*self.cost_a), wp.vec4(*self.cost_b),
             self.scale, bg_weight, exclusion, sums, logw, penalty, complexity, cov_diff, d, band=band,
             groups=(g.group_box, g.n_groups, g.slot_group, group_sums) if grouped else None, finish=finish,
         )  # fmt: skip
@@ -292,12 +334,14 @@ class GroupScore:
         return out
 
 
-@pytest.mark.parametrize("band", [0, 8, 5])
-def test_group_sums_match_numpy_and_leave_the_joint_scores_unchanged(device, rng, band):
+@pytest.mark.parametrize(("band", "scene"), [(0, "jittered"), (8, "jittered"), (5, "jittered"), (0, "crowd"),
+                                           (8, "crowd")])  # fmt: skip
+def test_group_sums_match_numpy_and_leave_the_joint_scores_unchanged(device, rng, band, scene):
     """Row kernel (band 0) and band kernel (bands of 8 and 5 rows): per group, (|v|, |q AND v|) of its objects
     rendered alone; summed over the groups the joint |v| (the penalties of eq. 4 follow); the joint log-weights,
-    penalties, complexities and coverage counts equal the ungrouped launch's bit for bit."""
-    case = GroupScore(device, rng)
+    penalties, complexities and coverage counts equal the ungrouped launch's bit for bit. Also for the crowd of 64
+    slots (the band kernel compiled for 128 pieces)."""
+    case = GroupScore(device, rng, n=12 if scene == "crowd" else 30, scene=scene)
     plain = case.score(band, grouped=False)
     grouped = case.score(band, grouped=True)
     for a, b in zip(plain[:4], grouped[:4], strict=True):
@@ -313,15 +357,15 @@ def test_group_sums_match_numpy_and_leave_the_joint_scores_unchanged(device, rng
     np.testing.assert_array_equal(grouped[1].numpy(), q.sum() + covered - 2 * ref[..., 1].sum(axis=1))  # eq. 4
 
 
-@pytest.mark.parametrize("band", [0, 8])
-def test_group_factors_match_numpy(device, rng, band):
+@pytest.mark.parametrize(("band", "scene"), [(0, "jittered"), (8, "jittered"), (8, "crowd")])
+def test_group_factors_match_numpy(device, rng, band, scene):
     """group_logw_kernel: per group, -(-|q AND v| + lambda (|v| - |q AND v|) + c_g) s with c_g the group's eq. 5 and
     the exclusion prior of its pairs; the group sums are cleared; the per-block maxima (blocks of 7 particles) are
     the maxima of the factors, NEG_INF for unused groups; summed over the groups, the factors differ from the joint
     log-weight by a constant minus the cross-group exclusion (none here: such pairs cannot overlap). After the band
     kernel (``finish`` 1) it also finishes the joint scores: the same log-weights, penalties and complexities as
-    ``xor_finish_kernel`` bit for bit, and the joint sums cleared."""
-    case = GroupScore(device, rng, n=30)
+    ``xor_finish_kernel`` bit for bit, and the joint sums cleared. Also for the crowd of 64 slots."""
+    case = GroupScore(device, rng, n=12 if scene == "crowd" else 30, scene=scene)
     bg_weight, exclusion = 0.6, 300.0
     plain = case.score(band, grouped=False, bg_weight=bg_weight, exclusion=exclusion)
     finish = band > 0
@@ -338,7 +382,7 @@ def test_group_factors_match_numpy(device, rng, band):
     wp.launch_tiled(
         kxor.group_logw_kernel,
         dim=[blocks],
-        inputs=[*case.arrays, case.qtotal, wp.vec3(*case.cost_a), wp.vec3(*case.cost_b), case.scale, bg_weight,
+        inputs=[*case.arrays, case.qtotal, wp.vec4(*case.cost_a), wp.vec4(*case.cost_b), case.scale, bg_weight,
                 exclusion, g.slot_group, g.n_groups, n, chunk, int(finish), sums],
         outputs=[group_sums, glogw, part_gmax, lw_d, pen_d, cx_d],
         block_dim=BLOCK,
@@ -363,7 +407,7 @@ def test_group_factors_match_numpy(device, rng, band):
                     cost[i, sg[s]] += exclusion * pair_overlap_ref(
                         *a, k[i, t], case.pos[i, t], case.heading[i, t], case.dims[i, t]
                     )
-    assert cost[:, sg[0]].max() > cost[:, sg[2]].max(), "the side-by-side pair must pay some exclusion"
+    assert cost[:, sg[0]].max() > cost[:, sg[2 if scene == "jittered" else 3]].max(), "the pair pays some exclusion"
     cov, both = ref_sums[..., 0], ref_sums[..., 1]
     ref = -(-both + bg_weight * (cov - both) + cost) * np.float64(np.float32(case.scale))
     got = glogw.numpy()

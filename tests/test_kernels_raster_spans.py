@@ -183,12 +183,12 @@ def intervals_kernel(
     out: wp.array4d(dtype=wp.int32),
 ):
     i, lane = wp.tid()
-    down = kraster.vec32i()
-    up = kraster.vec32i()
+    down = kraster.vec_pieces()
+    up = kraster.vec_pieces()
     for y in range(lane, out.shape[2], stride):
         count, m0, m1, down, up = kraster.row_intervals(hull_pts, hull_n, hull_rows, i, pieces, y, width, down, up)
         c2, f0, f1, _d, _u = kraster.row_intervals(
-            hull_pts, hull_n, hull_rows, i, pieces, y, width, kraster.vec32i(), kraster.vec32i()
+            hull_pts, hull_n, hull_rows, i, pieces, y, width, kraster.vec_pieces(), kraster.vec_pieces()
         )
         out[0, i, y, 0] = count
         out[1, i, y, 0] = c2

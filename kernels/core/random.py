@@ -70,6 +70,13 @@ def random_words(seed: wp.vec2ui, index: int, frame: int, stream: int):
 
 
 @wp.func
+def random_words_at(seed: wp.vec2ui, index: int, frame: int, stream: int, word: int):
+    """:func:`random_words` with ``word`` as the counter's fourth word (``word`` 0: :func:`random_words` exactly):
+    more independent streams per ``(index, frame, stream)``."""
+    return philox4x32(wp.uint32(index), wp.uint32(frame), wp.uint32(stream), wp.uint32(word), seed[0], seed[1])
+
+
+@wp.func
 def word_to_unit(w: wp.uint32):
     """Map a 32-bit word to a float in the open interval (0, 1) (24-bit resolution, never 0 or 1)."""
     return (wp.float32(w >> wp.uint32(8)) + 0.5) * (1.0 / 16777216.0)
@@ -86,6 +93,24 @@ def uniform4(seed: wp.vec2ui, index: int, frame: int, stream: int):
     """Four independent U(0, 1) float32 values."""
     w = random_words(seed, index, frame, stream)
     return wp.vec4(word_to_unit(w[0]), word_to_unit(w[1]), word_to_unit(w[2]), word_to_unit(w[3]))
+
+
+@wp.func
+def uniform4_at(seed: wp.vec2ui, index: int, frame: int, stream: int, word: int):
+    """:func:`uniform4` of the stream with fourth counter word ``word`` (:func:`random_words_at`)."""
+    w = random_words_at(seed, index, frame, stream, word)
+    return wp.vec4(word_to_unit(w[0]), word_to_unit(w[1]), word_to_unit(w[2]), word_to_unit(w[3]))
+
+
+@wp.func
+def normal4_at(seed: wp.vec2ui, index: int, frame: int, stream: int, word: int):
+    """:func:`normal4` of the stream with fourth counter word ``word`` (:func:`random_words_at`)."""
+    u = uniform4_at(seed, index, frame, stream, word)
+    r0 = wp.sqrt(-2.0 * wp.log(u[0]))
+    r1 = wp.sqrt(-2.0 * wp.log(u[2]))
+    a0 = 6.283185307179586 * u[1]
+    a1 = 6.283185307179586 * u[3]
+    return wp.vec4(r0 * wp.cos(a0), r0 * wp.sin(a0), r1 * wp.cos(a1), r1 * wp.sin(a1))
 
 
 @wp.func

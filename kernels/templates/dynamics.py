@@ -2,10 +2,12 @@
 
 Each particle is a whole scene: R slots, each empty or holding one object (struct-of-arrays, shape (N, R)).
 Prediction per slot: gather from the resampled parent, stochastic diffusion (deletion, eq. 13; addition of the
-frame's chosen candidate, eq. 12; then noise) and deterministic drift (human eq. 8, vehicle eq. 9).
+frame's chosen candidates, eq. 12; then noise) and deterministic drift (human eq. 8, vehicle eq. 9; a cyclist, beyond
+the paper, moves as a vehicle with its own prior and limits).
 
-Random numbers come from counter-based streams keyed by ``(particle * MAX_SLOTS + slot, frame, STREAM_*)``:
-reproducible on every device and under CUDA graph replay.
+Random numbers come from counter-based streams keyed by ``(particle * SLOT_KEY + slot % SLOT_KEY, frame, STREAM_*,
+slot / SLOT_KEY)`` (the last in the Philox counter's fourth word): reproducible on every device and under CUDA graph
+replay, and the streams of slots below 16 are those of R_max <= 16 before issue 26 (same runs bit for bit).
 """
 
 import warp as wp
@@ -17,13 +19,18 @@ from wptrack.kernels.core.random import (
     STREAM_TEMPLATE_INIT2,
     STREAM_TEMPLATE_NOISE,
     STREAM_TEMPLATE_NOISE2,
-    normal4,
-    uniform4,
+    normal4_at,
+    uniform4_at,
 )
-from wptrack.kernels.templates.raster import KIND_HUMAN, KIND_NONE, KIND_VEHICLE, MAX_SLOTS, PIECES
-from wptrack.kernels.templates.xor import disc_in_box
+from wptrack.kernels.templates.exclusion import disc_in_box
+from wptrack.kernels.templates.raster import KIND_CYCLIST, KIND_HUMAN, KIND_NONE, KIND_VEHICLE, PIECES
 
 wp.set_module_options({"enable_backward": False})
+
+
+SLOT_KEY = wp.constant(16)
+"""Slots per particle in the index of the random streams (the former ``MAX_SLOTS``): slot ``s`` of particle ``j``
+draws from index ``j SLOT_KEY + s % SLOT_KEY`` and counter word ``s / SLOT_KEY``."""
 
 
 @wp.struct
@@ -61,21 +68,27 @@ class Dynamics:
 
     dt: float  # frame period, s
     sigma_pos: float  # position diffusion (added to eqs. 8-9), m
-    sigma_speed: wp.vec3  # sigma_v: human velocity components / vehicle speed, m/s
-    sigma_turn: float  # sigma_theta: vehicle angular velocity, rad/s
+    sigma_speed: wp.vec4  # sigma_v by kind: human velocity components / vehicle and cyclist speed, m/s
+    sigma_turn: float  # sigma_theta: vehicle and cyclist angular velocity, rad/s
     sigma_dims_human: wp.vec3  # sigma_d of the human dims, m
     sigma_dims_vehicle: wp.vec3  # sigma_d of the vehicle dims, m
+    sigma_dims_cyclist: wp.vec3  # sigma_d of the cyclist dims, m
     dims_mean_human: wp.vec3  # prior mean of an added human, m
     dims_mean_vehicle: wp.vec3
+    dims_mean_cyclist: wp.vec3
     dims_sd_human: wp.vec3  # prior deviation of an added human's dims, m
     dims_sd_vehicle: wp.vec3
+    dims_sd_cyclist: wp.vec3
     dims_min_human: wp.vec3  # dims are clamped to [min, max], m
     dims_max_human: wp.vec3
     dims_min_vehicle: wp.vec3
     dims_max_vehicle: wp.vec3
-    init_speed_sd: wp.vec3  # initial velocity deviation of an added object by kind, m/s
-    init_heading_sd: float  # initial heading deviation of an added vehicle, rad
-    speed_max: wp.vec3  # |velocity| (human) / |speed| (vehicle) limit by kind, m/s
+    dims_min_cyclist: wp.vec3
+    dims_max_cyclist: wp.vec3
+    init_speed_sd: wp.vec4  # initial velocity deviation of an added object by kind, m/s
+    init_heading_sd: float  # initial heading deviation of an added vehicle or cyclist, rad
+    speed_max: wp.vec4  # |velocity| (human) / |speed| (vehicle, cyclist) limit by kind, m/s
+    speed_min: wp.vec4  # |speed| floor of the box kinds (the cyclist's; beyond the paper; 0: none), m/s
     turn_max: float  # |theta| limit, rad/s
     t_add: float  # T_add of eq. 12
     t_del: float  # T_del of eq. 13
@@ -91,6 +104,30 @@ class Dynamics:
 @wp.func
 def clamp3(v: wp.vec3, lo: wp.vec3, hi: wp.vec3):
     return wp.vec3(wp.clamp(v[0], lo[0], hi[0]), wp.clamp(v[1], lo[1], hi[1]), wp.clamp(v[2], lo[2], hi[2]))
+
+
+@wp.func
+def box_prior(dyn: Dynamics, k: int):
+    """``(mean, sd, min, max, sigma_d)`` of the dims of a box kind: the cyclist's for ``KIND_CYCLIST``, else the
+    vehicle's (metres)."""
+    if k == KIND_CYCLIST:
+        return (dyn.dims_mean_cyclist, dyn.dims_sd_cyclist, dyn.dims_min_cyclist, dyn.dims_max_cyclist,
+                dyn.sigma_dims_cyclist)  # fmt: skip
+    return (
+        dyn.dims_mean_vehicle,
+        dyn.dims_sd_vehicle,
+        dyn.dims_min_vehicle,
+        dyn.dims_max_vehicle,
+        dyn.sigma_dims_vehicle,
+    )
+
+
+@wp.func
+def add_draw(seed: wp.vec2ui, j: int, f: int, r: int):
+    """The U(0, 1) draw of particle ``j`` for the frame's addition ``r`` (eq. 12: added when below T_add): component
+    ``r % 4`` of the particle's ``STREAM_TEMPLATE_ADD`` block with counter word ``r / 4`` (addition 0: the draw of the
+    paper's single addition, as before)."""
+    return uniform4_at(seed, j, f, STREAM_TEMPLATE_ADD, r / 4)[r % 4]
 
 
 @wp.kernel
@@ -121,9 +158,11 @@ def template_predict_kernel(
             row and ``slot_group`` zeros; the partitioned filter (``kernels.templates.partition``) a row per independent
             group. A slot of group -1 is empty in every particle (any parent will do: row 0).
         slot_group: (R,) group of each slot. resampled: (1,) 1 when the weights restart from 0.
-        add: (2,) this frame's addition ``(slot, candidate)`` or ``slot = -1`` (``uoh.choose_addition_kernel``).
-            With ``dyn.absorb``, a vehicle added to a particle removes the particle's humans whose ground disc
-            meets the candidate's footprint (a box of the prior's mean length and width; beyond the paper).
+        add: (2K,) this frame's K additions ``(slot, candidate)`` or ``slot = -1`` (``uoh.choose_addition_kernel``,
+            ``uoh.choose_more_additions_kernel``; K = 1: eq. 12); each is added to a particle with its own draw
+            (:func:`add_draw`). With ``dyn.absorb``, a vehicle added to a particle removes the particle's humans
+            whose ground disc meets the candidate's footprint (a box of the prior's mean length and width; beyond
+            the paper).
         slot_label: (R,) label of each slot. cand_kind, cand_pos, cand_heading: (C,) candidate objects.
         occlusion: (N, R) fraction of each object hidden by nearer objects of its particle, read at the parent
             (``occlusion.occlusion_kernel``; zeros: the paper's prediction). Beyond the paper: an object hidden a
@@ -139,7 +178,8 @@ def template_predict_kernel(
     j, s = wp.tid()
     a = ancestors[wp.max(slot_group[s], 0), j]
     f = frame[0]
-    idx = j * MAX_SLOTS + s
+    idx = j * SLOT_KEY + s % SLOT_KEY
+    word = s / SLOT_KEY
     if s == 0:
         if resampled[0] != 0:
             dst.logw[j] = 0.0
@@ -154,7 +194,7 @@ def template_predict_kernel(
     age = src.age[a, s]
     occ = occlusion[a, s]
     # stochastic diffusion: deletion (eq. 13, T_del lowered for hidden objects), then addition (eq. 12)
-    u = uniform4(seed, idx, f, STREAM_TEMPLATE_EVENT)
+    u = uniform4_at(seed, idx, f, STREAM_TEMPLATE_EVENT, word)
     if k != KIND_NONE and u[0] < dyn.t_del * (1.0 - dyn.occlusion_del * occ):
         k = KIND_NONE
     if k != KIND_NONE and dyn.unseen_del > 0.0:
@@ -164,41 +204,47 @@ def template_predict_kernel(
                 seen = True
         if not seen and u[1] < dyn.unseen_del:
             k = KIND_NONE
-    if k == KIND_HUMAN and dyn.absorb != 0 and add[0] >= 0:
-        # beyond the paper (kernels.templates.classify): a vehicle added to this particle (the same draw as the addition
-        # below, keyed by the particle) replaces the humans standing on its footprint, in one move
-        cv = add[1]
-        add_parent = ancestors[wp.max(slot_group[add[0]], 0), j]  # the parent of the slot that receives it
-        if cand_kind[cv] == KIND_VEHICLE and src.kind[add_parent, add[0]] == KIND_NONE:
-            if uniform4(seed, j, f, STREAM_TEMPLATE_ADD)[0] < dyn.t_add:
-                half = 0.5 * wp.vec2(dyn.dims_mean_vehicle[0], dyn.dims_mean_vehicle[1])
-                if disc_in_box(p, d[1], cand_pos[cv], cand_heading[cv], half) > 0.0:
-                    k = KIND_NONE
-    if k == KIND_NONE and s == add[0]:
-        ua = uniform4(seed, j, f, STREAM_TEMPLATE_ADD)
-        if ua[0] < dyn.t_add:
-            c = add[1]
+    rounds = add.shape[0] / 2  # the frame's additions (beyond the paper: TemplateConfig.additions; eq. 12: one)
+    if k == KIND_HUMAN and dyn.absorb != 0:
+        # beyond the paper (kernels.templates.classify): a vehicle added to this particle (the same draw as the
+        # addition below, keyed by the particle) replaces the humans standing on its footprint, in one move
+        for r in range(rounds):
+            if add[2 * r] >= 0 and k == KIND_HUMAN:
+                cv = add[2 * r + 1]
+                add_parent = ancestors[wp.max(slot_group[add[2 * r]], 0), j]  # the parent of the receiving slot
+                if cand_kind[cv] == KIND_VEHICLE and src.kind[add_parent, add[2 * r]] == KIND_NONE:
+                    if add_draw(seed, j, f, r) < dyn.t_add:
+                        half = 0.5 * wp.vec2(dyn.dims_mean_vehicle[0], dyn.dims_mean_vehicle[1])
+                        if disc_in_box(p, d[1], cand_pos[cv], cand_heading[cv], half) > 0.0:
+                            k = KIND_NONE
+    mine = int(-1)  # the addition that targets this slot
+    for r in range(rounds):
+        if add[2 * r] == s:
+            mine = r
+    if k == KIND_NONE and mine >= 0:
+        if add_draw(seed, j, f, mine) < dyn.t_add:
+            c = add[2 * mine + 1]
             k = cand_kind[c]
             label = slot_label[s]
             p = cand_pos[c]
             alpha = cand_heading[c]
             age = 0.0
-            z = normal4(seed, idx, f, STREAM_TEMPLATE_INIT)
+            z = normal4_at(seed, idx, f, STREAM_TEMPLATE_INIT, word)
             if k == KIND_HUMAN:
                 d = dyn.dims_mean_human + wp.cw_mul(dyn.dims_sd_human, wp.vec3(z[0], z[1], z[2]))
                 d = clamp3(d, dyn.dims_min_human, dyn.dims_max_human)
-                z2 = normal4(seed, idx, f, STREAM_TEMPLATE_INIT2)
+                z2 = normal4_at(seed, idx, f, STREAM_TEMPLATE_INIT2, word)
                 v = dyn.init_speed_sd[KIND_HUMAN] * wp.vec2(z2[0], z2[1])
                 alpha = 0.0
-            else:
-                d = dyn.dims_mean_vehicle + wp.cw_mul(dyn.dims_sd_vehicle, wp.vec3(z[0], z[1], z[2]))
-                d = clamp3(d, dyn.dims_min_vehicle, dyn.dims_max_vehicle)
-                z2 = normal4(seed, idx, f, STREAM_TEMPLATE_INIT2)
-                v = wp.vec2(dyn.init_speed_sd[KIND_VEHICLE] * z2[0], 0.0)
+            else:  # a vehicle or a cyclist (beyond the paper: a box kind of its own prior)
+                mean, sd, lo, hi, _sig = box_prior(dyn, k)
+                d = clamp3(mean + wp.cw_mul(sd, wp.vec3(z[0], z[1], z[2])), lo, hi)
+                z2 = normal4_at(seed, idx, f, STREAM_TEMPLATE_INIT2, word)
+                v = wp.vec2(dyn.init_speed_sd[k] * z2[0], 0.0)
                 alpha = alpha + dyn.init_heading_sd * z[3]
     if k != KIND_NONE:
-        n1 = normal4(seed, idx, f, STREAM_TEMPLATE_NOISE)
-        n2 = normal4(seed, idx, f, STREAM_TEMPLATE_NOISE2)
+        n1 = normal4_at(seed, idx, f, STREAM_TEMPLATE_NOISE, word)
+        n2 = normal4_at(seed, idx, f, STREAM_TEMPLATE_NOISE2, word)
         # beyond the paper: a hidden object keeps its motion (no evidence to correct a diffused velocity); an object
         # added this frame is not hidden in its parent (its slot was empty there: occ = 0)
         ns = 1.0 - dyn.occlusion_noise * occ
@@ -220,25 +266,21 @@ def template_predict_kernel(
             p = p + v * dyn.dt + sig_pos * wp.vec2(n2[1], n2[2])
             if sp > 0.2:
                 alpha = wp.atan2(v[1], v[0])
-        elif k == KIND_VEHICLE:
-            # eq. 9: theta_t = theta + N; alpha_t = alpha + theta_{t-1} dt; v_t = v + N;
-            #        l_t = l + v_{t-1} dt (cos alpha_t, sin alpha_t)
-            d = clamp3(
-                d
-                + dyn.dims_revert * (dyn.dims_mean_vehicle - d)
-                + wp.cw_mul(dyn.sigma_dims_vehicle, wp.vec3(n1[0], n1[1], n1[2])),
-                dyn.dims_min_vehicle,
-                dyn.dims_max_vehicle,
-            )
+        else:
+            # eq. 9 (vehicles; cyclists too, with their own prior and limits): theta_t = theta + N;
+            #        alpha_t = alpha + theta_{t-1} dt; v_t = v + N; l_t = l + v_{t-1} dt (cos alpha_t, sin alpha_t)
+            mean, _sd, lo, hi, sig = box_prior(dyn, k)
+            d = clamp3(d + dyn.dims_revert * (mean - d) + wp.cw_mul(sig, wp.vec3(n1[0], n1[1], n1[2])), lo, hi)
             speed = v[0]
             turn = v[1]
             alpha = alpha + turn * dyn.dt
             p = p + speed * dyn.dt * wp.vec2(wp.cos(alpha), wp.sin(alpha)) + sig_pos * wp.vec2(n2[1], n2[2])
-            vmax = dyn.speed_max[KIND_VEHICLE]
-            v = wp.vec2(
-                wp.clamp(speed + ns * dyn.sigma_speed[KIND_VEHICLE] * n1[3], -vmax, vmax),
-                wp.clamp(turn + ns * dyn.sigma_turn * n2[0], -dyn.turn_max, dyn.turn_max),
-            )
+            vmax = dyn.speed_max[k]
+            speed = wp.clamp(speed + ns * dyn.sigma_speed[k] * n1[3], -vmax, vmax)
+            vmin = dyn.speed_min[k]  # beyond the paper: a cyclist is never slower than this (0: no floor)
+            if wp.abs(speed) < vmin:
+                speed = wp.where(speed < 0.0, -vmin, vmin)
+            v = wp.vec2(speed, wp.clamp(turn + ns * dyn.sigma_turn * n2[0], -dyn.turn_max, dyn.turn_max))
         age = age + dyn.dt
     else:
         label = -1

@@ -33,15 +33,13 @@ summed by ``kernels.templates.xor`` and weighed by ``kernels.templates.xor.group
 import warp as wp
 
 from wptrack.kernels.core.reduce import block_argmax
-from wptrack.kernels.templates.raster import PIECES
+from wptrack.kernels.templates.raster import PIECES, vec_slots_i
 
 wp.set_module_options({"enable_backward": False})
 
 BOX_NONE = wp.constant(-1073741824)
 """Sentinel of the box maxima: ``-x0``, ``-y0``, ``x1``, ``y1`` are reduced by max, and an empty box is this in
 all four (``x1 < x0``)."""
-
-vec16i = wp.types.vector(length=16, dtype=wp.int32)
 
 
 @wp.func
@@ -135,7 +133,7 @@ def boxes_touch(a: wp.vec4i, b: wp.vec4i):
 
 
 @wp.func
-def root_of(parent: vec16i, s: int):
+def root_of(parent: vec_slots_i, s: int):
     r = s
     while parent[r] != r:
         r = parent[r]
@@ -155,7 +153,7 @@ def group_slots_kernel(
     n_groups: wp.array(dtype=wp.int32),
 ):
     """The slot boxes from :func:`slot_box_kernel`'s maxima, which it resets for the next frame, then the slots'
-    groups (see the module docstring). One thread (``dim=1``); R <= 16 slots.
+    groups (see the module docstring). One thread (``dim=1``); R <= ``raster.MAX_SLOTS`` slots.
 
     Groups are numbered by their lowest slot, in slot order. With ``partition`` 0 every alive slot is put in group
     0 (the joint filter of the paper: one factor, one resampling).
@@ -172,12 +170,12 @@ def group_slots_kernel(
         n_groups: (1,) number of groups.
     """
     r = slot_group.shape[0]
-    parent = vec16i()
-    x0 = vec16i()
-    y0 = vec16i()
-    x1 = vec16i()
-    y1 = vec16i()
-    alive = vec16i()
+    parent = vec_slots_i()
+    x0 = vec_slots_i()
+    y0 = vec_slots_i()
+    x1 = vec_slots_i()
+    y1 = vec_slots_i()
+    alive = vec_slots_i()
     for s in range(r):
         box = wp.vec4i(0, 0, -1, -1)
         if slot_acc[s, 2] != BOX_NONE:
@@ -229,7 +227,7 @@ def group_slots_kernel(
                             y0[first] = wp.min(y0[first], y0[s])
                             x1[first] = wp.max(x1[first], x1[s])
                             y1[first] = wp.max(y1[first], y1[s])
-    ids = vec16i()
+    ids = vec_slots_i()
     for s in range(r):
         ids[s] = -1
     count = int(0)

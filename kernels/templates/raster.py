@@ -14,6 +14,10 @@ Every object is made of ``PIECES`` convex 3D pieces, each given by at most ``HUL
 * vehicle (``KIND_VEHICLE``, dims = (length, width, height) metres, heading alpha radians): piece 0 the lower
   body box (full length and width, ``LOWER`` of the height), piece 1 the cabin box (``CABIN_LENGTH`` of the length,
   ``CABIN_WIDTH`` of the width, from the lower body to the full height).
+* cyclist (``KIND_CYCLIST``, a person riding a bicycle, one object; dims = (length, width, height) metres, heading
+  alpha radians; beyond the paper): the vehicle's two boxes in other proportions, piece 0 the bike with the rider's
+  legs (full length and width, ``RIDER_LOWER`` of the height), piece 1 the rider's body and head
+  (``RIDER_LENGTH`` of the length, ``RIDER_WIDTH`` of the width, up to the full height).
 
 A piece's image is the convex hull of its projected vertices (gift wrapping, at most ``HULL_MAX`` vertices). A
 pixel ``(u, v)`` (centre at integer coordinates, OpenCV convention) is covered by a piece when its centre lies in
@@ -28,18 +32,20 @@ from wptrack.kernels.core.camera import Camera, project
 
 wp.set_module_options({"enable_backward": False})
 
-MAX_SLOTS = wp.constant(16)
-"""Largest R_max (objects per particle) the kernels support."""
+MAX_SLOTS = wp.constant(64)
+"""Largest R_max (objects per particle) the kernels support (the length of their per-slot local vectors,
+:data:`vec_slots` and :data:`vec_slots_i`; was 16 before issue 26)."""
 PIECES = wp.constant(2)
 """Convex pieces per object."""
-MAX_PIECES = wp.constant(32)
-"""MAX_SLOTS * PIECES: the most pieces a particle can have."""
+MAX_PIECES = wp.constant(128)
+"""MAX_SLOTS * PIECES: the most pieces a particle can have (the length of :data:`vec_pieces`)."""
 HULL_MAX = wp.constant(16)
 """Most vertices per piece (and per projected hull)."""
 
 KIND_NONE = wp.constant(0)
 KIND_HUMAN = wp.constant(1)
 KIND_VEHICLE = wp.constant(2)
+KIND_CYCLIST = wp.constant(3)
 
 LOWER = wp.constant(0.55)  # vehicle: lower body height / total height
 CABIN_LENGTH = wp.constant(0.6)  # vehicle: cabin length / total length
@@ -50,9 +56,18 @@ HEXAGON = wp.constant(1.0471975511965976)  # 2 pi / 6
 LEG_RATIO = wp.constant(0.65)  # human: leg prism radius / body radius (two legs side by side vs torso and arms)
 HIP = wp.constant(0.5)  # human: hip height / height
 SHOULDER = wp.constant(2.5)  # human: shoulders this many head radii below the top of the head
+RIDER_LOWER = wp.constant(0.5)  # cyclist: bike and legs box height / total height (the saddle)
+RIDER_LENGTH = wp.constant(0.35)  # cyclist: rider box length / total length (the bike's)
+RIDER_WIDTH = wp.constant(0.8)  # cyclist: rider box width / total width (the handlebar's)
 
 vec16 = wp.types.vector(length=16, dtype=wp.float32)
-vec32i = wp.types.vector(length=32, dtype=wp.int32)
+"""HULL_MAX floats: a piece's projected vertices."""
+vec_pieces = wp.types.vector(length=128, dtype=wp.int32)
+"""MAX_PIECES int32: per-piece local arrays of a particle (rows, chain walks, spans)."""
+vec_slots = wp.types.vector(length=64, dtype=wp.float32)
+"""MAX_SLOTS float32: per-slot (or per-group: at most one group per slot) local arrays."""
+vec_slots_i = wp.types.vector(length=64, dtype=wp.int32)
+"""MAX_SLOTS int32: per-slot (or per-group) local arrays."""
 
 
 @wp.struct
@@ -79,7 +94,7 @@ def piece_vertices(kind: int, piece: int):
     """Number of vertices of ``piece`` of an object of ``kind`` (0 when the object has no such piece)."""
     if kind == KIND_HUMAN:
         return 16
-    if kind == KIND_VEHICLE:
+    if kind == KIND_VEHICLE or kind == KIND_CYCLIST:
         return 8
     return 0
 
@@ -107,17 +122,24 @@ def piece_vertex(kind: int, piece: int, k: int, dims: wp.vec3, heading: float):
             return wp.vec3(body_r * wp.cos(a), body_r * wp.sin(a), h)
         a = float(k - 12) * (0.5 * wp.pi)  # top of the head: a square
         return wp.vec3(head_r * wp.cos(a), head_r * wp.sin(a), height)
-    # vehicle boxes, rotated by the heading about the plane normal
+    # vehicle (and cyclist) boxes, rotated by the heading about the plane normal
     length = dims[0]
     width = dims[1]
     height = dims[2]
+    lower = LOWER
+    top_length = CABIN_LENGTH
+    top_width = CABIN_WIDTH
+    if kind == KIND_CYCLIST:
+        lower = RIDER_LOWER
+        top_length = RIDER_LENGTH
+        top_width = RIDER_WIDTH
     hl = 0.5 * length
     hw = 0.5 * width
     z0 = float(0.0)
-    z1 = LOWER * height
+    z1 = lower * height
     if piece == 1:
-        hl = hl * CABIN_LENGTH
-        hw = hw * CABIN_WIDTH
+        hl = hl * top_length
+        hw = hw * top_width
         z0 = z1
         z1 = height
     lx = hl * (1.0 - 2.0 * float(k % 2))
@@ -367,8 +389,8 @@ def row_intervals(
     pieces: int,
     y: int,
     width: int,
-    down: vec32i,
-    up: vec32i,
+    down: vec_pieces,
+    up: vec_pieces,
 ):
     """The covered columns of row ``y`` of particle ``i``'s virtual scene as disjoint sorted intervals.
 
@@ -377,8 +399,8 @@ def row_intervals(
     merged intervals ``[starts[k], ends[k]]`` (inclusive columns), sorted, separated by at least one uncovered
     pixel, and the walks after this row.
     """
-    s0 = vec32i()
-    s1 = vec32i()
+    s0 = vec_pieces()
+    s1 = vec_pieces()
     n = int(0)
     yf = float(y)
     for q in range(pieces):
@@ -428,7 +450,9 @@ def render_virtual_kernel(
     width = out.shape[2]
     for x in range(width):
         out[k, y, x] = wp.uint8(0)
-    count, m0, m1, _down, _up = row_intervals(hull_pts, hull_n, hull_rows, i, pieces, y, width, vec32i(), vec32i())
+    count, m0, m1, _down, _up = row_intervals(
+        hull_pts, hull_n, hull_rows, i, pieces, y, width, vec_pieces(), vec_pieces()
+    )
     for c in range(count):
         for x in range(m0[c], m1[c] + 1):
             out[k, y, x] = wp.uint8(1)
@@ -455,7 +479,7 @@ def render_labels_kernel(
     for x in range(width):
         out[y, x] = wp.uint8(0)
     yf = float(y)
-    drawn = vec32i()
+    drawn = vec_pieces()
     for _pass in range(pieces):
         # the farthest piece not drawn yet
         far = int(-1)

@@ -14,7 +14,7 @@ import warp as wp
 from wptrack.kernels.core.reduce import EST_MAXLOGW, NEG_INF, block_argmax, block_sum17, vec17d
 from wptrack.kernels.core.resample import block_scan_int64
 from wptrack.kernels.templates.dynamics import TemplateState
-from wptrack.kernels.templates.raster import KIND_NONE, KIND_VEHICLE
+from wptrack.kernels.templates.raster import KIND_HUMAN, KIND_NONE
 
 wp.set_module_options({"enable_backward": False})
 
@@ -107,7 +107,7 @@ def block_slot_moments_kernel(
             d = state.dims[i, s]
             direction = state.heading[i, s]
             speed = wp.length(v)
-            if k == KIND_VEHICLE:
+            if k != KIND_HUMAN:  # vehicles and cyclists: (signed speed, turn rate) along the heading (eq. 9)
                 speed = wp.abs(v[0])
                 if v[0] < 0.0:
                     direction = direction + wp.pi

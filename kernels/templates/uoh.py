@@ -308,6 +308,132 @@ def candidate_score_kernel(
 
 
 @wp.kernel
+def slot_budget_kernel(
+    slot_count: wp.array(dtype=wp.float64),
+    slot_est: wp.array2d(dtype=wp.float64),
+    exist_col: int,
+    min_existence: float,
+    margin: int,
+    margin_frac: float,
+    slot_open: wp.array(dtype=wp.float64),
+):
+    """Beyond the paper (``TemplateConfig.slot_margin``): the slots that additions may open this frame. With ``n`` the
+    objects reported (existence ``slot_est[s, exist_col]`` >= ``min_existence``) and ``u`` the slots held by some
+    particle (``slot_count`` > 0), at most ``n + max(margin, ceil(margin_frac n)) - u`` free slots may be opened:
+    ``slot_open`` is ``slot_count`` with the other free slots (the highest) set to 1 (held), so the choice kernels
+    (:func:`choose_addition_kernel`, :func:`choose_more_additions_kernel`) pass over them. ``margin`` <= 0: every
+    free slot stays open (``slot_open`` = ``slot_count``). Launch ``dim=1``."""
+    r = slot_count.shape[0]
+    reported = int(0)
+    used = int(0)
+    for s in range(r):
+        if slot_count[s] > wp.float64(0.0):
+            used += 1
+            if slot_est[s, exist_col] >= wp.float64(min_existence):
+                reported += 1
+    budget = r
+    if margin > 0:
+        extra = wp.max(margin, int(wp.ceil(margin_frac * float(reported))))
+        budget = reported + extra - used
+    for s in range(r):
+        slot_open[s] = slot_count[s]
+        if slot_count[s] == wp.float64(0.0):
+            if budget > 0:
+                budget -= 1
+            else:
+                slot_open[s] = wp.float64(1.0)
+
+
+@wp.func
+def chosen_candidate(
+    best: wp.array(dtype=wp.int32),
+    best_score: wp.array(dtype=wp.float64),
+    best_slot: int,
+    n_cand: int,
+    fit_best: wp.array(dtype=wp.int32),
+    fit_est: wp.array(dtype=wp.float64),
+    min_fit: float,
+):
+    """The candidate an argmax chose (``best[0]``, score ``best_score[best_slot]``), after the class-aware
+    replacement by the best-fitting vehicle ``fit_best[0]`` when its fit ``fit_est[best_slot]`` is at least
+    ``min_fit`` (``inf``: none); -1 when nothing is eligible (every score -3e38) or the index is invalid."""
+    c = best[0]
+    f = fit_est[best_slot]
+    if f > wp.float64(-1.0e37) and f >= wp.float64(min_fit) and fit_best[0] >= 0:
+        c = fit_best[0]
+    if best_score[best_slot] < wp.float64(-1.0e37) or c < 0 or c >= n_cand:
+        return int(-1)
+    return c
+
+
+@wp.kernel
+def suppress_candidates_kernel(
+    best: wp.array(dtype=wp.int32),
+    best_score: wp.array(dtype=wp.float64),
+    best_slot: int,
+    fit_best: wp.array(dtype=wp.int32),
+    fit_est: wp.array(dtype=wp.float64),
+    min_fit: float,
+    box: wp.array(dtype=wp.vec4i),
+    score: wp.array(dtype=wp.float32),
+):
+    """Beyond the paper (several additions per frame, ``TemplateConfig.additions``): after an argmax chose a
+    candidate (:func:`chosen_candidate`), every candidate whose image box ``box`` (``candidate_spans_kernel``)
+    shares a pixel with the chosen one's gets ``score`` -3e38, the chosen one too. The next argmax then picks the best
+    candidate on other pixels: its gain (eq. 11, computed without the chosen object) is what it gains with the
+    chosen one added, as no pixel is shared. Nothing changes when nothing was chosen. Launch ``dim=C``."""
+    j = wp.tid()
+    c = chosen_candidate(best, best_score, best_slot, score.shape[0], fit_best, fit_est, min_fit)
+    if c < 0:
+        return
+    a = box[c]
+    b = box[j]
+    if j == c or (a[0] <= b[2] and b[0] <= a[2] and a[1] <= b[3] and b[1] <= a[3]):
+        score[j] = NEG_INF
+
+
+@wp.kernel
+def choose_more_additions_kernel(
+    best: wp.array(dtype=wp.int32),
+    best_score: wp.array2d(dtype=wp.float64),
+    best_slot: int,
+    cand_kind: wp.array(dtype=wp.int32),
+    slot_count: wp.array(dtype=wp.float64),
+    slots: int,
+    next_label: wp.array(dtype=wp.int32),
+    slot_label: wp.array(dtype=wp.int32),
+    slot_kind: wp.array(dtype=wp.int32),
+    add: wp.array(dtype=wp.int32),
+):
+    """Additions 1 .. K-1 of the frame (launch ``dim=1``, after :func:`choose_addition_kernel` wrote addition 0 into
+    ``add[0:2]``; beyond the paper, ``TemplateConfig.additions``): round ``k``'s argmax ``best[k]`` with score
+    ``best_score[k, best_slot]`` (candidates sharing pixels with an earlier round's were suppressed,
+    :func:`suppress_candidates_kernel`) gets the lowest slot that is empty in every particle and not given this
+    frame, a new label and its kind: ``add[2k: 2k + 2] = (slot, candidate)``, or ``(-1, -1)`` when nothing is
+    eligible or no slot is free. ``best`` (K,), ``best_score`` (K, EST_SIZE), ``add`` (2K,)."""
+    rounds = add.shape[0] / 2
+    for k in range(1, rounds):
+        add[2 * k] = -1
+        add[2 * k + 1] = -1
+        c = best[k]
+        if best_score[k, best_slot] < wp.float64(-1.0e37) or c < 0 or c >= cand_kind.shape[0]:
+            continue
+        for s in range(slots):
+            taken = slot_count[s] != wp.float64(0.0)
+            for e in range(k):
+                if add[2 * e] == s:
+                    taken = True
+            if not taken:
+                label = next_label[0]
+                next_label[0] = label + 1
+                slot_label[s] = label
+                slot_kind[s] = cand_kind[c]
+                add[2 * k] = s
+                add[2 * k + 1] = c
+                break
+
+
+@wp.kernel
 def choose_addition_kernel(
     best: wp.array(dtype=wp.int32),
     best_score: wp.array(dtype=wp.float64),

@@ -5,7 +5,8 @@ and the virtual scene v_i differ (eq. 4). It is computed without an image per pa
 ``m_i = |q| + |v_i| - 2 |q AND v_i|``, where ``|v_i|`` and ``|q AND v_i|`` are summed over the covered spans of
 each row only (``|q AND span|`` from the row prefix sums of q in O(1)). The same pass records the particle's
 spans in a per-row difference array of coverage counts (two atomic adds per span, spread over the image), from
-which ``kernels.templates.uoh`` builds the Uncovered Object Histogram.
+which ``kernels.templates.uoh`` builds the Uncovered Object Histogram. The exclusion prior added to eq. 5's
+complexity (objects of a particle on the same ground) is ``kernels.templates.exclusion``'s.
 """
 
 import functools
@@ -13,8 +14,16 @@ import functools
 import warp as wp
 
 from wptrack.kernels.core.reduce import NEG_INF, block_argmax, finite_logw
-from wptrack.kernels.templates.partition import group_at, vec16i
-from wptrack.kernels.templates.raster import KIND_HUMAN, MAX_PIECES, PIECES, hull_chain_span, vec16, vec32i
+from wptrack.kernels.templates.exclusion import pair_overlap
+from wptrack.kernels.templates.partition import group_at
+from wptrack.kernels.templates.raster import (
+    MAX_PIECES,
+    PIECES,
+    hull_chain_span,
+    vec_pieces,
+    vec_slots,
+    vec_slots_i,
+)
 
 wp.set_module_options({"enable_backward": False})
 
@@ -70,51 +79,6 @@ def mask_total_kernel(qrow: wp.array2d(dtype=wp.int32), total: wp.array(dtype=wp
 
 
 @wp.func
-def disc_in_box(c: wp.vec2, r: float, centre: wp.vec2, heading: float, half: wp.vec2):
-    """Penetration of a ground disc (centre ``c``, radius ``r``, metres) into an oriented box (``centre``,
-    ``heading`` radians, half length and half width ``half``, metres), as a fraction of the disc's diameter in
-    [0, 1]: 0 when they do not overlap, 1 when the disc is pushed a whole diameter in."""
-    d = c - centre
-    ca = wp.cos(heading)
-    sa = wp.sin(heading)
-    lx = wp.abs(ca * d[0] + sa * d[1])
-    ly = wp.abs(-sa * d[0] + ca * d[1])
-    depth = wp.min(half[0] + r - lx, half[1] + r - ly)
-    return wp.clamp(depth / (2.0 * r), 0.0, 1.0)
-
-
-@wp.func
-def footprint(k: int, dims: wp.vec3):
-    """Radius of an object's ground disc (human: body radius; vehicle: half width, metres)."""
-    if k == KIND_HUMAN:
-        return dims[1]
-    return 0.5 * dims[1]
-
-
-@wp.func
-def pair_overlap(ka: int, pa: wp.vec2, ha: float, da: wp.vec3, kb: int, pb: wp.vec2, hb: float, db: wp.vec3):
-    """Ground-footprint overlap of two objects in [0, 1] (the exclusion prior of ``xor_score_kernel``).
-
-    Humans are discs of their body radius, vehicles boxes of their length and width. Two humans: ``1 - d / (r_a +
-    r_b)`` (d the distance of their centres). Human and vehicle: the disc's penetration into the box
-    (``disc_in_box``). Two vehicles: the deepest penetration of three discs of half the width along b (its centre
-    and both ends) into a's box.
-    """
-    if ka == KIND_HUMAN and kb == KIND_HUMAN:
-        return wp.clamp(1.0 - wp.length(pa - pb) / (da[1] + db[1]), 0.0, 1.0)
-    if ka == KIND_HUMAN:
-        return disc_in_box(pa, da[1], pb, hb, wp.vec2(0.5 * db[0], 0.5 * db[1]))
-    if kb == KIND_HUMAN:
-        return disc_in_box(pb, db[1], pa, ha, wp.vec2(0.5 * da[0], 0.5 * da[1]))
-    r = 0.5 * db[1]
-    along = wp.max(0.5 * db[0] - r, 0.0) * wp.vec2(wp.cos(hb), wp.sin(hb))
-    half = wp.vec2(0.5 * da[0], 0.5 * da[1])
-    o = disc_in_box(pb, r, pa, ha, half)
-    o = wp.max(o, disc_in_box(pb + along, r, pa, ha, half))
-    return wp.max(o, disc_in_box(pb - along, r, pa, ha, half))
-
-
-@wp.func
 def particle_score(
     i: int,
     covered: int,
@@ -125,8 +89,8 @@ def particle_score(
     heading: wp.array2d(dtype=wp.float32),
     dims: wp.array2d(dtype=wp.vec3),
     qtotal: int,
-    cost_a: wp.vec3,
-    cost_b: wp.vec3,
+    cost_a: wp.vec4,
+    cost_b: wp.vec4,
     scale: float,
     bg_weight: float,
     exclusion: float,
@@ -167,8 +131,8 @@ def xor_score_kernel(
     dims: wp.array2d(dtype=wp.vec3),
     qrow: wp.array2d(dtype=wp.int32),
     qtotal: wp.array(dtype=wp.int32),
-    cost_a: wp.vec3,
-    cost_b: wp.vec3,
+    cost_a: wp.vec4,
+    cost_b: wp.vec4,
     scale: float,
     bg_weight: float,
     exclusion: float,
@@ -184,15 +148,16 @@ def xor_score_kernel(
 
     Launch with ``wp.launch_tiled(dim=[N], block_dim=B)``: block ``i`` is particle ``i`` and each of its threads
     takes a contiguous run of the rows its templates cover (``row_segment``; one thread per block on the CPU
-    backend). Along its rows a thread walks each piece's hull chains (``raster.hull_chain_span``), keeps the pieces'
-    spans sorted and merges them into the row's disjoint intervals (as ``raster.row_intervals``).
+    backend). Along its rows a thread walks the hull chains (``raster.hull_chain_span``) of the pieces drawn on the
+    row (an active list of the pieces sorted by first row: a row costs the pieces it meets, not ``R_max``), keeps
+    their spans sorted and merges them into the row's disjoint intervals (as ``raster.row_intervals``).
 
     Args:
         hull_pts, hull_n, hull_rows: the particles' piece hulls from ``raster.template_hulls_kernel``.
         kind: (N, R) KIND_* per slot. age: (N, R) seconds each object has been in the particle (tau of eq. 5).
         pos, heading, dims: (N, R) ground position (metres), heading (radians), dims (metres) per slot.
         qrow: (H, W+1) row prefix sums of the motion mask; qtotal: (1,) |q|.
-        cost_a, cost_b: a_r and b_r of eq. 5 indexed by kind (pixels).
+        cost_a, cost_b: a_r and b_r of eq. 5 indexed by kind (pixels; index 0 unused).
         scale: s / (W H) of eq. 6 (1 / pixels).
         bg_weight: weight lambda of a template pixel on mask background in the weighted penalty
             ``m'_i = |q AND NOT v_i| + lambda |v_i AND NOT q|`` that enters the log-weight (1: eq. 4 exactly; < 1
@@ -218,8 +183,8 @@ def xor_score_kernel(
     width = qrow.shape[1] - 1
     y0 = qrow.shape[0]  # empty row range unless a piece is visible
     y1 = int(-1)
-    r0 = vec32i()  # each piece's rows (an empty range for pieces not drawn), read once
-    r1 = vec32i()
+    r0 = vec_pieces()  # each piece's rows (an empty range for pieces not drawn), read once
+    r1 = vec_pieces()
     for q in range(pieces):
         r = hull_rows[i, q]
         if hull_n[i, q] > 0:
@@ -233,30 +198,56 @@ def xor_score_kernel(
     covered = int(0)
     both = int(0)
     groups = n_groups[0]
-    gcov = vec16i()  # per group: this lane's |v| and |q AND v| (partitioned filter only)
-    gboth = vec16i()
-    down = vec32i()  # the pieces' hull chain walks (raster.hull_chain_span) over this lane's rows
-    up = vec32i()
-    s0 = vec32i()  # the row's piece spans sorted by start (raster.row_intervals, written out: no vector copies)
-    s1 = vec32i()
+    gcov = vec_slots_i()  # per group: this lane's |v| and |q AND v| (partitioned filter only)
+    gboth = vec_slots_i()
+    down = vec_pieces()  # the pieces' hull chain walks (raster.hull_chain_span) over this lane's rows
+    up = vec_pieces()
+    s0 = vec_pieces()  # the row's piece spans sorted by start (raster.row_intervals, written out: no vector copies)
+    s1 = vec_pieces()
+    # the drawn pieces in order of their first row, then a list of the pieces drawn on the current row (a row costs
+    # the pieces it meets, not R_max; the merged intervals do not depend on the order the pieces are visited in)
+    order = vec_pieces()
+    drawn = int(0)
+    for q in range(pieces):
+        if r0[q] <= r1[q]:
+            j = drawn
+            while j > 0 and r0[order[j - 1]] > r0[q]:
+                order[j] = order[j - 1]
+                j -= 1
+            order[j] = q
+            drawn += 1
+    active = vec_pieces()
+    n_active = int(0)
+    next_piece = int(0)
     ya, yb = row_segment(wp.max(y1 - y0 + 1, 0), lane)  # this lane's run of rows: the walks move forward row by row
     for y in range(y0 + ya, y0 + yb):
         yf = float(y)
+        while next_piece < drawn and r0[order[next_piece]] <= y:
+            if r1[order[next_piece]] >= y:
+                active[n_active] = order[next_piece]
+                n_active += 1
+            next_piece += 1
         n = int(0)
-        for q in range(pieces):
-            if y >= r0[q] and y <= r1[q]:
-                u0, u1, dq, uq = hull_chain_span(hull_pts, i, q, hull_n[i, q], yf, width, down[q], up[q])
-                down[q] = dq
-                up[q] = uq
-                if u0 <= u1:
-                    j = n
-                    while j > 0 and s0[j - 1] > u0:
-                        s0[j] = s0[j - 1]
-                        s1[j] = s1[j - 1]
-                        j -= 1
-                    s0[j] = u0
-                    s1[j] = u1
-                    n += 1
+        k = int(0)
+        while k < n_active:
+            q = active[k]
+            if y > r1[q]:  # the piece ended above this row: drop it (the last one takes its place)
+                n_active -= 1
+                active[k] = active[n_active]
+                continue
+            k += 1
+            u0, u1, dq, uq = hull_chain_span(hull_pts, i, q, hull_n[i, q], yf, width, down[q], up[q])
+            down[q] = dq
+            up[q] = uq
+            if u0 <= u1:
+                j = n
+                while j > 0 and s0[j - 1] > u0:
+                    s0[j] = s0[j - 1]
+                    s1[j] = s1[j - 1]
+                    j -= 1
+                s0[j] = u0
+                s1[j] = u1
+                n += 1
         # merge the sorted spans into disjoint intervals [a, b] (separated by an uncovered pixel) and count them
         if n > 0:
             a = s0[0]
@@ -329,7 +320,7 @@ def xor_band_kernel(cap: int, grouped: bool = False) -> wp.Kernel:
     The per-piece arrays hold two coordinates per int32 (rows, walk positions, spans) in vectors of ``cap``
     entries: a thread's run-time indexed arrays live in local memory, and with 32 lanes per warp on 32 particles
     their footprint decides how much of it stays in L1 (3 x 64 bytes per thread at 5 objects, against 6 x 128
-    bytes with the row kernel's separate ``vec32i`` arrays). Spans are sorted by (start, end) instead of (start,
+    bytes with the row kernel's separate per-piece arrays). Spans are sorted by (start, end) instead of (start,
     piece): the merged intervals, and so every output, are the same.
 
     Kernel args:
@@ -344,7 +335,7 @@ def xor_band_kernel(cap: int, grouped: bool = False) -> wp.Kernel:
         group_sums: (N, R) with ``grouped``: the same sums per group (one atomic add per band and group that covers
             anything); must hold zeros. Not touched otherwise.
     """
-    if cap not in (2, 4, 8, 16, 32):
+    if cap not in (2, 4, 8, 16, 32, 64, 128):
         raise ValueError(f"xor_band_kernel: cap {cap} must be a power of two from 2 to {MAX_PIECES}")
     veci = wp.types.vector(length=cap, dtype=wp.int32)
 
@@ -460,8 +451,8 @@ def finish_particle(
     heading: wp.array2d(dtype=wp.float32),
     dims: wp.array2d(dtype=wp.vec3),
     qtotal: wp.array(dtype=wp.int32),
-    cost_a: wp.vec3,
-    cost_b: wp.vec3,
+    cost_a: wp.vec4,
+    cost_b: wp.vec4,
     scale: float,
     bg_weight: float,
     exclusion: float,
@@ -490,8 +481,8 @@ def xor_finish_kernel(
     heading: wp.array2d(dtype=wp.float32),
     dims: wp.array2d(dtype=wp.vec3),
     qtotal: wp.array(dtype=wp.int32),
-    cost_a: wp.vec3,
-    cost_b: wp.vec3,
+    cost_a: wp.vec4,
+    cost_b: wp.vec4,
     scale: float,
     bg_weight: float,
     exclusion: float,
@@ -518,8 +509,8 @@ def group_logw_kernel(
     heading: wp.array2d(dtype=wp.float32),
     dims: wp.array2d(dtype=wp.vec3),
     qtotal: wp.array(dtype=wp.int32),
-    cost_a: wp.vec3,
-    cost_b: wp.vec3,
+    cost_a: wp.vec4,
+    cost_b: wp.vec4,
     scale: float,
     bg_weight: float,
     exclusion: float,
@@ -567,7 +558,7 @@ def group_logw_kernel(
     groups = n_groups[0]
     start = b * chunk
     stop = wp.min(start + chunk, n)
-    gmax = vec16()
+    gmax = vec_slots()
     for g in range(slots):
         gmax[g] = NEG_INF
     for i in range(start + lane, stop, wp.block_dim()):
@@ -576,7 +567,7 @@ def group_logw_kernel(
                 i, kind, age, pos, heading, dims, qtotal, cost_a, cost_b, scale, bg_weight, exclusion, sums, logw,
                 penalty, complexity,
             )  # fmt: skip
-        cost = vec16()
+        cost = vec_slots()
         for s in range(slots):
             kk = kind[i, s]
             g = slot_group[s]

@@ -29,13 +29,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-KIND_NONE, KIND_HUMAN, KIND_VEHICLE = 0, 1, 2
+KIND_NONE, KIND_HUMAN, KIND_VEHICLE, KIND_CYCLIST = 0, 1, 2, 3
 PIECES = 2
 """Convex pieces per object (human: legs, upper body with head; vehicle: lower body, cabin)."""
 HULL_MAX = 16
 """Most vertices per piece."""
 LOWER, CABIN_LENGTH, CABIN_WIDTH = 0.55, 0.6, 0.9
 """Vehicle proportions (``kernels.templates.raster``): lower body height, cabin length and width, as fractions."""
+RIDER_LOWER, RIDER_LENGTH, RIDER_WIDTH = 0.5, 0.35, 0.8
+"""Cyclist proportions (``kernels.templates.raster.RIDER_*``): bike-and-legs height, rider length, rider width."""
 MIN_DEPTH = 1.0e-6
 """Camera depth (metres) at or below which a point is not seen (``kernels.core.camera.MIN_DEPTH``)."""
 
@@ -112,17 +114,18 @@ class NumpyTemplateScorer:
 
     @classmethod
     def for_tracker(cls, tracker) -> NumpyTemplateScorer:
-        """The reference for a ``TemplateTracker``'s camera, ground plane, eq. 5 costs, eq. 6 scale and fold radius."""
+        """The reference for a ``TemplateTracker``'s camera, ground plane, eq. 5 costs and exclusion prior (scaled to
+        the image's area as the tracker does, ``TemplateConfig.reference_area``), eq. 6 scale and fold radius."""
         cfg = tracker.config
         return cls(
             tracker.camera,
             tracker.plane,
-            (0.0, cfg.human.cost_a, cfg.vehicle.cost_a),
-            (0.0, cfg.human.cost_b, cfg.vehicle.cost_b),
+            tuple(float(v) for v in tracker.cost_a),
+            tuple(float(v) for v in tracker.cost_b),
             cfg.scale,
             r2_max=float(tracker.cam.r2_max),
             bg_weight=cfg.bg_weight,
-            exclusion=cfg.exclusion,
+            exclusion=tracker.exclusion,
         )
 
     # --- geometry ------------------------------------------------------------------------------------------
@@ -165,20 +168,25 @@ class NumpyTemplateScorer:
             v[:, 1, :16] = upper
             verts[human] = v
             count[human] = (16, 16)
-        vehicle = kind == KIND_VEHICLE
-        if np.any(vehicle):
-            d = dims[vehicle]
-            a = heading[vehicle]
+        for box_kind, (lower, top_l, top_w) in (
+            (KIND_VEHICLE, (LOWER, CABIN_LENGTH, CABIN_WIDTH)),
+            (KIND_CYCLIST, (RIDER_LOWER, RIDER_LENGTH, RIDER_WIDTH)),
+        ):
+            boxes = kind == box_kind
+            if not np.any(boxes):
+                continue
+            d = dims[boxes]
+            a = heading[boxes]
             hl, hw, hh = 0.5 * d[:, 0:1], 0.5 * d[:, 1:2], d[:, 2:3]
             v = np.zeros((len(d), PIECES, HULL_MAX, 3))
-            for piece, (fl, fw, z0, z1) in enumerate(((1.0, 1.0, 0.0, LOWER), (CABIN_LENGTH, CABIN_WIDTH, LOWER, 1.0))):
+            for piece, (fl, fw, z0, z1) in enumerate(((1.0, 1.0, 0.0, lower), (top_l, top_w, lower, 1.0))):
                 lx = fl * hl * _BOX[:, 0]
                 ly = fw * hw * _BOX[:, 1]
                 z = hh * (z0 + (z1 - z0) * _BOX[:, 2])
                 ca, sa = np.cos(a)[:, None], np.sin(a)[:, None]
                 v[:, piece, :8] = np.stack([ca * lx - sa * ly, sa * lx + ca * ly, z], axis=-1)
-            verts[vehicle] = v
-            count[vehicle] = 8
+            verts[boxes] = v
+            count[boxes] = 8
         return verts, count
 
     def project(self, world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -85,8 +85,9 @@ def summary_lines(cmd: TrackCommand, summary: dict, parts: dict[str, Any]) -> li
         virtual = summary.get("virtual", parts["inputs"].virtual)
         return [
             f"tracked {plural(summary['frames'], 'frame')} on {summary['device']}: "
-            f"{plural(summary['objects'], 'object')} ({summary['classes']['human']} human, "
-            f"{summary['classes']['vehicle']} vehicle)",
+            f"{plural(summary['objects'], 'object')} ("
+            + ", ".join(f"{n} {c}" for c, n in summary["classes"].items() if n or c != "cyclist")
+            + ")",
             f"outputs: {out}/tracks.csv, best.csv, run.json" + (", virtual.avi" if virtual else ""),
         ]
     return [

@@ -1,4 +1,5 @@
-"""Image-box ground truth (PETS 2009 / A. Milan's XML annotations) as ground-plane tables for evaluation.
+"""Image-box ground truth as ground-plane tables for evaluation: PETS 2009 / A. Milan's XML annotations, and
+box tables with ground positions (Oxford TownCentre's ``groundtruth.csv``).
 
 The annotation file lists, per frame, the people's bounding boxes in image pixels::
 
@@ -21,7 +22,44 @@ import numpy as np
 
 from wptrack.core.errors import ConfigError
 
-__all__ = ["read_boxes", "boxes_to_ground", "read_box_groundtruth"]
+__all__ = ["read_boxes", "boxes_to_ground", "read_box_groundtruth", "is_box_ground_table", "box_ground_table"]
+
+BOX_GROUND_COLUMNS = ("frame", "id", "body_valid", "x", "y")
+"""Columns of a box table with ground positions (TownCentre's ``groundtruth.csv``: ``frame, orig_frame, id,
+head_valid, body_valid, head_l .. head_b, body_l .. body_b, x, y``; its ``x, y`` are the body box's bottom centre
+back-projected onto the ground, metres). Recognised by :func:`is_box_ground_table`."""
+
+
+def is_box_ground_table(columns) -> bool:
+    """Whether a table read by :func:`wptrack.io.tables.read_tracks` is a box table with ground positions
+    (:data:`BOX_GROUND_COLUMNS`, and no ``z`` column: a wptrack ground-truth table has one)."""
+    return all(c in columns for c in BOX_GROUND_COLUMNS) and "z" not in columns
+
+
+def box_ground_table(columns, label: str = "ground truth") -> dict[str, np.ndarray]:
+    """The evaluation table of a box table with ground positions: the rows whose body box is valid
+    (``body_valid`` 1), columns ``frame, id, x, y`` as given and ``z`` 0 (the ground; metres).
+
+    Args:
+        columns: ``{column: (N,) array}`` as :func:`wptrack.io.tables.read_tracks` returns it
+            (:func:`is_box_ground_table`).
+        label: Names the table in errors.
+
+    Raises:
+        ConfigError: ``body_valid`` holds other values than 0 and 1.
+    """
+    valid = np.asarray(columns["body_valid"])
+    try:
+        flags = valid.astype(np.float64)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{label}: column 'body_valid' must hold 0 or 1, got {valid[:3].tolist()}") from None
+    if not np.isin(flags, (0.0, 1.0)).all():
+        bad = flags[~np.isin(flags, (0.0, 1.0))][0]
+        raise ConfigError(f"{label}: column 'body_valid' must hold 0 or 1, got {bad!r}")
+    keep = flags == 1.0
+    out = {name: np.asarray(columns[name])[keep] for name in ("frame", "id", "x", "y")}
+    out["z"] = np.zeros(int(keep.sum()))
+    return out
 
 
 def read_boxes(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:

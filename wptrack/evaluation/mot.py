@@ -77,6 +77,7 @@ from typing import Any
 import numpy as np
 
 from wptrack.core.errors import ConfigError, WptrackError
+from wptrack.evaluation.groundtruth import box_ground_table, is_box_ground_table
 from wptrack.evaluation.hota import HotaResult, _hota_tables
 from wptrack.io.atomic import jsonable
 from wptrack.io.tables import read_tracks
@@ -294,6 +295,7 @@ def _load(source: TableLike, role: str, ground_truth: bool) -> _Table:
             columns: Mapping[str, Any] = read_tracks(source, what=f"{role} file")
         except WptrackError as e:
             raise ConfigError(str(e)) from None
+        columns = box_ground_table(columns, label) if ground_truth and is_box_ground_table(columns) else columns
     elif isinstance(source, Mapping):
         label = f"{role} <table>"
         columns = source
@@ -428,8 +430,8 @@ def evaluate(
     Args:
         groundtruth: Ground truth: a dict of columns as returned by :func:`wptrack.io.tables.read_tracks`, or the
             path of a CSV file. Columns ``frame,id,x,y`` required; ``z`` and ``class`` optional; other columns ignored.
-        tracks: Tracker output (e.g. a run's ``tracks.csv``), same forms and columns. Rows with a non-finite
-            ``x`` or ``y`` are dropped.
+            Image boxes with ground positions (TownCentre's ``frame,id,body_valid,x,y``, no ``z``): valid bodies.
+        tracks: Tracker output (e.g. a run's ``tracks.csv``), same forms and columns; non-finite x/y rows dropped.
         threshold: Largest ground-plane distance (metres) at which an object and a hypothesis may be matched.
         min_coverage: A ground-truth track is correctly tracked when matched in at least this fraction of the
             evaluated frames in which it is present; in (0, 1].

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from wptrack.core.errors import ConfigError, WptrackError
+from wptrack.evaluation.groundtruth import box_ground_table, is_box_ground_table
 from wptrack.evaluation.mot import REQUIRED_COLUMNS, _integers, _numeric
 from wptrack.io.tables import read_tracks
 
@@ -99,6 +100,8 @@ def write_mot_files(
             columns = read_tracks(table, what=f"{what} file")
         except WptrackError as e:
             raise ConfigError(str(e)) from None
+    if is_box_ground_table(columns):  # image boxes with ground positions (TownCentre): the valid bodies, z = 0
+        columns = box_ground_table(columns, what)
     missing = [c for c in REQUIRED_COLUMNS if c not in columns]
     if missing:
         raise ConfigError(f"{what}: missing column(s) {', '.join(missing)} for the MOTChallenge files")

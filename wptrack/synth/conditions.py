@@ -23,6 +23,11 @@ truth as without this module). The conditions:
   (blocking, ringing and chroma subsampling around edges); the written video stays lossless.
 - ``dark-car``: the first car of the scene (lowest id) is painted in the road's asphalt colour, so its roof shows the
   road's radiance and its sides are darker still; scenes without a car are unchanged (a warning says so).
+- ``crowd``: 20-40 more people in view at once, singles, pairs side by side and groups of three walking along the
+  street both ways, some crossing in from below, a few small and half hidden on the far sidewalk (issue 26;
+  :mod:`wptrack.synth.plaza_crowd`).
+- ``cyclists``: 2-4 people riding bicycles at 3.5-6 m/s along the road and across the plaza, each one object of
+  class ``cyclist`` (issue 26; :mod:`wptrack.synth.plaza_crowd`).
 
 The chosen conditions and their parameters are written to ``scene.json`` under ``conditions`` (absent when none).
 """
@@ -68,6 +73,20 @@ SHOT_GAIN = 0.27
 """noise: variance per DN of signal (shot noise), DN."""
 JPEG_QUALITY = 70
 """compression: JPEG quality (0-100) of cv2.imencode."""
+CROWD_AT_ONCE = (20, 40)
+"""crowd: range of the mean number of crowd people in the ground truth over the default length (one draw per scene)."""
+GROUP_SIZES = ((1, 0.4), (2, 0.4), (3, 0.2))
+"""crowd: group sizes and their shares."""
+SIDE_BY_SIDE = (0.7, 0.9)
+"""crowd: distance of neighbours walking side by side in a pair or a group of three, metres."""
+WALK_SPEEDS = (0.9, 1.5)
+"""crowd: walking speeds, m/s."""
+CYCLISTS = (2, 4)
+"""cyclists: range of their number."""
+CYCLE_SPEEDS = (3.5, 6.0)
+"""cyclists: their speeds, m/s."""
+CYCLIST_CLASS = "cyclist"
+"""cyclists: ground-truth class of a rider on a bicycle (one object)."""
 
 CONDITION_NAMES: dict[str, str] = {
     "static-start": "static_start",
@@ -77,6 +96,8 @@ CONDITION_NAMES: dict[str, str] = {
     "noise": "sensor_noise",
     "compression": "compression",
     "dark-car": "dark_car",
+    "crowd": "crowd",
+    "cyclists": "cyclists",
 }
 """Command-line name -> :class:`PlazaConditions` field."""
 
@@ -93,6 +114,8 @@ class PlazaConditions:
         sensor_noise: Stronger signal-dependent sensor noise.
         compression: JPEG quality :data:`JPEG_QUALITY` on every frame.
         dark_car: The first car painted in the asphalt's colour.
+        crowd: 20-40 more people at once, in pairs and small groups (:mod:`wptrack.synth.plaza_crowd`).
+        cyclists: 2-4 cyclists (:mod:`wptrack.synth.plaza_crowd`).
     """
 
     static_start: bool = False
@@ -102,6 +125,8 @@ class PlazaConditions:
     sensor_noise: bool = False
     compression: bool = False
     dark_car: bool = False
+    crowd: bool = False
+    cyclists: bool = False
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -147,8 +172,19 @@ class PlazaConditions:
             "noise": {"read_dn": READ_NOISE, "shot_gain_dn": SHOT_GAIN},
             "compression": {"codec": "jpeg", "quality": JPEG_QUALITY},
             "dark-car": {"albedo": "asphalt"},
+            "crowd": _crowd_params(),
+            "cyclists": _cyclist_params(),
         }
         return {name: params[name] for name in self.names}
+
+
+def _crowd_params() -> dict[str, Any]:
+    return {"at_once": list(CROWD_AT_ONCE), "group_sizes": [list(g) for g in GROUP_SIZES],
+            "side_by_side_m": list(SIDE_BY_SIDE), "speeds": list(WALK_SPEEDS)}  # fmt: skip
+
+
+def _cyclist_params() -> dict[str, Any]:
+    return {"count": list(CYCLISTS), "speeds": list(CYCLE_SPEEDS), "class": CYCLIST_CLASS}
 
 
 def parse_conditions(text: str | Sequence[str] | None) -> PlazaConditions:

@@ -54,14 +54,14 @@ over the scene's default length (180 frames at 15 fps).
 
 Hard conditions, each a switch off by default (objects standing in view at frame 0, people stopping and walking
 on, a low sun with hard shadows, a global illumination change, stronger sensor noise, JPEG compression, a car as
-dark as the road): :mod:`wptrack.synth.conditions`, ``wptrack synth s3-... --conditions ...``.
+dark as the road, a crowd, cyclists): :mod:`wptrack.synth.conditions`, ``wptrack synth s3-... --conditions ...``.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -164,6 +164,17 @@ def image_box_cover(
     return cam.image_box_cover(np.stack([wx, wy, wz], axis=-1), min_depth=0.1)
 
 
+_ACTOR_CONDITIONS: dict[str, Callable[[list[PlazaActor]], list[PlazaActor]]] = {}
+"""Conditions that add objects to a scene: :class:`PlazaConditions` field -> function of the scene's actors that
+returns them with the new ones, applied in registration order (:func:`register_actor_condition`)."""
+
+
+def register_actor_condition(name: str, add: Callable[[list[PlazaActor]], list[PlazaActor]]) -> None:
+    """Register the function that adds the objects of condition ``name`` (a :class:`PlazaConditions` field), so that
+    the modules that draw them (:mod:`wptrack.synth.plaza_crowd`) can use this one without it importing them."""
+    _ACTOR_CONDITIONS[name] = add
+
+
 class PlazaScene(Scene):
     """A plaza scene: one camera, people and cars with class, size and heading ground truth, perfect masks.
 
@@ -194,6 +205,12 @@ class PlazaScene(Scene):
         self.conditions = PlazaConditions() if conditions is None else conditions
         if not isinstance(self.conditions, PlazaConditions):
             raise TypeError(f"conditions must be a PlazaConditions, got {type(self.conditions).__name__}")
+        for name, add in _ACTOR_CONDITIONS.items():  # more objects (issue 26: crowd, cyclists)
+            if getattr(self.conditions, name):
+                self.actors = add(self.actors)
+        missing = [n for n in ("crowd", "cyclists") if getattr(self.conditions, n) and n not in _ACTOR_CONDITIONS]
+        if missing:
+            raise RuntimeError(f"conditions {missing}: not registered (import wptrack.synth.plaza_crowd)")
         if self.conditions.dark_car:
             self.actors = _dark_car(self.actors)
         if self.conditions.static_start:

@@ -15,8 +15,12 @@ from wptrack.core.errors import ConfigError
 from wptrack.core.resampling import SCHEMES
 from wptrack.kernels.templates import raster as kraster
 
-CLASSES: tuple[str, ...] = ("human", "vehicle")
-"""Object classes, in KIND order (KIND_HUMAN = 1, KIND_VEHICLE = 2)."""
+CLASSES: tuple[str, ...] = ("human", "vehicle", "cyclist")
+"""Object classes, in KIND order (KIND_HUMAN = 1, KIND_VEHICLE = 2, KIND_CYCLIST = 3)."""
+DEFAULT_CLASSES: tuple[str, ...] = ("human", "vehicle")
+"""The classes the tracker adds by default. The cyclist (issue 26) is opt-in: with it on by default, cyclist
+hypotheses took people walking along the street (TownCentre, tracker seed 0: 10 cyclist tracks, 28 % of the
+reported rows, MOTA 0.28 -> 0.21; PETS seed 1: MOTA 0.88 -> 0.82; docs/notes.md)."""
 
 
 def _vec3(value: Any, name: str, positive: bool = True) -> tuple[float, float, float]:
@@ -127,6 +131,51 @@ class VehiclePrior:
         _check_dims("vehicle", self.dims_mean, self.dims_min, self.dims_max)
 
 
+@dataclass(frozen=True)
+class CyclistPrior:
+    """Cyclist template (a person riding a bicycle, one object: the bike-and-legs box and the rider's box of
+    ``kernels.templates.raster``), its prior and its dynamics (eq. 9, as a vehicle's). Beyond the paper.
+
+    dims = (length, width, height), metres: the bike's length, the handlebar's width, the top of the rider's head.
+    Deviations are per frame; the turn rate's deviation and limit and the heading deviation of an added cyclist are
+    the vehicle's (``VehiclePrior.sigma_turn``, ``turn_max``, ``init_heading_sd``).
+    """
+
+    dims_mean: tuple[float, float, float] = (1.75, 0.6, 1.65)
+    dims_sd: tuple[float, float, float] = (0.1, 0.05, 0.06)
+    dims_min: tuple[float, float, float] = (1.4, 0.4, 1.3)
+    dims_max: tuple[float, float, float] = (2.2, 0.9, 2.0)
+    sigma_dims: tuple[float, float, float] = (0.01, 0.005, 0.005)
+    sigma_speed: float = 0.4
+    """sigma_v of eq. 9, m/s per frame."""
+    init_speed_sd: float = 3.0
+    """Speed deviation of an added cyclist (along its heading, either way), m/s."""
+    speed_max: float = 12.0
+    speed_min: float = 0.0
+    """Slowest speed of a cyclist, m/s (beyond the paper: eq. 9's speed is kept at least this far from 0, either
+    way; 0: no floor, eq. 9). People on bicycles ride at 3-8 m/s and walkers at 0.8-1.6 m/s, so a cyclist hypothesis
+    put on a walker would outrun them and lose their pixels. Off by default: with the cyclist class and 2 m/s (the
+    physical bound, not tuned), held-out s3-people + cyclists MOTA 0.748 -> 0.772 and s3-mixed + cyclists 0.879 ->
+    0.891, PETS seeds 0 / 1 0.850 / 0.815 -> 0.855 / 0.842, but TownCentre seeds 0 / 1 0.209 / 0.313 -> 0.239 / 0.200
+    (docs/notes.md, round eight): not a gain on the real street."""
+    orientations: int = 4
+    """Candidate orientations in [0, pi)."""
+    cost_a: float = 20.0
+    """a_r of eq. 5, pixels (at ``TemplateConfig.reference_area``), as a human's."""
+    cost_b: float = 60.0
+
+    def __post_init__(self) -> None:
+        for name in ("dims_mean", "dims_sd", "dims_min", "dims_max", "sigma_dims"):
+            object.__setattr__(self, name, _vec3(getattr(self, name), f"cyclist.{name}"))
+        for name, unit in (("sigma_speed", "m/s"), ("init_speed_sd", "m/s"), ("cost_a", "px"), ("cost_b", "px")):
+            object.__setattr__(self, name, _nonneg(getattr(self, name), f"cyclist.{name}", unit))
+        object.__setattr__(self, "speed_max", _nonneg(self.speed_max, "cyclist.speed_max", "m/s", strict=True))
+        object.__setattr__(self, "speed_min", _nonneg(self.speed_min, "cyclist.speed_min", "m/s", upper=self.speed_max))
+        if isinstance(self.orientations, bool) or not isinstance(self.orientations, int) or self.orientations < 1:
+            raise ConfigError(f"cyclist.orientations: expected an integer >= 1, got {self.orientations!r}")
+        _check_dims("cyclist", self.dims_mean, self.dims_min, self.dims_max)
+
+
 def _check_dims(kind: str, mean, lo, hi) -> None:
     if not all(0 < a <= b for a, b in zip(lo, hi, strict=True)):
         raise ConfigError(f"{kind}.dims_min/dims_max: expected 0 < min <= max per dimension, got {lo} and {hi}")
@@ -139,7 +188,13 @@ class TemplateConfig:
     """Configuration of the template tracker (defaults suit 640x480 surveillance video at 10-25 fps)."""
 
     particles: int = param(1000, help="number of particles, each a whole scene", symbol="N", lo=1, hi=2**31 - 2)
-    max_objects: int = param(8, help="objects per particle", symbol="R_max", lo=1, hi=int(kraster.MAX_SLOTS))
+    max_objects: int = param(64, help="objects per particle", symbol="R_max", lo=1, hi=int(kraster.MAX_SLOTS))
+    """R_max, objects per particle (at most ``kernels.templates.raster.MAX_SLOTS`` = 64; the device memory it needs is
+    checked before allocation). 64 (was 8 before issue 26): a busy street holds 20-40 people and the hypotheses on
+    their way in and out; a slot is free again only when no particle holds its object, so R_max just above the scene's
+    count delays additions (on the PETS clip, 4-8 people, R_max 64 scored MOTA 0.866 where 8 scored 0.836, tracker
+    seeds 0-5). Empty slots cost little: the partitioned filter keeps them out of every group, and the scoring walks
+    only the pieces drawn on each row (CPU time per frame on the PETS clip, 1000 particles: 25 ms at 8, 35 ms at 64)."""
     camera: str = param("0", help="the rig camera that sees the scene: its name or index")
     fps: float | None = param(
         None,
@@ -174,6 +229,33 @@ class TemplateConfig:
     (``kernels.templates.xor.pair_overlap``); solid objects cannot overlap, which keeps two hypotheses off one person in
     a group and humans off a car that its template does not fit yet. 300 px is about a fifth of a person's silhouette
     at 15 m."""
+    slot_margin: int = param(
+        0, help="slots beyond the reported objects that additions may hold (0: every free slot of R_max)", lo=0
+    )
+    """Slots beyond the reported objects that additions may hold at once (with ``slot_margin_frac``: at most n +
+    max(slot_margin, ceil(slot_margin_frac n)) slots in use for n objects reported; 0: every free slot of R_max).
+    Beyond the paper: R_max bounds the hypotheses on their way in (not yet reported) as well as the objects; an R_max
+    just above the scene's count kept spurious additions (a human on the edge of a car) few, a large one lets them
+    all in (held-out s3-cars, offline masks: MOTA 0.908 at R_max 6, 0.860 at 64, from three of twelve runs). Off by
+    default: on the tuning scenes (s3-cars, scene seeds 0-5) 4 changed nothing (MOTA 0.959 -> 0.960), which cannot
+    justify it (docs/notes.md, round eight)."""
+    slot_margin_frac: float = param(
+        0.25, help="the slot margin as a fraction of the reported objects (the larger of the two)", lo=0.0
+    )
+    """See ``slot_margin``: the margin grows with the objects reported (a crowd takes several in at once)."""
+    reference_area: int = param(
+        640 * 480,
+        help="image area at which the pixel costs are given (scaled with the image's area; 0: raw pixels)",
+        units="px",
+        lo=0,
+    )
+    """Image area, pixels, at which the pixel costs are given: eq. 5's a_r and b_r (``human.cost_a`` ...),
+    ``exclusion`` and ``min_candidate_area`` are multiplied by the image's area over this (0: raw pixels, as before
+    issue 26). Beyond the paper: the matching penalty enters eq. 6 as a fraction of the image (m / (W H)), but the
+    costs were in pixels, so at 1920x1080 they weighed 6.75 times less against an object's evidence than at 640x480
+    (the same scene at two sizes was tracked differently; TownCentre at 1080p: three hypotheses on a woman with a
+    pushchair, duplicates beside people). A person's silhouette is 0.4-0.45 % of the image in the plaza scenes, the
+    PETS clip and TownCentre alike (the median human addition candidate), so one reference serves them."""
     t_add: float = param(
         0.3,
         help="fraction of particles that receive the frame's proposed object",
@@ -181,6 +263,15 @@ class TemplateConfig:
         lo=0.0,
         hi=1.0,
     )
+    additions: int = param(
+        1, help="objects proposed per frame on disjoint candidate boxes (1: eq. 11's single o_new)", lo=1
+    )
+    """Objects proposed per frame (1: eq. 11's single o_new, the paper). Beyond the paper: after each choice the
+    candidates whose image boxes share a pixel with it are set aside and the best of the rest is proposed too, up to
+    this many, each to its own slot and added to each particle with its own draw (eq. 12). A crowd that is in view
+    at the first frame, or enters at once, is otherwise found one object per frame (20 people: the better part of
+    a second of misses for the last ones); disjoint boxes explain disjoint pixels, so each choice's gain (eq. 11) is
+    what it gains beside the others."""
     t_del: float = param(
         0.02,
         help="per-frame deletion probability of each object in each particle",
@@ -235,10 +326,26 @@ class TemplateConfig:
     vehicle: VehiclePrior = param(
         default_factory=VehiclePrior, help="the vehicle template, its prior and dynamics (YAML, --config)", flag=""
     )
-    classes: tuple[str, ...] = param(CLASSES, help="object classes the tracker may add", choices=CLASSES)
+    cyclist: CyclistPrior = param(
+        default_factory=CyclistPrior, help="the cyclist template, its prior and dynamics (YAML, --config)", flag=""
+    )
+    classes: tuple[str, ...] = param(
+        DEFAULT_CLASSES, help="object classes the tracker may add (cyclist: opt-in)", choices=CLASSES
+    )
+    """Object classes the tracker may add: any of ``human``, ``vehicle``, ``cyclist`` (default: human and vehicle;
+    add ``cyclist`` for streets with bicycles, :data:`DEFAULT_CLASSES`)."""
     candidate_step_px: int = param(
         8, help="addition candidates: ground points under an image grid of this pitch", units="px", lo=1
     )
+    candidate_step_width: float = param(
+        0.0,
+        help="candidate grid pitch per row as a fraction of a person's image width there (0: the fixed pitch)",
+        lo=0.0,
+    )
+    """With a value > 0 the pitch of each row of the candidate grid is this fraction of the image width of a person
+    standing on that row (the human prior's mean body diameter), between 2 pixels and ``candidate_step_px`` (0: a
+    fixed pitch of ``candidate_step_px``). Beyond the paper: a far person 8-10 pixels wide on an 8-pixel grid has no
+    candidate that fits them well enough for eq. 11's threshold."""
     max_range: float = param(
         60.0, help="addition candidates farther from the camera are dropped", units="m", lo=0.0, lo_open=True
     )
@@ -389,6 +496,8 @@ class TemplateConfig:
             raise ConfigError("human: expected a HumanPrior")
         if not isinstance(self.vehicle, VehiclePrior):
             raise ConfigError("vehicle: expected a VehiclePrior")
+        if not isinstance(self.cyclist, CyclistPrior):
+            raise ConfigError("cyclist: expected a CyclistPrior")
         if not self.classes or len(set(self.classes)) != len(self.classes):
             raise ConfigError(f"classes: expected a non-empty subset of {list(CLASSES)}, got {list(self.classes)}")
         if self.partition and self.ess_threshold < 1.0:
@@ -431,13 +540,13 @@ class TrackedObject:
     id: int
     """Persistent label."""
     cls: str
-    """``"human"`` or ``"vehicle"``."""
+    """``"human"``, ``"vehicle"`` or ``"cyclist"``."""
     position: np.ndarray
     """(3,) ground-contact point in world coordinates, metres."""
     ground: np.ndarray
     """(2,) ground-plane coordinates, metres."""
     dims: np.ndarray
-    """(3,) human (height, body radius, head radius) or vehicle (length, width, height), metres."""
+    """(3,) human (height, body radius, head radius) or vehicle and cyclist (length, width, height), metres."""
     heading: float
     """Direction of motion (vehicle: orientation towards its motion) in the ground plane, radians."""
     speed: float

@@ -24,23 +24,30 @@ S3_MASKS: tuple[str, ...] = ("offline", "mog2", "perfect")
 scene's perfect silhouettes."""
 
 
-def _s3_scene(name: str, scenes_dir: Path, frames: int | None, seed: int, progress: bool):
+def _s3_scene(
+    name: str, scenes_dir: Path, frames: int | None, seed: int, progress: bool, conditions: str | None = None
+):
     """Render scene ``name`` with scene seed ``seed`` into ``scenes_dir/<name>/s<seed>`` (reused when it is already
     there with the same frame count and ground truth: rendering is deterministic; one rendered by an older version,
-    e.g. before scene seeds drew new plaza sequences, is rendered again and its cached masks are removed)."""
+    e.g. before scene seeds drew new plaza sequences, is rendered again and its cached masks are removed). Under
+    ``conditions`` (comma-separated, :mod:`wptrack.synth.conditions`) into ``scenes_dir/<name>+<cond>+.../s<seed>``."""
     import logging
     import shutil
 
     from wptrack.synth import render_scene
     from wptrack.synth.base import SceneResult, _groundtruth_csv, get_scene
+    from wptrack.synth.conditions import parse_conditions
 
-    out = scenes_dir / name / f"s{seed}"
+    cond = parse_conditions(conditions)
+    out = scenes_dir / "+".join([name, *cond.names]) / f"s{seed}"
     meta = out / "scene.json"
     if meta.exists():
         hints = json.loads(meta.read_text())
         if hints.get("scene") == name and hints.get("seed") == seed and (frames is None or hints["frames"] == frames):
             spec = get_scene(name)
             scene = spec.build(seed) if spec.seeded else spec.build()
+            if cond.any:
+                scene = scene.with_conditions(cond)
             n = int(hints["frames"])
             gt = out / "groundtruth.csv"
             if gt.exists() and gt.read_text() == _groundtruth_csv(scene.trajectories(n), scene.groundtruth_columns(n)):
@@ -58,7 +65,7 @@ def _s3_scene(name: str, scenes_dir: Path, frames: int | None, seed: int, progre
             for old in out.glob("masks-*"):
                 if old.is_dir():
                     shutil.rmtree(old)
-    return render_scene(name, out, frames=frames, seed=seed, progress=progress)
+    return render_scene(name, out, frames=frames, seed=seed, progress=progress, conditions=cond if cond.any else None)
 
 
 def _s3_masks(res, masks: str, mask_config) -> Path:
@@ -103,7 +110,9 @@ def _template_run(task: dict) -> dict:
 
 def _template_scene(task: dict) -> tuple[str, str, str, str, str]:
     """Render one scene and make its masks (a worker process may run it): rig, video, masks, ground truth, hints."""
-    res = _s3_scene(task["name"], Path(task["cache"]), task["frames"], task["scene_seed"], task["progress"])
+    res = _s3_scene(
+        task["name"], Path(task["cache"]), task["frames"], task["scene_seed"], task["progress"], task.get("conditions")
+    )
     mask_video = _s3_masks(res, task["masks"], task["mask_config"])
     return str(res.rig_path), str(res.videos[0]), str(mask_video), str(res.groundtruth_path), str(res.scene_json)
 
@@ -134,6 +143,7 @@ def template_accuracy(
     scene_seeds: Sequence[int] = (0,),
     scenes_dir: str | Path | None = None,
     workers: int = 1,
+    conditions: str | None = None,
 ) -> dict:
     """Section 5 of Juza et al.: run every scene ``seeds`` times with different tracker seeds, evaluate each run
     against the ground truth (paper accuracy, MOTA, IDF1 at 1 m) and average, as the paper does.
@@ -163,6 +173,9 @@ def template_accuracy(
         workers: processes that render the scenes and run the tracker side by side (1: all in this process). Every
             run is independent and seeded, so the results do not depend on it. The workers are spawned (they import
             the calling script): from a script, call this under ``if __name__ == "__main__":``.
+        conditions: hard conditions every scene is rendered under (comma-separated names of
+            :mod:`wptrack.synth.conditions`, e.g. ``"crowd"``; default: none); the scene folders are then
+            ``scenes_dir/<scene>+<condition>.../s<scene seed>``.
 
     Returns:
         ``{"scenes": {name: {"runs": [...], "average": {...}}}, ...}``.
@@ -210,7 +223,7 @@ def template_accuracy(
         _template_scene,
         [
             {"name": name, "cache": str(cache), "frames": frames, "scene_seed": ss, "progress": progress,
-             "masks": masks, "mask_config": mask_config}
+             "masks": masks, "mask_config": mask_config, "conditions": conditions}
             for name, ss in keys
         ],
         workers,
@@ -223,7 +236,6 @@ def template_accuracy(
                 "particles": particles,
                 "seed": seed,
                 "fps": float(hints.get("fps", 15.0)),
-                "max_objects": max(8, int(hints.get("max_objects", 8)) + 3),
                 **(config_overrides or {}),
             }
             run_dir = out / name / f"s{scene_seed}" / f"seed{seed}"

@@ -15,6 +15,12 @@ CABIN_LENGTH = 0.6
 """Vehicle: cabin length / total length (``kernels.templates.raster.CABIN_LENGTH``)."""
 CABIN_WIDTH = 0.9
 """Vehicle: cabin width / total width (``kernels.templates.raster.CABIN_WIDTH``)."""
+RIDER_LOWER = 0.5
+"""Cyclist: bike-and-legs box height / total height (``kernels.templates.raster.RIDER_LOWER``)."""
+RIDER_LENGTH = 0.35
+"""Cyclist: rider box length / total length (``kernels.templates.raster.RIDER_LENGTH``)."""
+RIDER_WIDTH = 0.8
+"""Cyclist: rider box width / total width (``kernels.templates.raster.RIDER_WIDTH``)."""
 LEG_RATIO = 0.65
 """Human: leg prism radius / body radius (``kernels.templates.raster.LEG_RATIO``)."""
 HIP = 0.5
@@ -29,7 +35,7 @@ def template_pieces(cls: str, dims: Sequence[float], heading: float = 0.0) -> li
     """Vertices of an object's convex pieces in its own frame, as ``kernels.templates.raster.piece_vertex`` builds them.
 
     Args:
-        cls: ``"human"`` or ``"vehicle"``.
+        cls: ``"human"``, ``"vehicle"`` or ``"cyclist"``.
         dims: Human (height, body radius, head radius) or vehicle (length, width, height), metres.
         heading: Vehicle orientation in the ground plane, radians (humans are not rotated).
 
@@ -64,13 +70,16 @@ def template_pieces(cls: str, dims: Sequence[float], heading: float = 0.0) -> li
             ]
         )
         return [legs, upper]
-    if cls == "vehicle":
+    if cls in ("vehicle", "cyclist"):
         length, width, height = d
         ca, sa = math.cos(heading), math.sin(heading)
+        lower, top_l, top_w = (LOWER, CABIN_LENGTH, CABIN_WIDTH)
+        if cls == "cyclist":
+            lower, top_l, top_w = (RIDER_LOWER, RIDER_LENGTH, RIDER_WIDTH)
         pieces = []
         for hl, hw, z0, z1 in (
-            (0.5 * length, 0.5 * width, 0.0, LOWER * height),
-            (0.5 * length * CABIN_LENGTH, 0.5 * width * CABIN_WIDTH, LOWER * height, height),
+            (0.5 * length, 0.5 * width, 0.0, lower * height),
+            (0.5 * length * top_l, 0.5 * width * top_w, lower * height, height),
         ):
             k = np.arange(8)
             lx = hl * (1.0 - 2.0 * (k % 2))
@@ -78,7 +87,7 @@ def template_pieces(cls: str, dims: Sequence[float], heading: float = 0.0) -> li
             z = np.where(k >= 4, z1, z0)
             pieces.append(np.column_stack([ca * lx - sa * ly, sa * lx + ca * ly, z]))
         return pieces
-    raise ValueError(f"unknown object class {cls!r} (expected 'human' or 'vehicle')")
+    raise ValueError(f"unknown object class {cls!r} (expected 'human', 'vehicle' or 'cyclist')")
 
 
 def template_world(
@@ -88,7 +97,7 @@ def template_world(
 
     Args:
         plane: The ground plane (``wptrack.cameras.rig.GroundPlane``).
-        cls: ``"human"`` or ``"vehicle"``.
+        cls: ``"human"``, ``"vehicle"`` or ``"cyclist"``.
         ground: (2,) the object's ground-contact point in ground-plane coordinates, metres.
         dims: Template dims (see :func:`template_pieces`).
         heading: Orientation in the ground plane, radians.

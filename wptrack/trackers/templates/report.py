@@ -11,9 +11,9 @@ Sections, in page order:
 3. The paper's Fig. 5: frame, motion mask (``masks.avi`` or the run's given masks), the best particle's virtual
    scene (``virtual.avi``) and their XOR (eq. 4).
 4. Bird's-eye view of all tracks on the ground plane (ground truth dashed), and number of objects, existence and
-   speed vs frame.
+   speed vs frame (:mod:`~wptrack.trackers.templates.report_tracks`).
 5. A 3D PyVista scene (imported lazily, off-screen): ground grid, camera frustum, the templates as meshes at one or
-   two frames, the trajectories.
+   two frames, the trajectories (:mod:`~wptrack.trackers.templates.report_scene`).
 6. A movie of the template overlays (``ReportOptions.movie``), and the per-stage timings of run.json.
 
 Ground truth: ``ReportOptions.groundtruth`` (applied by :func:`wptrack.report.build_report`), else
@@ -33,13 +33,11 @@ from typing import Any
 
 import numpy as np
 
-from wptrack.core.errors import ConfigError
 from wptrack.io.atomic import atomic_imwrite
 from wptrack.report import plots, scene3d
 from wptrack.report.calibration import (
     GRID_ALPHA,
     GRID_BGR,
-    MAX_RANGE,
     TRUTH_BGR,
     _bgr_image,
     _legend,
@@ -53,17 +51,15 @@ from wptrack.report.overlays import compose
 from wptrack.trackers.templates.geometry import (
     CABIN_LENGTH,
     CABIN_WIDTH,
-    HIP,
-    LEG_RATIO,
     LOWER,
-    SHOULDER,
-    _rgb01,
     id_bgr,
     template_outlines,
     template_pieces,
     template_world,
 )
 from wptrack.trackers.templates.report_data import TemplateObject, TemplateRun, _read, template_run
+from wptrack.trackers.templates.report_scene import section_scene3d
+from wptrack.trackers.templates.report_tracks import section_tracks
 
 log = logging.getLogger(__name__)
 
@@ -363,341 +359,6 @@ def section_fig5(ctx: ReportContext) -> Section | None:
 
 
 # --------------------------------------------------------------------------------------- plots
-
-
-def _per_id(table: dict[str, np.ndarray]) -> dict[int, np.ndarray]:
-    """Row indices of each id, sorted by frame."""
-    out = {}
-    for obj in np.unique(table["id"]):
-        rows = np.flatnonzero(table["id"] == obj)
-        out[int(obj)] = rows[np.argsort(table["frame"][rows], kind="stable")]
-    return out
-
-
-def _ground_xy(run: TemplateRun, table: dict[str, np.ndarray], rows: np.ndarray) -> np.ndarray:
-    if "gx" in table and "gy" in table:
-        return np.column_stack([table["gx"][rows], table["gy"][rows]]).astype(np.float64)
-    xyz = np.column_stack([table["x"][rows], table["y"][rows], table["z"][rows]]).astype(np.float64)
-    return run.plane.to_ground(xyz)
-
-
-def _split_gaps(frames: np.ndarray, values: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-    """``(frames, values)`` pieces of a track between missing frames (not joined by a line); ``values`` has one
-    row per frame."""
-    cut = np.flatnonzero(np.diff(frames) > 1) + 1
-    return list(zip(np.split(frames, cut), np.split(values, cut), strict=True))
-
-
-def birdseye_tracks_plot(run: TemplateRun, path: Path) -> None:
-    """Write the bird's-eye view of the tracks on the ground plane (ground truth dashed, the camera's foot point and
-    the ground it sees)."""
-    truth = {}
-    if run.truth is not None:
-        truth = {
-            obj: (run.truth["frame"][rows], _ground_xy(run, run.truth, rows))
-            for obj, rows in _per_id(run.truth).items()
-        }
-    tracks = {obj: (rows, _ground_xy(run, run.tracks, rows)) for obj, rows in _per_id(run.tracks).items()}
-    pts = [xy for _, xy in truth.values()] + [xy for _, xy in tracks.values()]
-    foot = run.plane.to_ground(run.camera.center) if run.camera is not None else None
-    if foot is not None:
-        pts.append(foot.reshape(1, 2))
-    allp = np.vstack(pts)
-    lo, hi = allp.min(axis=0), allp.max(axis=0)
-    pad = max(1.0, 0.08 * float(np.max(hi - lo)))
-    lo, hi = lo - pad, hi + pad
-    aspect = float((hi[1] - lo[1]) / (hi[0] - lo[0]))
-    fig = plots._figure(7.5, float(np.clip(6.0 * aspect + 1.2, 3.0, 9.0)))
-    ax = fig.add_subplot()
-    if foot is not None:
-        fp = ground_footprint(run.camera, run.plane, MAX_RANGE)
-        if len(fp) >= 3:
-            ax.fill(fp[:, 0], fp[:, 1], color=(0.85, 0.9, 1.0), zorder=0, label="camera field of view")
-        ax.plot(foot[0], foot[1], "^", color="navy", ms=9, zorder=3)
-        ax.annotate(run.camera.name, (foot[0], foot[1]), textcoords="offset points", xytext=(5, 5), color="navy")
-    for k, (obj, (frames, xy)) in enumerate(truth.items()):
-        for j, (_, seg) in enumerate(_split_gaps(frames, xy)):
-            ax.plot(seg[:, 0], seg[:, 1], "--", color="0.25", lw=1.3, label="ground truth" if k == j == 0 else None)
-        ax.annotate(f"gt {obj}", xy[-1], textcoords="offset points", xytext=(3, -10), color="0.25", fontsize=7)
-    for obj, (rows, xy) in tracks.items():
-        c = _rgb01(id_bgr(obj))
-        cls = str(run.tracks["class"][rows[0]]) if "class" in run.tracks else ""
-        for j, (_, seg) in enumerate(_split_gaps(run.tracks["frame"][rows], xy)):
-            ax.plot(seg[:, 0], seg[:, 1], "-", color=c, lw=2, label=f"{obj} {cls}" if j == 0 else None)
-        ax.plot(xy[0, 0], xy[0, 1], "o", color=c, ms=4)
-        ax.plot(xy[-1, 0], xy[-1, 1], "s", color=c, ms=4)
-        ax.annotate(str(obj), xy[-1], textcoords="offset points", xytext=(3, 3), color=c, fontsize=8)
-    ax.set_xlim(lo[0], hi[0])
-    ax.set_ylim(lo[1], hi[1])
-    ax.set_xlabel("ground x (m)")
-    ax.set_ylabel("ground y (m)")
-    ax.set_aspect("equal", adjustable="box")
-    ax.grid(True, alpha=0.3)
-    handles, labels = ax.get_legend_handles_labels()
-    if len(labels) > 14:
-        keep = [i for i, lab in enumerate(labels) if lab in ("ground truth", "camera field of view")]
-        handles, labels = [handles[i] for i in keep], [labels[i] for i in keep]
-    if labels:
-        ax.legend(handles, labels, loc="best", fontsize=7, ncol=2)
-    plots._save(fig, path)
-
-
-def objects_plot(run: TemplateRun, path: Path) -> None:
-    """Write the number of objects, existence and speed vs frame."""
-    frames = np.arange(run.n_frames)
-    fig = plots._figure(8.0, 7.0)
-    ax1, ax2, ax3 = fig.subplots(3, 1, sharex=True)
-
-    def count(table: dict[str, np.ndarray] | None) -> np.ndarray | None:
-        if table is None or "frame" not in table:
-            return None
-        f = np.asarray(table["frame"], dtype=np.int64)
-        f = f[(f >= 0) & (f < run.n_frames)]
-        return np.bincount(f, minlength=run.n_frames)
-
-    for table, style, label in ((run.tracks, "-", "tracked"), (run.best, ":", "best particle")):
-        n = count(table)
-        if n is not None:
-            ax1.step(frames, n, style, where="mid", lw=1.8 if style == "-" else 1.2, label=label)
-    n = count(run.truth)
-    if n is not None:
-        ax1.step(frames, n, "--", where="mid", color="0.25", lw=1.3, label="ground truth")
-    ax1.set_ylabel("objects")
-    ax1.set_ylim(bottom=0)
-    ax1.legend(fontsize=8)
-    for obj, rows in _per_id(run.tracks).items():
-        c = _rgb01(id_bgr(obj))
-        for f, r in _split_gaps(run.tracks["frame"][rows], rows):
-            if "existence" in run.tracks:
-                ax2.plot(f, run.tracks["existence"][r], "-", color=c, lw=1.3)
-            if "speed" in run.tracks:
-                ax3.plot(f, run.tracks["speed"][r], "-", color=c, lw=1.3)
-    min_exist = (run.data.config.get("tracker") or {}).get("min_existence")
-    if isinstance(min_exist, (int, float)):
-        ax2.axhline(min_exist, color="gray", ls="--", lw=1, label=f"min_existence {min_exist:g}")
-        ax2.legend(fontsize=8)
-    ax2.set_ylabel("existence")
-    ax2.set_ylim(0, 1.05)
-    if run.truth is not None:
-        labelled = False
-        for rows in _per_id(run.truth).values():
-            f = np.asarray(run.truth["frame"][rows], dtype=np.int64)
-            xy = _ground_xy(run, run.truth, rows)
-            if len(f) < 2:
-                continue
-            for fs, seg in _split_gaps(f, xy):
-                if len(fs) >= 2:
-                    v = np.linalg.norm(np.diff(seg, axis=0), axis=1) * run.fps / np.diff(fs)
-                    ax3.plot(fs[1:], v, "--", color="0.35", lw=0.9, label=None if labelled else "ground truth")
-                    labelled = True
-        if labelled:
-            ax3.legend(fontsize=8)
-    ax3.set_ylabel("speed (m/s)")
-    ax3.set_ylim(bottom=0)
-    ax3.set_xlabel("frame")
-    for ax in (ax1, ax2, ax3):
-        ax.grid(True, alpha=0.3)
-    plots._save(fig, path)
-
-
-def _fmt_px(value: Any) -> str:
-    return f"{value:.0f} px" if isinstance(value, (int, float)) else "-"
-
-
-def section_tracks(ctx: ReportContext) -> Section | None:
-    """Bird's-eye view of the tracks and the per-frame plots."""
-    data = ctx.data
-    if data is None:
-        return None
-    run = template_run(ctx)
-    sec = Section(
-        "tracks",
-        "Tracks on the ground plane",
-        text=(
-            "Left: every track seen from above in ground-plane coordinates, in its id colour (circle: first frame, "
-            "square: last), the ground truth dashed and the ground the camera sees (blue). Right: objects per frame "
-            "(tracked, the best particle's, ground truth), each object's existence probability and speed."
-        ),
-    )
-    classes = {}
-    if "class" in run.tracks:
-        for obj, rows in _per_id(run.tracks).items():
-            classes[obj] = str(run.tracks["class"][rows[0]])
-    summary = data.run.get("summary") if isinstance(data.run.get("summary"), dict) else {}
-    sec.table = [
-        ("frames", str(run.n_frames)),
-        ("objects tracked", f"{len(run.ids)}: " + ", ".join(f"{i} {classes.get(i, '')}".strip() for i in run.ids)),
-        ("mean XOR penalty of the best particle", _fmt_px(summary.get("mean_penalty"))),
-    ]
-    if run.truth is not None:
-        sec.table.append(("ground-truth objects", str(len(np.unique(run.truth["id"])))))
-    with ctx.timed("plots"):
-        path = ctx.out_dir / "birdseye.png"
-        birdseye_tracks_plot(run, path)
-        sec.figures.append(Figure(path.name, "Tracks on the ground plane, seen from above"))
-        path = ctx.out_dir / "objects_vs_frame.png"
-        objects_plot(run, path)
-        sec.figures.append(Figure(path.name, "Objects, existence and speed vs frame"))
-    return sec
-
-
-# --------------------------------------------------------------------------------------- 3D
-
-
-def _plane_matrix(plane: Any) -> np.ndarray:
-    """4x4 transform from ground-plane coordinates (x, y, height) to world coordinates."""
-    m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = plane.x_axis, plane.y_axis, plane.normal, plane.origin
-    return m
-
-
-def template_mesh(pv: Any, plane: Any, obj: TemplateObject) -> Any:
-    """A PyVista mesh of an object's template in world coordinates: leg and torso cylinders + a head sphere (human)
-    or two boxes (vehicle), smooth shapes close to the tracker's polyhedra."""
-    gx, gy = (float(v) for v in obj.ground)
-    if obj.cls == "human":
-        height, body_r, head_r = obj.dims
-        hip = HIP * height
-        top = max(height - SHOULDER * head_r, hip + 0.01)
-        parts = [
-            pv.Cylinder(
-                center=(gx, gy, hip / 2.0), direction=(0, 0, 1), radius=LEG_RATIO * body_r, height=hip, resolution=24
-            ),
-            pv.Cylinder(
-                center=(gx, gy, (hip + top) / 2.0), direction=(0, 0, 1), radius=body_r, height=top - hip, resolution=24
-            ),
-            pv.Sphere(radius=head_r, center=(gx, gy, height - head_r), theta_resolution=16, phi_resolution=12),
-        ]
-    else:
-        length, width, height = obj.dims
-        parts = []
-        for ln, wd, z0, z1 in (
-            (length, width, 0.0, LOWER * height),
-            (CABIN_LENGTH * length, CABIN_WIDTH * width, LOWER * height, height),
-        ):
-            box = pv.Cube(center=(0.0, 0.0, 0.5 * (z0 + z1)), x_length=ln, y_length=wd, z_length=z1 - z0)
-            box = box.rotate_z(math.degrees(obj.heading), inplace=False)
-            parts.append(box.translate((gx, gy, 0.0), inplace=False))
-    mesh = parts[0].merge(parts[1:]) if len(parts) > 1 else parts[0]
-    return mesh.transform(_plane_matrix(plane), inplace=False)
-
-
-def _add_footprint(plotter: Any, pv: Any, run: TemplateRun, max_range: float) -> None:
-    """The ground the camera sees (:func:`ground_footprint`) as an outline on the ground, and the rays of the image
-    corners from the camera centre down to it, in the frustum colour."""
-    per_edge = 32
-    fp = ground_footprint(run.camera, run.plane, max_range, per_edge=per_edge)
-    if len(fp) < 3:
-        return
-    ring = run.plane.to_world(np.vstack([fp, fp[:1]]), 0.02)
-    colour = scene3d._rgb(scene3d.FRUSTUM_RGB)
-    outline = scene3d._polyline(pv, ring)
-    if outline is not None:
-        plotter.add_mesh(outline, color=colour, line_width=2, lighting=False, render=False)
-    if len(fp) == 4 * per_edge:  # every border ray kept: the corners are every per_edge-th point
-        corners = ring[: 4 * per_edge : per_edge]
-        pts = np.vstack([run.camera.center, corners])
-        lines = np.array([[2, 0, k] for k in range(1, 5)], dtype=np.int64).ravel()
-        plotter.add_mesh(pv.PolyData(pts, lines=lines), color=colour, line_width=1, lighting=False, render=False)
-
-
-def _scene_frames(frames: Sequence[int]) -> list[int]:
-    """One or two frames for the 3D stills: the middle and the last chosen frame."""
-    if not frames:
-        return []
-    picks = {frames[len(frames) // 2], frames[-1]}
-    return sorted(picks)
-
-
-def section_scene3d(ctx: ReportContext) -> Section | None:
-    """3D stills: ground grid, camera frustum, trajectories and the templates at one or two frames."""
-    data = ctx.data
-    if data is None:
-        return None
-    run = template_run(ctx)
-    sec = Section(
-        "scene",
-        "3D scene",
-        text=(
-            "The camera frustum (blue) with the rays of the image corners down to the ground it sees (blue outline, "
-            "clipped to the region shown), the ground grid, every track on the ground in its id colour, the ground "
-            "truth (green) and the objects' templates at the frame shown (humans: body cylinder and head sphere; "
-            "vehicles: lower body and cabin). " + scene3d.SCALE_TEXT + "."
-        ),
-    )
-    with ctx.timed("3D stills"):
-        try:
-            sec.figures.extend(_render_scene3d(ctx, run))
-        except ConfigError as e:  # PyVista is not installed: the rest of the report stands without the 3D views
-            sec.notes.append(str(e))
-    return sec
-
-
-def _render_scene3d(ctx: ReportContext, run: TemplateRun) -> list[Figure]:
-    from wptrack.report.offscreen import import_pyvista, new_plotter, renderer_info
-
-    pv = import_pyvista()
-    data = run.data
-    geo = scene3d.scene_geometry(data, ctx.frames)
-    w, h = ctx.options.still_size
-    figs = []
-    lift = 0.03  # trajectories slightly above the grid
-    pl = new_plotter(w, h, multi_samples=4)
-    try:
-        ctx.renderer = renderer_info(pl)
-        if data.rig is not None:
-            scene3d.add_rig(pl, pv, data.rig, geo.frustum_depth)
-        if run.camera is not None:
-            _add_footprint(pl, pv, run, max_range=min(MAX_RANGE, 2.0 * geo.radius))
-        scene3d.add_axes_and_scale(pl, scene3d.add_ground(pl, pv, geo, data.rig))
-        if run.truth is not None:
-            for rows in _per_id(run.truth).values():
-                for _, seg in _split_gaps(run.truth["frame"][rows], _ground_xy(run, run.truth, rows)):
-                    line = scene3d._polyline(pv, run.plane.to_world(seg, lift))
-                    if line is not None:
-                        pl.add_mesh(line, color=scene3d._rgb(scene3d.TRUTH_RGB), line_width=2, lighting=False)
-        for obj, rows in _per_id(run.tracks).items():
-            for _, seg in _split_gaps(run.tracks["frame"][rows], _ground_xy(run, run.tracks, rows)):
-                line = scene3d._polyline(pv, run.plane.to_world(seg, lift))
-                if line is not None:
-                    pl.add_mesh(line, color=_rgb01(id_bgr(obj)), line_width=4, lighting=False)
-        scene3d.overview_view(pl, geo, data.rig)
-        title = pl.add_text("", position="upper_left", font_size=11, color="black")
-        for f in _scene_frames(ctx.frames):
-            dynamic = []
-            objs = run.objects_at(f)
-            for o in objs:
-                dynamic.append(
-                    pl.add_mesh(template_mesh(pv, run.plane, o), color=_rgb01(id_bgr(o.id)), smooth_shading=True)
-                )
-            if objs:
-                tops = np.array(
-                    [run.plane.to_world(o.ground, o.dims[2] if o.cls == "vehicle" else o.dims[0]) for o in objs]
-                )
-                dynamic.append(
-                    pl.add_point_labels(
-                        tops + 0.3 * np.asarray(run.plane.normal),
-                        [f"{o.id} {o.cls}" for o in objs],
-                        font_size=12,
-                        text_color="black",
-                        shape=None,
-                        show_points=False,
-                        always_visible=True,
-                    )
-                )
-            scene3d._set_text(title, f"frame {f}: {len(objs)} objects")
-            path = ctx.out_dir / f"scene_frame{f:05d}.png"
-            pl.renderer.ResetCameraClippingRange()
-            scene3d.shot(pl, path)
-            figs.append(Figure(path.name, f"Frame {f}: templates, tracks and the camera"))
-            for a in dynamic:
-                pl.remove_actor(a, render=False)
-    finally:
-        pl.close()
-    return figs
-
-
-# --------------------------------------------------------------------------------------- movie
 
 
 def _movie_frames(run: TemplateRun, limit: int) -> list[int]:

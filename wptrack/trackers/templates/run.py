@@ -34,6 +34,7 @@ from wptrack.core.errors import ConfigError
 from wptrack.io.tables import CsvAppender
 from wptrack.motion.flood import FloodGuard
 from wptrack.runs.loop import TrackerRun, run_tracker
+from wptrack.trackers.templates.config import CLASSES
 
 log = logging.getLogger(__name__)
 
@@ -374,7 +375,7 @@ class TemplateRun(TrackerRun):
             "frames": self.tracker.frames_done,
             "device": self.tracker.device,
             "objects": len(seen),
-            "classes": {c: sum(1 for v in seen.values() if v == c) for c in ("human", "vehicle")},
+            "classes": {c: sum(1 for v in seen.values() if v == c) for c in CLASSES},
             "mean_penalty": self._penalty_sum / self._penalty_frames if self._penalty_frames else None,
             "degenerate_frames": self._degenerate,
             "flooded_frames": len(self._flood.flooded) if self._flood is not None else None,

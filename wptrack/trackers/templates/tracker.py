@@ -18,489 +18,89 @@ particles that hold it, and labels survive resampling. Objects are reported when
 weight of the particles holding them) is at least ``min_existence`` and at least ``min_in_image`` of their image
 bounding box is inside the image.
 
+This module is the driver (the device state and the frame chain); its parts live beside it: the launches shared with
+the benchmark and the tests (:mod:`~wptrack.trackers.templates.launches`), the addition candidates, UOH and the
+choice of new objects (:mod:`~wptrack.trackers.templates.additions`), the memory check made before allocation
+(:mod:`~wptrack.trackers.templates.memory`) and the host side of a frame's estimate
+(:mod:`~wptrack.trackers.templates.readout`). Their names are re-exported here.
+
 Units: metres, seconds, radians on the ground plane (its own 2D frame, see ``wptrack.cameras.rig.GroundPlane``); pixels
 in the image.
 """
 
 from __future__ import annotations
 
-import functools
 import logging
 import math
 import time
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 import warp as wp
 
-from wptrack.cameras.rig import Camera, GroundPlane, Rig
+from wptrack.cameras.rig import Rig
 from wptrack.cameras.structs import camera_struct
 from wptrack.core.device import CpuSplit, block_partition, cpu_split_threads
-from wptrack.core.errors import ConfigError, RigError
+from wptrack.core.errors import ConfigError
 from wptrack.core.filter import BLOCK, MAX_BLOCKS, FrameChain, _seed_words
-from wptrack.core.memory import check_fits
-from wptrack.core.resampling import Resampler, bytes_per_particle, quantisation_bits
+from wptrack.core.resampling import Resampler, quantisation_bits
 from wptrack.io.frames import camera_frame
 from wptrack.kernels.core import reduce as kreduce
 from wptrack.kernels.core import resample as kres
-from wptrack.kernels.templates import classify as kcls
 from wptrack.kernels.templates import dynamics as kdyn
 from wptrack.kernels.templates import occlusion as kocc
 from wptrack.kernels.templates import partition as kpart
 from wptrack.kernels.templates import raster as kraster
 from wptrack.kernels.templates import slots as kslots
-from wptrack.kernels.templates import uoh as kuoh
 from wptrack.kernels.templates import xor as kxor
-from wptrack.trackers.templates.config import (  # noqa: F401  (HumanPrior, VehiclePrior: the tracker's public API)
+from wptrack.trackers.templates.additions import (  # noqa: F401  (Candidates, ground_rays: tests and reports)
+    CANDIDATE_BLOCK,
+    Candidates,
+    choose_additions,
+    ground_rays,
+    score_candidates,
+)
+from wptrack.trackers.templates.config import (  # noqa: F401  (HumanPrior, VehiclePrior, CyclistPrior: the public API)
     CLASSES,
+    CyclistPrior,
     HumanPrior,
     TemplateConfig,
     TemplateEstimate,
     TrackedObject,
     VehiclePrior,
 )
+from wptrack.trackers.templates.launches import (  # noqa: F401  (the launches' helpers: bench, tests)
+    ROW_BLOCK,
+    SCORE_BLOCK,
+    SINGLE_MAX,
+    SINGLE_MAX_BLOCK,
+    Hulls,
+    _dynamics_struct,
+    _new_state,
+    _no_groups,
+    _plane_struct,
+    empty_slot_acc,
+    launch_argmax,
+    launch_mask_rows,
+    launch_xor_score,
+    piece_cap,
+    xor_band,
+)
+from wptrack.trackers.templates.memory import (  # noqa: F401  (byte counts: tests, bench)
+    PARTICLE_BYTES,
+    PARTITION_SLOT_BYTES,
+    SLOT_STATE_BYTES,
+    check_template_fits,
+    particle_bytes,
+)
+from wptrack.trackers.templates.readout import (  # noqa: F401  (the in-image test: run, reports, MOT files)
+    box_fraction_in_image,
+    estimate_from_host,
+    image_box_fraction,
+    object_box_corners,
+)
 
 log = logging.getLogger(__name__)
-
-SCORE_BLOCK = 64
-"""Threads per particle in the XOR scoring kernel of the CPU backend (``kernels.templates.xor.xor_score_kernel``; they
-stride over the particle's image rows; a CPU block has one thread)."""
-
-
-def xor_band(particles: int, height: int, groups: int = 0) -> int:
-    """Image rows per thread of the XOR sums on CUDA (``kernels.templates.xor.xor_band_kernel``: a thread per band and
-    particle, and per group with ``groups`` > 0, the partitioned filter's R rows of group sums).
-
-    Joint launch: 2 rows up to 3,000 particles, 8 below 30,000, 64 from there; grouped launch: 4, 16 and 64 (each of
-    its threads walks one group's pieces only, so its bands are taller for the same work per thread). Measured on an
-    H100 (bench scene, 1e3 / 1e4 / 1e5 particles x 5 and 10 objects, bands of 2 to 64 rows: BENCHMARKS.md, issue 13,
-    round seven). Doubled while the launch would exceed 2^31 - 1 threads (``height`` image rows)."""
-    small, mid = (4, 16) if groups > 0 else (2, 8)
-    band = small if particles <= 3000 else mid if particles < 30_000 else 64
-    while -(-height // band) * particles * max(groups, 1) > 2**31 - 1:
-        band *= 2
-    return band
-
-
-SINGLE_MAX = 4096
-"""Up to this many values an argmax runs in one block of :data:`SINGLE_MAX_BLOCK` threads (``kernels.core.reduce.
-single_max_kernel``), beyond in blocks and a combining block (``block_max_kernel``, ``final_max_kernel``)."""
-SINGLE_MAX_BLOCK = 1024
-ROW_BLOCK = 128
-"""Threads per image row in the row-scan kernels (mask prefix sums, coverage/UOH/gain rows): each owns a segment of
-ceil(W / ROW_BLOCK) pixels."""
-CANDIDATE_BLOCK = 32
-"""Threads per addition candidate in the candidate scoring kernel (they stride over the candidate's rows)."""
-
-
-def ground_rays(camera: Camera, plane: GroundPlane, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Intersect the viewing rays of ``pixels`` (K, 2) with the ground plane (distortion included).
-
-    Returns:
-        ``(ground, distance)``: (K, 2) ground coordinates (metres) and (K,) distance from the camera centre along
-        the ray (metres; ``inf`` where the ray misses the plane or hits it behind the camera).
-    """
-    rays = camera.pixel_rays(pixels)
-    centre = camera.center
-    denom = rays @ plane.normal
-    with np.errstate(divide="ignore", invalid="ignore"):
-        lam = ((plane.origin - centre) @ plane.normal) / denom
-    ok = np.isfinite(lam) & (lam > 0) & (np.abs(denom) > 1e-9)
-    dist = np.where(ok, lam, np.inf)
-    points = centre + np.where(ok, lam, 0.0)[:, None] * rays
-    return plane.to_ground(points), dist
-
-
-def _plane_struct(plane: GroundPlane) -> kraster.GroundPlane:
-    s = kraster.GroundPlane()
-    s.origin = wp.vec3(*plane.origin)
-    s.e1 = wp.vec3(*plane.x_axis)
-    s.e2 = wp.vec3(*plane.y_axis)
-    s.normal = wp.vec3(*plane.normal)
-    return s
-
-
-def _new_state(n: int, r: int, device: str) -> kdyn.TemplateState:
-    s = kdyn.TemplateState()
-    s.kind = wp.zeros((n, r), dtype=wp.int32, device=device)
-    s.label = wp.full((n, r), -1, dtype=wp.int32, device=device)
-    s.pos = wp.zeros((n, r), dtype=wp.vec2, device=device)
-    s.vel = wp.zeros((n, r), dtype=wp.vec2, device=device)
-    s.heading = wp.zeros((n, r), dtype=wp.float32, device=device)
-    s.dims = wp.zeros((n, r), dtype=wp.vec3, device=device)
-    s.age = wp.zeros((n, r), dtype=wp.float32, device=device)
-    s.logw = wp.zeros(n, dtype=wp.float32, device=device)
-    return s
-
-
-SLOT_STATE_BYTES = (
-    2 * (4 + 4 + 8 + 8 + 4 + 12 + 4) + int(kraster.PIECES) * (int(kraster.HULL_MAX) * 8 + 4 + 8 + 4) + 4  # + occlusion
-)
-"""Device bytes per object slot of a particle: two ping-pong state buffers and the piece hulls."""
-PARTICLE_BYTES = 2 * 4 + 4 + 4 + 4 + 8 + 8
-"""Device bytes per particle besides the slots: log-weights (2), penalty, complexity, ancestor, weight, XOR sums."""
-PARTITION_SLOT_BYTES = 8 + 4 + 4 + 8 + 8
-"""Device bytes per slot and particle of the partitioned filter (``TemplateConfig.partition``), besides the joint
-filter's: a weight (float64), an ancestor, a log-factor and an exact CDF entry (int64) per group (a group per slot at
-most), and the group sums (two int32)."""
-
-
-def particle_bytes(max_objects: int, scheme: str, partition: bool = False) -> int:
-    """Device memory per particle of the template tracker, bytes."""
-    extra = max_objects * PARTITION_SLOT_BYTES if partition else 0
-    return max_objects * SLOT_STATE_BYTES + PARTICLE_BYTES + extra + bytes_per_particle(scheme)  # float64 weights
-
-
-_BOX_CORNERS = np.array([[sx, sy, sz] for sx in (-0.5, 0.5) for sy in (-0.5, 0.5) for sz in (0.0, 1.0)])
-
-
-def image_box_fraction(camera: Camera, plane: GroundPlane, objects: list[TrackedObject]) -> np.ndarray:
-    """Fraction of each object's image bounding box that lies inside the image (``TemplateConfig.min_in_image``).
-
-    The image bounding box is the box around the 8 projected corners of the object's 3D bounding box (``size``:
-    length x width x height, metres, turned by its heading, standing on the ground plane), lens distortion included.
-    An object with a corner behind the camera counts as outside (0).
-
-    Args:
-        camera: The tracker's ``wptrack.cameras.rig.Camera`` (its ``width`` x ``height`` pixels is the image).
-        plane: The ``wptrack.cameras.rig.GroundPlane``.
-        objects: ``TrackedObject`` s.
-
-    Returns:
-        (len(objects),) fractions in [0, 1].
-    """
-    if not objects:
-        return np.zeros(0)
-    return box_fraction_in_image(
-        camera,
-        plane,
-        np.array([o.ground for o in objects], dtype=np.float64),
-        np.array([o.size for o in objects], dtype=np.float64),
-        np.array([o.heading for o in objects], dtype=np.float64),
-    )
-
-
-def box_fraction_in_image(
-    camera: Camera, plane: GroundPlane, ground: np.ndarray, size: np.ndarray, heading: np.ndarray
-) -> np.ndarray:
-    """:func:`image_box_fraction` of objects given as arrays.
-
-    Args:
-        camera: The camera (its ``width`` x ``height`` pixels is the image).
-        plane: The ground plane.
-        ground: (n, 2) ground-plane positions of the objects' footprint centres, metres.
-        size: (n, 3) length, width, height, metres.
-        heading: (n,) headings on the ground plane, radians.
-
-    Returns:
-        (n,) fractions in [0, 1].
-    """
-    ground = np.asarray(ground, dtype=np.float64).reshape(-1, 2)
-    if len(ground) == 0:
-        return np.zeros(0)
-    ok, area, inside = camera.image_box_cover(object_box_corners(plane, ground, size, heading))
-    return np.where(ok, inside / area, 0.0)
-
-
-def object_box_corners(plane: GroundPlane, ground: np.ndarray, size: np.ndarray, heading: np.ndarray) -> np.ndarray:
-    """The 8 world corners of each object's 3D box (the box whose image is the object's image box).
-
-    Args:
-        plane: The ground plane.
-        ground: (n, 2) ground-plane positions of the footprint centres, metres.
-        size: (n, 3) length, width, height, metres.
-        heading: (n,) headings on the ground plane, radians.
-
-    Returns:
-        (n, 8, 3) world points, metres.
-    """
-    ground = np.asarray(ground, dtype=np.float64).reshape(-1, 2)
-    size = np.asarray(size, dtype=np.float64).reshape(-1, 3)
-    heading = np.asarray(heading, dtype=np.float64).reshape(-1)
-    c = np.cos(heading)[:, None]
-    s = np.sin(heading)[:, None]
-    local = _BOX_CORNERS[None] * size[:, None, :]  # (n, 8, 3)
-    gx = ground[:, :1] + c * local[..., 0] - s * local[..., 1]
-    gy = ground[:, 1:] + s * local[..., 0] + c * local[..., 1]
-    return plane.to_world(np.stack([gx, gy], axis=-1), local[..., 2])
-
-
-class Hulls:
-    """Projected template pieces of a set of one- or multi-slot scenes (device arrays; see
-    ``kernels.templates.raster``)."""
-
-    def __init__(self, n: int, slots: int, device: str, particle_fastest: bool = False) -> None:
-        """``pts`` (n, slots * PIECES, HULL_MAX), ``n``, ``rows`` and ``depth`` (n, slots * PIECES). With
-        ``particle_fastest`` the arrays are views whose storage has the particle index fastest (the same indices,
-        other strides): threads on neighbouring particles at the same piece and vertex then read neighbouring
-        addresses (``kernels.templates.xor.xor_band_kernel`` on CUDA: the loads coalesce)."""
-        q = slots * int(kraster.PIECES)
-        h = int(kraster.HULL_MAX)
-        self._views: dict[tuple[int, ...], list[list[wp.array]]] = {}  # per state buffer and split: views per range
-        if particle_fastest:  # transposed views (each keeps its storage alive): checkpoints see the same names
-            pts = wp.zeros((q, h, n), dtype=wp.vec2, device=device)
-            cnt = wp.zeros((q, n), dtype=wp.int32, device=device)
-            rows = wp.zeros((q, n), dtype=wp.vec2i, device=device)
-            depth = wp.zeros((q, n), dtype=wp.float32, device=device)
-            self.pts = pts.transpose((2, 0, 1))
-            self.n = cnt.transpose((1, 0))
-            self.rows = rows.transpose((1, 0))
-            self.depth = depth.transpose((1, 0))
-            return
-        self.pts = wp.zeros((n, q, h), dtype=wp.vec2, device=device)
-        self.n = wp.zeros((n, q), dtype=wp.int32, device=device)
-        self.rows = wp.zeros((n, q), dtype=wp.vec2i, device=device)
-        self.depth = wp.zeros((n, q), dtype=wp.float32, device=device)
-
-    def launch(self, cam, plane, kind, pos, heading, dims, device: str, split: CpuSplit | None = None) -> None:
-        """Project every piece of every particle; with ``split`` (CPU backend) the particles' ranges in threads of
-        their own, on views of the arrays (the same values: a particle's hulls depend on its own state alone)."""
-        if split is None or len(split) == 1:
-            wp.launch(
-                kraster.template_hulls_kernel,
-                dim=(kind.shape[0], kind.shape[1] * int(kraster.PIECES)),
-                inputs=[cam, plane, kind, pos, heading, dims],
-                outputs=[self.pts, self.n, self.rows, self.depth],
-                device=device,
-            )
-            return
-        key = (kind.ptr, pos.ptr, heading.ptr, dims.ptr, *(b for r in split.ranges for b in r))
-        views = self._views.get(key)
-        if views is None:  # array views per range, made once per state buffer
-            arrays = (kind, pos, heading, dims, self.pts, self.n, self.rows, self.depth)
-            views = self._views[key] = [[a[lo:hi] for a in arrays] for lo, hi in split.ranges]
-
-        def run(k: int, lo: int, hi: int) -> None:
-            v = views[k]
-            wp.launch(
-                kraster.template_hulls_kernel,
-                dim=(hi - lo, kind.shape[1] * int(kraster.PIECES)),
-                inputs=[cam, plane, *v[:4]],
-                outputs=v[4:],
-                device=device,
-            )
-
-        split(run)
-
-
-class Candidates:
-    """The fixed set of addition candidates (eq. 11): ground points under an image grid x class x orientation,
-    at the prior's mean size, with their image spans precomputed on the device."""
-
-    @staticmethod
-    def _grid(camera: Camera, plane: GroundPlane, step: int, margin: int, max_range: float) -> np.ndarray:
-        """(K, 2) ground points (metres) under the pixel grid of pitch ``step`` over the image widened by ``margin``
-        pixels left, right and below (the rays of pixels beyond the border: objects entering the view), within
-        ``max_range`` of the camera."""
-        us = np.arange(step / 2.0 - margin, camera.width + margin, step)
-        vs = np.arange(step / 2.0, camera.height + margin, step)
-        grid = np.stack(np.meshgrid(us, vs), axis=-1).reshape(-1, 2)
-        ground, dist = ground_rays(camera, plane, grid)
-        return ground[dist <= max_range]
-
-    def __init__(self, camera: Camera, plane: GroundPlane, cam_struct, plane_struct, config: TemplateConfig, device):
-        step = int(config.candidate_step_px)
-        ground = self._grid(camera, plane, step, 0, config.max_range)
-        if len(ground) == 0:
-            raise RigError(
-                f"camera '{camera.name}' does not see the ground plane (origin {plane.origin.tolist()}, normal "
-                f"{plane.normal.tolist()}) within {config.max_range} m: no image pixel's ray meets it in front of "
-                "the camera; check the rig's pose and its 'ground' entry"
-            )
-        grids = {0: ground}  # by margin beyond the border, pixels (the two classes' margins are often equal)
-        for margin in {int(config.human_entry_px), int(config.vehicle_entry_px)} - {0}:
-            grids[margin] = self._grid(camera, plane, step, margin, config.max_range)
-        ground_h, ground_v = grids[int(config.human_entry_px)], grids[int(config.vehicle_entry_px)]
-        kinds, pos, heading, dims = [], [], [], []
-        if "human" in config.classes:
-            kinds.append(np.full(len(ground_h), int(kraster.KIND_HUMAN)))
-            pos.append(ground_h)
-            heading.append(np.zeros(len(ground_h)))
-            dims.append(np.tile(config.human.dims_mean, (len(ground_h), 1)))
-        if "vehicle" in config.classes:
-            for k in range(config.vehicle.orientations):
-                kinds.append(np.full(len(ground_v), int(kraster.KIND_VEHICLE)))
-                pos.append(ground_v)
-                heading.append(np.full(len(ground_v), math.pi * k / config.vehicle.orientations))
-                dims.append(np.tile(config.vehicle.dims_mean, (len(ground_v), 1)))
-        self.kind_np = np.concatenate(kinds).astype(np.int32)
-        self.pos_np = np.concatenate(pos).astype(np.float32)
-        self.heading_np = np.concatenate(heading).astype(np.float32)
-        dims_np = np.concatenate(dims).astype(np.float32)
-        c = len(self.kind_np)
-        self.count = c
-        d = device
-        kind2 = wp.array(self.kind_np.reshape(c, 1), dtype=wp.int32, device=d)
-        pos2 = wp.array(self.pos_np.reshape(c, 1, 2), dtype=wp.vec2, device=d)
-        head2 = wp.array(self.heading_np.reshape(c, 1), dtype=wp.float32, device=d)
-        dims2 = wp.array(dims_np.reshape(c, 1, 3), dtype=wp.vec3, device=d)
-        self.hulls = Hulls(c, 1, d)
-        self.hulls.launch(cam_struct, plane_struct, kind2, pos2, head2, dims2, d)
-        rows = self.hulls.rows.numpy()
-        nverts = self.hulls.n.numpy()
-        lengths = np.where(nverts > 0, rows[..., 1] - rows[..., 0] + 1, 0).sum(axis=1)
-        offsets = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int32)
-        self.offsets = wp.array(offsets, dtype=wp.int32, device=d)
-        self.spans = wp.zeros(max(int(lengths.sum()), 1), dtype=wp.vec2i, device=d)
-        self.box = wp.zeros(c, dtype=wp.vec4i, device=d)
-        self.pixels = wp.zeros(c, dtype=wp.int32, device=d)
-        wp.launch(
-            kuoh.candidate_spans_kernel,
-            dim=c,
-            inputs=[self.hulls.pts, self.hulls.n, self.hulls.rows, self.offsets, int(kraster.PIECES), camera.width],
-            outputs=[self.spans, self.box, self.pixels],
-            device=d,
-        )
-        self.kind = wp.array(self.kind_np, dtype=wp.int32, device=d)
-        self.pos = wp.array(self.pos_np, dtype=wp.vec2, device=d)
-        self.heading = wp.array(self.heading_np, dtype=wp.float32, device=d)
-        self.score = wp.zeros(c, dtype=wp.float32, device=d)
-        self.area = wp.zeros(c, dtype=wp.int32, device=d)
-        self.blocks = min((c + BLOCK - 1) // BLOCK, MAX_BLOCKS)
-        self.chunk = (c + self.blocks - 1) // self.blocks
-        self.part_max = wp.zeros(self.blocks, dtype=wp.float32, device=d)
-        self.part_arg = wp.zeros(self.blocks, dtype=wp.int32, device=d)
-        self.est = wp.zeros(int(kreduce.EST_SIZE), dtype=wp.float64, device=d)
-        self.best = wp.zeros(1, dtype=wp.int32, device=d)
-        # class-aware addition (kernels.templates.classify): vehicle fits near a chosen human and their argmax
-        self.fit = wp.zeros(c, dtype=wp.float32, device=d)
-        self.fit_max = wp.zeros(self.blocks, dtype=wp.float32, device=d)
-        self.fit_arg = wp.zeros(self.blocks, dtype=wp.int32, device=d)
-        self.fit_est = wp.zeros(int(kreduce.EST_SIZE), dtype=wp.float64, device=d)
-        self.fit_best = wp.zeros(1, dtype=wp.int32, device=d)
-        self.bytes = int(lengths.sum()) * 8 + c * (int(kraster.PIECES) * (int(kraster.HULL_MAX) * 8 + 16) + 56)
-
-
-def _dynamics_struct(config: TemplateConfig) -> kdyn.Dynamics:
-    h, v = config.human, config.vehicle
-    s = kdyn.Dynamics()
-    s.dt = 1.0 / config.frame_rate
-    s.sigma_pos = config.sigma_pos
-    s.sigma_speed = wp.vec3(0.0, h.sigma_speed, v.sigma_speed)
-    s.sigma_turn = v.sigma_turn
-    s.sigma_dims_human = wp.vec3(*h.sigma_dims)
-    s.sigma_dims_vehicle = wp.vec3(*v.sigma_dims)
-    s.dims_mean_human = wp.vec3(*h.dims_mean)
-    s.dims_mean_vehicle = wp.vec3(*v.dims_mean)
-    s.dims_sd_human = wp.vec3(*h.dims_sd)
-    s.dims_sd_vehicle = wp.vec3(*v.dims_sd)
-    s.dims_min_human = wp.vec3(*h.dims_min)
-    s.dims_max_human = wp.vec3(*h.dims_max)
-    s.dims_min_vehicle = wp.vec3(*v.dims_min)
-    s.dims_max_vehicle = wp.vec3(*v.dims_max)
-    s.init_speed_sd = wp.vec3(0.0, h.init_speed_sd, v.init_speed_sd)
-    s.init_heading_sd = v.init_heading_sd
-    s.speed_max = wp.vec3(1.0, h.speed_max, v.speed_max)
-    s.turn_max = v.turn_max
-    s.t_add = config.t_add
-    s.t_del = config.t_del
-    s.occlusion_del = config.occlusion_del
-    s.unseen_del = config.unseen_del
-    s.dims_revert = config.dims_revert
-    s.absorb = 1 if config.absorb else 0
-    s.occlusion_noise = config.occlusion_noise
-    return s
-
-
-def launch_mask_rows(q: wp.array, qrow: wp.array, qtotal: wp.array, device: str, block_dim: int = ROW_BLOCK) -> None:
-    """Row prefix sums ``qrow`` (H, W+1) and ``qtotal`` = |q| of the motion mask ``q`` (H, W): one block per row,
-    then one block over the row totals (``kernels.templates.xor``)."""
-    h = q.shape[0]
-    wp.launch_tiled(kxor.mask_rows_kernel, dim=[h], inputs=[q], outputs=[qrow], block_dim=block_dim, device=device)
-    wp.launch_tiled(
-        kxor.mask_total_kernel, dim=[1], inputs=[qrow], outputs=[qtotal], block_dim=block_dim, device=device
-    )
-
-
-def empty_slot_acc(slots: int, device: str) -> wp.array:
-    """The (R, 5) int32 box maxima of ``kernels.templates.partition.slot_box_kernel`` as it expects them: ``BOX_NONE``
-    in the four box columns, 0 in the alive column (``group_slots_kernel`` leaves them so after reading)."""
-    acc = np.zeros((slots, 5), np.int32)
-    acc[:, :4] = int(kpart.BOX_NONE)
-    return wp.array(acc, dtype=wp.int32, device=device)
-
-
-def piece_cap(pieces: int) -> int:
-    """The piece count ``kernels.templates.xor.xor_band_kernel`` is compiled for: the smallest power of two >=
-    ``pieces`` (at least 2)."""
-    c = 2
-    while c < pieces:
-        c *= 2
-    return c
-
-
-@functools.cache
-def _no_groups(device: str) -> tuple[wp.array, wp.array, wp.array, wp.array]:
-    """``(group_box, n_groups, slot_group, group_sums)`` of no groups on ``device`` (the joint filter; allocated
-    once)."""
-    return (
-        wp.zeros(1, dtype=wp.vec4i, device=device),
-        wp.zeros(1, dtype=wp.int32, device=device),
-        wp.zeros(1, dtype=wp.int32, device=device),
-        wp.zeros((1, 1), dtype=wp.vec2i, device=device),
-    )
-
-
-def launch_xor_score(
-    hulls: Any,
-    kind: wp.array,
-    age: wp.array,
-    pos: wp.array,
-    heading: wp.array,
-    dims: wp.array,
-    qrow: wp.array,
-    qtotal: wp.array,
-    cost_a: wp.vec3,
-    cost_b: wp.vec3,
-    scale: float,
-    bg_weight: float,
-    exclusion: float,
-    sums: wp.array,
-    logw: wp.array,
-    penalty: wp.array,
-    complexity: wp.array,
-    cov_diff: wp.array,
-    device: str,
-    band: int = 0,
-    groups: tuple[wp.array, wp.array, wp.array, wp.array] | None = None,
-    finish: bool = True,
-) -> None:
-    """Eqs. 4-6 for every particle (``kernels.templates.xor``) and the coverage counts: with ``band`` > 0 a thread per
-    band of ``band`` rows and particle (``xor_band_kernel``, then ``xor_finish_kernel``; ``sums`` (N,) vec2i zeros, left
-    zeroed), else a block per particle (``xor_score_kernel``). The same outputs bit for bit either way.
-
-    ``groups`` = ``(group_box, n_groups, slot_group, group_sums)`` (``kernels.templates.partition``) also sums |v| and
-    |q AND v| per independent group into ``group_sums`` (N, R) vec2i (zeros; ``xor.group_logw_kernel`` reads and clears
-    them); the band kernel then runs a thread per (group, band, particle). ``finish`` False leaves the band path's
-    ``sums`` unfinished for ``xor.group_logw_kernel`` (its ``finish`` 1: the same outputs, one launch less)."""
-    n = kind.shape[0]
-    cost = [kind, age, pos, heading, dims, qtotal, cost_a, cost_b, scale, bg_weight, exclusion]
-    grouped = groups is not None
-    group_box, n_groups, slot_group, group_sums = groups if grouped else _no_groups(str(device))
-    if band > 0:
-        h = qrow.shape[0]
-        bands = (h + band - 1) // band
-        wp.launch(
-            kxor.xor_band_kernel(piece_cap(hulls.n.shape[1]), grouped),
-            dim=(group_sums.shape[1] if grouped else 1, bands, n),
-            inputs=[hulls.pts, hulls.n, hulls.rows, qrow, int(band), group_box, n_groups, slot_group],
-            outputs=[sums, cov_diff, group_sums],
-            device=device,
-        )
-        if finish:
-            wp.launch(
-                kxor.xor_finish_kernel, dim=n, inputs=[*cost, sums], outputs=[logw, penalty, complexity], device=device
-            )
-        return
-    wp.launch_tiled(
-        kxor.xor_score_kernel,
-        dim=[n],
-        inputs=[hulls.pts, hulls.n, hulls.rows, kind, age, pos, heading, dims, qrow, *cost[5:], group_box, n_groups],
-        outputs=[logw, penalty, complexity, cov_diff, group_sums],
-        block_dim=SCORE_BLOCK,
-        device=device,
-    )
 
 
 class TemplateTracker(FrameChain):
@@ -552,9 +152,7 @@ class TemplateTracker(FrameChain):
         h, w = self.height, self.width
         image_bytes = h * (w + 1) * (4 + 4 + 8) + (h + 1) * (w + 1) * 8 + h * w * (1 + 4 + 1)
         self.partition = bool(config.partition)
-        check_fits(
-            n, particle_bytes(r, config.resampling, self.partition), image_bytes, d, what="template tracker particles"
-        )
+        check_template_fits(n, r, config.resampling, self.partition, image_bytes, d)
         self.candidates = Candidates(self.camera, self.plane, self.cam, self.plane_struct, config, d)
         log.info(
             "template tracker: %d particles x %d slots, %d addition candidates, camera %s %dx%d on %s",
@@ -631,14 +229,21 @@ class TemplateTracker(FrameChain):
         ]
         self.slot_est = wp.zeros((r, int(kslots.NE)), dtype=wp.float64, device=d)
         self.slot_count = wp.zeros(r, dtype=wp.float64, device=d)
+        self.slot_open = wp.zeros(r, dtype=wp.float64, device=d)  # slot_count with the closed free slots held
         self.slot_label = wp.full(r, -1, dtype=wp.int32, device=d)
         self.slot_kind = wp.zeros(r, dtype=wp.int32, device=d)
         self.next_label = wp.zeros(1, dtype=wp.int32, device=d)
-        self.add = wp.full(2, -1, dtype=wp.int32, device=d)
+        self.add = wp.full(2 * int(config.additions), -1, dtype=wp.int32, device=d)
         self.best_state = wp.zeros((r, 11), dtype=wp.float32, device=d)
         self.resampler = Resampler(config.resampling, n, d)
-        self.cost_a = wp.vec3(0.0, config.human.cost_a, config.vehicle.cost_a)
-        self.cost_b = wp.vec3(0.0, config.human.cost_b, config.vehicle.cost_b)
+        # the pixel costs are given for an image of reference_area pixels and scale with this one's area
+        self.area_scale = float(w * h) / float(config.reference_area) if config.reference_area > 0 else 1.0
+        a = self.area_scale
+        hp, vp, cp = config.human, config.vehicle, config.cyclist
+        self.cost_a = wp.vec4(0.0, hp.cost_a * a, vp.cost_a * a, cp.cost_a * a)
+        self.cost_b = wp.vec4(0.0, hp.cost_b * a, vp.cost_b * a, cp.cost_b * a)
+        self.exclusion = float(config.exclusion) * a
+        self.min_area = max(1, int(round(config.min_candidate_area * a)))
         self.score_scale = float(config.scale) / float(w * h)
         pinned = self.is_cuda
         self.host = {
@@ -646,7 +251,7 @@ class TemplateTracker(FrameChain):
             "slot_label": wp.zeros(r, dtype=wp.int32, device="cpu", pinned=pinned),
             "slot_kind": wp.zeros(r, dtype=wp.int32, device="cpu", pinned=pinned),
             "best_state": wp.zeros((r, 11), dtype=wp.float32, device="cpu", pinned=pinned),
-            "add": wp.zeros(2, dtype=wp.int32, device="cpu", pinned=pinned),
+            "add": wp.zeros(2 * int(config.additions), dtype=wp.int32, device="cpu", pinned=pinned),
             "qtotal": wp.zeros(1, dtype=wp.int32, device="cpu", pinned=pinned),
             "est": wp.zeros(int(kreduce.EST_SIZE), dtype=wp.float64, device="cpu", pinned=pinned),
             "n_groups": wp.zeros(1, dtype=wp.int32, device="cpu", pinned=pinned),
@@ -745,7 +350,7 @@ class TemplateTracker(FrameChain):
         finish_here = not (self.partition and self.xor_band > 0)
         launch_xor_score(
             self.hulls, s.kind, s.age, s.pos, s.heading, s.dims, self.qrow, self.qtotal, self.cost_a, self.cost_b,
-            self.score_scale, float(cfg.bg_weight), float(cfg.exclusion), self.xor_sums, s.logw, self.penalty,
+            self.score_scale, float(cfg.bg_weight), self.exclusion, self.xor_sums, s.logw, self.penalty,
             self.complexity, self.cov_diff, self.device, band=self.xor_band,
             groups=(self.group_box, self.n_groups, self.slot_group, self.group_sums) if self.partition else None,
             finish=finish_here,
@@ -755,7 +360,7 @@ class TemplateTracker(FrameChain):
                 kxor.group_logw_kernel,
                 dim=[self.blocks],
                 inputs=[s.kind, s.age, s.pos, s.heading, s.dims, self.qtotal, self.cost_a, self.cost_b,
-                        self.score_scale, float(cfg.bg_weight), float(cfg.exclusion), self.slot_group, self.n_groups,
+                        self.score_scale, float(cfg.bg_weight), self.exclusion, self.slot_group, self.n_groups,
                         self.n, self.chunk, int(not finish_here), self.xor_sums],
                 outputs=[self.group_sums, self.glogw, self.part_gmax, s.logw, self.penalty, self.complexity],
                 block_dim=BLOCK,
@@ -763,111 +368,14 @@ class TemplateTracker(FrameChain):
             )  # fmt: skip
 
     def _uoh(self) -> None:
-        d = self.device
-        c = self.candidates
-        cfg = self.config
-        wp.launch_tiled(
-            kuoh.coverage_uoh_kernel,
-            dim=[self.height],
-            inputs=[self.q, self.n, float(cfg.add_beta)],
-            outputs=[self.cov_diff, self.uoh, self.gain_rows, self.a_sat],
-            block_dim=ROW_BLOCK,
-            device=d,
-        )
-        cols = 1 if self.is_cuda else self.width + 1  # a block per column; one pass in memory order on the CPU
-        wp.launch_tiled(
-            kuoh.uoh_box_sums_kernel,
-            dim=[(self.width + cols) // cols],
-            inputs=[cols, self.a_sat],
-            block_dim=ROW_BLOCK,
-            device=d,
-        )
-        wp.launch_tiled(
-            kuoh.candidate_score_kernel,
-            dim=[c.count],
-            inputs=[
-                c.hulls.rows,
-                c.hulls.n,
-                c.offsets,
-                c.spans,
-                c.box,
-                c.pixels,
-                int(kraster.PIECES),
-                self.gain_rows,
-                self.a_sat,
-                self.n,
-                float(cfg.add_beta),
-                float(cfg.add_min_gain),
-                int(cfg.min_candidate_area),
-            ],
-            outputs=[c.score, c.area],
-            block_dim=CANDIDATE_BLOCK,
-            device=d,
-        )
-        self._argmax(c.score, c.count, c.blocks, c.chunk, c.part_max, c.part_arg, c.est, c.best)
-        if self.min_fit < math.inf:
-            # beyond the paper: a vehicle that fits the blob replaces a chosen human (kernels.templates.classify; the
-            # replacement itself is made by uoh.choose_addition_kernel)
-            wp.launch_tiled(
-                kcls.vehicle_fit_kernel,
-                dim=[c.count],
-                inputs=[
-                    c.hulls.rows,
-                    c.hulls.n,
-                    c.offsets,
-                    c.spans,
-                    c.pixels,
-                    int(kraster.PIECES),
-                    c.kind,
-                    c.pos,
-                    c.heading,
-                    c.best,
-                    self.qrow,
-                    0.5 * float(cfg.vehicle.dims_mean[0]),
-                    int(cfg.min_candidate_area),
-                    wp.vec3(*cfg.vehicle.dims_mean),
-                    self.slot_est,
-                    self.slot_kind,
-                    float(cfg.min_existence),
-                ],
-                outputs=[c.fit],
-                block_dim=CANDIDATE_BLOCK,
-                device=d,
-            )
-            self._argmax(c.fit, c.count, c.blocks, c.chunk, c.fit_max, c.fit_arg, c.fit_est, c.fit_best)
-
-    def _argmax(self, values, n, blocks, chunk, part_max, part_arg, est, best) -> None:
-        if n <= SINGLE_MAX:  # one block over all values: one launch instead of two, the same result
-            wp.launch_tiled(
-                kreduce.single_max_kernel,
-                dim=[1],
-                inputs=[values, n],
-                outputs=[est, best],
-                block_dim=SINGLE_MAX_BLOCK,
-                device=self.device,
-            )
-            return
-        wp.launch_tiled(
-            kreduce.block_max_kernel,
-            dim=[blocks],
-            inputs=[values, n, chunk],
-            outputs=[part_max, part_arg],
-            block_dim=BLOCK,
-            device=self.device,
-        )
-        wp.launch_tiled(
-            kreduce.final_max_kernel,
-            dim=[1],
-            inputs=[part_max, part_arg, blocks],
-            outputs=[est, best],
-            block_dim=BLOCK,
-            device=self.device,
-        )
+        score_candidates(self)
 
     def _estimate(self, cur: int) -> None:
         d = self.device
         s = self.state[cur]
-        self._argmax(s.logw, self.n, self.blocks, self.chunk, self.part_max, self.part_arg, self.est, self.best_index)
+        launch_argmax(
+            s.logw, self.n, self.blocks, self.chunk, self.part_max, self.part_arg, self.est, self.best_index, d
+        )
         wp.launch_tiled(
             kslots.block_slot_moments_kernel,
             dim=[self.blocks, self.r],
@@ -915,23 +423,7 @@ class TemplateTracker(FrameChain):
     def _predict(self, cur: int, nxt: int) -> None:
         d = self.device
         c = self.candidates
-        wp.launch(
-            kuoh.choose_addition_kernel,
-            dim=1,
-            inputs=[
-                c.best,
-                c.est,
-                int(kreduce.EST_MAXLOGW),
-                c.kind,
-                self.slot_count,
-                self.r,
-                c.fit_best,
-                c.fit_est,
-                self.min_fit,
-            ],
-            outputs=[self.next_label, self.slot_label, self.slot_kind, self.add],
-            device=d,
-        )
+        choose_additions(self)  # eq. 12's o_new and the slots they go to
         if self.partition and self.config.resampling == "systematic":
             # each group of slots on its own factor (kernels.templates.partition), one launch; unused rows: the identity
             wp.launch_tiled(
@@ -1026,73 +518,8 @@ class TemplateTracker(FrameChain):
         self.frames_done += 1
         return est
 
-    def _object(self, label: int, kind: int, ground: np.ndarray, dims: np.ndarray, heading: float, speed: float):
-        return TrackedObject(
-            id=int(label),
-            cls=CLASSES[kind - 1],
-            position=self.plane.to_world(ground),
-            ground=np.array(ground, dtype=np.float64),  # copies: the host buffers are reused every frame
-            dims=np.array(dims, dtype=np.float64),
-            heading=float(heading),
-            speed=float(speed),
-        )
-
     def _estimate_from_host(self) -> TemplateEstimate:
-        h = self.host
-        se = h["slot_est"].numpy()
-        labels = h["slot_label"].numpy()
-        kinds = h["slot_kind"].numpy()
-        objects = []
-        for s in range(self.r):
-            exist = float(se[s, kslots.SE_EXIST])
-            if exist >= self.config.min_existence and se[s, kslots.SE_COUNT] > 0 and kinds[s] > 0:
-                o = self._object(
-                    labels[s],
-                    int(kinds[s]),
-                    se[s, kslots.SE_X : kslots.SE_X + 2],
-                    se[s, kslots.SE_DIMS : kslots.SE_DIMS + 3],
-                    se[s, kslots.SE_HEADING],
-                    se[s, kslots.SE_SPEED],
-                )
-                o.existence = exist
-                o.std = se[s, kslots.SE_STD : kslots.SE_STD + 2].copy()
-                o.age = float(se[s, kslots.SE_AGE])
-                objects.append(o)
-        for o, f in zip(objects, image_box_fraction(self.camera, self.plane, objects), strict=True):
-            o.in_image = float(f)
-        objects = [o for o in objects if o.in_image >= self.config.min_in_image]
-        objects.sort(key=lambda o: o.id)
-        bs = h["best_state"].numpy()
-        best = []
-        for s in range(self.r):
-            k = int(bs[s, 0])
-            if k > 0:
-                v = bs[s, 5:7]
-                speed = float(np.hypot(*v)) if k == 1 else abs(float(v[0]))
-                heading = float(bs[s, 4]) + (math.pi if k == 2 and v[0] < 0 else 0.0)
-                best.append(self._object(int(bs[s, 1]), k, bs[s, 2:4], bs[s, 7:10], heading, speed))
-        add = h["add"].numpy()
-        added = None
-        if add[0] >= 0:
-            added = (int(labels[add[0]]), CLASSES[int(kinds[add[0]]) - 1])
-        est = TemplateEstimate(
-            frame=self.frames_done,
-            objects=objects,
-            best=best,
-            penalty=int(bs[0, 10]),
-            foreground=int(h["qtotal"].numpy()[0]),
-            ess=float(se[0, kslots.SE_ESS]),
-            loglik=float(se[0, kslots.SE_LOGLIK]),
-            added=added,
-            # every log-weight -inf/NaN (floored in the score kernel): uniform weights, the predicted particles kept
-            degenerate=bool(h["est"].numpy()[kreduce.EST_MAXLOGW] <= float(kreduce.LOGW_FLOOR)),
-            groups=int(h["n_groups"].numpy()[0]) if self.partition else 1,
-        )
-        if self.keep_virtual:
-            est.virtual = h["virtual"].numpy().copy()
-        if self.keep_uoh:
-            est.uoh = h["uoh"].numpy().copy()
-        return est
+        return estimate_from_host(self)
 
     # --- diagnostics ---------------------------------------------------------------------------------------
     def render_virtual(self, particles: np.ndarray | None = None) -> np.ndarray:
