@@ -291,7 +291,7 @@ def test_missing_motmetrics_is_a_config_error(monkeypatch):
         evaluate(gt, gt)
 
 
-def test_ground_plane_table_without_z(tmp_path):
+def test_ground_plane_table_without_z(mm, tmp_path):
     """Ground-plane annotations (frame,id,x,y: the EPFL datasets) are scored like tables with z; a z column that is
     present is still checked."""
     path = _write_csv(tmp_path / "gt.csv", ["frame", "id", "x", "y"], [(0, 1, 0.0, 0.0), (1, 1, 0.1, 0.0)])

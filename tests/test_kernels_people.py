@@ -727,7 +727,8 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
         np.testing.assert_array_equal(fused[k].numpy(), sep[k].numpy(), err_msg=k)
     np.testing.assert_allclose(fused["logw"].numpy(), logw, rtol=1e-6, atol=1e-6)
     np.testing.assert_allclose(fused["part"].numpy(), sep["part"].numpy(), rtol=1e-6)
-    assert (fused["mass"].numpy() == 0).sum() >= 3 and (fused["mass"].numpy() > 0).sum() >= 200
+    # the data covers both cases: particles no camera sees (2 on CUDA, 3 on the CPU: rounding at the image border)
+    assert (fused["mass"].numpy() == 0).sum() >= 2 and (fused["mass"].numpy() > 0).sum() >= 200
 
     # the GPU chain of the tracker: predict -> descriptor (one block per particle) -> score + block moments
     gpu = {k: zeros(v.shape, v.dtype) for k, v in fused.items()}

@@ -109,8 +109,10 @@ def test_colour_jump_predict_score_matches_numpy(device, rng, case, resampled, k
         prior = kscoring.colour_predict_score_kernel
         pobs = [drig.cams, target.to_struct(device), bgr, integral, window, int(kscoring.SCORE_INTEGRAL)]
         px, plw, _ = launch_fused(prior, pobs, parents, anc, logw_prev, resampled, sigma, n, chunk, device)
-        np.testing.assert_allclose(x, px, rtol=0, atol=1e-6 if kernel == "map-set" else 0.0)
-        np.testing.assert_allclose(lw, plw, rtol=1e-5 if kernel == "map-set" else 0.0, atol=1e-5)
+        # CPU: bit for bit; CUDA compiles the two kernels' walks with their own fused multiply-adds (1 ulp)
+        exact = kernel != "map-set" and "cpu" in str(device)
+        np.testing.assert_allclose(x, px, rtol=0, atol=0.0 if exact else 1e-6)
+        np.testing.assert_allclose(lw, plw, rtol=0.0 if exact else 1e-5, atol=0.0 if exact else 1e-5)
     else:
         assert 0.2 * n < jumped.sum() < 0.4 * n
         assert len(np.unique(np.argmin(np.linalg.norm(x[jumped, None] - det_pos[None, :count], axis=2), 1))) == count

@@ -309,7 +309,13 @@ def test_mixture_scoring_modes_identical(device, frames, mode):
     """The detection reads the same counts in every scoring mode, so the mixture's estimates are identical too."""
     d = run(device, frames[:5], score_mode="direct")
     o = run(device, frames[:5], score_mode=mode)
+    exact = "cpu" in str(device)  # CUDA: each kernel's own fused multiply-adds, equal to float32 rounding
     for ed, eo in zip(d, o, strict=True):
-        np.testing.assert_array_equal(ed.mean, eo.mean)
-        assert (ed.ess, ed.detection, ed.jump) == (eo.ess, eo.detection, eo.jump)
+        if exact:
+            np.testing.assert_array_equal(ed.mean, eo.mean)
+            assert ed.ess == eo.ess
+        else:
+            np.testing.assert_allclose(ed.mean, eo.mean, rtol=0, atol=1e-6)
+            assert ed.ess == pytest.approx(eo.ess, rel=1e-4)
+        assert (ed.detection, ed.jump) == (eo.detection, eo.jump)
     assert d[0].jump and d[0].detection > 0

@@ -63,10 +63,16 @@ def test_scoring_modes_identical(device, frames, mode):
     td, d = run(device, frames[:8], score_mode="direct")
     ti, i = run(device, frames[:8], score_mode=mode)
     assert (td.score_mode, ti.score_mode) == ("direct", mode)
-    for ed, ei in zip(d, i, strict=True):
-        np.testing.assert_array_equal(ed.mean, ei.mean)
-        assert ed.ess == ei.ess
-    np.testing.assert_array_equal(td.particles.numpy(), ti.particles.numpy())
+    if "cpu" in str(device):
+        for ed, ei in zip(d, i, strict=True):
+            np.testing.assert_array_equal(ed.mean, ei.mean)
+            assert ed.ess == ei.ess
+        np.testing.assert_array_equal(td.particles.numpy(), ti.particles.numpy())
+    else:  # CUDA compiles each kernel's arithmetic its own way (fused multiply-adds): equal to float32 rounding
+        for ed, ei in zip(d, i, strict=True):
+            np.testing.assert_allclose(ed.mean, ei.mean, rtol=0, atol=1e-6)
+            assert ed.ess == pytest.approx(ei.ess, rel=1e-4)
+        np.testing.assert_allclose(td.particles.numpy(), ti.particles.numpy(), rtol=0, atol=1e-5)
 
 
 def test_auto_mode_follows_the_crossover(device):
