@@ -30,7 +30,7 @@ def test_crowd_counts_groups_and_gaps(crowds) -> None:
     """20-40 crowd people in the ground truth at once on average (the scene's own on top), singles, pairs and
     threes whose members walk 0.6-1.2 m apart, everybody else at least 0.7 m apart, nobody nearer than 0.45 m to the
     clutter; the scene's own objects keep their ground truth."""
-    from wptrack.synth import plaza_seeds as S
+    from wptrack.synth import plaza_rules as R
 
     all_sizes: set[int] = set()
     for (name, seed), scene in crowds.items():
@@ -65,7 +65,7 @@ def test_crowd_counts_groups_and_gaps(crowds) -> None:
                 near = np.min([np.linalg.norm(pos[a] - pos[b], axis=1) for b in members if b != a], axis=0)
                 assert near[act[a]].max() <= 1.2, (name, seed, a, near[act[a]].max())
         for a in range(own, len(scene.actors)):
-            assert S.clutter_distance(pos[a, act[a]]).min() >= S.CLUTTER_GAP - 1e-6
+            assert R.clutter_distance(pos[a, act[a]]).min() >= R.CLUTTER_GAP - 1e-6
     assert {1, 2, 3} <= all_sizes, all_sizes
 
 

@@ -15,6 +15,7 @@ from wptrack.io.frames import open_frames
 from wptrack.kernels.templates.raster import MAX_SLOTS
 from wptrack.synth import SCENES, plaza_cast, render_scene
 from wptrack.synth import plaza as P
+from wptrack.synth import plaza_rules as R
 from wptrack.synth import plaza_seeds as S
 from wptrack.synth.base import _groundtruth_csv
 from wptrack.trackers.templates.config import TemplateConfig, VehiclePrior
@@ -139,11 +140,11 @@ def _check_invariants(name: str, seed: int) -> None:
     for a in cars:
         assert 4.0 <= a.shape.length <= 4.8 and 1.7 <= a.shape.width <= 1.9 and 1.4 <= a.shape.height <= 1.6, where
 
-    st = scene.states(S.CHECK_FRAMES)
+    st = scene.states(R.CHECK_FRAMES)
     act = st.active
     present = st.present[:, :FRAMES]
     # every object in the ground truth long enough; at most R_max objects at once
-    assert present.sum(axis=1).min() >= S.MIN_PRESENT, (where, present.sum(axis=1))
+    assert present.sum(axis=1).min() >= R.MIN_PRESENT, (where, present.sum(axis=1))
     assert scene.max_objects() <= TemplateConfig().max_objects and scene.max_objects() + 3 <= int(MAX_SLOTS), where
     # speeds (m/s) where on the path
     for a, actor in enumerate(actors):
@@ -155,7 +156,7 @@ def _check_invariants(name: str, seed: int) -> None:
     for a, actor in enumerate(actors):
         pos = st.pos[a, act[a]]
         if isinstance(actor.shape, P.Person):
-            assert S.clutter_distance(pos).min() >= 0.45, (where, actor.oid)
+            assert R.clutter_distance(pos).min() >= 0.45, (where, actor.oid)
         else:
             h = st.heading[a, act[a]]
             for sx, sy in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
@@ -194,7 +195,7 @@ def _check_invariants(name: str, seed: int) -> None:
     # the rules of the generator itself, appearing/vanishing in view included (seed 0 is the fixed sequence and
     # breaks three of them slightly: see plaza_seeds)
     if 1 <= seed <= 10:
-        assert S.layout_problems(list(actors)) == [], where
+        assert R.layout_problems(list(actors)) == [], where
 
 
 @pytest.mark.parametrize("name", S3)
@@ -230,7 +231,7 @@ def test_vehicle_prior_covers_the_cars_turns_and_speeds() -> None:
     for name in ("s3-cars", "s3-mixed"):
         for seed in range(51):
             scene = _scene(name, seed)
-            st = scene.states(S.CHECK_FRAMES)
+            st = scene.states(R.CHECK_FRAMES)
             for a, actor in enumerate(scene.actors):
                 if not isinstance(actor.shape, P.Car) or st.active[a].sum() < 2:
                     continue

@@ -35,6 +35,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from wptrack.synth import plaza as P
+from wptrack.synth import plaza_rules as R
 from wptrack.synth import plaza_seeds as S
 from wptrack.synth.actors import Car, Formation, Path, Person, PlazaActor, _pitch, _Prim, _Rgb, _yaw
 from wptrack.synth.conditions import (
@@ -192,22 +193,22 @@ def _has_cars(actors: Sequence[PlazaActor]) -> bool:
 
 
 def _tracks(actors: Sequence[PlazaActor]):
-    return [S._geo(a) for a in actors]
+    return [R._geo(a) for a in actors]
 
 
 def _clear(new: Sequence[PlazaActor], accepted: list) -> tuple[bool, list]:
     """Whether the actors ``new`` keep the plaza's rules with each other and with ``accepted`` (tracks of the actors
     taken so far): clutter, speeds, gaps; returns their tracks too."""
-    tracks = [S._geo(a) for a in new]
+    tracks = [R._geo(a) for a in new]
     for t in tracks:
         if isinstance(t.actor.shape, Cyclist):
             act = t.active
             sp = t.speed[act]
             if sp.size and (sp.min() < CYCLE_SPEEDS[0] - 0.3 or sp.max() > CYCLE_SPEEDS[1] + 0.3):
                 return False, tracks
-            if np.any(act) and S.clutter_distance(t.pos[act]).min() < S.CLUTTER_GAP + 0.3:
+            if np.any(act) and R.clutter_distance(t.pos[act]).min() < R.CLUTTER_GAP + 0.3:
                 return False, tracks
-        elif S._geo_problems(t):
+        elif R._geo_problems(t):
             return False, tracks
     for i, t in enumerate(tracks):
         for u in tracks[i + 1 :] + accepted:
@@ -219,29 +220,29 @@ def _clear(new: Sequence[PlazaActor], accepted: list) -> tuple[bool, list]:
 def _gap_problem(a, b) -> bool:
     """Too close while both are on their paths (cyclists count as people with 0.5 m more room)."""
     if not (isinstance(a.actor.shape, Cyclist) or isinstance(b.actor.shape, Cyclist)):
-        return bool(S._pair_problems(a, b))
+        return bool(R._pair_problems(a, b))
     both = a.active & b.active
     if not np.any(both):
         return False
     if isinstance(a.actor.shape, Car) or isinstance(b.actor.shape, Car):
         car, other = (a, b) if isinstance(a.actor.shape, Car) else (b, a)
-        gap = S._point_rect_distance(other.pos[both], car.pos[both], car.heading[both], car.actor.shape).min()
-        return bool(gap < S.PERSON_CAR_GAP)
-    return bool(np.linalg.norm(a.pos[both] - b.pos[both], axis=1).min() < S.PERSON_GAP + 0.5)
+        gap = R._point_rect_distance(other.pos[both], car.pos[both], car.heading[both], car.actor.shape).min()
+        return bool(gap < R.PERSON_CAR_GAP)
+    return bool(np.linalg.norm(a.pos[both] - b.pos[both], axis=1).min() < R.PERSON_GAP + 0.5)
 
 
 def _present_count(tracks: list) -> np.ndarray:
     """(FRAMES,) people of ``tracks`` seen by the camera per frame (the cheap stand-in of the ground truth)."""
     out = np.zeros(FRAMES)
     for t in tracks:
-        out += t.active[:FRAMES] & S._in_view(t.pos[:FRAMES])
+        out += t.active[:FRAMES] & R._in_view(t.pos[:FRAMES])
     return out
 
 
 def _street_path(rng: np.random.Generator, band: tuple[float, float], towards: float, speed: float) -> Path:
     """A walk along the street (x) inside ``band`` from beyond one side of the image to beyond the other."""
     ys = rng.uniform(*band, size=3)
-    xs = [float(S.view_half_width(y)) + float(rng.uniform(2.0, 3.5)) for y in (ys[0], ys[2])]
+    xs = [float(R.view_half_width(y)) + float(rng.uniform(2.0, 3.5)) for y in (ys[0], ys[2])]
     x0, x1 = -towards * xs[0], towards * xs[1]
     mid = float(rng.uniform(-0.3, 0.3)) * (x1 - x0) / 2
     pts = ((x0, float(ys[0])), (mid, float(ys[1])), (x1, float(ys[2])))
@@ -335,7 +336,7 @@ def add_cyclists(actors: Sequence[PlazaActor]) -> list[PlazaActor]:
             else:
                 band = ROAD_BANDS[0] if towards > 0 else ROAD_BANDS[1]
             ys = rng.uniform(*band, size=2)
-            xs = [float(S.view_half_width(y)) + float(rng.uniform(3.0, 5.0)) for y in ys]
+            xs = [float(R.view_half_width(y)) + float(rng.uniform(3.0, 5.0)) for y in ys]
             path = Path(((-towards * xs[0], float(ys[0])), (towards * xs[1], float(ys[1]))), speed, 0.0, smooth_m=4.0)
             path = _started(rng, path, 0.0)
             ok, tracks = _clear([PlazaActor(oid, shape, path)], accepted)
