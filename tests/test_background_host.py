@@ -188,10 +188,25 @@ def test_offline_evidence_matches_numpy_reference(device, rng):
         b1, m1 = (a.numpy().reshape(H, W, 3) for a in model._window(j))
         p = model.params
         nb = (1.0 - w) * model._nb_scale[i] + w * model._nb_scale[j]
+        # the local light field and patch statistics of this frame from the device (their kernels have their own
+        # references: tests/test_background_illumination.py); the per-frame tests given them
+        local = model._local.numpy().reshape(p.tiles_y, p.tiles_x, 3).astype(np.float64)
+        st = model._patch.numpy().reshape(H, W, 6).astype(np.float64)
+        veto = dict(
+            st=st,
+            texture=p.veto_texture,
+            veto_ncc=p.veto_ncc,
+            veto_grad=p.veto_grad,
+            resid=p.veto_resid,
+            illum_lo=p.illum_lo,
+            illum_hi=p.illum_hi,
+            illum_chroma=p.illum_chroma,
+            gap=p.gain_gap,
+        )
         ref = numpy_masks.foreground(
             video[t], b0, m0, b1, m1, w, p.threshold, p.soft_scale, p.noise_floor, bool(p.shadow), p.shadow_lo,
             p.shadow_hi, p.chroma_max, model.last_gain, p.low_threshold, p.spread_cap, p.shadow_edge_hi,
-            config.neighbourhood, nb,
+            config.neighbourhood, nb, field=numpy_masks.local_field(local, p.tile, H, W), veto=veto,
         )  # fmt: skip
         near = (np.abs(ref["z"] - p.threshold) < 1e-3) | (np.abs(ref["z"] - p.low_threshold) < 1e-3)
         assert np.all((mask.astype(bool) == ref["mask"]) | near)

@@ -23,7 +23,9 @@ from wptrack.masks import MaskConfig, open_masks
 H, W = 72, 96
 
 #: MaskConfig fields of the first offline model (before hysteresis, spread cap, learnt shadows, neighbourhoods).
-ROUND_ONE = dict(fg_low=0.0, spread_cap=0.0, shadow_band=0.0, neighbourhood=0)
+ROUND_ONE = dict(
+    fg_low=0.0, spread_cap=0.0, shadow_band=0.0, neighbourhood=0, illum_tiles=0, illum_veto=0.0, mode_band=0.0
+)
 
 
 def _texture(rng: np.random.Generator, lo: float = 60, hi: float = 200) -> np.ndarray:
@@ -96,7 +98,14 @@ def test_foreground_kernel_matches_numpy(device, rng, shadow, gain, low, cap, hi
     wp.launch(
         kbg.foreground_kernel,
         dim=n,
-        inputs=[*dev, w, wp.vec3(*gain), p],
+        inputs=[
+            *dev,
+            w,
+            wp.vec3(*gain),
+            p,
+            wp.zeros(1, dtype=wp.vec3, device=device),
+            wp.zeros(1, dtype=kbg.patch_vec, device=device),
+        ],
         outputs=[mask, prob, shad, diff],
         device=device,
     )
@@ -314,7 +323,8 @@ def test_sampler_seeks_read_the_sampled_frames(tmp_path, rng):
     path = tmp_path / "v.avi"
     write_video(path, video)
     decoded = np.stack(list(open_source(path)))
-    config = MaskConfig(window=frames, samples=5, device="cpu")  # samples 26 frames apart: seeks
+    # samples 26 frames apart: seeks; the plain median of the samples read (no local light field, no densest cluster)
+    config = MaskConfig(window=frames, samples=5, device="cpu", illum_tiles=0, mode_band=0.0)
     masks = open_masks(video=path, config=config)
     samples = masks.model.windows[0].samples
     assert min(np.diff(samples)) >= SEEK_GAP

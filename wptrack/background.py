@@ -38,6 +38,37 @@ Design (kernels and formulas: :mod:`wptrack.kernels.background`):
 * **Spread cap.** Each window also records the image-wide median of its per-pixel noise scales (on a pixel
   subsample); with ``MaskConfig.spread_cap`` the per-pixel scale is capped at that many times it, so an object
   standing in a large minority of a window's samples does not hide itself by inflating its pixels' MAD.
+* **Local illumination** (issue 26; ``MaskConfig.illum_*``). A cloud's shadow drifting over the ground, a light
+  switched on in part of the view, change the light of a region smoothly and coherently: the texture, the gradient
+  structure and the hue stay, scaled. Per frame (:meth:`OfflineBackground._illumination`, kernels
+  :func:`~wptrack.kernels.background.luma_kernel` to :func:`~wptrack.kernels.background.tile_smooth_kernel`):
+
+  - every pixel's ``(2 illum_patch + 1)^2`` patch of luminance (after the global gain) is compared with the
+    background's: normalised cross-correlation, gradient correlation, both patches' texture (standard deviation in
+    luminance noise scales) and the pixel's residual from the patch's linear fit;
+  - **local field** (``illum_tiles``): the image is cut into tiles (``illum_tiles`` along the shorter side, at least
+    4 px); a tile's gain per channel is the median ratio frame / background of its pixels whose patch is textured
+    and correlates (NCC >= ``illum_verify``) and that are no cast shadow by the learnt band (the votes: an object
+    that entered does not keep the background's texture, a flat patch cannot tell, a cast shadow is the shadow
+    test's); the tiles' gains are smoothed by a weighted median over ``illum_radius`` tiles (weights: the fraction
+    that voted; a tile with a quarter of votes keeps its own gains within ``illum_keep`` of that median), and the
+    frame is divided by the field interpolated bilinearly between the tile centres before every test. Objects on
+    flat ground take the field of the textured ground around them, never their own;
+  - **veto** (``illum_veto``, ``illum_grad``): a pixel still foreground whose textured patch correlates with the
+    background's (NCC >= ``illum_veto`` or gradient correlation >= ``illum_grad``), that follows its patch's linear
+    fit within ``illum_resid`` noise scales (a thin leg on a textured patch does not) and whose colour is the
+    background's scaled (brightness ratio in ``[illum_lo, illum_hi]``, chromaticity distortion <=
+    ``illum_chroma``) is background (shadow code 3).
+
+  With ``illum_windows`` each window's samples are divided by their own field against the window's first median
+  before its statistics are taken (median, MAD, learnt shadow ratio, neighbourhood scale): a cloud that shaded a
+  pixel in a third of the samples no longer inflates its MAD (hiding the people there), nor do the unlit samples
+  of a light switched on mid-window teach the shadow band a ratio of 0.8.
+* **Densest samples** (``MaskConfig.mode_band``; short recordings with people in most frames): the background of a
+  window is, per pixel, the median of its densest cluster of samples (those within ``mode_band`` noise scales of
+  the sample with the most such neighbours) instead of the median of all: moving people differ from sample to
+  sample, the background does not, so a pixel covered in most samples keeps its background
+  (:func:`~wptrack.kernels.background.mode_kernel`).
 * **Hysteresis.** With ``MaskConfig.fg_low``, the kernel marks weak foreground (``fg_low < z <= fg_threshold``)
   beside the strong; :func:`hysteresis` keeps the weak pixels 8-connected to a strong one (OpenCV connected
   components on the host, where the mask goes anyway).
@@ -490,6 +521,25 @@ def shadow_ratio(
     return float(edges[best] + bin_width / 2)
 
 
+ILLUM_MIN_WEIGHT = 2.0
+"""Smallest total weight (sum of the tiles' voting fractions) of a tile neighbourhood whose weighted median sets the
+local illumination field; below it the field is 1 there (:func:`wptrack.kernels.background.tile_smooth_kernel`)."""
+
+
+ILLUM_WIDEN = 2
+"""Times a tile neighbourhood without enough votes is widened (radius ``r`` -> ``2 r + 1``; with the default radius
+2: 5, then 11 tiles) before the field is left at 1 there: a cloud over a wide flat road takes the field of the
+textured ground (kerbs, markings, paving) around it."""
+
+
+def tile_size(width: int, height: int, tiles: int) -> int:
+    """Tile size of the local illumination field, pixels: ``ceil(min(width, height) / tiles)``, at least 4 (0 when
+    ``tiles`` is 0: no field)."""
+    if not tiles:
+        return 0
+    return max(4, -(-min(width, height) // int(tiles)))
+
+
 @dataclass
 class _WindowRead:
     """A window's samples as read from the source and prepared on the host (NumPy only, no device work): what
@@ -603,7 +653,30 @@ class OfflineBackground:
         p.shadow_hi = float(config.shadow_hi)
         p.shadow_edge_hi = float(config.shadow_hi)
         p.chroma_max = float(config.shadow_chroma)
+        c = config
+        height, width = source.height, source.width
+        p.tile = tile_size(width, height, c.illum_tiles)
+        p.width = width
+        p.tiles_x = -(-width // p.tile) if p.tile else 1
+        p.tiles_y = -(-height // p.tile) if p.tile else 1
+        p.verify_ncc = float(c.illum_verify)
+        p.veto_ncc = float(c.illum_veto)
+        p.veto_grad = float(c.illum_grad)
+        p.veto_texture = float(c.illum_texture)
+        p.veto_resid = float(c.illum_resid)
+        p.gain_gap = float(c.illum_gap)
+        p.illum_chroma = float(c.illum_chroma)
+        p.illum_lo = float(c.illum_lo)
+        p.illum_hi = float(c.illum_hi)
         self.params = p
+        # local illumination: per-pixel luminance and patch statistics, per-tile gains and the smoothed field
+        self._patches = bool(p.tile or p.veto_ncc > 0 or p.veto_grad > 0)
+        n_tiles = p.tiles_x * p.tiles_y
+        self._luma = wp.zeros(self.pixels if self._patches else 1, dtype=wp.vec3, device=device)
+        self._rows9 = wp.zeros(self.pixels if self._patches else 1, dtype=kbg.rows_vec, device=device)
+        self._patch = wp.zeros(self.pixels if self._patches else 1, dtype=kbg.patch_vec, device=device)
+        self._tiles = wp.zeros(n_tiles, dtype=wp.vec4, device=device)
+        self._local = wp.zeros(n_tiles, dtype=wp.vec3, device=device)
 
     def _read(self, i: int) -> _WindowRead:
         """Read window ``i``'s samples and prepare them on the host (any thread; no Warp call: see the class)."""
@@ -687,8 +760,25 @@ class OfflineBackground:
         wp.launch(
             kbg.median_mad_kernel, dim=3 * self.pixels, inputs=[stack, g], outputs=[median, mad], device=self.device
         )
-        self._built[i] = (median, mad)
         c = self.config
+        if self.params.tile and c.illum_windows:
+            # each sample under its own light: divide it by its global gain and local field against this first
+            # median, then the statistics again (unit gains) on what now differs only by what moved
+            self._compensate_window(stack, gains, median, mad)
+            ones = wp.array(np.ones((k, 3), dtype=np.float32), dtype=wp.vec3, device=self.device)
+            wp.launch(kbg.median_mad_kernel, dim=3 * self.pixels, inputs=[stack, ones], outputs=[median, mad],
+                      device=self.device)  # fmt: skip
+            if c.mode_band > 0:
+                self._mode(stack, ones, mad, median)
+            host = stack.numpy()
+            frames = [host[r].reshape(self.source.height, self.source.width, 3) for r in range(k)]
+            sub = np.ascontiguousarray(host[:, self._sub_channels.reshape(-1)].reshape(k, *self._sub_channels.shape))
+            gains = np.ones((k, 3), dtype=np.float32)
+            bg_sub = median_last(np.moveaxis(sub, 0, -1).astype(np.float64))
+            self._bg_sub[i], self._bg_gain[i] = bg_sub, np.ascontiguousarray(bg_sub[:, :: self._gain_step])
+        elif c.mode_band > 0:
+            self._mode(stack, g, mad, median)
+        self._built[i] = (median, mad)
         if c.spread_cap > 0 or c.shadow_band > 0 or c.neighbourhood > 0:
             mad_host = mad.numpy()
             self._scale[i] = spread_scale(mad_host)
@@ -714,6 +804,68 @@ class OfflineBackground:
             image = median.numpy().reshape(self.source.height, self.source.width, 3).copy()
             self.on_build(i, float(self.centres[i]), image)
         return median, mad
+
+    def _illumination(
+        self, frame: Any, gain: Any, b0: Any, m0: Any, b1: Any, m1: Any, w: float, shadows: bool = True
+    ) -> None:
+        """Launch the patch statistics of ``frame`` (a flat device or CPU uint8 array) against the background
+        ``(b0, m0)``/``(b1, m1)`` (weight ``w`` of the second) into ``self._patch`` and, with tiles, its local field
+        into ``self._local`` (:mod:`wptrack.kernels.background`); with ``shadows``, pixels that pass the cast-shadow
+        test (``self.params``' bounds) do not vote for the field."""
+        import warp as wp
+
+        from .kernels import background as kbg
+
+        c, p, dev = self.config, self.params, self.device
+        width, height = self.source.width, self.source.height
+        wp.launch(kbg.luma_kernel, dim=self.pixels, inputs=[frame, gain, b0, m0, b1, m1, w, p], outputs=[self._luma],
+                  device=dev)  # fmt: skip
+        r = int(c.illum_patch)
+        wp.launch(kbg.patch_rows_kernel, dim=self.pixels, inputs=[self._luma, width, height, r],
+                  outputs=[self._rows9], device=dev)  # fmt: skip
+        wp.launch(kbg.patch_kernel, dim=self.pixels, inputs=[self._rows9, self._luma, width, height, r],
+                  outputs=[self._patch], device=dev)  # fmt: skip
+        if p.tile:
+            n = p.tiles_x * p.tiles_y
+            wp.launch(kbg.tile_gain_kernel, dim=n, inputs=[frame, gain, b0, b1, w, self._patch, p, height,
+                      int(shadows)], outputs=[self._tiles], device=dev)  # fmt: skip
+            wp.launch(kbg.tile_smooth_kernel, dim=n,
+                      inputs=[self._tiles, p.tiles_x, p.tiles_y, int(c.illum_radius), ILLUM_WIDEN, ILLUM_MIN_WEIGHT,
+                              float(c.illum_keep), float(c.illum_dead)],
+                      outputs=[self._local], device=dev)  # fmt: skip
+
+    def _compensate_window(self, stack: Any, gains: np.ndarray, median: Any, mad: Any) -> None:
+        """Divide each sample of a window's ``stack`` (on the device, in place) by its global gain and its own local
+        illumination field against the window's first ``(median, mad)``; the caller rebuilds the statistics with
+        unit gains."""
+        import warp as wp
+
+        from .kernels import background as kbg
+
+        p, c = self.params, self.config
+        frame_cap = p.spread_cap  # the per-frame cap; the window's own while it is built (no state from frames)
+        p.spread_cap = float(c.spread_cap * spread_scale(mad.numpy())) if c.spread_cap > 0 else 0.0
+        try:
+            for k in range(stack.shape[0]):
+                g = wp.vec3(*(float(v) for v in gains[k]))
+                self._illumination(stack[k], g, median, mad, median, mad, 0.0, shadows=False)
+                wp.launch(kbg.compensate_kernel, dim=self.pixels, inputs=[stack, k, g, self._local, p],
+                          device=self.device)  # fmt: skip
+        finally:
+            p.spread_cap = frame_cap
+
+    def _mode(self, stack: Any, gains: Any, mad: Any, median: Any) -> None:
+        """Rebuild a window's ``median`` and ``mad`` (device arrays, in place) as the densest cluster of each pixel's
+        samples (:func:`wptrack.kernels.background.mode_kernel`), the band ``mode_band`` times the image-wide noise
+        scale of the window's first ``mad`` (at least the noise floor)."""
+        import warp as wp
+
+        from .kernels import background as kbg
+
+        c = self.config
+        band = float(c.mode_band * max(c.noise_floor, spread_scale(mad.numpy())))
+        wp.launch(kbg.mode_kernel, dim=self.pixels, inputs=[stack, gains, band], outputs=[median, mad],
+                  device=self.device)  # fmt: skip
 
     def shadow_bounds(self, i: int, j: int, w: float) -> tuple[float, float]:
         """Brightness-ratio bounds of the cast-shadow (umbra) test between windows ``i`` and ``j`` (weight ``w`` of
@@ -788,10 +940,12 @@ class OfflineBackground:
             self.params.spread_cap = float(self.config.spread_cap * ((1.0 - w) * self._scale[i] + w * self._scale[j]))
         if self.config.shadow_band > 0:
             self.params.shadow_lo, self.params.shadow_hi = self.shadow_bounds(i, j, w)
+        if self._patches:
+            self._illumination(frame_in, wp.vec3(*gain), b0, m0, b1, m1, w)
         wp.launch(
             kbg.foreground_kernel,
             dim=self.pixels,
-            inputs=[frame_in, b0, m0, b1, m1, w, wp.vec3(*gain), self.params],
+            inputs=[frame_in, b0, m0, b1, m1, w, wp.vec3(*gain), self.params, self._local, self._patch],
             outputs=[self._mask, self._prob, self._shadow, self._diff],
             device=self.device,
         )

@@ -447,7 +447,7 @@ def cmd_masks(args) -> int:
     kw = {"method": args.method, "device": args.device, "detect_shadows": not args.keep_shadows}
     for name in ("window", "samples", "fg_threshold", "noise_floor", "shadow_lo", "shadow_hi", "shadow_chroma",
                  "soft_scale", "history", "open_px", "close_px", "min_area", "fg_low", "spread_cap", "shadow_band",
-                 "neighbourhood"):  # fmt: skip
+                 "neighbourhood", "illum_tiles", "illum_radius", "illum_veto", "illum_grad", "mode_band"):  # fmt: skip
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     summary = write_masks(
@@ -551,7 +551,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--conditions",
         default=None,
         help="s3 scenes only: comma-separated hard conditions, each alone measurable: static-start, stop-and-go, sun, "
-        "light-change, noise, compression, dark-car; or all (default: none; see wptrack.synth.conditions)",
+        "light-change, noise, compression, dark-car, clouds, exposure, short; or all (default: none; see "
+        "wptrack.synth.conditions)",
     )
     s.set_defaults(func=cmd_synth)
 
@@ -817,6 +818,13 @@ def build_parser() -> argparse.ArgumentParser:
     mk.add_argument("--spread-cap", type=float, default=None, help="offline: noise scale cap, x median (1.5; 0: off)")
     mk.add_argument("--shadow-band", type=float, default=None, help="offline: learnt shadow band (0.08; 0: off)")
     mk.add_argument("--neighbourhood", type=int, default=None, help="offline: neighbourhood radius, px (1; 0: off)")
+    mk.add_argument("--illum-tiles", type=int, default=None,
+                    help="offline: local light field, tiles along the short side (30; 0: off)")  # fmt: skip
+    mk.add_argument("--illum-radius", type=int, default=None, help="offline: light field smoothing, tiles (2)")
+    mk.add_argument("--illum-veto", type=float, default=None, help="offline: patch NCC of a light change (0.7; 0: off)")
+    mk.add_argument("--illum-grad", type=float, default=None, help="offline: gradient correlation veto (0: off)")
+    mk.add_argument("--mode-band", type=float, default=None,
+                    help="offline: background of the densest samples, noise scales (3; 0: median)")  # fmt: skip
     mk.add_argument("--history", type=int, default=None, help="mog2/knn: history, frames (200)")
     mk.add_argument("--keep-shadows", action="store_true", help="count shadow pixels as foreground")
     mk.add_argument("--open-px", type=int, default=None, help="morphological opening, pixels (3; 0: off)")

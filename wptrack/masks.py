@@ -115,6 +115,38 @@ class MaskConfig:
         shadow_chroma: Offline only: largest chromaticity distortion ``|I - a B| / |B|`` of a cast shadow (>= 0).
         soft_scale: Offline only: scale ``k`` of the foreground probability ``1 / (1 + exp(-(z - T) / k))``, robust
             standard deviations (> 0).
+        illum_tiles: Offline only: local illumination field (cloud shadows, lights switched on in part of the view):
+            the image is cut into tiles, this many along its shorter side (0 disables), each tile's gain per
+            channel is the median brightness ratio of its pixels whose patch keeps the background's texture
+            (``illum_verify``), smoothed over ``illum_radius`` tiles and interpolated, and frames are divided by it
+            before the tests (:mod:`wptrack.background`).
+        illum_radius: Offline only: radius in tiles of the weighted median that smooths the tiles' gains (0 to 4).
+        illum_keep: Offline only: a tile keeps its own gains where they differ from that median by at most this
+            much (log gain, mean over the channels; 0: the median everywhere; 0 to 1).
+        illum_dead: Offline only: a tile's field whose log gains all lie within this of 0 is 0 (no local change;
+            0 to 0.5).
+        illum_windows: Offline only: with ``illum_tiles``, also divide each background window's samples by their
+            own local field before the window's median, noise scale and learnt shadow ratio.
+        illum_patch: Offline only: radius in pixels of the patches the texture tests compare (1 to 7).
+        illum_verify: Offline only: smallest normalised cross-correlation (NCC) of a pixel's patch with the
+            background's for it to vote for its tile's gain (in ``(0, 1)``).
+        illum_veto: Offline only: a foreground pixel whose textured patch correlates at least this much with the
+            background's (NCC), whose own value follows the patch's fit and whose colour is the background's scaled
+            is a local illumination change, not foreground (0 disables; else in ``(0, 1)``).
+        illum_grad: Offline only: as ``illum_veto`` with the gradient correlation of the patches (0 disables).
+        illum_texture: Offline only: smallest standard deviation of a background patch, in noise scales, for the
+            texture tests (a flat patch cannot tell light from an object; > 0).
+        illum_resid: Offline only: largest residual of a pixel from its patch's linear fit, luminance noise
+            scales, for the veto (> 0).
+        illum_chroma: Offline only: largest chromaticity distortion of a vetoed pixel (>= 0).
+        illum_gap: Offline only: largest ``|ln(slope / ratio of the means)|`` of a patch's linear fit for the
+            texture tests: light multiplies radiance, so the fit of a light change is a gain (> 0).
+        illum_lo: Offline only: smallest brightness ratio of a vetoed pixel (in ``(0, 1]``).
+        illum_hi: Offline only: largest brightness ratio of a vetoed pixel (>= 1).
+        mode_band: Offline only: each window's background is the densest cluster of a pixel's samples (those within
+            this many noise scales of the sample with most such neighbours, every channel; their median) instead
+            of the median of all its samples, so a pixel that moving objects cover in most samples of a short
+            recording keeps its background (:func:`wptrack.kernels.background.mode_kernel`; 0: the median).
         device: Offline only: Warp device, ``"auto"``, ``"cpu"``, ``"cuda"`` or ``"cuda:N"``.
 
     Raises:
@@ -143,6 +175,22 @@ class MaskConfig:
     shadow_chroma: float = 0.1
     shadow_band: float = 0.08
     soft_scale: float = 1.0
+    illum_tiles: int = 30
+    illum_radius: int = 2
+    illum_keep: float = 0.15
+    illum_dead: float = 0.03
+    illum_windows: bool = True
+    illum_patch: int = 3
+    illum_verify: float = 0.7
+    illum_veto: float = 0.7
+    illum_grad: float = 0.0
+    illum_texture: float = 2.0
+    illum_resid: float = 3.0
+    illum_chroma: float = 0.12
+    illum_gap: float = 0.2
+    illum_lo: float = 0.3
+    illum_hi: float = 3.0
+    mode_band: float = 3.0
     device: str = "auto"
 
     def __post_init__(self) -> None:
@@ -200,6 +248,40 @@ class MaskConfig:
             fail("shadow_band", "in [0, 0.5] (brightness ratio; 0: fixed bounds)")
         if self.shadow_chroma < 0:
             fail("shadow_chroma", ">= 0 (chromaticity distortion)")
+        if not _is_int(self.illum_tiles) or not 0 <= self.illum_tiles <= 1000:
+            fail("illum_tiles", "an integer in [0, 1000] (tiles along the shorter image side; 0 disables)")
+        if not _is_int(self.illum_radius) or not 0 <= self.illum_radius <= 4:
+            fail("illum_radius", "an integer in [0, 4] (tiles)")
+        if not _is_real(self.illum_keep) or not 0 <= self.illum_keep <= 1:
+            fail("illum_keep", "in [0, 1] (log gain)")
+        if not _is_real(self.illum_dead) or not 0 <= self.illum_dead <= 0.5:
+            fail("illum_dead", "in [0, 0.5] (log gain)")
+        if not isinstance(self.illum_windows, (bool, np.bool_)):
+            fail("illum_windows", "True or False")
+        if not _is_int(self.illum_patch) or not 1 <= self.illum_patch <= 7:
+            fail("illum_patch", "an integer in [1, 7] (pixels)")
+        for field in ("illum_verify", "illum_veto", "illum_grad", "illum_texture", "illum_resid", "illum_chroma",
+                      "illum_lo", "illum_hi"):  # fmt: skip
+            if not _is_real(getattr(self, field)) or not math.isfinite(getattr(self, field)):
+                fail(field, "a finite number")
+        if not 0 < self.illum_verify < 1:
+            fail("illum_verify", "in (0, 1) (normalised cross-correlation)")
+        for field in ("illum_veto", "illum_grad"):
+            if not 0 <= getattr(self, field) < 1:
+                fail(field, "0 (off) or in (0, 1) (correlation)")
+        for field in ("illum_texture", "illum_resid"):
+            if getattr(self, field) <= 0:
+                fail(field, "> 0 (noise scales)")
+        if not _is_real(self.illum_gap) or not 0 < self.illum_gap < math.inf:
+            fail("illum_gap", "a finite number > 0 (log gain)")
+        if self.illum_chroma < 0:
+            fail("illum_chroma", ">= 0 (chromaticity distortion)")
+        if not 0 < self.illum_lo <= 1:
+            fail("illum_lo", "in (0, 1] (brightness ratio)")
+        if not self.illum_hi >= 1:
+            fail("illum_hi", ">= 1 (brightness ratio)")
+        if not _is_real(self.mode_band) or not (self.mode_band == 0 or 0.5 <= self.mode_band <= 20):
+            fail("mode_band", "0 (the median) or in [0.5, 20] (noise scales)")
         if not isinstance(self.device, str) or not (
             self.device in ("auto", "cpu", "cuda") or self.device.startswith("cuda:")
         ):
