@@ -107,9 +107,11 @@ def synthetic_row(
     frames: int | None = None,
     make_masks: Callable[..., dict[int, np.ndarray]] | None = None,
     stride: int = 1,
+    camera: str = "cam0",
 ) -> dict[str, Any]:
-    """Mask quality of one method on one rendered scene (see the module docstring), on every ``stride``-th frame;
-    ``make_masks(video, config, frames)`` (frame -> mask) replaces :func:`masks_at` (experiments)."""
+    """Mask quality of one method on one rendered scene's ``camera`` (see the module docstring), on every
+    ``stride``-th frame; ``make_masks(video, config, frames)`` (frame -> mask) replaces :func:`masks_at`
+    (experiments). Scenes whose ground truth has no object sizes (the office) get no per-object recall."""
     import cv2
 
     from .frames import open_source
@@ -118,32 +120,38 @@ def synthetic_row(
 
     d = scene_dir(cache, scene, condition, seed, frames)
     obj = _scene_object(scene, condition, seed)
-    n = len(open_source(d / "cam0.avi"))
+    n = len(open_source(d / f"{camera}.avi"))
     chosen = list(range(0, n, max(int(stride), 1)))
     t0 = time.perf_counter()
-    made = _make(str(d / "cam0.avi"), _config(method, device), make_masks, chosen)
+    made = _make(str(d / f"{camera}.avi"), _config(method, device), make_masks, chosen)
     seconds = time.perf_counter() - t0
     masks = [made[t] for t in chosen]
-    perfect = [(p.max(axis=2) if p.ndim == 3 else p) > 0 for t, p in enumerate(open_source(d / "cam0_mask.avi"))
+    perfect = [(p.max(axis=2) if p.ndim == 3 else p) > 0 for t, p in enumerate(open_source(d / f"{camera}_mask.avi"))
                if t in made]  # fmt: skip
     near_kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (11, 11))
     inter = pred = true = fp = 0
     lit_fp = lit_px = 0
-    gt = GroundTruthFrames.read(d / "groundtruth.csv")
-    cam = Rig.load(d / "rig.yaml")["cam0"]
+    try:
+        gt: GroundTruthFrames | None = GroundTruthFrames.read(d / "groundtruth.csv")
+    except KeyError:  # no object sizes
+        gt = None
+    cam = Rig.load(d / "rig.yaml")[camera]
+    conditions = getattr(obj, "conditions", None)
+    local = conditions is not None and (conditions.clouds or conditions.exposure)
     hits: dict[int, list[float]] = {}
     for t, mask, ref in zip(chosen, masks, perfect, strict=True):
-        labels, ids = object_labels(ref, gt.frame(t), cam)
-        per, _, _ = score_frame(mask, ref, labels, ids)
-        for oid, (hit, tot) in per.items():
-            if tot >= 50:
-                hits.setdefault(oid, []).append(hit / tot)
+        if gt is not None:
+            labels, ids = object_labels(ref, gt.frame(t), cam)
+            per, _, _ = score_frame(mask, ref, labels, ids)
+            for oid, (hit, tot) in per.items():
+                if tot >= 50:
+                    hits.setdefault(oid, []).append(hit / tot)
         m = mask > 0
         inter += int(np.count_nonzero(m & ref))
         pred += int(np.count_nonzero(m))
         true += int(np.count_nonzero(ref))
         fp += int(np.count_nonzero(m & ~ref))
-        if obj.conditions.clouds or obj.conditions.exposure:
+        if local:
             changed = np.abs(obj.local_light(t) - 1.0) > 0.05
             changed &= cv2.dilate(ref.view(np.uint8), near_kernel) == 0
             lit_px += int(np.count_nonzero(changed))
@@ -153,7 +161,7 @@ def synthetic_row(
     recall = inter / true if true else math.nan
     size = masks[0].size
     return {
-        "scene": scene,
+        "scene": scene if camera == "cam0" else f"{scene}/{camera}",
         "condition": condition or "none",
         "seed": int(seed),
         "method": method if isinstance(method, str) else json.dumps(method, sort_keys=True),
@@ -352,6 +360,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--background", action="store_true", help="also the background error of each synthetic row")
     p.add_argument("--device", default="cpu")
     p.add_argument("--stride", type=int, default=1, help="score every n-th frame only (the others are not made)")
+    p.add_argument("--cameras", default="cam0", help="comma-separated cameras of the synthetic scenes")
     p.add_argument("--out", default=None, help="append the rows (JSON lines) to this file")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
@@ -362,8 +371,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         for cond in [c for c in args.conditions.split(",") if c]:
             c = None if cond == "none" else cond.replace("+", ",")
             for seed in [int(s) for s in args.seeds.split(",") if s]:
-                for m in methods:
-                    r = synthetic_row(args.cache, scene, c, seed, m, args.device, stride=args.stride)
+                for m, cam in [(m, cam) for m in methods for cam in args.cameras.split(",")]:
+                    r = synthetic_row(args.cache, scene, c, seed, m, args.device, stride=args.stride, camera=cam)
                     if args.background:
                         r.update({k: v for k, v in background_error(args.cache, scene, c, seed, m, args.device).items()
                                   if k in ("mae", "bad")})  # fmt: skip
