@@ -1,11 +1,11 @@
 """Where the time of the colour predict+score kernel goes at large N (profiling script of issue 13, not shipped).
 
-Variants of ``kernels.scoring.colour_predict_score_kernel`` (map scoring) compiled with ``wp.static`` flags - the
+Variants of ``kernels.colour.scoring.colour_predict_score_kernel`` (map scoring) compiled with ``wp.static`` flags - the
 cameras from the struct array or by value (the ``Cams4`` argument), 10 or 7 Philox rounds, with or without the
 scoring, the weighted moments, the gather through the ancestors - are launched on the state of a real ``ColorTracker``
 (the benchmark's 4-camera scene after 5 frames) and timed with CUDA events (median of 20 launches), next to a device
 copy of 64 bytes per particle for the memory bandwidth. The kernels live here, not in ``kernels/``, because they are
-measurement scaffolding; the shipped kernel is ``kernels.scoring.colour_predict_score_map_kernel``.
+measurement scaffolding; the shipped kernel is ``kernels.colour.scoring.colour_predict_score_map_kernel``.
 
 Usage: ``python benchmarks/colour_kernel_variants.py 1e8 [cuda:0]`` (BENCHMARKS.md, issue 13).
 """
@@ -16,9 +16,9 @@ import time
 import numpy as np
 import warp as wp
 
-from wptrack.kernels import random as krandom
-from wptrack.kernels.camera import Camera, pixel_of, project
-from wptrack.kernels.reduce import finite_logw, moments_push, moments_store, moments_zero
+from wptrack.kernels.core import random as krandom
+from wptrack.kernels.core.camera import Camera, pixel_of, project
+from wptrack.kernels.core.reduce import finite_logw, moments_push, moments_store, moments_zero
 
 N = int(float(sys.argv[1])) if len(sys.argv) > 1 else 10**8
 DEV = sys.argv[2] if len(sys.argv) > 2 else "cuda:0"
@@ -151,7 +151,7 @@ def tracker_state(n: int, device: str):
         ``(tracker, rig, common_in, outs)``.
     """
     from wptrack.bench.colour import HUE, INTENSITY, SAT, bench_frames, bench_rig
-    from wptrack.trackers.colour import ColorTracker, HSITarget
+    from wptrack.trackers.colour.tracker import ColorTracker, HSITarget
 
     wp.config.quiet = True
     rig = bench_rig(4)
@@ -175,9 +175,9 @@ def tracker_state(n: int, device: str):
 
 
 def main():
-    from wptrack.kernels import scoring as kscoring
-    from wptrack.pf import BLOCK
-    from wptrack.warpcams import camera_struct
+    from wptrack.cameras.structs import camera_struct
+    from wptrack.core.filter import BLOCK
+    from wptrack.kernels.colour import scoring as kscoring
 
     tr, rig, common_in, outs = tracker_state(N, DEV)
     c4 = Cams4()

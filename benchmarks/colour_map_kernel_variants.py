@@ -14,10 +14,10 @@ import time
 import numpy as np
 import warp as wp
 
-from wptrack.kernels.camera import CameraSet
-from wptrack.kernels.motion import gaussian_walk
-from wptrack.kernels.reduce import finite_logw, moments_push, moments_store, moments_zero
-from wptrack.kernels.scoring import map_log_likelihood
+from wptrack.kernels.colour.scoring import map_log_likelihood
+from wptrack.kernels.colour.walk import gaussian_walk
+from wptrack.kernels.core.camera import CameraSet
+from wptrack.kernels.core.reduce import finite_logw, moments_push, moments_store, moments_zero
 
 N = int(float(sys.argv[1]))
 DEV = sys.argv[2] if len(sys.argv) > 2 else "cuda:0"
@@ -106,8 +106,8 @@ def make(style, lb=None, maxreg=None):
 def main():
     from colour_kernel_variants import tracker_state  # the same tracker state (run from benchmarks/)
 
-    from wptrack.kernels import scoring as kscoring
-    from wptrack.pf import BLOCK
+    from wptrack.core.filter import BLOCK
+    from wptrack.kernels.colour import scoring as kscoring
 
     tr, _rig, common_in, outs = tracker_state(N, DEV)
     dst = 1 - tr.parity

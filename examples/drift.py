@@ -13,17 +13,17 @@ from pathlib import Path
 
 import numpy as np
 
-from wptrack.device import quiet_warp
-from wptrack.experiments import drift_study
-from wptrack.frames import open_frames
-from wptrack.io import read_tracks
-from wptrack.rig import Rig
+from wptrack.cameras.rig import Rig
+from wptrack.core.device import quiet_warp
+from wptrack.io.frames import open_frames
+from wptrack.io.tables import read_tracks
 from wptrack.synth import render_scene
-from wptrack.trackers.colour import ColorTracker, HSITarget
+from wptrack.trackers.colour.experiments import drift_study
+from wptrack.trackers.colour.tracker import ColorTracker, HSITarget
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))  # the whole sentence
     ap.add_argument("--device", default="auto")
     ap.add_argument("--frames", type=int, default=100)
     ap.add_argument("--particles", type=int, default=200)
@@ -52,7 +52,13 @@ def main(argv=None) -> dict:
         for name, sign in (("nearer", -1.0), ("further", 1.0)):
             init = ball + sign * args.offset * ray
             tracker = ColorTracker(
-                rig, target, particles=args.particles, sigma=0.03, init=tuple(init), device=args.device
+                rig,
+                target,
+                particles=args.particles,
+                sigma=0.03,
+                init=tuple(init),
+                device=args.device,
+                proposal="prior",
             )
             depth = [float((e.mean - ball) @ ray) for e in tracker.track(open_frames([str(v) for v in scene.videos]))]
             runs[name] = depth

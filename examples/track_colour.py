@@ -4,7 +4,7 @@
     python examples/track_colour.py --device cuda --frames 200 --particles 100000
 
 Renders the ``s1-lab`` scene (two calibrated webcams, ground truth) into a temporary folder, tracks it with
-:class:`wptrack.trackers.colour.ColorTracker` and prints the 3D error against the ground truth.
+:class:`wptrack.trackers.colour.tracker.ColorTracker` and prints the 3D error against the ground truth.
 """
 
 from __future__ import annotations
@@ -16,17 +16,17 @@ from pathlib import Path
 
 import numpy as np
 
-from wptrack.device import quiet_warp
-from wptrack.frames import open_frames
-from wptrack.io import read_tracks
-from wptrack.metrics import summarize
-from wptrack.rig import Rig
+from wptrack.cameras.rig import Rig
+from wptrack.core.device import quiet_warp
+from wptrack.evaluation.convergence import summarize
+from wptrack.io.frames import open_frames
+from wptrack.io.tables import read_tracks
 from wptrack.synth import render_scene
-from wptrack.trackers.colour import ColorTracker, HSITarget
+from wptrack.trackers.colour.tracker import ColorTracker, HSITarget
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))  # the whole sentence
     ap.add_argument("--device", default="auto", help="auto, cpu, cuda or cuda:N")
     ap.add_argument("--frames", type=int, default=200, help="frames of the scene to render and track")
     ap.add_argument("--particles", type=int, default=200)
@@ -60,7 +60,15 @@ def main(argv=None) -> dict:
                     f" spread {np.round(100 * est.std, 1)} cm"
                 )
     summary = summarize(np.asarray(errors)).as_dict()
-    print(f"device {tracker.device}, {tracker.score_mode} scoring: {summary}")
+    if summary["converged_at"] is None:
+        result = f"did not converge to 5 cm (final error {100 * summary['final_error']:.1f} cm)"
+    else:
+        result = (
+            f"converged at frame {summary['converged_at']}; error after it: mean "
+            f"{100 * summary['mean_error_after']:.2f} cm, median {100 * summary['median_error_after']:.2f} cm, "
+            f"max {100 * summary['max_error_after']:.2f} cm"
+        )
+    print(f"device {tracker.device}, {tracker.score_mode} scoring, {summary['frames']} frames: {result}")
     return summary
 
 

@@ -6,7 +6,7 @@
 Renders the ``s2-office`` scene (two people enter from opposite doors, meet, shake hands and leave; furniture hides
 their legs) in memory at the chosen size, makes motion masks from the rendered frames with the offline background
 model (the default motion pipeline, not the scene's perfect masks), tracks with
-:class:`wptrack.trackers.people.PeopleTracker` frame by frame and prints the people and the evaluation (MOTA and
+:class:`wptrack.trackers.people.tracker.PeopleTracker` frame by frame and prints the people and the evaluation (MOTA and
 IDF1 at 0.5 m on the ground, mean 3D centroid error).
 """
 
@@ -16,16 +16,16 @@ import argparse
 
 import numpy as np
 
-from wptrack.device import quiet_warp, resolve_device
-from wptrack.evaluation import evaluate
-from wptrack.masks import MaskConfig, open_masks
+from wptrack.core.device import quiet_warp, resolve_device
+from wptrack.evaluation.mot import evaluate
+from wptrack.motion.masks import MaskConfig, open_masks
 from wptrack.synth.office import OfficeConfig, OfficeScene
-from wptrack.trackers.people import PeopleTracker
-from wptrack.trackers.people_model import PeopleConfig
+from wptrack.trackers.people.config import PeopleConfig
+from wptrack.trackers.people.tracker import PeopleTracker
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))  # the whole sentence
     ap.add_argument("--device", default="auto", help="auto, cpu, cuda or cuda:N")
     ap.add_argument("--frames", type=int, default=120, help="frames of the scene to render and track")
     ap.add_argument("--size", type=int, nargs=2, default=(320, 240), metavar=("W", "H"), help="image size, pixels")

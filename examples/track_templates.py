@@ -5,7 +5,7 @@
 
 Renders the ``s3-people`` scene (one calibrated camera, ground truth) into a temporary folder, builds motion
 masks (the scene's perfect masks, or OpenCV MOG2 background subtraction with ``--mog2``), tracks them with
-:class:`wptrack.trackers.templates.TemplateTracker` frame by frame and prints the objects and the evaluation.
+:class:`wptrack.trackers.templates.tracker.TemplateTracker` frame by frame and prints the objects and the evaluation.
 """
 
 from __future__ import annotations
@@ -16,17 +16,17 @@ from pathlib import Path
 
 import numpy as np
 
-from wptrack.device import quiet_warp, resolve_device
-from wptrack.evaluation import evaluate
-from wptrack.masks import open_masks
-from wptrack.rig import Rig
-from wptrack.runs.templates import TEMPLATE_COLUMNS, object_row
+from wptrack.cameras.rig import Rig
+from wptrack.core.device import quiet_warp, resolve_device
+from wptrack.evaluation.mot import evaluate
+from wptrack.motion.masks import open_masks
 from wptrack.synth import render_scene
-from wptrack.trackers.templates import TemplateConfig, TemplateTracker
+from wptrack.trackers.templates.run import TEMPLATE_COLUMNS, object_row
+from wptrack.trackers.templates.tracker import TemplateConfig, TemplateTracker
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))  # the whole sentence
     ap.add_argument("--device", default="auto", help="auto, cpu, cuda or cuda:N")
     ap.add_argument("--frames", type=int, default=120, help="frames of the scene to render and track")
     ap.add_argument("--particles", type=int, default=1000)

@@ -1,12 +1,13 @@
 """NumPy references shared by the tests/test_kernels_*_extra.py modules: the counter-based random draws of
-``kernels.random`` (from the NumPy Philox of test_kernels_random) and the per-block partials of ``kernels.reduce``."""
+``kernels.core.random`` (from the NumPy Philox of test_kernels_random) and the per-block partials of
+``kernels.core.reduce``."""
 
 from __future__ import annotations
 
 import numpy as np
 from test_kernels_random import philox_ref
 
-from wptrack.kernels import reduce as kreduce
+from wptrack.kernels.core import reduce as kreduce
 
 
 def uniform4_ref(seed: tuple[int, int], n: int, frame: int, stream: int) -> np.ndarray:

@@ -1,4 +1,5 @@
-"""Offline backfill of completed tracks (``wptrack.backfill``, ``TemplateConfig.backfill_seconds``)."""
+"""Offline backfill of completed tracks (``wptrack.trackers.templates.backfill``,
+``TemplateConfig.backfill_seconds``)."""
 
 from __future__ import annotations
 
@@ -7,9 +8,9 @@ import json
 import numpy as np
 import pytest
 
-from wptrack.backfill import backfill_rows, backfill_tracks_file, stitch_tracks_file
-from wptrack.errors import ConfigError, OutputError
-from wptrack.trackers.templates import TemplateConfig
+from wptrack.core.errors import ConfigError, OutputError
+from wptrack.trackers.templates.backfill import backfill_rows, backfill_tracks_file, stitch_tracks_file
+from wptrack.trackers.templates.tracker import TemplateConfig
 
 HEADER = "frame,id,x,y,z,class,length,width,height,orientation,speed,existence,gx,gy,sx,sy,degenerate"
 
@@ -185,7 +186,7 @@ def test_a_completed_template_run_is_backfilled(tmp_path, capsys):
     """The run loop backfills tracks.csv when the run completes; tracks_all.csv keeps the tracker's rows."""
     pytest.importorskip("motmetrics")
     from wptrack.cli import main
-    from wptrack.io import read_tracks
+    from wptrack.io.tables import read_tracks
 
     assert main(["synth", "s3-people", "--out", str(tmp_path / "scene"), "--frames", "30", "-q"]) == 0
     out = tmp_path / "run"
@@ -214,7 +215,8 @@ def test_run_writer_finish_tracks(tmp_path):
     """RunWriter.close('complete', finish_tracks=f): f gets tracks.csv after the short tracks are left out, its dict
     goes into run.json, tracks_all.csv holds the rows before it; an error leaves tracks.csv as it was and is
     recorded; an interrupted run does not call it."""
-    from wptrack.io import RunWriter, read_tracks
+    from wptrack.io.run import RunWriter
+    from wptrack.io.tables import read_tracks
 
     cols = ["frame", "id", "x", "y", "z"]
     rows = [(f, 1, 1.0, 2.0, 0.0) for f in range(5)]

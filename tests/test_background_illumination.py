@@ -10,7 +10,8 @@ import pytest
 import warp as wp
 
 from wptrack.bench import numpy_masks as ref
-from wptrack.kernels import background as kbg
+from wptrack.kernels.core import background as kbg
+from wptrack.kernels.core import illumination as kil
 
 H, W = 60, 84
 
@@ -49,13 +50,13 @@ def _arr(a: np.ndarray, device: str, dtype=wp.uint8) -> wp.array:
 def _patch(device, frame, bg, mad, gain, w, params, radius):
     n = H * W
     luma = wp.zeros(n, dtype=wp.vec3, device=device)
-    rows = wp.zeros(n, dtype=kbg.rows_vec, device=device)
+    rows = wp.zeros(n, dtype=kil.rows_vec, device=device)
     patch = wp.zeros(n, dtype=kbg.patch_vec, device=device)
     b, m = _arr(bg, device), _arr(mad, device)
-    wp.launch(kbg.luma_kernel, dim=n, inputs=[_arr(frame, device), wp.vec3(*gain), b, m, b, m, w, params],
+    wp.launch(kil.luma_kernel, dim=n, inputs=[_arr(frame, device), wp.vec3(*gain), b, m, b, m, w, params],
               outputs=[luma], device=device)  # fmt: skip
-    wp.launch(kbg.patch_rows_kernel, dim=n, inputs=[luma, W, H, radius], outputs=[rows], device=device)
-    wp.launch(kbg.patch_kernel, dim=n, inputs=[rows, luma, W, H, radius], outputs=[patch], device=device)
+    wp.launch(kil.patch_rows_kernel, dim=n, inputs=[luma, W, H, radius], outputs=[rows], device=device)
+    wp.launch(kil.patch_kernel, dim=n, inputs=[rows, luma, W, H, radius], outputs=[patch], device=device)
     return luma, patch
 
 
@@ -92,7 +93,7 @@ def test_tile_gain_smooth_and_field_match_numpy(device, rng):
     b = _arr(bg, device)
     st = patch.numpy().reshape(H, W, 6)
     for shadows in (1, 0):  # cast shadows (ratio 0.5 in the shadow band [0.4, 0.6]) vote or not
-        wp.launch(kbg.tile_gain_kernel, dim=ntiles, inputs=[_arr(frame, device), wp.vec3(*gain), b, b, 0.0, patch, p,
+        wp.launch(kil.tile_gain_kernel, dim=ntiles, inputs=[_arr(frame, device), wp.vec3(*gain), b, b, 0.0, patch, p,
                   H, shadows], outputs=[tiles], device=device)  # fmt: skip
         band = (p.shadow_lo, p.shadow_hi, p.chroma_max) if shadows else None
         t_ref = ref.tile_gains(frame, gain, bg, bg, 0.0, st, 12, p.veto_texture, p.verify_ncc, band, p.veto_resid,
@@ -108,7 +109,7 @@ def test_tile_gain_smooth_and_field_match_numpy(device, rng):
     cases = ((0, 0, 0.0, 0.0, 0.0), (1, 2, 9.0, 0.1, 0.0), (2, 0, 0.5, 0.1, 0.0), (2, 0, 0.5, 0.0, 0.05))
     for radius, widen, min_weight, keep, dead in cases:
         local = wp.zeros(ntiles, dtype=wp.vec3, device=device)
-        wp.launch(kbg.tile_smooth_kernel, dim=ntiles, inputs=[tiles, p.tiles_x, p.tiles_y, radius, widen, min_weight,
+        wp.launch(kil.tile_smooth_kernel, dim=ntiles, inputs=[tiles, p.tiles_x, p.tiles_y, radius, widen, min_weight,
                   keep, dead], outputs=[local], device=device)  # fmt: skip
         s_ref = ref.tile_smooth(got, radius, min_weight, keep, dead, widen)
         if widen:  # a weight of 9 needs the widest neighbourhood, strided, somewhere
@@ -119,7 +120,7 @@ def test_tile_gain_smooth_and_field_match_numpy(device, rng):
     # the field, through the compensation kernel (rounded as the reference rounds)
     field = ref.local_field(s_ref, 12, H, W)
     stack = wp.array(np.stack([bg.reshape(-1), frame.reshape(-1)]), dtype=wp.uint8, device=device)
-    wp.launch(kbg.compensate_kernel, dim=H * W, inputs=[stack, 1, wp.vec3(*gain), local, p], device=device)
+    wp.launch(kil.compensate_kernel, dim=H * W, inputs=[stack, 1, wp.vec3(*gain), local, p], device=device)
     out = stack.numpy()
     np.testing.assert_array_equal(out[0], bg.reshape(-1))  # the other sample is left alone
     expected = ref.compensate(frame, gain, field).reshape(-1)
@@ -256,7 +257,7 @@ def cloud_sequence(rng: np.random.Generator, frames: int = 90, h: int = 120, w: 
 
 
 def _rates(video, people, dark, config):
-    from wptrack.masks import open_masks
+    from wptrack.motion.masks import open_masks
 
     fp = fp_n = hit = hit_n = 0
     for mask, p, d in zip(open_masks(video=video, config=config), people, dark, strict=True):
@@ -273,7 +274,7 @@ def test_cloud_shadow_false_positives_far_below_old_model_people_kept(rng):
     """A thick and a thin cloud shadow drift over a paved road with walkers: the old model (no local light field,
     no veto) marks the darkened road, the new one almost none of it; the walkers' recall under the clouds stays
     that of the same sequence without clouds (the old model's too)."""
-    from wptrack.masks import MaskConfig
+    from wptrack.motion.masks import MaskConfig
 
     seed = int(rng.integers(2**31))
     video, people, dark = cloud_sequence(np.random.default_rng(seed))
@@ -311,9 +312,9 @@ def crowd_sequence(rng: np.random.Generator, frames: int = 40, h: int = 120, w: 
 
 
 def test_short_clip_with_people_in_most_frames_background_clean(rng):
-    from wptrack.background import OfflineBackground
-    from wptrack.frames import open_source
-    from wptrack.masks import MaskConfig
+    from wptrack.io.frames import open_source
+    from wptrack.motion.background import OfflineBackground
+    from wptrack.motion.masks import MaskConfig
 
     video, truth = crowd_sequence(rng)
     errors = {}
@@ -351,16 +352,16 @@ def test_short_clip_with_people_in_most_frames_background_clean(rng):
     ],
 )
 def test_bad_illumination_config_names_field(kwargs, field):
-    from wptrack.errors import ConfigError
-    from wptrack.masks import MaskConfig
+    from wptrack.core.errors import ConfigError
+    from wptrack.motion.masks import MaskConfig
 
-    with pytest.raises(ConfigError, match=rf"^MaskConfig\.{field}: must be .*, got "):
+    with pytest.raises(ConfigError, match=rf"^MaskConfig\.{field}: expected .*, got "):
         MaskConfig(**kwargs)
 
 
 def test_cli_masks_illumination_options(tmp_path, rng, capsys):
     from wptrack.cli import main
-    from wptrack.frames import write_video
+    from wptrack.io.video import write_video
 
     video, _, _ = cloud_sequence(rng, frames=12, h=48, w=64)
     path = tmp_path / "v.avi"

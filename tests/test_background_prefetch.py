@@ -1,7 +1,7 @@
-"""The offline background model's prefetch worker (wptrack.background.OfflineBackground): window ``i + 1``'s samples
-read in one worker thread while the frames before it are processed. The masks and probabilities equal those of
-reading every window in the calling thread, byte for byte, for every source type; restarts work; the sampler's
-warnings and errors reach the calling thread as before; close() joins the worker."""
+"""The offline background model's prefetch worker (wptrack.motion.background.OfflineBackground): window ``i + 1``'s
+samples read in one worker thread while the frames before it are processed. The masks and probabilities equal those of
+reading every window in the calling thread, byte for byte, for every source type; restarts work; the sampler's warnings
+and errors reach the calling thread as before; close() joins the worker."""
 
 from __future__ import annotations
 
@@ -12,10 +12,12 @@ import cv2
 import numpy as np
 import pytest
 
-from wptrack import background as B
-from wptrack.errors import FrameError
-from wptrack.frames import open_source, write_video
-from wptrack.masks import MaskConfig, MotionMasks
+from wptrack.core.errors import FrameError
+from wptrack.io.frames import open_source
+from wptrack.io.video import write_video
+from wptrack.motion import background as B
+from wptrack.motion import windows as Wn
+from wptrack.motion.masks import MaskConfig, MotionMasks
 
 H, W = 48, 64
 WORKER = "wptrack-background"
@@ -78,7 +80,7 @@ def test_prefetch_gives_the_same_masks(device, rng, tmp_path, kind, frames, wind
     windows = len(plain.model.windows)
     assert windows >= 3
     if window == 80:
-        assert min(np.diff(plain.model.windows[0].samples)) >= B.SEEK_GAP  # the sampler seeks between samples
+        assert min(np.diff(plain.model.windows[0].samples)) >= Wn.SEEK_GAP  # the sampler seeks between samples
     fetched = MotionMasks(open_source(spec), config)
     for _ in range(2):  # the second pass starts again at frame 0 after a full pass (and the model's close())
         reads: list = []
@@ -122,9 +124,9 @@ def _truncated_pass(path, config: MaskConfig, prefetch: bool, caplog) -> tuple[l
     source._count += 25  # the video reports 25 frames more than it has (as a truncated file's header does)
     masks = MotionMasks(source, config)
     caplog.clear()
-    with caplog.at_level(logging.WARNING, logger="wptrack.background"):
+    with caplog.at_level(logging.WARNING, logger="wptrack.motion.background"):
         out, _ = _pass(masks, prefetch=prefetch)
-    records = [(r.getMessage(), r.threadName) for r in caplog.records if r.name == "wptrack.background"]
+    records = [(r.getMessage(), r.threadName) for r in caplog.records if r.name == "wptrack.motion.background"]
     return records, out
 
 
@@ -153,7 +155,7 @@ def test_worker_error_raised_in_the_calling_thread_when_needed(device, rng, capl
 
     def run(prefetch: bool) -> tuple[int, list]:
         caplog.clear()
-        with caplog.at_level(logging.WARNING, logger="wptrack.background"):
+        with caplog.at_level(logging.WARNING, logger="wptrack.motion.background"):
             t = first_error(prefetch)
         return t, [(r.getMessage(), r.threadName) for r in caplog.records]
 
@@ -184,8 +186,8 @@ def test_worker_error_raised_in_the_calling_thread_when_needed(device, rng, capl
 
     with_worker, without = run(True), run(False)
     assert with_worker == without
-    centres = [w.centre for w in B.plan_windows(40, 16, 8)]
-    assert without[0] == min(t for t in range(40) if B.bracket(centres, t)[1] == 2)  # when window 2 is first needed
+    centres = [w.centre for w in Wn.plan_windows(40, 16, 8)]
+    assert without[0] == min(t for t in range(40) if Wn.bracket(centres, t)[1] == 2)  # when window 2 is first needed
     assert without[1] == [("array: a warning before the error", threading.main_thread().name)]
 
 

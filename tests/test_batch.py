@@ -10,11 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wptrack.batch import BATCH_FILE, load_manifest, run_batch
+from wptrack.batch import BATCH_FILE, run_batch
+from wptrack.batch.manifest import load_manifest
+from wptrack.cameras.rig import Camera, Rig
 from wptrack.cli import main
-from wptrack.errors import ConfigError
-from wptrack.frames import write_video
-from wptrack.rig import Camera, Rig
+from wptrack.core.errors import ConfigError
+from wptrack.io.video import write_video
 
 BALL = np.array([0.42, 0.45, 0.035])
 
@@ -122,13 +123,13 @@ def test_manifest_grid_ids_paths_and_hash(scene):
         ("tracker: nope\n", "tracker: expected one of"),
         ("speed: 1\n", "unknown key(s) ['speed']"),
         (COLOUR_ARGS + "runs:\n  - args: {particle: 10}\n", "args.particle: not an option of 'wptrack track color'"),
-        (COLOUR_ARGS + "runs:\n  - args: {particles: many}\n", "run run000: argument --particles"),
+        (COLOUR_ARGS + "runs:\n  - args: {particles: many}\n", "run run000: args.particles: expected a positive"),
         (COLOUR_ARGS + "runs:\n  - id: a\n  - id: a\n", "run id 'a' is used twice"),
         (COLOUR_ARGS + "runs:\n  - id: ../x\n", "is not a valid run id"),
         (COLOUR_ARGS + "runs:\n  - grid: {seed: 3}\n", "grid.seed: expected a non-empty list"),
         (COLOUR_ARGS + "runs:\n  - args: {out: x}\n", "are set by the batch"),
         ("tracker: function\nfunction: nowhere.py:f\n", "nowhere.py not found"),
-        ("tracker: function\nfunction: wptrack.io:nothing\n", "cannot load it"),
+        ("tracker: function\nfunction: wptrack.io.run:nothing\n", "cannot load it"),
         ("runs: [\n", "not valid YAML"),
     ],
 )
@@ -206,7 +207,8 @@ def test_without_ray_local_runs_inline(tmp_path, monkeypatch):
 
 
 def test_sweep_is_a_batch_with_the_same_table(tmp_path, capsys):
-    from wptrack.experiments import jump_experiment, read_sweep
+    from wptrack.trackers.colour.experiments import jump_experiment
+    from wptrack.trackers.colour.sweep import read_sweep
 
     kw = {"particles": 64, "iterations": 12, "jump_at": 6, "runs": 2, "device": "cpu"}
     ref = jump_experiment([0.02, 0.2], **kw)
@@ -250,11 +252,12 @@ def test_ray_batch_same_outputs_as_inline(ray_local, scene, tmp_path):
     assert_clean(tmp_path / "ray")
 
 
-def test_ray_killed_task_is_retried(ray_local, tmp_path):
-    """The run's worker process dies (os._exit) in its first attempt: Ray retries it on a new worker, the retry
-    starts from a clean partial folder and the completed run replaces it."""
+@pytest.mark.parametrize("pool", ["actors", "tasks"])
+def test_ray_killed_task_is_retried(ray_local, tmp_path, pool):
+    """The run's worker process dies (os._exit) in its first attempt: the run is retried on another worker (a new
+    actor, or a new task worker), the retry starts from a clean partial folder and the completed run replaces it."""
     out = tmp_path / "out"
-    res = run_batch(flaky_manifest(tmp_path, "exit"), out, address="local", gpus_per_task=0)
+    res = run_batch(flaky_manifest(tmp_path, "exit"), out, address="local", gpus_per_task=0, pool=pool)
     assert res[0]["status"] == "complete" and res[0]["attempts"] == 2
     assert (tmp_path / "marker-exit").read_text() == "first attempt"  # the first attempt did die
     assert sorted(p.name for p in (out / "flaky").iterdir()) == [BATCH_FILE, "partial.txt", "result.txt", "run.json"]
@@ -278,7 +281,7 @@ def test_ray_failing_run_reported_after_retries(ray_local, tmp_path, capsys):
 
 
 def test_example_manifest_is_valid():
-    from wptrack.batch import validate
+    from wptrack.batch.manifest import validate
 
     m = load_manifest(Path(__file__).resolve().parents[1] / "examples" / "batch_lab.yaml")
     assert [r.id for r in m.runs][:2] == ["n200-seed0", "n200-seed1"] and len(m.runs) == 7 and m.retries == 2
@@ -287,17 +290,259 @@ def test_example_manifest_is_valid():
 
 
 def test_track_arguments_of_every_tracker(tmp_path):
-    """Manifest args become the command's own options: lists for nargs and repeated options, booleans as flags."""
-    from wptrack.batch import RunSpec, parse_track_args
+    """Manifest args become the run's declared parts (wptrack.runs.spec), by option name: lists for list options,
+    booleans as values or as their opposite flag (no_virtual, joint), None for an option's default."""
+    from wptrack.batch.manifest import RunSpec, track_parts
 
     kw = {"rig": "r.yaml", "video": "v.avi", "classes": ["human"], "no_virtual": True, "camera": 0, "t_add": 0.4}
-    t = parse_track_args(RunSpec("t", "templates", {**kw, "max_frames": None}), tmp_path)
-    assert (t.classes, t.no_virtual, t.camera, t.t_add, t.max_frames) == (["human"], True, "0", 0.4, None)
-    assert t.out == str(tmp_path)
-    p = parse_track_args(RunSpec("p", "people", {"rig": "r.yaml", "video": ["a.avi", "b.avi"], "p_b": 0.1}), "o")
-    assert p.video == ["a.avi", "b.avi"] and p.p_b == 0.1 and p.quiet and not p.resume
+    t = track_parts(RunSpec("t", "templates", {**kw, "max_frames": None, "joint": True}), tmp_path)
+    got = (t["config"].classes, t["inputs"].virtual, t["config"].camera, t["config"].t_add, t["control"].max_frames)
+    assert got == (("human",), False, "0", 0.4, None) and t["config"].partition is False
+    assert t["control"].out == str(tmp_path)
+    p = track_parts(RunSpec("p", "people", {"rig": "r.yaml", "video": ["a.avi", "b.avi"], "p_b": 0.1}), "o")
+    assert p["inputs"].video == ("a.avi", "b.avi") and p["config"].motion.p_b == 0.1 and not p["control"].resume
     kw = {"rig": "r", "video": "v", "hue": [350, 10], "sat": [0, 1], "init_random": True, "report": False}
-    c = parse_track_args(RunSpec("c", "color", {**kw, "volume": [-1, -1, 0, 1, 1, 2]}), "o")
-    assert c.hue == [350.0, 10.0] and c.init_random and c.volume == [-1, -1, 0, 1, 1, 2] and c.report is False
-    with pytest.raises(ConfigError, match="args.report: expected true or false"):
-        parse_track_args(RunSpec("t", "templates", {"rig": "r", "report": "yes"}), "o")
+    c = track_parts(RunSpec("c", "color", {**kw, "volume": [-1, -1, 0, 1, 1, 2]}), "o")
+    assert c["target"].hue == (350.0, 10.0) and c["inputs"].init_random and c["control"].report is False
+    assert c["config"].box == ((-1.0, -1.0, 0.0), (1.0, 1.0, 2.0))
+    with pytest.raises(ConfigError, match="run t: args.report: expected true or false"):
+        track_parts(RunSpec("t", "templates", {"rig": "r", "report": "yes"}), "o")
+    with pytest.raises(ConfigError, match="run t: args.particels: not an option of 'wptrack track templates'"):
+        track_parts(RunSpec("t", "templates", {"rig": "r", "particels": 5}), "o")
+
+
+def test_attempts_count_only_this_invocation(scene, tmp_path, capsys):
+    """Issue 30 item 5: a run that failed with a user error (a missing video, not retried) reported '2 attempts'
+    once fixed, although nothing was retried in that invocation."""
+    d = scene["dir"]
+    path = write_manifest(scene, COLOUR_ARGS.replace("cam2.avi]", "cam2-later.avi]") + "id: one\n", "later.yaml")
+    out = tmp_path / "batch"
+    assert main(["batch", str(path), "--out", str(out), "--address", "inline"]) == 1
+    assert "one: failed" in capsys.readouterr().out
+    assert read_summary(out)[0]["attempts"] == "1"
+    assert_clean(out)
+    (d / "cam2-later.avi").write_bytes((d / "cam2.avi").read_bytes())
+    assert main(["batch", str(path), "--out", str(out), "--address", "inline"]) == 0
+    text = capsys.readouterr().out
+    assert "one: complete" in text and " attempts)" not in text
+    assert read_summary(out)[0]["attempts"] == "1"
+    # a counter left by a crashed earlier invocation does not count either
+    (out / ".one.attempts").write_text("5\n")
+    (out / "one" / BATCH_FILE).unlink()
+    assert main(["batch", str(path), "--out", str(out), "--address", "inline"]) == 0
+    assert read_summary(out)[0]["attempts"] == "1"
+
+
+def test_readme_batch_example_runs_as_written(tmp_path, monkeypatch, capsys):
+    """Issue 30 item 5: the README's batch example failed from the repo root (the scene it needs was made only in
+    a comment of the YAML) and its YAML differed from the file. Now the README shows the file as it is, and its
+    commands (with 3 frames, in-process) run from a copy of the repo root."""
+    import shlex
+
+    root = Path(__file__).resolve().parents[1]
+    readme = (root / "README.md").read_text(encoding="utf-8")
+    manifest = (root / "examples" / "batch_lab.yaml").read_text(encoding="utf-8")
+    assert f"```yaml\n{manifest}```" in readme
+    block = readme[readme.index("```bash\nwptrack synth s1-lab --out examples/lab") :].split("```")[1]
+    synth, batch = (line.split("#")[0] for line in block.splitlines()[1:3])
+    assert batch.split()[:2] == ["wptrack", "batch"]
+    (tmp_path / "examples").mkdir()
+    (tmp_path / "examples" / "batch_lab.yaml").write_text(manifest)
+    monkeypatch.chdir(tmp_path)
+    argv = shlex.split(synth.replace("--frames 100", "--frames 3"))[1:]
+    assert main([*argv, "-q"]) == 0
+    assert main([*shlex.split(batch)[1:], "--address", "inline"]) == 0
+    assert "7/7 runs complete" in capsys.readouterr().out
+    assert {r["id"]: r["status"] for r in read_summary(tmp_path / "lab-batch")}["paper-filter"] == "complete"
+
+
+# ---------------------------------------------------------------------------------------------- warm workers
+VICTIM = """\
+import os
+import time
+from pathlib import Path
+
+
+def run(out_dir, marker, name):
+    (Path(out_dir) / "partial.txt").write_text("written before the kill")
+    if name == "victim" and not Path(marker).exists():
+        Path(marker).write_text(str(os.getpid()))
+        time.sleep(120)  # the test kills this worker here
+    return {"frames": 1, "pid": os.getpid(), "threads": os.environ.get("WPTRACK_DECODE_THREADS")}
+"""
+
+
+def test_actor_killed_mid_run_is_retried_elsewhere(ray_local, tmp_path):
+    """Issue 32: a warm worker (actor) is killed (SIGKILL from outside) in the middle of a run: the run is retried
+    on another worker and completes, the other runs complete, the batch finishes, nothing partial is left."""
+    import os
+    import signal
+    import threading
+    import time
+
+    (tmp_path / "victim.py").write_text(VICTIM)
+    marker = tmp_path / "victim-pid"
+    names = ["a", "victim", "b", "c"]
+    runs = "".join(f"  - {{id: {n}, args: {{marker: '{marker}', name: {n}}}}}\n" for n in names)
+    path = tmp_path / "victim.yaml"
+    path.write_text(f"tracker: function\nfunction: victim.py:run\nretries: 1\nruns:\n{runs}")
+    killed: list[int] = []
+
+    def killer() -> None:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            if marker.exists() and marker.read_text().strip():
+                time.sleep(0.2)  # mid-run: the victim sleeps
+                killed.append(int(marker.read_text()))
+                os.kill(killed[0], signal.SIGKILL)
+                return
+            time.sleep(0.05)
+
+    thread = threading.Thread(target=killer, daemon=True)
+    thread.start()
+    out = tmp_path / "out"
+    res = run_batch(path, out, gpus_per_task=0, cpus_per_task=1, pool="actors")
+    thread.join(timeout=5)
+    assert killed, "the victim run never started"
+    by_id = {r["id"]: r for r in res}
+    assert [r["status"] for r in res] == ["complete"] * 4
+    assert by_id["victim"]["attempts"] == 2 and by_id["victim"]["summary"]["pid"] != killed[0]
+    assert all(r["summary"]["threads"] == "1" for r in res)  # decode threads = the worker's cores
+    assert sorted(p.name for p in (out / "victim").iterdir()) == [BATCH_FILE, "partial.txt", "run.json"]
+    assert_clean(out)
+    rows = {r["id"]: r for r in read_summary(out)}
+    assert rows["victim"]["attempts"] == "2" and rows["a"]["attempts"] == "1"
+
+
+def test_warm_worker_runs_match_inline_and_record_stages(ray_local, scene, tmp_path):
+    """One warm worker (2 cores: the whole local instance) runs three colour runs one after another: each gives the
+    tracks.csv of the same run in-process, the later ones are warm (no imports, no Warp start, kernels loaded), and
+    summary.csv / batch.json carry the stage times."""
+    path = write_manifest(
+        scene, COLOUR_ARGS + "runs:\n  - id: 'n{particles}'\n    grid: {particles: [100, 150, 200]}\n", "warm.yaml"
+    )
+    res = run_batch(path, tmp_path / "ray", gpus_per_task=0, cpus_per_task=2, pool="actors")
+    assert [r["status"] for r in res] == ["complete"] * 3
+    assert len({r["pid"] for r in res}) == 1 and sorted(r["worker_runs"] for r in res) == [0, 1, 2]
+    run_batch(path, tmp_path / "inline", address="inline")
+    for rid in ("n100", "n150", "n200"):
+        a, b = (tmp_path / k / rid / "tracks.csv" for k in ("ray", "inline"))
+        assert a.read_bytes() == b.read_bytes()
+    rows = read_summary(tmp_path / "ray")
+    stages = [c for c in rows[0] if c.startswith("stage.")]
+    assert {"stage.import_s", "stage.frame_loop_s", "stage.decode_wait_s", "stage.total_s"} <= set(stages)
+    for r in res:
+        st = r["stages"]
+        assert st["frame_loop_s"] > 0 and st["setup_s"] >= 0 and st["cpu_s"] > 0
+        parts = ("import_s", "warp_init_s", "context_s", "setup_s", "module_load_s", "frame_loop_s", "score_s")
+        assert sum(st[k] for k in parts) + st["finish_s"] == pytest.approx(st["total_s"], abs=1e-4)
+        assert st["decode_wait_s"] <= st["frame_loop_s"] and st["to_first_frame_s"] < st["total_s"]
+    warm = [r for r in res if r["worker_runs"] > 0]
+    assert all(r["stages"]["warp_init_s"] < 0.01 for r in warm)  # Warp started once, in the worker's warm-up
+    phases = json.loads((tmp_path / "ray" / "n100" / "run.json").read_text())["phases"]
+    assert phases["frame_loop_s"] > 0 and phases["module_load_s"] >= 0
+    assert_clean(tmp_path / "ray")
+
+
+def test_kept_workers_serve_the_next_batch(ray_local, tmp_path):
+    from wptrack.batch.actors import release_workers
+
+    (tmp_path / "victim.py").write_text(VICTIM)
+    a = tmp_path / "one.yaml"
+    a.write_text(f"tracker: function\nfunction: victim.py:run\nargs: {{marker: '{tmp_path / 'm'}', name: a}}\n")
+    first = run_batch(a, tmp_path / "one", gpus_per_task=0, keep_workers=True)
+    second = run_batch(a, tmp_path / "two", gpus_per_task=0, keep_workers=True)
+    assert first[0]["status"] == second[0]["status"] == "complete"
+    assert second[0]["pid"] == first[0]["pid"] and second[0]["worker_runs"] >= 1  # the same warm process
+    assert release_workers() >= 1 and release_workers() == 0
+
+
+def test_pool_size():
+    from wptrack.batch.actors import cpus_per_slot, pool_size
+
+    assert pool_size({"GPU": 2, "CPU": 16}, 1, 1, 64) == 2
+    assert pool_size({"GPU": 4, "CPU": 16}, 0.5, 2, 64) == 8  # two workers per GPU
+    assert pool_size({"GPU": 4, "CPU": 16}, 0.5, 4, 64) == 4  # the cores limit them
+    assert pool_size({"GPU": 4, "CPU": 16}, 1, 1, 3) == 3  # never more than the runs
+    assert pool_size({"CPU": 2}, 0, 1, 8) == 2 and pool_size({"CPU": 2}, 0, 3, 8) == 1
+    # the default cores per GPU worker: what the smallest GPU node gives each (a head without GPUs aside)
+    head = {"Alive": True, "Resources": {"CPU": 8}}
+    small = {"Alive": True, "Resources": {"CPU": 16, "GPU": 4}}
+    big = {"Alive": True, "Resources": {"CPU": 64, "GPU": 8}}
+    assert cpus_per_slot([head, small, big], 1) == 4 and cpus_per_slot([head, big], 1) == 8
+    assert cpus_per_slot([head, small], 0.5) == 2 and cpus_per_slot([head], 1) == 1
+    assert cpus_per_slot([{"Alive": False, "Resources": {"CPU": 2, "GPU": 2}}, big], 1) == 8
+
+
+def test_decode_threads_shared_among_a_runs_videos(scene, monkeypatch):
+    from wptrack.io.frames import DECODE_THREADS_ENV, open_frames
+
+    d = scene["dir"]
+    videos = [str(d / "cam1.avi"), str(d / "cam2.avi")]
+    default = list(open_frames(videos))
+    monkeypatch.setenv(DECODE_THREADS_ENV, "5")
+    frames = open_frames(videos)
+    assert [s.threads for s in frames.sources] == [2, 2]
+    got = list(frames)
+    assert len(got) == len(default) == 6
+    assert all(np.array_equal(a, b) for fa, fb in zip(default, got, strict=True) for a, b in zip(fa, fb, strict=True))
+    monkeypatch.setenv(DECODE_THREADS_ENV, "1")
+    assert [s.threads for s in open_frames(videos).sources] == [1, 1]
+
+
+# ---------------------------------------------------------------------------------------------- --videos
+def test_videos_batch_one_run_per_recording(scene, tmp_path, capsys, monkeypatch):
+    """Issue 32: ``wptrack batch --videos`` without a manifest: one run per recording (two cameras paired by file
+    stem), its id the stem, the track options of the tracker, the same outputs as ``wptrack track``; a progress bar
+    and a table at the end; a second batch skips the completed runs."""
+    d = scene["dir"]
+    for cam in ("cam1", "cam2"):
+        (tmp_path / cam).mkdir()
+        for stem in ("day-1", "day 2"):
+            (tmp_path / cam / f"{stem}.avi").write_bytes((d / f"{cam}.avi").read_bytes())
+    monkeypatch.chdir(tmp_path)
+    opts = ["--rig", str(d / "rig.yaml"), "--hue", "300", "340", "--sat", "0.3", "1.0", "--init", "0.42", "0.45",
+            "0.05", "--device", "cpu", "--keep-particles", "50", "--particles", "120"]  # fmt: skip
+    argv = ["batch", "--videos", "cam1/*.avi", "--videos", "cam2/*.avi", "--tracker", "color", *opts]
+    assert main([*argv, "--out", "vb", "--address", "inline"]) == 0
+    out = capsys.readouterr()
+    assert "runs:" in out.err and "2/2" in out.err  # the progress bar over runs
+    table = out.out[out.out.index("id ") :].splitlines()
+    assert table[0].split() == ["id", "status", "frames", "seconds", "frames/s"]
+    assert [line.split()[:3] for line in table[1:3]] == [["day-1", "complete", "6"], ["day_2", "complete", "6"]]
+    ref = tmp_path / "ref"
+    assert main(["track", "color", "-q", "--video", "cam1/day 2.avi", "--video", "cam2/day 2.avi", *opts,
+                 "--out", str(ref)]) == 0  # fmt: skip
+    assert (tmp_path / "vb" / "day_2" / "tracks.csv").read_bytes() == (ref / "tracks.csv").read_bytes()
+    rows = read_summary(tmp_path / "vb")
+    assert [r["id"] for r in rows] == ["day-1", "day_2"] and all(r["status"] == "complete" for r in rows)
+    assert main([*argv, "--out", "vb", "--address", "inline", "-q"]) == 0  # again: both reused
+    assert all(r["reused"] == "1" for r in read_summary(tmp_path / "vb"))
+
+
+COLOUR_OPTS = "--tracker color --rig r.yaml --hue 1 2 --sat 0 1"
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (f"--videos nothing/*.avi {COLOUR_OPTS}", "--videos nothing/*.avi: no file matches"),
+        (f"--videos cam1/*.avi --videos cam2/*.avi {COLOUR_OPTS}", "do not pair up by name: b"),
+        ("--videos cam1/*.avi --videos cam2/*.avi --tracker templates --rig r.yaml", "takes 1 video(s) per run"),
+        ("--videos cam1/*.avi", "give the runs' --tracker"),
+        ("m.yaml --videos cam1/*.avi", "a manifest or --videos, not both"),
+        ("", "give a manifest (YAML) or --videos"),
+        ("--videos cam1/*.avi --tracker templates", "the following arguments are required: --rig"),
+        ("--videos cam1/*.avi --tracker templates --rig r --particels 3", "unrecognized arguments: --particels"),
+    ],
+)
+def test_videos_batch_mistakes_one_line(tmp_path, capsys, monkeypatch, extra, message):
+    for cam, stems in (("cam1", "ab"), ("cam2", "a")):
+        (tmp_path / cam).mkdir()
+        for stem in stems:
+            (tmp_path / cam / f"{stem}.avi").write_bytes(b"x")
+    monkeypatch.chdir(tmp_path)
+    assert main(["batch", *extra.split(), "--out", "vb", "--address", "inline"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("wptrack: error: ") and message in err and err.count("\n") == 1, err
+    assert not (tmp_path / "vb").exists()

@@ -160,7 +160,7 @@ def test_bench_templates_rejects_cameras(capsys):
 
 def _small_tracker(device, n=20_000):
     from wptrack.bench.colour import HUE, INTENSITY, SAT, bench_frames, bench_rig
-    from wptrack.trackers.colour import ColorTracker, HSITarget
+    from wptrack.trackers.colour.tracker import ColorTracker, HSITarget
 
     rig = bench_rig(2)
     frames, balls = bench_frames(rig, 3)
@@ -224,3 +224,37 @@ def test_bench_masks_end_to_end_tiny(device):
     assert "end to end: -" in MasksSuite.format_row(MasksSuite.run_case(Case(64, 48, e2e=False), device, frames=3))
     assert [c.e2e for c in MasksSuite.default_grid(False)] == [True, False]
     assert [c.e2e for c in MasksSuite.default_grid(True)] == [True, True]
+
+
+def test_bench_masks_frames_bound_the_end_to_end_pass(tmp_path, capsys, caplog, monkeypatch):
+    """Issue 30 item 7: `bench --tracker masks --frames 5` ran the 600-frame end-to-end pass anyway (~32 s of
+    silence after a warning naming a temporary file). Now --frames bounds it, each case is announced and the bench's
+    own short videos raise no warning."""
+    from wptrack.bench.masks import Case, MasksSuite
+
+    monkeypatch.setattr(MasksSuite, "default_grid", staticmethod(lambda is_cuda: [Case(64, 48)]))
+    out = tmp_path / "masks.json"
+    with caplog.at_level("WARNING"):
+        assert main(["bench", "--tracker", "masks", "--device", "cpu", "--frames", "4", "--out", str(out)]) == 0
+    (r,) = json.loads(out.read_text())["results"]
+    assert r["frames"] == 4 and r["e2e_frames"] == 4
+    err = capsys.readouterr().err
+    assert "masks: case 1/1: 64x48, 4 frames, then the end-to-end mask pass over 4 frames" in err
+    assert "shorter than the background window" not in caplog.text and ".avi" not in err
+
+
+def test_bench_notes_only_for_the_default_grid(capsys):
+    """Issue 30 item 13: a grid the user gave was told what the default grid leaves out; --weights printed the
+    colour table's header above its resampling rows."""
+    from wptrack.bench.templates import TemplateSuite
+
+    argv = ["bench", "--tracker", "templates", "--device", "cpu", "--particles", "100", "--objects", "1"]
+    assert main([*argv, "--frames", "1", "-q"]) == 0
+    assert "leaves out" not in capsys.readouterr().out
+    assert TemplateSuite.notes(False) and "leaves out N=10000 x 10" in TemplateSuite.notes(False)[0]
+    assert TemplateSuite.notes(True) == []
+    argv = ["bench", "-q", "--device", "cpu", "--particles", "2000", "--weights", "ordinary", "--frames", "1"]
+    assert main(argv) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("resampling alone") and "frame ms" not in lines[0]
+    assert lines[1].startswith("resample ordinary")

@@ -1,10 +1,10 @@
-"""The block partition of the reduction launches (``wptrack.device.block_partition``)."""
+"""The block partition of the reduction launches (``wptrack.core.device.block_partition``)."""
 
 from __future__ import annotations
 
 import pytest
 
-from wptrack.device import CPU_CHUNK, GPU_BLOCKS_PER_SM, GPU_FEW_BLOCKS_PARTICLES, block_partition
+from wptrack.core.device import CPU_CHUNK, GPU_BLOCKS_PER_SM, GPU_FEW_BLOCKS_PARTICLES, block_partition
 
 
 @pytest.mark.parametrize("sms", [0, 46, 132])

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 import warp as wp
 
+from wptrack.cameras.rig import Camera, Rig
 from wptrack.cli import main
-from wptrack.frames import write_video
-from wptrack.io import read_tracks
-from wptrack.rig import Camera, Rig
+from wptrack.io.tables import read_tracks
+from wptrack.io.video import write_video
 
 BALL = np.array([0.42, 0.45, 0.035])
 
@@ -104,7 +104,7 @@ def test_init_random_uses_the_rig_volume(scene, tmp_path):
     assert main(args) == 0
     run = json.loads((out / "run.json").read_text())
     lo, hi = Rig.load(scene["rig"]).bounds()
-    np.testing.assert_allclose(run["config"]["tracker"]["init_box"], [lo, hi])
+    np.testing.assert_allclose(np.reshape(run["config"]["tracker"]["init_box"], (2, 3)), [lo, hi])  # xyz min, max
     assert run["config"]["tracker"]["init"] is None
     assert len(read_tracks(out / "tracks.csv")["frame"]) == 6
 
@@ -192,3 +192,67 @@ def test_console_script_subprocess_exit_code(scene, tmp_path):
     r = subprocess.run([sys.executable, "-m", "wptrack.cli", *args], capture_output=True, text=True, timeout=120)
     assert r.returncode == 2
     assert "wptrack: error: particles" in r.stderr and "Traceback" not in r.stderr
+
+
+@pytest.mark.skipif(bool(wp.get_cuda_devices()), reason="CUDA is available here")
+def test_demo_without_cuda_fails_before_rendering(tmp_path, capsys):
+    """Issue 30 item 6: `wptrack demo --device cuda` without a GPU rendered the scene (48 MB) and then failed."""
+    out = tmp_path / "demo"
+    assert main(["demo", "--device", "cuda", "--out", str(out), "-q"]) == 2
+    captured = capsys.readouterr()
+    assert "CUDA is not available" in captured.err and "rendering" not in captured.out
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("argv", "names"),
+    [
+        ([], ["demo", "synth", "track", "evaluate", "report", "batch", "bench"]),
+        (["track"], ["color", "templates", "people"]),
+    ],
+)
+def test_command_alone_prints_the_usage_with_the_list(argv, names):
+    """Issue 30 item 12: `wptrack` and `wptrack track` alone printed one line without the commands / trackers."""
+    r = subprocess.run([sys.executable, "-m", "wptrack.cli", *argv], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert r.stderr.startswith("usage: wptrack")
+    for name in names:
+        assert f"\n    {name} " in r.stderr or f"\n    {name}\n" in r.stderr, (name, r.stderr)
+    assert r.stderr.strip().splitlines()[-1].startswith("wptrack: error: give a ")
+
+
+def test_plural_and_convergence_words():
+    """Issue 30 item 11: 'converges in 1 iterations', 'after the jump in not within the run', '1 objects'."""
+    from wptrack.cli.commands import convergence_words
+    from wptrack.cli.common import plural
+
+    assert (plural(1, "object"), plural(2, "object"), plural(1, "person", "people")) == (
+        "1 object",
+        "2 objects",
+        "1 person",
+    )
+    assert plural(0, "person", "people") == "0 people"
+    text = convergence_words({"converge_initial": 1, "converge_after_jump": None}, 30)
+    assert text == "converges in 1 iteration; after the jump, no convergence within the run"
+    text = convergence_words({"converge_initial": None, "converge_after_jump": 4}, 30)
+    assert text == "no convergence in 30 iterations; after the jump, in 4 iterations"
+
+
+def test_convergence_output_reads_as_sentences(tmp_path, capsys):
+    argv = ["convergence", "--sigma", "0.3", "--particles", "50", "--iterations", "8", "--jump-at", "4", "--runs", "1"]
+    assert main([*argv, "--device", "cpu", "--out", str(tmp_path), "-q"]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("sigma_m = "))
+    assert "after the jump, " in line and "not within" not in line and ">" not in line and "1 iterations" not in line
+
+
+def test_missing_groundtruth_is_named_as_ground_truth(scene, tmp_path, capsys):
+    """Issue 30 item 14: `evaluate --groundtruth missing.csv` called the ground-truth file a 'tracks file'."""
+    out = tmp_path / "run"
+    assert main(track_args(scene, out)) == 0
+    capsys.readouterr()
+    assert main(["evaluate", str(out), "--groundtruth", str(tmp_path / "missing.csv")]) == 2
+    err = capsys.readouterr().err
+    assert f"ground truth file not found: {tmp_path / 'missing.csv'}" in err and "tracks file" not in err
+    (tmp_path / "gt.csv").write_text("frame,id,x,y,z\n0,1,0.4,0.4,0.0\n")
+    assert main(["evaluate", str(tmp_path / "nothing"), "--groundtruth", str(tmp_path / "gt.csv")]) == 2
+    assert "tracks file not found" in capsys.readouterr().err

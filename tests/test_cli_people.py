@@ -11,11 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wptrack.chunklog import read_chunks
+from wptrack.cameras.rig import Rig
 from wptrack.cli import main
-from wptrack.frames import write_video
-from wptrack.io import read_tracks
-from wptrack.rig import Rig
+from wptrack.io.chunklog import read_chunks
+from wptrack.io.tables import read_tracks
+from wptrack.io.video import write_video
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_tracker_people import COLOURS, render, rig3  # noqa: E402

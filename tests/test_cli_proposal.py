@@ -9,7 +9,7 @@ import numpy as np
 from test_cli import scene, track_args  # noqa: F401  (module fixture)
 
 from wptrack.cli import main
-from wptrack.io import read_tracks
+from wptrack.io.tables import read_tracks
 
 
 def _replace(args, flag, values):

@@ -8,12 +8,12 @@ import json
 import numpy as np
 import pytest
 
+from wptrack.cameras.rig import Camera, Rig
 from wptrack.cli import main
-from wptrack.errors import ConfigError
-from wptrack.frames import write_video
-from wptrack.io import read_tracks
-from wptrack.rig import Camera, Rig
-from wptrack.trackers.templates import HumanPrior, TemplateConfig, TemplateTracker
+from wptrack.core.errors import ConfigError
+from wptrack.io.tables import read_tracks
+from wptrack.io.video import write_video
+from wptrack.trackers.templates.tracker import HumanPrior, TemplateConfig, TemplateTracker
 
 
 def _rig(tmp_path, look_up: bool = False) -> str:
@@ -71,7 +71,21 @@ def test_track_templates_writes_outputs_and_evaluates(scene, capsys):
     assert run["min_track_frames"] == 8 and run["short_tracks_dropped"] == int(np.sum(counts < 8))
     assert sorted(set(kept["id"].tolist())) == sorted(ids[counts >= 8].tolist()) and len(kept["id"]) > 0
     code, text, err = _run(["evaluate", str(out), "--groundtruth", str(scene / "scene/groundtruth.csv")], capsys)
-    assert code == 0 and "IDF1" in text
+    assert code == 0 and "IDF1" in text and "HOTA" in text
+    # issue 30: MOTChallenge files, image boxes of the run's camera for the tracks and the ground truth
+    boxes, truth = (np.loadtxt(out / "mot" / p / "cam0.txt", delimiter=",", ndmin=2) for p in (".", "gt"))
+    assert len(boxes) == len(kept["frame"]) and len(truth) == len(read_tracks(scene / "scene/groundtruth.csv")["id"])
+    assert (out / "mot" / "world.txt").is_file() and (out / "mot" / "gt" / "world.txt").is_file()
+
+    def iou(a, b):
+        w = min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0])
+        h = min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1])
+        inter = max(w, 0) * max(h, 0)
+        return inter / (a[2] * a[3] + b[2] * b[3] - inter)
+
+    last = boxes[boxes[:, 0] == boxes[:, 0].max()]
+    here = truth[truth[:, 0] == last[0, 0]]
+    assert all(max(iou(b[2:6], t[2:6]) for t in here) > 0.5 for b in last)  # each tracked box lies on a true one
 
 
 @pytest.mark.parametrize(
@@ -159,10 +173,59 @@ def test_offline_masks_keep_backgrounds_for_the_report(scene, capsys):
     assert first.shape == frame0.shape
     assert np.abs(first.astype(int) - frame0.astype(int)).mean() < 20  # a background of this scene, not noise
 
-    from wptrack.report.templates import _background_for, _backgrounds
+    from wptrack.trackers.templates.report import _background_for, _backgrounds
 
     saved = _backgrounds(out)
     assert len(saved) == len(index["windows"])
     window, image = _background_for(saved, 5)
     assert window == min(saved, key=lambda w: abs(w[1] - 5))[0] and image.shape == frame0.shape
     assert _background_for(_backgrounds(scene / "nowhere"), 5) is None
+
+
+def _template_args(scene, out, *extra):
+    return [
+        "track", "templates", "--rig", str(scene / "scene/rig.yaml"), "--masks", str(scene / "scene/cam0_mask.avi"),
+        "--out", str(out), "--device", "cpu", "--particles", "100", "--max-frames", "4", "-q", *extra,
+    ]  # fmt: skip
+
+
+def test_groundtruth_scoring_checked_before_tracking(scene, capsys, monkeypatch):
+    """Issue 30 item 2: --groundtruth without the scoring package (or with a missing file) is one error line
+    before anything runs, not after the whole run."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "motmetrics", None)  # import motmetrics raises ImportError
+    out = scene / "nomm"
+    code, text, err = _run(_template_args(scene, out, "--groundtruth", str(scene / "scene/groundtruth.csv")), capsys)
+    assert code == 2 and "motmetrics" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists() and "tracked" not in text
+    monkeypatch.delitem(sys.modules, "motmetrics")
+    code, _, err = _run(_template_args(scene, out, "--groundtruth", str(scene / "nope.csv")), capsys)
+    assert code == 2 and "nope.csv" in err and "not found" in err and not out.exists()
+
+
+def test_report_is_written_when_scoring_fails(scene, capsys, monkeypatch):
+    """Issue 30 item 2: a scoring failure after the run still leaves the --report (then exits 2 with the error)."""
+    pytest.importorskip("pyvista")
+    import wptrack.evaluation.mot
+
+    def broken(*a, **k):
+        raise ConfigError("ground truth: scoring failed on purpose")
+
+    monkeypatch.setattr(wptrack.evaluation.mot, "evaluate", broken)
+    out = scene / "scored"
+    argv = _template_args(scene, out, "--groundtruth", str(scene / "scene/groundtruth.csv"), "--report")
+    code, text, err = _run(argv, capsys)
+    assert code == 2 and "scoring failed on purpose" in err
+    assert (out / "report" / "index.html").exists() and "report:" in text
+
+
+@pytest.mark.parametrize("flag", ["--video", "--masks"])
+def test_templates_refuses_two_cameras(scene, capsys, flag):
+    """Issue 30 item 3: two --video (or --masks) were silently the last one with the first camera's calibration."""
+    video = str(scene / "scene/cam0.avi") if flag == "--video" else str(scene / "scene/cam0_mask.avi")
+    out = scene / "two"
+    argv = ["track", "templates", "--rig", str(scene / "scene/rig.yaml"), flag, video, flag, video, "--out", str(out)]
+    code, _, err = _run([*argv, "--device", "cpu", "-q"], capsys)
+    assert code == 2 and "one camera" in err and "--camera" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()

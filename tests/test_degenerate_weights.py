@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from tests.test_kernels_reduce import run_reduction
-from wptrack.kernels import reduce as kred
-from wptrack.trackers.gaussian3d import Gaussian3DTracker
+from wptrack.kernels.core import reduce as kred
+from wptrack.trackers.colour.gaussian3d import Gaussian3DTracker
 
 
 @pytest.mark.parametrize("bad", [-np.inf, np.nan, -3.0e38])

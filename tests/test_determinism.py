@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.io import read_tracks
+from wptrack.io.tables import read_tracks
 from wptrack.runs import run_tracker
-from wptrack.runs.colour import ColourRun
-from wptrack.runs.templates import TemplateRun
 from wptrack.synth import render_scene
-from wptrack.trackers.colour import ColorConfig, HSITarget
-from wptrack.trackers.templates import TemplateConfig
+from wptrack.trackers.colour.run import ColourRun
+from wptrack.trackers.colour.tracker import ColorConfig, HSITarget
+from wptrack.trackers.templates.run import TemplateRun
+from wptrack.trackers.templates.tracker import TemplateConfig
 
 TARGET = HSITarget(hue=(312, 348), sat=(0.3, 0.8), intensity=(20, 240))
 

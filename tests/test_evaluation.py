@@ -9,8 +9,8 @@ import sys
 import numpy as np
 import pytest
 
-from wptrack.errors import ConfigError
-from wptrack.evaluation import SCALAR_METRICS, Evaluation, average, evaluate
+from wptrack.core.errors import ConfigError
+from wptrack.evaluation.mot import SCALAR_METRICS, Evaluation, average, evaluate
 
 
 @pytest.fixture
@@ -223,7 +223,9 @@ def test_average(mm):
     ]
     avg = average(runs)
     assert avg["runs"] == 3 and set(SCALAR_METRICS) <= set(avg)
-    assert avg["accuracy"] == {"mean": pytest.approx(0.5), "min": 0.0, "max": 1.0, "n": 3}
+    # accuracies 1.0, 0.5, 0.0: sample standard deviation 0.5
+    assert avg["accuracy"] == {"mean": pytest.approx(0.5), "min": 0.0, "max": 1.0, "std": pytest.approx(0.5), "n": 3}
+    assert average(runs[:1])["accuracy"]["std"] == 0.0
     assert avg["classification_accuracy"]["n"] == 2  # None for the empty run
     assert avg["motp"]["n"] == 2  # NaN for the empty run
     json.dumps(avg, allow_nan=False)
@@ -286,3 +288,191 @@ def test_missing_motmetrics_is_a_config_error(monkeypatch):
     gt = _table(_walk(1, 3, 0.0, 0.0))
     with pytest.raises(ConfigError, match="pip install motmetrics"):
         evaluate(gt, gt)
+
+
+# ------------------------------------------------------------------------------------------ HOTA (issue 30)
+
+
+def _pts(rows):
+    """Rows (frame, id, x, y) -> columns."""
+    return _table([(*r, "human") for r in rows], cls=False)
+
+
+def test_hota_perfect_tracking_is_one():
+    from wptrack.evaluation.hota import HOTA_ALPHAS
+    from wptrack.evaluation.mot import hota
+
+    gt = [(f, 1, 0.1 * f, 0.0) for f in range(5)] + [(f, 2, 3.0, 0.2 * f) for f in range(2, 6)]
+    r = hota(_pts(gt), _pts([(f, i + 10, x, y) for f, i, x, y in gt]))  # other ids: HOTA does not care
+    assert (r.hota, r.deta, r.assa, r.loca, r.detre, r.detpr, r.assre, r.asspr) == (1, 1, 1, 1, 1, 1, 1, 1)
+    assert r.alphas == HOTA_ALPHAS and len(HOTA_ALPHAS) == 19 and HOTA_ALPHAS[0] == 0.05 and HOTA_ALPHAS[-1] == 0.95
+
+
+@pytest.mark.parametrize(("d", "threshold", "kept"), [(0.33, 1.0, 13), (0.1, 0.5, 16), (0.6, 0.5, 0)])
+def test_hota_of_a_constant_offset(d, threshold, kept):
+    """Tracks a constant distance d away: similarity s = 1 - d / threshold in every frame, so every alpha <= s has
+    DetA = AssA = 1 and every alpha > s has nothing: HOTA = (alphas <= s) / 19, LocA = s."""
+    from wptrack.evaluation.mot import hota
+
+    gt = [(f, 1, 0.1 * f, 0.0) for f in range(6)]
+    r = hota(_pts(gt), _pts([(f, 4, x + 0.6 * d, y + 0.8 * d) for f, i, x, y in gt]), threshold=threshold)
+    assert r.hota == pytest.approx(kept / 19)
+    assert r.deta == pytest.approx(kept / 19) and r.assa == pytest.approx(kept / 19)
+    if kept:
+        assert r.loca == pytest.approx(1 - d / threshold)
+    else:
+        assert math.isnan(r.loca)
+
+
+def test_hota_identity_switch_halves_association():
+    """One object, tracked exactly by id 5 in frames 0-1 and id 6 in frames 2-3: DetA = 1, each TP's association
+    IoU = 2 / (4 + 2 - 2) = 0.5, AssA = 0.5, HOTA = sqrt(0.5)."""
+    from wptrack.evaluation.mot import hota
+
+    gt = [(f, 1, 0.1 * f, 0.0) for f in range(4)]
+    r = hota(_pts(gt), _pts([(f, 5 if f < 2 else 6, x, y) for f, i, x, y in gt]))
+    assert r.deta == pytest.approx(1.0) and r.assa == pytest.approx(0.5) and r.hota == pytest.approx(math.sqrt(0.5))
+    assert r.assre == pytest.approx(0.5) and r.asspr == pytest.approx(1.0)  # each id's frames all belong to it
+
+
+def test_hota_false_positives_lower_detection_only():
+    """A second hypothesis 5 m away in every frame: TP = 3, FP = 3, DetA = 3 / 6, AssA = 1, HOTA = sqrt(0.5)."""
+    from wptrack.evaluation.mot import hota
+
+    gt = [(f, 1, 0.1 * f, 0.0) for f in range(3)]
+    tracks = [(f, 5, x, y) for f, i, x, y in gt] + [(f, 9, x + 5.0, y) for f, i, x, y in gt]
+    r = hota(_pts(gt), _pts(tracks))
+    assert r.deta == pytest.approx(0.5) and r.assa == pytest.approx(1.0) and r.hota == pytest.approx(math.sqrt(0.5))
+    assert r.detre == pytest.approx(1.0) and r.detpr == pytest.approx(0.5)
+    assert hota(_pts(gt), _pts(gt[:0])).hota == 0.0  # no tracks at all
+
+
+def test_hota_matching_prefers_the_lasting_identity():
+    """The object is followed 0.2 m away by id 1 in frames 0-3; in frame 1 id 2 sits exactly on it. A per-frame
+    best-similarity match would take id 2 there (AssA 0.5125); HOTA's matching weighs each pair by its identities'
+    alignment over the sequence (A(o, 1) = 3.444 / (8 - 3.444) = 0.756 > A(o, 2) = 0.125 / ...), keeps id 1: TP = 4,
+    FP = 1, DetA = 0.8, AssA = 1 for alpha <= 0.8 (similarity 0.8), nothing above: HOTA = 16 / 19 sqrt(0.8)."""
+    from wptrack.evaluation.mot import hota
+
+    gt = [(f, 7, 0.0, 0.0) for f in range(4)]
+    tracks = [(f, 1, 0.2, 0.0) for f in range(4)] + [(1, 2, 0.0, 0.0)]
+    r = hota(_pts(gt), _pts(tracks))
+    assert r.hota == pytest.approx(16 / 19 * math.sqrt(0.8))
+    assert r.deta_alpha[15] == pytest.approx(0.8) and r.assa_alpha[15] == pytest.approx(1.0)  # alpha 0.80
+    assert r.deta_alpha[16] == 0.0 and r.loca == pytest.approx(0.8)
+
+
+def test_hota_properties_on_random_scenes():
+    """Symmetric in ground truth and tracks, blind to id labels and row order, in [0, 1], HOTA_alpha = sqrt(DetA
+    AssA), DetA non-increasing in alpha; more noise never scores better (fixed seeds)."""
+    from wptrack.evaluation.mot import hota
+
+    rng = np.random.default_rng(30)
+    for trial in range(5):
+        n_obj, frames = 4, 12
+        start = rng.uniform(0, 6, (n_obj, 2))
+        vel = rng.normal(0, 0.2, (n_obj, 2))
+        gt = [(f, k, *(start[k] + f * vel[k])) for f in range(frames) for k in range(n_obj) if rng.random() > 0.1]
+        noisy = [(f, (k * 7 + 3) % 11, x + rng.normal(0, 0.15), y + rng.normal(0, 0.15)) for f, k, x, y in gt]
+        noisy = [r for r in noisy if rng.random() > 0.15] + [(f, 50, *rng.uniform(0, 6, 2)) for f in range(0, 12, 3)]
+        a = hota(_pts(gt), _pts(noisy))
+        b = hota(_pts(noisy), _pts(gt))
+        assert a.hota == pytest.approx(b.hota, abs=1e-12) and a.deta == pytest.approx(b.deta, abs=1e-12)
+        assert a.assa == pytest.approx(b.assa, abs=1e-12)
+        relabelled = [(f, 1000 - i, x, y) for f, i, x, y in reversed(noisy)]
+        assert hota(_pts(gt), _pts(relabelled)).hota == pytest.approx(a.hota, abs=1e-12)
+        assert 0 < a.hota < 1 and all(0 <= v <= 1 for v in a.hota_alpha)
+        for h, d, s in zip(a.hota_alpha, a.deta_alpha, a.assa_alpha, strict=True):
+            assert h == pytest.approx(math.sqrt(d * s))
+        assert all(x >= y - 1e-12 for x, y in zip(a.deta_alpha, a.deta_alpha[1:], strict=False))
+        worse = [(f, i, x + rng.normal(0, 0.3), y + rng.normal(0, 0.3)) for f, i, x, y in noisy]
+        assert hota(_pts(gt), _pts(worse)).hota < a.hota + 0.02, trial
+
+
+def test_evaluate_reports_hota(mm):
+    gt = _walk(1, 10, 0.0, 0.0) + _walk(2, 10, 8.0, 0.0)
+    ev = evaluate(_table(gt), _table(_offset(gt, dx=0.33)))
+    assert ev.hota == pytest.approx(13 / 19) and ev.hota_detail.hota == ev.hota and ev.loca == pytest.approx(0.67)
+    d = ev.to_dict()
+    assert d["hota"] == ev.hota and len(d["hota_detail"]["hota_alpha"]) == 19
+    json.dumps(d, allow_nan=False)
+    assert {"hota", "deta", "assa", "loca"} <= set(SCALAR_METRICS)
+
+
+# ------------------------------------------------------------------------------------------ MOTChallenge files
+
+
+def _template_camera():
+    from wptrack.cameras.rig import Camera, GroundPlane
+
+    return Camera.look_at("cam 0", 320, 240, position=[0, -8, 5], target=[0, 4, 0], fx=260), GroundPlane()
+
+
+def test_mot_files_world_and_image_boxes(tmp_path, mm):
+    """world.txt: 1-based frames, ids, no box, the world position; <camera>.txt: the bounding box of the projected
+    3D box corners; both read back by motmetrics' MOT15 loader."""
+    from wptrack.evaluation.motfiles import write_mot_files
+
+    cam, plane = _template_camera()
+    rows = {
+        "frame": np.array([0, 0, 1]),
+        "id": np.array([3, 4, 3]),
+        "x": np.array([0.0, 1.5, 0.1]),
+        "y": np.array([2.0, 4.0, 2.0]),
+        "z": np.zeros(3),
+        "length": np.array([0.5, 4.5, 0.5]),
+        "width": np.array([0.5, 1.8, 0.5]),
+        "height": np.array([1.8, 1.5, 1.8]),
+        "orientation": np.array([0.0, 0.3, 0.0]),
+        "existence": np.array([0.9, 1.0, 0.8]),
+    }
+    paths = write_mot_files(rows, tmp_path / "mot", cam, plane)
+    assert [p.name for p in paths] == ["world.txt", "cam_0.txt"]
+    world = np.loadtxt(paths[0], delimiter=",")
+    assert world[:, 0].tolist() == [1, 1, 2] and world[:, 1].tolist() == [3, 4, 3]
+    assert np.all(world[:, 2:6] == -1) and np.allclose(world[:, 6], [0.9, 1.0, 0.8])
+    assert np.allclose(world[:, 7:], np.column_stack([rows["x"], rows["y"], rows["z"]]), atol=1e-4)
+    boxes = np.loadtxt(paths[1], delimiter=",")
+    # the person at (0, 2): its 8 corners projected independently
+    corners = np.array([[x, y, z] for x in (-0.25, 0.25) for y in (1.75, 2.25) for z in (0.0, 1.8)])
+    uv, _ = cam.project(corners)
+    left, top = uv.min(axis=0)
+    w, h = uv.max(axis=0) - uv.min(axis=0)
+    assert np.allclose(boxes[0, 2:6], [left + 1, top + 1, w, h], atol=0.01) and np.all(boxes[:, 7:] == -1)
+    assert boxes[1, 4] > 3 * boxes[0, 4]  # the car's box is wider than the person's
+    import warnings
+
+    with warnings.catch_warnings():  # motmetrics' loader trips a pandas deprecation warning (not ours)
+        warnings.simplefilter("ignore")
+        df = mm.io.loadtxt(str(paths[1]), fmt="mot15-2D")
+        assert len(mm.io.loadtxt(str(paths[0]), fmt="mot15-2D")) == 3
+    assert len(df) == 3 and sorted(df.index.get_level_values("Id").tolist()) == [3, 3, 4]
+    assert np.allclose(df["X"].to_numpy(), boxes[:, 2] - 1, atol=0.01)  # the loader's 0-based pixels: OpenCV's
+
+
+def test_cli_evaluate_several_runs_spread_and_mot_files(tmp_path, capsys, mm):
+    """`wptrack evaluate run0 run1 --groundtruth gt.csv`: each run's scores with HOTA, the spread (mean, min, max,
+    std) over the runs, the JSON of both, and each run's MOTChallenge files (world coordinates: no rig)."""
+    from wptrack.cli import main
+
+    gt = _walk(1, 10, 0.0, 0.0) + _walk(2, 10, 8.0, 0.0)
+    _write_csv(tmp_path / "gt.csv", ["frame", "id", "x", "y", "z"], [(f, i, x, y, 0.0) for f, i, x, y, _ in gt])
+    for k, dx in enumerate((0.0, 0.33)):
+        (tmp_path / f"run{k}").mkdir()
+        rows = [(f, i + 5, x + dx, y, 0.0) for f, i, x, y, _ in gt]
+        _write_csv(tmp_path / f"run{k}" / "tracks.csv", ["frame", "id", "x", "y", "z"], rows)
+    out = tmp_path / "ev.json"
+    argv = ["evaluate", str(tmp_path / "run0"), str(tmp_path / "run1"), "--groundtruth", str(tmp_path / "gt.csv")]
+    assert main([*argv, "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "HOTA 1.000" in text and "HOTA 0.684" in text and "over 2 runs: mean (min, max, std)" in text
+    doc = json.loads(out.read_text())
+    assert set(doc["runs"]) == {str(tmp_path / "run0"), str(tmp_path / "run1")}
+    spread = doc["spread"]["hota"]
+    assert spread["mean"] == pytest.approx((1 + 13 / 19) / 2) and spread["min"] == pytest.approx(13 / 19)
+    assert spread["std"] == pytest.approx(np.std([1.0, 13 / 19], ddof=1))
+    for k in range(2):
+        assert (tmp_path / f"run{k}" / "mot" / "world.txt").is_file()
+        assert (tmp_path / f"run{k}" / "mot" / "gt" / "world.txt").is_file()
+        assert not list((tmp_path / f"run{k}" / "mot").glob("cam*.txt"))  # no rig: no image boxes
+    assert main([*argv[:2], "--groundtruth", str(tmp_path / "gt.csv"), "--no-mot"]) == 0

@@ -9,17 +9,9 @@ import cv2
 import numpy as np
 import pytest
 
-from wptrack.errors import ConfigError, FrameError
-from wptrack.frames import (
-    ArraySource,
-    ImageSequenceSource,
-    SyncedFrames,
-    VideoSource,
-    VideoWriter,
-    open_frames,
-    open_source,
-    write_video,
-)
+from wptrack.core.errors import ConfigError, FrameError
+from wptrack.io.frames import ArraySource, ImageSequenceSource, SyncedFrames, VideoSource, open_frames, open_source
+from wptrack.io.video import VideoWriter, write_video
 
 
 def _frames(rng: np.random.Generator, n: int, w: int = 32, h: int = 24) -> np.ndarray:
@@ -260,7 +252,7 @@ def test_write_video_ffv1_lossless(tmp_path, rng):
 
 
 def test_video_writer_mjpg_fallback(tmp_path, rng, monkeypatch):
-    import wptrack.frames as frames_mod
+    import wptrack.io.video as frames_mod
 
     monkeypatch.setitem(frames_mod.VIDEO_CODECS, ".avi", ("XXXX", "MJPG"))
     frames = _frames(rng, 5)
@@ -297,7 +289,7 @@ def test_prefetch_order_errors_and_early_stop():
     import threading
     import time
 
-    from wptrack.frames import prefetch
+    from wptrack.io.prefetch import prefetch
 
     assert list(prefetch(range(50), depth=3)) == list(range(50))
 
@@ -326,3 +318,29 @@ def test_prefetch_order_errors_and_early_stop():
     time.sleep(0.3)
     assert len(produced) < 10, "the thread must stop after the consumer leaves"
     assert not any(t.name == "wptrack-prefetch" and t.is_alive() for t in threading.enumerate())
+
+
+@pytest.mark.parametrize("suffix", [".avi", ".mp4"])
+def test_video_reader_gives_the_frames_of_a_sequential_read_in_any_order(tmp_path, suffix):
+    """Random access (seeks over long gaps, backwards, collected frames on the way) gives the same frames as
+    decoding the file from the start (lossless FFV1 and lossy MPEG-4 with keyframes far apart)."""
+    from wptrack.io.frames import VideoReader, VideoSource
+    from wptrack.io.video import write_video
+
+    rng = np.random.default_rng(4)
+    frames = [np.full((24, 32, 3), 7 * k % 256, np.uint8) + rng.integers(0, 20, (24, 32, 3), dtype=np.uint8)
+              for k in range(60)]  # fmt: skip
+    path = write_video(tmp_path / f"v{suffix}", frames, fps=10)
+    src = VideoSource(path)
+    truth = list(src)
+    reader = VideoReader(src, seek_gap=5)
+    for i in [3, 40, 41, 12, 59, 0, 30]:
+        np.testing.assert_array_equal(reader.read(i), truth[i])
+    assert reader.read(len(truth) + 3) is None
+    reader.close()
+    through = VideoReader(src, seek_gap=100)  # decodes through the gap: the collected frames come along
+    np.testing.assert_array_equal(through.read(10, collect={4, 7, 12}), truth[10])
+    assert sorted(through.passed) == [4, 7]
+    for i, frame in through.passed.items():
+        np.testing.assert_array_equal(frame, truth[i])
+    through.close()

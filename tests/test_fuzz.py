@@ -1,5 +1,5 @@
 """Fuzzing (hypothesis) of the rig parser and the frame-source layer: whatever the input, the only exception is
-the documented one (:class:`wptrack.errors.WptrackError`: RigError / FrameError / ConfigError).
+the documented one (:class:`wptrack.core.errors.WptrackError`: RigError / FrameError / ConfigError).
 
 Case counts (derandomized, so CI runs the same cases every time) with ``WPTRACK_FUZZ_FULL=1``: rig dicts 4000 +
 mutated camera entries 4000 + rig file texts 2000 = 10^4 rig cases, opencv files 300, frame sources 300 generated
@@ -21,9 +21,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tests.test_rig import _cam_entry
-from wptrack.errors import WptrackError
-from wptrack.frames import open_frames, open_source
-from wptrack.rig import Rig
+from wptrack.cameras.rig import Rig
+from wptrack.core.errors import WptrackError
+from wptrack.io.frames import open_frames, open_source
 
 FULL = os.environ.get("WPTRACK_FUZZ_FULL", "") not in ("", "0")
 
@@ -39,7 +39,7 @@ def fuzz(n: int) -> settings:
     )
 
 
-logging.getLogger("wptrack.rig").setLevel(logging.ERROR)  # blind-camera warnings are expected here
+logging.getLogger("wptrack.cameras.rig").setLevel(logging.ERROR)  # blind-camera warnings are expected here
 
 floats = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True),

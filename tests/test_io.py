@@ -8,17 +8,10 @@ import os
 import numpy as np
 import pytest
 
-from wptrack.errors import OutputError, WptrackError
-from wptrack.io import (
-    RunWriter,
-    _atomic_file,
-    atomic_save_npz,
-    atomic_write_json,
-    atomic_write_text,
-    ensure_writable_dir,
-    read_tracks,
-    versions,
-)
+from wptrack.core.errors import OutputError, WptrackError
+from wptrack.io.atomic import atomic_file, atomic_save_npz, atomic_write_json, atomic_write_text, ensure_writable_dir
+from wptrack.io.run import RunWriter, versions
+from wptrack.io.tables import read_tracks
 
 COLUMNS = ["frame", "id", "x", "y", "z", "sx", "sy", "sz", "label"]
 
@@ -46,7 +39,7 @@ def test_atomic_writes_leave_no_temp_files(tmp_path):
 def test_atomic_write_failure_keeps_old_file(tmp_path):
     atomic_write_json(tmp_path / "b.json", {"ok": 1})
     with pytest.raises(KeyboardInterrupt):
-        with _atomic_file(tmp_path / "b.json") as f:  # interrupted in the middle of a write
+        with atomic_file(tmp_path / "b.json") as f:  # interrupted in the middle of a write
             f.write(b'{"half":')
             raise KeyboardInterrupt
     assert json.loads((tmp_path / "b.json").read_text()) == {"ok": 1}
@@ -265,7 +258,7 @@ def test_complete_run_leaves_short_tracks_out(tmp_path):
 
 def test_drop_short_tracks_needs_an_id_column(tmp_path):
     """A tracks file without an id column is refused by name, and left as it was."""
-    from wptrack.io import drop_short_tracks
+    from wptrack.io.tables import drop_short_tracks
 
     path = tmp_path / "t.csv"
     path.write_text("frame,x\n0,1.0\n")
@@ -299,3 +292,32 @@ def test_new_run_removes_an_earlier_runs_tracks_all(tmp_path):
         rw.add_rows([(0, 0, 1.0, 2.0, 3.0)])
         rw.close("complete")  # min_track_frames 1: no filter, no tracks_all.csv
     assert not (out / "tracks_all.csv").exists()
+
+
+def test_atomic_path_commits_on_success_and_leaves_the_target_on_failure(tmp_path):
+    from wptrack.io.atomic import atomic_path
+
+    target = tmp_path / "cam.yml"
+    target.write_text("old")
+    with pytest.raises(RuntimeError), atomic_path(target) as tmp:
+        assert tmp.parent == tmp_path and tmp.suffix == ".yml" and tmp != target
+        tmp.write_text("half")
+        raise RuntimeError("interrupted")
+    assert target.read_text() == "old" and sorted(p.name for p in tmp_path.iterdir()) == ["cam.yml"]
+    with atomic_path(target) as tmp:
+        tmp.write_text("new")
+    assert target.read_text() == "new" and sorted(p.name for p in tmp_path.iterdir()) == ["cam.yml"]
+
+
+def test_csv_appender_writes_the_one_cell_format(tmp_path):
+    from wptrack.io.tables import CsvAppender, read_tracks
+
+    path = tmp_path / "best.csv"
+    w = CsvAppender(path, ["frame", "id", "x", "cls"])
+    w.add([[0, 3, 0.1234567891, "human"], [1, 3, float("nan"), "vehicle"]])
+    w.close()
+    assert path.read_text() == "frame,id,x,cls\n0,3,0.123457,human\n1,3,nan,vehicle\n"
+    w = CsvAppender(path, ["frame", "id", "x", "cls"], append=True)
+    w.add([[2, 4, np.float32(1.5), "human"]])
+    w.close()
+    assert read_tracks(path)["x"][2] == 1.5 and path.read_text().endswith("2,4,1.500000,human\n")

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import cv2
+import kernel_harness as harness
 import numpy as np
 import warp as wp
 
-from wptrack.kernels import camera as kcam
-from wptrack.rig import Camera, Rig
-from wptrack.warpcams import DeviceRig, fold_radius2
+from wptrack.cameras.rig import Camera, Rig
+from wptrack.cameras.structs import DeviceRig, fold_radius2
 
 
 def random_camera(rng: np.random.Generator, name: str = "c") -> Camera:
@@ -57,7 +57,7 @@ def test_project_matches_opencv(device, rng):
     pts = np.concatenate([points_in_view(c, rng, 300) for c in cams])
     out = wp.zeros((len(cams), len(pts)), dtype=wp.vec3, device=device)
     wp.launch(
-        kcam.project_kernel,
+        harness.project_kernel,
         dim=(len(cams), len(pts)),
         inputs=[drig.cams, wp.array(pts, dtype=wp.vec3, device=device)],
         outputs=[out],
@@ -91,7 +91,7 @@ def test_behind_camera_not_seen(device, rng):
     behind = cam.center + (-(cam.R[2]) * rng.uniform(0.1, 5, (50, 1)))  # along the negative optical axis
     out = wp.zeros((1, 50), dtype=wp.vec3, device=device)
     wp.launch(
-        kcam.project_kernel,
+        harness.project_kernel,
         dim=(1, 50),
         inputs=[drig.cams, wp.array(behind, dtype=wp.vec3, device=device)],
         outputs=[out],

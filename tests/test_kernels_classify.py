@@ -1,5 +1,5 @@
-"""Class-aware addition of the S3 template tracker (beyond Juza et al.; ``kernels.classify`` and the ``absorb``
-move of ``dynamics.template_predict_kernel``), on every device.
+"""Class-aware addition of the S3 template tracker (beyond Juza et al.; ``kernels.templates.classify`` and the
+``absorb`` move of ``dynamics.template_predict_kernel``), on every device.
 
 * ``vehicle_fit_kernel`` on the tracker's candidate set against each candidate's rendered one-slot silhouette;
 * the replacement's threshold rule (in ``uoh.choose_addition_kernel``);
@@ -29,14 +29,14 @@ from test_kernels_templates import (
     render,
 )
 
-from wptrack.errors import ConfigError
-from wptrack.kernels import classify as kcls
-from wptrack.kernels import reduce as kreduce
-from wptrack.kernels import slots as kslots
-from wptrack.kernels import uoh as kuoh
-from wptrack.rig import GroundPlane
-from wptrack.trackers.templates import Candidates, TemplateConfig, VehiclePrior, _plane_struct
-from wptrack.warpcams import camera_struct
+from wptrack.cameras.rig import GroundPlane
+from wptrack.cameras.structs import camera_struct
+from wptrack.core.errors import ConfigError
+from wptrack.kernels.core import reduce as kreduce
+from wptrack.kernels.templates import classify as kcls
+from wptrack.kernels.templates import slots as kslots
+from wptrack.kernels.templates import uoh as kuoh
+from wptrack.trackers.templates.tracker import Candidates, TemplateConfig, VehiclePrior, _plane_struct
 
 NEG_INF32 = np.float32(-3.0e38)
 

@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
+import kernel_harness as harness
 import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.kernels import colour as kcolour
-from wptrack.kernels import scoring as kscoring
-from wptrack.rig import Camera, Rig
-from wptrack.trackers.colour import HSITarget
-from wptrack.warpcams import ColourMaps, DeviceRig, camera_struct
+from wptrack.cameras.rig import Camera, Rig
+from wptrack.cameras.structs import ColourMaps, DeviceRig, camera_struct
+from wptrack.kernels.colour import hsi as kcolour
+from wptrack.kernels.colour import scoring as kscoring
+from wptrack.trackers.colour.tracker import HSITarget
 
 
 def hsi_ref(bgr: np.ndarray):
@@ -82,7 +83,7 @@ def mask_and_integral(drig: DeviceRig, target: HSITarget, bgr, device):
     m = drig.num_cameras
     per_pixel = wp.zeros(drig.total_pixels, dtype=wp.uint8, device=device)
     wp.launch(
-        kcolour.window_from_mask_kernel,
+        harness.window_from_mask_kernel,
         dim=(m, drig.max_height, drig.max_width),
         inputs=[drig.cams, maps.mask],
         outputs=[per_pixel],
@@ -203,7 +204,7 @@ def test_window_counts_direct_equals_integral_and_reference(device, rng):
     # log-likelihood (eqs. 5-7) from the counts
     loglik = wp.zeros(n, dtype=wp.float32, device=device)
     wp.launch(
-        kscoring.colour_score_kernel,
+        harness.colour_score_kernel,
         dim=n,
         inputs=[drig.cams, target.to_struct(device), bgr, integral, window, kscoring.SCORE_DIRECT, P],
         outputs=[loglik],

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import kernel_harness as harness
 import numpy as np
 import warp as wp
 
-from wptrack.kernels import motion as kmotion
+from wptrack.kernels.colour import walk as kmotion
 
 
 def test_gaussian_walk_statistics_and_gather(device, rng):
@@ -21,7 +22,7 @@ def test_gaussian_walk_statistics_and_gather(device, rng):
         wp.vec2ui(9, 0),
         wp.array([3], dtype=wp.int32, device=device),
     ]
-    wp.launch(kmotion.gaussian_walk_kernel, dim=n, inputs=args, outputs=[out], device=device)
+    wp.launch(harness.gaussian_walk_kernel, dim=n, inputs=args, outputs=[out], device=device)
     step = out.numpy() - base[anc]
     # per axis: mean within 5 standard errors, std within 2 %
     assert np.all(np.abs(step.mean(0)) < 5 * sigma / np.sqrt(n))
@@ -29,10 +30,10 @@ def test_gaussian_walk_statistics_and_gather(device, rng):
     assert abs(np.corrcoef(step.T)[0, 1]) < 0.02
     # determinism and frame dependence
     out2 = wp.zeros(n, dtype=wp.vec3, device=device)
-    wp.launch(kmotion.gaussian_walk_kernel, dim=n, inputs=args, outputs=[out2], device=device)
+    wp.launch(harness.gaussian_walk_kernel, dim=n, inputs=args, outputs=[out2], device=device)
     np.testing.assert_array_equal(out.numpy(), out2.numpy())
     args[4] = wp.array([4], dtype=wp.int32, device=device)
-    wp.launch(kmotion.gaussian_walk_kernel, dim=n, inputs=args, outputs=[out2], device=device)
+    wp.launch(harness.gaussian_walk_kernel, dim=n, inputs=args, outputs=[out2], device=device)
     assert not np.any(np.all(out.numpy() == out2.numpy(), axis=1))
 
 

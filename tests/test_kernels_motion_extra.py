@@ -5,12 +5,13 @@ of the (seed, i, frame, STREAM_MOTION) block) and ``init_box_kernel`` (uniform i
 
 from __future__ import annotations
 
+import kernel_harness as harness
 import numpy as np
 import warp as wp
 from kernel_refs import normal4_ref, uniform4_ref
 
-from wptrack.kernels import motion as kmotion
-from wptrack.kernels import random as krand
+from wptrack.kernels.colour import walk as kmotion
+from wptrack.kernels.core import random as krand
 
 
 def test_gaussian_walk_matches_numpy_philox(device, rng):
@@ -19,7 +20,7 @@ def test_gaussian_walk_matches_numpy_philox(device, rng):
     anc = rng.integers(0, n, n).astype(np.int32)
     out = wp.zeros(n, dtype=wp.vec3, device=device)
     wp.launch(
-        kmotion.gaussian_walk_kernel,
+        harness.gaussian_walk_kernel,
         dim=n,
         inputs=[
             wp.array(base, dtype=wp.vec3, device=device),

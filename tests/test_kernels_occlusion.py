@@ -1,4 +1,4 @@
-"""Occlusion-aware prediction of the S3 template tracker (beyond Juza et al.; ``kernels.occlusion`` and the
+"""Occlusion-aware prediction of the S3 template tracker (beyond Juza et al.; ``kernels.templates.occlusion`` and the
 occlusion/size terms of ``dynamics.template_predict_kernel``), on every device.
 
 * ``occlusion_kernel`` against a float64 NumPy reference of its box formula on random scenes, and on a scene whose
@@ -27,11 +27,11 @@ from test_kernels_templates import (
     raster,
 )
 
-from wptrack.errors import ConfigError
-from wptrack.kernels import occlusion as kocc
-from wptrack.kernels import raster as kraster
-from wptrack.rig import GroundPlane
-from wptrack.trackers.templates import TemplateConfig
+from wptrack.cameras.rig import GroundPlane
+from wptrack.core.errors import ConfigError
+from wptrack.kernels.templates import occlusion as kocc
+from wptrack.kernels.templates import raster as kraster
+from wptrack.trackers.templates.tracker import TemplateConfig
 
 PIECES = int(kraster.PIECES)
 

@@ -10,8 +10,8 @@ import warp as wp
 from scipy.special import logsumexp
 from test_kernels_reduce import run_reduction
 
-from wptrack.kernels import occupancy as kocc
-from wptrack.kernels import reduce as kreduce
+from wptrack.kernels.core import reduce as kreduce
+from wptrack.kernels.people import occupancy as kocc
 
 
 def log_norm(device, est: np.ndarray, slot: int, n: int) -> float:

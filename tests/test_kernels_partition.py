@@ -1,5 +1,6 @@
-"""The partitioned template filter (``kernels.partition``, the group sums of ``kernels.xor``, the group weights of
-``kernels.slots`` and the per-group gathering of ``kernels.dynamics``) against NumPy references, on every device.
+"""The partitioned template filter (``kernels.templates.partition``, the group sums of ``kernels.templates.xor``, the
+group weights of ``kernels.templates.slots`` and the per-group gathering of ``kernels.templates.dynamics``) against
+NumPy references, on every device.
 
 * slot boxes: the union over particles of each slot's drawn pieces, from the hulls; every pixel a slot draws (the
   virtual image of that slot alone) lies inside its box;
@@ -38,13 +39,13 @@ from test_kernels_templates import (
     truth_at,
 )
 
-from wptrack.kernels import partition as kpart
-from wptrack.kernels import reduce as kreduce
-from wptrack.kernels import slots as kslots
-from wptrack.kernels import xor as kxor
-from wptrack.pf import BLOCK
-from wptrack.rig import Camera, GroundPlane
-from wptrack.trackers.templates import (
+from wptrack.cameras.rig import Camera, GroundPlane
+from wptrack.core.filter import BLOCK
+from wptrack.kernels.core import reduce as kreduce
+from wptrack.kernels.templates import partition as kpart
+from wptrack.kernels.templates import slots as kslots
+from wptrack.kernels.templates import xor as kxor
+from wptrack.trackers.templates.tracker import (
     TemplateConfig,
     TemplateTracker,
     empty_slot_acc,
@@ -557,7 +558,7 @@ def test_partitioned_tracker_follows_rendered_scene_with_300_particles(device, s
 
 def test_partition_needs_resampling_every_frame():
     """The partitioned filter resamples every group every frame: an ESS trigger is refused with a clear message."""
-    from wptrack.errors import ConfigError
+    from wptrack.core.errors import ConfigError
 
     with pytest.raises(ConfigError, match="ess_threshold 0.5.*partition"):
         TemplateConfig(ess_threshold=0.5)

@@ -7,16 +7,16 @@ from __future__ import annotations
 
 import colorsys
 
+import kernel_harness as harness
 import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.kernels import camera as kcam
-from wptrack.kernels import descriptor as kdesc
-from wptrack.kernels import occupancy as kocc
-from wptrack.kernels import people as kpeople
-from wptrack.rig import Camera, Rig
-from wptrack.warpcams import DeviceRig
+from wptrack.cameras.rig import Camera, Rig
+from wptrack.cameras.structs import DeviceRig
+from wptrack.kernels.people import descriptor as kdesc
+from wptrack.kernels.people import filter as kpeople
+from wptrack.kernels.people import occupancy as kocc
 
 NB = 8
 R_N = 0.12
@@ -68,7 +68,7 @@ def project_all(drig: DeviceRig, pts: np.ndarray, device) -> np.ndarray:
     """(M, N, 3) (u, v, depth) from the tested projection (test_kernels_camera checks it against OpenCV)."""
     out = wp.zeros((drig.num_cameras, len(pts)), dtype=wp.vec3, device=device)
     wp.launch(
-        kcam.project_kernel,
+        harness.project_kernel,
         dim=(drig.num_cameras, len(pts)),
         inputs=[drig.cams, wp.array(pts, dtype=wp.vec3, device=device)],
         outputs=[out],
@@ -146,7 +146,7 @@ def run_noise(a, b, chunk, device, stride=1) -> float:
 
 
 def alpha_ref(rgb: np.ndarray, sigma_n: float) -> np.ndarray:
-    """(alpha_S, alpha_H) of eq. 17 with the delta-method variances (see kernels/descriptor.py)."""
+    """(alpha_S, alpha_H) of eq. 17 with the delta-method variances (see kernels/people/descriptor.py)."""
     s = np.sort(rgb, axis=1)[:, ::-1]
     mx, mid, mn = s[:, 0], s[:, 1], s[:, 2]
     vv = sigma_n**2
@@ -573,8 +573,8 @@ def test_occupancy_matches_brute_force_and_integrates(device, rng):
 @pytest.mark.parametrize("resampled", [0, 1])
 def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     """The fused frame gives the same state, descriptor, log-weights and block partials as predict -> descriptor
-    -> observation -> reduce.block_partials_kernel launched one after another."""
-    from wptrack.kernels import reduce as kred
+    -> observation -> kernel_harness.block_partials_kernel launched one after another."""
+    from wptrack.kernels.core import reduce as kred
 
     rig = make_rig()
     drig = DeviceRig(rig, device)
@@ -646,7 +646,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     )
     logw = sep["logw"].numpy() + (0 if resampled else logw_prev.numpy())
     wp.launch_tiled(
-        kred.block_partials_kernel,
+        harness.block_partials_kernel,
         dim=[nbk],
         inputs=[wp.array(logw, device=device), sep["pos"], n, chunk],
         outputs=[sep["pmax"], sep["parg"], sep["part"]],

@@ -26,11 +26,11 @@ from test_kernels_people import (
     run_predict,
 )
 
-from wptrack.kernels import people as kpeople
-from wptrack.kernels import random as krand
-from wptrack.kernels import reduce as kreduce
-from wptrack.rig import Rig
-from wptrack.warpcams import DeviceRig
+from wptrack.cameras.rig import Rig
+from wptrack.cameras.structs import DeviceRig
+from wptrack.kernels.core import random as krand
+from wptrack.kernels.core import reduce as kreduce
+from wptrack.kernels.people import filter as kpeople
 
 # ------------------------------------------------------------------------------------------ ground votes
 

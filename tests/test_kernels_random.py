@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import kernel_harness as harness
 import numpy as np
 import pytest
 import warp as wp
 from scipy import stats
 
-from wptrack.kernels import random as krand
+from wptrack.kernels.core import random as krand
 
 M0, M1 = 0xD2511F53, 0xCD9E8D57
 W0, W1 = 0x9E3779B9, 0xBB67AE85
@@ -81,7 +82,7 @@ def test_streams_do_not_collide_at_large_indices(device):
 def test_normals_distribution(device):
     n = 50_000
     out = wp.zeros((n, 4), dtype=wp.float32, device=device)
-    wp.launch(krand.normal_kernel, dim=n, inputs=[wp.vec2ui(42, 0), 0, 1], outputs=[out], device=device)
+    wp.launch(harness.normal_kernel, dim=n, inputs=[wp.vec2ui(42, 0), 0, 1], outputs=[out], device=device)
     z = out.numpy().ravel()
     assert np.all(np.isfinite(z))
     # 200k samples: mean within 5 sigma (5/sqrt(2e5) ~ 0.011), variance within 1.5 %

@@ -19,8 +19,8 @@ from test_kernels_templates import (
     reference_scene,
 )
 
-from wptrack.kernels import raster as kraster
-from wptrack.rig import GroundPlane
+from wptrack.cameras.rig import GroundPlane
+from wptrack.kernels.templates import raster as kraster
 
 
 def render_labels(device, hulls, r: int, width: int, height: int, best: int) -> np.ndarray:

@@ -13,8 +13,8 @@ import pytest
 import warp as wp
 from test_kernels_templates import PIECES, random_camera, random_scene, raster
 
-from wptrack.kernels import raster as kraster
-from wptrack.rig import GroundPlane
+from wptrack.cameras.rig import GroundPlane
+from wptrack.kernels.templates import raster as kraster
 
 HULL_MAX = int(kraster.HULL_MAX)
 

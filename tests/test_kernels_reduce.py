@@ -3,11 +3,12 @@ the block, on every device (the CPU backend runs one thread per block: the patte
 
 from __future__ import annotations
 
+import kernel_harness as harness
 import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.kernels import reduce as kred
+from wptrack.kernels.core import reduce as kred
 
 BLOCK = 256
 
@@ -26,7 +27,7 @@ def run_reduction(device, logw: np.ndarray, x: np.ndarray, chunk: int, threshold
     thr = wp.array([threshold], dtype=wp.float32, device=device)
     flag = wp.zeros(1, dtype=wp.int32, device=device)
     wp.launch_tiled(
-        kred.block_partials_kernel,
+        harness.block_partials_kernel,
         dim=[nb],
         inputs=[L, X, n, chunk],
         outputs=[pm, pa, part],

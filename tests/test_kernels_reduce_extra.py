@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.kernels import reduce as kreduce
+from wptrack.kernels.core import reduce as kreduce
 
 
 def test_increment_counts_launches(device):
@@ -27,7 +27,7 @@ def test_increment_counts_launches(device):
         np.testing.assert_array_equal(counter.numpy(), [47, 7])
 
 
-BLOCK = 256  # as wptrack.pf / the template tracker
+BLOCK = 256  # as wptrack.core.filter / the template tracker
 
 
 def run_max(device, logw: np.ndarray, chunk: int):

@@ -12,13 +12,13 @@ import warp as wp
 from kernel_refs import check_partials, normal4_ref
 from test_kernels_colour import TARGETS, make_rig, mask_and_integral, random_frames, upload, window_ref
 
-from wptrack.kernels import random as krand
-from wptrack.kernels import reduce as kreduce
-from wptrack.kernels import scoring as kscoring
-from wptrack.rig import Camera, Rig
-from wptrack.warpcams import DeviceRig
+from wptrack.cameras.rig import Camera, Rig
+from wptrack.cameras.structs import DeviceRig
+from wptrack.kernels.colour import scoring as kscoring
+from wptrack.kernels.core import random as krand
+from wptrack.kernels.core import reduce as kreduce
 
-BLOCK = 256  # as wptrack.pf launches the fused kernels
+BLOCK = 256  # as wptrack.core.filter launches the fused kernels
 SEED = (7, 3)
 FRAME = 5
 

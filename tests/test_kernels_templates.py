@@ -18,15 +18,16 @@ import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.kernels import dynamics as kdyn
-from wptrack.kernels import raster as kraster
-from wptrack.kernels import reduce as kreduce
-from wptrack.kernels import slots as kslots
-from wptrack.kernels import uoh as kuoh
-from wptrack.kernels import xor as kxor
-from wptrack.pf import BLOCK, _seed_words
-from wptrack.rig import Camera, GroundPlane, Rig
-from wptrack.trackers.templates import (
+from wptrack.cameras.rig import Camera, GroundPlane, Rig
+from wptrack.cameras.structs import camera_struct
+from wptrack.core.filter import BLOCK, _seed_words
+from wptrack.kernels.core import reduce as kreduce
+from wptrack.kernels.templates import dynamics as kdyn
+from wptrack.kernels.templates import raster as kraster
+from wptrack.kernels.templates import slots as kslots
+from wptrack.kernels.templates import uoh as kuoh
+from wptrack.kernels.templates import xor as kxor
+from wptrack.trackers.templates.tracker import (
     CANDIDATE_BLOCK,
     ROW_BLOCK,
     Candidates,
@@ -41,7 +42,6 @@ from wptrack.trackers.templates import (
     launch_xor_score,
     xor_band,
 )
-from wptrack.warpcams import camera_struct
 
 HUMAN, VEHICLE = 1, 2
 PIECES = int(kraster.PIECES)
@@ -57,11 +57,11 @@ TILTED = GroundPlane(origin=(0.4, -0.7, 0.3), normal=(0.12, -0.2, 1.0), x_axis=(
 def template_vertices(kind: int, piece: int, dims, heading: float) -> np.ndarray:
     """Vertices (n, 3) of one piece in the object's frame (along e1, along e2, height), metres, float64.
 
-    Re-derived from ``kernels.raster``'s docstring: human legs = regular octagonal prism of radius 0.65 x the body
-    radius from the ground to half the height; human upper body = hexagons of the body radius at half the height
+    Re-derived from ``kernels.templates.raster``'s docstring: human legs = regular octagonal prism of radius 0.65 x the
+    body radius from the ground to half the height; human upper body = hexagons of the body radius at half the height
     and at the shoulders (``max(height - 2.5 head_r, height / 2)``) and a square of half-diagonal head_r at the top;
-    vehicle = lower box (full length/width, 0.55 of the height) and a cabin box (0.6 of the length, 0.9 of the
-    width) up to the full height, rotated by the heading.
+    vehicle = lower box (full length/width, 0.55 of the height) and a cabin box (0.6 of the length, 0.9 of the width) up
+    to the full height, rotated by the heading.
     """
     if kind == HUMAN:
         height, body_r, head_r = (float(v) for v in dims)
@@ -572,7 +572,7 @@ def disc_in_box_ref(c, r, centre, heading, half) -> float:
 
 
 def pair_overlap_ref(ka, pa, ha, da, kb, pb, hb, db) -> float:
-    """Ground overlap of two objects (``kernels.xor.pair_overlap``, re-derived from its docstring)."""
+    """Ground overlap of two objects (``kernels.templates.xor.pair_overlap``, re-derived from its docstring)."""
     pa, pb, da, db = (np.asarray(v, np.float64) for v in (pa, pb, da, db))
     if ka == HUMAN and kb == HUMAN:
         return float(np.clip(1 - np.linalg.norm(pa - pb) / (da[1] + db[1]), 0, 1))
@@ -1455,7 +1455,7 @@ def slot_moments(device, state: kdyn.TemplateState, n: int, r: int, chunk: int, 
 
 
 def slot_reference(a: dict, n: int, r: int) -> np.ndarray:
-    """Per-slot estimates in float64 (columns as kernels.slots.SE_*)."""
+    """Per-slot estimates in float64 (columns as kernels.templates.slots.SE_*)."""
     logw = a["logw"].astype(np.float64)
     w = np.exp(logw - logw.max())
     sw = w.sum()

@@ -1,12 +1,12 @@
-"""Per-object recall of motion masks (wptrack.mask_recall): attribution of the perfect mask to ground-truth boxes,
+"""Per-object recall of motion masks (wptrack.motion.recall): attribution of the perfect mask to ground-truth boxes,
 occlusion by the nearer object, recall and false positives per frame."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from wptrack.mask_recall import GroundTruthFrames, mask_recall, object_labels, score_frame
-from wptrack.rig import Camera
+from wptrack.cameras.rig import Camera
+from wptrack.motion.recall import GroundTruthFrames, mask_recall, object_labels, score_frame
 
 
 def _camera() -> Camera:

@@ -1,4 +1,4 @@
-"""Motion masks (wptrack.masks): OpenCV background subtraction + clean-up, given masks, size checks, config."""
+"""Motion masks (wptrack.motion.masks): OpenCV background subtraction + clean-up, given masks, size checks, config."""
 
 from __future__ import annotations
 
@@ -8,10 +8,11 @@ import cv2
 import numpy as np
 import pytest
 
-from wptrack.errors import ConfigError, FrameError
-from wptrack.frames import VideoWriter, open_source
-from wptrack.masks import MaskConfig, MotionMasks, clean_mask, open_masks
-from wptrack.rig import Camera
+from wptrack.cameras.rig import Camera
+from wptrack.core.errors import ConfigError, FrameError
+from wptrack.io.frames import open_source
+from wptrack.io.video import VideoWriter
+from wptrack.motion.masks import MaskConfig, MotionMasks, clean_mask, open_masks
 
 H, W = 90, 120
 WARM = 25  # background-only frames before anything moves or changes
@@ -290,7 +291,7 @@ def test_size_change_mid_stream(tmp_path):
     ],
 )
 def test_bad_config_names_field(kwargs, field):
-    with pytest.raises(ConfigError, match=rf"^MaskConfig\.{field}: must be .*, got "):
+    with pytest.raises(ConfigError, match=rf"^MaskConfig\.{field}: expected .*, got "):
         MaskConfig(**kwargs)
 
 

@@ -1,4 +1,4 @@
-"""Offline background model (wptrack.background, wptrack.kernels.background, MaskConfig(method="offline")):
+"""Offline background model (wptrack.motion.background, wptrack.kernels.core.background, MaskConfig(method="offline")):
 kernels vs the NumPy reference on every device, no ghost of an object that stands still at the start (where MOG2
 leaves one), cast shadows vs dark objects, short recordings, bad input, and ``wptrack masks``."""
 
@@ -12,13 +12,14 @@ import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.background import SEEK_GAP, bracket, plan_windows
 from wptrack.bench import numpy_masks
 from wptrack.cli import main
-from wptrack.errors import ConfigError, FrameError
-from wptrack.frames import open_source, write_video
-from wptrack.kernels import background as kbg
-from wptrack.masks import MaskConfig, open_masks
+from wptrack.core.errors import ConfigError, FrameError
+from wptrack.io.frames import open_source
+from wptrack.io.video import write_video
+from wptrack.kernels.core import background as kbg
+from wptrack.motion.masks import MaskConfig, open_masks
+from wptrack.motion.windows import SEEK_GAP, bracket, plan_windows
 
 H, W = 72, 96
 
@@ -250,7 +251,7 @@ def test_video_file_offline_default_matches_array(tmp_path, rng):
 
 
 def test_given_masks_of_wrong_size(tmp_path):
-    from wptrack.rig import Camera
+    from wptrack.cameras.rig import Camera
 
     cam = Camera.look_at("cam0", 80, 60, (0, -5, 3), (0, 0, 0), 60.0)
     with pytest.raises(FrameError, match=r"mask size 96x72 differs from camera 'cam0' calibration 80x60"):
@@ -272,7 +273,7 @@ def test_given_masks_of_wrong_size(tmp_path):
     ],
 )
 def test_bad_offline_config_names_field(kwargs, field):
-    with pytest.raises(ConfigError, match=rf"^MaskConfig\.{field}: must be .*, got "):
+    with pytest.raises(ConfigError, match=rf"^MaskConfig\.{field}: expected .*, got "):
         MaskConfig(**kwargs)
 
 
@@ -351,7 +352,7 @@ def _hysteresis_ref(levels: np.ndarray) -> np.ndarray:
 
 
 def test_hysteresis_matches_flood_reference(rng):
-    from wptrack.background import hysteresis
+    from wptrack.motion.background import hysteresis
 
     for density in (0.05, 0.3, 0.6):
         levels = (rng.random((40, 50)) < density).astype(np.uint8)
@@ -403,7 +404,7 @@ def test_spread_cap_finds_object_standing_in_many_samples(rng):
 
 
 def test_resolve_levels_penumbra_near_shadow_only():
-    from wptrack.background import PENUMBRA_PX, resolve_levels
+    from wptrack.motion.background import PENUMBRA_PX, resolve_levels
 
     packed = np.zeros((30, 60), np.uint8)
     packed[5:25, 5:15] = 8  # cast shadow (umbra)
@@ -446,7 +447,7 @@ def test_learnt_shadow_ratio_removes_deep_shadows_keeps_dark_objects(rng):
     """Hard shadows darker than shadow_lo (ratio 0.36) move across a grey floor next to a dark grey object
     (ratio 0.7, neutral: the fixed test takes it for a shadow). The learnt ratio removes the shadows and keeps the
     object; the fixed bounds do the opposite."""
-    from wptrack.background import shadow_ratio
+    from wptrack.motion.stats import shadow_ratio
 
     fixed, learnt, ratio, shadow, obj = _shadow_and_object(rng, 0.36, 0.7)
     assert ratio is not None and abs(ratio - 0.36) < 0.03
@@ -503,7 +504,7 @@ def test_neighbourhood_kernel_matches_numpy(device, rng, radius, scale):
 
 
 def test_neighbourhood_scale_independent_vs_correlated_noise(rng):
-    from wptrack.background import neighbourhood_scale
+    from wptrack.motion.stats import neighbourhood_scale
 
     k, h, w = 5, 60, 80
     bg = np.full((h, w, 3), 120, np.uint8)

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.io import atomic_imwrite, atomic_save_npz, atomic_write_json, atomic_write_text, default_file_mode
-from wptrack.rig import Camera, Rig
+from wptrack.cameras.rig import Camera, Rig
+from wptrack.io.atomic import atomic_imwrite, atomic_save_npz, atomic_write_json, atomic_write_text, default_file_mode
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -30,7 +30,7 @@ def test_no_cuda_noise_on_a_cpu_run(spec):
     code = (
         "import logging, sys;"
         "logging.basicConfig(level=logging.INFO, stream=sys.stdout, format='%(levelname)s %(name)s: %(message)s');"
-        "from wptrack.device import resolve_device;"
+        "from wptrack.core.device import resolve_device;"
         f"print('RESOLVED', resolve_device({spec!r})); resolve_device({spec!r})"
     )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=_env())
@@ -39,8 +39,8 @@ def test_no_cuda_noise_on_a_cpu_run(spec):
     resolved = r.stdout.split("RESOLVED ")[1].split()[0]
     if spec == "cpu" or not wp.get_cuda_devices():
         assert resolved == "cpu"
-    assert r.stdout.count("INFO wptrack.device: device ") == 1, r.stdout  # said once, with why: "(...)"
-    assert "(" in r.stdout.split("INFO wptrack.device: device ")[1]
+    assert r.stdout.count("INFO wptrack.core.device: device ") == 1, r.stdout  # said once, with why: "(...)"
+    assert "(" in r.stdout.split("INFO wptrack.core.device: device ")[1]
 
 
 def test_atomic_writes_use_the_umask_mode(tmp_path):
@@ -93,7 +93,7 @@ def test_warm_up_says_compiling_only_on_a_cache_miss(tmp_path):
     (tmp_path / "tinykern.py").write_text(KERNEL_MODULE)
     code = (
         "import sys, numpy as np, warp as wp, tinykern;"
-        "from wptrack.device import warm_up;"
+        "from wptrack.core.device import warm_up;"
         "print('MISSING', warm_up([tinykern], 'cpu', say=lambda m: print('SAY', m)));"
         "a = wp.array(np.arange(3, dtype=np.float32)); b = wp.zeros(3);"
         "wp.launch(tinykern.twice, dim=3, inputs=[a], outputs=[b]); print('OUT', b.numpy().tolist())"
@@ -107,3 +107,92 @@ def test_warm_up_says_compiling_only_on_a_cache_miss(tmp_path):
     assert "MISSING ['tinykern']" in runs[0].stdout
     assert f"SAY compiling kernels (first run only; cache: {tmp_path / 'cache'}" in runs[0].stdout
     assert "MISSING []" in runs[1].stdout and "SAY" not in runs[1].stdout
+
+
+def _readme() -> str:
+    return (ROOT / "README.md").read_text(encoding="utf-8")
+
+
+def _code_block_after(text: str, marker: str, lang: str = "bash") -> list[str]:
+    """The lines of the first fenced ``lang`` block after ``marker`` in ``text``."""
+    rest = text[text.index(marker) :]
+    start = rest.index(f"```{lang}\n") + len(f"```{lang}\n")
+    return rest[start : rest.index("```", start)].splitlines()
+
+
+def test_ci_runs_the_readme_test_commands_in_a_fresh_venv():
+    """Issue 30 item 1: CI runs exactly the README's test commands, and those make a fresh virtualenv first (a
+    test that only works in the system Python is caught)."""
+    readme = _code_block_after(_readme(), "exactly what `.ci/run` runs")
+    ci = (ROOT / ".ci" / "run").read_text().split("# --- the README's test commands (keep the two identical) ---\n")
+    assert len(ci) == 2
+    assert [line for line in ci[1].splitlines() if line.strip()] == readme
+    assert readme[0].startswith("python3 -m venv ") and ". .venv/bin/activate" in readme[0]
+    assert readme[-1] == 'python3 -m pip install -q -e ".[dev,ray]" && python3 -m pytest -q'
+    assert "rm -rf .venv" in ci[0]  # fresh every run
+
+
+@pytest.mark.parametrize("path", ["wptrack-demo/track/run.json", "examples/lab/cam1.avi", "lab-batch/summary.csv"])
+def test_readme_outputs_are_ignored_by_git(path):
+    """Issue 30 item 16: `wptrack demo` in a checkout left wptrack-demo/ untracked (and the README's batch example
+    examples/lab/ and lab-batch/)."""
+    import shutil
+
+    if not (ROOT / ".git").exists() or shutil.which("git") is None:
+        pytest.skip("not a git checkout")
+    r = subprocess.run(["git", "check-ignore", "-q", path], cwd=ROOT, capture_output=True, text=True)
+    assert r.returncode == 0, f"{path} is not ignored: {r.stderr}"
+
+
+def test_readme_says_which_commands_take_a_device():
+    """Issue 30 item 17: the README said every command takes a device (synth, report, evaluate, batch do not)."""
+    import argparse
+    import re
+
+    from wptrack.cli import build_parser
+
+    readme = _readme()
+    assert "Every command" not in readme
+    line = readme[readme.index("Commands that take a device:") :].split("--device auto")[0]
+    said = set(re.findall(r"`([a-z]+)`", line)) - {"sweep"}
+    parser = build_parser()
+    subs = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    have = set()
+    for name, sub in subs.choices.items():
+        opts = {o for a in sub._actions for o in a.option_strings}
+        nested = [a for a in sub._actions if isinstance(a, argparse._SubParsersAction)]
+        if nested:
+            opts |= {o for p in nested[0].choices.values() for a in p._actions for o in a.option_strings}
+        if "--device" in opts and name != "sweep":
+            have.add(name)
+    assert said == have
+
+
+def test_readme_lists_the_colour_tracks_columns():
+    """Issue 30 item 17: the colour tracker's columns `detection` and `degenerate` were not listed."""
+    from wptrack.trackers.colour.run import COLOR_TRACK_COLUMNS
+
+    readme = _readme()
+    listed = readme[readme.index("- `tracks.csv`: `frame,id,x,y,z,") :].split("`")[3]
+    assert listed.split(",") == list(COLOR_TRACK_COLUMNS)
+    for name in ("detection", "degenerate"):
+        assert f"`{name}` (" in readme
+
+
+def test_truncated_video_shows_no_ffmpeg_lines(tmp_path):
+    """Issue 30 item 20: a truncated video showed FFmpeg's raw '[ffv1 @ 0x...] Slice pointer chain broken' beside
+    wptrack's own message; with -v they are shown."""
+    from wptrack.io.video import write_video
+
+    rng = np.random.default_rng(0)
+    write_video(tmp_path / "full.avi", [rng.integers(0, 255, (96, 128, 3), dtype=np.uint8) for _ in range(10)], fps=10)
+    data = (tmp_path / "full.avi").read_bytes()
+    (tmp_path / "cut.avi").write_bytes(data[: int(len(data) * 0.6)])
+    env = {k: v for k, v in _env().items() if k != "OPENCV_FFMPEG_LOGLEVEL"}
+    argv = [sys.executable, "-m", "wptrack.cli", "masks", "--video", str(tmp_path / "cut.avi"), "--device", "cpu"]
+    quiet = subprocess.run([*argv, "--out", str(tmp_path / "a"), "-q"], capture_output=True, text=True, env=env)
+    assert quiet.returncode == 0, quiet.stderr
+    assert "ended after" in quiet.stderr  # wptrack's own line
+    assert "@ 0x" not in quiet.stderr and "[ffv1" not in quiet.stderr, quiet.stderr
+    loud = subprocess.run([*argv, "--out", str(tmp_path / "b"), "-v"], capture_output=True, text=True, env=env)
+    assert "[ffv1" in loud.stderr or "FFMPEG" in loud.stderr.upper()  # the same file does make FFmpeg talk

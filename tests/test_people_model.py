@@ -6,14 +6,8 @@ import math
 
 import pytest
 
-from wptrack.errors import ConfigError
-from wptrack.trackers.people_model import (
-    DescriptorConfig,
-    DynamicsConfig,
-    MotionConfig,
-    OccupancyConfig,
-    PeopleConfig,
-)
+from wptrack.core.errors import ConfigError
+from wptrack.trackers.people.config import DescriptorConfig, DynamicsConfig, MotionConfig, OccupancyConfig, PeopleConfig
 
 
 def test_defaults_are_valid_and_frozen():

@@ -1,19 +1,23 @@
-"""The detection-driven mixture proposal (issue 12) on every device: ray-pair triangulation and the two densities
-against NumPy, sampling statistics, validity of the importance weights on a linear-gaussian toy, and the colour
-tracker with ``proposal="mixture"``: convergence from random initialisation, 'no detection' frames, determinism."""
+"""Detection jumps of the colour tracker (``proposal="mixture"``, issues 12 and 29) on every device: ray-pair
+triangulation against NumPy, the jump sampling statistics, config validation, and the tracker: convergence from random
+initialisation, 'no detection' frames, determinism, candidates on the ball, any number of cameras, the mode test moving
+a cloud off a wrong mode and leaving a locked one alone."""
 
 from __future__ import annotations
 
+import kernel_harness as harness
 import numpy as np
 import pytest
 import warp as wp
+from kernel_refs import normal4_ref
 from test_tracker_colour import BALL, TARGET, frames_for, small_rig
 
-from wptrack.errors import ConfigError
-from wptrack.kernels import proposal as kproposal
-from wptrack.rig import Camera, Rig
-from wptrack.trackers.colour import ColorConfig, ColorTracker, HSITarget
-from wptrack.warpcams import DeviceRig
+from wptrack.cameras.rig import Camera, Rig
+from wptrack.cameras.structs import DeviceRig
+from wptrack.core.errors import ConfigError
+from wptrack.kernels.colour import proposal as kproposal
+from wptrack.kernels.colour.walk import STREAM_MOTION
+from wptrack.trackers.colour.tracker import ColorConfig, ColorTracker, HSITarget
 
 LO = np.array([-0.5, -0.5, 0.0])
 HI = np.array([1.0, 1.0, 0.8])
@@ -48,7 +52,7 @@ def test_ray_pairs_triangulate_projected_points(device):
     out = wp.zeros(64, dtype=wp.vec4, device=device)
     for uv_b, exact in ((uvb, True), (uvb_off, False)):
         wp.launch(
-            kproposal.ray_pair_kernel,
+            harness.ray_pair_kernel,
             dim=64,
             inputs=[
                 drig.cams,
@@ -84,82 +88,28 @@ def ray_dir(cam: Camera, uv) -> np.ndarray:
     return d / np.linalg.norm(d)
 
 
-def components(device, centres, valid):
-    return (
-        wp.array(np.asarray(centres, np.float32), dtype=wp.vec3, device=device),
-        wp.array(np.asarray(valid, np.int32), dtype=wp.int32, device=device),
-    )
-
-
-def np_log_motion(x, parent, s, alpha):
-    r2 = ((x - parent) ** 2).sum(1)
-    ln = -r2 / (2 * s * s) - np.log((2 * np.pi) ** 1.5 * s**3)
-    inside = np.all((x >= LO) & (x <= HI), axis=1)
-    lu = np.where(inside, np.log(alpha / np.prod(HI - LO)), -np.inf)
-    return np.logaddexp(np.log(1 - alpha) + ln, lu)
-
-
-def np_log_det(x, centres, valid, sd):
-    c = np.asarray(centres)[np.asarray(valid) != 0]
-    r2 = ((x[:, None, :] - c[None]) ** 2).sum(2)
-    e = -r2 / (2 * sd * sd)
-    m = e.max(1)
-    return m + np.log(np.exp(e - m[:, None]).mean(1)) - np.log((2 * np.pi) ** 1.5 * sd**3)
-
-
-def test_densities_match_numpy(device):
-    rng = np.random.default_rng(1)
-    centres = BALL + rng.normal(0, 0.05, (16, 3))
-    valid = rng.integers(0, 3, 16)
-    parents = BALL + rng.normal(0, 0.05, (200, 3))
-    x = parents + rng.normal(0, 0.05, (200, 3))
-    out = wp.zeros((200, 2), dtype=wp.float32, device=device)
-    c, v = components(device, centres, valid)
-    s, alpha, sd = 0.03, 0.05, 0.04
+def jump_sample(device, parents, det_pos, det_cum, count, threshold, uniform=0, sigma=0.03, sd=0.02, seed=7, frame=3):
+    out = wp.zeros(len(parents), dtype=wp.vec3, device=device)
+    k = max(1, len(det_pos))
+    pos = np.zeros((k, 3), np.float32)
+    pos[: len(det_pos)] = det_pos
+    cum = np.ones(k, np.float32)
+    cum[: len(det_cum)] = det_cum
     wp.launch(
-        kproposal.log_densities_kernel,
-        dim=200,
+        harness.jump_sample_kernel,
+        dim=len(parents),
         inputs=[
-            wp.array(x.astype(np.float32), dtype=wp.vec3, device=device),
-            wp.array(parents.astype(np.float32), dtype=wp.vec3, device=device),
-            s,
-            alpha,
-            wp.vec3(*LO),
-            wp.vec3(*HI),
-            c,
-            v,
-            int((valid != 0).sum()),
-            sd,
-        ],
-        outputs=[out],
-        device=device,
-    )
-    r = out.numpy()
-    np.testing.assert_allclose(r[:, 0], np_log_motion(x, parents, s, alpha), rtol=1e-4, atol=1e-3)
-    np.testing.assert_allclose(r[:, 1], np_log_det(x, centres, valid, sd), rtol=1e-4, atol=1e-3)
-
-
-def sample(device, parents, centres, valid, s, alpha, eps, sd, seed=7):
-    n = len(parents)
-    z = np.random.default_rng(seed).normal(size=(n, 4)).astype(np.float32)
-    c, v = components(device, centres, valid)
-    out = wp.zeros(n, dtype=wp.vec4, device=device)
-    wp.launch(
-        kproposal.mixture_sample_kernel,
-        dim=n,
-        inputs=[
-            wp.array(parents.astype(np.float32), dtype=wp.vec3, device=device),
-            wp.array(z, dtype=wp.vec4, device=device),
+            wp.array(np.asarray(parents, np.float32), dtype=wp.vec3, device=device),
             wp.vec2ui(seed, 0),
-            3,
-            s,
-            alpha,
-            eps,
+            frame,
+            sigma,
+            threshold,
+            uniform,
             wp.vec3(*LO),
             wp.vec3(*HI),
-            c,
-            v,
-            int((np.asarray(valid) != 0).sum()),
+            wp.array(pos, dtype=wp.vec3, device=device),
+            wp.array(cum, dtype=wp.float32, device=device),
+            count,
             sd,
         ],
         outputs=[out],
@@ -168,52 +118,53 @@ def sample(device, parents, centres, valid, s, alpha, eps, sd, seed=7):
     return out.numpy().astype(np.float64)
 
 
-def test_sampling_statistics_and_log_ratio(device):
-    n = 40000
+def test_jump_sampling_statistics(device):
+    """A fraction Phi(threshold) of the particles jumps; jumpers pick the components in proportion to their weights
+    (chi-square) and scatter by sigma_d; the others are the paper's walk (z-tested), or uniform in the box on the
+    first frame after a random initialisation."""
+    from statistics import NormalDist
+
+    n = 60000
     parent = np.array([0.0, 0.0, 0.3])
-    centres = np.array([[0.6, 0.6, 0.2], [0.6, 0.6, 0.2], [9.0, 9.0, 9.0]])
-    valid = [1, 2, 0]  # the invalid component must never be sampled
-    s, alpha, eps, sd = 0.03, 0.05, 0.3, 0.02
-    r = sample(device, np.repeat(parent[None], n, 0), centres, valid, s, alpha, eps, sd)
-    x = r[:, :3]
-    near_det = np.linalg.norm(x - centres[0], axis=1) < 6 * sd
-    near_parent = np.linalg.norm(x - parent, axis=1) < 6 * s
-    p_det, p_par = eps, (1 - eps) * (1 - alpha)
-    for frac, p in ((near_det.mean(), p_det), (near_parent.mean(), p_par)):
-        assert abs(frac - p) < 5 * np.sqrt(p * (1 - p) / n) + 0.002  # + the uniform part landing there
-    assert not np.any(np.linalg.norm(x - centres[2], axis=1) < 1.0)
-    lp = np_log_motion(x, np.repeat(parent[None], n, 0), s, alpha)
-    ld = np_log_det(x, centres, valid, sd)
-    lq = np.logaddexp(np.log(1 - eps) + lp, np.log(eps) + ld)
-    np.testing.assert_allclose(r[:, 3], lp - lq, atol=2e-3, rtol=1e-3)
-
-
-def test_importance_weights_are_valid_on_a_linear_gaussian_toy(device):
-    """Prior N(parent, s^2), likelihood N(obs; x, so^2): the weighted mean with the mixture proposal (detection
-    components around a biased guess) equals the exact posterior mean; a wrong weight (no p/q) is visibly biased."""
-    n = 200000
-    parent = np.array([0.3, 0.3, 0.3])
-    obs = parent + np.array([0.04, -0.02, 0.03])
-    s, so, sd, eps = 0.03, 0.02, 0.02, 0.5
-    centres = obs + np.array([[0.03, 0.0, 0.0], [0.0, 0.03, -0.01]])
-    r = sample(device, np.repeat(parent[None], n, 0), centres, [1, 1], s, 0.0, eps, sd, seed=11)
-    x = r[:, :3]
-    loglik = -((x - obs) ** 2).sum(1) / (2 * so * so)
-    exact = (parent / s**2 + obs / so**2) / (1 / s**2 + 1 / so**2)
-    post_sd = 1 / np.sqrt(1 / s**2 + 1 / so**2)
-    lw = loglik + r[:, 3]
-    w = np.exp(lw - lw.max())
-    est = (w[:, None] * x).sum(0) / w.sum()
-    ess = w.sum() ** 2 / (w**2).sum()
-    tol = 5 * post_sd / np.sqrt(ess)
-    assert np.all(np.abs(est - exact) < tol), (est, exact, tol)
-    w_bad = np.exp(loglik - loglik.max())
-    bad = (w_bad[:, None] * x).sum(0) / w_bad.sum()
-    assert np.max(np.abs(bad - exact)) > 10 * tol
+    det = np.array([[0.6, 0.6, 0.2], [0.2, 0.7, 0.5], [0.7, 0.1, 0.1]])
+    weights = np.array([0.6, 0.3, 0.1])
+    cum = np.cumsum(weights)
+    p_jump, sd, s = 0.3, 0.02, 0.03
+    x = jump_sample(device, np.repeat(parent[None], n, 0), det, cum, 3, NormalDist().inv_cdf(p_jump), sigma=s, sd=sd)
+    d = np.linalg.norm(x[:, None, :] - det[None], axis=2)
+    near = d.min(1) < 6 * sd
+    assert abs(near.mean() - p_jump) < 5 * np.sqrt(p_jump * (1 - p_jump) / n)
+    counts = np.bincount(d[near].argmin(1), minlength=3)
+    expected = weights * near.sum()
+    assert ((counts - expected) ** 2 / expected).sum() < 13.8  # chi-square, 2 dof, p = 0.001
+    r = x[near] - det[d[near].argmin(1)]
+    assert abs(r.std() - sd) < 0.03 * sd and np.all(np.abs(r.mean(0)) < 5 * sd / np.sqrt(near.sum()))
+    walk = x[~near] - parent
+    assert abs(walk.std() - s) < 0.03 * s and np.all(np.abs(walk.mean(0)) < 5 * s / np.sqrt((~near).sum()))
+    # no component or no jump: the paper's walk, draw for draw; the first frame after a random init: uniform
+    base = jump_sample(device, np.repeat(parent[None], 2000, 0), det, cum, 0, 10.0, sigma=s)
+    none = jump_sample(device, np.repeat(parent[None], 2000, 0), det, cum, 3, float(kproposal.NO_JUMP), sigma=s)
+    np.testing.assert_array_equal(base, none)
+    z = normal4_ref((7, 0), 2000, 3, int(STREAM_MOTION))[:, :3]
+    np.testing.assert_allclose(base, parent + s * z, atol=2e-6)
+    uni = jump_sample(device, np.repeat(parent[None], n, 0), det, cum, 3, float(kproposal.NO_JUMP), uniform=1)
+    assert np.all((uni >= LO) & (uni <= HI))
+    assert np.all(np.abs(uni.mean(0) - (LO + HI) / 2) < 5 * (HI - LO) / np.sqrt(12 * n))
 
 
 def test_config_validation_of_the_proposal():
-    for kw in ({"proposal": "magic"}, {"mixture": 1.0}, {"reset_rate": -0.1}, {"detection_sigma": 0.0}):
+    for kw in (
+        {"proposal": "magic"},
+        {"mixture": 1.0},
+        {"reset_rate": -0.1},
+        {"detection_sigma": 0.0},
+        {"jump_margin": -1.0},
+        {"jump_evidence": float("nan")},
+        {"blobs": 0},
+        {"detection_components": 65},
+        {"epipolar_px": 0},
+        {"min_blob_pixels": 226},
+    ):
         with pytest.raises(ConfigError, match=next(iter(kw))):
             ColorConfig(**kw)
 
@@ -267,49 +218,24 @@ def test_no_detection_frames_are_flagged_without_nan(device, frames):
         assert np.all(np.isfinite(e.mean)) and np.all(np.isfinite(e.std)) and np.isfinite(e.ess)
 
 
-def test_detection_components_from_target_pixels(device, frames):
-    """Components triangulated from the ball's pixels lie on the ball (within its radius + a pixel); a frame with
-    the ball in camera 0 only gives points along camera-0 rays through the ball; no target pixel: none valid."""
-    rig = small_rig()
-    drig = DeviceRig(rig, device)
-    target = TARGET.to_struct(device)
-    k = 64
-    centres = wp.zeros(k, dtype=wp.vec3, device=device)
-    valid = wp.zeros(k, dtype=wp.int32, device=device)
-    frame = wp.zeros(1, dtype=wp.int32, device=device)
-
-    def launch(images):
-        bgr = wp.array(np.concatenate([im.reshape(-1) for im in images]), dtype=wp.uint8, device=device)
-        wp.launch(
-            kproposal.detection_components_kernel,
-            dim=k,
-            inputs=[drig.cams, target, bgr, wp.vec2ui(1, 2), frame, 1024, 0.1, 0.1, 3.0],
-            outputs=[centres, valid],
-            device=device,
-        )
-        return centres.numpy(), valid.numpy()
-
-    c, v = launch(frames[0])
-    # the test discs are drawn ~12 px in radius (~6 cm at the ball's depth): rays through opposite edges of the two
-    # discs can pass more than max_gap = 0.1 m apart, and those pairs fall back to a point along ray a
-    assert np.all(v > 0) and np.mean(v == 1) > 0.6
-    dist = np.linalg.norm(c[v == 1] - BALL, axis=1)
-    assert np.median(dist) < 0.04 and np.all(dist < 0.3), dist  # edge pairs meet at grazing angles, further out
-    blank = [np.full_like(im, 70) for im in frames[0]]
-    c, v = launch([frames[0][0], blank[1]])
-    assert set(np.unique(v)) <= {0, 2} and np.sum(v == 2) > k // 4  # camera a = 0 half of the time, else no pixel
-    cam0 = rig.cameras[0]
-    uv, _ = cam0.project(c[v == 2])
-    uv_ball, _ = cam0.project(BALL[None])
-    assert np.all(np.linalg.norm(uv - uv_ball, axis=1) < 0.033 * cam0.K[0, 0] / 0.4 + 2)
-    c, v = launch(blank)
-    assert np.all(v == 0)
+def test_candidates_lie_on_the_ball(device, frames):
+    """After a frame the best detection candidate is the ball (within its radius) and the mode test scored it as
+    well as any point can be (every camera's window full)."""
+    tr = ColorTracker(
+        small_rig(), TARGET, particles=300, init="random", init_box=BOX, proposal="mixture", device=device
+    )
+    e = tr.step(frames[0])
+    assert e.jump and e.detection >= 1
+    assert np.linalg.norm(tr.det_pos.numpy()[0] - BALL) < 0.033
+    assert tr.det_score.numpy()[0] > -0.5
+    bs = tr.blob_score.numpy()
+    assert np.all(bs[:, 0] > 0)  # a blob in each camera
 
 
 @pytest.mark.parametrize("cameras", [3, 1])
 def test_mixture_on_three_cameras_and_one(device, cameras):
-    """Any number of cameras: 3 converge from random initialisation; with 1 the detection proposal puts its
-    components along the camera's rays (no triangulation) and stays finite."""
+    """Any number of cameras: 3 converge from random initialisation; with 1 there is no camera pair, so no candidate
+    and no jump: the filter stays finite (the paper's walk from the uniform cloud)."""
     import cv2
 
     rig = Rig(rig3().cameras[:cameras])
@@ -328,9 +254,62 @@ def test_mixture_on_three_cameras_and_one(device, cameras):
         rig, TARGET, particles=500, sigma=0.02, init="random", init_box=BOX, proposal="mixture", device=device
     )
     out = [tr.step(f) for f in frames]
-    assert all(e.detection > 0 and np.all(np.isfinite(e.mean)) for e in out)
+    assert all(np.all(np.isfinite(e.mean)) and np.isfinite(e.ess) for e in out)
     if cameras == 3:
+        assert all(e.detection > 0 for e in out)
         assert np.linalg.norm(out[-1].mean - BALL) < 0.03
-        assert np.all(tr.det_valid.numpy() == 1)
     else:
-        assert np.all(tr.det_valid.numpy() == 2)
+        assert all(e.detection == 0 and not e.jump for e in out)
+
+
+GHOST = BALL + np.array([0.1, -0.15, 0.0])  # a spot all three cameras of rig3 see, 25-38 pixels from the ball
+
+
+def lookalike_frames(rig, rng, count=12):
+    """The ball in every camera, and a target-coloured patch at the projection of GHOST in camera 0 only: a cloud
+    there is a wrong mode that one camera of three agrees on."""
+    import cv2
+
+    out = []
+    for _ in range(count):
+        imgs = []
+        for c, cam in enumerate(rig.cameras):
+            img = rng.integers(60, 90, (cam.height, cam.width, 3)).astype(np.uint8)
+            for p, r in ((BALL, 0.033), (GHOST, 0.02 if c == 0 else 0.0)):
+                uv, depth = cam.project(p[None])
+                if r > 0:
+                    radius = max(2, int(round(r * cam.K[0, 0] / depth[0])))
+                    cv2.circle(img, (int(round(uv[0, 0])), int(round(uv[0, 1]))), radius, (180, 60, 230), -1)
+            imgs.append(img)
+        out.append(imgs)
+    return out
+
+
+def test_a_cloud_on_a_wrong_mode_jumps_to_the_ball_and_a_locked_one_does_not(device):
+    """The mode test: started on a spot that only camera 0 agrees on (the paper's filter stays near it), the mixture
+    jumps to the ball on the first frame and stays; started on the ball it never jumps and stays within 1 cm."""
+    rig = rig3()
+    frames = lookalike_frames(rig, np.random.default_rng(4))
+    kw = {"particles": 1000, "sigma": 0.01, "device": device}
+    wrong = ColorTracker(rig, TARGET, init=tuple(GHOST), proposal="mixture", **kw)
+    out = [wrong.step(f) for f in frames]
+    err = [np.linalg.norm(e.mean - BALL) for e in out]
+    assert out[0].jump and max(err[1:]) < 0.02, err
+    assert not any(e.jump for e in out[2:])
+    paper = ColorTracker(rig, TARGET, init=tuple(GHOST), proposal="prior", **kw)
+    assert np.linalg.norm([paper.step(f) for f in frames][-1].mean - BALL) > 0.1
+    locked = ColorTracker(rig, TARGET, init=tuple(BALL), proposal="mixture", **kw)
+    out = [locked.step(f) for f in frames]
+    assert not any(e.jump for e in out)
+    assert np.mean([np.linalg.norm(e.mean - BALL) for e in out[2:]]) < 0.01
+
+
+@pytest.mark.parametrize("mode", ["integral", "map"])
+def test_mixture_scoring_modes_identical(device, frames, mode):
+    """The detection reads the same counts in every scoring mode, so the mixture's estimates are identical too."""
+    d = run(device, frames[:5], score_mode="direct")
+    o = run(device, frames[:5], score_mode=mode)
+    for ed, eo in zip(d, o, strict=True):
+        np.testing.assert_array_equal(ed.mean, eo.mean)
+        assert (ed.ess, ed.detection, ed.jump) == (eo.ess, eo.detection, eo.jump)
+    assert d[0].jump and d[0].detection > 0

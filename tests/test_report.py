@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wptrack.errors import ConfigError, OutputError
-from wptrack.rig import Camera
+from wptrack.cameras.rig import Camera
+from wptrack.core.errors import ConfigError, OutputError
 
 # ------------------------------------------------------------------------------------------------- helpers
 
@@ -134,9 +134,9 @@ def test_apply_camera_checks_window_size():
 @pytest.fixture(scope="module")
 def lab_run(tmp_path_factory) -> dict:
     """The s1-lab scene (10 frames) tracked on the CPU: run folder, scene folder."""
-    from wptrack.cli import run_color_tracking
     from wptrack.synth import render_scene
-    from wptrack.trackers.colour import ColorConfig, HSITarget
+    from wptrack.trackers.colour.run import run_color_tracking
+    from wptrack.trackers.colour.tracker import ColorConfig, HSITarget
 
     root = tmp_path_factory.mktemp("lab")
     res = render_scene("s1-lab", root / "scene", frames=10, seed=0)
@@ -203,10 +203,10 @@ def test_report_images_not_blank(report):
 def test_overlay_shows_truth_and_estimate_where_projected(report, lab_run):
     """The green ground-truth circle and the orange estimate cross are drawn at their projections in each
     camera's panel of the overlay composite."""
-    from wptrack.io import read_tracks
+    from wptrack.cameras.rig import Rig
+    from wptrack.io.tables import read_tracks
     from wptrack.report.overlays import LABEL_HEIGHT
     from wptrack.report.scene3d import ESTIMATE_RGB, TRUTH_RGB
-    from wptrack.rig import Rig
 
     rig = Rig.load(lab_run["scene"] / "rig.yaml")
     gt = read_tracks(lab_run["scene"] / "groundtruth.csv")
@@ -231,9 +231,9 @@ def test_camera_view_shows_truth_marker_where_projected(report, lab_run):
     distortion: the frame is undistorted and the render is a pinhole)."""
     import cv2
 
-    from wptrack.io import read_tracks
+    from wptrack.cameras.rig import Rig
+    from wptrack.io.tables import read_tracks
     from wptrack.report.scene3d import TRUTH_RGB
-    from wptrack.rig import Rig
 
     rig = Rig.load(lab_run["scene"] / "rig.yaml")
     gt = read_tracks(lab_run["scene"] / "groundtruth.csv")
@@ -372,7 +372,7 @@ def test_cli_report_errors_one_line(tmp_path, capsys):
 
 
 def _sweep_dir(path: Path) -> Path:
-    from wptrack.experiments import write_sweep
+    from wptrack.trackers.colour.sweep import write_sweep
 
     sigmas = np.array([0.001, 0.05, 0.1])
     it = np.arange(30)
@@ -438,7 +438,7 @@ def test_track_color_report_flag_and_sweep_option(lab_run, tmp_path, capsys):
     ]
     assert main(args) == 0
     assert not (out / "report").exists()  # off by default
-    assert main([*args, "--report"]) == 0
+    assert main([*args, "--report", "--overwrite"]) == 0  # the same --out again: replace the run
     assert (out / "report" / "index.html").is_file()
     assert "report:" in capsys.readouterr().out
     sweep = _sweep_dir(tmp_path / "sweep")
@@ -488,3 +488,35 @@ def test_registry_plugs_in_a_new_tracker(lab_run, tmp_path):
     finally:
         REPORTERS.pop("unit-test-tracker")
     assert "People boxes" in html and "1 object(s), frames [1]" in html
+
+
+def test_3d_views_have_axes_and_a_scale_and_captions_say_the_markers(report):
+    """Issue 30 item 19: the 3D scene had no axes or scale bar, and the overlay captions did not say what the
+    markers are."""
+    import cv2
+
+    html = report.read_text()
+    assert "the world axes (lower left)" in html and "grid" in html and "spacing in metres" in html
+    assert "orange cross" in html and "green circle" in html and "yellow = heaviest" in html  # overlay captions
+    assert "orange sphere" in html and "green sphere" in html  # per-frame 3D stills
+    # the axes marker is drawn in the lower left corner, the grid label in the upper right
+    img = cv2.imread(str(report.parent / "scene_overview.png"))
+    h, w = img.shape[:2]
+    corner = img[int(0.8 * h) :, : int(0.2 * w)]
+    assert (corner.min(axis=2) < 128).sum() > 20, "no axes marker in the lower left corner"
+    right = img[: int(0.1 * h), int(0.6 * w) :]
+    assert (right.max(axis=2) < 80).sum() > 20, "no scale label in the upper right corner"
+
+
+def test_ground_grid_step_is_returned():
+    pytest.importorskip("pyvista")
+    from wptrack.report.offscreen import import_pyvista, new_plotter
+    from wptrack.report.scene3d import SceneGeometry, add_ground
+
+    pv = import_pyvista()
+    pl = new_plotter(160, 120)
+    try:
+        geo = SceneGeometry(np.zeros(3), np.array([4.0, 3.0, 2.0]), up=2, up_sign=1.0, ground=0.0, frustum_depth=0.5)
+        assert add_ground(pl, pv, geo, None) == 0.5  # 4 m / 8 -> the nice step 0.5 m, the label's number
+    finally:
+        pl.close()

@@ -19,9 +19,9 @@ def test_people_report(scene, tmp_path):  # noqa: F811
     pytest.importorskip("pyvista")
     import cv2
 
-    from wptrack.report.people import draw_people, load_hulls
-    from wptrack.report.templates import id_bgr
-    from wptrack.rig import Rig
+    from wptrack.cameras.rig import Rig
+    from wptrack.trackers.people.report import draw_people, load_hulls
+    from wptrack.trackers.templates.report import id_bgr
 
     out = tmp_path / "run"
     assert main([*_args(scene, out), "--occupancy-every", "5"]) == 0
@@ -47,3 +47,22 @@ def test_people_report(scene, tmp_path):  # noqa: F811
     u, v = np.round(uv[0]).astype(int)
     expected = 0.35 * np.array(id_bgr(pid)) + 0.65 * 128
     assert np.abs(drawn[v, u].astype(float) - expected).max() < 3
+
+
+def test_people_report_has_a_movie_and_says_what_its_views_show(scene, tmp_path):  # noqa: F811
+    """Issue 30 items 18, 19: the people report had no movie although the README lists one; its bird's-eye section
+    said 'particle clouds' and then 'no particles.npz: only the trajectories are shown'; the occupancy views had no
+    axes or scale."""
+    pytest.importorskip("pyvista")
+    out = tmp_path / "run"
+    assert main([*_args(scene, out), "--occupancy-every", "5", "--max-frames", "20"]) == 0
+    argv = ["report", str(out), "--groundtruth", str(scene / "groundtruth.csv"), "--movie-frames", "3", "-q"]
+    assert main(argv) == 0
+    rep = out / "report"
+    html = (rep / "index.html").read_text()
+    assert "3D view over time" in html and list(rep.glob("movie.*"))
+    assert "Bird&#x27;s-eye view of the trajectories" in html or "Bird's-eye view of the trajectories" in html
+    assert "particle cloud over time" not in html and "no particles.npz" not in html
+    assert "Particle clouds over time" not in html
+    assert html.count("the world axes (lower left)") >= 2  # the 3D scene and the occupancy views
+    assert "bounding volume projected into every camera" in html  # the segmentation captions say what is drawn

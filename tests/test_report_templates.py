@@ -1,4 +1,4 @@
-"""Reports of S3 template-tracker runs (``wptrack.report.templates``): the NumPy template geometry against the
+"""Reports of S3 template-tracker runs (``wptrack.trackers.templates.report``): the NumPy template geometry against the
 raster kernel, the calibration check (NumPy/OpenCV only, no PyVista), template outlines, and a rendered report of a
 tiny s3-people run on the CPU (the PyVista parts skipped where PyVista is not installed)."""
 
@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wptrack.errors import ConfigError
-from wptrack.rig import Camera, GroundPlane, Rig
+from wptrack.cameras.rig import Camera, GroundPlane, Rig
+from wptrack.core.errors import ConfigError
 
 # ------------------------------------------------------------------------------------------------- helpers
 
@@ -51,7 +51,7 @@ def plaza_like_camera() -> Camera:
 
 
 def test_template_pieces_shapes_and_extents():
-    from wptrack.report.templates import CABIN_LENGTH, LOWER, template_pieces
+    from wptrack.trackers.templates.report import CABIN_LENGTH, LOWER, template_pieces
 
     legs, upper = template_pieces("human", (1.8, 0.2, 0.1))
     assert legs.shape == upper.shape == (16, 3)
@@ -77,10 +77,10 @@ def test_template_outlines_match_raster_kernel():
     on a shifted and tilted ground plane."""
     import warp as wp
 
-    from wptrack.kernels import raster as kraster
-    from wptrack.report.templates import template_outlines
-    from wptrack.trackers.templates import Hulls, _plane_struct
-    from wptrack.warpcams import camera_struct
+    from wptrack.cameras.structs import camera_struct
+    from wptrack.kernels.templates import raster as kraster
+    from wptrack.trackers.templates.report import template_outlines
+    from wptrack.trackers.templates.tracker import Hulls, _plane_struct
 
     cam = plaza_like_camera()
     plane = GroundPlane(origin=(0.3, -0.2, 0.1), normal=(0.02, -0.05, 1.0), x_axis=(1.0, 0.1, 0.0))
@@ -112,7 +112,7 @@ def test_template_outlines_match_raster_kernel():
 
 
 def test_calibration_check_grid_passes_through_projected_ground_points():
-    from wptrack.report.templates import GRID_ALPHA, GRID_BGR, calibration_check
+    from wptrack.trackers.templates.report import GRID_ALPHA, GRID_BGR, calibration_check
 
     cam = plaza_like_camera()
     plane = GroundPlane(origin=(0.0, 0.0, 0.25))  # a raised ground: the grid must follow the rig's plane
@@ -135,7 +135,7 @@ def test_calibration_check_grid_passes_through_projected_ground_points():
 
 
 def test_calibration_check_grey_and_resized_frames_and_errors():
-    from wptrack.report.templates import calibration_check
+    from wptrack.trackers.templates.report import calibration_check
 
     cam = plaza_like_camera()
     rig = Rig((cam,))
@@ -152,8 +152,8 @@ def test_calibration_check_grey_and_resized_frames_and_errors():
 def test_calibration_check_needs_neither_pyvista_nor_warp():
     code = (
         "import sys, numpy as np\n"
-        "from wptrack.rig import Camera, Rig\n"
-        "from wptrack.report.templates import calibration_check\n"
+        "from wptrack.cameras.rig import Camera, Rig\n"
+        "from wptrack.trackers.templates.report import calibration_check\n"
         "cam = Camera.look_at('c', 64, 48, (0, 0, 3), (0, 5, 0), 60.0)\n"
         "out = calibration_check(Rig((cam,)), cam, np.zeros((48, 64), np.uint8))\n"
         "assert out.shape == (48, 64, 3)\n"
@@ -165,7 +165,7 @@ def test_calibration_check_needs_neither_pyvista_nor_warp():
 
 
 def test_draw_templates_outline_and_truth_where_projected():
-    from wptrack.report.templates import TRUTH_BGR, TemplateObject, draw_templates, id_bgr
+    from wptrack.trackers.templates.report import TRUTH_BGR, TemplateObject, draw_templates, id_bgr
 
     cam = plaza_like_camera()
     plane = GroundPlane()
@@ -190,9 +190,9 @@ def test_draw_templates_outline_and_truth_where_projected():
 @pytest.fixture(scope="module")
 def people_run(tmp_path_factory) -> dict:
     """s3-people, 8 frames, tracked on the CPU from the scene's perfect motion masks (100 particles)."""
-    from wptrack.runs.templates import run_template_tracking
     from wptrack.synth import render_scene
-    from wptrack.trackers.templates import TemplateConfig
+    from wptrack.trackers.templates.run import run_template_tracking
+    from wptrack.trackers.templates.tracker import TemplateConfig
 
     root = tmp_path_factory.mktemp("s3")
     res = render_scene("s3-people", root / "scene", frames=8, seed=0)
@@ -241,8 +241,8 @@ def test_report_overlay_outlines_tracked_object(report, people_run):
     """The object's colour is drawn at the projected ground point of a tracked object (overlay_scale 2)."""
     import cv2
 
-    from wptrack.io import read_tracks
-    from wptrack.report.templates import id_bgr
+    from wptrack.io.tables import read_tracks
+    from wptrack.trackers.templates.report import id_bgr
 
     rig = Rig.load(people_run["rig"])
     cam, plane = rig[0], rig.ground_plane
@@ -277,7 +277,7 @@ def test_calibration_section_on_masks_without_video(people_run, tmp_path):
 
     from wptrack.report.data import load_run
     from wptrack.report.model import ReportContext, ReportOptions
-    from wptrack.report.templates import section_calibration
+    from wptrack.trackers.templates.report import section_calibration
 
     data = load_run(people_run["run"])
     data.run["config"]["video"] = None
@@ -294,7 +294,7 @@ def test_groundtruth_option_and_scene_fallback(people_run, tmp_path):
     from wptrack.report import ReportOptions, build_report, use_groundtruth
     from wptrack.report.data import load_run
     from wptrack.report.model import ReportContext
-    from wptrack.report.templates import template_run
+    from wptrack.trackers.templates.report import template_run
 
     gt = people_run["scene"] / "groundtruth.csv"
     data = load_run(people_run["run"])

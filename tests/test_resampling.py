@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.errors import ConfigError
-from wptrack.kernels import random as wrand
-from wptrack.kernels import resample as kres
-from wptrack.resampling import MAX_BLOCKS, SCHEMES, Resampler, make_resampler, offspring_counts
+from wptrack.core.errors import ConfigError
+from wptrack.core.resampling import MAX_BLOCKS, SCHEMES, Resampler, make_resampler, offspring_counts
+from wptrack.kernels.core import random as wrand
+from wptrack.kernels.core import resample as kres
 
 SEED = wp.vec2ui(0x1234ABCD, 0x0BADF00D)
 UNIT64 = 2.3283064365386963e-10  # word_to_unit64: (w + 0.5) * 2^-32
@@ -582,7 +582,7 @@ def test_grouped_systematic_rows_match_numpy(device, rng, n, chunk, blocks, bloc
     same weights and differ (independent uniforms); a row whose weight is on one parent. Blocks of parents as the
     tracker's (256 of 256 lanes), more parents than lanes (several CDF rounds), many small blocks, and a last block
     with no parents (5 in blocks of 2, 4 blocks); one lane per block on the CPU."""
-    from wptrack.resampling import quantisation_bits
+    from wptrack.core.resampling import quantisation_bits
 
     g_rows = 5
     w = np.exp(rng.normal(0.0, 2.0, (g_rows, n)))
@@ -595,7 +595,7 @@ def test_grouped_systematic_rows_match_numpy(device, rng, n, chunk, blocks, bloc
     active = np.array([1, 1, 1, 0, 1], np.int32)
     scale = float(2 ** quantisation_bits(n))
     q_all = np.floor(w * scale).astype(np.int64)
-    part_q = np.zeros((blocks, g_rows), np.int64)  # as kernels.slots.block_slot_moments_kernel writes them
+    part_q = np.zeros((blocks, g_rows), np.int64)  # as kernels.templates.slots.block_slot_moments_kernel writes them
     for b in range(blocks):
         part_q[b] = q_all[:, b * chunk : (b + 1) * chunk].sum(axis=1)
     part_q[:, 3] = -(2**50)  # an inactive row's sums are never read

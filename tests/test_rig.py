@@ -1,4 +1,4 @@
-"""Tests for the camera rig model (wptrack.rig)."""
+"""Tests for the camera rig model (wptrack.cameras.rig)."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 import yaml
 
-from wptrack.errors import OutputError, RigError
-from wptrack.rig import Camera, Rig, save_opencv
+from wptrack.cameras.rig import Camera, Rig, camera_from_dict, save_opencv
+from wptrack.core.errors import OutputError, RigError
 
 
 def _cam_entry(name: str = "cam0", **overrides: Any) -> dict[str, Any]:
@@ -102,9 +102,9 @@ def test_rvec_form_equals_r_form(tmp_path: Path) -> None:
     del entry_rvec["R"]
     entry_rvec["rvec"] = rvec
     both = _cam_entry(R=R.tolist(), rvec=rvec)
-    a = Camera.from_dict(entry_r)
-    b = Camera.from_dict(entry_rvec)
-    c = Camera.from_dict(both)
+    a = camera_from_dict(entry_r)
+    b = camera_from_dict(entry_rvec)
+    c = camera_from_dict(both)
     np.testing.assert_allclose(b.R, a.R, atol=1e-15)
     np.testing.assert_allclose(c.R, a.R, atol=1e-15)
     np.testing.assert_allclose(a.rvec, rvec, atol=1e-12)
@@ -207,7 +207,7 @@ def test_look_at_degenerate() -> None:
 
 
 def test_project_matches_manual_pinhole(rng: np.random.Generator) -> None:
-    cam = Camera.from_dict(_cam_entry(dist=None))
+    cam = camera_from_dict(_cam_entry(dist=None))
     pts = rng.uniform(-0.5, 0.5, size=(20, 3))
     uv, depth = cam.project(pts)
     xc = pts @ cam.R.T + cam.t
@@ -215,7 +215,7 @@ def test_project_matches_manual_pinhole(rng: np.random.Generator) -> None:
     np.testing.assert_allclose(uv[:, 0], cam.fx * xc[:, 0] / xc[:, 2] + cam.cx, rtol=1e-12)
     np.testing.assert_allclose(uv[:, 1], cam.fy * xc[:, 1] / xc[:, 2] + cam.cy, rtol=1e-12)
     # distortion is applied: same camera with k1 != 0 moves off-centre points
-    distorted = Camera.from_dict(_cam_entry(dist=[0.2, 0, 0, 0]))
+    distorted = camera_from_dict(_cam_entry(dist=[0.2, 0, 0, 0]))
     assert np.max(np.abs(distorted.project(pts)[0] - uv)) > 0.1
     empty_uv, empty_depth = cam.project(np.zeros((0, 3)))
     assert empty_uv.shape == (0, 2) and empty_depth.shape == (0,)
@@ -277,14 +277,20 @@ def test_rig_indexing_and_bounds() -> None:
     assert vol.volume[0].dtype == np.float64
 
 
-def test_check_frame_size(tmp_path: Path) -> None:
+def test_frame_sizes_check_and_scale(tmp_path: Path) -> None:
+    """Frames of the calibrated size use the rig as it is; a resized copy (same aspect ratio) scales K; another
+    aspect ratio is an error naming the source, the camera and both sizes."""
     path = _write_yaml(tmp_path / "rig.yaml", {"cameras": [_cam_entry("cam0"), _cam_entry("cam1", width=640)]})
     rig = Rig.load(path)
-    rig.check_frame_size(0, 320, 240, "a.mp4")
-    rig.check_frame_size(1, 640, 240, "b.mp4")
+    assert rig.at_sizes([(320, 240), (640, 240)], ["a.mp4", "b.mp4"]) is rig
     with pytest.raises(RigError) as info:
-        rig.check_frame_size(1, 320, 240, "b.mp4")
-    assert str(info.value) == f"b.mp4: frame size 320x240 differs from camera 'cam1' calibration 640x240 in {path}"
+        rig.at_sizes([(320, 240), (320, 240)], ["a.mp4", "b.mp4"])
+    assert str(info.value).startswith(
+        f"b.mp4: frame size 320x240 differs from camera 'cam1' calibration 640x240 in {path}"
+    )
+    half = rig.at_sizes([(160, 120), (640, 240)], ["a.mp4", "b.mp4"])
+    assert (half[0].width, half[0].height) == (160, 120) and half[1] is rig[1]
+    np.testing.assert_allclose(half[0].K[:2], rig[0].K[:2] / 2)
 
 
 # --------------------------------------------------------------------------------------------- validation
@@ -473,7 +479,7 @@ def test_volume_errors(tmp_path: Path, volume: dict[str, Any], needle: str) -> N
 
 
 def test_python_api_validation() -> None:
-    good = Camera.from_dict(_cam_entry())
+    good = camera_from_dict(_cam_entry())
     with pytest.raises(RigError, match=r"^<memory>: camera 'x': K: focal length fx must be > 0, got -1.0$"):
         Camera("x", 10, 10, [[-1.0, 0, 5], [0, 1, 5], [0, 0, 1]], None, np.eye(3), [0, 0, 0])
     with pytest.raises(RigError, match="<memory>: camera 'x': R: not a rotation"):

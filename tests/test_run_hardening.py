@@ -7,12 +7,12 @@ import json
 import pytest
 
 from wptrack.bench.soak import cycle_scene
-from wptrack.errors import FrameError
-from wptrack.frames import write_video
-from wptrack.io import read_tracks
+from wptrack.core.errors import FrameError
+from wptrack.io.tables import read_tracks
+from wptrack.io.video import write_video
 from wptrack.runs import run_tracker
-from wptrack.runs.colour import ColourRun
-from wptrack.trackers.colour import ColorConfig, HSITarget
+from wptrack.trackers.colour.run import ColourRun
+from wptrack.trackers.colour.tracker import ColorConfig, HSITarget
 
 TARGET = HSITarget(hue=(300.0, 340.0), sat=(0.3, 1.0), intensity=(20.0, 240.0))
 
@@ -67,9 +67,9 @@ def test_template_tracker_flags_a_frame_with_zero_likelihood_everywhere(device, 
     after every frame, so it reads none): the frame is flagged, and its groups' weights stay finite."""
     import numpy as np
 
-    from wptrack.kernels.reduce import LOGW_FLOOR
-    from wptrack.rig import Camera, Rig
-    from wptrack.trackers.templates import TemplateConfig, TemplateTracker
+    from wptrack.cameras.rig import Camera, Rig
+    from wptrack.kernels.core.reduce import LOGW_FLOOR
+    from wptrack.trackers.templates.tracker import TemplateConfig, TemplateTracker
 
     cam = Camera.look_at("cam0", 160, 120, position=[0, -4, 10], target=[0, 9, 0], fx=125.0)
     cfg = TemplateConfig(particles=200, max_objects=4, seed=1, partition=partition)
@@ -103,7 +103,7 @@ def test_people_tracker_flags_a_person_with_zero_likelihood_everywhere(device):
     sys.path.insert(0, str(Path(__file__).parent))
     from test_tracker_people import crossing, render, rig3
 
-    from wptrack.trackers.people import PeopleConfig, PeopleTracker
+    from wptrack.trackers.people.tracker import PeopleConfig, PeopleTracker
 
     rng = np.random.default_rng(5)
     rig = rig3()

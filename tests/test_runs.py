@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wptrack.io import read_tracks
+from wptrack.io.tables import read_tracks
 from wptrack.runs import RunInterrupted, TrackerRun, run_tracker
 
 
@@ -160,3 +160,99 @@ def test_sigterm_mid_run_marks_run_interrupted(tmp_path):
     assert run["status"] == "interrupted" and run["last_frame"] >= 2  # frame 3 was being tracked
     frames = read_tracks(tmp_path / "run" / "tracks.csv")["frame"]
     assert frames[-1] <= run["last_frame"] and list(frames) == list(range(0, frames[-1] + 1, 2))
+
+
+def test_existing_run_folder_is_refused_without_overwrite(tmp_path):
+    """Issue 30 item 4: a second run into a run folder was written over the first, keeping its stale files (an old
+    report and masks.avi beside the new run.json). Now it is refused; --overwrite removes what the run wrote."""
+    from wptrack.core.errors import ConfigError
+
+    out = tmp_path / "run"
+    run_tracker(_Job(range(6)), out)
+    (out / "masks.avi").write_bytes(b"old masks")
+    (out / "report").mkdir()
+    (out / "report" / "index.html").write_text("200 particles")
+    (out / "my-notes.txt").write_text("kept")
+    before = (out / "run.json").read_bytes()
+    with pytest.raises(ConfigError, match="holds a previous run.*--overwrite"):
+        run_tracker(_Job(range(2)), out)
+    assert (out / "run.json").read_bytes() == before and (out / "masks.avi").exists()
+    run_tracker(_Job(range(2)), out, overwrite=True)
+    assert json.loads((out / "run.json").read_text())["last_frame"] == 1
+    assert not (out / "masks.avi").exists() and not (out / "report").exists()
+    assert (out / "my-notes.txt").read_text() == "kept" and (out / "extra.txt").exists()  # the new run's own
+    with pytest.raises(ConfigError, match="give one of them"):
+        run_tracker(_Job(range(2)), out, overwrite=True, resume=True)
+
+
+_LOCK_HOLDER = """
+import sys, time
+from pathlib import Path
+sys.path.insert(0, {tests!r})
+from test_runs import _Job
+from wptrack.runs import RunInterrupted, run_tracker
+
+class Slow(_Job):
+    def step(self, item):
+        if self.k == 1:
+            Path({ready!r}).write_text("go")
+        time.sleep(0.05)
+        return super().step(item)
+
+try:
+    run_tracker(Slow(range(100000)), {out!r})
+except RunInterrupted as e:
+    sys.exit(e.exit_code)
+"""
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_a_run_folder_in_use_is_locked(tmp_path):
+    """Issue 30 item 22: two runs into one --out both ran and reported success. The second now refuses, naming
+    the first's pid; the lock goes with the run that held it."""
+    from wptrack.core.errors import ConfigError
+    from wptrack.io.rundir import LOCK_FILE
+
+    out, ready = tmp_path / "run", tmp_path / "ready"
+    code = _LOCK_HOLDER.format(tests=str(Path(__file__).parent), ready=str(ready), out=str(out))
+    proc = subprocess.Popen([sys.executable, "-c", code], env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    try:
+        import time
+
+        deadline = time.monotonic() + 60
+        while not ready.exists():
+            assert time.monotonic() < deadline and proc.poll() is None, "the run did not start"
+            time.sleep(0.02)
+        lock = json.loads((out / LOCK_FILE).read_text())
+        assert lock["pid"] == proc.pid and lock["host"] and lock["started"]
+        for kw in ({}, {"overwrite": True}, {"resume": True}):
+            with pytest.raises(ConfigError, match=f"in use by another wptrack run \\(pid {proc.pid} on "):
+                run_tracker(_Job(range(3)), out, **kw)
+        assert json.loads((out / "run.json").read_text())["status"] == "running"  # the first run is untouched
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=60) == 128 + signal.SIGTERM
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert not (out / LOCK_FILE).exists()
+
+
+def test_a_stale_lock_is_taken_over(tmp_path, caplog):
+    """A lock left by a dead process of this host (SIGKILL, crash) is taken over with a warning; one of another
+    host (which cannot be checked) is refused."""
+    import socket
+
+    from wptrack.core.errors import ConfigError
+    from wptrack.io.rundir import LOCK_FILE
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    pid = int(dead.stdout)
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / LOCK_FILE).write_text(json.dumps({"pid": pid, "host": socket.gethostname(), "started": "earlier"}))
+    with caplog.at_level("WARNING", logger="wptrack.runs.loop"):
+        run_tracker(_Job(range(3)), out)
+    assert f"stale lock of process {pid}" in caplog.text and not (out / LOCK_FILE).exists()
+    (out / LOCK_FILE).write_text(json.dumps({"pid": os.getpid(), "host": "elsewhere.example", "started": "x"}))
+    with pytest.raises(ConfigError, match="elsewhere.example"):
+        run_tracker(_Job(range(3)), out, overwrite=True)

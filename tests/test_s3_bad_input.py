@@ -10,13 +10,13 @@ import logging
 import numpy as np
 import pytest
 
+from wptrack.cameras.rig import Camera, Rig
 from wptrack.cli import main
-from wptrack.errors import ConfigError
-from wptrack.frames import write_video
-from wptrack.rig import Camera, Rig
-from wptrack.runs.flood import FloodGuard
-from wptrack.runs.templates import run_template_tracking
-from wptrack.trackers.templates import TemplateConfig
+from wptrack.core.errors import ConfigError
+from wptrack.io.video import write_video
+from wptrack.motion.flood import FloodGuard
+from wptrack.trackers.templates.run import run_template_tracking
+from wptrack.trackers.templates.tracker import TemplateConfig
 
 W, H = 160, 120
 
@@ -151,7 +151,7 @@ def test_wrong_size_source_clear_error(tmp_path, capsys, kind, size, needle) -> 
 
 
 def test_shake_moves_only_the_chosen_frames(rng) -> None:
-    from wptrack.experiments_conditions import shake
+    from wptrack.motion.experiments import shake
 
     frames = _textured(rng, 8)
     out = shake(frames, first=2, count=3, amplitude=4)

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from wptrack.bench.soak import RSS_LIMIT, Case, SoakSuite, TemplateSoakSuite, growth, rss_bytes
-from wptrack.chunklog import ChunkLog, read_chunks
-from wptrack.io import ParticleStore, RunWriter, StageTimer
+from wptrack.io.chunklog import ChunkLog, read_chunks
+from wptrack.io.run import ParticleStore, RunWriter, StageTimer
 
 COLUMNS = ["frame", "id", "x", "y", "z"]
 

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wptrack.errors import ConfigError
-from wptrack.frames import open_frames
-from wptrack.rig import Rig
+from wptrack.cameras.rig import Rig
+from wptrack.core.errors import ConfigError
+from wptrack.io.frames import open_frames
 from wptrack.synth import SCENES, SceneResult, register_scene, render_scene, scene_names
 from wptrack.synth import lab as L
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from wptrack.cli import main
-from wptrack.errors import ConfigError
+from wptrack.core.errors import ConfigError
 from wptrack.synth import SCENES, render_scene
 from wptrack.synth import conditions as C
 from wptrack.synth import plaza as P
@@ -272,8 +272,8 @@ def test_dark_car_as_dark_as_the_road() -> None:
 
 
 def test_condition_mask_quality_small() -> None:
-    from wptrack.experiments_conditions import _markdown, condition_mask_quality, render_arrays
-    from wptrack.masks import MaskConfig
+    from wptrack.motion.experiments import _markdown, condition_mask_quality, render_arrays
+    from wptrack.motion.masks import MaskConfig
 
     images, perfect, fps = render_arrays("s3-cars", "compression", seed=0, frames=3)
     assert images.shape == (3, 480, 640, 3) and perfect.shape == (3, 480, 640) and fps == P.FPS

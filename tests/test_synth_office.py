@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from wptrack.errors import ConfigError
+from wptrack.core.errors import ConfigError
 from wptrack.synth import SCENES, render_scene, scene_names
 from wptrack.synth.office import ROOM, OfficeConfig, OfficeScene
 

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wptrack.frames import open_frames
-from wptrack.rig import Rig
+from wptrack.cameras.rig import Rig
+from wptrack.io.frames import open_frames
 from wptrack.synth import SCENES, SceneResult, plaza_background, render_scene
 from wptrack.synth import plaza as P
 from wptrack.synth.render import Box, Cylinder

@@ -10,14 +10,14 @@ import math
 import numpy as np
 import pytest
 
-from wptrack.errors import ConfigError
-from wptrack.frames import open_frames
-from wptrack.kernels.raster import MAX_SLOTS
+from wptrack.core.errors import ConfigError
+from wptrack.io.frames import open_frames
+from wptrack.kernels.templates.raster import MAX_SLOTS
 from wptrack.synth import SCENES, render_scene
 from wptrack.synth import plaza as P
 from wptrack.synth import plaza_seeds as S
 from wptrack.synth.base import _groundtruth_csv
-from wptrack.trackers.template_config import TemplateConfig, VehiclePrior
+from wptrack.trackers.templates.config import TemplateConfig, VehiclePrior
 
 S3 = ("s3-people", "s3-cars", "s3-groups", "s3-mixed")
 FRAMES = 180
@@ -224,7 +224,7 @@ def test_vehicle_prior_covers_the_cars_turns_and_speeds() -> None:
     """The clamps of eq. 9 (``VehiclePrior.turn_max``, ``speed_max``) cover what every scene's cars do, seeds 0-50.
 
     A turn limit below a car's yaw rate makes every hypothesis of that car lag outside its turn, and humans are then
-    added on the part of the car it leaves uncovered (the U-turn lag of docs/reproduction.md: with the old limit of
+    added on the part of the car it leaves uncovered (the U-turn lag of docs/notes.md: with the old limit of
     1 rad/s the U-turns of s3-cars, up to 2.4 rad/s, were out of the prior's reach)."""
     prior = VehiclePrior()
     for name in ("s3-cars", "s3-mixed"):
@@ -282,7 +282,7 @@ def test_render_scene_with_a_new_seed(tmp_path, name: str) -> None:
 
 def test_accuracy_cache_renders_stale_scenes_again(tmp_path, caplog) -> None:
     """A scene folder of template_accuracy rendered before seeds drew new sequences is not reused."""
-    from wptrack.experiments import _s3_scene
+    from wptrack.trackers.templates.experiments import _s3_scene
 
     first = _s3_scene("s3-cars", tmp_path, 2, 2, False)
     assert _s3_scene("s3-cars", tmp_path, 2, 2, False).groundtruth_path == first.groundtruth_path
@@ -301,8 +301,8 @@ def test_accuracy_workers_give_the_same_table(tmp_path) -> None:
     """template_accuracy with two worker processes gives the same per-run evaluations and table as in-process runs
     (every run is seeded and independent); a worker count below 1 is refused with the field named."""
     pytest.importorskip("motmetrics")
-    from wptrack.errors import ConfigError
-    from wptrack.experiments import template_accuracy
+    from wptrack.core.errors import ConfigError
+    from wptrack.trackers.templates.experiments import template_accuracy
 
     kw = dict(scenes=["s3-people"], seeds=[0, 1], frames=6, particles=60, masks="perfect", device="cpu",
               scenes_dir=tmp_path / "scenes")  # fmt: skip

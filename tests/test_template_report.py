@@ -6,13 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wptrack.errors import ConfigError
-from wptrack.rig import Camera, GroundPlane, Rig
+from wptrack.cameras.rig import Camera, GroundPlane, Rig
+from wptrack.core.errors import ConfigError
 from wptrack.synth import SCENES
 from wptrack.synth import plaza as P
 from wptrack.synth.plaza_background import plaza_camera
-from wptrack.trackers.template_config import TemplateConfig, TrackedObject
-from wptrack.trackers.templates import TemplateTracker, image_box_fraction
+from wptrack.trackers.templates.config import TemplateConfig, TrackedObject
+from wptrack.trackers.templates.tracker import TemplateTracker, image_box_fraction
 
 
 def _vehicle(plane: GroundPlane, ground, dims, heading: float) -> TrackedObject:

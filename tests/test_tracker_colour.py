@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.errors import ConfigError, FrameError
-from wptrack.rig import Camera, Rig
-from wptrack.trackers.colour import ColorConfig, ColorTracker, HSITarget
-from wptrack.trackers.gaussian3d import Gaussian3DTracker
+from wptrack.cameras.rig import Camera, Rig
+from wptrack.core.errors import ConfigError, FrameError
+from wptrack.trackers.colour.gaussian3d import Gaussian3DTracker
+from wptrack.trackers.colour.tracker import ColorConfig, ColorTracker, HSITarget
 
 BALL = np.array([0.42, 0.5, 0.06])
 TARGET = HSITarget(hue=(300, 340), sat=(0.3, 1.0))
@@ -106,7 +106,7 @@ def test_keep_particles_and_weights(device, frames):
 
 def test_frame_errors(device, frames):
     tr = ColorTracker(small_rig(), TARGET, particles=10, init=(0, 0, 0), device=device)
-    with pytest.raises(FrameError, match="cam1.*differs"):
+    with pytest.raises(FrameError, match="frame size 10x10 differs from camera 'cam1' calibration"):
         tr.step([np.zeros((10, 10, 3), np.uint8), frames[0][1]])
     with pytest.raises(FrameError, match="2 cameras"):
         tr.step(frames[0][:1])
@@ -142,7 +142,7 @@ def test_gaussian3d_filter_converges_after_a_jump(device):
 
 
 def test_too_many_particles_is_a_clear_error_before_allocation(device, monkeypatch):
-    import wptrack.pf as pf
+    import wptrack.core.memory as pf
 
     monkeypatch.setattr(pf, "available_bytes", lambda dev: 64 * 2**20)  # pretend 64 MiB are free
     before = wp.get_mempool_used_mem_current(device) if wp.get_device(device).is_cuda else None

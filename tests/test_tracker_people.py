@@ -7,11 +7,11 @@ import cv2
 import numpy as np
 import pytest
 
-from wptrack.errors import ConfigError, FrameError
-from wptrack.rig import Camera, Rig
-from wptrack.runs.people import hull_points
-from wptrack.trackers.people import PeopleTracker
-from wptrack.trackers.people_model import OccupancyConfig, PeopleConfig
+from wptrack.cameras.rig import Camera, Rig
+from wptrack.core.errors import ConfigError, FrameError
+from wptrack.trackers.people.config import OccupancyConfig, PeopleConfig
+from wptrack.trackers.people.run import hull_points
+from wptrack.trackers.people.tracker import PeopleTracker
 
 W, H = 160, 120
 COLOURS = ((40, 40, 200), (200, 80, 30))  # BGR: a red and a blue person

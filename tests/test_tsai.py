@@ -1,4 +1,4 @@
-"""Tsai calibrations (wptrack.tsai), the tsai: rig entry and box ground truth (wptrack.groundtruth).
+"""Tsai calibrations (wptrack.cameras.tsai), the tsai: rig entry and box ground truth (wptrack.evaluation.groundtruth).
 
 Fixtures: tests/data/pets/ (PETS 2009 View_001 calibration, 5 annotated frames). The real-video test reads
 <repo>/../shared/data/pets09-s2l1-view001-dev when present and is skipped otherwise.
@@ -12,16 +12,16 @@ import subprocess
 import sys
 from pathlib import Path
 
+import kernel_harness as harness
 import numpy as np
 import pytest
 import warp as wp
 
-from wptrack.errors import ConfigError, RigError
-from wptrack.groundtruth import boxes_to_ground, read_box_groundtruth, read_boxes
-from wptrack.kernels import camera as kcam
-from wptrack.rig import Rig
-from wptrack.tsai import _distorted_radius, load_tsai_camera, read_tsai, tsai_fit_residual, tsai_to_camera
-from wptrack.warpcams import DeviceRig
+from wptrack.cameras.rig import Rig
+from wptrack.cameras.structs import DeviceRig
+from wptrack.cameras.tsai import _distorted_radius, load_tsai_camera, read_tsai, tsai_fit_residual, tsai_to_camera
+from wptrack.core.errors import ConfigError, RigError
+from wptrack.evaluation.groundtruth import boxes_to_ground, read_box_groundtruth, read_boxes
 
 DATA = Path(__file__).parent / "data" / "pets"
 XML = DATA / "View_001.xml"
@@ -86,7 +86,7 @@ def test_converted_camera_matches_tsai(device):
     drig = DeviceRig(Rig((cam,)), device)
     out = wp.zeros((1, len(pts)), dtype=wp.vec3, device=device)
     wp.launch(
-        kcam.project_kernel,
+        harness.project_kernel,
         dim=(1, len(pts)),
         inputs=[drig.cams, wp.array(pts / 1000.0, dtype=wp.vec3, device=device)],
         outputs=[out],
@@ -231,8 +231,6 @@ def test_cli_evaluate_xml(tmp_path):
 
 @pytest.mark.skipif(not SHARED.is_dir(), reason="PETS 2009 development clip not present in ../shared/data")
 def test_real_video_frames(tmp_path):
-    from wptrack.runs.templates import _camera_for_size
-
     cv2 = pytest.importorskip("cv2")
     rig_file = tmp_path / "rig.yaml"
     rig_file.write_text(f"cameras:\n  - tsai: {SHARED / 'View_001.xml'}\n")
@@ -245,7 +243,7 @@ def test_real_video_frames(tmp_path):
         frames.append(frame)
     cap.release()
     h, w = frames[0].shape[:2]
-    cam = _camera_for_size(rig[0], w, h, "video.avi", str(rig_file))
+    cam = rig[0].for_size(w, h, "video.avi", str(rig_file))
     assert (cam.width, cam.height) == (w, h) == (480, 360)
     gt = read_box_groundtruth(SHARED / "PETS2009-S2L1-frames0-399.xml", rig_file)
     first = gt["frame"] < 5

@@ -14,11 +14,11 @@ import pytest
 from tests.test_cli import _replace, track_args
 from tests.test_frames import _frames, _write_avi
 from tests.test_tracker_colour import TARGET, small_rig
+from wptrack.cameras.rig import Camera, Rig
 from wptrack.cli import main
-from wptrack.errors import ConfigError, FrameError
-from wptrack.frames import open_frames, open_source
-from wptrack.rig import Camera, Rig
-from wptrack.trackers.colour import ColorTracker, HSITarget
+from wptrack.core.errors import ConfigError, FrameError
+from wptrack.io.frames import open_frames, open_source
+from wptrack.trackers.colour.tracker import ColorTracker, HSITarget
 
 VOLUME = ((-0.5, -0.5, 0.0), (0.5, 0.5, 1.0))
 
@@ -26,13 +26,13 @@ VOLUME = ((-0.5, -0.5, 0.0), (0.5, 0.5, 1.0))
 def test_blind_camera_warns(caplog):
     sees = Camera.look_at("sees", 64, 48, (3.0, 0.0, 1.0), (0.0, 0.0, 0.5), 60.0)
     away = Camera.look_at("away", 64, 48, (3.0, 0.0, 1.0), (6.0, 0.0, 0.5), 60.0)  # looks away from the volume
-    with caplog.at_level(logging.WARNING, logger="wptrack.rig"):
+    with caplog.at_level(logging.WARNING, logger="wptrack.cameras.rig"):
         rig = Rig((sees, away), volume=VOLUME, source="r.yaml")
     assert rig.blind_cameras() == ["away"]
     msgs = [r.getMessage() for r in caplog.records]
     assert len(msgs) == 1 and "camera 'away' sees nothing of the working volume" in msgs[0] and "r.yaml" in msgs[0]
     caplog.clear()
-    with caplog.at_level(logging.WARNING, logger="wptrack.rig"):
+    with caplog.at_level(logging.WARNING, logger="wptrack.cameras.rig"):
         Rig((sees,), volume=VOLUME)
     assert not caplog.records
 
@@ -46,7 +46,7 @@ def test_video_truncated_mid_stream(tmp_path, rng, caplog):
         src = open_source(path)
     except FrameError:  # an OpenCV build that rejects the cut index outright: still the documented error
         return
-    with caplog.at_level(logging.WARNING, logger="wptrack.frames"):
+    with caplog.at_level(logging.WARNING, logger="wptrack.io.frames"):
         got = list(open_frames([path]))
     assert 0 < len(got) < 20
     if len(src) > len(got):
@@ -68,7 +68,7 @@ def test_different_frame_rates_warn(tmp_path, rng, caplog):
     for f in _frames(rng, 4):
         writer.write(f)
     writer.release()
-    with caplog.at_level(logging.WARNING, logger="wptrack.frames"):
+    with caplog.at_level(logging.WARNING, logger="wptrack.io.frames"):
         frames = open_frames([a, tmp_path / "b.avi"])
     assert len(frames) == 4
     assert any("frame rates differ" in r.getMessage() and "25 fps" in r.getMessage() for r in caplog.records)

@@ -9,7 +9,6 @@ wptrack may also live (an editable finder appended to ``sys.meta_path``): the te
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import subprocess
 import sys
@@ -17,6 +16,10 @@ import zipfile
 from pathlib import Path
 
 import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+from venvhelp import clean_env as _env  # noqa: E402
+from venvhelp import make_venv  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 # build outputs, caches and run folders of a working checkout stay out of the copy the wheel is built from (a stale
@@ -30,18 +33,35 @@ def _ignore(folder: str, names: list[str]) -> set[str]:
     return top | set(ANY_IGNORE(folder, names))
 
 
-def _env() -> dict[str, str]:
-    """The caller's environment without anything that would put a checkout on the import path."""
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "PYTHONSTARTUP")}
-    env["PYTHONNOUSERSITE"] = "1"
-    env["PIP_DISABLE_PIP_VERSION_CHECK"] = "1"
-    return env
-
-
 def _run(cmd: list[str], cwd: Path, timeout: float = 120) -> subprocess.CompletedProcess:
     r = subprocess.run(cmd, cwd=cwd, env=_env(), capture_output=True, text=True, timeout=timeout)
     assert r.returncode == 0, f"{cmd} exited {r.returncode}\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
     return r
+
+
+def test_test_venv_sees_the_callers_packages(tmp_path):
+    """make_venv run from inside a venv (as the README's `python3 -m venv` set-up and CI do): a module installed
+    only in that outer venv is importable in the venv it makes (plain --system-site-packages shows the base
+    Python's packages instead: 'No module named warp' in a venv whose base Python has no Warp)."""
+    outer = tmp_path / "outer"
+    _run([sys.executable, "-m", "venv", "--without-pip", str(outer)], tmp_path)
+    outer_py = outer / "bin" / "python"
+    purelib = _run([str(outer_py), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"], tmp_path)
+    (Path(purelib.stdout.strip()) / "only_in_outer_venv.py").write_text("WHERE = 'outer'\n")
+    inner = tmp_path / "inner"
+    code = (
+        f"import sys, pathlib; sys.path.insert(0, {str(Path(__file__).parent)!r}); import venvhelp; "
+        f"venvhelp.make_venv(pathlib.Path({str(inner)!r}), pathlib.Path('.'), venvhelp.clean_env())"
+    )
+    _run([str(outer_py), "-c", code], tmp_path)
+    probe = [str(inner / "bin" / "python"), "-c", "import only_in_outer_venv as m; print(m.WHERE)"]
+    assert _run(probe, tmp_path).stdout.strip() == "outer"
+    # the bug it fixes: plain --system-site-packages from inside the outer venv shows the base Python's packages
+    plain = tmp_path / "plain"
+    _run([str(outer_py), "-m", "venv", "--system-site-packages", "--without-pip", str(plain)], tmp_path)
+    probe[0] = str(plain / "bin" / "python")
+    r = subprocess.run(probe, cwd=tmp_path, env=_env(), capture_output=True, text=True, timeout=60)
+    assert r.returncode != 0 and "No module named 'only_in_outer_venv'" in r.stderr
 
 
 @pytest.mark.slow
@@ -56,11 +76,10 @@ def test_wheel_installs_and_runs_bench(tmp_path):
     assert {n.split("/")[0] for n in names} == {"wptrack", wheel.name.split("-py")[0] + ".dist-info"}, names
     for mod in ("wptrack/bench/__init__.py", "wptrack/bench/colour.py", "wptrack/bench/numpy_colour.py"):
         assert mod in names
-    assert "wptrack/kernels/colour.py" in names
+    assert "wptrack/kernels/colour/hsi.py" in names
 
-    # a venv without its own pip: the system pip (seen through --system-site-packages) installs into it
-    _run([sys.executable, "-m", "venv", "--system-site-packages", "--without-pip", str(venv)], work)
-    py = venv / "bin" / "python"
+    # a venv without its own pip: the caller's pip (seen through the caller's site-packages) installs into it
+    py = make_venv(venv, work, _env())
     _run([str(py), "-m", "pip", "install", "-q", "--no-deps", "--no-index", "--force-reinstall", str(wheel)], work)
 
     probe = (

@@ -12,7 +12,7 @@ from __future__ import annotations
 import importlib
 import logging
 
-from ..errors import ConfigError
+from wptrack.core.errors import ConfigError
 
 log = logging.getLogger(__name__)
 
@@ -21,6 +21,7 @@ SUITES: dict[str, str] = {
     "color-e2e": "wptrack.bench.endtoend:EndToEndSuite",
     "templates": "wptrack.bench.templates:TemplateSuite",
     "masks": "wptrack.bench.masks:MasksSuite",
+    "pipeline": "wptrack.bench.pipeline:PipelineSuite",
     "people": "wptrack.bench.people:PeopleSuite",
     "batch": "wptrack.bench.batch:BatchSuite",
     "soak": "wptrack.bench.soak:SoakSuite",

@@ -24,7 +24,7 @@ class Case:
 
 def bench_rig(cameras: int):
     """``cameras`` 640x480 cameras on a 2 m circle at 1 m height, all looking at the origin."""
-    from wptrack.rig import Camera, Rig
+    from wptrack.cameras.rig import Camera, Rig
 
     angles = np.linspace(0, 2 * np.pi, cameras, endpoint=False) + 0.3
     cams = tuple(
@@ -91,16 +91,16 @@ class ColourSuite:
         seed: int = 0,
         offspring_at: tuple[int, ...] = (10**7,),
         weights: str | None = None,
+        proposal: str = "prior",
     ) -> dict:
         if weights is not None:  # --weights: the resampling pass alone on synthetic log-weights (cameras unused)
-            from .resample_weights import run_weights_case
+            from wptrack.bench.resample_weights import run_weights_case
 
             return run_weights_case(case.particles, device, weights, frames, numpy_max, seed)
         import warp as wp
 
-        from wptrack.trackers.colour import ColorTracker, HSITarget
-
-        from .numpy_colour import NumpyColorFilter
+        from wptrack.bench.numpy_colour import NumpyColorFilter
+        from wptrack.trackers.colour.tracker import ColorTracker, HSITarget
 
         rig = bench_rig(case.cameras)
         n_frames = max(frames, numpy_frames) + 5
@@ -109,9 +109,20 @@ class ColourSuite:
         init = tuple(balls[0] + np.array([0.05, -0.05, 0.05]))
         dev = wp.get_device(device)
         mem0 = wp.get_mempool_used_mem_current(dev) if dev.is_cuda else 0
-        tracker = ColorTracker(rig, target, particles=case.particles, sigma=0.01, init=init, device=device, seed=seed)
+        tracker = ColorTracker(
+            rig,
+            target,
+            particles=case.particles,
+            sigma=0.01,
+            init=init,
+            device=device,
+            seed=seed,
+            proposal=proposal,
+            keep_particles=0,
+        )  # prior (default): the paper's filter, as the NumPy reference
         result = {
-            "tracker": "color",
+            "tracker": "color" if proposal == "prior" else "color+m",
+            "proposal": proposal,
             "particles": case.particles,
             "cameras": case.cameras,
             "width": WIDTH,
@@ -125,7 +136,7 @@ class ColourSuite:
         truth = balls[numpy_frames - 1]
         result["warp_error_m"] = float(np.linalg.norm(warp_est[-1].mean - truth))
         if case.particles <= numpy_max:
-            from wptrack.warpcams import camera_struct
+            from wptrack.cameras.structs import camera_struct
 
             ref = NumpyColorFilter(
                 rig,
@@ -186,10 +197,10 @@ class ColourSuite:
 
     @staticmethod
     def format_row(r: dict) -> str:
-        from . import format_row
+        from wptrack.bench import format_row
 
         if "weights" in r:
-            from .resample_weights import format_weights_row
+            from wptrack.bench.resample_weights import format_weights_row
 
             return format_weights_row(r)
         return format_row(r)
@@ -205,8 +216,8 @@ def offspring_check(tracker, replays: int = 32, groups: int = 1000) -> dict:
     """
     import warp as wp
 
-    from wptrack.kernels import reduce as kreduce
-    from wptrack.kernels import resample as kres
+    from wptrack.kernels.core import reduce as kreduce
+    from wptrack.kernels.core import resample as kres
 
     r = tracker.resampler
     if not r.exact:

@@ -29,7 +29,7 @@ import time
 
 import numpy as np
 
-from .colour import HUE, INTENSITY, SAT, bench_frames, bench_rig
+from wptrack.bench.colour import HUE, INTENSITY, SAT, bench_frames, bench_rig
 
 WARMUP = 3
 
@@ -40,10 +40,18 @@ def _make(impl: str, particles: int, cameras: int, seed: int):
     images, balls = bench_frames(rig, 8, seed)
     init = tuple(balls[0] + np.array([0.05, -0.05, 0.05]))
     if impl in ("warp", "warp-observe"):
-        from wptrack.trackers.colour import ColorTracker, HSITarget
+        from wptrack.trackers.colour.tracker import ColorTracker, HSITarget
 
         tr = ColorTracker(
-            rig, HSITarget(HUE, SAT, INTENSITY), particles=particles, sigma=0.01, init=init, device="cpu", seed=seed
+            rig,
+            HSITarget(HUE, SAT, INTENSITY),
+            particles=particles,
+            sigma=0.01,
+            init=init,
+            device="cpu",
+            seed=seed,
+            proposal="prior",
+            keep_particles=0,
         )
         step = tr.step
         if impl == "warp-observe":  # the observation stage alone (mask + window map: plain, untiled launches)
@@ -54,7 +62,7 @@ def _make(impl: str, particles: int, cameras: int, seed: int):
             def step(_images, tr=tr):
                 tr._launch_observation()
     else:
-        from .numpy_colour import NumpyColorFilter
+        from wptrack.bench.numpy_colour import NumpyColorFilter
 
         step = NumpyColorFilter(rig, HUE, SAT, INTENSITY, particles, 0.01, init, seed=seed).step
     for k in range(WARMUP):

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .colour import HUE, INTENSITY, SAT, bench_frames, bench_rig
+from wptrack.bench.colour import HUE, INTENSITY, SAT, bench_frames, bench_rig
 
 
 @dataclass(frozen=True)
@@ -30,8 +30,10 @@ class EndToEndSuite:
 
     @staticmethod
     def run_case(case: Case, device: str, frames: int = 100, numpy_max: int = 0, seed: int = 0) -> dict:
-        from wptrack.frames import open_frames, prefetch, write_video
-        from wptrack.trackers.colour import ColorTracker, HSITarget
+        from wptrack.io.frames import open_frames
+        from wptrack.io.prefetch import prefetch
+        from wptrack.io.video import write_video
+        from wptrack.trackers.colour.tracker import ColorTracker, HSITarget
 
         rig = bench_rig(case.cameras)
         images, balls = bench_frames(rig, frames, seed)
@@ -49,7 +51,15 @@ class EndToEndSuite:
                 decode.append(time.perf_counter() - t0)
             target = HSITarget(hue=HUE, sat=SAT, intensity=INTENSITY)
             tracker = ColorTracker(
-                rig, target, particles=case.particles, sigma=0.01, init=tuple(balls[0] + 0.03), device=device, seed=seed
+                rig,
+                target,
+                particles=case.particles,
+                sigma=0.01,
+                init=tuple(balls[0] + 0.03),
+                device=device,
+                seed=seed,
+                proposal="prior",
+                keep_particles=0,
             )
             for _ in range(3):  # compile + capture outside the timing
                 tracker.step(images[0])

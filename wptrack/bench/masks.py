@@ -3,14 +3,14 @@
 Per case (frame size), ``frames`` synthetic frames (smooth colour texture, gaussian noise of 3 levels, a few
 moving rectangles) are encoded to a temporary FFV1 ``.avi`` (the project's lossless writer). Measured:
 
-* ``decode``: reading the video with :class:`wptrack.frames.VideoSource`, per frame (median of 3 passes);
+* ``decode``: reading the video with :class:`wptrack.io.frames.VideoSource`, per frame (median of 3 passes);
 * ``sample+build``: one background window (the sampler's reads of its ``samples`` frames, the upload, the
   median/MAD kernel and the host statistics: gains, spread, neighbourhood scale, shadow ratio), amortised over the
   ``window // 2`` frames between window starts (a window is built every ``window // 2`` frames). The video is
   shorter than ``window``, so its one window samples every other frame of it and the sampler decodes all
   ``frames`` frames for it, about a third of a decoding pass per frame; in a long video with the default window
   (a sample every 12 frames) the sampler reads forward and decodes each frame about once (see
-  :mod:`wptrack.background`): add about one ``decode`` for a video source;
+  :mod:`wptrack.motion.background`): add about one ``decode`` for a video source;
 * ``kernel``: the per-frame step (frame gain, upload, foreground and neighbourhood kernels, mask and probability
   back, hysteresis), per frame;
 * ``clean``: the host morphology (cv2 opening + closing) per frame;
@@ -37,6 +37,7 @@ standard deviations of a threshold (float32 vs float64), and probabilities agree
 
 from __future__ import annotations
 
+import logging
 import tempfile
 import time
 from collections.abc import Iterator
@@ -93,7 +94,7 @@ def e2e_frames(window: int) -> int:
 def end_to_end(case: Case, device: str, frames: int, seed: int = 0, repeats: int = 1) -> dict:
     """Wall time of the default mask pipeline over a ``frames``-frame FFV1 video of ``case``'s size against
     decoding it: ``open_masks(video=path, config=MaskConfig(device=device))`` iterated to the end (the offline
-    model with its defaults, the frames decoded ahead by :func:`wptrack.frames.prefetch`, the windows' samples read
+    model with its defaults, the frames decoded ahead by :func:`wptrack.io.prefetch.prefetch`, the windows' samples read
     ahead by the model's worker, the clean-up), alternating with decode-only passes, ``repeats`` of each.
 
     Returns:
@@ -102,8 +103,9 @@ def end_to_end(case: Case, device: str, frames: int, seed: int = 0, repeats: int
         masks add to decoding per frame), ``added_vs_decode``; ``e2e_first_ms`` (time to the first mask, ms),
         ``e2e_steady_ms`` (ms per frame after it), ``added_steady_ms`` (that less decoding), ``added_steady_vs_decode``.
     """
-    from wptrack.frames import VideoWriter, open_source
-    from wptrack.masks import MaskConfig, open_masks
+    from wptrack.io.frames import open_source
+    from wptrack.io.video import VideoWriter
+    from wptrack.motion.masks import MaskConfig, open_masks
 
     config = MaskConfig(device=device)
     with tempfile.TemporaryDirectory() as tmp:
@@ -148,6 +150,14 @@ def end_to_end(case: Case, device: str, frames: int, seed: int = 0, repeats: int
     }
 
 
+class _DropShortWindowWarning(logging.Filter):
+    """The bench's own short temporary videos are shorter than a background window on purpose: the model's warning
+    about it (naming the temporary file) says nothing to the user."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "shorter than the background window" not in record.getMessage()
+
+
 class MasksSuite:
     """Offline background model vs decoding, at 640x480 and 1920x1080."""
 
@@ -182,16 +192,37 @@ class MasksSuite:
         )
 
     @staticmethod
+    def describe(case: Case, frames: int, e2e: int | None = None) -> str:
+        """What a case times (said before it runs: the end-to-end pass takes a while on a CPU)."""
+        from wptrack.motion.masks import MaskConfig
+
+        what = f"{case.width}x{case.height}, {frames} frames"
+        if case.e2e:
+            what += f", then the end-to-end mask pass over {e2e or e2e_frames(MaskConfig().window)} frames"
+        return what
+
+    @staticmethod
     def run_case(
         case: Case, device: str, frames: int = 50, numpy_max: int = 0, seed: int = 0, e2e: int | None = None
     ) -> dict:
+        quiet = _DropShortWindowWarning()
+        logger = logging.getLogger("wptrack.motion.background")
+        logger.addFilter(quiet)
+        try:
+            return MasksSuite._run_case(case, device, frames, numpy_max, seed, e2e)
+        finally:
+            logger.removeFilter(quiet)
+
+    @staticmethod
+    def _run_case(case: Case, device: str, frames: int, numpy_max: int, seed: int, e2e: int | None) -> dict:
         import cv2
 
-        from wptrack.background import ILLUM_MIN_WEIGHT, ILLUM_WIDEN, OfflineBackground
-        from wptrack.frames import open_source, write_video
-        from wptrack.masks import MaskConfig
-
-        from . import numpy_masks
+        from wptrack.bench import numpy_masks
+        from wptrack.io.frames import open_source
+        from wptrack.io.video import write_video
+        from wptrack.motion.background import OfflineBackground
+        from wptrack.motion.illumination import ILLUM_MIN_WEIGHT, ILLUM_WIDEN
+        from wptrack.motion.masks import MaskConfig
 
         config = MaskConfig(method="offline", device=device)
         video = bench_video(case.width, case.height, frames, seed)
@@ -225,8 +256,8 @@ class MasksSuite:
                 masks.append(m)
                 probs.append(p)
                 gains.append(model.last_gain.copy())
-                if t < 10 and model._patches:  # the device's local field and patch statistics, for the reference
-                    fields.append((model._local.numpy().copy(), model._patch.numpy().copy()))
+                if t < 10 and model.light.active:  # the device's local field and patch statistics, for the reference
+                    fields.append((model.light.local.numpy().copy(), model.light.patch.numpy().copy()))
             model.close()
         k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
         k5 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))

@@ -1,5 +1,5 @@
 """Plain NumPy reference of the S1 colour particle filter (Barrera et al., eqs. 1-7), for the benchmark's
-equivalence check and CPU baseline. Same algorithm as ``wptrack.trackers.colour.ColorTracker`` (gaussian walk,
+equivalence check and CPU baseline. Same algorithm as ``wptrack.trackers.colour.tracker.ColorTracker`` (gaussian walk,
 HSI target mask, 5x5 window counts through an integral image, product over cameras in log space, systematic
 resampling every frame), written for clarity with vectorised NumPy; its random numbers come from NumPy, so it
 agrees with the Warp tracker statistically, not bit for bit."""
@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wptrack.rig import Rig
+from wptrack.cameras.rig import Rig
 
 
 def hsi_mask(bgr: np.ndarray, hue, sat, intensity) -> np.ndarray:

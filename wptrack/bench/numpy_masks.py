@@ -1,4 +1,4 @@
-"""NumPy reference of the offline background model's kernels (:mod:`wptrack.kernels.background`), for the tests
+"""NumPy reference of the offline background model's kernels (:mod:`wptrack.kernels.core.background`), for the tests
 and the ``masks`` benchmark: same formulas, float64 instead of float32."""
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ def median_mad(stack: np.ndarray, gains: np.ndarray | None = None) -> tuple[np.n
 def neighbourhood(
     packed: np.ndarray, diff: np.ndarray, radius: int, low_threshold: float, scale: float = 1.0
 ) -> np.ndarray:
-    """Reference of :func:`wptrack.kernels.background.neighbourhood_kernel` on ``(H, W)`` packed levels and
+    """Reference of :func:`wptrack.kernels.core.background.neighbourhood_kernel` on ``(H, W)`` packed levels and
     ``(H, W, 3)`` normalised differences (box sums over the usable neighbours, zero outside the image)."""
     import cv2
 
@@ -69,12 +69,12 @@ def foreground(
     formulas), the frame divided by its ``(3,)`` channel ``gain`` first; ``low_threshold`` (default: ``threshold``)
     is the hysteresis threshold, ``spread_cap`` the largest noise scale (8-bit units, 0: none), ``shadow_edge_hi``
     (default ``shadow_hi``) the penumbra candidates' upper ratio. ``packed`` is the kernel's ``level + 4 shadow``;
-    ``mask`` is :func:`wptrack.background.resolve_levels` of it (after :func:`neighbourhood` with ``radius`` and
+    ``mask`` is :func:`wptrack.motion.background.resolve_levels` of it (after :func:`neighbourhood` with ``radius`` and
     ``nb_scale`` when ``radius > 0``) for 2-D images, ``level == 2`` otherwise. ``field``: the ``(..., 3)`` local
     illumination gains the frame is divided by too (:func:`local_field`); ``veto``: the keyword arguments of
     :func:`illumination_change` but ``x`` and ``b`` (its pixels, tested where ``z > low_threshold`` and not a cast
     shadow, get shadow code 3: background)."""
-    from wptrack.background import resolve_levels
+    from wptrack.motion.background import resolve_levels
 
     edge_hi = shadow_hi if shadow_edge_hi is None else shadow_edge_hi
     low = threshold if low_threshold is None else low_threshold

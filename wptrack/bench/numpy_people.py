@@ -1,6 +1,6 @@
-"""NumPy reference of the S2 multi-view colour descriptor (eqs. 19-21, ``kernels/descriptor.py``) for the ``people``
-benchmark: the same definition written independently (projection by ``cv2.projectPoints``, hexcone HSV, two-bin
-linear interpolation with circular hue, a normalised 2D Gaussian of deviation r_i over the disc), float64, one
+"""NumPy reference of the S2 multi-view colour descriptor (eqs. 19-21, ``kernels/people/descriptor.py``) for the
+``people`` benchmark: the same definition written independently (projection by ``cv2.projectPoints``, hexcone HSV,
+two-bin linear interpolation with circular hue, a normalised 2D Gaussian of deviation r_i over the disc), float64, one
 particle at a time. It imports neither Warp nor ``wptrack.kernels``."""
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ def descriptor(
 
     Args:
         cameras: objects with ``K``, ``dist``, ``rvec``, ``t``, ``R``, ``width``, ``height``, ``fx``, ``fy``
-            (``wptrack.rig.Camera``). images: one (H, W, 3) uint8 BGR image per camera. points: (N, 3) metres.
+            (``wptrack.cameras.rig.Camera``). images: one (H, W, 3) uint8 BGR image per camera. points: (N, 3) metres.
     """
     import cv2
 

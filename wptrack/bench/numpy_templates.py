@@ -4,7 +4,8 @@ baseline "NumPy on CPU" of ``wptrack/bench/templates.py``.
 Given the particle state (kind, ground position, heading, dims, age per slot; shapes (N, R, ...)), a calibrated
 camera and the ground plane, it
 
-1. builds every template piece's vertices (the list of ``kernels/raster.py``, re-implemented here; vectorised over
+1. builds every template piece's vertices (the list of ``kernels/templates/raster.py``, re-implemented here; vectorised
+   over
    all particles and slots),
 2. projects them with the OpenCV pinhole + (k1, k2, p1, p2, k3) distortion model in float64 (the formula of
    ``cv2.projectPoints``, in NumPy; a piece with a vertex behind the camera or beyond the distortion fold radius
@@ -34,14 +35,14 @@ PIECES = 2
 HULL_MAX = 16
 """Most vertices per piece."""
 LOWER, CABIN_LENGTH, CABIN_WIDTH = 0.55, 0.6, 0.9
-"""Vehicle proportions (``kernels.raster``): lower body height, cabin length and width, as fractions."""
+"""Vehicle proportions (``kernels.templates.raster``): lower body height, cabin length and width, as fractions."""
 MIN_DEPTH = 1.0e-6
-"""Camera depth (metres) at or below which a point is not seen (``kernels.camera.MIN_DEPTH``)."""
+"""Camera depth (metres) at or below which a point is not seen (``kernels.core.camera.MIN_DEPTH``)."""
 
 
 LEG_RATIO, HIP, SHOULDER = 0.65, 0.5, 2.5
-"""Human proportions (``kernels.raster``): leg radius / body radius, hip height / height, shoulders in head radii
-below the top."""
+"""Human proportions (``kernels.templates.raster``): leg radius / body radius, hip height / height, shoulders in head
+radii below the top."""
 
 _OCTAGON = (np.arange(16) % 8) * (2.0 * np.pi / 8.0)
 _LEGS = np.stack([np.cos(_OCTAGON), np.sin(_OCTAGON), (np.arange(16) >= 8).astype(np.float64)], axis=1)
@@ -72,14 +73,14 @@ class NumpyTemplateScorer:
     """NumPy reference of eqs. 4-6 and 10 for one camera and a ground plane.
 
     Args:
-        camera: ``wptrack.rig.Camera`` (K, dist, R, t, width, height).
-        plane: ``wptrack.rig.GroundPlane`` (origin, x_axis, y_axis, normal).
+        camera: ``wptrack.cameras.rig.Camera`` (K, dist, R, t, width, height).
+        plane: ``wptrack.cameras.rig.GroundPlane`` (origin, x_axis, y_axis, normal).
         cost_a, cost_b: a_r and b_r of eq. 5 per kind, indexed by KIND_* (index 0 unused), pixels.
         scale: s of eq. 6 (the log-weight is ``-(m + c) s / (W H)``).
         r2_max: squared normalised radius beyond which a point is "not seen" (``warpcams.camera_struct``); inf to
             project everything in front of the camera.
         bg_weight: lambda of the weighted penalty ``|q AND NOT v| + lambda |v AND NOT q|`` in the log-weight.
-        exclusion: cost of two objects' ground overlap, pixels per pair (``kernels.xor.pair_overlap``).
+        exclusion: cost of two objects' ground overlap, pixels per pair (``kernels.templates.xor.pair_overlap``).
     """
 
     def __init__(
@@ -341,7 +342,8 @@ class NumpyTemplateScorer:
 
     @staticmethod
     def overlap(kind: np.ndarray, pos: np.ndarray, heading: np.ndarray, dims: np.ndarray) -> np.ndarray:
-        """Summed ground overlap of every pair of objects of each particle (``kernels.xor.pair_overlap``); (N,)."""
+        """Summed ground overlap of every pair of objects of each particle (``kernels.templates.xor.pair_overlap``);
+        (N,)."""
         pos = pos.astype(np.float64)
         heading = heading.astype(np.float64)
         dims = dims.astype(np.float64)

@@ -44,7 +44,7 @@ class Case:
 def bench_rig():
     """Three 640x480 cameras (90 degrees wide) in the corners of a 4 x 4 m room, 2.6 m high, looking at its
     centre at 0.8 m; working volume the room up to 2 m."""
-    from wptrack.rig import Camera, Rig
+    from wptrack.cameras.rig import Camera, Rig
 
     target = (2.0, 2.0, 0.8)
     f = WIDTH / 2.0
@@ -131,10 +131,9 @@ class PeopleSuite:
         """Time ``frames`` frames of the case (after two warm-up frames: kernel loading and CUDA graph capture)."""
         import warp as wp
 
-        from wptrack.trackers.people import PeopleTracker
-        from wptrack.trackers.people_model import BirthConfig, PeopleConfig
-
-        from . import numpy_people
+        from wptrack.bench import numpy_people
+        from wptrack.trackers.people.config import BirthConfig, PeopleConfig
+        from wptrack.trackers.people.tracker import PeopleTracker
 
         n, k = int(case.particles), int(case.objects)
         if not 1 <= k <= 12:

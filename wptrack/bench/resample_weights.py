@@ -59,9 +59,9 @@ def run_weights_case(n: int, device: str, weights: str, frames: int = 50, numpy_
     """
     import warp as wp
 
-    from wptrack.kernels import reduce as kreduce
-    from wptrack.kernels import resample as kres
-    from wptrack.resampling import LONG_RANGE, Resampler, offspring_counts
+    from wptrack.core.resampling import LONG_RANGE, Resampler, offspring_counts
+    from wptrack.kernels.core import reduce as kreduce
+    from wptrack.kernels.core import resample as kres
 
     if weights not in WEIGHT_SIGMAS:
         raise ValueError(f"weights {weights!r}: expected one of {', '.join(WEIGHT_SIGMAS)}")
@@ -124,7 +124,7 @@ def _systematic_reference(q: np.ndarray, seed, device) -> np.ndarray:
     """NumPy systematic resampling on the exact integer CDF of ``q`` with the kernels' uniform of frame 0."""
     import warp as wp
 
-    from wptrack.kernels import random as wrand
+    from wptrack.kernels.core import random as wrand
 
     words = wp.zeros((1, 4), dtype=wp.uint32, device=device)
     wp.launch(wrand.philox_kernel, dim=1, inputs=[seed, 0, wrand.STREAM_RESAMPLE], outputs=[words], device=device)
@@ -134,6 +134,10 @@ def _systematic_reference(q: np.ndarray, seed, device) -> np.ndarray:
     bounds = np.clip(np.floor(c.astype(np.float64) * (n / float(c[-1])) + u), 0, n).astype(np.int64)
     bounds[-1] = n
     return np.repeat(np.arange(n), np.diff(np.concatenate([[0], bounds])))
+
+
+WEIGHTS_HEADER = "resampling alone on synthetic log-weights (ms per call; serial scatter: the reference path)"
+"""The line above the ``--weights`` rows (the colour suite's table header does not describe them)."""
 
 
 def format_weights_row(r: dict) -> str:

@@ -28,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from wptrack.runs.colour import ColourRun
-from wptrack.runs.templates import TemplateRun
+from wptrack.trackers.colour.run import ColourRun
+from wptrack.trackers.templates.run import TemplateRun
 
 WIDTH, HEIGHT = 320, 240
 PERIOD = 96
@@ -97,7 +97,7 @@ def cycle_scene(cameras: int, seed: int = 0) -> tuple[Any, list[np.ndarray], np.
     """
     import cv2
 
-    from wptrack.rig import Camera, Rig
+    from wptrack.cameras.rig import Camera, Rig
 
     angles = np.linspace(0, 2 * np.pi, cameras, endpoint=False) + 0.3
     rig = Rig(
@@ -143,11 +143,12 @@ class _Cycled:
 
 
 class SoakRun(_Cycled, ColourRun):
-    """:class:`~wptrack.runs.colour.ColourRun` over its in-memory videos repeated to ``frames`` frames."""
+    """:class:`~wptrack.trackers.colour.run.ColourRun` over its in-memory videos repeated to ``frames`` frames."""
 
 
 class TemplateSoakRun(_Cycled, TemplateRun):
-    """:class:`~wptrack.runs.templates.TemplateRun` over its in-memory motion masks repeated to ``frames`` frames."""
+    """:class:`~wptrack.trackers.templates.run.TemplateRun` over its in-memory motion masks repeated to ``frames``
+    frames."""
 
     _source_attr = "_stream"
 
@@ -160,8 +161,8 @@ def template_cycle(seed: int = 0) -> tuple[Any, np.ndarray]:
     Returns:
         ``(rig, masks)``: masks ``(PERIOD, H, W)`` uint8, 0 or 255.
     """
-    from wptrack.rig import Camera, Rig
-    from wptrack.trackers.templates import TemplateConfig, TemplateTracker
+    from wptrack.cameras.rig import Camera, Rig
+    from wptrack.trackers.templates.tracker import TemplateConfig, TemplateTracker
 
     cam = Camera.look_at("cam0", 320, 240, position=[0, -4, 10], target=[0, 9, 0], fx=250.0)
     rig = Rig(cameras=(cam,))
@@ -192,13 +193,18 @@ def soak_job(
 ) -> SoakRun:
     """The colour tracker's run-loop job on the cycled scene, ``frames`` frames long (its rig file written into
     ``out_dir``)."""
-    from wptrack.trackers.colour import ColorConfig, HSITarget
+    from wptrack.trackers.colour.tracker import ColorConfig, HSITarget
 
     rig, videos, balls = cycle_scene(case.cameras, seed)
     rig_path = out_dir / "rig.yaml"
     rig.save(rig_path)
     cfg = ColorConfig(
-        particles=case.particles, sigma=0.01, init=tuple(balls[0]), seed=seed, keep_particles=keep_particles
+        particles=case.particles,
+        sigma=0.01,
+        init=tuple(balls[0]),
+        seed=seed,
+        keep_particles=keep_particles,
+        proposal="prior",
     )
     target = HSITarget(hue=(300.0, 340.0), sat=(0.3, 1.0), intensity=(20.0, 240.0))
     return SoakRun(rig_path, videos, target, cfg, device=device, frames=frames, on_record=on_record)
@@ -213,7 +219,7 @@ def template_soak_job(
     on_record: Callable[[Any, Any], None] | None = None,
 ) -> TemplateSoakRun:
     """The template tracker's run-loop job (virtual scenes written too) on the cycled masks, ``frames`` long."""
-    from wptrack.trackers.templates import TemplateConfig
+    from wptrack.trackers.templates.tracker import TemplateConfig
 
     rig, masks = template_cycle(seed)
     rig_path = out_dir / "rig.yaml"

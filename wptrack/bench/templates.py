@@ -60,7 +60,7 @@ class Case:
 
 def bench_rig():
     """The scene camera: 640x480, 550 px focal length, k1 = -0.05, at (0, -8, 7) m looking at (0, 7, 0)."""
-    from wptrack.rig import Camera, Rig
+    from wptrack.cameras.rig import Camera, Rig
 
     cam = Camera.look_at(
         "cam0", WIDTH, HEIGHT, (0.0, -8.0, 7.0), (0.0, 7.0, 0.0), 550.0, dist=(-0.05, 0.0, 0.0, 0.0, 0.0)
@@ -70,8 +70,8 @@ def bench_rig():
 
 def bench_objects(objects: int, seed: int = 0) -> dict[str, np.ndarray]:
     """Ground truth of ``objects`` objects (at most 12): kind (R,), pos (R, 2), heading (R,), dims (R, 3)."""
-    from wptrack.errors import ConfigError
-    from wptrack.trackers.templates import HumanPrior, VehiclePrior
+    from wptrack.core.errors import ConfigError
+    from wptrack.trackers.templates.tracker import HumanPrior, VehiclePrior
 
     if not 1 <= objects <= MAX_OBJECTS:
         raise ConfigError(f"--objects: the benchmark scene holds 1 to {MAX_OBJECTS} objects, got {objects}")
@@ -92,7 +92,7 @@ def bench_objects(objects: int, seed: int = 0) -> dict[str, np.ndarray]:
 
 def bench_mask(rig, truth: dict[str, np.ndarray], device: str, seed: int = 0) -> np.ndarray:
     """The motion mask (H, W) uint8 0/1: the truth's virtual scene from a one-particle tracker, plus noise."""
-    from wptrack.trackers.templates import TemplateConfig, TemplateTracker
+    from wptrack.trackers.templates.tracker import TemplateConfig, TemplateTracker
 
     r = len(truth["kind"])
     one = TemplateTracker(rig, TemplateConfig(particles=1, max_objects=r, seed=seed), device=device)
@@ -114,7 +114,7 @@ def bench_mask(rig, truth: dict[str, np.ndarray], device: str, seed: int = 0) ->
 
 def bench_particles(truth: dict[str, np.ndarray], n: int, seed: int = 0) -> dict[str, np.ndarray]:
     """Initial state of ``n`` particles, each holding every object of the truth with jitter (see the module)."""
-    from wptrack.trackers.templates import HumanPrior, VehiclePrior
+    from wptrack.trackers.templates.tracker import HumanPrior, VehiclePrior
 
     rng = np.random.default_rng(seed + 2)
     kind = np.broadcast_to(truth["kind"], (n, len(truth["kind"]))).copy()
@@ -199,18 +199,23 @@ class TemplateSuite:
 
     @staticmethod
     def default_grid(is_cuda: bool) -> list[Case]:
-        """N in {1e2, 1e3, 1e4} x {1, 5, 10} objects; on the CPU without the cases of ``CPU_SKIP`` (said so on
-        stdout)."""
+        """N in {1e2, 1e3, 1e4} x {1, 5, 10} objects; on the CPU without the cases of ``CPU_SKIP`` (see
+        :meth:`notes`)."""
         grid = [Case(n, k) for k in (1, 5, 10) for n in (100, 1_000, 10_000)]
         if not is_cuda:
-            for c in grid:
-                if (c.particles, c.objects) in CPU_SKIP:
-                    print(
-                        f"templates: the default CPU grid leaves out N={c.particles} x {c.objects} objects (~1 s a "
-                        f"frame); give --particles {c.particles} --objects {c.objects} to run it"
-                    )
             grid = [c for c in grid if (c.particles, c.objects) not in CPU_SKIP]
         return grid
+
+    @staticmethod
+    def notes(is_cuda: bool) -> list[str]:
+        """What the default grid leaves out (printed by ``wptrack bench`` only when the default grid runs)."""
+        if is_cuda:
+            return []
+        return [
+            f"templates: the default CPU grid leaves out N={n} x {k} objects (~1 s a frame); give --particles {n} "
+            f"--objects {k} to run it"
+            for n, k in CPU_SKIP
+        ]
 
     @staticmethod
     def run_case(
@@ -224,9 +229,8 @@ class TemplateSuite:
     ) -> dict:
         import warp as wp
 
-        from wptrack.trackers.templates import TemplateConfig, TemplateTracker
-
-        from .numpy_templates import NumpyTemplateScorer
+        from wptrack.bench.numpy_templates import NumpyTemplateScorer
+        from wptrack.trackers.templates.tracker import TemplateConfig, TemplateTracker
 
         n, k = int(case.particles), int(case.objects)
         rig = bench_rig()

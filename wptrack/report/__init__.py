@@ -3,9 +3,10 @@
 A report is a folder (default ``RUN_DIR/report``) with PNG images, a movie and ``index.html``, one page that opens in
 a browser with no network access. What goes into it depends on the tracker that wrote the run (run.json
 ``tracker``): each tracker registers its section builders with :func:`register_reporter` (see
-:mod:`wptrack.report.model`); the S1 colour tracker's are in :mod:`wptrack.report.color`, the S3 template
-tracker's in :mod:`wptrack.report.templates`. 3D views are rendered off-screen with PyVista (EGL/OSMesa: no display,
-no GPU needed); PyVista, VTK and matplotlib are imported only when a report is built.
+:mod:`wptrack.report.model`); the built-in trackers' are in their packages (:mod:`wptrack.trackers.colour.report`,
+:mod:`wptrack.trackers.people.report`, :mod:`wptrack.trackers.templates.report`), imported on first use. 3D views
+are rendered off-screen with PyVista (EGL/OSMesa: no display, no GPU needed); PyVista, VTK and matplotlib are
+imported only when a report is built.
 
 Modules: :mod:`.data` (loading a run), :mod:`.vtkcam` (OpenCV -> VTK camera), :mod:`.scene3d` (3D stills, views
 from the rig cameras, movie frames), :mod:`.overlays` (particles on the real frames), :mod:`.plots` (2D plots),
@@ -21,13 +22,19 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ConfigError, OutputError
-from ..io import RUN_FILE, ensure_writable_dir
-from . import color as _color  # noqa: F401  (registers the colour tracker's report)
-from . import people as _people  # noqa: F401  (registers the people tracker's report)
-from . import templates as _templates  # noqa: F401  (registers the template tracker's report)
-from .data import GROUNDTRUTH_FILE, RunData, find_sweep, load_run, load_sweep, trajectories
-from .model import REPORTERS, Figure, ReportContext, ReporterSpec, ReportOptions, Section, register_reporter
+from wptrack.core.errors import ConfigError, OutputError
+from wptrack.io.atomic import ensure_writable_dir
+from wptrack.io.run import RUN_FILE
+from wptrack.report.data import GROUNDTRUTH_FILE, RunData, find_sweep, load_run, load_sweep, trajectories
+from wptrack.report.model import (
+    REPORTERS,
+    Figure,
+    ReportContext,
+    ReporterSpec,
+    ReportOptions,
+    Section,
+    register_reporter,
+)
 
 __all__ = [
     "REPORTERS",
@@ -95,8 +102,8 @@ def use_groundtruth(data: RunData, path: str | Path) -> None:
     Raises:
         ConfigError: The file is missing or unreadable.
     """
-    from ..errors import WptrackError
-    from ..io import read_tracks
+    from wptrack.core.errors import WptrackError
+    from wptrack.io.tables import read_tracks
 
     p = Path(path)
     if not p.is_file():
@@ -141,8 +148,8 @@ def build_report(
         OutputError: ``run_dir`` is not a run folder (and holds no sweep), or the report cannot be written.
         ConfigError: The run's tracker has no report; bad frames; an unreadable sweep.
     """
-    from .html import write_index
-    from .plots import section_sweep
+    from wptrack.report.html import write_index
+    from wptrack.report.plots import section_sweep
 
     t0 = time.perf_counter()
     run_dir = Path(run_dir)

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from . import scene3d
+from wptrack.report import scene3d
 
 GRID_BGR = (0, 255, 255)
 """Colour of the ground grid in :func:`calibration_check` (yellow, BGR)."""
@@ -191,7 +191,7 @@ def calibration_check(
     centre (labelled with its coordinates).
 
     Args:
-        rig: The rig (its ground plane and working volume; ``wptrack.rig.Rig``).
+        rig: The rig (its ground plane and working volume; ``wptrack.cameras.rig.Rig``).
         camera: The camera that took ``frame`` (scaled to the frame's size when it is a resized copy).
         frame: (H, W) or (H, W, 3) uint8 image.
         step: Grid spacing, metres.

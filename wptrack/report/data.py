@@ -1,7 +1,7 @@
 """Everything a report reads from a run directory (and its rig, videos and ground truth), validated.
 
 Missing optional inputs (ground truth, videos, particles, rig) are recorded as notes, never errors; a folder that
-is not a wptrack run, or a run of an unknown tracker, is a :class:`~wptrack.errors.WptrackError`.
+is not a wptrack run, or a run of an unknown tracker, is a :class:`~wptrack.core.errors.WptrackError`.
 """
 
 from __future__ import annotations
@@ -14,8 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ConfigError, OutputError, WptrackError
-from ..io import PARTICLES_FILE, RUN_FILE, TRACKS_FILE, read_tracks
+from wptrack.core.errors import ConfigError, OutputError, WptrackError
+from wptrack.io.run import PARTICLES_FILE, RUN_FILE
+from wptrack.io.tables import TRACKS_FILE, read_tracks
 
 log = logging.getLogger(__name__)
 
@@ -85,7 +86,7 @@ class RunData:
         tracks: tracks.csv columns.
         estimates: Estimated trajectories by object id (the ``x, y, z`` columns).
         particles: The saved particle clouds, or None.
-        rig: The rig (``wptrack.rig.Rig``), or None when its file is gone.
+        rig: The rig (``wptrack.cameras.rig.Rig``), or None when its file is gone.
         groundtruth: Ground-truth trajectories by object id, or None.
         groundtruth_path: Where the ground truth was read.
         videos: One frame source spec per camera (paths that exist), or None when any is missing.
@@ -217,10 +218,11 @@ def load_run(run_dir: str | Path, known: list[str] | None = None) -> RunData:
 
 
 def _load_particles(data: RunData) -> None:
-    name = (data.run.get("files") or {}).get("particles") or PARTICLES_FILE
-    path = data.run_dir / str(name)
+    listed = (data.run.get("files") or {}).get("particles")
+    path = data.run_dir / str(listed or PARTICLES_FILE)
     if not path.is_file():
-        data.notes.append(f"no {PARTICLES_FILE}: particle clouds are left out")
+        if listed or data.tracker == "color":  # a run that saves none (people, templates) needs no note
+            data.notes.append(f"no {PARTICLES_FILE}: particle clouds are left out")
         return
     try:
         with np.load(path) as z:
@@ -238,7 +240,7 @@ def _load_particles(data: RunData) -> None:
 
 
 def _load_rig(data: RunData) -> None:
-    from ..rig import Rig
+    from wptrack.cameras.rig import Rig
 
     rig_spec = data.config.get("rig")
     if not rig_spec:
@@ -302,7 +304,7 @@ def load_sweep(path: str | Path) -> dict[str, Any]:
     Raises:
         ConfigError: No errors.csv there, or it cannot be parsed.
     """
-    from ..experiments import read_sweep
+    from wptrack.trackers.colour.sweep import read_sweep
 
     csv_path = find_sweep(path)
     if csv_path is None:

@@ -9,8 +9,8 @@ from html import escape
 from pathlib import Path
 from typing import Any
 
-from ..io import atomic_write_text
-from .model import ReportContext, Section
+from wptrack.io.atomic import atomic_write_text
+from wptrack.report.model import ReportContext, Section
 
 log = logging.getLogger(__name__)
 

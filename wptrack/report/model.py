@@ -11,15 +11,16 @@ their own (e.g. people boxes, template patches)::
 
 from __future__ import annotations
 
+import importlib
 import logging
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, MutableMapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .data import RunData
+from wptrack.report.data import RunData
 
 log = logging.getLogger(__name__)
 
@@ -148,8 +149,48 @@ class ReporterSpec:
     sections: tuple[SectionBuilder, ...]
 
 
-REPORTERS: dict[str, ReporterSpec] = {}
-"""Reporters by tracker name (filled by :func:`register_reporter`)."""
+BUILTIN_REPORTERS: dict[str, str] = {
+    "color": "wptrack.trackers.colour.report",
+    "people": "wptrack.trackers.people.report",
+    "templates": "wptrack.trackers.templates.report",
+}
+"""The trackers' own report modules by run.json ``tracker`` name: each registers its sections when imported. They are
+imported on first use of :data:`REPORTERS`, so that a tracker's report module can use this package without an
+import cycle."""
+
+
+class _Registry(MutableMapping[str, ReporterSpec]):
+    """Reporters by tracker name: the built-in trackers' (imported on first access) and any registered later."""
+
+    def __init__(self) -> None:
+        self._specs: dict[str, ReporterSpec] = {}
+        self._loaded = False
+
+    def _load(self) -> dict[str, ReporterSpec]:
+        if not self._loaded:
+            self._loaded = True
+            for module in BUILTIN_REPORTERS.values():
+                importlib.import_module(module)
+        return self._specs
+
+    def __getitem__(self, key: str) -> ReporterSpec:
+        return self._load()[key]
+
+    def __setitem__(self, key: str, value: ReporterSpec) -> None:
+        self._specs[key] = value
+
+    def __delitem__(self, key: str) -> None:
+        del self._load()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._load())
+
+    def __len__(self) -> int:
+        return len(self._load())
+
+
+REPORTERS: MutableMapping[str, ReporterSpec] = _Registry()
+"""Reporters by tracker name (filled by :func:`register_reporter`; the built-in trackers' on first access)."""
 
 
 def register_reporter(tracker: str, description: str, sections: tuple[SectionBuilder, ...]) -> ReporterSpec:

@@ -8,7 +8,6 @@ import contextlib
 import logging
 import os
 import sys
-import uuid
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import WptrackError
+from wptrack.core.errors import WptrackError
+from wptrack.io.atomic import atomic_path, commit, discard, temp_path
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +69,7 @@ class _WebmWriter:
         import cv2
 
         self.path = path
-        self.tmp = path.with_name(f".{path.stem}.tmp-{uuid.uuid4().hex[:8]}{path.suffix}")
+        self.tmp = temp_path(path)
         self.writer: Any = None
         self.codec: str | None = None
         for codec in WEBM_CODECS:
@@ -80,8 +80,7 @@ class _WebmWriter:
                 break
             w.release()
         if self.writer is None:
-            with contextlib.suppress(FileNotFoundError):
-                self.tmp.unlink()
+            discard(self.tmp)
 
     @property
     def ok(self) -> bool:
@@ -96,10 +95,9 @@ class _WebmWriter:
         with _quiet_stderr():
             self.writer.release()
         if keep and self.tmp.exists() and self.tmp.stat().st_size > 0:
-            os.replace(self.tmp, self.path)
+            commit(self.tmp, self.path)
             return self.path
-        with contextlib.suppress(FileNotFoundError):
-            self.tmp.unlink()
+        discard(self.tmp)
         return None
 
 
@@ -115,7 +113,7 @@ def encode_movie(frames: Iterable[np.ndarray], out_dir: Path, fps: float, stem: 
     Returns:
         The files written and notes about those that could not be.
     """
-    from ..frames import VideoWriter
+    from wptrack.io.video import VideoWriter
 
     out = MovieFiles()
     mp4: VideoWriter | None = None
@@ -162,22 +160,17 @@ def _to_palette(rgb: np.ndarray) -> Any:
 
 
 def _write_gif(images: list[Any], path: Path, fps: float) -> Path:
-    tmp = path.with_name(f".{path.stem}.tmp-{uuid.uuid4().hex[:8]}{path.suffix}")
-    try:
+    with atomic_path(path) as tmp:
         images[0].save(
             tmp, format="GIF", save_all=True, append_images=images[1:], duration=int(round(1000 / fps)), loop=0
         )
-        os.replace(tmp, path)
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
     return path
 
 
 def add_movie_figures(sec: Any, files: MovieFiles, fps: float, total: int) -> None:
     """Attach an encoded movie to a report section: its notes, a note when frames were skipped, and the web
     video/animation (with the MP4 as an alternate) or the MP4 alone."""
-    from .model import Figure
+    from wptrack.report.model import Figure
 
     sec.notes.extend(files.notes)
     if files.frames < total:

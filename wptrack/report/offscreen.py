@@ -13,7 +13,7 @@ import logging
 import os
 from typing import Any
 
-from ..errors import ConfigError
+from wptrack.core.errors import ConfigError
 
 log = logging.getLogger(__name__)
 

@@ -10,10 +10,10 @@ from typing import Any
 
 import numpy as np
 
-from ..io import atomic_imwrite
-from .data import RunData
-from .model import Figure, ReportContext, Section
-from .scene3d import TRUTH_RGB, estimate_rgb, frames_for
+from wptrack.io.atomic import atomic_imwrite
+from wptrack.report.data import RunData
+from wptrack.report.model import Figure, ReportContext, Section
+from wptrack.report.scene3d import TRUTH_RGB, estimate_rgb, frames_for
 
 log = logging.getLogger(__name__)
 
@@ -179,5 +179,12 @@ def render_overlays(ctx: ReportContext, data: RunData) -> list[Figure]:
         canvas, _ = compose(drawn, labels)
         path = ctx.out_dir / f"overlay_frame{f:05d}.png"
         atomic_imwrite(path, canvas)
-        figs.append(Figure(path.name, f"Frame {f}: particles projected into each camera", wide=True))
+        figs.append(
+            Figure(
+                path.name,
+                f"Frame {f}: particles projected into each camera (dots coloured by weight, viridis: yellow = "
+                "heaviest), the estimate (orange cross) and the ground truth (green circle)",
+                wide=True,
+            )
+        )
     return figs

@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from .model import Figure, ReportContext, Section
-from .scene3d import TRUTH_RGB, estimate_rgb, up_axis
+from wptrack.report.model import Figure, ReportContext, Section
+from wptrack.report.scene3d import TRUTH_RGB, estimate_rgb, up_axis
 
 log = logging.getLogger(__name__)
 
@@ -40,22 +40,33 @@ def _c(rgb: tuple[int, int, int]) -> tuple[float, float, float]:
 
 
 def section_birdseye(ctx: ReportContext) -> Section | None:
-    """Particle clouds of every saved frame seen from above, coloured by frame (S1 Fig. 4)."""
+    """Particle clouds of every saved frame seen from above, coloured by frame (S1 Fig. 4); the trajectories alone
+    for a run without particles."""
     data = ctx.data
     if data is None:
         return None
-    sec = Section(
-        "birdseye",
-        "Bird's-eye view of the particle cloud over time",
-        text="The saved particles of every frame seen from above (colour: frame number), the estimated trajectory "
-        "(orange), the ground truth (green) and the camera centres.",
-    )
-    if data.particles is None:
-        sec.notes.append("no particles.npz: only the trajectories are shown")
+    if data.particles is not None:
+        sec = Section(
+            "birdseye",
+            "Bird's-eye view of the particle cloud over time",
+            text="The saved particles of every frame seen from above (colour: frame number), the estimated "
+            "trajectory (orange), the ground truth (green) and the camera centres (navy triangles).",
+        )
+        caption = "Particle clouds over time, seen from above"
+    else:  # a run that saves no particles (the people tracker), or whose particles.npz is gone
+        sec = Section(
+            "birdseye",
+            "Bird's-eye view of the trajectories",
+            text="The estimated trajectories seen from above (one colour per track), the ground truth (green) and "
+            "the camera centres (navy triangles).",
+        )
+        caption = "Trajectories seen from above"
+        if (data.run.get("files") or {}).get("particles"):
+            sec.notes.append("particles.npz is missing: only the trajectories are shown")
     with ctx.timed("plots"):
         path = ctx.out_dir / "birdseye.png"
         birdseye_plot(data, path)
-        sec.figures.append(Figure(path.name, "Particle clouds over time, seen from above"))
+        sec.figures.append(Figure(path.name, caption))
     return sec
 
 

@@ -9,16 +9,16 @@ World units are metres. The scene's "up" is the world axis closest to the camera
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from ..io import atomic_imwrite
-from .data import RunData
-from .model import Figure, ReportContext, Section
-from .offscreen import import_pyvista, new_plotter, renderer_info
+from wptrack.io.atomic import atomic_imwrite
+from wptrack.report.data import RunData
+from wptrack.report.model import Figure, ReportContext, Section
+from wptrack.report.offscreen import import_pyvista, new_plotter, renderer_info
 
 log = logging.getLogger(__name__)
 
@@ -189,8 +189,20 @@ def add_rig(plotter: Any, pv: Any, rig: Any, depth: float, labels: bool = True) 
         )
 
 
-def add_ground(plotter: Any, pv: Any, geo: SceneGeometry, rig: Any) -> None:
-    """A light grid on the ground plane under the region of interest, and the rig's working volume outline."""
+def add_axes_and_scale(plotter: Any, step: float) -> None:
+    """The world axes (an x/y/z marker in the lower left corner) and the ground grid's spacing (a ``grid: 0.5 m``
+    label in the upper right corner), so that a 3D view has directions and a scale."""
+    plotter.add_axes(xlabel="x", ylabel="y", zlabel="z", line_width=2, color="black")
+    plotter.add_text(f"ground grid: {step:g} m", position="upper_right", font_size=10, color="black")
+
+
+SCALE_TEXT = "x/y/z: the world axes (lower left); the ground grid's spacing in metres is written upper right"
+"""What :func:`add_axes_and_scale` draws, for the sections' texts."""
+
+
+def add_ground(plotter: Any, pv: Any, geo: SceneGeometry, rig: Any) -> float:
+    """A light grid on the ground plane under the region of interest, and the rig's working volume outline; returns
+    the grid spacing (metres)."""
     axes = [a for a in range(3) if a != geo.up]
     ext = [(geo.lo[a], geo.hi[a]) for a in axes]
     step = _nice_step(max(e[1] - e[0] for e in ext) / 8.0)
@@ -212,9 +224,10 @@ def add_ground(plotter: Any, pv: Any, geo: SceneGeometry, rig: Any) -> None:
     if rig is not None and rig.volume is not None:
         vlo, vhi = rig.bounds()
         if np.linalg.norm(vhi - vlo) > 3.0 * np.linalg.norm(geo.hi - geo.lo):
-            return  # a room-sized volume around a bench-sized scene: its outline would only cross the view
+            return step  # a room-sized volume around a bench-sized scene: its outline would only cross the view
         box = pv.Box(bounds=(vlo[0], vhi[0], vlo[1], vhi[1], vlo[2], vhi[2]))
         plotter.add_mesh(box.extract_all_edges(), color=(0.55, 0.55, 0.55), line_width=1, lighting=False, render=False)
+    return step
 
 
 def _nice_step(x: float) -> float:
@@ -341,7 +354,9 @@ def section_scene(ctx: ReportContext) -> Section | None:
         "3D scene",
         text=(
             "Camera frusta (blue) from the rig, the ground grid, the estimated trajectory (orange) and the ground "
-            "truth (green). Particles are coloured by weight relative to the frame's largest weight."
+            "truth (green). Particles are coloured by weight relative to the frame's largest weight. "
+            + SCALE_TEXT
+            + "."
         ),
     )
     with ctx.timed("3D stills"):
@@ -364,7 +379,7 @@ def _render_stills(ctx: ReportContext, data: RunData) -> list[Figure]:
         ctx.renderer = renderer_info(pl)
         if data.rig is not None:
             add_rig(pl, pv, data.rig, geo.frustum_depth)
-        add_ground(pl, pv, geo, data.rig)
+        add_axes_and_scale(pl, add_ground(pl, pv, geo, data.rig))
         add_trajectories(pl, pv, data)
         radius = 0.012 * float(np.max(geo.hi - geo.lo))
         # overview: the clouds of every chosen frame
@@ -395,7 +410,13 @@ def _render_stills(ctx: ReportContext, data: RunData) -> list[Figure]:
             path = ctx.out_dir / f"scene_frame{f:05d}.png"
             pl.renderer.ResetCameraClippingRange()
             shot(pl, path)
-            figs.append(Figure(path.name, f"Frame {f}: particle cloud, estimate (orange) and ground truth (green)"))
+            figs.append(
+                Figure(
+                    path.name,
+                    f"Frame {f}: particle cloud (colour: weight / max), estimate (orange sphere) and ground truth "
+                    "(green sphere)",
+                )
+            )
             for a in dynamic:
                 pl.remove_actor(a, render=False)
     finally:
@@ -418,7 +439,7 @@ def read_frames(videos: list[str], wanted: Sequence[int]) -> dict[int, list[np.n
 
 
 def _source_frames(spec: str, wanted: list[int]) -> dict[int, np.ndarray]:
-    from ..frames import VideoSource, open_source
+    from wptrack.io.frames import VideoSource, open_source
 
     src = open_source(spec)
     out: dict[int, np.ndarray] = {}
@@ -434,47 +455,22 @@ def _source_frames(spec: str, wanted: list[int]) -> dict[int, np.ndarray]:
 
 
 def _video_frames(src: Any, wanted: list[int]) -> dict[int, np.ndarray]:
-    """Wanted frames of a video: seek (``CAP_PROP_POS_FRAMES``) over long gaps, checking the position after each
-    seek; if a seek lands elsewhere the rest is read sequentially (``grab`` without conversion)."""
-    import cv2
+    """Wanted frames of a video (:class:`wptrack.io.frames.VideoReader`: exact seeks over long gaps)."""
+    from wptrack.io.frames import VideoReader
 
     out: dict[int, np.ndarray] = {}
-    cap = src._open()
+    reader = VideoReader(src, seek_gap=9)
     try:
-        pos, seek = 0, True
         for f in wanted:
             if f >= len(src):
                 break
-            if seek and f - pos > 8:
-                cap.set(cv2.CAP_PROP_POS_FRAMES, f)
-                if int(round(cap.get(cv2.CAP_PROP_POS_FRAMES))) == f:
-                    pos = f
-                else:  # inexact seeking for this codec: start again, sequentially
-                    log.debug("seeking in %s is inexact; reading sequentially", src.path)
-                    seek = False
-                    cap.release()
-                    cap = src._open()
-                    pos = 0
-            while pos < f and cap.grab():
-                pos += 1
-            if pos != f:
+            frame = reader.read(f)
+            if frame is None:
                 break
-            ok, frame = cap.read()
-            pos += 1
-            if not ok or frame is None:
-                break
-            out[f] = frame if frame.ndim == 3 and frame.shape[2] == 3 else _bgr3(frame)
+            out[f] = frame
     finally:
-        cap.release()
+        reader.close()
     return out
-
-
-def _bgr3(frame: np.ndarray) -> np.ndarray:
-    import cv2
-
-    if frame.ndim == 2:
-        return cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
-    return cv2.cvtColor(frame, cv2.COLOR_BGRA2BGR)
 
 
 def frames_for(ctx: ReportContext, data: RunData) -> dict[int, list[np.ndarray]]:
@@ -493,7 +489,7 @@ def render_camera_views(ctx: ReportContext, data: RunData) -> list[Figure]:
     """
     import cv2
 
-    from .vtkcam import apply_camera
+    from wptrack.report.vtkcam import apply_camera
 
     pv = import_pyvista()
     rig = data.rig
@@ -528,7 +524,7 @@ def render_camera_views(ctx: ReportContext, data: RunData) -> list[Figure]:
                 Figure(
                     path.name,
                     f"{cam.name}, frame {frame}: the 3D scene rendered from the calibrated camera over its undistorted "
-                    "frame",
+                    "frame: estimated trajectory (orange), ground truth (green), particles (colour: weight / max)",
                 )
             )
     finally:
@@ -559,87 +555,6 @@ def _safe(name: str) -> str:
 # ------------------------------------------------------------------------------------------------- movie
 
 
-def movie_frames(data: RunData, limit: int) -> list[int]:
-    """Frames shown in the movie: those with particles (else all tracked frames), evenly thinned to ``limit``."""
-    frames = data.particles.frames if data.particles is not None else data.frames
-    frames = np.asarray(frames, dtype=np.int64)
-    if len(frames) > limit > 0:
-        frames = frames[np.unique(np.round(np.linspace(0, len(frames) - 1, limit)).astype(np.int64))]
-    return [int(f) for f in frames]
-
-
-def iter_movie(ctx: ReportContext, data: RunData) -> Iterator[np.ndarray]:
-    """Render the movie's frames ((H, W, 3) uint8 RGB), reusing one plotter; it is closed when the loop ends.
-
-    Static actors (frusta, ground, ground truth) are added once; the cloud, the estimated trajectories so far and
-    the markers are meshes updated in place, so each movie frame costs one render.
-    """
-    import cv2
-
-    pv = import_pyvista()
-    geo = scene_geometry(data, ctx.frames)
-    w, h = ctx.options.movie_size
-    pl = new_plotter(w, h)
-    try:
-        if data.rig is not None:
-            add_rig(pl, pv, data.rig, geo.frustum_depth)
-        add_ground(pl, pv, geo, data.rig)
-        add_trajectories(pl, pv, data, upto=-(10**12), width=2.0)  # ground truth only
-        overview_view(pl, geo, data.rig)
-        cloud = _empty_cloud(pv)
-        cloud_actor = _cloud_actor(pl, cloud, 5, scalar_bar=False)
-        est_lines, est_points = [], []
-        for k, _ in enumerate(data.estimates):
-            est_lines.append(pv.PolyData())
-            pl.add_mesh(est_lines[-1], color=_rgb(estimate_rgb(k)), line_width=3, lighting=False, render=False)
-        truth_marks = pv.PolyData()
-        marker_size = max(8.0, h / 30.0)
-        pl.add_mesh(
-            truth_marks,
-            color=_rgb(TRUTH_RGB),
-            point_size=marker_size,
-            render_points_as_spheres=True,
-            lighting=False,
-            render=False,
-        )
-        for k, _ in enumerate(data.estimates):
-            est_points.append(pv.PolyData())
-            pl.add_mesh(
-                est_points[-1],
-                color=_rgb(estimate_rgb(k)),
-                point_size=marker_size,
-                render_points_as_spheres=True,
-                lighting=False,
-                render=False,
-            )
-        for f in movie_frames(data, ctx.options.movie_frames):
-            if data.particles is not None:
-                pos, wt = data.particles.cloud(f)
-                cloud.copy_from(cloud_polydata(pv, pos, wt, ctx.options.max_points) if len(pos) else _empty_cloud(pv))
-            cloud_actor.SetVisibility(data.particles is not None and cloud.n_points > 0)
-            for k, traj in enumerate(data.estimates.values()):
-                line = _polyline(pv, traj.xyz[traj.frames <= f])
-                est_lines[k].copy_from(line if line is not None else pv.PolyData())
-                p = traj.at(np.array([f]))
-                est_points[k].copy_from(pv.PolyData(p) if np.all(np.isfinite(p)) else pv.PolyData())
-            truths = [t.at(np.array([f]))[0] for t in (data.groundtruth or {}).values()]
-            truths = [p for p in truths if np.all(np.isfinite(p))]
-            truth_marks.copy_from(pv.PolyData(np.array(truths)) if truths else pv.PolyData())
-            pl.renderer.ResetCameraClippingRange()
-            img = np.ascontiguousarray(shot(pl)[..., :3])
-            # the frame number drawn on the image: updating a VTK text actor costs ~15 ms per frame in software
-            cv2.putText(img, f"frame {f}", (8, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 0), 1, cv2.LINE_AA)
-            yield img
-    finally:
-        pl.close()
-
-
-def _empty_cloud(pv: Any) -> Any:
-    mesh = pv.PolyData(np.zeros((0, 3)))
-    mesh.point_data["weight"] = np.zeros(0)
-    return mesh
-
-
 def shot(plotter: Any, path: Any = None, transparent: bool = False) -> np.ndarray | None:
     """Render now and return the image (RGB, or RGBA if ``transparent``) or write it to ``path``."""
     plotter.render()  # a no-op before the first screenshot, which renders by itself
@@ -647,26 +562,3 @@ def shot(plotter: Any, path: Any = None, transparent: bool = False) -> np.ndarra
         plotter.screenshot(str(path), transparent_background=transparent)
         return None
     return plotter.screenshot(transparent_background=transparent, return_img=True)
-
-
-def section_movie(ctx: ReportContext) -> Section | None:
-    """The 3D view over time: ``movie.mp4`` plus ``movie.webm`` (or ``movie.gif``) for the page."""
-    from .movie import add_movie_figures, encode_movie
-
-    data = ctx.data
-    if data is None:
-        return None
-    sec = Section(
-        "movie",
-        "3D view over time",
-        text="The particle cloud (weight colours), the estimated trajectory so far (orange) and the ground truth "
-        "(green) frame by frame.",
-    )
-    if not ctx.options.movie:
-        sec.notes.append("movie not rendered (disabled)")
-        return sec
-    with ctx.timed("movie"):
-        files = encode_movie(iter_movie(ctx, data), ctx.out_dir, ctx.options.movie_fps)
-    n_total = len(data.particles.frames) if data.particles is not None else len(data.frames)
-    add_movie_figures(sec, files, ctx.options.movie_fps, n_total)
-    return sec

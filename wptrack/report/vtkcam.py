@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from ..rig import Camera
+from wptrack.cameras.rig import Camera
 
 __all__ = ["VtkCameraParams", "apply_camera", "vtk_camera_params"]
 

@@ -2,13 +2,17 @@
 
 >>> from wptrack.synth import render_scene, scene_names
 >>> scene_names()
-['s1-lab', 's1-lab-jump', 's2-office', 's2-office-twocolour', 's3-cars', 's3-groups', 's3-mixed', 's3-people']
+['s1-clutter', 's1-clutter-2cam', 's1-clutter-4cam', 's1-clutter-6cam', 's1-lab', 's1-lab-jump', 's1-room', 's2-office',
+ 's2-office-twocolour', 's3-cars', 's3-groups', 's3-mixed', 's3-people']
 >>> result = render_scene("s1-lab", "out/s1-lab", frames=50)  # doctest: +SKIP
 
 Scenes:
 
 - ``s1-lab``: Barrera et al.'s lab, a pink ball resting, looping (occluded in one camera) and resting; 2 webcams.
 - ``s1-lab-jump``: the same lab, the ball jumps 2 m (the extended paper's section III.C).
+- ``s1-clutter`` (and ``-2cam``, ``-4cam``, ``-6cam``): a room full of colours near the target's (issue 29), a pole
+  hiding part of the ball in one camera, the ball leaving one camera's view, a light change, JPEG frames and an
+  OpenCV FileStorage calibration with distortion; 3 cameras (2, 4, 6). Seeded: the seed draws the layout.
 - ``s2-office``: the S2 paper's office, two people enter from opposite doors, meet, shake hands and leave; desk
   partitions hide their legs; 3 corner cameras (seeded: the seed also varies paths and clothing).
 - ``s2-office-twocolour``: the same, one person in a red front and a blue back (the paper's Fig. 9 case).
@@ -28,6 +32,7 @@ See :mod:`wptrack.synth.base` for the files written, :mod:`wptrack.synth.lab` fo
 
 from __future__ import annotations
 
+from wptrack.synth import clutter as _clutter  # noqa: F401  (registers the clutter rooms)
 from wptrack.synth import lab as _lab  # noqa: F401  (registers the lab scenes)
 from wptrack.synth import office as _office  # noqa: F401  (registers the office scenes)
 from wptrack.synth import plaza as _plaza  # noqa: F401  (registers the plaza scenes)

@@ -3,7 +3,7 @@
 A scene is a :class:`Scene` object (rig, ground truth, per-frame renderer, tracker hints) built by a function
 registered with :func:`register_scene`; :func:`render_scene` writes any registered scene to a folder::
 
-    out_dir/rig.yaml            the calibrated rig (wptrack.rig format)
+    out_dir/rig.yaml            the calibrated rig (wptrack.cameras.rig format)
     out_dir/<camera>.avi        one lossless video per camera (FFV1, MJPG fallback)
     out_dir/<camera>_mask.avi   only for scenes with perfect foreground masks (:attr:`Scene.writes_masks`, e.g. the
                                 s3 scenes): binary silhouettes of the moving objects, 0/255, same size, lossless
@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from wptrack.errors import ConfigError
-from wptrack.rig import Rig
+from wptrack.cameras.rig import Rig
+from wptrack.core.errors import ConfigError
 
 __all__ = ["SCENES", "Scene", "SceneResult", "SceneSpec", "register_scene", "render_scene", "scene_names"]
 
@@ -103,6 +103,11 @@ class Scene(ABC):
             ConfigError: the scene takes no conditions.
         """
         raise ConfigError("this scene takes no conditions (only the s3 plaza scenes do)")
+
+    def save_rig(self, path: Path) -> None:
+        """Write the scene's rig file (default: ``self.rig.save(path)``, inline camera entries). Scenes that show
+        other calibration formats override it (``s1-clutter``: OpenCV FileStorage files through ``opencv:`` entries)."""
+        self.rig.save(path)
 
     def groundtruth_columns(self, frames: int) -> dict[str, dict[int, np.ndarray]] | None:
         """Extra ground-truth columns written after ``frame,id,x,y,z`` (default: none).
@@ -256,8 +261,8 @@ def render_scene(
     """
     from tqdm import tqdm
 
-    from wptrack.frames import VideoWriter
-    from wptrack.io import atomic_write_json, atomic_write_text, ensure_writable_dir
+    from wptrack.io.atomic import atomic_write_json, atomic_write_text, ensure_writable_dir
+    from wptrack.io.video import VideoWriter
 
     spec = get_scene(name)
     if frames is not None and (isinstance(frames, bool) or not isinstance(frames, (int, np.integer)) or frames < 1):
@@ -310,7 +315,7 @@ def render_scene(
         writer.close()
     elapsed = time.perf_counter() - start
 
-    scene.rig.save(rig_path)
+    scene.save_rig(rig_path)
     gt_path = out / "groundtruth.csv"
     atomic_write_text(gt_path, _groundtruth_csv(trajectories, extra_columns))
     scene_json = out / "scene.json"

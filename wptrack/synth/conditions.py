@@ -56,7 +56,7 @@ from typing import Any
 
 import numpy as np
 
-from wptrack.errors import ConfigError
+from wptrack.core.errors import ConfigError
 
 __all__ = [
     "CONDITION_NAMES",

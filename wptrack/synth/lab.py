@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from wptrack.rig import Camera, Rig
+from wptrack.cameras.rig import Camera, Rig
 from wptrack.synth.base import Scene, register_scene
 from wptrack.synth.render import (
     Box,

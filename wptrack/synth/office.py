@@ -35,7 +35,7 @@ soft shadow on the floor under each person (a darkened ellipse, stretched away f
 edged), Gaussian sensor noise (sigma 2.5 DN) and an illumination change (global gain falling by 18 % over frames
 120-150, a bank of lights switched off). The tracker is meant to make its motion masks from the videos with the
 default motion pipeline; the perfect masks ``cam*_mask.avi`` (visible pixels of the people) are for debugging
-only. With the default :class:`wptrack.masks.MaskConfig` (MOG2, shadows as background) on seed 0, after 30 frames
+only. With the default :class:`wptrack.motion.masks.MaskConfig` (MOG2, shadows as background) on seed 0, after 30 frames
 of learning, the motion masks cover about half of the people's visible pixels (mean IoU with the perfect masks
 0.48 / 0.54 / 0.67 for cam1 / cam2 / cam3 on the frames with people, no foreground on the empty frames):
 incomplete and fragmented, as the paper's Fig. 4.
@@ -71,8 +71,8 @@ from typing import Any
 
 import numpy as np
 
-from wptrack.errors import ConfigError
-from wptrack.rig import Camera, Rig
+from wptrack.cameras.rig import Camera, Rig
+from wptrack.core.errors import ConfigError
 from wptrack.synth.actors import Path, Person, _Prim
 from wptrack.synth.base import Scene, register_scene
 from wptrack.synth.plaza import _image_box

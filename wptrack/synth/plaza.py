@@ -68,20 +68,9 @@ from typing import Any
 
 import numpy as np
 
-from wptrack.rig import Camera, Rig
+from wptrack.cameras.rig import Camera, Rig
 from wptrack.synth import conditions as C
-from wptrack.synth.actors import (
-    _BOX_SIGNS,
-    HUMAN,
-    VEHICLE,
-    Car,
-    Formation,
-    Path,
-    Person,
-    PlazaActor,
-    _Prim,
-    _Rgb,
-)
+from wptrack.synth.actors import _BOX_SIGNS, HUMAN, VEHICLE, Car, Formation, Path, Person, PlazaActor, _Prim, _Rgb
 from wptrack.synth.base import Scene, register_scene
 from wptrack.synth.conditions import (
     PlazaConditions,

@@ -11,19 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wptrack.rig import Camera
+from wptrack.cameras.rig import Camera
 from wptrack.synth.actors import _Prim, _Rgb
-from wptrack.synth.render import (
-    Box,
-    Cylinder,
-    Light,
-    StaticView,
-    noisy,
-    render_static,
-    solid,
-    value_noise,
-    wood,
-)
+from wptrack.synth.render import Box, Cylinder, Light, StaticView, noisy, render_static, solid, value_noise, wood
 
 log = logging.getLogger(__name__)
 

@@ -55,7 +55,7 @@ from typing import Any
 
 import numpy as np
 
-from wptrack.errors import ConfigError
+from wptrack.core.errors import ConfigError
 from wptrack.synth import plaza as P
 from wptrack.synth.actors import Car, Formation, Path, Person, PlazaActor
 from wptrack.synth.plaza_background import FPS, FRAMES, ROAD_LANES, _static_objects, plaza_camera

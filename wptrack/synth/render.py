@@ -5,7 +5,7 @@ once per camera; per frame only dynamic spheres are intersected, inside the pixe
 and composited by ray distance (a z-buffer), then lit, shadowed and corrupted with sensor noise.
 
 Conventions: world units are metres, z up; image units are pixels with pixel centres at integer coordinates (as in
-:mod:`wptrack.rig`). Colours inside this module are linear RGB floats where 1.0 maps to 255 DN before the global
+:mod:`wptrack.cameras.rig`). Colours inside this module are linear RGB floats where 1.0 maps to 255 DN before the global
 exposure; the images returned are uint8 BGR (OpenCV order). Rays are cast through ``cv2.undistortPoints`` of every
 pixel centre, so rendered images carry the camera's lens distortion exactly as ``Camera.project`` models it.
 """
@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wptrack.rig import Camera
+from wptrack.cameras.rig import Camera
 
 __all__ = [
     "Box",

@@ -14,7 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from wptrack.rig import Camera, Rig
+from wptrack.cameras.rig import Camera, Rig
 from wptrack.synth.base import Scene, register_scene
 from wptrack.synth.lab import BALL_RGB, LABEL_BALL, LABEL_MUG, TARGET_HSI, LabConfig, LabScene
 from wptrack.synth.render import Box, Light, Sphere, StaticView, noisy, render_static, solid

@@ -1,0 +1,7 @@
+"""``python -m wptrack.cli``: the ``wptrack`` command."""
+
+import sys
+
+from wptrack.cli import main
+
+sys.exit(main())

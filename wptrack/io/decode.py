@@ -1,0 +1,192 @@
+"""One video decoded by several threads at once, frames in order (:func:`parallel_frames`), for
+:class:`wptrack.io.frames.VideoSource` when :func:`decode_workers` says so; its timestamps checked against its rate
+(:func:`rate_note`).
+
+A video is cut into chunks of :data:`CHUNK` consecutive frames; worker ``k`` of ``W`` decodes chunks ``k, k + W,
+k + 2W, ...`` with a ``cv2.VideoCapture`` of its own (a seek to each chunk's first frame, then sequential reads), and
+the frames come out in order. Each worker holds at most :data:`CHUNK` decoded frames ahead (a bounded queue of its
+own), so memory is at most ``W (CHUNK + 1)`` frames whatever the consumer's speed; a consumer that stops early
+stops the workers. Only for codecs whose every frame is a keyframe (:data:`INTRA_CODECS`): their seeks land exactly
+on the frame asked for, so the frames are those of one sequential read (tested); a seek whose reported position is
+not the frame asked for (a truncated AVI without its index) is replaced by reading forward from the start; other
+codecs are read by one thread.
+
+When it pays: OpenCV's FFmpeg decoder already runs threads of its own inside one capture, and the calling thread
+still does the colour conversion, so more captures help when decoding is the pipeline's slowest stage and cores
+are free (a GPU host; measure with ``WPTRACK_DECODE_WORKERS=N wptrack bench --tracker pipeline``). On the 2-core CI
+machine it costs more CPU than it saves (1440x1080 MJPG, 2 captures: 19 ms of CPU per frame instead of 11 ms), so
+the default is one thread. Each capture opens as :meth:`wptrack.io.frames.VideoSource._open` does, so a
+``WPTRACK_DECODE_THREADS`` budget (``wptrack batch`` workers) sets each capture's FFmpeg threads: with both, a video
+uses up to workers x threads.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import queue
+import threading
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+CHUNK = 8
+"""Frames per chunk (each worker decodes this many consecutive frames between seeks)."""
+
+INTRA_CODECS = frozenset({"MJPG", "FFV1", "MJPA", "AVRN", "LJPG", "HFYU", "FFVH", "PNG ", "MPNG", "RGBA", "DIB "})
+"""FOURCCs of codecs whose frames are all keyframes (exact seeks)."""
+
+
+RATE_TOLERANCE = 0.5
+"""A frame interval departing from ``1 / fps`` by more than this fraction marks a variable-frame-rate video
+(:func:`rate_note`); decoders' timestamps jitter by a millisecond or so."""
+
+
+def rate_note(fps: float, index: int, interval_ms: float) -> dict[str, Any] | None:
+    """``{"frame", "interval_ms", "expected_ms", "reason"}`` when frame ``index`` comes ``interval_ms`` after the one
+    before it, more than :data:`RATE_TOLERANCE` away from ``1 / fps`` (a variable frame rate: the trackers take
+    every frame as one time step of ``1 / fps``); None otherwise."""
+    expected = 1000.0 / float(fps)
+    if abs(interval_ms - expected) <= RATE_TOLERANCE * expected:
+        return None
+    reason = (
+        f"variable frame rate: frame {index} comes {interval_ms:.0f} ms after frame {index - 1}, the video's rate "
+        f"{fps:g} frames/s says {expected:.0f} ms; the trackers take every frame as one time step of 1/fps, so "
+        "motion across such gaps is misjudged (re-encode at a constant rate, e.g. ffmpeg -fps_mode cfr)"
+    )
+    return {"frame": index, "interval_ms": round(interval_ms, 3), "expected_ms": round(expected, 3), "reason": reason}
+
+
+def decode_workers() -> int:
+    """Decoding threads per video: the environment variable ``WPTRACK_DECODE_WORKERS`` (default 1: one thread)."""
+    text = os.environ.get("WPTRACK_DECODE_WORKERS", "").strip()
+    return int(text) if text.isdigit() and int(text) > 0 else 1
+
+
+def fourcc(cap: Any) -> str:
+    """The codec FOURCC an opened ``cv2.VideoCapture`` reports (``""`` when none)."""
+    import cv2
+
+    code = int(cap.get(cv2.CAP_PROP_FOURCC))
+    return "".join(chr((code >> (8 * k)) & 0xFF) for k in range(4)) if code > 0 else ""
+
+
+_END = object()
+
+
+def parallel_frames(open_capture: Any, count: int, workers: int, stop: threading.Event | None = None) -> Iterator[Any]:
+    """Yield ``(index, ok, frame, ms)`` for frames ``0 .. count - 1`` in order, decoded by ``workers`` threads (see the
+    module); ``ok`` False at the first frame that cannot be read (the video ends early), after which nothing more
+    comes. ``ms`` is the decoder's timestamp of the frame.
+
+    Args:
+        open_capture: Makes a new opened ``cv2.VideoCapture`` of the video.
+        count: Frames to read.
+        workers: Decoding threads (>= 2).
+        stop: Set to stop the workers (closing the iterator also stops them).
+    """
+    import cv2
+
+    chunks = (count + CHUNK - 1) // CHUNK
+    queues = [queue.Queue(maxsize=CHUNK) for _ in range(workers)]
+    halt = stop or threading.Event()
+
+    def put(q: queue.Queue, item: Any) -> bool:
+        while not halt.is_set():
+            try:
+                q.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def work(k: int) -> None:
+        q = queues[k]
+        try:
+            cap = open_capture()
+        except BaseException as e:  # noqa: BLE001 - raised by the consumer
+            put(q, e)
+            return
+        try:
+            pos, exact = 0, True
+            for c in range(k, chunks, workers):
+                first = c * CHUNK
+                if pos != first and exact:
+                    cap.set(cv2.CAP_PROP_POS_FRAMES, float(first))
+                    pos = first
+                    if int(round(cap.get(cv2.CAP_PROP_POS_FRAMES))) != first:  # inexact (an AVI without index):
+                        exact = False  # from the start again, and read forward from now on
+                        cap.release()
+                        cap = open_capture()
+                        pos = 0
+                while pos < first and cap.grab():
+                    pos += 1
+                for i in range(first, min(first + CHUNK, count)):
+                    ok, frame = cap.read()
+                    pos += 1
+                    if not put(q, (i, bool(ok and frame is not None), frame, cap.get(cv2.CAP_PROP_POS_MSEC))):
+                        return
+                    if not ok or frame is None:
+                        put(q, _END)
+                        return
+            put(q, _END)
+        except BaseException as e:  # noqa: BLE001 - raised by the consumer
+            put(q, e)
+        finally:
+            cap.release()
+
+    threads = [
+        threading.Thread(target=work, args=(k,), name=f"wptrack-decode-{k}", daemon=True) for k in range(workers)
+    ]
+    for t in threads:
+        t.start()
+    try:
+        for i in range(count):
+            item = queues[(i // CHUNK) % workers].get()
+            if isinstance(item, BaseException):
+                raise item
+            if item is _END:  # that worker's video ended before frame i
+                yield i, False, None, 0.0
+                return
+            index, ok, frame, ms = item
+            if index != i:  # cannot happen: each worker delivers its chunks in order
+                raise RuntimeError(f"parallel decode delivered frame {index} for frame {i}")
+            yield i, ok, frame, ms
+            if not ok:
+                return
+    finally:
+        halt.set()
+        for t in threads:
+            t.join(timeout=5.0)
+
+
+def frame_items(open_capture: Any, count: int, workers: int | None = None) -> Iterator[Any]:
+    """The items of :func:`parallel_frames` for a video's first ``count`` frames: decoded by ``workers`` captures
+    (default :func:`decode_workers`) when it is more than one, the video long enough and its codec intra-only, else by
+    one capture in this thread (:func:`read_sequential`). The captures are released when the iteration ends or is
+    closed."""
+    workers = decode_workers() if workers is None else workers
+    cap = open_capture()
+    if workers > 1 and count >= 2 * CHUNK and fourcc(cap) in INTRA_CODECS:
+        cap.release()
+        yield from parallel_frames(open_capture, count, workers)
+        return
+    try:
+        yield from read_sequential(cap, count)
+    finally:
+        cap.release()
+
+
+def read_sequential(cap: Any, count: int) -> Iterator[tuple[int, bool, np.ndarray | None, float]]:
+    """The same items as :func:`parallel_frames` from one opened capture, in this thread."""
+    import cv2
+
+    for i in range(count):
+        ok, frame = cap.read()
+        ok = bool(ok and frame is not None)
+        yield i, ok, frame, cap.get(cv2.CAP_PROP_POS_MSEC) if ok else 0.0
+        if not ok:
+            return

@@ -1,0 +1,1 @@
+"""Motion evidence: the offline background model, motion masks (offline, MOG2, KNN), mask recall and the flood guard."""

@@ -1,0 +1,143 @@
+"""Offline motion masks made by several threads at once, in frame order (issue 27: the mask step is the slowest
+stage of a GPU run at 1080p, mostly host work per frame in one thread).
+
+:func:`parallel_evidence` gives the frames of a :class:`wptrack.motion.masks.MotionMasks` round robin to ``W``
+worker threads, each with an :class:`wptrack.motion.background.OfflineBackground` of its own (the first is the
+stream's ``model``, so its ``on_build`` callback and its windows serve the caller as before), and yields the masks in
+frame order. A frame's evidence depends on that frame and the windows around it only, and every model builds the
+same windows from the same samples, so the masks are those of one model, frame for frame (tested). The cost: each
+model builds each window and its reader decodes the samples, so the window work is done ``W`` times, and ``W`` times
+the model's device buffers. Queues of 2 per worker bound the memory. Errors (the source's, a model's) are raised in
+the caller at the frame they concern; leaving the iteration early stops the threads.
+
+Opt-in (``WPTRACK_MASK_WORKERS=N``, :func:`mask_workers`): measured on the CPU only, where the mask step is not the
+slowest stage of a run (the filter is) and extra models cost the two cores more than they save.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import threading
+from collections.abc import Iterable, Iterator
+from typing import Any
+
+import numpy as np
+
+from wptrack.core.errors import FrameError
+from wptrack.io import timeline
+
+MASK_WORKERS_ENV = "WPTRACK_MASK_WORKERS"
+"""Environment variable: threads making the offline masks of one video (default 1)."""
+
+_END = object()
+
+
+def mask_workers() -> int:
+    """Threads making one video's offline masks: :data:`MASK_WORKERS_ENV` (default 1)."""
+    text = os.environ.get(MASK_WORKERS_ENV, "").strip()
+    return int(text) if text.isdigit() and int(text) > 0 else 1
+
+
+def parallel_evidence(
+    masks: Any, frames: Iterable[np.ndarray], workers: int, clean: Any, probability: bool = True
+) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+    """``(mask, prob)`` per frame of ``frames`` (the decoded frames of ``masks.source``, in order), as
+    :meth:`wptrack.motion.masks.MotionMasks.evidence` yields them, made by ``workers`` threads (see the module).
+
+    Args:
+        masks: The :class:`~wptrack.motion.masks.MotionMasks` (offline method); its ``model`` is the first worker's.
+        frames: Its frames, in order.
+        workers: Threads (>= 2).
+        clean: The clean-up of a model's raw mask (``clean_mask`` with the stream's config).
+        probability: Yield the probability image (else None).
+    """
+    from wptrack.motion.background import OfflineBackground
+
+    c = masks.config
+    width, height = masks.size
+    models = [masks.model] + [OfflineBackground(masks.source, c, masks.model.device) for _ in range(workers - 1)]
+    for model in models[1:]:  # the first model's clean-up and probability settings for every model
+        masks.attach_cleanup(model)
+        model.want_prob = masks.model.want_prob
+    stop = threading.Event()
+    inbox = [queue.Queue(maxsize=2) for _ in range(workers)]
+    outbox = [queue.Queue(maxsize=2) for _ in range(workers)]
+
+    def put(q: queue.Queue, item: Any) -> bool:
+        while not stop.is_set():
+            try:
+                q.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def get(q: queue.Queue) -> Any:
+        while not stop.is_set():
+            try:
+                return q.get(timeout=0.1)
+            except queue.Empty:
+                continue
+        return _END
+
+    def feed() -> None:
+        count = 0  # frames handed out; an error concerns frame `count`
+        try:
+            for index, frame in enumerate(frames):
+                if frame.shape[:2] != (height, width):
+                    raise FrameError(
+                        f"{masks.name}: frame {index} is {frame.shape[1]}x{frame.shape[0]} pixels, but the sequence "
+                        f"started with {width}x{height} (the frame size must not change)"
+                    )
+                if not put(inbox[index % workers], (index, frame)):
+                    return
+                count = index + 1
+            for k in range(workers):  # the worker of the next index first: its END ends the collection
+                put(inbox[(count + k) % workers], _END)
+        except BaseException as e:  # noqa: BLE001 - raised by the collector at its frame
+            put(inbox[count % workers], e)
+
+    def work(k: int) -> None:
+        with timeline.thread_cpu("mask_workers"):  # the run's timeline: these threads' CPU time
+            _work(k)
+
+    def _work(k: int) -> None:
+        model = models[k]
+        while True:
+            item = get(inbox[k])
+            if item is _END or isinstance(item, BaseException):
+                put(outbox[k], item)
+                return
+            index, frame = item
+            try:
+                raw, prob = model.evidence(index, frame)
+                result = (raw if model.cleanup is not None else clean(raw), prob if probability else None)
+            except BaseException as e:  # noqa: BLE001 - raised by the collector at its frame
+                put(outbox[k], e)
+                return
+            if not put(outbox[k], result):
+                return
+
+    threads = [threading.Thread(target=feed, name="wptrack-masks-feed", daemon=True)]
+    threads += [
+        threading.Thread(target=work, args=(k,), name=f"wptrack-masks-{k}", daemon=True) for k in range(workers)
+    ]
+    for t in threads:
+        t.start()
+    try:
+        index = 0
+        while True:
+            item = get(outbox[index % workers])
+            if item is _END:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+            index += 1
+    finally:
+        stop.set()
+        for t in threads:
+            t.join(timeout=30.0)
+        for model in models[1:]:
+            model.close()

@@ -1,0 +1,1 @@
+"""The S2 multi-camera people tracker: config, tracker, run job and report section."""

@@ -1,0 +1,1 @@
+"""The S3 template tracker (Juza et al.): config, tracker, run job, offline track completion and report section."""
