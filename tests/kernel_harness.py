@@ -19,6 +19,15 @@ from wptrack.kernels.colour.walk import STREAM_MOTION, gaussian_walk
 from wptrack.kernels.core.camera import Camera, project
 from wptrack.kernels.core.random import normal4
 from wptrack.kernels.core.reduce import moments_push, moments_store, moments_zero
+from wptrack.kernels.people.coverage import PersonTerms, person_log_terms
+from wptrack.kernels.people.descriptor import (
+    alpha_h,
+    alpha_s,
+    appearance_log_prob,
+    rgb_to_hsv,
+)
+from wptrack.kernels.people.filter import motion_log_likelihood
+from wptrack.kernels.people.occupancy import INV_SQRT_2PI_CUBED
 
 
 @wp.kernel
@@ -256,3 +265,130 @@ def normal_kernel(
     z = normal4(seed, i, frame, stream)
     for k in range(4):
         out[i, k] = z[k]
+
+
+@wp.kernel
+def hsv_planes_kernel(
+    bgr: wp.array(dtype=wp.uint8),
+    h: wp.array(dtype=wp.float32),
+    s: wp.array(dtype=wp.float32),
+    v: wp.array(dtype=wp.float32),
+):
+    """H, S, V planes of flat BGR frames (all cameras back to back, ``Camera.pixel_offset``): launch one thread per
+    pixel (total pixels of the rig). ``bgr`` (3 P,) uint8; outputs (P,) float32 in the units of :func:`rgb_to_hsv`."""
+    p = wp.tid()
+    o = 3 * p
+    scale = 1.0 / 255.0
+    hsv = rgb_to_hsv(float(bgr[o + 2]) * scale, float(bgr[o + 1]) * scale, float(bgr[o]) * scale)
+    h[p] = hsv[0]
+    s[p] = hsv[1]
+    v[p] = hsv[2]
+
+
+@wp.kernel
+def alpha_kernel(rgb: wp.array(dtype=wp.vec3), sigma_n: float, out: wp.array(dtype=wp.vec2)):
+    """(alpha_S, alpha_H) of each colour (tests and diagnostics)."""
+    i = wp.tid()
+    out[i] = wp.vec2(alpha_s(rgb[i], sigma_n), alpha_h(rgb[i], sigma_n))
+
+
+@wp.kernel
+def appearance_kernel(
+    model: wp.array2d(dtype=wp.float32),
+    desc: wp.array2d(dtype=wp.float32),
+    mass: wp.array(dtype=wp.float32),
+    mean_rgb: wp.array(dtype=wp.vec3),
+    n_bins: int,
+    sigma_n: wp.array(dtype=wp.float32),
+    sigma_p: float,
+    logp: wp.array(dtype=wp.float32),
+):
+    """log p(A_t | x_t) of every particle (eqs. 23-26): ``model`` (N, 3 N_b) predicted C_t, ``desc`` (N, 3 N_b)
+    observed A_t with ``mass``, ``mean_rgb`` from :func:`descriptor_kernel`; ``sigma_n[0]`` from
+    :func:`noise_sigma_kernel`. ``logp`` (N,) out."""
+    i = wp.tid()
+    logp[i] = appearance_log_prob(model, i, desc, i, mass[i], mean_rgb[i], n_bins, sigma_n[0], sigma_p)
+
+
+@wp.kernel
+def motion_kernel(
+    cams: wp.array(dtype=Camera),
+    mask: wp.array(dtype=wp.uint8),
+    p_b: float,
+    log_outside: float,
+    drop_worst: int,
+    points: wp.array(dtype=wp.vec3),
+    loglik: wp.array(dtype=wp.float32),
+):
+    """log p(M_t | x_t) of every point (eqs. 7-10); see :func:`motion_log_likelihood`. ``loglik`` (N,) out."""
+    i = wp.tid()
+    loglik[i] = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, points[i])
+
+
+@wp.kernel
+def observation_kernel(
+    cams: wp.array(dtype=Camera),
+    mask: wp.array(dtype=wp.uint8),
+    p_b: float,
+    log_outside: float,
+    drop_worst: int,
+    points: wp.array(dtype=wp.vec3),
+    model: wp.array2d(dtype=wp.float32),
+    desc: wp.array2d(dtype=wp.float32),
+    mass: wp.array(dtype=wp.float32),
+    mean_rgb: wp.array(dtype=wp.vec3),
+    n_bins: int,
+    sigma_n: wp.array(dtype=wp.float32),
+    sigma_p: float,
+    box_cams: wp.array(dtype=Camera),
+    integral: wp.array(dtype=wp.int32),
+    others: wp.array(dtype=wp.vec2),
+    alive: wp.array(dtype=wp.int32),
+    boxes: wp.array2d(dtype=wp.vec4),
+    own: int,
+    terms: PersonTerms,
+    loglik: wp.array(dtype=wp.float32),
+):
+    """log p(z_t | x_t) = log p(M_t | x_t) + log p(A_t | x_t) (eq. 11) of every particle, plus the person-level terms
+    (ours: ``coverage.person_log_terms`` with the masks' integral images ``integral`` of the cameras ``box_cams``
+    (the rig at the integral's reduced size, ``coverage.downsample_mask_kernel``), the other people's ground
+    positions ``others``/``alive`` and this person's slot ``own``); the descriptor (``desc``, ``mass``,
+    ``mean_rgb``) must have been computed at ``points`` by ``descriptor.descriptor_kernel``."""
+    i = wp.tid()
+    x = points[i]
+    lm = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, x)
+    la = appearance_log_prob(model, i, desc, i, mass[i], mean_rgb[i], n_bins, sigma_n[0], sigma_p)
+    loglik[i] = lm + la + person_log_terms(box_cams, integral, others, alive, boxes, own, terms, x)
+
+
+@wp.kernel
+def occupancy_hashgrid_kernel(
+    hash_grid: wp.uint64,
+    points: wp.array(dtype=wp.vec3),
+    logw: wp.array(dtype=wp.float32),
+    log_norm: wp.array(dtype=wp.float64),
+    sigma: float,
+    cutoff: float,
+    origin: wp.vec3,
+    voxel: float,
+    grid: wp.array3d(dtype=wp.float32),
+):
+    """:func:`occupancy_kernel` with the particles found by a ``wp.HashGrid`` query (``hash_grid``: the id of a
+    grid built on ``points`` with radius >= cutoff sigma): O(V k) instead of O(V N) for k particles within the
+    cutoff. Still a gather (no atomics): the query visits cells and the sorted points in a fixed order, so the result
+    is reproducible for a given point set; it equals the brute-force kernel up to float32 summation order."""
+    ix, iy, iz = wp.tid()
+    xv = origin + voxel * wp.vec3(float(ix) + 0.5, float(iy) + 0.5, float(iz) + 0.5)
+    rmax = cutoff * sigma
+    r2max = rmax * rmax
+    inv2s2 = 0.5 / (sigma * sigma)
+    ln = log_norm[0]
+    acc = float(0.0)
+    query = wp.hash_grid_query(hash_grid, xv, rmax)
+    i = int(0)
+    while wp.hash_grid_query_next(query, i):
+        d = xv - points[i]
+        d2 = wp.dot(d, d)
+        if d2 <= r2max:
+            acc += wp.float32(wp.exp(wp.float64(logw[i]) - ln)) * wp.exp(-d2 * inv2s2)
+    grid[ix, iy, iz] = acc * INV_SQRT_2PI_CUBED / (sigma * sigma * sigma)

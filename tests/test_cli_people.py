@@ -94,6 +94,10 @@ def test_resume_of_a_complete_people_run_is_refused(scene, tmp_path):
         ("one_camera", "two or more"),
         ("wrong_mask_size", "size"),
         ("camera_count", "video(s) given for a rig of 3"),
+        ("no_overlap", "see no common ground"),
+        ("volume_outside", "outside every camera's view"),
+        ("different_lengths", "different frame counts"),
+        ("frame_size", "differs from camera 'c2' calibration"),
     ],
 )
 def test_bad_input_is_one_line_and_writes_nothing(scene, tmp_path, capsys, change, message):
@@ -113,9 +117,121 @@ def test_bad_input_is_one_line_and_writes_nothing(scene, tmp_path, capsys, chang
             str(scene / "mask1.avi"),
         ]
         argv += ["--masks", str(tmp_path / "small.avi")]
+    elif change in ("no_overlap", "volume_outside"):
+        from wptrack.cameras.rig import Camera
+
+        rig = Rig.load(scene / "rig.yaml")
+        if change == "no_overlap":  # each camera looks away from the others
+            cams = tuple(
+                Camera.look_at(c.name, c.width, c.height, c.center, c.center + [3 * dx, 3 * dy, -1.5], 90.0)
+                for c, (dx, dy) in zip(rig.cameras, ((-1, 0), (1, 0), (0, 1)), strict=True)
+            )
+            bad = Rig(cams)
+        else:
+            bad = Rig(rig.cameras, volume=(np.array([40.0, 40.0, 0.0]), np.array([42.0, 42.0, 2.0])))
+        bad.save(tmp_path / "bad.yaml")
+        argv = _args(scene, out, masks=False)
+        argv[argv.index("--rig") + 1] = str(tmp_path / "bad.yaml")
+    elif change == "different_lengths":
+        from wptrack.io.frames import open_source
+
+        short = [f for i, f in enumerate(open_source(str(scene / "cam2.avi"))) if i < 50]
+        write_video(tmp_path / "short.avi", short, fps=25)
+        argv = _args(scene, out, masks=False, cams=(0, 1)) + ["--video", str(tmp_path / "short.avi")]
+    elif change == "frame_size":
+        write_video(tmp_path / "big.avi", [np.zeros((240, 300, 3), np.uint8)] * 60, fps=25)  # another aspect ratio
+        argv = _args(scene, out, masks=False, cams=(0, 1)) + ["--video", str(tmp_path / "big.avi")]
     else:
         argv = _args(scene, out, masks=False, cams=(0, 1))
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith("wptrack: error:") and message in err and "Traceback" not in err
     assert not out.exists()
+
+
+def test_person_removed_in_a_frame_with_occupancy_grids(scene, tmp_path):
+    """The crash of issue 31: a person removed after a frame whose occupancy grids are written (everybody leaves
+    while ``--occupancy-every 1`` asks for every frame's grids). The grids come with the frame's estimate, so
+    every person of a frame has one, also the ones removed after it."""
+    root = tmp_path / "leave"
+    root.mkdir()
+    rig = Rig.load(scene / "rig.yaml")
+    rig.save(root / "rig.yaml")
+    rng = np.random.default_rng(4)
+    frames, masks = [[], [], []], [[], [], []]
+    for t in range(40):
+        people = [(np.array([0.6 + 0.05 * t, 1.65]), COLOURS[0]), (np.array([3.4 - 0.05 * t, 2.35]), COLOURS[1])]
+        images, ms = render(rig, people if t < 20 else [], rng)  # everybody vanishes at frame 20
+        for k in range(3):
+            frames[k].append(images[k])
+            masks[k].append(np.repeat(ms[k][..., None], 3, axis=2))
+    for k in range(3):
+        write_video(root / f"cam{k}.avi", frames[k], fps=25)
+        write_video(root / f"mask{k}.avi", masks[k], fps=25)
+    out = tmp_path / "run"
+    assert main([*_args(root, out), "--occupancy-every", "1"]) == 0
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "complete" and run["summary"]["people"] == 2
+    t = read_tracks(out / "tracks.csv")
+    with np.load(out / "occupancy.npz") as z:
+        index = {(int(f), int(i)) for f, i in z["index"]}
+    rows = set(zip(t["frame"].tolist(), t["id"].tolist(), strict=True))
+    assert index == rows  # one grid per (frame, person) row, the last frames of both people included
+    assert max(f for f, _ in rows) >= 20  # they were still reported when the masks emptied, then removed
+
+
+def test_internal_error_is_not_a_user_error_and_keeps_the_run(scene, tmp_path, capsys, monkeypatch):
+    """A bug in the middle of a run: exit code 70 (not 2), the traceback and one 'internal error' line; the rows
+    written so far stay readable and run.json says 'failed' with the reason."""
+    from wptrack.cli import EXIT_INTERNAL
+    from wptrack.trackers.people.tracker import PeopleTracker
+
+    step = PeopleTracker.step
+
+    def failing(self, images, masks, **kw):
+        if self.frames_done == 25:
+            raise RuntimeError("injected fault")
+        return step(self, images, masks, **kw)
+
+    monkeypatch.setattr(PeopleTracker, "step", failing)
+    out = tmp_path / "run"
+    assert main(_args(scene, out)) == EXIT_INTERNAL != 2
+    err = capsys.readouterr().err
+    assert "Traceback" in err and "wptrack: internal error: RuntimeError: injected fault" in err
+    assert "wptrack: error:" not in err
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "failed" and "injected fault" in run["error"] and run["last_frame"] == 24
+    t = read_tracks(out / "tracks.csv")
+    assert t["frame"].max() == 24 and set(np.unique(t["id"])) == {0, 1}
+    idx, _ = read_chunks(out / "hulls")
+    assert len(idx) == len(t["frame"])
+
+
+def test_image_folders_need_a_frame_rate(scene, tmp_path, capsys):
+    """Image folders carry no frame rate: without --fps a clear one-line error, with --fps the run records it."""
+    import cv2
+
+    from wptrack.io.frames import open_source
+
+    folders = []
+    for k in range(3):
+        folder = tmp_path / f"img{k}"
+        folder.mkdir()
+        for i, frame in enumerate(open_source(str(scene / f"cam{k}.avi"))):
+            if i >= 20:
+                break
+            cv2.imwrite(str(folder / f"{i:04d}.png"), frame)
+        folders.append(folder)
+    argv = ["track", "people", "--rig", str(scene / "rig.yaml"), "--device", "cpu", "-q", "--particles", "200"]
+    for k in range(3):
+        argv += ["--video", str(folders[k]), "--masks", str(scene / f"mask{k}.avi")]
+    out = tmp_path / "run"
+    assert main([*argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("wptrack: error:") and "--fps" in err and not out.exists()
+    assert main([*argv, "--out", str(out), "--fps", "12.5"]) == 0
+    run = json.loads((out / "run.json").read_text())
+    assert run["config"]["tracker"]["fps"] == 12.5
+    video = tmp_path / "video"
+    assert main([*_args(scene, video), "--max-frames", "5"]) == 0
+    assert json.loads((video / "run.json").read_text())["config"]["tracker"]["fps"] == 25.0  # the videos' own

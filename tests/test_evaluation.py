@@ -290,6 +290,19 @@ def test_missing_motmetrics_is_a_config_error(monkeypatch):
         evaluate(gt, gt)
 
 
+def test_ground_plane_table_without_z(tmp_path):
+    """Ground-plane annotations (frame,id,x,y: the EPFL datasets) are scored like tables with z; a z column that is
+    present is still checked."""
+    path = _write_csv(tmp_path / "gt.csv", ["frame", "id", "x", "y"], [(0, 1, 0.0, 0.0), (1, 1, 0.1, 0.0)])
+    tracks = {"frame": [0, 1], "id": [7, 7], "x": [0.2, 0.3], "y": [0.0, 0.0]}
+    ev = evaluate(path, tracks, threshold=1.0)
+    assert ev.mota == pytest.approx(1.0) and ev.idf1 == pytest.approx(1.0)
+    far = evaluate(path, {"frame": [0, 1], "id": [7, 7], "x": [2.0, 2.0], "y": [0.0, 0.0]}, threshold=1.0)
+    assert far.num_misses == 2 and far.num_false_positives == 2
+    with pytest.raises(ConfigError, match=r"'z'"):
+        evaluate(path, {**tracks, "z": ["a", "b"]})
+
+
 # ------------------------------------------------------------------------------------------ HOTA (issue 30)
 
 

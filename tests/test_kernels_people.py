@@ -55,7 +55,7 @@ def hsv_planes(bgr: np.ndarray, device):
     n = len(bgr) // 3
     planes = [wp.zeros(n, dtype=wp.float32, device=device) for _ in range(3)]
     wp.launch(
-        kdesc.hsv_planes_kernel,
+        harness.hsv_planes_kernel,
         dim=n,
         inputs=[wp.array(bgr, dtype=wp.uint8, device=device)],
         outputs=planes,
@@ -165,7 +165,7 @@ def test_alpha_weights_and_noise_propagation(device, rng):
     rgb[0] = [0.5, 0.5, 0.5]  # grey: hue meaningless -> alpha_H ~ 0
     out = wp.zeros(len(rgb), dtype=wp.vec2, device=device)
     wp.launch(
-        kdesc.alpha_kernel,
+        harness.alpha_kernel,
         dim=len(rgb),
         inputs=[wp.array(rgb, dtype=wp.vec3, device=device), sigma_n],
         outputs=[out],
@@ -348,7 +348,7 @@ def test_appearance_matches_numpy(device, rng):
     sigma_n, sigma_p = 0.02, 0.3
     out = wp.zeros(n, dtype=wp.float32, device=device)
     wp.launch(
-        kdesc.appearance_kernel,
+        harness.appearance_kernel,
         dim=n,
         inputs=[
             wp.array(model, device=device),
@@ -411,7 +411,7 @@ def test_motion_likelihood(device, neutral, drop_worst):
     log_outside = 0.0 if neutral else float(np.log(p_b))
     out = wp.zeros(len(pts), dtype=wp.float32, device=device)
     wp.launch(
-        kpeople.motion_kernel,
+        harness.motion_kernel,
         dim=len(pts),
         inputs=[
             drig.cams,
@@ -433,11 +433,51 @@ def test_motion_likelihood(device, neutral, drop_worst):
     assert len(np.unique(np.round(full, 5))) >= 4
 
 
+def person_inputs(rig: Rig, drig: DeviceRig, mask: np.ndarray, device, rng, slope=0.02, weight=5.0) -> list:
+    """The person-level inputs of the S2 kernels (kernels/coverage.py): the masks' integral images, three other
+    people (one not alive) with their rectangles, this person's slot 0 and the terms."""
+    from test_kernels_coverage import integral, make_terms
+
+    from wptrack.kernels.people import coverage as kcov
+
+    I = integral(rig, drig, (mask != 0).astype(np.uint8), device)  # noqa: E741
+    others = wp.array(rng.uniform(0.0, 1.0, (3, 2)).astype(np.float32), dtype=wp.vec2, device=device)
+    alive = wp.array(np.array([1, 0, 1], np.int32), device=device)
+    boxes = wp.zeros((3, drig.num_cameras), dtype=wp.vec4, device=device)
+    wp.launch(
+        kcov.person_boxes_kernel,
+        dim=boxes.shape,
+        inputs=[drig.cams, others, alive, 0.25, 1.75],
+        outputs=[boxes],
+        device=device,
+    )
+    terms = make_terms(slope=slope, weight=weight)
+    terms.half_width, terms.height = 0.25, 1.75
+    return [drig.cams, I, others, alive, boxes, 0, terms]
+
+
+def person_terms_ref(drig: DeviceRig, inputs: list, pts: np.ndarray, device) -> np.ndarray:
+    """The person-level terms of ``pts`` by test_kernels_coverage's kernel (checked there against NumPy)."""
+    from test_kernels_coverage import _terms_kernel
+
+    out = wp.zeros(len(pts), dtype=wp.float32, device=device)
+    wp.launch(
+        _terms_kernel,
+        dim=len(pts),
+        inputs=[*inputs, wp.array(pts, dtype=wp.vec3, device=device)],
+        outputs=[out],
+        device=device,
+    )
+    return out.numpy().astype(np.float64)
+
+
 def test_observation_is_motion_plus_appearance(device, rng):
     rig = make_rig()
     drig = DeviceRig(rig, device)
     bgr = random_frames(rig, rng)
-    mask = wp.array(motion_masks(rig, rng), dtype=wp.uint8, device=device)
+    flat = motion_masks(rig, rng)
+    mask = wp.array(flat, dtype=wp.uint8, device=device)
+    person = person_inputs(rig, drig, flat, device, rng)
     pts = random_points(rng, 100)
     P = wp.array(pts, dtype=wp.vec3, device=device)
     desc, mass, rgb = run_descriptor(drig, bgr, pts, device)
@@ -446,26 +486,30 @@ def test_observation_is_motion_plus_appearance(device, rng):
     lm, la, lo = (wp.zeros(len(pts), dtype=wp.float32, device=device) for _ in range(3))
     p_b = 0.1
     wp.launch(
-        kpeople.motion_kernel, dim=len(pts), inputs=[drig.cams, mask, p_b, 0.0, 0, P], outputs=[lm], device=device
+        harness.motion_kernel, dim=len(pts), inputs=[drig.cams, mask, p_b, 0.0, 0, P], outputs=[lm], device=device
     )
     wp.launch(
-        kdesc.appearance_kernel,
+        harness.appearance_kernel,
         dim=len(pts),
         inputs=[model, desc, mass, rgb, NB, sn, 0.25],
         outputs=[la],
         device=device,
     )
     wp.launch(
-        kpeople.observation_kernel,
+        harness.observation_kernel,
         dim=len(pts),
-        inputs=[drig.cams, mask, p_b, 0.0, 0, P, model, desc, mass, rgb, NB, sn, 0.25],
+        inputs=[drig.cams, mask, p_b, 0.0, 0, P, model, desc, mass, rgb, NB, sn, 0.25, *person],
         outputs=[lo],
         device=device,
     )
-    np.testing.assert_allclose(lo.numpy(), lm.numpy() + la.numpy(), rtol=1e-6, atol=1e-6)
+    lt = person_terms_ref(drig, person, pts, device)
+    assert np.ptp(lt) > 1.0  # the person-level terms vary over the points
+    np.testing.assert_allclose(lo.numpy(), lm.numpy() + la.numpy() + lt, rtol=1e-5, atol=1e-4)
 
 
-def run_predict(device, pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, frame):
+def run_predict(
+    device, pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, frame, dt=1.0, observe=(1, 1), decay=1.0
+):
     n = len(pos)
     outs = [
         wp.zeros(n, dtype=wp.vec3, device=device),
@@ -483,8 +527,11 @@ def run_predict(device, pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, f
             wp.array(mass, device=device),
             wp.array(anc, device=device),
             wp.array([sp], dtype=wp.float32, device=device),
-            wp.array([sv], dtype=wp.float32, device=device),
-            alpha,
+            wp.array(np.broadcast_to(np.asarray(sv, np.float32), 2).copy(), dtype=wp.float32, device=device),
+            wp.array([dt], dtype=wp.float32, device=device),
+            wp.array([alpha], dtype=wp.float32, device=device),
+            wp.array(np.asarray(observe, np.int32), device=device),
+            wp.array([decay], dtype=wp.float32, device=device),
             wp.vec2ui(seed, 0),
             wp.array([frame], dtype=wp.int32, device=device),
         ],
@@ -503,11 +550,11 @@ def test_predict_statistics_and_appearance_update(device, rng):
     mass = np.ones(n, np.float32)
     mass[::7] = 0  # unseen parents keep their appearance
     anc = rng.integers(0, n, n).astype(np.int32)
-    sp, sv, alpha = 0.02, 0.005, 0.1
+    sp, sv, alpha = 0.02, (0.005, 0.012), 0.1  # horizontal and vertical velocity noise
     p, v, c = run_predict(device, pos, vel, model, desc, mass, anc, sp, sv, alpha, 11, 5)
     npos = p.astype(np.float64) - pos[anc] - vel[anc]  # eq. 5: position noise
     nvel = v.astype(np.float64) - vel[anc]  # velocity noise
-    for noise, s in ((npos, sp), (nvel, sv)):
+    for noise, s in ((npos, np.full(3, sp)), (nvel, np.array([sv[0], sv[0], sv[1]]))):
         assert np.all(np.abs(noise.mean(0)) < 5 * s / np.sqrt(n))
         np.testing.assert_allclose(noise.std(0), s, rtol=0.03)  # sd of the sd estimate: 0.5 %
     # the 6 components are uncorrelated (|r| < 0.03 is ~4 standard errors at n = 20000)
@@ -524,6 +571,24 @@ def test_predict_statistics_and_appearance_update(device, rng):
     p3, _, _ = run_predict(device, pos, vel, model, desc, mass, anc, sp, sv, alpha, 12, 5)
     assert not np.any(np.all(p2 == p, axis=1)) and not np.any(np.all(v2 == v, axis=1))
     assert not np.any(np.all(p3 == p, axis=1))
+
+
+def test_predict_unseen_person_slows_down_and_keeps_its_appearance(device, rng):
+    """observe[0] = 0 (this frame's masks do not show the person): the parent's velocity is multiplied by the decay
+    before eq. 5; observe[1] = 0 (nor the last frame's): eq. 6 keeps the appearance model C_{t-1}."""
+    n = 2000
+    pos = rng.uniform(-1, 1, (n, 3)).astype(np.float32)
+    vel = rng.normal(0, 0.5, (n, 3)).astype(np.float32)
+    model, desc = random_histograms(rng, n), random_histograms(rng, n)
+    anc = rng.integers(0, n, n).astype(np.int32)
+    args = (device, pos, vel, model, desc, np.ones(n, np.float32), anc, 0.02, 0.01, 0.3, 3, 9)
+    p1, v1, c1 = run_predict(*args, dt=0.2, observe=(1, 1), decay=0.5)
+    p0, v0, c0 = run_predict(*args, dt=0.2, observe=(0, 0), decay=0.5)
+    # the same noise draws: the differences are the decayed velocity (position: times dt)
+    np.testing.assert_allclose(v1 - v0, 0.5 * vel[anc], rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(p1 - p0, 0.2 * 0.5 * vel[anc], rtol=1e-4, atol=1e-5)
+    np.testing.assert_array_equal(c0, model[anc])  # kept
+    np.testing.assert_allclose(c1, 0.3 * desc[anc] + 0.7 * model[anc], rtol=1e-6, atol=1e-7)
 
 
 def run_occupancy(device, pts, logw, sigma, cutoff, origin, voxel, shape):
@@ -582,7 +647,11 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     nbk = (n + chunk - 1) // chunk
     bgr = random_frames(rig, rng)
     B = wp.array(bgr, dtype=wp.uint8, device=device)
-    mask = wp.array(motion_masks(rig, rng), dtype=wp.uint8, device=device)
+    flat = motion_masks(rig, rng)
+    mask = wp.array(flat, dtype=wp.uint8, device=device)
+    person = person_inputs(rig, drig, flat, device, rng)
+    observe = wp.array(np.array([1, 1], np.int32), device=device)
+    decay = wp.array([0.5], dtype=wp.float32, device=device)
     pos = wp.array(random_points(rng, n), dtype=wp.vec3, device=device)
     vel = wp.array(rng.normal(0, 0.02, (n, 3)).astype(np.float32), dtype=wp.vec3, device=device)
     model = wp.array(random_histograms(rng, n), device=device)
@@ -593,9 +662,10 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     anc = wp.array(rng.integers(0, n, n).astype(np.int32), device=device)
     logw_prev = wp.array(rng.normal(0, 1, n).astype(np.float32), device=device)
     flag = wp.array([resampled], dtype=wp.int32, device=device)
-    sp, sv, sn = (wp.array([x], dtype=wp.float32, device=device) for x in (0.02, 0.004, 0.01))
+    sp, sn, dt, alpha = (wp.array([x], dtype=wp.float32, device=device) for x in (0.02, 0.01, 0.3, 0.05))
+    sv = wp.array([0.004, 0.009], dtype=wp.float32, device=device)
     seed, frame = wp.vec2ui(3, 4), wp.array([7], dtype=wp.int32, device=device)
-    p_b, alpha, sigma_p = 0.1, 0.05, 0.3
+    p_b, sigma_p = 0.1, 0.3
 
     def zeros(shape, dtype=wp.float32):
         return wp.zeros(shape, dtype=dtype, device=device)
@@ -616,7 +686,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
         kpeople.step_kernel,
         dim=[nbk],
         inputs=[drig.cams, mask, p_b, 0.0, 1, B, R_N, NB, R_MIN, R_MAX, 2, pos, vel, model, desc, mass, anc]
-        + [logw_prev, flag, sp, sv, alpha, sn, sigma_p, seed, frame, n, chunk],
+        + [logw_prev, flag, sp, sv, dt, alpha, observe, decay, sn, sigma_p, seed, frame, *person, n, chunk],
         outputs=list(fused.values()),
         block_dim=block,
         device=device,
@@ -625,7 +695,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     wp.launch(
         kpeople.predict_kernel,
         dim=n,
-        inputs=[pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, frame],
+        inputs=[pos, vel, model, desc, mass, anc, sp, sv, dt, alpha, observe, decay, seed, frame],
         outputs=[sep["pos"], sep["vel"], sep["model"]],
         device=device,
     )
@@ -637,10 +707,10 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
         device=device,
     )
     wp.launch(
-        kpeople.observation_kernel,
+        harness.observation_kernel,
         dim=n,
         inputs=[drig.cams, mask, p_b, 0.0, 1, sep["pos"], sep["model"], sep["desc"], sep["mass"], sep["rgb"], NB, sn]
-        + [sigma_p],
+        + [sigma_p, *person],
         outputs=[sep["logw"]],
         device=device,
     )
@@ -664,7 +734,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     wp.launch(
         kpeople.predict_kernel,
         dim=n,
-        inputs=[pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, frame],
+        inputs=[pos, vel, model, desc, mass, anc, sp, sv, dt, alpha, observe, decay, seed, frame],
         outputs=[gpu["pos"], gpu["vel"], gpu["model"]],
         device=device,
     )
@@ -680,7 +750,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
         kpeople.score_moments_kernel,
         dim=[nbk],
         inputs=[drig.cams, mask, p_b, 0.0, 1, gpu["pos"], gpu["model"], gpu["desc"], gpu["mass"], gpu["rgb"], NB]
-        + [logw_prev, flag, sn, sigma_p, n, chunk],
+        + [logw_prev, flag, sn, sigma_p, *person, observe, n, chunk],
         outputs=[gpu["logw"], gpu["pmax"], gpu["parg"], gpu["part"]],
         block_dim=block,
         device=device,
@@ -690,6 +760,35 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     for k in ("desc", "mass", "rgb", "logw", "pmax"):  # the block sums the disc pixels in another order
         np.testing.assert_allclose(gpu[k].numpy(), fused[k].numpy(), rtol=1e-4, atol=1e-5, err_msg=k)
     np.testing.assert_allclose(gpu["part"].numpy(), fused["part"].numpy(), rtol=1e-4, atol=1e-9)
+
+    # a frame whose masks do not show the person: no weighting (the previous log-weights, or 0 after resampling),
+    # the velocity decayed, the appearance model kept; the GPU chain's score kernel agrees
+    observe.assign(np.array([0, 0], np.int32))
+    unseen = {k: zeros(v.shape, v.dtype) for k, v in fused.items()}
+    wp.launch_tiled(
+        kpeople.step_kernel,
+        dim=[nbk],
+        inputs=[drig.cams, mask, p_b, 0.0, 1, B, R_N, NB, R_MIN, R_MAX, 2, pos, vel, model, desc, mass, anc]
+        + [logw_prev, flag, sp, sv, dt, alpha, observe, decay, sn, sigma_p, seed, frame, *person, n, chunk],
+        outputs=list(unseen.values()),
+        block_dim=block,
+        device=device,
+    )
+    expect = np.zeros(n, np.float32) if resampled else logw_prev.numpy()
+    np.testing.assert_array_equal(unseen["logw"].numpy(), expect)
+    a = anc.numpy()
+    np.testing.assert_array_equal(unseen["model"].numpy(), model.numpy()[a])
+    np.testing.assert_allclose(fused["vel"].numpy() - unseen["vel"].numpy(), 0.5 * vel.numpy()[a], atol=1e-6)
+    wp.launch_tiled(
+        kpeople.score_moments_kernel,
+        dim=[nbk],
+        inputs=[drig.cams, mask, p_b, 0.0, 1, unseen["pos"], unseen["model"], unseen["desc"], unseen["mass"]]
+        + [unseen["rgb"], NB, logw_prev, flag, sn, sigma_p, *person, observe, n, chunk],
+        outputs=[gpu["logw"], gpu["pmax"], gpu["parg"], gpu["part"]],
+        block_dim=block,
+        device=device,
+    )
+    np.testing.assert_array_equal(gpu["logw"].numpy(), expect)
 
 
 def test_occupancy_hashgrid_equals_brute_force(device, rng):
@@ -706,7 +805,7 @@ def test_occupancy_hashgrid_equals_brute_force(device, rng):
     grid = wp.zeros(shape, dtype=wp.float32, device=device)
     args = [hg.id, P, wp.array(logw, device=device), wp.array([log_norm], dtype=wp.float64, device=device)]
     wp.launch(
-        kocc.occupancy_hashgrid_kernel,
+        harness.occupancy_hashgrid_kernel,
         dim=shape,
         inputs=[*args, sigma, cutoff, wp.vec3(*origin), voxel],
         outputs=[grid],

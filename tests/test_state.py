@@ -106,12 +106,14 @@ def test_every_tracker_keeps_the_contract(lab, plaza):
     """The three trackers (and the point filter of the extended paper's experiments) are ``Tracker``s, and the
     people tracker iterates over ``(images, masks)`` pairs like the others over their observations."""
     from wptrack.core.filter import Tracker
+    from wptrack.synth.office import office_rig
     from wptrack.trackers.colour.gaussian3d import Gaussian3DTracker
     from wptrack.trackers.people.config import PeopleConfig
     from wptrack.trackers.people.tracker import PeopleTracker
 
     rig, frames = lab
-    people = PeopleTracker(rig, PeopleConfig(particles=50), device="cpu")
+    office = office_rig(160, 120)  # the people tracker needs ground two cameras see (the lab rig's volume has none)
+    people = PeopleTracker(office, PeopleConfig(particles=50), device="cpu")
     trackers = [
         ColorTracker(rig, TARGET, ColorConfig(particles=50, init=(0.4, 0.1, 0.2)), device="cpu"),
         TemplateTracker(plaza[0], TemplateConfig(particles=50, max_objects=2), device="cpu"),
@@ -119,8 +121,9 @@ def test_every_tracker_keeps_the_contract(lab, plaza):
         Gaussian3DTracker(particles=50, sigma=0.03, device="cpu"),
     ]
     assert all(isinstance(t, Tracker) for t in trackers)
-    masks = [np.zeros(img.shape[:2], np.uint8) for img in frames[0]]
-    ests = list(people.track(((f, masks) for f in frames), max_frames=3))
+    images = [np.zeros((cam.height, cam.width, 3), np.uint8) for cam in office.cameras]
+    masks = [np.zeros(img.shape[:2], np.uint8) for img in images]
+    ests = list(people.track(((images, masks) for _ in frames), max_frames=3))
     assert [e.frame for e in ests] == [0, 1, 2] and all(e.people == [] for e in ests)
 
 

@@ -11,7 +11,7 @@ import pytest
 
 from wptrack.cli import main
 from wptrack.core.errors import ConfigError
-from wptrack.synth import SCENES, render_scene
+from wptrack.synth import SCENES, plaza_cast, render_scene
 from wptrack.synth import conditions as C
 from wptrack.synth import plaza as P
 from wptrack.synth.base import _groundtruth_csv
@@ -247,7 +247,8 @@ def test_compression_bounded_change_masks_unchanged() -> None:
 
 def test_dark_car_as_dark_as_the_road() -> None:
     scene, default = _scene("s3-mixed", dark_car=True), _scene("s3-mixed")
-    assert scene.actors[0].shape.body == P.ASPHALT_RGB and default.actors[0].shape.body != P.ASPHALT_RGB
+    dark = plaza_cast.ASPHALT_RGB
+    assert scene.actors[0].shape.body == dark and default.actors[0].shape.body != dark
     assert [a.shape for a in scene.actors[1:]] == [a.shape for a in default.actors[1:]]
     f = 60
     rng = np.random.default_rng(0)

@@ -195,3 +195,43 @@ def test_render_scene_passes_the_seed(tmp_path, monkeypatch):
     header = res.groundtruth_path.read_text().splitlines()[0]
     assert header == "frame,id,x,y,z,gx,gy,height,heading,handshake"
     assert OfficeScene(OfficeConfig(seed=4)).walkers[0].meet == small.build(4).walkers[0].meet
+
+
+def test_low_frame_rate_variant_is_the_same_scene_every_8th_frame():
+    """``s2-office-lowfps``: at 3.125 frames/s the people are where the 25 frames/s scene has them 8 frames later
+    each (times in seconds), the 12 s fit 38 frames, the light dims at the same time."""
+    assert "s2-office-lowfps" in scene_names() and SCENES["s2-office-lowfps"].seeded
+    low = SCENES["s2-office-lowfps"].build(1)
+    assert low.fps == pytest.approx(3.125) and low.default_frames == 38
+    full = OfficeScene(OfficeConfig(seed=1))
+    a, b = low.states(38), full.states(300)
+    np.testing.assert_allclose(a.pos[:, :37], b.pos[:, ::8][:, :37], atol=1e-9)
+    assert np.any(low.inside(38)) and low.hints()["held_out"]
+    assert low.gain(15) == pytest.approx(full.gain(120)) and low.gain(19) == pytest.approx(full.gain(152), abs=1e-3)
+
+
+def test_meeting_variant_four_cameras_people_stand_and_talk():
+    """``s2-office-meeting``: a fourth camera in the north-west corner sees the room centre; the two people stand
+    still at the meeting point for the 8 s of talk before the handshake, then leave."""
+    sc = SCENES["s2-office-meeting"].build(0)
+    assert len(sc.rig) == 4 and sc.rig.names[-1] == "cam4" and sc.hints()["held_out"]
+    cam4 = sc.rig["cam4"]
+    assert cam4.center[0] < 0.5 and cam4.center[1] > 4.5
+    uv, depth = cam4.project(np.array([[3.0, 2.5, 1.0]]))
+    assert depth[0] > 0 and 0 < uv[0, 0] < cam4.width and 0 < uv[0, 1] < cam4.height
+    n = sc.default_frames
+    st = sc.states(n)
+    still = np.all(st.speed < 0.05, axis=0)  # both standing
+    longest, run = 0, 0
+    for s in still:
+        run = run + 1 if s else 0
+        longest = max(longest, run)
+    assert longest >= 8.0 * sc.fps  # at least the 8 s of talk
+    base = OfficeScene(OfficeConfig(seed=0))
+    assert sc.walkers[0].shake[0] == pytest.approx(base.walkers[0].shake[0] + 8.0)
+    inside = sc.inside(n)
+    assert inside.any(axis=0)[n // 2] and not inside[:, -1].any()  # both have left by the end
+    with pytest.raises(ConfigError, match="cameras"):
+        OfficeConfig(cameras=5)
+    with pytest.raises(ConfigError, match="talk"):
+        OfficeConfig(talk=-1.0)

@@ -13,7 +13,7 @@ import pytest
 from wptrack.core.errors import ConfigError
 from wptrack.io.frames import open_frames
 from wptrack.kernels.templates.raster import MAX_SLOTS
-from wptrack.synth import SCENES, render_scene
+from wptrack.synth import SCENES, plaza_cast, render_scene
 from wptrack.synth import plaza as P
 from wptrack.synth import plaza_seeds as S
 from wptrack.synth.base import _groundtruth_csv
@@ -133,7 +133,7 @@ def _check_invariants(name: str, seed: int) -> None:
     # counts per scene type (paper Table 2), the share of camouflaged clothes and of dark cars as at seed 0
     expected = {"s3-people": ((5,), 0), "s3-cars": ((0,), 3), "s3-groups": ((6, 7), 0), "s3-mixed": ((2,), 2)}
     assert len(humans) in expected[name][0] and len(cars) == expected[name][1], where
-    camouflaged = sum(P._PAVING_LIKE in (a.shape.shirt, a.shape.trousers) for a in humans)
+    camouflaged = sum(plaza_cast._PAVING_LIKE in (a.shape.shirt, a.shape.trousers) for a in humans)
     assert camouflaged == {"s3-people": 1, "s3-cars": 0, "s3-groups": 2, "s3-mixed": 1}[name], where
     assert sum(max(a.shape.body) < S.DARK_PAINT_MAX for a in cars) == (1 if cars else 0), where
     for a in cars:

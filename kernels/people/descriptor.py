@@ -2,13 +2,13 @@
 colour descriptor and the appearance probability.
 
 Map to the paper:
-- :func:`rgb_to_hsv`, :func:`hsv_planes_kernel`: eqs. 12-14 (hexcone HSV). Units: H in [0, 1) (fraction of the hue
+- :func:`rgb_to_hsv`: eqs. 12-14 (hexcone HSV). Units: H in [0, 1) (fraction of the hue
   circle, 0 = red), S in [0, 1], V in [0, 1] (intensity / 255). Grey pixels (max = min) get H = 0.
 - :func:`noise_partials_kernel` + :func:`noise_sigma_kernel`: sigma_n of eq. 18 from two consecutive frames.
 - :func:`var_s`, :func:`var_h`, :func:`alpha_s`, :func:`alpha_h`: the noise propagation of eqs. 15-16 and the
   equalisation weights of eq. 17.
 - :func:`descriptor_at`, :func:`descriptor_kernel`: D(P) of eqs. 19-21 for every particle (A_t, eq. 22).
-- :func:`appearance_log_prob`, :func:`appearance_kernel`: eqs. 23-26.
+- :func:`appearance_log_prob`: eqs. 23-26 (the test harness launches it per particle).
 
 Choices where the paper is silent or ambiguous (all documented at the function):
 - sigma_n (eq. 18): the sum runs over all 3 Npix channel values of the BGR frames of every camera (the paper's
@@ -77,24 +77,6 @@ def rgb_to_hsv(r: float, g: float, b: float):
         if h >= 1.0:
             h -= 1.0
     return wp.vec3(h, s, mx)  # eq. 12: V = max
-
-
-@wp.kernel
-def hsv_planes_kernel(
-    bgr: wp.array(dtype=wp.uint8),
-    h: wp.array(dtype=wp.float32),
-    s: wp.array(dtype=wp.float32),
-    v: wp.array(dtype=wp.float32),
-):
-    """H, S, V planes of flat BGR frames (all cameras back to back, ``Camera.pixel_offset``): launch one thread per
-    pixel (total pixels of the rig). ``bgr`` (3 P,) uint8; outputs (P,) float32 in the units of :func:`rgb_to_hsv`."""
-    p = wp.tid()
-    o = 3 * p
-    scale = 1.0 / 255.0
-    hsv = rgb_to_hsv(float(bgr[o + 2]) * scale, float(bgr[o + 1]) * scale, float(bgr[o]) * scale)
-    h[p] = hsv[0]
-    s[p] = hsv[1]
-    v[p] = hsv[2]
 
 
 # ----------------------------------------------------------------------------------------- noise (eqs. 15-18)
@@ -187,13 +169,6 @@ def alpha_h(rgb: wp.vec3, sigma_n: float):
     mx, mid, mn = sort3(rgb)
     vv = wp.max(sigma_n * sigma_n, VAR_FLOOR)
     return wp.pow(vv / wp.max(var_h(mx, mid, mn, sigma_n), VAR_FLOOR), ALPHA_POWER)
-
-
-@wp.kernel
-def alpha_kernel(rgb: wp.array(dtype=wp.vec3), sigma_n: float, out: wp.array(dtype=wp.vec2)):
-    """(alpha_S, alpha_H) of each colour (tests and diagnostics)."""
-    i = wp.tid()
-    out[i] = wp.vec2(alpha_s(rgb[i], sigma_n), alpha_h(rgb[i], sigma_n))
 
 
 # -------------------------------------------------------------------------------------- descriptor (eqs. 19-21)
@@ -399,24 +374,6 @@ def appearance_log_prob(
         beta = wp.exp(-d_v * d_v / (2.0 * sn * sn) - LOG_SQRT_2PI) / sn  # eq. 25
         m = (d_h + d_s + beta * d_v) / wp.max(a_h + a_s + beta, VAR_FLOOR)  # eq. 24
     return -m * m / (2.0 * sigma_p * sigma_p) - LOG_SQRT_2PI - wp.log(sigma_p)  # eq. 26
-
-
-@wp.kernel
-def appearance_kernel(
-    model: wp.array2d(dtype=wp.float32),
-    desc: wp.array2d(dtype=wp.float32),
-    mass: wp.array(dtype=wp.float32),
-    mean_rgb: wp.array(dtype=wp.vec3),
-    n_bins: int,
-    sigma_n: wp.array(dtype=wp.float32),
-    sigma_p: float,
-    logp: wp.array(dtype=wp.float32),
-):
-    """log p(A_t | x_t) of every particle (eqs. 23-26): ``model`` (N, 3 N_b) predicted C_t, ``desc`` (N, 3 N_b)
-    observed A_t with ``mass``, ``mean_rgb`` from :func:`descriptor_kernel`; ``sigma_n[0]`` from
-    :func:`noise_sigma_kernel`. ``logp`` (N,) out."""
-    i = wp.tid()
-    logp[i] = appearance_log_prob(model, i, desc, i, mass[i], mean_rgb[i], n_bins, sigma_n[0], sigma_p)
 
 
 # ------------------------------------------------------------------------- descriptor, one block per particle

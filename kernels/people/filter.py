@@ -1,20 +1,24 @@
 """S2 people tracker (Lopez-Cifuentes et al.): particle dynamics and the motion observation model.
 
 Map to the paper:
-- :func:`constant_velocity`: eq. 5, P_t = P_{t-1} + Pdot_{t-1} + n_P, Pdot_t = Pdot_{t-1} + n_V (velocity in metres
-  per frame: the paper's uniform frame rate makes it a position difference). n_t (6 x 1) has independent
-  components, deviation ``sigma_pos`` on the position and ``sigma_vel`` on the velocity (the paper gives no
-  covariance). Noise: Philox streams ``(seed, particle, frame, STREAM_MOTION)`` for the position and
-  ``STREAM_PEOPLE_VELOCITY`` for the velocity.
+- :func:`constant_velocity`: eq. 5 with the frame interval dt made explicit, P_t = P_{t-1} + dt Pdot_{t-1} + n_P,
+  Pdot_t = Pdot_{t-1} + n_V (velocity in metres per second; the paper's uniform frame rate makes its eq. 5 the
+  case dt = 1 frame). n_t (6 x 1) has independent components, deviation ``sigma_pos`` on the position and
+  ``sigma_vel`` on the velocity, per frame (the paper gives no covariance; the driver scales both with sqrt(dt)); the
+  velocity noise has its own vertical deviation (ours: a person walks on the floor, but its points must keep mixing
+  over the body's height).
+  Noise: Philox streams ``(seed, particle, frame, STREAM_MOTION)`` for the position and ``STREAM_PEOPLE_VELOCITY``
+  for the velocity.
 - :func:`predict_kernel`: resampled gather + eq. 5 + the appearance update of eq. 6,
   C_t = alpha A_{t-1} + (1 - alpha) C_{t-1}, where A_{t-1} is the descriptor observed at P_{t-1}
   (``kernels.people.descriptor.descriptor_kernel``). A particle whose A_{t-1} was unseen (mass 0) keeps C_{t-1}.
-- :func:`motion_log_likelihood`, :func:`motion_kernel`: eqs. 7-10, log p(M_t | x_t) = sum over cameras of
+- :func:`motion_log_likelihood`: eqs. 7-10, log p(M_t | x_t) = sum over cameras of
   log(1 - p_B) where the projection falls on a motion pixel, log(p_B) otherwise (eq. 9 as a sum of logs).
   A camera that does not see P (behind it, or the projection off the image) contributes ``log_outside``: pass
   log(p_B) to read "off the image" as "no motion observed" (eq. 10 literally: m(v) = 1 only for pixels of R), or 0
   for a neutral factor (the camera says nothing). The choice is the driver's.
-- :func:`observation_kernel`: eq. 11, log p(z_t | x_t) = log p(M_t | x_t) + log p(A_t | x_t).
+- eq. 11, log p(z_t | x_t) = log p(M_t | x_t) + log p(A_t | x_t), inside :func:`step_kernel` and
+  :func:`score_moments_kernel` (``tests/kernel_harness.py`` launches the single-factor kernels for the tests).
 - :func:`step_kernel`: one frame fused (gather, eqs. 5-6, descriptor eqs. 19-22 at the new P_t, eq. 11, and the
   block partials of ``kernels.core.reduce``), so each particle's state is read once per frame.
 
@@ -27,8 +31,9 @@ array (H bins, S bins, V bins; each block sums to 1). At initialisation C_0 is t
 import warp as wp
 
 from wptrack.kernels.core.camera import Camera, pixel_index
-from wptrack.kernels.core.random import STREAM_MOTION, STREAM_PEOPLE_VELOCITY, normal4, uniform4
+from wptrack.kernels.core.random import STREAM_INIT, STREAM_MOTION, STREAM_PEOPLE_VELOCITY, normal4, uniform4
 from wptrack.kernels.core.reduce import finite_logw, moments_push, moments_store, moments_zero
+from wptrack.kernels.people.coverage import PersonTerms, person_log_terms
 from wptrack.kernels.people.descriptor import appearance_log_prob, descriptor_at
 
 wp.set_module_options({"enable_backward": False})
@@ -36,13 +41,23 @@ wp.set_module_options({"enable_backward": False})
 
 @wp.func
 def constant_velocity(
-    pos: wp.vec3, vel: wp.vec3, sigma_pos: float, sigma_vel: float, seed: wp.vec2ui, index: int, frame: int
+    pos: wp.vec3,
+    vel: wp.vec3,
+    dt: float,
+    sigma_pos: float,
+    sigma_vel: float,
+    sigma_vel_z: float,
+    seed: wp.vec2ui,
+    index: int,
+    frame: int,
 ):
-    """Eq. 5: returns (P_t, Pdot_t) = (P + Pdot + n_P, Pdot + n_V); metres and metres per frame."""
+    """Eq. 5: returns (P_t, Pdot_t) = (P + dt Pdot + n_P, Pdot + n_V); metres, metres per second, dt in seconds,
+    ``sigma_pos`` (metres), ``sigma_vel`` (horizontal) and ``sigma_vel_z`` (vertical, metres per second) the
+    deviations of this frame's noise."""
     zp = normal4(seed, index, frame, STREAM_MOTION)
     zv = normal4(seed, index, frame, STREAM_PEOPLE_VELOCITY)
-    p = pos + vel + sigma_pos * wp.vec3(zp[0], zp[1], zp[2])
-    v = vel + sigma_vel * wp.vec3(zv[0], zv[1], zv[2])
+    p = pos + dt * vel + sigma_pos * wp.vec3(zp[0], zp[1], zp[2])
+    v = vel + wp.vec3(sigma_vel * zv[0], sigma_vel * zv[1], sigma_vel_z * zv[2])
     return p, v
 
 
@@ -76,7 +91,10 @@ def predict_kernel(
     ancestors: wp.array(dtype=wp.int32),
     sigma_pos: wp.array(dtype=wp.float32),
     sigma_vel: wp.array(dtype=wp.float32),
-    alpha: float,
+    dt: wp.array(dtype=wp.float32),
+    alpha: wp.array(dtype=wp.float32),
+    observe: wp.array(dtype=wp.int32),
+    decay: wp.array(dtype=wp.float32),
     seed: wp.vec2ui,
     frame: wp.array(dtype=wp.int32),
     pos_out: wp.array(dtype=wp.vec3),
@@ -88,19 +106,27 @@ def predict_kernel(
     ``mass[a] == 0``).
 
     Args:
-        pos, vel: (N,) P_{t-1} (metres), Pdot_{t-1} (metres/frame). model: (N, 3 N_b) C_{t-1}.
+        pos, vel: (N,) P_{t-1} (metres), Pdot_{t-1} (metres/second). model: (N, 3 N_b) C_{t-1}.
         desc, mass: (N, 3 N_b), (N,) A_{t-1} and its mass from ``descriptor.descriptor_kernel`` at P_{t-1}.
-        ancestors: (N,) resampled parents (identity without resampling). sigma_pos, sigma_vel: [0] noise deviations
-            (metres, metres/frame), device arrays so that CUDA graphs see updates. alpha: forgetting factor of eq. 6.
+        ancestors: (N,) resampled parents (identity without resampling). sigma_pos: [0], sigma_vel: [0] horizontal,
+            [1] vertical: this frame's noise deviations (metres, metres/second). dt: [0] the frame interval, seconds.
+            alpha: [0] this frame's forgetting factor of eq. 6. observe: [0] 0 when this frame's masks do not show the
+            person, [1] the same for the previous frame (``coverage.gate_kernel``): with [0] = 0 the parent's
+            velocity is first multiplied by decay[0] (ours: a person nobody sees is more likely to stand than to walk
+            on); with [1] = 0 the appearance model is kept (A_{t-1} was read where the person was not seen). All are
+            device arrays so that CUDA graphs see updates.
         seed: 64-bit run seed. frame: [0] frame number (the noise counter).
         pos_out, vel_out, model_out: the predicted state (must not alias the inputs).
     """
     i = wp.tid()
     a = ancestors[i]
-    p, v = constant_velocity(pos[a], vel[a], sigma_pos[0], sigma_vel[0], seed, i, frame[0])
+    va = vel[a]
+    if observe[0] == 0:
+        va = va * decay[0]
+    p, v = constant_velocity(pos[a], va, dt[0], sigma_pos[0], sigma_vel[0], sigma_vel[1], seed, i, frame[0])
     pos_out[i] = p
     vel_out[i] = v
-    appearance_update(model, desc, mass, a, alpha, model_out, i)  # eq. 6
+    appearance_update(model, desc, mass, a, wp.where(observe[1] != 0, alpha[0], 0.0), model_out, i)  # eq. 6
 
 
 @wp.func
@@ -141,46 +167,6 @@ def motion_log_likelihood(
 
 
 @wp.kernel
-def motion_kernel(
-    cams: wp.array(dtype=Camera),
-    mask: wp.array(dtype=wp.uint8),
-    p_b: float,
-    log_outside: float,
-    drop_worst: int,
-    points: wp.array(dtype=wp.vec3),
-    loglik: wp.array(dtype=wp.float32),
-):
-    """log p(M_t | x_t) of every point (eqs. 7-10); see :func:`motion_log_likelihood`. ``loglik`` (N,) out."""
-    i = wp.tid()
-    loglik[i] = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, points[i])
-
-
-@wp.kernel
-def observation_kernel(
-    cams: wp.array(dtype=Camera),
-    mask: wp.array(dtype=wp.uint8),
-    p_b: float,
-    log_outside: float,
-    drop_worst: int,
-    points: wp.array(dtype=wp.vec3),
-    model: wp.array2d(dtype=wp.float32),
-    desc: wp.array2d(dtype=wp.float32),
-    mass: wp.array(dtype=wp.float32),
-    mean_rgb: wp.array(dtype=wp.vec3),
-    n_bins: int,
-    sigma_n: wp.array(dtype=wp.float32),
-    sigma_p: float,
-    loglik: wp.array(dtype=wp.float32),
-):
-    """log p(z_t | x_t) = log p(M_t | x_t) + log p(A_t | x_t) (eq. 11) of every particle; the descriptor
-    (``desc``, ``mass``, ``mean_rgb``) must have been computed at ``points`` by ``descriptor.descriptor_kernel``."""
-    i = wp.tid()
-    lm = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, points[i])
-    la = appearance_log_prob(model, i, desc, i, mass[i], mean_rgb[i], n_bins, sigma_n[0], sigma_p)
-    loglik[i] = lm + la
-
-
-@wp.kernel
 def step_kernel(
     cams: wp.array(dtype=Camera),
     mask: wp.array(dtype=wp.uint8),
@@ -203,11 +189,21 @@ def step_kernel(
     resampled: wp.array(dtype=wp.int32),
     sigma_pos: wp.array(dtype=wp.float32),
     sigma_vel: wp.array(dtype=wp.float32),
-    alpha: float,
+    dt: wp.array(dtype=wp.float32),
+    alpha: wp.array(dtype=wp.float32),
+    observe: wp.array(dtype=wp.int32),
+    decay: wp.array(dtype=wp.float32),
     sigma_n: wp.array(dtype=wp.float32),
     sigma_p: float,
     seed: wp.vec2ui,
     frame: wp.array(dtype=wp.int32),
+    box_cams: wp.array(dtype=Camera),
+    integral: wp.array(dtype=wp.int32),
+    others: wp.array(dtype=wp.vec2),
+    alive: wp.array(dtype=wp.int32),
+    boxes: wp.array2d(dtype=wp.vec4),
+    own: int,
+    terms: PersonTerms,
     n: int,
     chunk: int,
     pos_out: wp.array(dtype=wp.vec3),
@@ -226,7 +222,7 @@ def step_kernel(
     log p(z_t | x_t) = motion + appearance (eq. 11) added to ``logw_prev[i]`` unless ``resampled[0]``, and the
     block's max / MAP / weighted sums (``reduce.moments_push``, outputs as ``reduce.moments_store``).
 
-    Same arguments as :func:`predict_kernel`, :func:`motion_kernel` and ``descriptor.descriptor_kernel``; every
+    Same arguments as :func:`predict_kernel`, :func:`motion_log_likelihood` and ``descriptor.descriptor_kernel``; every
     ``*_out`` is the other half of a ping-pong pair. Launch ``wp.launch_tiled(dim=[blocks], block_dim=B)``; block
     ``b`` owns particles ``[b chunk, (b+1) chunk)``. Same values as the separate kernels (tested).
     """
@@ -235,21 +231,32 @@ def step_kernel(
     stop = wp.min(start + chunk, n)
     sp = sigma_pos[0]
     sv = sigma_vel[0]
+    svz = sigma_vel[1]
+    h = dt[0]
+    al = wp.where(observe[1] != 0, alpha[0], 0.0)  # eq. 6, unless the person was not seen in the last frame
+    seen = observe[0] != 0
+    dv = decay[0]
     sn = sigma_n[0]
     f = frame[0]
     keep = resampled[0] == 0
     best, arg, sw, sw2, sx, sxx = moments_zero()
     for i in range(start + lane, stop, wp.block_dim()):
         a = ancestors[i]
-        x, u = constant_velocity(pos[a], vel[a], sp, sv, seed, i, f)  # eq. 5
+        va = vel[a]
+        if not seen:
+            va = va * dv
+        x, u = constant_velocity(pos[a], va, h, sp, sv, svz, seed, i, f)  # eq. 5
         pos_out[i] = x
         vel_out[i] = u
-        appearance_update(model, desc, mass, a, alpha, model_out, i)  # eq. 6
+        appearance_update(model, desc, mass, a, al, model_out, i)  # eq. 6
         m, rgb = descriptor_at(cams, bgr, x, r_n, n_bins, r_min, r_max, step, desc_out, i)  # eqs. 19-22
         mass_out[i] = m
         rgb_out[i] = rgb
-        lw = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, x)  # eqs. 9-10
-        lw += appearance_log_prob(model_out, i, desc_out, i, m, rgb, n_bins, sn, sigma_p)  # eqs. 23-26, eq. 11
+        lw = float(0.0)
+        if seen:
+            lw = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, x)  # eqs. 9-10
+            lw += appearance_log_prob(model_out, i, desc_out, i, m, rgb, n_bins, sn, sigma_p)  # eqs. 23-26, eq. 11
+            lw += person_log_terms(box_cams, integral, others, alive, boxes, own, terms, x)  # ours
         if keep:
             lw += logw_prev[i]
         lw = finite_logw(lw)  # -inf/NaN -> the floor, as the estimate and the resampler read it
@@ -258,113 +265,29 @@ def step_kernel(
     moments_store(b, lane, best, arg, sw, sw2, sx, sxx, part_max, part_arg, part)
 
 
-@wp.func
-def ray_near_axis(centre: wp.vec3, ray: wp.vec3, axis: wp.vec2, z_top: float, radius: float):
-    """Whether the viewing ray ``centre + s ray`` (s > 0) passes within ``radius`` (horizontally) of the vertical
-    segment at ``axis`` = (x, y) from z = 0 to ``z_top`` (metres): the part of the ray between those heights is
-    projected on the ground and its distance to the axis compared with ``radius``."""
-    s0 = float(0.0)
-    s1 = float(1.0e6)
-    if wp.abs(ray[2]) > 1.0e-9:
-        a = (0.0 - centre[2]) / ray[2]
-        b = (z_top - centre[2]) / ray[2]
-        s0 = wp.max(wp.min(a, b), 0.0)
-        s1 = wp.max(a, b)
-    elif centre[2] < 0.0 or centre[2] > z_top:
-        return False
-    if s1 <= s0:
-        return False
-    p = wp.vec2(centre[0] + s0 * ray[0], centre[1] + s0 * ray[1])
-    d = wp.vec2(ray[0], ray[1]) * (s1 - s0)
-    dd = wp.dot(d, d)
-    u = float(0.0)
-    if dd > 1.0e-12:
-        u = wp.clamp(wp.dot(axis - p, d) / dd, 0.0, 1.0)
-    q = p + u * d - axis
-    return wp.dot(q, q) <= radius * radius
-
-
-@wp.kernel
-def ground_votes_kernel(
-    cams: wp.array(dtype=Camera),
-    mask: wp.array(dtype=wp.uint8),
-    rays: wp.array(dtype=wp.vec3),
-    heights: wp.array(dtype=wp.float32),
-    people: wp.array(dtype=wp.vec2),
-    n_people: int,
-    person_radius: float,
-    person_height: float,
-    origin: wp.vec2,
-    cell: float,
-    nx: int,
-    min_fraction: float,
-    votes: wp.array(dtype=wp.int32),
-    free_votes: wp.array(dtype=wp.int32),
-):
-    """Multi-view motion evidence on a ground grid (ours, for adding and removing people; the paper does not say
-    how targets appear): for the vertical column over the centre of cell (ix, iy) (z = ``heights``), each camera that
-    sees at least one of its points votes when at least ``min_fraction`` of the points it sees fall on its motion
-    mask. ``free_votes`` counts only motion not explained by a tracked person: a motion pixel whose viewing ray
-    (``rays``: world direction per pixel) passes within ``person_radius`` of a tracked person's vertical axis
-    (``people[:n_people]``, ground x, y; up to ``person_height``) is explained. Furniture that hides a person's
-    legs in one camera removes some of its points, not its vote, while the fraction stays above ``min_fraction``.
-
-    Launch one thread per cell (nx * ny). Outputs (nx * ny,): ``votes`` (all motion), ``free_votes`` (unexplained
-    motion). Cell (ix, iy) has centre ``origin + cell (ix + 1/2, iy + 1/2)`` on the world plane z = 0, metres."""
-    t = wp.tid()
-    ix = t % nx
-    iy = t / nx
-    cx = origin[0] + cell * (float(ix) + 0.5)
-    cy = origin[1] + cell * (float(iy) + 0.5)
-    npeople = n_people
-    v = int(0)
-    vf = int(0)
-    for c in range(cams.shape[0]):
-        cam = cams[c]
-        centre = -(wp.transpose(cam.R) * cam.t)
-        vis = int(0)
-        hit = int(0)
-        free = int(0)
-        for k in range(heights.shape[0]):
-            pix = pixel_index(cam, wp.vec3(cx, cy, heights[k]))
-            if pix >= 0:
-                vis += 1
-                if mask[pix] != wp.uint8(0):
-                    hit += 1
-                    explained = int(0)
-                    for j in range(npeople):
-                        if ray_near_axis(centre, rays[pix], people[j], person_height, person_radius):
-                            explained = 1
-                    if explained == 0:
-                        free += 1
-        if vis > 0:
-            if float(hit) >= min_fraction * float(vis):
-                v += 1
-            if float(free) >= min_fraction * float(vis):
-                vf += 1
-    votes[t] = v
-    free_votes[t] = vf
-
-
 @wp.kernel
 def init_cylinder_kernel(
     centre: wp.vec3,
     radius: float,
     z_lo: float,
     z_hi: float,
+    speed: float,
     seed: wp.vec2ui,
     frame: int,
     pos: wp.array(dtype=wp.vec3),
     vel: wp.array(dtype=wp.vec3),
 ):
     """A new person's particles: uniform in the vertical cylinder of ``radius`` around ``centre`` (x, y) between
-    heights ``z_lo`` and ``z_hi`` (metres), at rest. The draw is keyed by (seed, particle, frame, STREAM_MOTION)."""
+    heights ``z_lo`` and ``z_hi`` (metres), keyed by (seed, particle, frame, STREAM_MOTION); horizontal velocities
+    normal with deviation ``speed`` per axis (metres per second; ours: a newcomer's walking direction is unknown, the
+    weights pick it from the first frames), keyed by (seed, particle, frame, STREAM_INIT); no vertical velocity."""
     i = wp.tid()
     u = uniform4(seed, i, frame, STREAM_MOTION)
     r = radius * wp.sqrt(u[0])
     a = 6.283185307179586 * u[1]
     pos[i] = wp.vec3(centre[0] + r * wp.cos(a), centre[1] + r * wp.sin(a), z_lo + (z_hi - z_lo) * u[2])
-    vel[i] = wp.vec3(0.0, 0.0, 0.0)
+    z = normal4(seed, i, frame, STREAM_INIT)
+    vel[i] = wp.vec3(speed * z[0], speed * z[1], 0.0)
 
 
 COLUMN_AXES = 9
@@ -449,6 +372,14 @@ def score_moments_kernel(
     resampled: wp.array(dtype=wp.int32),
     sigma_n: wp.array(dtype=wp.float32),
     sigma_p: float,
+    box_cams: wp.array(dtype=Camera),
+    integral: wp.array(dtype=wp.int32),
+    others: wp.array(dtype=wp.vec2),
+    alive: wp.array(dtype=wp.int32),
+    boxes: wp.array2d(dtype=wp.vec4),
+    own: int,
+    terms: PersonTerms,
+    observe: wp.array(dtype=wp.int32),
     n: int,
     chunk: int,
     logw_out: wp.array(dtype=wp.float32),
@@ -465,11 +396,15 @@ def score_moments_kernel(
     stop = wp.min(start + chunk, n)
     sn = sigma_n[0]
     keep = resampled[0] == 0
+    seen = observe[0] != 0
     best, arg, sw, sw2, sx, sxx = moments_zero()
     for i in range(start + lane, stop, wp.block_dim()):
         x = pos[i]
-        lw = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, x)  # eqs. 9-10
-        lw += appearance_log_prob(model, i, desc, i, mass[i], rgb[i], n_bins, sn, sigma_p)  # eqs. 23-26, eq. 11
+        lw = float(0.0)
+        if seen:
+            lw = motion_log_likelihood(cams, mask, p_b, log_outside, drop_worst, x)  # eqs. 9-10
+            lw += appearance_log_prob(model, i, desc, i, mass[i], rgb[i], n_bins, sn, sigma_p)  # eqs. 23-26, eq. 11
+            lw += person_log_terms(box_cams, integral, others, alive, boxes, own, terms, x)  # ours
         if keep:
             lw += logw_prev[i]
         lw = finite_logw(lw)  # -inf/NaN -> the floor, as the estimate and the resampler read it
@@ -481,6 +416,6 @@ def score_moments_kernel(
 @wp.kernel
 def person_xy_kernel(est: wp.array(dtype=wp.float64), mean_slot: int, j: int, people: wp.array(dtype=wp.vec2)):
     """``people[j]`` = the (x, y) of a filter's estimate vector (``est[mean_slot]``, ``est[mean_slot + 1]``, e.g.
-    ``kernels.core.reduce.EST_MEAN``): the tracked people's ground positions for :func:`ground_votes_kernel` and
+    ``kernels.core.reduce.EST_MEAN``): the tracked people's ground positions for ``kernels.people.coverage`` and
     :func:`column_top_kernel` without a round trip through the host. Launch dim 1."""
     people[j] = wp.vec2(wp.float32(est[mean_slot]), wp.float32(est[mean_slot + 1]))

@@ -57,39 +57,6 @@ def occupancy_kernel(
 
 
 @wp.kernel
-def occupancy_hashgrid_kernel(
-    hash_grid: wp.uint64,
-    points: wp.array(dtype=wp.vec3),
-    logw: wp.array(dtype=wp.float32),
-    log_norm: wp.array(dtype=wp.float64),
-    sigma: float,
-    cutoff: float,
-    origin: wp.vec3,
-    voxel: float,
-    grid: wp.array3d(dtype=wp.float32),
-):
-    """:func:`occupancy_kernel` with the particles found by a ``wp.HashGrid`` query (``hash_grid``: the id of a
-    grid built on ``points`` with radius >= cutoff sigma): O(V k) instead of O(V N) for k particles within the
-    cutoff. Still a gather (no atomics): the query visits cells and the sorted points in a fixed order, so the result
-    is reproducible for a given point set; it equals the brute-force kernel up to float32 summation order."""
-    ix, iy, iz = wp.tid()
-    xv = origin + voxel * wp.vec3(float(ix) + 0.5, float(iy) + 0.5, float(iz) + 0.5)
-    rmax = cutoff * sigma
-    r2max = rmax * rmax
-    inv2s2 = 0.5 / (sigma * sigma)
-    ln = log_norm[0]
-    acc = float(0.0)
-    query = wp.hash_grid_query(hash_grid, xv, rmax)
-    i = int(0)
-    while wp.hash_grid_query_next(query, i):
-        d = xv - points[i]
-        d2 = wp.dot(d, d)
-        if d2 <= r2max:
-            acc += wp.float32(wp.exp(wp.float64(logw[i]) - ln)) * wp.exp(-d2 * inv2s2)
-    grid[ix, iy, iz] = acc * INV_SQRT_2PI_CUBED / (sigma * sigma * sigma)
-
-
-@wp.kernel
 def log_norm_kernel(est: wp.array(dtype=wp.float64), loglik_slot: int, n: int, out: wp.array(dtype=wp.float64)):
     """``out[0] = est[loglik_slot] + log(n)``: log sum_i exp(logw_i) from a filter's estimate vector (its log mean
     weight, ``kernels.core.reduce.EST_LOGLIK``), for :func:`occupancy_kernel` without a host round trip. Launch dim

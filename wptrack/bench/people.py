@@ -142,7 +142,7 @@ class PeopleSuite:
         places = bench_places(k)
         images, masks = render_people(rig, places, seed)
         # a fixed set of people (no additions or removals, their bookkeeping still runs): the same work every frame
-        birth = BirthConfig(max_people=k, frames_to_add=10**9, frames_to_remove=10**9, merge_distance=0.0)
+        birth = BirthConfig(max_people=k, add_seconds=1e9, remove_seconds=1e9, merge_distance=0.0)
         config = PeopleConfig(particles=n, seed=seed, birth=birth)
         tracker = PeopleTracker(rig, config, device=device, keep_particles=min(n, 500))
         for xy in places:

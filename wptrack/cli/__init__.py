@@ -33,9 +33,12 @@ from wptrack.core.errors import ConfigError, WptrackError
 from wptrack.motion.masks import MaskConfig
 from wptrack.runs.spec import add_track_arguments, command, commands
 
-__all__ = ["build_parser", "main"]
+__all__ = ["EXIT_INTERNAL", "build_parser", "main"]
 
 log = logging.getLogger("wptrack")
+
+EXIT_INTERNAL = 70
+"""Exit code of an internal error (a bug, not a user mistake): sysexits' EX_SOFTWARE."""
 
 
 # --- parser -------------------------------------------------------------------------------------------------
@@ -320,6 +323,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM during a run (RunInterrupted)
         print(f"wptrack: {_interrupted_message(e)}", file=sys.stderr)
         return int(getattr(e, "exit_code", 130))
+    except Exception as e:  # a bug: never a user mistake (exit 2); the run loop has closed its outputs ("failed")
+        import traceback
+
+        traceback.print_exc(file=sys.stderr)
+        print(
+            f"wptrack: internal error: {type(e).__name__}: {e} (a bug in wptrack, not in the input; please report "
+            "it with the traceback above; a run keeps its outputs so far and run.json says 'failed')",
+            file=sys.stderr,
+        )
+        return EXIT_INTERNAL
 
 
 def _interrupted_message(e: BaseException) -> str:

@@ -6,10 +6,16 @@ import logging
 import os
 import sys
 import tempfile
+import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from typing import TYPE_CHECKING, Any
 
 from wptrack.core.errors import DeviceError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 log = logging.getLogger(__name__)
 
@@ -280,3 +286,87 @@ def warm_up(
         wp.load_module(m, device=d, block_dim=block_dim)
     log.debug("kernels loaded on %s in %.2f s (compiled: %s)", d, time.perf_counter() - t0, ", ".join(missing) or "-")
     return missing
+
+
+class DeviceGuard:
+    """Keeps a CUDA graph capture apart from other threads' work on the same device.
+
+    Warp's current stream is one per device, shared by every thread: a kernel, copy or allocation that another thread
+    issues while a tracker captures its frame chain lands in the capture (silently part of the graph) or fails it
+    ("Cannot synchronize stream while graph capture is active"). The motion masks run in threads beside the tracker
+    (``wptrack track ... --video``, ``WPTRACK_MASK_WORKERS``), so their device work is *shared* (many threads at once)
+    and a capture is *exclusive*: it waits for the shared sections in progress and holds new ones back until it ends
+    (a capture waiting goes first, so steady mask work cannot starve it). Captures happen once per parity of a run.
+    """
+
+    def __init__(self) -> None:
+        self._cond = threading.Condition()
+        self._shared = 0
+        self._exclusive = False
+        self._waiting = 0
+
+    @contextmanager
+    def shared(self) -> Iterator[None]:
+        """Device work that may run beside other shared work but never inside a capture."""
+        with self._cond:
+            self._cond.wait_for(lambda: not self._exclusive and not self._waiting)
+            self._shared += 1
+        try:
+            yield
+        finally:
+            with self._cond:
+                self._shared -= 1
+                self._cond.notify_all()
+
+    @contextmanager
+    def exclusive(self) -> Iterator[None]:
+        """A graph capture: no shared work runs on the device meanwhile (re-entrant use is not supported)."""
+        with self._cond:
+            self._waiting += 1
+            try:
+                self._cond.wait_for(lambda: not self._exclusive and not self._shared)
+            finally:
+                self._waiting -= 1
+            self._exclusive = True
+        try:
+            yield
+        finally:
+            with self._cond:
+                self._exclusive = False
+                self._cond.notify_all()
+
+
+_guards: dict[str, DeviceGuard] = {}
+_guards_lock = threading.Lock()
+
+
+def device_guard(device: object) -> DeviceGuard:
+    """The process's :class:`DeviceGuard` of ``device`` (a Warp device or any name of it: ``cuda`` and ``cuda:0``
+    are one device, one guard)."""
+    import warp as wp
+
+    key = wp.get_device(device).alias
+    with _guards_lock:
+        guard = _guards.get(key)
+        if guard is None:
+            guard = _guards[key] = DeviceGuard()
+        return guard
+
+
+def download(array: Any) -> np.ndarray:
+    """A host copy of a Warp array that leaves the device's current stream alone (for threads beside a tracker).
+
+    ``wp.array.numpy()`` of a CUDA array switches the device's one current stream to the null stream and back
+    (``wp.ScopedStream``): two threads doing so at once can leave the device on the null stream, and the tracker's
+    next graph capture then fails ("Warp error: unknown stream", H100, three mask threads). This copies on the stream
+    current at the call and waits for that stream only.
+    """
+    import warp as wp
+
+    if array.device.is_cpu:
+        return array.numpy()
+    stream = wp.get_stream(array.device)
+    host = wp.empty(array.shape, dtype=array.dtype, device="cpu")
+    wp.copy(host, array, stream=stream)
+    wp.synchronize_stream(stream)
+    return host.numpy()

@@ -31,7 +31,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 import warp as wp
 
-from wptrack.core.device import block_partition
+from wptrack.core.device import block_partition, device_guard
 from wptrack.core.errors import ConfigError
 from wptrack.core.memory import POINT_STATE_BYTES, check_fits, check_particles, resampler_bytes
 from wptrack.core.resampling import SCHEMES, Resampler
@@ -215,7 +215,7 @@ class FrameChain:
             self._warm[src] = True
             return
         if self._graphs[src] is None:
-            with no_gc():
+            with device_guard(self.device).exclusive(), no_gc():  # no other thread's device work in the graph
                 with wp.ScopedCapture(device=self.device) as capture:
                     self._chain(src, dst)
             self._graphs[src] = capture.graph

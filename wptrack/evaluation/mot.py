@@ -1,10 +1,11 @@
 """Evaluation of multi-object ground-plane tracks against ground truth.
 
 This module scores the output of a multi-object tracker (a ``tracks.csv``) against a ground-truth table, both with
-the columns ``frame,id,x,y,z`` (metres) and optionally ``class``. It reports the standard CLEAR-MOT and identity
-metrics, computed by `py-motmetrics <https://github.com/cheind/py-motmetrics>`_ (the ``motmetrics`` package, a
-dependency of wptrack), and the accuracy of Juza et al. (*3D template
-based single camera multiple object tracking*, sections 5.1-5.2), following our reading of that paper set out below.
+the columns ``frame,id,x,y`` (metres), optionally ``z`` (checked when present, not used: matching is on the ground
+plane; ground-plane annotations such as the EPFL datasets' have none) and optionally ``class``. It reports the
+standard CLEAR-MOT and identity metrics, computed by `py-motmetrics <https://github.com/cheind/py-motmetrics>`_ (the
+``motmetrics`` package, a dependency of wptrack), and the accuracy of Juza et al. (*3D template based single camera
+multiple object tracking*, sections 5.1-5.2), following our reading of that paper set out below.
 
 **Evaluated frames.** The frames scored are the distinct frames of the ground-truth table, or, when ``frames`` is
 given, exactly those frames. Ground-truth and tracker rows outside the evaluated frames are ignored. An evaluated
@@ -80,8 +81,8 @@ from wptrack.evaluation.hota import HotaResult, _hota_tables
 from wptrack.io.atomic import jsonable
 from wptrack.io.tables import read_tracks
 
-#: Columns every ground-truth and tracks table must have.
-REQUIRED_COLUMNS = ("frame", "id", "x", "y", "z")
+#: Columns every ground-truth and tracks table must have (``z`` is optional: matching is on the ground plane).
+REQUIRED_COLUMNS = ("frame", "id", "x", "y")
 
 #: The scalar fields of :class:`Evaluation` that :func:`average` summarises.
 SCALAR_METRICS = (
@@ -305,7 +306,7 @@ def _load(source: TableLike, role: str, ground_truth: bool) -> _Table:
             f"{label}: missing column{'s' if len(missing) > 1 else ''} {', '.join(repr(c) for c in missing)} "
             f"(required: {','.join(REQUIRED_COLUMNS)})"
         )
-    names = list(REQUIRED_COLUMNS) + (["class"] if "class" in columns else [])
+    names = list(REQUIRED_COLUMNS) + [c for c in ("z", "class") if c in columns]
     arrays = {}
     for name in names:
         a = np.asarray(columns[name])
@@ -320,7 +321,8 @@ def _load(source: TableLike, role: str, ground_truth: bool) -> _Table:
     ids = _integers(label, "id", arrays["id"], non_negative=False)
     x = _numeric(label, "x", arrays["x"])
     y = _numeric(label, "y", arrays["y"])
-    _numeric(label, "z", arrays["z"])  # checked, not used: matching is on the ground plane
+    if "z" in arrays:
+        _numeric(label, "z", arrays["z"])  # checked, not used: matching is on the ground plane
     classes = None
     if "class" in arrays:
         classes = np.array([_class_value(v) for v in arrays["class"].tolist()], dtype=object)
@@ -425,7 +427,7 @@ def evaluate(
 
     Args:
         groundtruth: Ground truth: a dict of columns as returned by :func:`wptrack.io.tables.read_tracks`, or the
-            path of a CSV file. Columns ``frame,id,x,y,z`` required; ``class`` optional; other columns ignored.
+            path of a CSV file. Columns ``frame,id,x,y`` required; ``z`` and ``class`` optional; other columns ignored.
         tracks: Tracker output (e.g. a run's ``tracks.csv``), same forms and columns. Rows with a non-finite
             ``x`` or ``y`` are dropped.
         threshold: Largest ground-plane distance (metres) at which an object and a hypothesis may be matched.

@@ -70,6 +70,7 @@ from typing import Any
 
 import numpy as np
 
+from wptrack.core.device import download
 from wptrack.core.errors import FrameError
 from wptrack.io.frames import FrameSource
 from wptrack.motion.illumination import LightField
@@ -375,12 +376,12 @@ class OfflineBackground:
             self._mode(stack, g, mad, median)
         self._built[i] = (median, mad)
         if c.spread_cap > 0 or c.shadow_band > 0 or c.neighbourhood > 0:
-            mad_host = mad.numpy()
+            mad_host = download(mad)
             self._scale[i] = spread_scale(mad_host)
             if c.neighbourhood > 0:
                 shape = (self.source.height, self.source.width, 3)
                 self._nb_scale[i] = neighbourhood_scale(
-                    [f.reshape(shape) for f in frames], gains, median.numpy().reshape(shape), mad_host.reshape(shape),
+                    [f.reshape(shape) for f in frames], gains, download(median).reshape(shape), mad_host.reshape(shape),
                     c.neighbourhood, c.noise_floor,
                 )  # fmt: skip
                 log.info(
@@ -396,7 +397,7 @@ class OfflineBackground:
                 log.info("%s: background window %d: learnt shadow ratio %s", self.source.name, i, ratio)
         log.debug("%s: background window %d from %d frames", self.source.name, i, k)
         if self.on_build is not None:
-            image = median.numpy().reshape(self.source.height, self.source.width, 3).copy()
+            image = download(median).reshape(self.source.height, self.source.width, 3).copy()
             self.on_build(i, float(self.centres[i]), image)
         return median, mad
 
@@ -438,12 +439,12 @@ class OfflineBackground:
     def background(self, i: int = 0) -> np.ndarray:
         """``(H, W, 3)`` uint8 BGR background of window ``i`` (builds it if needed)."""
         median, _ = self._window(i)
-        return median.numpy().reshape(self.source.height, self.source.width, 3).copy()
+        return download(median).reshape(self.source.height, self.source.width, 3).copy()
 
     def spread(self, i: int = 0) -> np.ndarray:
         """``(H, W, 3)`` uint8 per-channel MAD of window ``i`` (8-bit units)."""
         _, mad = self._window(i)
-        return mad.numpy().reshape(self.source.height, self.source.width, 3).copy()
+        return download(mad).reshape(self.source.height, self.source.width, 3).copy()
 
     def evidence(self, t: int, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Foreground of frame ``t``.

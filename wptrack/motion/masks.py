@@ -313,7 +313,11 @@ class MotionMasks:
         self.prefetch_depth = int(prefetch_depth)
         from wptrack.motion.parallel import mask_workers
 
-        self.workers = mask_workers()  # offline masks: threads making them (wptrack.motion.parallel), default 1
+        self.workers = 1  # offline masks: threads making them (wptrack.motion.parallel.mask_workers)
+        if config.method == "offline":
+            from wptrack.core.device import resolve_device
+
+            self.workers = mask_workers(resolve_device(config.device))
         self._model: Any = None
         if camera is not None and (source.width, source.height) != (camera.width, camera.height):
             where = f" in {rig_source}" if rig_source else ""
@@ -359,10 +363,12 @@ class MotionMasks:
         if self.config.method != "offline":
             return None
         if self._model is None:
-            from wptrack.core.device import resolve_device
+            from wptrack.core.device import device_guard, resolve_device
             from wptrack.motion.background import OfflineBackground
 
-            self._model = OfflineBackground(self.source, self.config, resolve_device(self.config.device))
+            device = resolve_device(self.config.device)
+            with device_guard(device).shared():  # allocations: never inside a tracker's graph capture
+                self._model = OfflineBackground(self.source, self.config, device)
             self.attach_cleanup(self._model)
         return self._model
 
@@ -398,7 +404,10 @@ class MotionMasks:
         frames = prefetch(self.source, depth=self.prefetch_depth) if self.prefetch_depth else self.source
         subtractor = None if c.method in ("given", "offline") else self._subtractor()
         if model is not None:
+            from wptrack.core.device import device_guard
+
             model.want_prob = probability
+            guard = device_guard(model.device)
         try:
             if model is not None and self.workers > 1:  # several models in threads, masks in frame order
                 from wptrack.motion.parallel import parallel_evidence
@@ -412,7 +421,8 @@ class MotionMasks:
                         f"sequence started with {width}x{height} (the frame size must not change)"
                     )
                 if model is not None:
-                    raw, prob = model.evidence(index, frame)
+                    with guard.shared():  # a tracker's graph capture in another thread waits for this frame's work
+                        raw, prob = model.evidence(index, frame)
                     yield (raw if model.cleanup is not None else clean_mask(raw, c)), prob
                     continue
                 if subtractor is None:

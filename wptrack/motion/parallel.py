@@ -28,15 +28,26 @@ from wptrack.core.errors import FrameError
 from wptrack.io import timeline
 
 MASK_WORKERS_ENV = "WPTRACK_MASK_WORKERS"
-"""Environment variable: threads making the offline masks of one video (default 1)."""
+"""Environment variable: threads making the offline masks of one video (default: :func:`mask_workers`)."""
+
+GPU_MASK_WORKERS = 3
+"""Mask threads by default when the masks are made on a CUDA device and the host has >= 8 cores. H100 host (16
+cores), ``wptrack bench --tracker pipeline`` 1080p MJPG, 600 frames: ``track templates --video`` 47.3 frames/s with
+one thread, 64.1 with three (the masks thread was the limit: 19 ms of CPU per frame); the masks command alone 39.8 and
+41.3 (it is limited by writing masks.avi). On the CPU device they cost more than they save (BENCHMARKS.md)."""
 
 _END = object()
 
 
-def mask_workers() -> int:
-    """Threads making one video's offline masks: :data:`MASK_WORKERS_ENV` (default 1)."""
+def mask_workers(device: str | None = None) -> int:
+    """Threads making one video's offline masks: :data:`MASK_WORKERS_ENV` when set, else
+    :data:`GPU_MASK_WORKERS` on a CUDA ``device`` of a host with >= 8 cores, else 1."""
     text = os.environ.get(MASK_WORKERS_ENV, "").strip()
-    return int(text) if text.isdigit() and int(text) > 0 else 1
+    if text:
+        return int(text) if text.isdigit() and int(text) > 0 else 1
+    if device is not None and device.startswith("cuda") and (os.cpu_count() or 1) >= 8:
+        return GPU_MASK_WORKERS
+    return 1
 
 
 def parallel_evidence(
@@ -52,11 +63,14 @@ def parallel_evidence(
         clean: The clean-up of a model's raw mask (``clean_mask`` with the stream's config).
         probability: Yield the probability image (else None).
     """
+    from wptrack.core.device import device_guard
     from wptrack.motion.background import OfflineBackground
 
     c = masks.config
     width, height = masks.size
-    models = [masks.model] + [OfflineBackground(masks.source, c, masks.model.device) for _ in range(workers - 1)]
+    guard = device_guard(masks.model.device)  # a tracker's graph capture waits for the workers' device work
+    with guard.shared():
+        models = [masks.model] + [OfflineBackground(masks.source, c, masks.model.device) for _ in range(workers - 1)]
     for model in models[1:]:  # the first model's clean-up and probability settings for every model
         masks.attach_cleanup(model)
         model.want_prob = masks.model.want_prob
@@ -111,7 +125,8 @@ def parallel_evidence(
                 return
             index, frame = item
             try:
-                raw, prob = model.evidence(index, frame)
+                with guard.shared():
+                    raw, prob = model.evidence(index, frame)
                 result = (raw if model.cleanup is not None else clean(raw), prob if probability else None)
             except BaseException as e:  # noqa: BLE001 - raised by the collector at its frame
                 put(outbox[k], e)

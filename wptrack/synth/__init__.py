@@ -35,7 +35,7 @@ from __future__ import annotations
 from wptrack.synth import clutter as _clutter  # noqa: F401  (registers the clutter rooms)
 from wptrack.synth import lab as _lab  # noqa: F401  (registers the lab scenes)
 from wptrack.synth import office as _office  # noqa: F401  (registers the office scenes)
-from wptrack.synth import plaza as _plaza  # noqa: F401  (registers the plaza scenes)
+from wptrack.synth import plaza_scenes as _plaza  # noqa: F401  (registers the plaza scenes)
 from wptrack.synth import room as _room  # noqa: F401  (registers the 4-camera room)
 from wptrack.synth.base import (
     SCENES,

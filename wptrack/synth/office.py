@@ -45,6 +45,12 @@ paths (waypoints +-0.08 m, meeting point +-0.15 m), speeds (1.0-1.3 m/s), timing
 shades. Seed 0 of ``s2-office`` is the tuning scene; other seeds and ``s2-office-twocolour`` are held out
 (``held_out`` in scene.json).
 
+Variants (issue 31, held out): ``s2-office-lowfps``, the same scene seen at 3.125 frames/s (every 8th frame: the
+same 12 s in 38 frames; the tracker's dynamics and its birth and removal times are in seconds), and
+``s2-office-meeting``, four cameras (``cam4`` in the north-west corner) and the two people standing and talking for
+8 s at the meeting point before the handshake (500 frames; the light dims while they stand: the background model
+and the tracker must keep people who do not move).
+
 Ground truth (``groundtruth.csv``): ``frame,id,x,y,z,gx,gy,height,heading,handshake``: the centroid of the body
 volume (volume-weighted mean of the body parts' ellipsoid centres, metres, world frame), the ground position (gx,
 gy) (z = 0 below the body axis), the person's height (metres), heading (radians, ``atan2`` of the facing direction)
@@ -59,6 +65,11 @@ three cameras takes 0.17 s median (0.15-0.21 s; 0.07 s at 320x240), before video
 synth s2-office --frames 300`` wrote the 300 frames (6 lossless videos, about 135 MB per camera video) in 3 min 40 s
 on the same loaded machine. Smaller images for quick experiments: ``OfficeScene(OfficeConfig(width=320,
 height=240))``.
+
+Length: one module because it is one specification, the synthetic counterpart of the paper's experiment: the
+room's constants (walls, doors, camera corners) place the furniture, the cameras and the people's paths alike, and
+the scene class renders exactly those; split, each part would import the others' constants and the scene could
+only be read across files. The variants at the end are a few lines each.
 """
 
 from __future__ import annotations
@@ -99,8 +110,8 @@ DOOR_HEIGHT = 2.1
 """Height of the door openings, metres."""
 CAMERA_HEIGHT = 2.65
 """Height of the camera centres, metres."""
-CAMERA_CORNERS = {"cam1": (0.2, 0.2), "cam2": (5.8, 4.8), "cam3": (5.8, 0.2)}
-"""Camera centres (x, y) in the top corners, metres."""
+CAMERA_CORNERS = {"cam1": (0.2, 0.2), "cam2": (5.8, 4.8), "cam3": (5.8, 0.2), "cam4": (0.2, 4.8)}
+"""Camera centres (x, y) in the top corners, metres (``cam4``, the north-west corner, only in four-camera rigs)."""
 CAMERA_TARGET = (3.0, 2.5, 0.7)
 """Point every camera looks at (room centre, waist height), metres."""
 CAMERA_DIST = (-0.05, 0.01, 0.0, 0.0, 0.0)
@@ -140,6 +151,10 @@ class OfficeConfig:
         light_ramp: ``(first, last)`` frames of the illumination change.
         light_gain: Global gain after the ramp (0.82: 18 % darker).
         shadow_strength: Darkening at the centre of a person's floor shadow (0..1).
+        cameras: 3 (the paper's set-up) or 4 (a fourth camera in the north-west corner).
+        talk: Seconds the two people stand and talk at the meeting point before the handshake (0: they shake
+            hands as soon as both have arrived). The paths, speeds and looks do not depend on it; the handshake and
+            the rest of the timeline move later by ``talk``.
     """
 
     two_colour: bool = False
@@ -152,6 +167,8 @@ class OfficeConfig:
     light_ramp: tuple[int, int] = (120, 150)
     light_gain: float = 0.82
     shadow_strength: float = 0.45
+    cameras: int = 3
+    talk: float = 0.0
 
     def __post_init__(self) -> None:
         def integer(name: str, lo: int) -> None:
@@ -169,6 +186,10 @@ class OfficeConfig:
                 raise ConfigError(f"office scene: {name}: expected a number in ({lo:g}, {hi:g}], got {v!r}")
         if isinstance(self.noise_sigma, bool) or not isinstance(self.noise_sigma, (int, float)) or self.noise_sigma < 0:
             raise ConfigError(f"office scene: noise_sigma: expected a number >= 0 (DN), got {self.noise_sigma!r}")
+        if self.cameras not in (3, 4) or isinstance(self.cameras, bool):
+            raise ConfigError(f"office scene: cameras: expected 3 or 4, got {self.cameras!r}")
+        if isinstance(self.talk, bool) or not isinstance(self.talk, (int, float)) or not (0 <= self.talk < 1e4):
+            raise ConfigError(f"office scene: talk: expected seconds >= 0, got {self.talk!r}")
         ramp = self.light_ramp
         if len(ramp) != 2 or not all(isinstance(r, (int, np.integer)) for r in ramp) or not 0 <= ramp[0] < ramp[1]:
             raise ConfigError(f"office scene: light_ramp: expected two frames 0 <= first < last, got {ramp!r}")
@@ -177,17 +198,18 @@ class OfficeConfig:
 # ----------------------------------------------------------------------------------------------------- rig
 
 
-def office_rig(width: int = 640, height: int = 480) -> Rig:
-    """The three corner cameras (see the module docstring) and the room's working volume (floor to 2.2 m).
+def office_rig(width: int = 640, height: int = 480, cameras: int = 3) -> Rig:
+    """The corner cameras (see the module docstring) and the room's working volume (floor to 2.2 m).
 
     Args:
         width: Image width, pixels.
         height: Image height, pixels.
+        cameras: 3 (``cam1``-``cam3``) or 4 (and ``cam4``).
     """
     fx = 0.5 * width
     cams = [
         Camera.look_at(name, width, height, (x, y, CAMERA_HEIGHT), CAMERA_TARGET, fx=fx, dist=CAMERA_DIST)
-        for name, (x, y) in CAMERA_CORNERS.items()
+        for name, (x, y) in list(CAMERA_CORNERS.items())[:cameras]
     ]
     volume = (np.array([0.0, 0.0, 0.0]), np.array([ROOM[0], ROOM[1], 2.2]))
     return Rig(cameras=tuple(cams), volume=volume)
@@ -299,12 +321,13 @@ def _jitter(rgb: _Rgb, rng: np.random.Generator, amount: float = 0.04) -> _Rgb:
     return (float(out[0]), float(out[1]), float(out[2]))
 
 
-def office_walkers(seed: int = 0, two_colour: bool = False) -> list[Walker]:
+def office_walkers(seed: int = 0, two_colour: bool = False, talk: float = 0.0) -> list[Walker]:
     """The two people: paths, timing and looks for scene seed ``seed`` (see the module docstring).
 
     Args:
         seed: Scene seed (0 = the tuning scene).
         two_colour: Person 0 wears a red front and a blue back.
+        talk: Seconds they stand and talk before the handshake.
     """
     rng = np.random.default_rng([2, int(seed)])
 
@@ -360,7 +383,7 @@ def office_walkers(seed: int = 0, two_colour: bool = False) -> list[Walker]:
     late = rng.uniform(0.1, 0.6)
     arrive = (t_meet, t_meet + late)
     enters = [Path(p.waypoints, p.speeds, float(t - p.end), smooth_m=0.8) for p, t in zip(enters, arrive, strict=True)]
-    shake = (max(arrive) + 0.2, max(arrive) + 0.2 + rng.uniform(1.4, 1.8))
+    shake = (max(arrive) + 0.2 + talk, max(arrive) + 0.2 + talk + rng.uniform(1.4, 1.8))
     hand_z = 0.55 * 0.5 * (looks[0].height + looks[1].height)
     hand = (float(cx), float(cy), float(hand_z))
     out = []
@@ -418,7 +441,9 @@ def _ellipsoid_rot(axis: np.ndarray, forward: np.ndarray) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=4)
-def _office_views(width: int, height: int) -> tuple[list[StaticView], list[tuple[np.ndarray, np.ndarray]]]:
+def _office_views(
+    width: int, height: int, cameras: int = 3
+) -> tuple[list[StaticView], list[tuple[np.ndarray, np.ndarray]]]:
     """The static room ray cast for every camera of :func:`office_rig` at this size (cached per process).
 
     Returns:
@@ -426,7 +451,9 @@ def _office_views(width: int, height: int) -> tuple[list[StaticView], list[tuple
         pixels with their world (x, y) (M, 2) float32 metres (the people's shadows fall there).
     """
     objects = _static_objects()
-    views = [render_static(cam, objects, LIGHT, background=(0.3, 0.3, 0.3)) for cam in office_rig(width, height)]
+    views = [
+        render_static(cam, objects, LIGHT, background=(0.3, 0.3, 0.3)) for cam in office_rig(width, height, cameras)
+    ]
     floor = []
     for view in views:
         idx = np.flatnonzero(view.label.ravel() == LABEL_FLOOR)
@@ -451,8 +478,8 @@ class OfficeScene(Scene):
         self.config = config or OfficeConfig()
         self.fps = float(self.config.fps)
         self.default_frames = int(self.config.frames)
-        self.rig = office_rig(self.config.width, self.config.height)
-        self.walkers = office_walkers(self.config.seed, self.config.two_colour)
+        self.rig = office_rig(self.config.width, self.config.height, self.config.cameras)
+        self.walkers = office_walkers(self.config.seed, self.config.two_colour, self.config.talk)
         self._views: list[StaticView] | None = None
         self._floor: list[tuple[np.ndarray, np.ndarray]] | None = None
         self._states: _States | None = None
@@ -580,7 +607,7 @@ class OfficeScene(Scene):
             "room": list(ROOM),
             "ground": {"origin": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]},
             "two_colour": bool(cfg.two_colour),
-            "held_out": bool(cfg.two_colour or cfg.seed != 0),
+            "held_out": bool(cfg.two_colour or cfg.seed != 0 or cfg.cameras != 3 or cfg.talk > 0 or cfg.fps != 25.0),
             "clothing_rgb": clothing,
         }
 
@@ -589,7 +616,7 @@ class OfficeScene(Scene):
     def views(self) -> list[StaticView]:
         """Static ray-cast views, one per camera (computed on first use, shared by scenes of the same size)."""
         if self._views is None:
-            self._views, self._floor = _office_views(self.config.width, self.config.height)
+            self._views, self._floor = _office_views(self.config.width, self.config.height, self.config.cameras)
         return self._views
 
     def gain(self, index: int) -> float:
@@ -737,3 +764,26 @@ def _s2_office(seed: int = 0) -> Scene:
 )
 def _s2_office_twocolour(seed: int = 0) -> Scene:
     return OfficeScene(OfficeConfig(seed=seed, two_colour=True))
+
+
+LOW_FPS = 3.125
+"""Frame rate of ``s2-office-lowfps``: every 8th frame of the 25 frames/s scene."""
+
+
+@register_scene(
+    "s2-office-lowfps",
+    "S2 office at 3.125 frames/s (every 8th frame of s2-office: the same people, 12 s in 38 frames); 3 cams",
+    seeded=True,
+)
+def _s2_office_lowfps(seed: int = 0) -> Scene:
+    k = 25.0 / LOW_FPS
+    return OfficeScene(OfficeConfig(seed=seed, fps=LOW_FPS, frames=38, light_ramp=(round(120 / k), round(150 / k))))
+
+
+@register_scene(
+    "s2-office-meeting",
+    "S2 office, 4 cams: the two people stand and talk 8 s at the meeting point before shaking hands (18 s)",
+    seeded=True,
+)
+def _s2_office_meeting(seed: int = 0) -> Scene:
+    return OfficeScene(OfficeConfig(seed=seed, cameras=4, talk=8.0, frames=500, light_ramp=(200, 230)))

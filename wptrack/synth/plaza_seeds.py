@@ -57,7 +57,8 @@ import numpy as np
 
 from wptrack.core.errors import ConfigError
 from wptrack.synth import plaza as P
-from wptrack.synth.actors import Car, Formation, Path, Person, PlazaActor
+from wptrack.synth import plaza_cast
+from wptrack.synth.actors import Car, Formation, Path, Person, PlazaActor, _Rgb
 from wptrack.synth.plaza_background import FPS, FRAMES, ROAD_LANES, _static_objects, plaza_camera
 from wptrack.synth.render import Cylinder
 
@@ -100,8 +101,8 @@ CAR_SPEEDS = (2.0, 8.0)
 MAX_DRAWS = 400
 """Draws of a whole scene before giving up (never reached for seeds 0-50, see the tests)."""
 
-_DARK_PAINTS: tuple[P._Rgb, ...] = ((0.24, 0.24, 0.26), (0.1, 0.16, 0.4), (0.3, 0.08, 0.08), (0.12, 0.22, 0.14))
-_LIGHT_PAINTS: tuple[P._Rgb, ...] = (
+_DARK_PAINTS: tuple[_Rgb, ...] = ((0.24, 0.24, 0.26), (0.1, 0.16, 0.4), (0.3, 0.08, 0.08), (0.12, 0.22, 0.14))
+_LIGHT_PAINTS: tuple[_Rgb, ...] = (
     (0.8, 0.8, 0.78),
     (0.32, 0.4, 0.55),
     (0.55, 0.56, 0.58),
@@ -345,12 +346,12 @@ def _occluding_frames(a: _Track, b: _Track, frames: int = FRAMES) -> int:
 
 
 def _looks(rng: np.random.Generator, count: int, camouflaged: int) -> list[Person]:
-    """``count`` people (:func:`plaza._people`), ``camouflaged`` of them in ground-like clothes."""
+    """``count`` people (:func:`plaza_cast._people`), ``camouflaged`` of them in ground-like clothes."""
     which = tuple(sorted(int(i) for i in rng.choice(count, size=camouflaged, replace=False)))
-    return P._people(count, seed=int(rng.integers(2**31)), camouflage=which)
+    return plaza_cast._people(count, seed=int(rng.integers(2**31)), camouflage=which)
 
 
-def _paint(rng: np.random.Generator, dark: bool, taken: list[P._Rgb]) -> P._Rgb:
+def _paint(rng: np.random.Generator, dark: bool, taken: list[_Rgb]) -> _Rgb:
     """A paint from the dark or the light palette (not one in ``taken``), its brightness varied by +-6 %."""
     palette = [c for c in (_DARK_PAINTS if dark else _LIGHT_PAINTS) if c not in taken]
     base = palette[int(rng.integers(len(palette)))]
@@ -362,7 +363,7 @@ def _paint(rng: np.random.Generator, dark: bool, taken: list[P._Rgb]) -> P._Rgb:
 def _cars(rng: np.random.Generator, count: int) -> list[Car]:
     """``count`` cars of random size, one in a dark paint (at a random position), the others light."""
     dark_at = int(rng.integers(count))
-    taken: list[P._Rgb] = []
+    taken: list[_Rgb] = []
     return [
         Car(
             length=float(rng.uniform(4.0, 4.8)),
@@ -528,8 +529,8 @@ def _lane_path(rng: np.random.Generator, lane: int, x_pass: float, t_pass: float
 
 def _u_turn(rng: np.random.Generator) -> tuple[Path, tuple[float, float]]:
     """The seed-0 U-turn, shifted, stretched, jittered (or mirrored and reversed); and its middle waypoint."""
-    pts = np.array(P.U_TURN, dtype=np.float64)
-    speeds = np.array(P.U_TURN_SPEEDS) * rng.uniform(0.92, 1.3)
+    pts = np.array(plaza_cast.U_TURN, dtype=np.float64)
+    speeds = np.array(plaza_cast.U_TURN_SPEEDS) * rng.uniform(0.92, 1.3)
     shift, stretch = rng.uniform(-3.0, 3.0), rng.uniform(0.85, 1.15)
     pts[1:-1, 0] = shift + stretch * pts[1:-1, 0]
     # seed 0's turn (centre y 11.9-18.0) brushes the kerb and the parking line: narrowed here to fit ROAD_Y

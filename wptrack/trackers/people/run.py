@@ -82,6 +82,25 @@ def hull_points(points: np.ndarray, weights: np.ndarray, p_h: float) -> np.ndarr
         return sel
 
 
+def recording_fps(given: float | None, frames: Any) -> float:
+    """The frame rate of a run: ``given`` (``--fps``) if set, else the videos' own (the first camera's that knows
+    one; ``wptrack.io.frames.SyncedFrames`` warns when they differ).
+
+    Raises:
+        ConfigError: no rate given and none known (image folders and arrays carry none).
+    """
+    if given is not None:
+        return float(given)
+    for source in frames.sources:
+        if getattr(source, "fps", None):
+            return float(source.fps)
+    names = ", ".join(str(n) for n in frames.names)
+    raise ConfigError(
+        f"the frame rate of {names} is unknown (image folders carry none): give it with --fps (PeopleConfig.fps); "
+        "the dynamics and the birth and removal times are in seconds"
+    )
+
+
 class _Thinned:
     """Keyframes kept in memory with a bounded count: past ``cap`` entries every other one is dropped."""
 
@@ -147,6 +166,7 @@ class PeopleRun(TrackerRun):
             raise ConfigError(f"occupancy_every: expected frames >= 0, got {occupancy_every!r}")
         self._frames = open_frames(list(videos), stop_at_shortest=stop_at_shortest, max_frames=max_frames)
         rig = rig.at_sizes(self._frames.sizes, [str(n) for n in self._frames.names])  # a resized copy: K scaled
+        config = replace(config, fps=recording_fps(config.fps, self._frames))
         mask_config = mask_config if mask_config is not None else MaskConfig()
         self._masks = [
             open_masks(masks=masks[i], config=mask_config, camera=cam, rig_source=rig.source)
@@ -165,6 +185,7 @@ class PeopleRun(TrackerRun):
         self._occupancy_every = occupancy_every
         self._save_masks = save_masks
         self._names = rig.names
+        self._fps = config.fps
         self.config = {
             "rig": str(Path(rig_path).resolve()),
             "videos": [str(v) for v in videos],
@@ -206,12 +227,13 @@ class PeopleRun(TrackerRun):
             self._load_npz_logs(out_dir, resume_after)
         if self._save_masks:  # a resumed run rewrites them: the frames up to the resume point, then the new ones
             keep = 0 if resume_after is None else resume_after + 1
-            self._mask_writers = [continue_video(out_dir / f"masks_{n}.avi", keep, fps=25.0) for n in self._names]
+            self._mask_writers = [continue_video(out_dir / f"masks_{n}.avi", keep, fps=self._fps) for n in self._names]
 
     def step(self, item: Any) -> Any:
         images, *masks = item
         self._frame_masks = masks
-        return self.tracker.step(images, masks)
+        every = self._occupancy_every
+        return self.tracker.step(images, masks, occupancy=bool(every) and self.tracker.frames_done % every == 0)
 
     def record(self, est: Any, out: Any) -> None:
         p_h = self.tracker.config.occupancy.p_h
@@ -227,9 +249,8 @@ class PeopleRun(TrackerRun):
             if person.particles is not None:
                 self._hulls.add(est.frame, person.id, hull_points(person.particles, person.weights, p_h))
         out.add_rows(rows)
-        if self._occupancy_every and est.frame % self._occupancy_every == 0:
-            occ = self.tracker.occupancies([p.id for p in est.people])
-            grids = [(pid, origin, grid) for pid, (origin, grid) in occ.items()]
+        grids = [(p.id, *p.occupancy) for p in est.people if p.occupancy is not None]  # computed with the frame
+        if grids:
             self._occupancy.add(est.frame, grids)
         for writer, m in zip(self._mask_writers, self._frame_masks, strict=False):
             writer.write(np.repeat(((np.asarray(m) != 0) * 255).astype(np.uint8)[..., None], 3, axis=2))

@@ -1,19 +1,26 @@
 """S2: multi-camera 3D people tracker (Lopez-Cifuentes et al., multi-camera 3D particle filters with motion and
 colour). Several people are tracked directly in 3D from two or more calibrated cameras with overlapping views; each
 person has its own particle filter whose particles are 3D points inside the person, weighted by the motion masks of
-all cameras and a multi-view HSV colour descriptor.
+all cameras and a multi-view HSV colour descriptor; beyond the paper (ours, after the Probabilistic Occupancy Map of
+Fleuret, Berclaz, Lengagne and Fua, PAMI 2008) each particle's weight also judges the whole person: the rectangle of
+a person standing at its ground position must explain motion the other tracked people do not
+(``kernels/people/coverage.py``).
 
 One frame::
 
     BGR frames + motion masks of every camera  -> device (one copy each)
-    -> sigma_n from the previous frame (eq. 18)
-    -> per person (one CUDA graph each on GPUs): gather + constant velocity (eq. 5) + appearance update (eq. 6)
-       + descriptor (eqs. 19-22; HSV of eqs. 12-14 for the disc pixels) + motion x appearance likelihood
-       (eqs. 7-11, 23-26) + block moments (fused), estimate, systematic resampling (every frame, section 2.1)
-    -> ground evidence map (ours): cameras whose masks agree on a column over each ground cell
-    -> host: estimates; people added where the evidence is unexplained, removed where it is gone (ours)
+    -> sigma_n from the previous frame (eq. 18); the masks' integral images
+    -> per person (one CUDA graph each on GPUs): the gate (do this frame's masks show the person?) + gather +
+       constant velocity (eq. 5, dt in seconds) + appearance update (eq. 6) + descriptor (eqs. 19-22; HSV of eqs.
+       12-14 for the disc pixels) + motion x appearance likelihood (eqs. 7-11, 23-26) x the person terms (ours) +
+       block moments (fused), estimate, systematic resampling (every frame, section 2.1)
+    -> the tracked people's rectangles; the evidence map (ours): coverage of a person's rectangle at each ground
+       cell by the motion nobody explains; the people's appearance histograms (re-identification)
+    -> host: estimates; people added where the evidence is unexplained, removed when the masks stop showing them,
+       re-identified when they come back (ours)
 
-Units: metres (world frame, z up for the ground evidence map: the rig's ground is z = 0), pixels, frames.
+Units: metres (world frame, z up for the ground evidence map: the rig's ground is z = 0), pixels, seconds (the
+frame interval dt from ``PeopleConfig.fps`` or the frames' timestamps).
 """
 
 from __future__ import annotations
@@ -22,351 +29,66 @@ import logging
 import math
 import time
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
 
 import numpy as np
 import warp as wp
 
-from wptrack.cameras.rig import Rig
+from wptrack.cameras.rig import Camera, Rig
 from wptrack.cameras.structs import DeviceRig
 from wptrack.core.device import block_partition, resolve_device
 from wptrack.core.errors import ConfigError, FrameError
-from wptrack.core.filter import BLOCK, MAX_BLOCKS, ParticleFilter, arrays_state, check_state, load_arrays
+from wptrack.core.filter import BLOCK, MAX_BLOCKS, arrays_state, check_state, load_arrays
 from wptrack.io.frames import camera_frame
+from wptrack.kernels.colour import hsi as kcolour
 from wptrack.kernels.core import reduce as kreduce
+from wptrack.kernels.people import coverage as kcov
 from wptrack.kernels.people import descriptor as kdesc
 from wptrack.kernels.people import filter as kpeople
-from wptrack.kernels.people import occupancy as kocc
+from wptrack.trackers.people.area import working_area
 from wptrack.trackers.people.config import PeopleConfig
+from wptrack.trackers.people.person import PeopleEstimate, PersonEstimate, PersonFilter, person_seed
+from wptrack.trackers.people.population import Population
+
+__all__ = ["PeopleEstimate", "PeopleTracker", "PersonEstimate", "PersonFilter", "coverage_scale", "person_seed"]
 
 log = logging.getLogger(__name__)
 
-_GOLDEN = 0x9E3779B97F4A7C15
-DESCRIPTOR_BLOCK = 64
-"""Lanes per particle of the GPU descriptor (they share the disc pixels)."""
+DEFAULT_FPS = 25.0
+"""Frame rate assumed by a tracker built without ``PeopleConfig.fps`` and stepped without timestamps."""
+COVERAGE_ROWS = 120
+"""The person rectangles are counted on masks reduced to about this many rows (``coverage_scale``)."""
+LEAVE_MARGIN = 0.5
+"""A person farther than this from the ground that any camera sees (the rig's volume when it has one) has left,
+metres."""
 NOISE_STRIDE = 4
 """Pixels between the samples of the image-noise estimate (eq. 18)."""
 
 
-def person_seed(seed: int, slot: int) -> int:
-    """The 64-bit seed of pool slot ``slot``: the run seed mixed with the slot (splitmix64), so that the people's
-    random streams differ and the same run seed gives the same streams."""
-    z = (int(seed) + _GOLDEN * (slot + 1)) & 0xFFFFFFFFFFFFFFFF
-    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & 0xFFFFFFFFFFFFFFFF
-    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & 0xFFFFFFFFFFFFFFFF
-    return z ^ (z >> 31)
+def coverage_scale(rig: Rig) -> int:
+    """Block size of the reduced masks the person rectangles are counted on: about ``COVERAGE_ROWS`` rows for the
+    smallest camera (1: full size for images of up to 180 rows; at most 15, so a block count fits a byte)."""
+    rows = min(cam.height for cam in rig.cameras)
+    return int(min(15, max(1, round(rows / COVERAGE_ROWS))))
 
 
-@dataclass
-class PersonEstimate:
-    """One tracked person in one frame.
-
-    Attributes:
-        id: persistent id (never reused in a run).
-        centroid: (3,) the person's 3D centroid, metres: the particles' mean, its height from the standing-person
-            model unless ``BodyConfig.centroid == "particles"`` (see :class:`~.people_model.BodyConfig`).
-        top: top of the person's silhouette column, metres (NaN when not found).
-        mean: (3,) weighted mean of the particles (the paper's estimate), metres.
-        std: (3,) weighted standard deviation per axis, metres.
-        map: (3,) best particle, metres.
-        ess: effective sample size of the frame's weights.
-        loglik: log of the mean weight (eq. 11 averaged over the particles).
-        age: frames since the person was added.
-        particles: (K, 3) subsample of the particles (before resampling), metres, or None.
-        weights: (K,) their weights relative to the best particle, or None.
-        degenerate: every particle's log-weight was -inf/NaN this frame (floored to ``kernels.core.reduce.LOGW_FLOOR``):
-            the person's predicted particles were kept with uniform weights (the prior), the estimate is finite.
-    """
-
-    id: int
-    centroid: np.ndarray
-    top: float
-    mean: np.ndarray
-    std: np.ndarray
-    map: np.ndarray
-    ess: float
-    loglik: float
-    age: int
-    particles: np.ndarray | None = None
-    weights: np.ndarray | None = None
-    degenerate: bool = False
+def reduced_camera(cam, scale: int):
+    """``cam`` for its image reduced by ``scale`` x ``scale`` blocks
+    (``kernels.people.coverage.downsample_mask_kernel``): the block (u, v) covers the full pixels (scale u .. scale u
+    + scale - 1, ...), whose centre is at full coordinate scale u + (scale - 1) / 2, so f' = f / scale and c' = (c -
+    (scale - 1) / 2) / scale; the remainder columns and rows (width % scale, height % scale) are left out."""
+    if scale == 1:
+        return cam
+    K = np.array(cam.K, dtype=np.float64)
+    K[0, 0] /= scale
+    K[1, 1] /= scale
+    K[0, 2] = (K[0, 2] - 0.5 * (scale - 1)) / scale
+    K[1, 2] = (K[1, 2] - 0.5 * (scale - 1)) / scale
+    return Camera(
+        name=cam.name, width=cam.width // scale, height=cam.height // scale, K=K, dist=cam.dist, R=cam.R, t=cam.t
+    )
 
 
-@dataclass
-class PeopleEstimate:
-    """The tracker's output for one frame.
-
-    Attributes:
-        frame: 0-based frame number.
-        people: the tracked people (added this frame: from the next frame on).
-        sigma_n: image noise sigma_n of eq. 18 (V units, [0, 1]).
-        added, removed: ids added / removed after this frame.
-        timings: seconds per stage.
-    """
-
-    frame: int
-    people: list[PersonEstimate]
-    sigma_n: float
-    added: list[int] = field(default_factory=list)
-    removed: list[int] = field(default_factory=list)
-    timings: dict[str, float] = field(default_factory=dict)
-
-
-def _all_pixel_rays(cam) -> np.ndarray:
-    """(H W, 3) world directions of the viewing rays of every pixel of ``cam`` (row-major), distortion removed."""
-    u, v = np.meshgrid(np.arange(cam.width, dtype=np.float64), np.arange(cam.height, dtype=np.float64))
-    return cam.pixel_rays(np.column_stack([u.ravel(), v.ravel()]))
-
-
-class PersonFilter(ParticleFilter):
-    """One person's particle set (a slot of the tracker's pool): positions and log-weights from
-    :class:`ParticleFilter`, plus, as (N, ...) ping-pong pairs: ``vel`` (metres/frame), ``model`` (appearance C,
-    (N, 3 N_b)), ``desc`` (descriptor A at the particle, (N, 3 N_b)), ``mass`` (its total weight); ``rgb`` (N,)
-    the patch's mean colour (eq. 17)."""
-
-    def __init__(self, tracker: PeopleTracker, slot: int) -> None:
-        cfg = tracker.config
-        super().__init__(
-            cfg.particles,
-            cfg.dynamics.sigma_pos,
-            tracker.device,
-            seed=person_seed(cfg.seed, slot),
-            resampling="systematic",
-            ess_threshold=1.0,  # section 2.1: resample every frame
-            keep_particles=tracker.keep_particles,
-            use_graph=tracker.use_graph,
-        )
-        n, cols, d = self.n, 3 * cfg.descriptor.n_bins, self.device
-        self.tracker = tracker
-        self.slot = slot
-        self.vel = [wp.zeros(n, dtype=wp.vec3, device=d) for _ in range(2)]
-        self.model = [wp.zeros((n, cols), dtype=wp.float32, device=d) for _ in range(2)]
-        self.desc = [wp.zeros((n, cols), dtype=wp.float32, device=d) for _ in range(2)]
-        self.mass = [wp.zeros(n, dtype=wp.float32, device=d) for _ in range(2)]
-        self.rgb = wp.zeros(n, dtype=wp.vec3, device=d)
-        self.sigma_vel = wp.array([cfg.dynamics.sigma_vel], dtype=wp.float32, device=d)
-        oc = cfg.occupancy
-        self.grid_dims = tuple(int(v) for v in np.maximum(np.round(np.asarray(oc.extent) / oc.voxel), 1))
-        self.grid = wp.zeros(self.grid_dims, dtype=wp.float32, device=d)  # occupancy pdf around the person, 1/m^3
-        self.grid_host = wp.zeros(self.grid_dims, dtype=wp.float32, device="cpu", pinned=tracker.is_cuda)
-        self.log_norm = wp.zeros(1, dtype=wp.float64, device=d)
-        self._occupancy_cmds: dict[int, tuple[wp.Launch, wp.Launch]] = {}  # recorded launches per parity
-
-    def state_arrays(self) -> dict[str, wp.array]:
-        """:meth:`ParticleFilter.state_arrays` and the person's other particle fields, both buffers of each (velocity,
-        appearance model C, descriptor A, mass), the patch colours and the velocity noise. The occupancy grid is
-        recomputed when asked for."""
-        arrays = super().state_arrays()
-        for name in ("vel", "model", "desc", "mass"):
-            for k, arr in enumerate(getattr(self, name)):
-                arrays[f"{name}.{k}"] = arr
-        arrays.update(rgb=self.rgb, sigma_vel=self.sigma_vel)
-        return arrays
-
-    def launch_occupancy(self, origin: np.ndarray) -> None:
-        """Launch the occupancy grid of the current particles with its corner at ``origin`` (metres) into
-        :attr:`grid` and its asynchronous copy into :attr:`grid_host` (recorded launches: a few microseconds of
-        host time each instead of a full ``wp.launch``)."""
-        cur = self.parity
-        if cur not in self._occupancy_cmds:
-            oc, d = self.tracker.config.occupancy, self.device
-            norm = wp.launch(
-                kocc.log_norm_kernel,
-                dim=1,
-                inputs=[self.est, int(kreduce.EST_LOGLIK), self.n],
-                outputs=[self.log_norm],
-                device=d,
-                record_cmd=True,
-            )
-            grid = wp.launch(
-                kocc.occupancy_kernel,
-                dim=self.grid_dims,
-                inputs=[self.x[cur], self.logw[cur], self.log_norm, oc.sigma, oc.cutoff, wp.vec3(0.0), oc.voxel],
-                outputs=[self.grid],
-                device=d,
-                record_cmd=True,
-            )
-            self._occupancy_cmds[cur] = (norm, grid)
-        norm, grid = self._occupancy_cmds[cur]
-        grid.set_param_by_name("origin", wp.vec3(*(float(v) for v in origin)))
-        norm.launch()
-        grid.launch()
-        wp.copy(self.grid_host, self.grid)  # asynchronous on CUDA (pinned)
-
-    def spawn(self, xy: np.ndarray, frame: int) -> None:
-        """Start the filter on a new person standing at ``xy`` (ground, metres): particles uniform in the
-        configured cylinder, at rest, each with the descriptor at its position as appearance model C_0."""
-        tr, b = self.tracker, self.tracker.config.birth
-        cur, d = self.parity, self.device
-        wp.launch(
-            kpeople.init_cylinder_kernel,
-            dim=self.n,
-            inputs=[
-                wp.vec3(float(xy[0]), float(xy[1]), 0.0),
-                b.init_radius,
-                b.init_z[0],
-                b.init_z[1],
-                self.seed,
-                frame,
-            ],
-            outputs=[self.x[cur], self.vel[cur]],
-            device=d,
-        )
-        dc = tr.config.descriptor
-        wp.launch(
-            kdesc.descriptor_kernel,
-            dim=self.n,
-            inputs=[
-                tr.drig.cams,
-                tr.bgr,
-                self.x[cur],
-                dc.r_n,
-                dc.n_bins,
-                dc.r_min,
-                dc.r_max,
-                dc.step,
-            ],
-            outputs=[self.desc[cur], self.mass[cur], self.rgb],
-            device=d,
-        )
-        wp.copy(self.model[cur], self.desc[cur])  # C_0 = A_0
-        self._reset_weights()
-
-    def _launch_predict_score(self, src: int, dst: int) -> None:
-        """One frame's particle work. CPU: the fused ``step_kernel`` (one pass per particle). CUDA: the same in three
-        launches (predict, descriptor with one block per particle, score + block moments): the descriptor's ~300 disc
-        pixels per particle are shared by a block's lanes instead of looping in one thread (a few thousand threads
-        leave a GPU idle)."""
-        tr, cfg = self.tracker, self.tracker.config
-        dc, mo = cfg.descriptor, cfg.motion
-        d = self.device
-        if not self.is_cuda:
-            wp.launch_tiled(
-                kpeople.step_kernel,
-                dim=[self.blocks],
-                inputs=[
-                    tr.drig.cams,
-                    tr.mask,
-                    mo.p_b,
-                    mo.log_outside,
-                    int(mo.drop_worst),
-                    tr.bgr,
-                    dc.r_n,
-                    dc.n_bins,
-                    dc.r_min,
-                    dc.r_max,
-                    dc.step,
-                    self.x[src],
-                    self.vel[src],
-                    self.model[src],
-                    self.desc[src],
-                    self.mass[src],
-                    self.ancestors,
-                    self.logw[src],
-                    self.resampled,
-                    self.sigma,
-                    self.sigma_vel,
-                    cfg.dynamics.alpha,
-                    tr.sigma_n,
-                    dc.sigma_p,
-                    self.seed,
-                    self.frame,
-                    self.n,
-                    self.chunk,
-                ],
-                outputs=[
-                    self.x[dst],
-                    self.vel[dst],
-                    self.model[dst],
-                    self.desc[dst],
-                    self.mass[dst],
-                    self.rgb,
-                    self.logw[dst],
-                    self.part_max,
-                    self.part_arg,
-                    self.part,
-                ],
-                block_dim=BLOCK,
-                device=d,
-            )
-            return
-        wp.launch(
-            kpeople.predict_kernel,
-            dim=self.n,
-            inputs=[
-                self.x[src],
-                self.vel[src],
-                self.model[src],
-                self.desc[src],
-                self.mass[src],
-                self.ancestors,
-                self.sigma,
-                self.sigma_vel,
-                cfg.dynamics.alpha,
-                self.seed,
-                self.frame,
-            ],
-            outputs=[self.x[dst], self.vel[dst], self.model[dst]],
-            device=d,
-        )
-        wp.launch_tiled(
-            kdesc.descriptor_block_kernel,
-            dim=[self.n],
-            inputs=[tr.drig.cams, tr.bgr, self.x[dst], dc.r_n, dc.n_bins, dc.r_min, dc.r_max, dc.step],
-            outputs=[self.desc[dst], self.mass[dst], self.rgb],
-            block_dim=DESCRIPTOR_BLOCK,
-            device=d,
-        )
-        wp.launch_tiled(
-            kpeople.score_moments_kernel,
-            dim=[self.blocks],
-            inputs=[
-                tr.drig.cams,
-                tr.mask,
-                mo.p_b,
-                mo.log_outside,
-                int(mo.drop_worst),
-                self.x[dst],
-                self.model[dst],
-                self.desc[dst],
-                self.mass[dst],
-                self.rgb,
-                dc.n_bins,
-                self.logw[src],
-                self.resampled,
-                tr.sigma_n,
-                dc.sigma_p,
-                self.n,
-                self.chunk,
-            ],
-            outputs=[self.logw[dst], self.part_max, self.part_arg, self.part],
-            block_dim=BLOCK,
-            device=d,
-        )
-
-    def estimate_from_host(self, person_id: int, age: int) -> PersonEstimate:
-        """The estimate of the last frame from the host copies (after the device synchronised)."""
-        e = self.est_host.numpy()
-        mean = e[kreduce.EST_MEAN : kreduce.EST_MEAN + 3].copy()
-        est = PersonEstimate(
-            id=person_id,
-            centroid=mean.copy(),
-            top=float("nan"),
-            mean=mean,
-            std=e[kreduce.EST_STD : kreduce.EST_STD + 3].copy(),
-            map=e[kreduce.EST_MAP : kreduce.EST_MAP + 3].copy(),
-            ess=float(e[kreduce.EST_ESS]),
-            loglik=float(e[kreduce.EST_LOGLIK]),
-            age=age,
-            degenerate=bool(e[kreduce.EST_DEGENERATE]),
-        )
-        if self.keep:
-            est.particles = self.sub_x_host.numpy().copy()
-            est.weights = self.sub_w_host.numpy().copy()
-        return est
-
-
-class PeopleTracker:
+class PeopleTracker(Population):
     """S2 people tracker on a rig of two or more cameras.
 
     Args:
@@ -376,12 +98,18 @@ class PeopleTracker:
         use_graph: capture each person's frame chain as a CUDA graph (default: on CUDA).
         keep_particles: particles per person and frame returned for reports and hulls (0: none).
 
+    Time: the frame interval dt is ``1 / config.fps`` (``DEFAULT_FPS`` when None) unless :meth:`step` is given
+    timestamps; the dynamics (``DynamicsConfig.per_frame``) and the birth and removal times follow it.
+
     Device buffers (P = pixels of all cameras):
         bgr, bgr_prev: (3 P,) uint8 this and the previous frame. mask: (P,) uint8 motion masks (nonzero = motion).
         sigma_n: (1,) float32 image noise (eq. 18, from every ``NOISE_STRIDE``-th pixel).
-        rays: (P,) vec3 world direction of every pixel's viewing ray.
-        votes, free_votes: (nx * ny,) int32 ground evidence map: cameras voting for each cell, with all motion /
-            with the motion not explained by a tracked person.
+        integral, free_integral: the (H+1) x (W+1) integral images of the masks and of the motion the tracked people's
+            rectangles leave (``free_mask``). boxes: (max_people, cameras) vec4 those rectangles.
+        cover, free_cover: (cameras, nx * ny) float32 the evidence map: coverage of a person's rectangle at each cell
+            by all motion / by the unexplained motion, -1 where the camera does not see it.
+        hist: (max_people, cameras, 2, 17) float32 the people's appearance histograms (``kernels.people.coverage``).
+        slot_xy, slot_alive: (max_people,) each pool slot's ground position and whether it tracks somebody.
 
     Raises:
         ConfigError: fewer than two cameras, a bad configuration or a pool that does not fit the device.
@@ -412,6 +140,15 @@ class PeopleTracker:
         self.is_cuda = dev.is_cuda
         self.use_graph = self.is_cuda if use_graph is None else (bool(use_graph) and self.is_cuda)
         self.keep_particles = min(int(keep_particles), config.particles)
+        self.fps = float(config.fps) if config.fps is not None else DEFAULT_FPS
+        self.frame_dt = 1.0 / self.fps  # seconds; :meth:`step` with timestamps changes it
+        self.frame_dynamics = config.dynamics.per_frame(self.frame_dt)
+        sp, sv, al = self.frame_dynamics
+        self.dt = wp.array([self.frame_dt], dtype=wp.float32, device=d)  # [0] dt, seconds
+        self.sigma_vel = wp.array(list(sv), dtype=wp.float32, device=d)  # velocity noise of one frame, m/s: xy, z
+        self.alpha = wp.array([al], dtype=wp.float32, device=d)  # [0] eq. 6's factor of one frame
+        self.decay = wp.array([self._decay(self.frame_dt)], dtype=wp.float32, device=d)  # [0] unseen velocity factor
+        self._last_timestamp: float | None = None
         self.drig = DeviceRig(rig, d)
         npx = self.drig.total_pixels
         self.bgr = wp.zeros(3 * npx, dtype=wp.uint8, device=d)
@@ -426,20 +163,62 @@ class PeopleTracker:
         self._bgr_host = wp.zeros(3 * npx, dtype=wp.uint8, device="cpu", pinned=pinned)
         self._mask_host = wp.zeros(npx, dtype=wp.uint8, device="cpu", pinned=pinned)
         self._sigma_host = wp.zeros(1, dtype=wp.float32, device="cpu", pinned=pinned)
-        # ground evidence map over the rig's working volume
+        # ground evidence map over the working area (the rig's volume, else the ground two cameras see)
         b = config.birth
-        lo, hi = rig.bounds()
+        self.area = working_area(rig, config.area)
+        log.info("%s", self.area.describe())
+        lo, hi = self.area.bounds
         self.grid_origin = np.array([lo[0], lo[1]], dtype=np.float64)
-        self.nx = max(1, int(math.ceil((hi[0] - lo[0]) / b.cell)))
-        self.ny = max(1, int(math.ceil((hi[1] - lo[1]) / b.cell)))
-        self.volume = (np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))
-        self.heights = wp.array(np.asarray(b.heights, dtype=np.float32), dtype=wp.float32, device=d)
-        self.votes = wp.zeros(self.nx * self.ny, dtype=wp.int32, device=d)
-        self.free_votes = wp.zeros(self.nx * self.ny, dtype=wp.int32, device=d)
-        self._votes_host = wp.zeros(self.nx * self.ny, dtype=wp.int32, device="cpu", pinned=pinned)
-        self._free_host = wp.zeros(self.nx * self.ny, dtype=wp.int32, device="cpu", pinned=pinned)
-        rays = np.concatenate([_all_pixel_rays(cam) for cam in rig.cameras]).astype(np.float32)
-        self.rays = wp.array(rays, dtype=wp.vec3, device=d)  # (P,) world direction of every pixel's viewing ray
+        self.nx = max(1, int(math.ceil((hi[0] - lo[0]) / b.cell - 1e-9)))
+        self.ny = max(1, int(math.ceil((hi[1] - lo[1]) / b.cell - 1e-9)))
+        self.area_map = self.area.resample(self.grid_origin, b.cell, self.nx, self.ny)  # (ny, nx) bool
+        self.keep_area = self.area.followed.grown(LEAVE_MARGIN)  # a person beyond it has left
+        self.volume = (np.array([lo[0], lo[1], 0.0]), np.array([hi[0], hi[1], self.area.z_top]))
+        # the masks' integral images (all motion, and the motion the tracked people's rectangles leave), the person
+        # rectangles' coverage on the evidence map's cells, and the person-level terms of the particles' weights
+        ncam = len(rig)
+        self.box_scale = s = coverage_scale(rig)  # the rectangles are counted on s x s blocks of the masks
+        self.sdrig = DeviceRig(Rig(tuple(reduced_camera(c, s) for c in rig.cameras)), d)  # the rig at that size
+        self.small_mask = wp.zeros(self.sdrig.total_pixels, dtype=wp.uint8, device=d)
+        self.integral = wp.zeros(self.sdrig.total_integral, dtype=wp.int32, device=d)
+        self.free_mask = wp.zeros(self.sdrig.total_pixels, dtype=wp.uint8, device=d)
+        self.free_integral = wp.zeros(self.sdrig.total_integral, dtype=wp.int32, device=d)
+        maxw, maxh = self.sdrig.max_width, self.sdrig.max_height
+        seg = int(kcolour.SEGMENT)
+        self._row_dims = (ncam, maxh, -(-maxw // seg))
+        self._col_dims = (ncam, maxw + 1, -(-maxh // seg))
+        self._row_seg = wp.zeros(self._row_dims, dtype=wp.int32, device=d)
+        self._col_seg = wp.zeros(self._col_dims, dtype=wp.int32, device=d)
+        self._pixel_dims = (ncam, maxh, maxw)  # of the reduced masks
+        self._rows = max(c.height for c in rig.cameras)  # of the full images
+        cells = self.nx * self.ny
+        self.cover = wp.zeros((ncam, cells), dtype=wp.float32, device=d)  # coverage of all motion, -1: unseen
+        self.free_cover = wp.zeros((ncam, cells), dtype=wp.float32, device=d)  # of the unexplained motion
+        self._cover_host = wp.zeros((ncam, cells), dtype=wp.float32, device="cpu", pinned=pinned)
+        cell_area = wp.zeros((ncam, cells), dtype=wp.float32, device=d)
+        wp.launch(
+            kcov.box_area_kernel,
+            dim=(ncam, cells),
+            inputs=[self.sdrig.cams, wp.vec2(*self.grid_origin), b.cell, self.nx]
+            + [config.person.half_width, config.person.height, config.person.min_visible, float(s * s)],
+            outputs=[cell_area],
+            device=d,
+        )
+        self.cell_area = cell_area.numpy().reshape(ncam, self.ny, self.nx)  # pixels of each cell's rectangle
+        self._free_cover_host = wp.zeros((ncam, cells), dtype=wp.float32, device="cpu", pinned=pinned)
+        self.boxes = wp.zeros((b.max_people, ncam), dtype=wp.vec4, device=d)  # tracked people's rectangles per slot
+        self.full_boxes = wp.zeros((b.max_people, ncam), dtype=wp.vec4, device=d)  # the same in the full images
+        pc = config.person
+        self.terms = kcov.PersonTerms()
+        self.terms.half_width, self.terms.height, self.terms.min_visible = pc.half_width, pc.height, pc.min_visible
+        self.terms.unit = float(s * s)
+        self.terms.slope, self.terms.offset = pc.slope_offset
+        self.terms.exclusion_radius, self.terms.exclusion_weight = pc.exclusion_radius, pc.exclusion_weight
+        nb = int(kcov.HIST_BINS)
+        self.hist = wp.zeros((b.max_people, ncam, int(kcov.HIST_PARTS), nb + 1), dtype=wp.float32, device=d)
+        self._hist_host = wp.zeros(self.hist.shape, dtype=wp.float32, device="cpu", pinned=pinned)
+        self.slot_xy = wp.zeros(b.max_people, dtype=wp.vec2, device=d)  # ground position per pool slot
+        self.slot_alive = wp.zeros(b.max_people, dtype=wp.int32, device=d)  # 1 where the slot tracks somebody
         self.people_xy = wp.zeros(b.max_people, dtype=wp.vec2, device=d)  # the tracked people's ground positions
         body = config.body
         self.column_z_lo = 0.05
@@ -454,16 +233,28 @@ class PeopleTracker:
         self.pool = [PersonFilter(self, k) for k in range(b.max_people)]
         self.slot_id = np.full(b.max_people, -1, dtype=np.int64)  # person id per slot, -1 = free
         self.slot_age = np.zeros(b.max_people, dtype=np.int64)
-        self.slot_miss = np.zeros(b.max_people, dtype=np.int64)
-        self.slot_close = np.zeros(b.max_people, dtype=np.int64)
-        self.pending = np.zeros((0, 3), dtype=np.float64)  # x, y, consecutive frames of unexplained evidence
+        self.slot_miss = np.zeros(b.max_people, dtype=np.float64)  # seconds without support
+        self.slot_close = np.zeros(b.max_people, dtype=np.float64)  # seconds closer than merge_distance to another
+        self.slot_track = np.zeros((b.max_people, 3))  # ground x, y and time (seconds) of the walk's reference point
+        self.slot_speed = np.zeros(b.max_people)  # ground speed over the last STILL_WINDOW seconds, m/s
+        self.slot_still = np.zeros(b.max_people, dtype=bool)  # lost from sight while standing: held longer
+        self.pending = np.zeros((0, 3), dtype=np.float64)  # x, y, seconds of unexplained evidence in a row
+        nparts = int(kcov.HIST_PARTS)
+        self.slot_app = np.zeros((b.max_people, nparts, nb))  # appearance per slot: normalised histograms
+        self.slot_app_seen = np.zeros((b.max_people, nparts), dtype=bool)  # the part has been seen
+        self.slot_new = np.zeros(b.max_people, dtype=bool)  # added last frame: may be somebody lost before
+        self.lost: list[dict] = []  # people removed for lack of support: id, time, x, y, appearance (re-id)
+        self.clock = 0.0  # seconds since the first frame (sum of the frame intervals)
         self.next_id = 0
         self.frames_done = 0
         log.info(
-            "people tracker: %d particles per person, up to %d people, %d cameras, evidence map %dx%d, device %s",
+            "people tracker: %d particles per person, up to %d people, %d cameras, %g frames/s%s, evidence map %dx%d, "
+            "device %s",
             config.particles,
             b.max_people,
             len(rig),
+            self.fps,
+            "" if config.fps is not None else " (assumed: no PeopleConfig.fps)",
             self.nx,
             self.ny,
             self.device,
@@ -486,7 +277,7 @@ class PeopleTracker:
             if m.dtype != np.uint8 and m.dtype != np.bool_:
                 m = m != 0
             bgr[3 * offs[c] : 3 * offs[c + 1]] = img.reshape(-1)
-            msk[offs[c] : offs[c + 1]] = m.reshape(-1)  # the kernels read nonzero as motion
+            np.not_equal(m.reshape(-1), 0, out=msk[offs[c] : offs[c + 1]].view(np.bool_))  # 0/1: counted
         wp.copy(self.bgr, self._bgr_host)
         wp.copy(self.mask, self._mask_host)
 
@@ -511,34 +302,84 @@ class PeopleTracker:
             device=d,
         )
         wp.copy(self.bgr_prev, self.bgr)
+        wp.launch(
+            kcov.downsample_mask_kernel,
+            dim=self._pixel_dims,
+            inputs=[self.drig.cams, self.mask, self.box_scale, self.sdrig.cams],
+            outputs=[self.small_mask],
+            device=d,
+        )
+        self._integral(self.small_mask, self.integral)
+
+    def _integral(self, mask: wp.array, out: wp.array) -> None:
+        """The (H+1) x (W+1) integral image of every camera's reduced ``mask`` (block counts) into ``out``
+        (``kernels.colour.hsi``'s four segmented scans)."""
+        cams, d = self.sdrig.cams, self.device
+        wp.launch(
+            kcolour.row_segment_sums_kernel, dim=self._row_dims, inputs=[cams, mask], outputs=[self._row_seg], device=d
+        )
+        wp.launch(
+            kcolour.row_scan_kernel, dim=self._row_dims, inputs=[cams, mask, self._row_seg], outputs=[out], device=d
+        )
+        wp.launch(
+            kcolour.col_segment_sums_kernel, dim=self._col_dims, inputs=[cams, out], outputs=[self._col_seg], device=d
+        )
+        wp.launch(kcolour.col_scan_kernel, dim=self._col_dims, inputs=[cams, self._col_seg], outputs=[out], device=d)
+
+    def _coverage(self) -> None:
+        """The tracked people's rectangles after this frame (``boxes``: what the others explain in the next frame's
+        rectangle terms) and the person rectangles' coverage on the evidence map's cells (``kernels.people.coverage``):
+        of all motion, and of the motion outside the tracked people's rectangles; copied to the host asynchronously."""
+        pc, b, d = self.config.person, self.config.birth, self.device
+        cams = self.sdrig.cams
+        origin = wp.vec2(*self.grid_origin)
+        dims = (len(self.rig), self.nx * self.ny)
+        common = [origin, b.cell, self.nx, pc.half_width, pc.height, pc.min_visible, self.terms.unit]
+        wp.launch(kcov.coverage_kernel, dim=dims, inputs=[cams, self.integral, *common], outputs=[self.cover], device=d)
+        wp.launch(
+            kcov.person_boxes_kernel,
+            dim=(len(self.pool), len(self.rig)),
+            inputs=[cams, self.slot_xy, self.slot_alive, pc.half_width, pc.height],
+            outputs=[self.boxes],
+            device=d,
+        )
+        wp.launch(
+            kcov.explained_mask_kernel,
+            dim=self._pixel_dims,
+            inputs=[cams, self.small_mask, self.boxes, len(self.pool)],
+            outputs=[self.free_mask],
+            device=d,
+        )
+        self._integral(self.free_mask, self.free_integral)
+        wp.launch(
+            kcov.coverage_kernel,
+            dim=dims,
+            inputs=[cams, self.free_integral, *common],
+            outputs=[self.free_cover],
+            device=d,
+        )
+        wp.copy(self._cover_host, self.cover)
+        wp.copy(self._free_cover_host, self.free_cover)
+        self.hist.zero_()
+        wp.launch(
+            kcov.person_boxes_kernel,
+            dim=(len(self.pool), len(self.rig)),
+            inputs=[self.drig.cams, self.slot_xy, self.slot_alive, pc.half_width, pc.height],
+            outputs=[self.full_boxes],
+            device=d,
+        )
+        wp.launch(
+            kcov.person_histogram_kernel,
+            dim=(len(self.pool), len(self.rig), int(kcov.HIST_PARTS), self._rows),
+            inputs=[self.drig.cams, self.bgr, self.mask, self.full_boxes],
+            outputs=[self.hist],
+            device=d,
+        )
+        wp.copy(self._hist_host, self.hist)
 
     def _evidence(self, n: int) -> None:
-        """The ground evidence map and the column tops, with the motion of the ``n`` people tracked after this
-        frame's prediction explained (``people_xy[:n]``, filled on the device from their estimates); the results are
-        copied to the host asynchronously (the frame's one synchronisation follows)."""
-        b = self.config.birth
-        wp.launch(
-            kpeople.ground_votes_kernel,
-            dim=self.nx * self.ny,
-            inputs=[
-                self.drig.cams,
-                self.mask,
-                self.rays,
-                self.heights,
-                self.people_xy,
-                n,
-                b.person_radius,
-                b.person_height,
-                wp.vec2(*self.grid_origin),
-                b.cell,
-                self.nx,
-                b.min_fraction,
-            ],
-            outputs=[self.votes, self.free_votes],
-            device=self.device,
-        )
-        wp.copy(self._votes_host, self.votes)
-        wp.copy(self._free_host, self.free_votes)
+        """The silhouette column tops of the ``n`` people tracked after this frame (``people_xy[:n]``, filled on the
+        device from their estimates), copied to the host asynchronously (the frame's one synchronisation follows)."""
         if n:
             body = self.config.body
             axes = kpeople.COLUMN_AXES
@@ -567,14 +408,29 @@ class PeopleTracker:
 
     # --- the frame --------------------------------------------------------------------------------------
     def step(
-        self, images: Sequence[np.ndarray] | tuple[Sequence[np.ndarray], Sequence[np.ndarray]], masks=None
+        self,
+        images: Sequence[np.ndarray] | tuple[Sequence[np.ndarray], Sequence[np.ndarray]],
+        masks: Sequence[np.ndarray] | None = None,
+        occupancy: bool = False,
+        timestamp: float | None = None,
     ) -> PeopleEstimate:
         """Track one synchronised set of frames: one (H, W, 3) uint8 BGR image and one (H, W) motion mask
         (nonzero = motion) per camera, in rig order; ``step(images, masks)`` or ``step((images, masks))`` (the
-        observation of the tracker contract, :class:`wptrack.core.filter.Tracker`)."""
+        observation of the tracker contract, :class:`wptrack.core.filter.Tracker`). With ``occupancy``, every person
+        of the returned estimate carries its occupancy grid (``PersonEstimate.occupancy``), computed before anybody
+        is removed.
+
+        Args:
+            timestamp: the frames' time, seconds (any origin): dt is the time since the previous frame's timestamp
+                (the first frame, and frames without one, keep the current dt).
+
+        Raises:
+            FrameError: bad images or masks (see :meth:`upload`), or a timestamp not after the previous one.
+        """
         if masks is None:
             images, masks = images
         t0 = time.perf_counter()
+        self._set_time(timestamp)
         self.upload(images, masks)
         t1 = time.perf_counter()
         self._observe()
@@ -582,18 +438,22 @@ class PeopleTracker:
         for j, k in enumerate(active):
             p = self.pool[k]
             p.launch_frame()
-            wp.launch(
-                kpeople.person_xy_kernel,
-                dim=1,
-                inputs=[p.est, int(kreduce.EST_MEAN), j],
-                outputs=[self.people_xy],
-                device=self.device,
-            )
+            for index, out in ((j, self.people_xy), (k, self.slot_xy)):
+                wp.launch(
+                    kpeople.person_xy_kernel,
+                    dim=1,
+                    inputs=[p.est, int(kreduce.EST_MEAN), index],
+                    outputs=[out],
+                    device=self.device,
+                )
+        self._coverage()
         self._evidence(len(active))
         wp.copy(self._sigma_host, self.sigma_n)
         wp.synchronize_device(self.device)  # the frame's one synchronisation: estimates, evidence, tops on the host
         t2 = time.perf_counter()
         people = []
+        self.clock += self.frame_dt
+        self._update_appearance(active)
         tops = self._top_host.numpy().max(axis=1)  # the highest of each person's axes
         body = self.config.body
         for j, k in enumerate(active):
@@ -604,6 +464,10 @@ class PeopleTracker:
                 if body.centroid == "standing":
                     person.centroid[2] = body.ratio * person.top  # standing-person model (BodyConfig)
             people.append(person)
+        if occupancy and active:  # before the population update: the grids belong to this frame's estimates
+            grids = self._occupancy_grids(active)
+            for person, grid in zip(people, grids, strict=True):
+                person.occupancy = grid
         est = PeopleEstimate(frame=self.frames_done, people=people, sigma_n=float(self._sigma_host.numpy()[0]))
         self._update_population(est, active, tops[: len(active)] > 0)
         self.frames_done += 1
@@ -621,113 +485,6 @@ class PeopleTracker:
             if max_frames is not None and k >= max_frames:
                 return
             yield self.step(obs)
-
-    # --- who is there (ours) ---------------------------------------------------------------------------------
-    def _cell_centres(self) -> tuple[np.ndarray, np.ndarray]:
-        """(x, y) of the evidence map's cell centres, metres, (ny, nx) each (computed once)."""
-        if self._centres is None:
-            c = self.config.birth.cell
-            xs = self.grid_origin[0] + c * (np.arange(self.nx) + 0.5)
-            ys = self.grid_origin[1] + c * (np.arange(self.ny) + 0.5)
-            self._centres = tuple(np.meshgrid(xs, ys))
-        return self._centres
-
-    def _update_population(self, est: PeopleEstimate, active: list[int], column: np.ndarray) -> None:
-        """Remove people without multi-view support, duplicates and people who left; add people where the
-        evidence is unexplained for several frames. Host code on the small evidence map.
-
-        A person is supported while motion seen by several cameras is found either on its silhouette column
-        (``column[j]``: the column-top search found a point, which stays true when furniture hides everything
-        but the head and shoulders) or in a cell of the evidence map within ``support_radius``."""
-        b = self.config.birth
-        votes = self._votes_host.numpy().reshape(self.ny, self.nx)
-        free_votes = self._free_host.numpy().reshape(self.ny, self.nx)
-        support = votes >= self.min_votes
-        gx, gy = self._cell_centres()
-        lo, hi = self.volume
-        margin = 0.5
-        by_slot = {k: e for k, e in zip(active, est.people, strict=True)}
-        for j, (k, e) in enumerate(by_slot.items()):
-            x, y = e.mean[0], e.mean[1]
-            near = (gx - x) ** 2 + (gy - y) ** 2 <= b.support_radius**2
-            self.slot_miss[k] = 0 if column[j] or np.any(support & near) else self.slot_miss[k] + 1
-            outside = np.any(e.mean[:2] < lo[:2] - margin) or np.any(e.mean[:2] > hi[:2] + margin)
-            if self.slot_miss[k] >= b.frames_to_remove or outside or not np.all(np.isfinite(e.mean)):
-                self._remove(k, est)
-        # duplicates: two filters on one person
-        alive = [k for k in active if self.slot_id[k] >= 0]
-        for k in alive:
-            close = any(
-                np.hypot(*(by_slot[k].mean[:2] - by_slot[j].mean[:2])) < b.merge_distance
-                for j in alive
-                if j != k and self.slot_id[j] >= 0
-            )
-            self.slot_close[k] = self.slot_close[k] + 1 if close else 0
-        for k in sorted(alive, key=lambda s: -self.slot_id[s]):  # the younger of a pair goes
-            if self.slot_id[k] >= 0 and self.slot_close[k] >= b.frames_to_remove:
-                self._remove(k, est)
-                for j in alive:
-                    self.slot_close[j] = 0
-        # unexplained evidence -> candidates; at most one person added per frame, the strongest (see BirthConfig)
-        free = free_votes >= self.min_votes
-        for k in range(len(self.pool)):  # people added or kept this frame explain their surroundings
-            if self.slot_id[k] >= 0 and k in by_slot:
-                e = by_slot[k]
-                free &= (gx - e.mean[0]) ** 2 + (gy - e.mean[1]) ** 2 > b.exclusion**2
-        candidates = self._blobs(free, free_votes, gx, gy)
-        pending, added = [], False
-        for cx, cy, _strength in sorted(candidates, key=lambda c: -c[2]):
-            count = 1.0
-            if len(self.pending):
-                dist = np.hypot(self.pending[:, 0] - cx, self.pending[:, 1] - cy)
-                j = int(np.argmin(dist))
-                if dist[j] < 0.5:
-                    count = self.pending[j, 2] + 1
-            if count >= b.frames_to_add and not added:
-                self._add(np.array([cx, cy]), est)
-                added = True
-            else:
-                pending.append((cx, cy, min(count, b.frames_to_add)))
-        self.pending = np.asarray(pending, dtype=np.float64).reshape(-1, 3)
-
-    def _blobs(
-        self, free: np.ndarray, votes: np.ndarray, gx: np.ndarray, gy: np.ndarray
-    ) -> list[tuple[float, float, float]]:
-        """Vote-weighted centroids and total votes of the connected regions of ``free`` cells with at least
-        ``min_area`` cells."""
-        if not free.any():
-            return []
-        import cv2
-
-        count, labels, stats, _ = cv2.connectedComponentsWithStats(free.astype(np.uint8), connectivity=8)
-        out = []
-        for lab in range(1, count):
-            if stats[lab, cv2.CC_STAT_AREA] < self.config.birth.min_area:
-                continue
-            sel = labels == lab
-            w = votes[sel].astype(np.float64)
-            out.append((float(np.sum(gx[sel] * w) / w.sum()), float(np.sum(gy[sel] * w) / w.sum()), float(w.sum())))
-        return out
-
-    def _add(self, xy: np.ndarray, est: PeopleEstimate) -> None:
-        free = np.nonzero(self.slot_id < 0)[0]
-        if not free.size:
-            log.warning("frame %d: no free slot for a new person at %s (max_people reached)", est.frame, xy.round(2))
-            return
-        k = int(free[0])
-        self.pool[k].spawn(xy, self.frames_done)
-        self.slot_id[k] = self.next_id
-        self.slot_age[k] = 0
-        self.slot_miss[k] = 0
-        self.slot_close[k] = 0
-        est.added.append(self.next_id)
-        log.info("frame %d: person %d added at (%.2f, %.2f)", est.frame, self.next_id, xy[0], xy[1])
-        self.next_id += 1
-
-    def _remove(self, k: int, est: PeopleEstimate) -> None:
-        est.removed.append(int(self.slot_id[k]))
-        log.info("frame %d: person %d removed", est.frame, self.slot_id[k])
-        self.slot_id[k] = -1
 
     # --- outputs beyond the estimate ------------------------------------------------------------------------
     def occupancy(self, person_id: int) -> tuple[np.ndarray, np.ndarray]:
@@ -747,58 +504,57 @@ class PeopleTracker:
         """:meth:`occupancy` of several people (default: everybody tracked): every grid is launched into the
         person's buffer (allocated once), then one synchronisation and the copies back."""
         ids = self.tracked_ids if person_ids is None else [int(i) for i in person_ids]
-        oc = self.config.occupancy
-        launched = {}
+        slots = []
         for pid in ids:
-            slots = np.nonzero(self.slot_id == pid)[0]
-            if not slots.size:
-                raise ConfigError(f"person {pid} is not tracked")
-            p = self.pool[int(slots[0])]
+            found = np.nonzero(self.slot_id == pid)[0]
+            if not found.size:
+                raise ConfigError(f"person {pid} is not tracked (tracked now: {self.tracked_ids})")
+            slots.append(int(found[0]))
+        return dict(zip(ids, self._occupancy_grids(slots), strict=True))
+
+    def _occupancy_grids(self, slots: Sequence[int]) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The occupancy grids of the filters in pool ``slots`` around their last estimates (host copies): every
+        grid is launched into its filter's buffer (allocated once), then one synchronisation and the copies."""
+        oc = self.config.occupancy
+        launched = []
+        for k in slots:
+            p = self.pool[k]
             centre = p.est_host.numpy()[kreduce.EST_MEAN : kreduce.EST_MEAN + 3]
             dims = np.asarray(p.grid_dims)
             origin = np.floor((centre - 0.5 * dims * oc.voxel) / oc.voxel) * oc.voxel  # on the voxel lattice
             p.launch_occupancy(origin)
-            launched[pid] = (origin, p)
+            launched.append((origin, p))
         wp.synchronize_device(self.device)
-        return {pid: (origin, p.grid_host.numpy().copy()) for pid, (origin, p) in launched.items()}
-
-    def add_person(self, xy: Sequence[float]) -> int:
-        """Start tracking a person standing at ``xy`` (ground x, y, metres) now, as if added by the evidence (e.g.
-        known initial positions). Returns its id.
-
-        Raises:
-            ConfigError: every slot of the pool is taken (``BirthConfig.max_people``).
-        """
-        if not np.any(self.slot_id < 0):
-            raise ConfigError(f"max_people ({len(self.pool)}) people are tracked already")
-        est = PeopleEstimate(frame=self.frames_done, people=[], sigma_n=0.0)
-        self._add(np.asarray(xy, dtype=np.float64)[:2], est)
-        return est.added[0]
-
-    @property
-    def tracked_ids(self) -> list[int]:
-        """Ids of the people tracked now."""
-        return [int(i) for i in self.slot_id if i >= 0]
+        return [(origin, p.grid_host.numpy().copy()) for origin, p in launched]
 
     # --- checkpoints -----------------------------------------------------------------------------------------
-    _HOST_ARRAYS = ("slot_id", "slot_age", "slot_miss", "slot_close", "pending")
-    """The population bookkeeping kept on the host (per slot: person id, age, missed and close frames; pending
-    births)."""
-
     def state_arrays(self) -> dict[str, wp.array]:
         """The device arrays that carry the tracker to the next frame: the previous frame (the noise estimate of eq. 18
-        differences consecutive frames) and every slot's person filter (``person<k>.<name>``, see
+        differences consecutive frames), the frame interval's parameters (dt, velocity noise, eq. 6's factor, the
+        unseen velocity's decay), each slot's ground position, whether it tracks somebody and its rectangles (the next
+        frame's gate and person terms read them), and every slot's person filter (``person<k>.<name>``, see
         :meth:`PersonFilter.state_arrays`), free slots included (a checkpoint has the same names whoever is tracked)."""
-        arrays = {"bgr_prev": self.bgr_prev}
+        arrays = {
+            "bgr_prev": self.bgr_prev,
+            "dt": self.dt,
+            "sigma_vel": self.sigma_vel,
+            "alpha": self.alpha,
+            "decay": self.decay,
+            "slot_xy": self.slot_xy,
+            "slot_alive": self.slot_alive,
+            "boxes": self.boxes,
+        }
         for k, p in enumerate(self.pool):
             arrays.update({f"person{k}.{name}": arr for name, arr in p.state_arrays().items()})
         return arrays
 
     def host_state(self) -> dict[str, np.ndarray]:
-        """The population bookkeeping, the next id, the frame count and each slot's parity and frame count."""
-        state = {f"__{name}__": getattr(self, name).copy() for name in self._HOST_ARRAYS}
-        state["__next_id__"] = np.int64(self.next_id)
+        """The population bookkeeping (:meth:`Population.population_state`), the frame count, the frame interval and
+        the last timestamp, and each slot's parity and frame count."""
+        state = self.population_state()
         state["__frames_done__"] = np.int64(self.frames_done)
+        state["__frame_dt__"] = np.float64(self.frame_dt)
+        state["__last_timestamp__"] = np.float64(np.nan if self._last_timestamp is None else self._last_timestamp)
         state["__parity__"] = np.array([p.parity for p in self.pool], dtype=np.int64)
         state["__person_frames__"] = np.array([p.frames_done for p in self.pool], dtype=np.int64)
         return state
@@ -817,10 +573,11 @@ class PeopleTracker:
         arrays = self.state_arrays()
         check_state(arrays, state, tuple(self.host_state()))
         load_arrays(arrays, state)
-        for name in self._HOST_ARRAYS:
-            setattr(self, name, np.array(state[f"__{name}__"]))
-        self.next_id = int(state["__next_id__"])
+        self.load_population_state(state)
         self.frames_done = int(state["__frames_done__"])
+        self.set_frame_interval(float(state["__frame_dt__"]))
+        last = float(state["__last_timestamp__"])
+        self._last_timestamp = None if math.isnan(last) else last
         for p, parity, frames in zip(self.pool, state["__parity__"], state["__person_frames__"], strict=True):
             p.parity, p.frames_done = int(parity), int(frames)
         wp.synchronize_device(self.device)

@@ -1,0 +1,195 @@
+"""The device guard keeps a tracker's CUDA graph capture apart from the motion masks' device work in other threads
+(a mask thread's launch on the device's one current stream would land in the graph or fail the capture)."""
+
+from __future__ import annotations
+
+import threading
+
+from wptrack.core.device import DeviceGuard, device_guard
+
+WAIT = 5.0  # seconds a step that must happen may take (a loaded CI box)
+BRIEF = 0.2  # seconds a step that must not happen is given
+
+
+def _in_thread(fn) -> tuple[threading.Thread, threading.Event]:
+    done = threading.Event()
+
+    def run():
+        fn()
+        done.set()
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    return t, done
+
+
+def test_shared_sections_run_together():
+    guard = DeviceGuard()
+    inside = threading.Barrier(2, timeout=WAIT)  # both threads inside at once, or the barrier breaks
+
+    def work():
+        with guard.shared():
+            inside.wait()
+
+    threads = [_in_thread(work) for _ in range(2)]
+    for t, done in threads:
+        assert done.wait(WAIT)
+        t.join()
+
+
+def test_a_capture_waits_for_the_shared_work_in_progress():
+    guard = DeviceGuard()
+    entered, release = threading.Event(), threading.Event()
+
+    def mask_frame():
+        with guard.shared():
+            entered.set()
+            release.wait(WAIT)
+
+    t1, _ = _in_thread(mask_frame)
+    assert entered.wait(WAIT)
+    captured = threading.Event()
+
+    def capture():
+        with guard.exclusive():
+            captured.set()
+
+    t2, done = _in_thread(capture)
+    assert not captured.wait(BRIEF)  # the mask frame is still on the device
+    release.set()
+    assert captured.wait(WAIT) and done.wait(WAIT)
+    t1.join()
+    t2.join()
+
+
+def test_new_shared_work_waits_for_a_capture_in_progress_and_one_waiting():
+    guard = DeviceGuard()
+    order: list[str] = []
+    holding, release = threading.Event(), threading.Event()
+
+    def mask_frame():
+        with guard.shared():
+            holding.set()
+            release.wait(WAIT)
+            order.append("first frame")
+
+    def capture():
+        with guard.exclusive():
+            order.append("capture")
+
+    def later_frame():
+        with guard.shared():
+            order.append("later frame")
+
+    t1, _ = _in_thread(mask_frame)
+    assert holding.wait(WAIT)
+    t2, captured = _in_thread(capture)
+    while not guard._waiting:  # the capture is queued behind the first frame
+        threading.Event().wait(0.005)
+    t3, later = _in_thread(later_frame)
+    assert not later.wait(BRIEF)  # held back: a waiting capture goes first
+    release.set()
+    assert captured.wait(WAIT) and later.wait(WAIT)
+    for t in (t1, t2, t3):
+        t.join()
+    assert order == ["first frame", "capture", "later frame"]
+
+
+def test_one_guard_per_device(device):
+    """Every name of a device gives its one guard (the tracker may say ``cuda``, the masks ``cuda:0``)."""
+    import warp as wp
+
+    d = wp.get_device(device)
+    assert device_guard(device) is device_guard(d) is device_guard(d.alias)
+    if d.is_cuda and d.ordinal == wp.get_cuda_device().ordinal:
+        assert device_guard("cuda") is device_guard(d.alias)
+    if d.is_cuda:
+        assert device_guard(d) is not device_guard("cpu")
+
+
+def test_the_frame_chain_captures_under_the_exclusive_guard(monkeypatch):
+    import contextlib
+
+    import warp as wp
+
+    from wptrack.core.filter import FrameChain
+
+    guard = device_guard("cpu")
+    seen = []
+
+    class Chain(FrameChain):
+        def stages(self, src, dst):
+            return [("record", lambda: seen.append(guard._exclusive))]
+
+    @contextlib.contextmanager
+    def fake_capture(device):
+        yield type("Capture", (), {"graph": "graph"})()
+
+    monkeypatch.setattr(wp, "ScopedCapture", fake_capture)
+    monkeypatch.setattr(wp, "capture_launch", lambda graph: None)
+    chain = Chain("cpu")
+    chain.use_graph, chain._warm = True, [True, True]  # as on CUDA after the warm-up frame
+    chain._run_chain(0, 1)  # captures (guarded), then replays
+    chain._run_chain(0, 1)
+    assert seen == [True] and not guard._exclusive
+
+
+def test_the_masks_model_works_under_the_shared_guard(monkeypatch):
+    """Every frame's device work of the offline model runs inside a shared section (one and two mask threads)."""
+    import numpy as np
+
+    from wptrack.motion.background import OfflineBackground
+    from wptrack.motion.masks import MaskConfig, open_masks
+
+    guard = device_guard("cpu")
+    seen = []
+    evidence = OfflineBackground.evidence
+
+    def spy(self, t, frame):
+        seen.append(guard._shared > 0)
+        return evidence(self, t, frame)
+
+    monkeypatch.setattr(OfflineBackground, "evidence", spy)
+    rng = np.random.default_rng(0)
+    frames = rng.integers(0, 255, size=(12, 24, 32, 3), dtype=np.uint8)
+    for workers in (1, 2):
+        monkeypatch.setenv("WPTRACK_MASK_WORKERS", str(workers))
+        masks = open_masks(frames, config=MaskConfig(method="offline", window=6, samples=3, device="cpu"))
+        assert len(list(masks)) == 12
+    assert len(seen) == 24 and all(seen)
+
+
+def test_download_copies_without_switching_the_current_stream(device):
+    import numpy as np
+    import warp as wp
+
+    from wptrack.core.device import download
+
+    values = np.arange(24, dtype=np.float32).reshape(4, 6) - 3.5
+    a = wp.array(values, dtype=wp.float32, device=device)
+    d = wp.get_device(device)
+    before = d.stream if d.is_cuda else None
+    got = download(a)
+    assert isinstance(got, np.ndarray) and got.shape == (4, 6) and got.dtype == np.float32
+    np.testing.assert_array_equal(got, values)
+    if d.is_cuda:
+        assert d.stream is before
+    v = wp.array(np.arange(9, dtype=np.uint8), dtype=wp.uint8, device=device)
+    np.testing.assert_array_equal(download(v), np.arange(9, dtype=np.uint8))
+
+
+def test_mask_threads_default_to_three_on_a_gpu_host_only(monkeypatch):
+    import os
+
+    from wptrack.motion.parallel import GPU_MASK_WORKERS, mask_workers
+
+    monkeypatch.delenv("WPTRACK_MASK_WORKERS", raising=False)
+    monkeypatch.setattr(os, "cpu_count", lambda: 16)
+    assert mask_workers("cuda:0") == GPU_MASK_WORKERS == 3
+    assert mask_workers("cpu") == mask_workers(None) == 1
+    monkeypatch.setattr(os, "cpu_count", lambda: 4)
+    assert mask_workers("cuda:0") == 1  # few cores: the threads would take the decoder's
+    monkeypatch.setenv("WPTRACK_MASK_WORKERS", "2")
+    assert mask_workers("cpu") == mask_workers("cuda:0") == 2
+    monkeypatch.setenv("WPTRACK_MASK_WORKERS", "0")
+    assert mask_workers("cuda:0") == 1
