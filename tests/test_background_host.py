@@ -12,6 +12,8 @@ from wptrack.bench import numpy_masks
 from wptrack.io.frames import open_source
 from wptrack.io.video import write_video
 from wptrack.motion import background as B
+from wptrack.motion import stats as S
+from wptrack.motion import windows as Wn
 from wptrack.motion.masks import MaskConfig
 
 H, W = 60, 80
@@ -20,7 +22,7 @@ H, W = 60, 80
 def _frame_gain_ref(values: np.ndarray, background: np.ndarray) -> np.ndarray:
     out = np.ones(3)
     for c in range(3):
-        ok = background[:, c] >= B.MIN_GAIN_LEVEL
+        ok = background[:, c] >= S.MIN_GAIN_LEVEL
         if ok.sum() >= 16:
             out[c] = float(np.median(values[ok, c] / background[ok, c]))
     return np.clip(out, 0.05, 20.0)
@@ -45,15 +47,15 @@ def _samples(rng: np.random.Generator, k: int, p: int = 3000) -> np.ndarray:
 @pytest.mark.parametrize("k", [1, 2, 5, 24, 25])
 def test_sample_gains_and_frame_gain_equal_numpy_formulas(rng, k):
     samples = _samples(rng, k)
-    gains, background = B.sample_gains(samples)
+    gains, background = S.sample_gains(samples)
     ref_gains, ref_background = _sample_gains_ref(samples)
     np.testing.assert_array_equal(gains, ref_gains)
     np.testing.assert_array_equal(background, ref_background)
     assert k < 3 or np.ptp(gains, axis=0).min() > 0.1  # the gains differ: the test sees them
     for xk in samples:
-        np.testing.assert_array_equal(B.frame_gain(xk, background), _frame_gain_ref(xk, background))
+        np.testing.assert_array_equal(S.frame_gain(xk, background), _frame_gain_ref(xk, background))
     dark = np.full_like(background, 10.0)  # too dark everywhere: gain 1
-    np.testing.assert_array_equal(B.frame_gain(samples[0], dark), np.ones(3))
+    np.testing.assert_array_equal(S.frame_gain(samples[0], dark), np.ones(3))
 
 
 @pytest.mark.parametrize("n", [1, 2, 7, 24, 25, 64, 65, 300, 301])
@@ -62,7 +64,7 @@ def test_median_last_equals_numpy_median(rng, n):
     floats = ints / rng.uniform(0.5, 1.5, n)
     singles = (floats * np.float32(np.pi)).astype(np.float32)  # float32 means round as np.median's do
     for x in (ints, floats, singles, singles[0, 0]):
-        got, expected = B.median_last(x), np.median(x, axis=-1)
+        got, expected = S.median_last(x), np.median(x, axis=-1)
         assert got.dtype == expected.dtype
         np.testing.assert_array_equal(got, expected)
         if x.dtype == np.uint8:
@@ -95,7 +97,7 @@ def test_shadow_ratio_equals_full_formula(rng):
     smooth = np.convolve(counts.astype(np.float64), [0.25, 0.5, 0.25], mode="same")
     peaks = [i for i in range(1, len(smooth) - 1) if smooth[i] >= smooth[i - 1] and smooth[i] > smooth[i + 1]]
     expected = float(edges[max(peaks, key=lambda i: smooth[i])] + 0.01)
-    got = B.shadow_ratio(samples, gains, background, mad, 4.0, 3.0, 0.1)
+    got = S.shadow_ratio(samples, gains, background, mad, 4.0, 3.0, 0.1)
     assert got == expected and 0.44 < got < 0.52
 
 
@@ -134,9 +136,9 @@ def test_sampler_reads_forward_and_keeps_the_next_windows_frames(tmp_path, rng):
     write_video(path, video)
     source = open_source(path)
     decoded = np.stack(list(source))
-    windows = B.plan_windows(frames, 40, 8)  # samples 5 frames apart, windows 20 frames apart
+    windows = Wn.plan_windows(frames, 40, 8)  # samples 5 frames apart, windows 20 frames apart
     assert len(windows) == 3
-    sampler = B._Sampler(source)
+    sampler = Wn._Sampler(source)
     sampler.cap = _CountingCapture(source._open())
     for i, w in enumerate(windows):
         ahead = windows[i + 1].samples if i + 1 < len(windows) else ()
@@ -151,15 +153,15 @@ def test_sampler_reads_forward_and_keeps_the_next_windows_frames(tmp_path, rng):
 
 
 def test_sampler_seeks_beyond_seek_gap(tmp_path, rng):
-    frames = 3 * B.SEEK_GAP
+    frames = 3 * Wn.SEEK_GAP
     video = np.clip(rng.normal(128, 40, (frames, 24, 32, 3)), 0, 255).astype(np.uint8)
     path = tmp_path / "v.avi"
     write_video(path, video)
     source = open_source(path)
     decoded = np.stack(list(source))
-    sampler = B._Sampler(source)
+    sampler = Wn._Sampler(source)
     sampler.cap = _CountingCapture(source._open())
-    indices = (2, 3 + B.SEEK_GAP, 4 + B.SEEK_GAP, frames - 1)  # gaps from the next frame: 0, SEEK_GAP, 0, > it
+    indices = (2, 3 + Wn.SEEK_GAP, 4 + Wn.SEEK_GAP, frames - 1)  # gaps from the next frame: 0, SEEK_GAP, 0, > it
     np.testing.assert_array_equal(np.stack(sampler.read(indices)), decoded[list(indices)])
     assert sampler.cap.seeks == 2  # the two long gaps; the short ones are grabbed
     sampler.close()
@@ -184,15 +186,30 @@ def test_offline_evidence_matches_numpy_reference(device, rng):
     for t in range(frames):
         mask, prob = model.evidence(t, video[t])
         gains.append(model.last_gain.mean())
-        i, j, w = B.bracket(model.centres, t)
+        i, j, w = Wn.bracket(model.centres, t)
         b0, m0 = (a.numpy().reshape(H, W, 3) for a in model._window(i))
         b1, m1 = (a.numpy().reshape(H, W, 3) for a in model._window(j))
         p = model.params
         nb = (1.0 - w) * model._nb_scale[i] + w * model._nb_scale[j]
+        # the local light field and patch statistics of this frame from the device (their kernels have their own
+        # references: tests/test_background_illumination.py); the per-frame tests given them
+        local = model.light.local.numpy().reshape(p.tiles_y, p.tiles_x, 3).astype(np.float64)
+        st = model.light.patch.numpy().reshape(H, W, 6).astype(np.float64)
+        veto = dict(
+            st=st,
+            texture=p.veto_texture,
+            veto_ncc=p.veto_ncc,
+            veto_grad=p.veto_grad,
+            resid=p.veto_resid,
+            illum_lo=p.illum_lo,
+            illum_hi=p.illum_hi,
+            illum_chroma=p.illum_chroma,
+            gap=p.gain_gap,
+        )
         ref = numpy_masks.foreground(
             video[t], b0, m0, b1, m1, w, p.threshold, p.soft_scale, p.noise_floor, bool(p.shadow), p.shadow_lo,
             p.shadow_hi, p.chroma_max, model.last_gain, p.low_threshold, p.spread_cap, p.shadow_edge_hi,
-            config.neighbourhood, nb,
+            config.neighbourhood, nb, field=numpy_masks.local_field(local, p.tile, H, W), veto=veto,
         )  # fmt: skip
         near = (np.abs(ref["z"] - p.threshold) < 1e-3) | (np.abs(ref["z"] - p.low_threshold) < 1e-3)
         assert np.all((mask.astype(bool) == ref["mask"]) | near)
@@ -200,7 +217,7 @@ def test_offline_evidence_matches_numpy_reference(device, rng):
         equal += bool(np.array_equal(mask.astype(bool), ref["mask"]))
         outputs.append((mask, prob, prob.copy()))
     model.close()
-    assert equal >= frames - 2 and any(0 < w < 1 for w in [B.bracket(model.centres, t)[2] for t in range(frames)])
+    assert equal >= frames - 2 and any(0 < w < 1 for w in [Wn.bracket(model.centres, t)[2] for t in range(frames)])
     assert min(gains) < 0.95 and abs(gains[0] - 1.0) < 0.02  # the dimming is compensated
     assert all(o[1] is not outputs[0][1] for o in outputs[1:])
     for mask, prob, copy in outputs:

@@ -16,6 +16,7 @@ from wptrack.core.errors import FrameError
 from wptrack.io.frames import open_source
 from wptrack.io.video import write_video
 from wptrack.motion import background as B
+from wptrack.motion import windows as Wn
 from wptrack.motion.masks import MaskConfig, MotionMasks
 
 H, W = 48, 64
@@ -79,7 +80,7 @@ def test_prefetch_gives_the_same_masks(device, rng, tmp_path, kind, frames, wind
     windows = len(plain.model.windows)
     assert windows >= 3
     if window == 80:
-        assert min(np.diff(plain.model.windows[0].samples)) >= B.SEEK_GAP  # the sampler seeks between samples
+        assert min(np.diff(plain.model.windows[0].samples)) >= Wn.SEEK_GAP  # the sampler seeks between samples
     fetched = MotionMasks(open_source(spec), config)
     for _ in range(2):  # the second pass starts again at frame 0 after a full pass (and the model's close())
         reads: list = []
@@ -186,8 +187,8 @@ def test_worker_error_raised_in_the_calling_thread_when_needed(device, rng, capl
 
     with_worker, without = run(True), run(False)
     assert with_worker == without
-    centres = [w.centre for w in B.plan_windows(40, 16, 8)]
-    assert without[0] == min(t for t in range(40) if B.bracket(centres, t)[1] == 2)  # when window 2 is first needed
+    centres = [w.centre for w in Wn.plan_windows(40, 16, 8)]
+    assert without[0] == min(t for t in range(40) if Wn.bracket(centres, t)[1] == 2)  # when window 2 is first needed
     assert without[1] == [("array: a warning before the error", threading.main_thread().name)]
 
 

@@ -18,13 +18,15 @@ from wptrack.core.errors import ConfigError, FrameError
 from wptrack.io.frames import open_source
 from wptrack.io.video import write_video
 from wptrack.kernels.core import background as kbg
-from wptrack.motion.background import SEEK_GAP, bracket, plan_windows
 from wptrack.motion.masks import MaskConfig, open_masks
+from wptrack.motion.windows import SEEK_GAP, bracket, plan_windows
 
 H, W = 72, 96
 
 #: MaskConfig fields of the first offline model (before hysteresis, spread cap, learnt shadows, neighbourhoods).
-ROUND_ONE = dict(fg_low=0.0, spread_cap=0.0, shadow_band=0.0, neighbourhood=0)
+ROUND_ONE = dict(
+    fg_low=0.0, spread_cap=0.0, shadow_band=0.0, neighbourhood=0, illum_tiles=0, illum_veto=0.0, mode_band=0.0
+)
 
 
 def _texture(rng: np.random.Generator, lo: float = 60, hi: float = 200) -> np.ndarray:
@@ -97,7 +99,14 @@ def test_foreground_kernel_matches_numpy(device, rng, shadow, gain, low, cap, hi
     wp.launch(
         kbg.foreground_kernel,
         dim=n,
-        inputs=[*dev, w, wp.vec3(*gain), p],
+        inputs=[
+            *dev,
+            w,
+            wp.vec3(*gain),
+            p,
+            wp.zeros(1, dtype=wp.vec3, device=device),
+            wp.zeros(1, dtype=kbg.patch_vec, device=device),
+        ],
         outputs=[mask, prob, shad, diff],
         device=device,
     )
@@ -315,7 +324,8 @@ def test_sampler_seeks_read_the_sampled_frames(tmp_path, rng):
     path = tmp_path / "v.avi"
     write_video(path, video)
     decoded = np.stack(list(open_source(path)))
-    config = MaskConfig(window=frames, samples=5, device="cpu")  # samples 26 frames apart: seeks
+    # samples 26 frames apart: seeks; the plain median of the samples read (no local light field, no densest cluster)
+    config = MaskConfig(window=frames, samples=5, device="cpu", illum_tiles=0, mode_band=0.0)
     masks = open_masks(video=path, config=config)
     samples = masks.model.windows[0].samples
     assert min(np.diff(samples)) >= SEEK_GAP
@@ -437,7 +447,7 @@ def test_learnt_shadow_ratio_removes_deep_shadows_keeps_dark_objects(rng):
     """Hard shadows darker than shadow_lo (ratio 0.36) move across a grey floor next to a dark grey object
     (ratio 0.7, neutral: the fixed test takes it for a shadow). The learnt ratio removes the shadows and keeps the
     object; the fixed bounds do the opposite."""
-    from wptrack.motion.background import shadow_ratio
+    from wptrack.motion.stats import shadow_ratio
 
     fixed, learnt, ratio, shadow, obj = _shadow_and_object(rng, 0.36, 0.7)
     assert ratio is not None and abs(ratio - 0.36) < 0.03
@@ -494,7 +504,7 @@ def test_neighbourhood_kernel_matches_numpy(device, rng, radius, scale):
 
 
 def test_neighbourhood_scale_independent_vs_correlated_noise(rng):
-    from wptrack.motion.background import neighbourhood_scale
+    from wptrack.motion.stats import neighbourhood_scale
 
     k, h, w = 5, 60, 80
     bg = np.full((h, w, 3), 120, np.uint8)

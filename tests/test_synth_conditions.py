@@ -14,6 +14,7 @@ from wptrack.core.errors import ConfigError
 from wptrack.synth import SCENES, plaza_cast, render_scene
 from wptrack.synth import conditions as C
 from wptrack.synth import plaza as P
+from wptrack.synth import plaza_background as PB
 from wptrack.synth.base import _groundtruth_csv
 from wptrack.synth.plaza_background import LABEL_BUSH, plaza_background
 
@@ -284,3 +285,89 @@ def test_condition_mask_quality_small() -> None:
     assert row["frames"] == 6 and row["condition"] == "compression"
     assert 0.0 <= row["iou"] <= 1.0 and 0.0 <= row["fp_fraction"] < 0.05 and row["precision"] > 0.5
     assert "| compression | 0 |" in _markdown([row])
+
+
+# ----------------------------------------------------------------------------------------------------- issue 26
+
+
+def test_short_clip_objects_in_view_from_the_first_frame() -> None:
+    for name in S3:
+        default, scene = _scene(name), _scene(name, short_clip=True)
+        n = scene.default_frames
+        assert n == round(C.SHORT_S * P.FPS) < default.default_frames
+        present = scene.states(n).present[:, :n]
+        base = default.states(default.default_frames).present[:, : default.default_frames]
+        count, full = present.sum(axis=0), base.sum(axis=0)
+        assert count[0] >= 1 and (count >= 1).mean() > 0.9, name
+        # the busiest clip of the default timeline: no other start holds more objects in view
+        sums = np.convolve(full, np.ones(n), mode="valid")
+        assert count.sum() == sums.max() and scene.short_origin_s == np.argmax(sums) / P.FPS, name
+        # the same motion, shifted in time
+        start = round(scene.short_origin_s * P.FPS)
+        for oid, p in scene.trajectories(n).items():
+            q = default.trajectories(default.default_frames)[oid][start : start + n]
+            np.testing.assert_allclose(p, q, atol=1e-6, err_msg=f"{name} {oid}")
+
+
+def test_clouds_darken_the_ground_softly_and_locally_masks_unchanged() -> None:
+    scene, default = _scene("s3-people", clouds=True), _scene("s3-people")
+    scene.noise_sigma = default.noise_sigma = 0.0
+    bg = plaza_background()
+    up = np.zeros(bg.sunlit.size, dtype=bool)
+    up[bg.view.up_index] = True
+    lit = up.reshape(bg.sunlit.shape) & (bg.sunlit > 0.99)  # sunlit up-facing ground
+    seen = []
+    for f in (0, 45, 90, 135):
+        img, mask = _render(scene, f)
+        ref, mask_ref = _render(default, f)
+        np.testing.assert_array_equal(mask, mask_ref)  # cloud shadows are not objects
+        ratio = (img.astype(np.float64) + 0.5) / (ref.astype(np.float64) + 0.5)
+        keep = (mask == 0) & (ref.min(axis=2) >= 60)
+        local = scene.local_light(f)
+        g = ratio.mean(axis=2)
+        # the ground truth of the darkening matches the pixels (static scene, away from the objects)
+        sel = keep & (bg.view.label != LABEL_BUSH)
+        assert np.abs(g[sel] - local[sel]).mean() < 0.01
+        seen.append(local[lit & keep])
+    cover = np.concatenate(seen)
+    assert cover.min() < 0.8 and (cover > 0.99).mean() > 0.2  # deep shadows and clear ground, at once
+    soft = ((cover > 0.8) & (cover < 0.97)).mean()
+    assert soft > 0.05  # soft edges (and thin clouds)
+    # the darkening keeps the hue: R falls most (bluish sky light), at most by a few percent more than B
+    img, _ = _render(scene, 0)
+    ref, _ = _render(default, 0)
+    dark = (scene.local_light(0) < 0.85) & (ref.min(axis=2) >= 60)
+    r = (img[dark].astype(np.float64) + 0.5) / (ref[dark] + 0.5)
+    assert 0.0 < np.median(r[:, 0] - r[:, 2]) < 0.05  # B / B_bg above R / R_bg
+    # the facade darkens less than the sunlit ground under the same cover
+    pts = PB.static_points(False)
+    cover_map = C.cloud_cover(C.cloud_shadow_foot(pts, bg.light.unit), 0.0)
+    share = PB.static_share(False)
+    assert np.allclose(share[bg.view.label == 2], C.CLOUD_SIDE_SHARE) and share[lit].min() > 0.5
+    assert cover_map.max() > 0.3 and "clouds" in scene.hints()["conditions"]
+
+
+def test_exposure_global_jumps_and_a_local_light() -> None:
+    scene, default = _scene("s3-mixed", exposure=True), _scene("s3-mixed")
+    fps = scene.fps
+    for t, factor in ((0.0, 1.0), (2.0, C.EXPOSURE_STEPS[0][1]), (6.0, 1.3 * 0.8)):
+        f = int(t * fps)
+        g = scene.gain(f) / default.gain(f)
+        assert np.allclose(g[1], factor)  # green: no white-balance shift
+    g = scene.gain(int(4.5 * fps)) / default.gain(int(4.5 * fps))
+    np.testing.assert_allclose(g, 1.3 * np.asarray(C.AWB_SHIFTS[0][1]))
+    # the first light is off before its time and lights its pool after, locally
+    before, after = scene.local_light(int(2.0 * fps)), scene.local_light(int(4.0 * fps))
+    assert np.all(before == 1.0)
+    assert after.max() > 1.25 and (after > 1.05).mean() < 0.6 and (after < 1.01).mean() > 0.3  # part of the view
+    scene.noise_sigma = default.noise_sigma = 0.0
+    f = int(4.0 * fps)
+    img, mask = _render(scene, f)
+    ref, mask_ref = _render(default, f)
+    np.testing.assert_array_equal(mask, mask_ref)
+    ratio = (img.astype(np.float64) + 0.5) / (ref.astype(np.float64) + 0.5)
+    pool = (after > 1.2) & (mask == 0) & (ref.max(axis=2) < 180)
+    outside = (after < 1.005) & (mask == 0) & (ref.min(axis=2) > 40) & (ref.max(axis=2) < 180)
+    gain = scene.gain(f) / default.gain(f)  # R, G, B
+    assert np.median(ratio[outside][:, 1]) == pytest.approx(gain[1], abs=0.02)
+    assert np.median(ratio[pool][:, 1]) > 1.2 * gain[1]

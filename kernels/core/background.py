@@ -41,6 +41,11 @@ linearly interpolated between the two nearest windows (weight ``w`` of the secon
 Then, with a neighbourhood radius (:func:`neighbourhood_rows_kernel`, :func:`neighbourhood_kernel`), a background
 pixel whose neighbours' mean normalised difference is far from 0 becomes weak foreground too (a faint but coherent
 change, e.g. a car painted like the road).
+
+Local illumination changes (issue 26): the frame is divided by a local light field and a pixel whose patch keeps
+the background's texture is vetoed (:func:`local_gain`, :func:`illumination_change`); the patch statistics and the
+field are made by the kernels of :mod:`wptrack.kernels.core.illumination` (driver:
+:mod:`wptrack.motion.illumination`). :func:`mode_kernel` is the densest-cluster background of short recordings.
 """
 
 import warp as wp
@@ -126,6 +131,13 @@ def median_mad_kernel(
     mad[j] = wp.uint8(select_rank(values, count, rank, 0, hi))
 
 
+#: Per-pixel patch statistics of :func:`wptrack.kernels.core.illumination.patch_kernel`: NCC of the luminance
+#: patches (frame vs background), correlation of their gradients, the background's and the frame's patch standard
+#: deviations (luminance noise scales), the centre pixel's residual from the patch's linear fit (luminance noise
+#: scales), and the fit's distance from a gain.
+patch_vec = wp.types.vector(length=6, dtype=wp.float32)
+
+
 @wp.struct
 class ForegroundParams:
     """Per-frame test parameters (units: robust standard deviations unless stated)."""
@@ -140,6 +152,61 @@ class ForegroundParams:
     shadow_hi: float
     shadow_edge_hi: float  # penumbra candidates: shadow_hi < a <= shadow_edge_hi (= shadow_hi: none)
     chroma_max: float  # chromaticity distortion bound (dimensionless, |I - a B| / |B|)
+    tile: int  # local illumination field: tile size, pixels (0: no field, the global gain only)
+    tiles_x: int  # tiles per image row
+    tiles_y: int  # tiles per image column
+    width: int  # image width, pixels
+    verify_ncc: float  # local field: smallest patch NCC of a pixel that votes for its tile's gain
+    veto_ncc: float  # illumination veto: smallest patch NCC (0: no NCC veto)
+    veto_grad: float  # illumination veto: smallest patch gradient correlation (0: no gradient veto)
+    veto_texture: float  # smallest background patch standard deviation, noise scales
+    veto_resid: float  # largest centre residual of the patch's linear fit, luminance noise scales
+    gain_gap: float  # largest |ln(slope / ratio of the means)| of a patch's fit (a pure gain: 0)
+    illum_chroma: float  # largest chromaticity distortion of a local illumination change
+    illum_lo: float  # brightness ratio range of a local illumination change
+    illum_hi: float
+
+
+@wp.func
+def local_gain(local: wp.array(dtype=wp.vec3), params: ForegroundParams, p: int):
+    """The local illumination field at pixel ``p``: the exponential of the tiles' log gains interpolated bilinearly
+    between the tile centres (clamped at the image border)."""
+    px = p % params.width
+    py = p // params.width
+    u = (float(px) + 0.5) / float(params.tile) - 0.5
+    v = (float(py) + 0.5) / float(params.tile) - 0.5
+    i0 = wp.clamp(int(wp.floor(u)), 0, params.tiles_x - 1)
+    j0 = wp.clamp(int(wp.floor(v)), 0, params.tiles_y - 1)
+    i1 = wp.min(i0 + 1, params.tiles_x - 1)
+    j1 = wp.min(j0 + 1, params.tiles_y - 1)
+    fu = wp.clamp(u - float(i0), 0.0, 1.0)
+    fv = wp.clamp(v - float(j0), 0.0, 1.0)
+    top = (1.0 - fu) * local[j0 * params.tiles_x + i0] + fu * local[j0 * params.tiles_x + i1]
+    bottom = (1.0 - fu) * local[j1 * params.tiles_x + i0] + fu * local[j1 * params.tiles_x + i1]
+    g = (1.0 - fv) * top + fv * bottom
+    return wp.vec3(wp.exp(g[0]), wp.exp(g[1]), wp.exp(g[2]))
+
+
+@wp.func
+def illumination_change(st: patch_vec, params: ForegroundParams, ib: float, bb: float, ii: float):
+    """Whether a pixel's change is a local illumination change: its background patch is textured
+    (``st[2] >= veto_texture``) and the frame's patch keeps texture (``st[3] >= veto_texture / 2``), the patches
+    correlate (NCC ``st[0] >= veto_ncc`` or gradient correlation ``st[1] >= veto_grad``, each where > 0), the
+    centre pixel follows the patch's linear fit (``st[4] <= veto_resid``), which is a gain (``st[5] <= gain_gap``),
+    and its colour is the background's
+    scaled (brightness ratio ``a = I.B / B.B`` in ``[illum_lo, illum_hi]``, chromaticity distortion
+    ``<= illum_chroma``)."""
+    if st[2] < params.veto_texture or st[3] < 0.5 * params.veto_texture or st[4] > params.veto_resid:
+        return False
+    if st[5] > params.gain_gap:
+        return False
+    ncc_ok = params.veto_ncc > 0.0 and st[0] >= params.veto_ncc
+    corr = ncc_ok or (params.veto_grad > 0.0 and st[1] >= params.veto_grad)
+    if not corr or bb < 1.0:
+        return False
+    a = ib / bb
+    cd = wp.sqrt(wp.max(ii - a * ib, 0.0) / bb)
+    return a >= params.illum_lo and a <= params.illum_hi and cd <= params.illum_chroma
 
 
 @wp.kernel
@@ -152,6 +219,8 @@ def foreground_kernel(
     w: float,
     gain: wp.vec3,
     params: ForegroundParams,
+    local: wp.array(dtype=wp.vec3),
+    patch: wp.array(dtype=patch_vec),
     mask: wp.array(dtype=wp.uint8),
     prob: wp.array(dtype=wp.float32),
     shadow: wp.array(dtype=wp.uint8),
@@ -166,16 +235,26 @@ def foreground_kernel(
         gain: The frame's global gain per channel (B, G, R) relative to the background (illumination change):
             the frame is divided by it before the tests (1: none).
         params: Thresholds.
+        local: ``(tiles_y tiles_x,)`` the local illumination field: per tile, the log gain per channel (B, G, R)
+            of the frame over the background beyond the global gain
+            (:func:`wptrack.kernels.core.illumination.tile_smooth_kernel`), interpolated bilinearly between the tile
+            centres; the frame is divided by its exponential too. Read only when ``params.tile > 0``.
+        patch: ``(H W,)`` the patch statistics of :func:`wptrack.kernels.core.illumination.patch_kernel`, for the
+            illumination veto; read only when ``params.veto_ncc > 0`` or ``params.veto_grad > 0``.
         mask: ``(H W,)`` output ``level + 4 shadow``: level 2 = foreground, 1 = weak foreground
-            (``T_low < z <= T``), 0 = background (and every cast shadow); ``shadow`` as below (one array for the
-            driver to copy).
+            (``T_low < z <= T``), 0 = background (and every cast shadow or illumination change); ``shadow`` as
+            below (one array for the driver to copy).
         prob: ``(H W,)`` output foreground probability in ``[0, 1]``.
         diff: ``(H W,)`` output normalised difference ``(I - B) / s`` per channel (B, G, R; robust standard
             deviations), for :func:`neighbourhood_kernel`.
         shadow: ``(H W,)`` output, 2 = cast shadow (counted as background), 1 = penumbra candidate (its ``mask``
-            and ``prob`` as if not a shadow), 0 = neither.
+            and ``prob`` as if not a shadow), 3 = local illumination change (the veto; counted as background), 0 =
+            none of them.
     """
     p = wp.tid()
+    lit = gain
+    if params.tile > 0:
+        lit = wp.cw_mul(gain, local_gain(local, params, p))
     d = wp.vec3(0.0, 0.0, 0.0)
     dd = float(0.0)
     mm = float(0.0)
@@ -189,7 +268,7 @@ def foreground_kernel(
         if w > 0.0:  # between two windows (w = 0: one window, half the reads)
             b = (1.0 - w) * b + w * float(bg1[j])
             m = (1.0 - w) * m + w * float(mad1[j])
-        x = float(frame[j]) / gain[c]
+        x = float(frame[j]) / lit[c]
         d[c] = x - b
         dd += (x - b) * (x - b)
         mm += m * m
@@ -211,6 +290,9 @@ def foreground_kernel(
                 is_shadow = 2
             elif a <= params.shadow_edge_hi:
                 is_shadow = 1
+    if is_shadow < 2 and (params.veto_ncc > 0.0 or params.veto_grad > 0.0) and z > params.low_threshold:
+        if illumination_change(patch[p], params, ib, bb, ii):
+            is_shadow = 3
     fg = int(0)
     pr = float(0.0)
     if is_shadow < 2:
@@ -322,7 +404,7 @@ def neighbourhood_kernel(
         p = y * width + x
         v = int(packed[p])
         n = acc[3]
-        if (v & 3) == 0 and (v >> 2) != 2 and n > 0.5:
+        if (v & 3) == 0 and (v >> 2) < 2 and n > 0.5:
             if scale * scale * (acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2]) / (3.0 * n) > (
                 low_threshold * low_threshold
             ):
@@ -332,3 +414,74 @@ def neighbourhood_kernel(
             acc += rows[(y + radius + 1) * width + x]
         if y - radius >= 0:
             acc -= rows[(y - radius) * width + x]
+
+
+@wp.kernel
+def mode_kernel(
+    stack: wp.array2d(dtype=wp.uint8),
+    gains: wp.array(dtype=wp.vec3),
+    band: float,
+    median: wp.array(dtype=wp.uint8),
+    mad: wp.array(dtype=wp.uint8),
+):
+    """Per pixel: the background as the densest cluster of its samples instead of their median (short recordings
+    with objects in most frames: a pixel that objects cover in more than half of the samples keeps its background
+    when the objects differ from sample to sample while the background does not).
+
+    The samples are compensated by their gains as in :func:`median_mad_kernel`. The centre is the first sample with
+    the most samples within ``band`` of it in every channel (Chebyshev distance, 8-bit units); the background is
+    the per-channel lower median of those samples, and the MAD the lower median of all samples' absolute deviations
+    from it (as :func:`median_mad_kernel`'s, so a pixel whose samples spread keeps its spread).
+
+    Args:
+        stack: ``(K, 3 H W)`` sampled frames, ``1 <= K <= MAX_SAMPLES``.
+        gains: ``(K,)`` per-sample gains (B, G, R).
+        band: Cluster half-width, 8-bit units (> 0).
+        median: ``(3 H W,)`` output background. mad: ``(3 H W,)`` output MAD.
+    """
+    p = wp.tid()
+    count = wp.min(stack.shape[0], MAX_SAMPLES)
+    vb = samples_vec()
+    vg = samples_vec()
+    vr = samples_vec()
+    for k in range(count):
+        vb[k] = unlit(float(stack[k, 3 * p]), gains[k][0])
+        vg[k] = unlit(float(stack[k, 3 * p + 1]), gains[k][1])
+        vr[k] = unlit(float(stack[k, 3 * p + 2]), gains[k][2])
+    best = int(0)
+    best_count = int(-1)
+    for k in range(count):
+        n = int(0)
+        for j in range(count):
+            dist = wp.max(wp.abs(vb[j] - vb[k]), wp.max(wp.abs(vg[j] - vg[k]), wp.abs(vr[j] - vr[k])))
+            if float(dist) <= band:
+                n += 1
+        if n > best_count:
+            best_count = n
+            best = k
+    for c in range(3):
+        values = samples_vec()
+        kept = samples_vec()
+        m = int(0)
+        lo = int(255)
+        hi = int(0)
+        for j in range(count):
+            v = vb[j]
+            if c == 1:
+                v = vg[j]
+            elif c == 2:
+                v = vr[j]
+            values[j] = v
+            dist = wp.max(wp.abs(vb[j] - vb[best]), wp.max(wp.abs(vg[j] - vg[best]), wp.abs(vr[j] - vr[best])))
+            if float(dist) <= band:
+                kept[m] = v
+                m += 1
+                lo = wp.min(lo, v)
+                hi = wp.max(hi, v)
+        b = select_rank(kept, m, (m - 1) // 2, lo, hi)
+        dev_hi = int(0)
+        for j in range(count):
+            values[j] = wp.abs(values[j] - b)
+            dev_hi = wp.max(dev_hi, values[j])
+        median[3 * p + c] = wp.uint8(b)
+        mad[3 * p + c] = wp.uint8(select_rank(values, count, (count - 1) // 2, 0, dev_hi))

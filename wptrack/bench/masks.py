@@ -221,6 +221,7 @@ class MasksSuite:
         from wptrack.io.frames import open_source
         from wptrack.io.video import write_video
         from wptrack.motion.background import OfflineBackground
+        from wptrack.motion.illumination import ILLUM_MIN_WEIGHT, ILLUM_WIDEN
         from wptrack.motion.masks import MaskConfig
 
         config = MaskConfig(method="offline", device=device)
@@ -247,7 +248,7 @@ class MasksSuite:
                 model._window(0)
                 builds.append(time.perf_counter() - t0)
             median, mad = (a.numpy().reshape(case.height, case.width, 3) for a in model._window(0))
-            kernel, masks, probs, gains = [], [], [], []
+            kernel, masks, probs, gains, fields = [], [], [], [], []
             for t, f in enumerate(decoded):
                 t0 = time.perf_counter()
                 m, p = model.evidence(min(t, 0), f)  # window 0 only: time the step, not window builds
@@ -255,6 +256,8 @@ class MasksSuite:
                 masks.append(m)
                 probs.append(p)
                 gains.append(model.last_gain.copy())
+                if t < 10 and model.light.active:  # the device's local field and patch statistics, for the reference
+                    fields.append((model.light.local.numpy().copy(), model.light.patch.numpy().copy()))
             model.close()
         k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
         k5 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
@@ -265,12 +268,33 @@ class MasksSuite:
             clean.append(time.perf_counter() - t0)
         c = config
         ref_t, equivalent = [], True
+        mp = model.params
         for t, f in enumerate(decoded[: min(frames, 10)]):
             t0 = time.perf_counter()
+            field = veto = None
+            if fields:
+                # the NumPy local field is computed (and timed) too; the masks are compared given the device's
+                # field and patch statistics (a tile's median vote may differ by a quantisation step, float32)
+                lum = numpy_masks.luma(f, gains[t], median, mad, median, mad, 0.0, c.noise_floor, mp.spread_cap)
+                st = numpy_masks.patch(lum, c.illum_patch)
+                if mp.tile:
+                    shadow = (mp.shadow_lo, mp.shadow_hi, mp.chroma_max) if mp.shadow else None
+                    tiles = numpy_masks.tile_gains(f, gains[t], median, median, 0.0, st, mp.tile, mp.veto_texture,
+                                                   mp.verify_ncc, shadow, mp.veto_resid, mp.gain_gap,
+                                                   mp.illum_chroma)  # fmt: skip
+                    numpy_masks.tile_smooth(tiles, c.illum_radius, ILLUM_MIN_WEIGHT, c.illum_keep, c.illum_dead,
+                                            ILLUM_WIDEN)  # fmt: skip
+                    local = fields[t][0].reshape(mp.tiles_y, mp.tiles_x, 3).astype(np.float64)
+                    field = numpy_masks.local_field(local, mp.tile, case.height, case.width)
+                if mp.veto_ncc > 0 or mp.veto_grad > 0:
+                    veto = dict(st=fields[t][1].reshape(case.height, case.width, 6).astype(np.float64),
+                                texture=mp.veto_texture, veto_ncc=mp.veto_ncc, veto_grad=mp.veto_grad,
+                                resid=mp.veto_resid, illum_lo=mp.illum_lo, illum_hi=mp.illum_hi,
+                                illum_chroma=mp.illum_chroma, gap=mp.gain_gap)  # fmt: skip
             ref = numpy_masks.foreground(
                 f, median, mad, median, mad, 0.0, c.fg_threshold, c.soft_scale, c.noise_floor, c.detect_shadows,
-                model.params.shadow_lo, model.params.shadow_hi, c.shadow_chroma, gains[t], model.params.low_threshold,
-                model.params.spread_cap, model.params.shadow_edge_hi, c.neighbourhood, model._nb_scale.get(0, 1.0),
+                mp.shadow_lo, mp.shadow_hi, c.shadow_chroma, gains[t], mp.low_threshold, mp.spread_cap,
+                mp.shadow_edge_hi, c.neighbourhood, model._nb_scale.get(0, 1.0), field=field, veto=veto,
             )  # fmt: skip
             ref_t.append(time.perf_counter() - t0)
             near = (np.abs(ref["z"] - c.fg_threshold) < 1e-3) | (np.abs(ref["z"] - model.params.low_threshold) < 1e-3)

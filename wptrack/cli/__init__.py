@@ -82,8 +82,8 @@ def build_parser(batch_tracker: str | None = None) -> argparse.ArgumentParser:
         "--conditions",
         default=None,
         help="s3 scenes only: comma-separated hard conditions, each alone measurable: static-start, stop-and-go, sun, "
-        "light-change, noise, compression, dark-car, crowd, cyclists; or all (default: none; see "
-        "wptrack.synth.conditions)",
+        "light-change, noise, compression, dark-car, crowd, cyclists, clouds, exposure, short; or all (default: none; "
+        "see wptrack.synth.conditions)",
     )
     s.set_defaults(func=cmd_synth)
 

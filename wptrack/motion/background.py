@@ -8,7 +8,9 @@ background is what it shows in most of its window's samples, so an object is lef
 that pixel for less than about half of the window (choose ``window`` longer than twice the longest stand that
 must stay foreground).
 
-Design (kernels and formulas: :mod:`wptrack.kernels.core.background`):
+Design (kernels and formulas: :mod:`wptrack.kernels.core.background`; the windows and their reader:
+:mod:`wptrack.motion.windows`; the host statistics of the samples: :mod:`wptrack.motion.stats`; local illumination:
+:mod:`wptrack.motion.illumination`):
 
 * **Windows.** The recording of ``T`` frames is covered by windows of ``L = window`` frames whose starts are spaced
   evenly, about ``L / 2`` apart (half overlap), the first starting at frame 0 and the last ending at frame ``T``.
@@ -19,25 +21,34 @@ Design (kernels and formulas: :mod:`wptrack.kernels.core.background`):
 * **Drift.** Frame ``t`` uses the background and MAD interpolated linearly between the two windows whose centres
   bracket it (before the first centre / after the last: that window alone), so slow illumination changes are
   followed with a lag of at most a window, without steps at window boundaries.
-* **Passes.** Windows are built lazily while the frames are streamed (the mask pass): a second reader fetches the
-  ``K`` sampled frames of the next window when frame ``t`` first needs it, so only two windows' backgrounds are
-  held. It seeks only across gaps of :data:`SEEK_GAP` frames or more (an OpenCV seek decodes about 16 frames
-  before its target) and grabs the frames in between otherwise, keeping on its way the samples of the following
-  window (which overlaps this one by half), so it reads forward and decodes each frame about once: with the
-  defaults (a sample every 12 frames) a video costs at most one extra decoding pass (0.6 of the decoding time of
-  a 600-frame 640x480 FFV1 video on the CI machine, where seeking to every sample cost 2.9); an image sequence,
-  or samples more than :data:`SEEK_GAP` apart, about ``K / (L / 2)`` extra decoded frames per frame. The exact
-  frame a seek lands on does not matter: the median is robust to a sample being a frame off. That reading runs
-  ahead in one worker thread: when the mask pass builds window ``i``, the worker starts reading (and preparing
-  with NumPy) window ``i + 1``'s samples, so the extra decoding overlaps the per-frame work on another core
-  (:class:`OfflineBackground`; the same reads in the same order, so the same masks).
+* **Passes.** Windows are built lazily while the frames are streamed (the mask pass): a second reader fetches the ``K``
+  sampled frames of the next window when frame ``t`` first needs it, so only two windows' backgrounds are held. It seeks
+  only across gaps of :data:`~wptrack.motion.windows.SEEK_GAP` frames or more (an OpenCV seek decodes about 16 frames
+  before its target) and grabs the frames in between otherwise, keeping on its way the samples of the following window
+  (which overlaps this one by half), so it reads forward and decodes each frame about once: with the defaults (a sample
+  every 12 frames) a video costs at most one extra decoding pass (0.6 of the decoding time of a 600-frame 640x480 FFV1
+  video on the CI machine, where seeking to every sample cost 2.9); an image sequence, or samples more than
+  :data:`SEEK_GAP` apart, about ``K / (L / 2)`` extra decoded frames per frame. The exact frame a seek lands on does not
+  matter: the median is robust to a sample being a frame off. That reading runs ahead in one worker thread: when the
+  mask pass builds window ``i``, the worker starts reading (and preparing with NumPy) window ``i + 1``'s samples, so the
+  extra decoding overlaps the per-frame work on another core (:class:`OfflineBackground`; the same reads in the same
+  order, so the same masks).
 * **Gains.** Each window's samples and each frame get a global gain per channel (illumination changes), the median
   of their ratios to the background over a pixel subsample: every 13th pixel for the windows, thinned to at most
-  :data:`GAIN_PIXELS` for a frame (the same pixels up to 425,984 pixels per frame, e.g. 640x480; at 1920x1080
-  every 65th pixel).
+  :data:`~wptrack.motion.stats.GAIN_PIXELS` for a frame (the same pixels up to 425,984 pixels per frame, e.g.
+  640x480; at 1920x1080 every 65th pixel).
 * **Spread cap.** Each window also records the image-wide median of its per-pixel noise scales (on a pixel
   subsample); with ``MaskConfig.spread_cap`` the per-pixel scale is capped at that many times it, so an object
   standing in a large minority of a window's samples does not hide itself by inflating its pixels' MAD.
+* **Local illumination** (issue 26; ``MaskConfig.illum_*``): a local light field the frame is divided by and a
+  veto of what a patch's texture explains as a light change (cloud shadows, exposure, lights switched on in part of
+  the view), and each window's samples divided by their own field before its statistics
+  (:class:`wptrack.motion.illumination.LightField`).
+* **Densest samples** (``MaskConfig.mode_band``; short recordings with people in most frames): the background of a
+  window is, per pixel, the median of its densest cluster of samples (those within ``mode_band`` noise scales of
+  the sample with the most such neighbours) instead of the median of all: moving people differ from sample to
+  sample, the background does not, so a pixel covered in most samples keeps its background
+  (:func:`~wptrack.kernels.core.background.mode_kernel`).
 * **Hysteresis.** With ``MaskConfig.fg_low``, the kernel marks weak foreground (``fg_low < z <= fg_threshold``)
   beside the strong; :func:`hysteresis` keeps the weak pixels 8-connected to a strong one (OpenCV connected
   components on the host, where the mask goes anyway).
@@ -51,7 +62,6 @@ from __future__ import annotations
 
 import logging
 import math
-import threading
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import wait as wait_futures
@@ -62,251 +72,20 @@ import numpy as np
 
 from wptrack.core.device import download
 from wptrack.core.errors import FrameError
-from wptrack.io.frames import ArraySource, FrameSource, ImageSequenceSource, VideoSource, _read_image, _to_bgr
+from wptrack.io.frames import FrameSource
+from wptrack.motion.illumination import LightField
+from wptrack.motion.stats import (
+    GAIN_PIXELS,
+    channel_gains,
+    median_last,
+    neighbourhood_scale,
+    sample_gains_channels,
+    shadow_ratio,
+    spread_scale,
+)
+from wptrack.motion.windows import _Sampler, bracket, plan_windows
 
 log = logging.getLogger(__name__)
-
-#: Sample gap (frames) from which the sampler seeks instead of grabbing the frames in between. OpenCV's FFmpeg
-#: reader seeks 16 frames before the target and decodes forward from there (more after a sparse keyframe), and
-#: ``grab`` decodes as much as ``read`` (it only skips the colour conversion): a seek cost 17-27 decodes of a
-#: 1920x1080 FFV1 video on the CI machine, so grabbing forward is cheaper up to about 20 frames.
-SEEK_GAP = 24
-
-
-@dataclass(frozen=True)
-class Window:
-    """One background window: its sampled frame indices and their mean (the window's centre, frames)."""
-
-    samples: tuple[int, ...]
-
-    @property
-    def centre(self) -> float:
-        return float(np.mean(self.samples))
-
-
-def plan_windows(frames: int, window: int, samples: int, name: str = "recording") -> list[Window]:
-    """Background windows covering ``frames`` frames (see the module docstring).
-
-    Args:
-        frames: Number of frames ``T`` (>= 1).
-        window: Window length ``L`` in frames (>= 1).
-        samples: Sampled frames per window (>= 1).
-        name: Source label for the warnings.
-
-    Returns:
-        The windows in time order (centres strictly increasing).
-    """
-    if frames < 1:
-        raise FrameError(f"{name}: no frames to build a background from")
-    if frames < window:
-        log.warning(
-            "%s: %d frames, shorter than the background window of %d frames; using one window over all of them",
-            name,
-            frames,
-            window,
-        )
-        window = frames
-    if frames < 3:
-        log.warning("%s: background from %d frame(s); whatever stands in them is background", name, frames)
-    k = min(samples, window)
-    count = 1 if frames == window else math.ceil((frames - window) / max(window // 2, 1)) + 1
-    starts = np.round(np.linspace(0, frames - window, count)).astype(int)
-    out = []
-    for s in starts:
-        idx = s + np.floor((np.arange(k) + 0.5) * window / k).astype(int)
-        out.append(Window(tuple(int(i) for i in np.unique(np.clip(idx, s, s + window - 1)))))
-    return out
-
-
-def bracket(centres: list[float], t: int) -> tuple[int, int, float]:
-    """``(i, j, w)``: frame ``t`` uses ``(1 - w) * window_i + w * window_j`` (linear in the centres, clamped)."""
-    if t <= centres[0] or len(centres) == 1:
-        return 0, 0, 0.0
-    if t >= centres[-1]:
-        n = len(centres) - 1
-        return n, n, 0.0
-    j = int(np.searchsorted(centres, t, side="right"))
-    i = j - 1
-    return i, j, float((t - centres[i]) / (centres[j] - centres[i]))
-
-
-class _Stopped(Exception):
-    """A sampler's read stopped by :meth:`OfflineBackground.close` (its result is dropped)."""
-
-
-class _Sampler:
-    """Reads given frame indices of a source (increasing within a call), for the window backgrounds.
-
-    A video is read forward: the frames between samples closer than :data:`SEEK_GAP` are grabbed, not sought, and
-    those of them that the next window samples (``ahead``) are kept, so that window, which overlaps this one by
-    half, does not seek back and decode them again (each frame is decoded about once by the sampler instead of
-    twice).
-
-    One thread at a time uses it (:class:`OfflineBackground`'s caller or its prefetch worker); with ``notes`` a
-    list, its warnings are kept there for the caller to log, and ``stop`` set by another thread ends a video read
-    at its next frame (:class:`_Stopped`).
-    """
-
-    def __init__(self, source: FrameSource) -> None:
-        self.source = source
-        self.cap: Any = None
-        self.pos = 0  # index of the frame the next read() returns
-        self.kept: dict[int, np.ndarray] = {}  # frames passed by an earlier read that a later one samples
-        self.notes: list[tuple[Any, ...]] | None = None  # a list: warnings kept here (for another thread to log)
-        self.stop = threading.Event()  # set (by another thread): a video read stops at its next frame
-
-    def _warn(self, message: str, *args: Any) -> None:
-        if self.notes is None:
-            log.warning(message, *args)
-        else:
-            self.notes.append((message, *args))
-
-    def read(self, indices: tuple[int, ...], ahead: tuple[int, ...] = ()) -> list[np.ndarray]:
-        """The frames at ``indices`` (fewer when some cannot be read); a video keeps those of ``ahead`` (the next
-        read's indices) that it passes on the way."""
-        s = self.source
-        if isinstance(s, ArraySource):
-            return [_to_bgr(np.ascontiguousarray(s.frames[i])) for i in indices]
-        if isinstance(s, ImageSequenceSource):
-            out = [_read_image(s.files[i]) for i in indices]
-            return [f for f in out if f is not None and f.shape[:2] == (s.height, s.width)]
-        if isinstance(s, VideoSource):
-            return self._read_video(indices, set(ahead))
-        return [f for i, f in enumerate(s) if i in set(indices)]  # any other source: one decoding pass
-
-    def _read_video(self, indices: tuple[int, ...], ahead: set[int]) -> list[np.ndarray]:
-        import cv2
-
-        if self.cap is None:
-            self.cap = self.source._open()  # type: ignore[attr-defined]
-            self.pos = 0
-        kept, self.kept = self.kept, {}
-        out = []
-        for i in indices:
-            if self.stop.is_set():
-                raise _Stopped(f"{self.source.name}: background read stopped")
-            frame = kept.get(i)
-            if frame is None:
-                if i < self.pos or i - self.pos >= SEEK_GAP:
-                    self.cap.set(cv2.CAP_PROP_POS_FRAMES, float(i))
-                    self.pos = i
-                ok = True
-                while ok and self.pos < i:
-                    if self.stop.is_set():
-                        raise _Stopped(f"{self.source.name}: background read stopped")
-                    ok = self.cap.grab()
-                    if ok and self.pos in ahead:
-                        ok, passed = self.cap.retrieve()
-                        if ok and passed is not None:
-                            self.kept[self.pos] = passed
-                    self.pos += 1
-                ok, frame = self.cap.read() if ok else (False, None)
-                if not ok or frame is None:
-                    self._warn("%s: cannot read frame %d for the background; skipped", self.source.name, i)
-                    break  # the video ends earlier than it reported
-                self.pos += 1
-            if i in ahead:
-                self.kept[i] = frame
-            if frame.ndim == 3 and frame.shape[2] == 3 and frame.shape[:2] == (self.source.height, self.source.width):
-                out.append(frame)
-        return out
-
-    def close(self) -> None:
-        self.kept = {}
-        if self.cap is not None:
-            self.cap.release()
-            self.cap = None
-
-
-GAIN_PIXELS = 32768
-"""Most pixels of the subsample a frame's global gain is estimated on (:class:`OfflineBackground`: every 13th
-pixel, thinned further above this), so its cost per frame is bounded at any frame size (at 1920x1080: 32k pixels
-instead of 160k, 1.9 instead of about 8 ms on the CI machine). Frames up to 425,984 pixels are unchanged. Measured
-effect at 1920x1080 (s3-mixed, light-change + sun + noise, frames 55-114 upscaled, window 30, 15 samples): 65 % of
-the masks identical, 13.5 pixels per frame differ on average (of about 60k foreground), mean IoU with the uncapped
-masks 0.9995 (min 0.982), mean IoU with the perfect masks 0.71858 -> 0.71856. The differences come where the
-median of the ratios sits between two quantisation steps of 8-bit values (a gain of 0.988 or 1.0): the uncapped
-estimate jumps between them from one frame to the next as well."""
-
-MIN_GAIN_LEVEL = 16.0
-"""Background values below this (8-bit) are left out of gain estimates (dark pixels carry no ratio)."""
-
-
-def frame_gain(values: np.ndarray, background: np.ndarray) -> np.ndarray:
-    """Global gain per channel of a frame relative to a background: the median over pixels of their ratio.
-
-    Args:
-        values: ``(P, 3)`` a pixel subsample of the frame (8-bit). background: ``(P, 3)`` the same pixels of the
-            background (float, 8-bit units).
-
-    Returns:
-        ``(3,)`` gains (1 where no pixel is bright enough). The median ignores a minority of changed pixels
-        (the people); a light dimming by 20 % gives 0.8.
-    """
-    return channel_gains(np.ascontiguousarray(values.T)[None], np.ascontiguousarray(background.T))[0]
-
-
-def channel_gains(values: np.ndarray, background: np.ndarray) -> np.ndarray:
-    """:func:`frame_gain` of ``K`` frames at once, on channel-major arrays (the same numbers).
-
-    Args:
-        values: ``(K, 3, P)`` uint8 channel values of K frames at P subsampled pixels.
-        background: ``(3, P)`` float64 the background at those pixels (8-bit units).
-
-    Returns:
-        ``(K, 3)`` float64 gains, each the median over the pixels whose background is at least
-        :data:`MIN_GAIN_LEVEL` of their ratio to the background (1 where fewer than 16 such pixels), clipped to
-        ``[0.05, 20]``.
-    """
-    out = np.ones((values.shape[0], 3))
-    for c in range(3):
-        b = background[c]
-        ok = np.flatnonzero(b >= MIN_GAIN_LEVEL)
-        if ok.size >= 16:
-            out[:, c] = median_last(values[:, c, ok] / b[ok])
-    return np.clip(out, 0.05, 20.0)
-
-
-def sample_gains(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Gains of a window's samples relative to their median, and that (compensated) median, on a pixel subsample.
-
-    Args:
-        samples: ``(K, P, 3)`` uint8 channel values of K samples at P subsampled pixels.
-
-    Returns:
-        ``(gains (K, 3) float32, background (P, 3) float64)``: each sample's gain against the per-pixel median of the
-        samples (normalised so that their median gain is 1), and the median of the compensated samples.
-    """
-    gains, background = sample_gains_channels(np.ascontiguousarray(samples.transpose(0, 2, 1)))
-    return gains, np.ascontiguousarray(background.T)
-
-
-def median_last(x: np.ndarray) -> np.ndarray:
-    """``np.median(x, axis=-1)`` of an array without NaNs, the same numbers and dtype (the mean of the middle value,
-    or of the two middle values, as ``np.median`` takes it), faster: rows sorted (float rows of at most 64 values:
-    NumPy's vectorised sort beats selection there) or partitioned at the middle only (``np.median`` also
-    partitions at the last value, for its NaN check, and costs several times more)."""
-    n = x.shape[-1]
-    h = n // 2
-    lo = h if n % 2 else h - 1
-    if np.issubdtype(x.dtype, np.floating) and n <= 64:
-        part = np.sort(x, axis=-1)
-    else:
-        part = np.partition(x, [lo, h] if lo < h else h, axis=-1)
-    return np.mean(part[..., lo : h + 1], axis=-1)
-
-
-def sample_gains_channels(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`sample_gains` on channel-major samples ``(K, 3, P)`` uint8; the background comes back ``(3, P)``.
-
-    The medians over the samples are taken along a contiguous last axis (a ``(3, P, K)`` copy): the same values as
-    ``np.median`` along a strided first axis, several times faster.
-    """
-    along = np.moveaxis(samples, 0, -1).copy()  # (3, P, K)
-    ref = median_last(along)  # float64: the same as the median of the samples taken as float64
-    gains = channel_gains(samples, ref)
-    gains /= np.median(gains, axis=0, keepdims=True)
-    return gains.astype(np.float32), median_last(along / gains.T[:, None, :])
 
 
 def hysteresis(levels: np.ndarray) -> np.ndarray:
@@ -371,124 +150,6 @@ def resolve_levels(packed: np.ndarray, prob: np.ndarray | None = None) -> np.nda
     if (levels == 1).any():
         return hysteresis(levels)
     return (levels == 2).view(np.uint8)
-
-
-def spread_scale(mad: np.ndarray, step: int = 7) -> float:
-    """Image-wide median of the per-pixel noise scales ``1.4826 sqrt(sum_c MAD_c^2 / 3)`` (8-bit units), over every
-    ``step``-th pixel of a flat ``(3 P,)`` MAD array."""
-    m = mad.reshape(-1, 3)[::step].astype(np.float64)
-    return float(np.median(1.4826 * np.sqrt((m * m).mean(axis=1))))
-
-
-def neighbourhood_scale(
-    samples: np.ndarray,
-    gains: np.ndarray,
-    median: np.ndarray,
-    mad: np.ndarray,
-    radius: int,
-    noise_floor: float,
-    max_samples: int = 5,
-) -> float:
-    """How much averaging over a ``(2 radius + 1)^2`` neighbourhood reduces the noise of a recording, relative to
-    independent pixels: ``c = sigma_1 / (sqrt(N) sigma_N)`` with ``sigma_1`` the robust spread (MAD) of the
-    normalised differences ``(I - B) / s`` of a window's samples and ``sigma_N`` that of their neighbourhood means
-    (N pixels). Independent noise (a rendered scene's sensor noise) gives 1; spatially correlated noise
-    (compression blocks, demosaicing, denoising) less, down to ``1 / sqrt(N)`` when neighbours move together.
-    :func:`wptrack.kernels.core.background.neighbourhood_kernel` multiplies its ``z_n`` by ``c``, so a coherent change
-    must beat the recording's real neighbourhood noise.
-
-    Args:
-        samples: ``(K, H, W, 3)`` uint8 a window's samples (an array or a sequence of K ``(H, W, 3)`` frames).
-            gains: ``(K, 3)`` their global gains.
-        median: ``(H, W, 3)`` uint8 the window's background. mad: ``(H, W, 3)`` uint8 its MAD.
-        radius: Neighbourhood radius, pixels.
-        noise_floor: Smallest noise scale, 8-bit units.
-        max_samples: Samples used (evenly chosen), to bound the cost.
-
-    Returns:
-        ``c`` in ``[1 / sqrt(N), 1]``.
-    """
-    import cv2
-
-    n = (2 * radius + 1) ** 2
-    s = np.maximum(noise_floor, 1.4826 * np.sqrt((mad.astype(np.float32) ** 2).mean(axis=2)))[..., None]
-    b = median.astype(np.float32)
-    pick = np.unique(np.linspace(0, len(samples) - 1, min(max_samples, len(samples))).round().astype(int))
-    single, mean = [], []
-    for k in pick:
-        d = samples[k].astype(np.float32)
-        d /= gains[k].astype(np.float32)
-        d -= b
-        d /= s
-        single.append(np.abs(d[radius:-radius:3, radius:-radius:3]).ravel())
-        mean.append(np.abs(cv2.blur(d, (2 * radius + 1, 2 * radius + 1))[radius:-radius:3, radius:-radius:3]).ravel())
-    s1 = float(median_last(np.concatenate(single)))
-    sn = float(median_last(np.concatenate(mean)))
-    if sn <= 0:
-        return 1.0
-    return float(np.clip(s1 / (np.sqrt(n) * sn), 1.0 / np.sqrt(n), 1.0))
-
-
-SHADOW_SEARCH = (0.3, 0.95)
-"""Brightness ratios searched for the learnt shadow ratio (:func:`shadow_ratio`). Below 0.3 lie mostly dark
-objects (a dark car's sides on a grey road: 0.2), not outdoor cast shadows (the sky light alone is rarely under a
-third of sky + sun on a horizontal surface)."""
-
-
-def shadow_ratio(
-    samples: np.ndarray,
-    gains: np.ndarray,
-    background: np.ndarray,
-    mad: np.ndarray,
-    threshold: float,
-    noise_floor: float,
-    chroma_max: float,
-    bin_width: float = 0.02,
-    min_count: int = 200,
-) -> float | None:
-    """The brightness ratio of the cast shadows of a recording, learnt from a window's samples.
-
-    Every sampled pixel that is foreground (``z > threshold``) and passes the chromaticity part of the shadow test
-    (``cd <= chroma_max``) votes for its brightness ratio ``a`` (see :mod:`wptrack.kernels.core.background`); the cast
-    shadows of one sun all darken the ground by about the same ratio and make the highest peak of the histogram
-    of ``a`` inside :data:`SHADOW_SEARCH` (dark objects spread over many ratios, or lie below it). The peak must
-    be a local maximum of the smoothed histogram, not the search range's end (the tail of a peak outside it).
-
-    Args:
-        samples: ``(K, P, 3)`` uint8 sampled values of P subsampled pixels. gains: ``(K, 3)`` the samples' global
-            gains. background: ``(P, 3)`` the window's background at those pixels. mad: ``(P, 3)`` its MAD.
-        threshold, noise_floor, chroma_max: As in :class:`wptrack.kernels.core.background.ForegroundParams`.
-        bin_width: Histogram bin width (ratio).
-        min_count: Fewer votes than this inside the search range: ``None`` (nothing learnt).
-
-    Returns:
-        The ratio at the peak, or ``None``.
-    """
-    b = background.astype(np.float64)
-    s = np.maximum(noise_floor, 1.4826 * np.sqrt((mad.astype(np.float64) ** 2).mean(axis=1)))
-    bb = (b * b).sum(axis=1)
-    votes = []
-    for xk, g in zip(samples, gains, strict=True):
-        x = xk.astype(np.float64) / g[None, :]
-        z = np.sqrt(((x - b) ** 2).mean(axis=1)) / s
-        fg = np.flatnonzero((z > threshold) & (bb >= 1.0))  # the ratios of the foreground pixels only
-        x, bf, bbf = x[fg], b[fg], bb[fg]
-        ib = (x * bf).sum(axis=1)
-        a = ib / np.maximum(bbf, 1.0)
-        cd = np.sqrt(np.maximum((x * x).sum(axis=1) - a * ib, 0.0) / np.maximum(bbf, 1.0))
-        votes.append(a[cd <= chroma_max])
-    a = np.concatenate(votes)
-    lo, hi = SHADOW_SEARCH
-    edges = np.arange(lo, hi + bin_width / 2, bin_width)
-    counts, _ = np.histogram(a, bins=edges)
-    if counts.sum() < min_count:
-        return None
-    smooth = np.convolve(counts.astype(np.float64), [0.25, 0.5, 0.25], mode="same")
-    peaks = [i for i in range(1, len(smooth) - 1) if smooth[i] >= smooth[i - 1] and smooth[i] > smooth[i + 1]]
-    if not peaks:
-        return None
-    best = max(peaks, key=lambda i: smooth[i])
-    return float(edges[best] + bin_width / 2)
 
 
 @dataclass
@@ -610,6 +271,7 @@ class OfflineBackground:
         p.shadow_edge_hi = float(config.shadow_hi)
         p.chroma_max = float(config.shadow_chroma)
         self.params = p
+        self.light = LightField(config, source.width, source.height, p, device)
 
     def _read(self, i: int) -> _WindowRead:
         """Read window ``i``'s samples and prepare them on the host (any thread; no Warp call: see the class)."""
@@ -693,8 +355,26 @@ class OfflineBackground:
         wp.launch(
             kbg.median_mad_kernel, dim=3 * self.pixels, inputs=[stack, g], outputs=[median, mad], device=self.device
         )
-        self._built[i] = (median, mad)
         c = self.config
+        if self.light.tiles and c.illum_windows:
+            # each sample under its own light: divide it by its global gain and local field against this first
+            # median, then the statistics again (unit gains) on what now differs only by what moved
+            cap = float(c.spread_cap * spread_scale(download(mad))) if c.spread_cap > 0 else 0.0
+            self.light.compensate(stack, gains, median, mad, cap)
+            ones = wp.array(np.ones((k, 3), dtype=np.float32), dtype=wp.vec3, device=self.device)
+            wp.launch(kbg.median_mad_kernel, dim=3 * self.pixels, inputs=[stack, ones], outputs=[median, mad],
+                      device=self.device)  # fmt: skip
+            if c.mode_band > 0:
+                self._mode(stack, ones, mad, median)
+            host = download(stack)
+            frames = [host[r].reshape(self.source.height, self.source.width, 3) for r in range(k)]
+            sub = np.ascontiguousarray(host[:, self._sub_channels.reshape(-1)].reshape(k, *self._sub_channels.shape))
+            gains = np.ones((k, 3), dtype=np.float32)
+            bg_sub = median_last(np.moveaxis(sub, 0, -1).astype(np.float64))
+            self._bg_sub[i], self._bg_gain[i] = bg_sub, np.ascontiguousarray(bg_sub[:, :: self._gain_step])
+        elif c.mode_band > 0:
+            self._mode(stack, g, mad, median)
+        self._built[i] = (median, mad)
         if c.spread_cap > 0 or c.shadow_band > 0 or c.neighbourhood > 0:
             mad_host = download(mad)
             self._scale[i] = spread_scale(mad_host)
@@ -720,6 +400,19 @@ class OfflineBackground:
             image = download(median).reshape(self.source.height, self.source.width, 3).copy()
             self.on_build(i, float(self.centres[i]), image)
         return median, mad
+
+    def _mode(self, stack: Any, gains: Any, mad: Any, median: Any) -> None:
+        """Rebuild a window's ``median`` and ``mad`` (device arrays, in place) as the densest cluster of each pixel's
+        samples (:func:`wptrack.kernels.core.background.mode_kernel`), the band ``mode_band`` times the image-wide noise
+        scale of the window's first ``mad`` (at least the noise floor)."""
+        import warp as wp
+
+        from wptrack.kernels.core import background as kbg
+
+        c = self.config
+        band = float(c.mode_band * max(c.noise_floor, spread_scale(download(mad))))
+        wp.launch(kbg.mode_kernel, dim=self.pixels, inputs=[stack, gains, band], outputs=[median, mad],
+                  device=self.device)  # fmt: skip
 
     def shadow_bounds(self, i: int, j: int, w: float) -> tuple[float, float]:
         """Brightness-ratio bounds of the cast-shadow (umbra) test between windows ``i`` and ``j`` (weight ``w`` of
@@ -794,10 +487,12 @@ class OfflineBackground:
             self.params.spread_cap = float(self.config.spread_cap * ((1.0 - w) * self._scale[i] + w * self._scale[j]))
         if self.config.shadow_band > 0:
             self.params.shadow_lo, self.params.shadow_hi = self.shadow_bounds(i, j, w)
+        if self.light.active:
+            self.light.measure(frame_in, wp.vec3(*gain), b0, m0, b1, m1, w)
         wp.launch(
             kbg.foreground_kernel,
             dim=self.pixels,
-            inputs=[frame_in, b0, m0, b1, m1, w, wp.vec3(*gain), self.params],
+            inputs=[frame_in, b0, m0, b1, m1, w, wp.vec3(*gain), self.params, self.light.local, self.light.patch],
             outputs=[self._mask, self._prob, self._shadow, self._diff],
             device=self.device,
         )

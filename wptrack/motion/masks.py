@@ -141,6 +141,66 @@ class MaskConfig:
         1.0, help="offline: scale of the foreground probability 1 / (1 + exp(-(z - T) / k))", units="robust sigmas",
         symbol="k", lo=0.0, lo_open=True,
     )  # fmt: skip
+    illum_tiles: int = param(
+        30, help="offline: local light field (cloud shadows, exposure, lights switched on in part of the view): tiles "
+        "along the shorter image side, each tile's gain the median brightness ratio of its pixels whose patch keeps "
+        "the background's texture; frames are divided by it before the tests (0: off)", lo=0, hi=1000,
+    )  # fmt: skip
+    illum_radius: int = param(
+        2, help="offline: radius of the weighted median that smooths the tiles' gains", units="tiles", lo=0, hi=4
+    )
+    illum_keep: float = param(
+        0.15, help="offline: a tile keeps its own gains where they differ from that median by at most this (0: the "
+        "median everywhere)", units="log gain", lo=0.0, hi=1.0, flag="",
+    )  # fmt: skip
+    illum_dead: float = param(
+        0.03, help="offline: a tile's field whose log gains all lie within this of 0 is 0 (no local change)",
+        units="log gain", lo=0.0, hi=0.5, flag="",
+    )  # fmt: skip
+    illum_windows: bool = param(
+        True, help="offline: with illum_tiles, also divide each background window's samples by their own local field "
+        "before the window's median, noise scale and learnt shadow ratio", flag="",
+    )  # fmt: skip
+    illum_patch: int = param(
+        3, help="offline: radius of the patches the texture tests compare", units="px", lo=1, hi=7, flag=""
+    )
+    illum_verify: float = param(
+        0.7, help="offline: smallest normalised cross-correlation (NCC) of a pixel's patch with the background's for "
+        "it to vote for its tile's gain", lo=0.0, hi=1.0, lo_open=True, hi_open=True, flag="",
+    )  # fmt: skip
+    illum_veto: float = param(
+        0.7, help="offline: a foreground pixel whose textured patch correlates at least this much with the "
+        "background's (NCC), follows the patch's fit and keeps the background's colour is a light change (0: off)",
+        lo=0.0, hi=1.0, hi_open=True,
+    )  # fmt: skip
+    illum_grad: float = param(
+        0.0, help="offline: as illum_veto with the gradient correlation of the patches (0: off)", lo=0.0, hi=1.0,
+        hi_open=True,
+    )  # fmt: skip
+    illum_texture: float = param(
+        2.0, help="offline: smallest deviation of a background patch for the texture tests (a flat patch cannot tell "
+        "light from an object)", units="noise scales", lo=0.0, lo_open=True, flag="",
+    )  # fmt: skip
+    illum_resid: float = param(
+        3.0, help="offline: largest residual of a vetoed pixel from its patch's linear fit", units="noise scales",
+        lo=0.0, lo_open=True, flag="",
+    )  # fmt: skip
+    illum_chroma: float = param(
+        0.12, help="offline: largest chromaticity distortion of a vetoed pixel", lo=0.0, flag=""
+    )
+    illum_gap: float = param(
+        0.2, help="offline: largest |ln(slope / ratio of the means)| of a patch's linear fit for the texture tests "
+        "(light multiplies radiance: its fit is a gain)", units="log gain", lo=0.0, lo_open=True, flag="",
+    )  # fmt: skip
+    illum_lo: float = param(
+        0.3, help="offline: smallest brightness ratio of a vetoed pixel", lo=0.0, hi=1.0, lo_open=True, flag=""
+    )
+    illum_hi: float = param(3.0, help="offline: largest brightness ratio of a vetoed pixel", lo=1.0, flag="")
+    mode_band: float = param(
+        3.0, help="offline: each window's background is the densest cluster of a pixel's samples (within this of the "
+        "sample with most such neighbours), not the median of all, so a pixel that people cover in most samples of a "
+        "short clip keeps its background (0: the median; else 0.5 to 20)", units="noise scales", lo=0.0, hi=20.0,
+    )  # fmt: skip
     device: str = param("auto", help="offline: Warp device (auto, cpu, cuda or cuda:N)", flag="")
 
     def __post_init__(self) -> None:
@@ -159,6 +219,8 @@ class MaskConfig:
             fail("spread_cap", "0 (off) or a number >= 1 (times the image-wide median noise scale)")
         if not self.shadow_lo < self.shadow_hi:
             fail("shadow_hi", f"a ratio in (shadow_lo={self.shadow_lo}, 1]")
+        if not (self.mode_band == 0 or self.mode_band >= 0.5):
+            fail("mode_band", "0 (the median) or in [0.5, 20] (noise scales)")
         if not (self.device in ("auto", "cpu", "cuda") or self.device.startswith("cuda:")):
             fail("device", "'auto', 'cpu', 'cuda' or 'cuda:N'")
 

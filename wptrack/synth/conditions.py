@@ -28,12 +28,32 @@ truth as without this module). The conditions:
   :mod:`wptrack.synth.plaza_crowd`).
 - ``cyclists``: 2-4 people riding bicycles at 3.5-6 m/s along the road and across the plaza, each one object of
   class ``cyclist`` (issue 26; :mod:`wptrack.synth.plaza_crowd`).
+- ``clouds`` (issue 26): soft-edged cloud shadows drifting across the scene with the wind (:func:`cloud_cover`): a
+  train of :data:`CLOUD_COUNT` clouds (elliptical, edges blurred over :data:`CLOUD_EDGE_M` metres, opacity
+  :data:`CLOUD_OPACITY` with a drifting internal texture) at :data:`CLOUD_WIND` m/s. A cloud removes that fraction of
+  the direct sunlight, so a sunlit horizontal surface darkens by ``opacity * direct share`` (the share of direct
+  light in its radiance, about 0.55 on the plaza: a road pixel goes e.g. 190 -> 145 under a thick cloud, -> 170
+  under a thin one), surfaces in static shadow not at all, vertical surfaces and vegetation by
+  ``opacity * CLOUD_SIDE_SHARE`` (less), the people and cars by their own direct share at their 3-D points; the sky
+  light left is a little bluer (:data:`CLOUD_TINT`). Cloud shadows are not objects: the masks and ground truth do
+  not change. :func:`cloud_darkening` gives the per-pixel darkening of the static scene (to measure false
+  positives where the ground darkened).
+- ``exposure`` (issue 26): the camera's auto-exposure jumps (global gain steps :data:`EXPOSURE_STEPS` over
+  :data:`EXPOSURE_RAMP_S` seconds), auto-white-balance shifts (:data:`AWB_SHIFTS`, per channel, over
+  :data:`AWB_RAMP_S`) and lights switching on in part of the view (:data:`LIGHT_POOLS`: a warm pool of light on the
+  ground, brightening every surface and person in it with a gaussian fall-off, switched on over
+  :data:`POOL_RAMP_S`). Masks and ground truth unchanged.
+- ``short`` (issue 26): a clip of :data:`SHORT_S` seconds (shorter than the offline background window), starting at
+  the moment of the scene's default timeline whose next :data:`SHORT_S` seconds hold the most objects in view, so
+  objects are in view from the first frame and through most frames (the default length becomes that clip; the
+  objects' motion is the default one, shifted in time).
 
 The chosen conditions and their parameters are written to ``scene.json`` under ``conditions`` (absent when none).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, fields
@@ -43,7 +63,17 @@ import numpy as np
 
 from wptrack.core.errors import ConfigError
 
-__all__ = ["CONDITION_NAMES", "PlazaConditions", "TimeWarp", "ease_rate", "parse_conditions"]
+__all__ = [
+    "CONDITION_NAMES",
+    "PlazaConditions",
+    "TimeWarp",
+    "cloud_cover",
+    "cloud_darkening",
+    "ease_rate",
+    "exposure_gain",
+    "light_pool_factor",
+    "parse_conditions",
+]
 
 HOLD_S = 4.0
 """static-start: seconds the whole scene stands still at the start."""
@@ -87,6 +117,48 @@ CYCLE_SPEEDS = (3.5, 6.0)
 """cyclists: their speeds, m/s."""
 CYCLIST_CLASS = "cyclist"
 """cyclists: ground-truth class of a rider on a bicycle (one object)."""
+CLOUD_WIND = (4.0, 25.0)
+"""clouds: wind speed (m/s) and direction (degrees from world +x towards +y) the cloud shadows drift with."""
+CLOUD_COUNT = 7
+"""clouds: number of clouds in the train (drawn once from :data:`CLOUD_SEED`)."""
+CLOUD_SEED = 2611
+"""clouds: seed of the cloud train's sizes, gaps, lateral offsets and opacities (fixed: the same clouds on every
+scene and scene seed)."""
+CLOUD_LENGTH_M = (8.0, 16.0)
+"""clouds: range of a cloud's length along the wind, metres."""
+CLOUD_WIDTH_M = (16.0, 32.0)
+"""clouds: range of a cloud's width across the wind, metres."""
+CLOUD_GAP_M = (3.0, 10.0)
+"""clouds: range of the clear gap between two clouds along the wind, metres."""
+CLOUD_OPACITY = (0.2, 0.5)
+"""clouds: range of the fraction of direct sunlight a cloud's core removes."""
+CLOUD_EDGE_M = 4.0
+"""clouds: width of a cloud shadow's soft edge on the ground, metres."""
+CLOUD_TEXTURE = 0.3
+"""clouds: relative amplitude of the drifting texture inside a cloud (its opacity varies by about +-15 %)."""
+CLOUD_SIDE_SHARE = 0.3
+"""clouds: share of direct sunlight in the radiance of static surfaces that do not face up (facades, vegetation,
+the sides of the clutter): they darken less under a cloud than the sunlit ground."""
+CLOUD_TINT = (1.0, 0.97, 0.92)
+"""clouds: relative darkening of R, G, B under a cloud (the sky light that stays is bluish: red falls most)."""
+EXPOSURE_STEPS = ((1.5, 1.3), (5.5, 0.8), (9.5, 1.15))
+"""exposure: auto-exposure jumps ``(time s, factor)``: from that time on, the global gain is multiplied by factor."""
+EXPOSURE_RAMP_S = 0.15
+"""exposure: duration of each auto-exposure jump, seconds (about two frames at 15 fps)."""
+AWB_SHIFTS = ((3.5, (1.08, 1.0, 0.9)), (8.5, (0.95, 1.0, 1.07)))
+"""exposure: auto-white-balance shifts ``(time s, (R, G, B) factors)``, multiplying from that time on."""
+AWB_RAMP_S = 0.5
+"""exposure: duration of each white-balance shift, seconds."""
+LIGHT_POOLS = (
+    (2.5, (2.0, 8.0), 2.5, (1.45, 1.36, 1.22)),
+    (7.0, (-6.0, 17.0), 3.0, (1.35, 1.3, 1.2)),
+)
+"""exposure: lights switching on ``(time s, ground centre (x, y) m, gaussian radius m, (R, G, B) peak factor)``:
+a floodlight's pool on the ground (a warm light: red rises most)."""
+POOL_RAMP_S = 0.2
+"""exposure: seconds a light takes to switch on."""
+SHORT_S = 5.0
+"""short: clip length, seconds (75 frames at the plaza's 15 fps; the offline background window is 300 frames)."""
 
 CONDITION_NAMES: dict[str, str] = {
     "static-start": "static_start",
@@ -98,6 +170,9 @@ CONDITION_NAMES: dict[str, str] = {
     "dark-car": "dark_car",
     "crowd": "crowd",
     "cyclists": "cyclists",
+    "clouds": "clouds",
+    "exposure": "exposure",
+    "short": "short_clip",
 }
 """Command-line name -> :class:`PlazaConditions` field."""
 
@@ -116,6 +191,9 @@ class PlazaConditions:
         dark_car: The first car painted in the asphalt's colour.
         crowd: 20-40 more people at once, in pairs and small groups (:mod:`wptrack.synth.plaza_crowd`).
         cyclists: 2-4 cyclists (:mod:`wptrack.synth.plaza_crowd`).
+        clouds: Soft cloud shadows drifting across the scene.
+        exposure: Auto-exposure jumps, white-balance shifts and lights switching on in part of the view.
+        short_clip: A clip of :data:`SHORT_S` seconds with objects in view from the first frame.
     """
 
     static_start: bool = False
@@ -127,6 +205,9 @@ class PlazaConditions:
     dark_car: bool = False
     crowd: bool = False
     cyclists: bool = False
+    clouds: bool = False
+    exposure: bool = False
+    short_clip: bool = False
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -174,6 +255,28 @@ class PlazaConditions:
             "dark-car": {"albedo": "asphalt"},
             "crowd": _crowd_params(),
             "cyclists": _cyclist_params(),
+            "clouds": {
+                "wind_m_s": CLOUD_WIND[0],
+                "wind_direction_deg": CLOUD_WIND[1],
+                "clouds": [
+                    {k: round(float(v), 3) for k, v in zip(CLOUD_FIELDS, c, strict=True)} for c in cloud_train()
+                ],
+                "edge_m": CLOUD_EDGE_M,
+                "texture": CLOUD_TEXTURE,
+                "side_share": CLOUD_SIDE_SHARE,
+                "tint_rgb": list(CLOUD_TINT),
+            },
+            "exposure": {
+                "steps": [list(s) for s in EXPOSURE_STEPS],
+                "ramp_s": EXPOSURE_RAMP_S,
+                "awb_shifts": [[t, list(f)] for t, f in AWB_SHIFTS],
+                "awb_ramp_s": AWB_RAMP_S,
+                "light_pools": [
+                    {"on_s": t, "centre_m": list(c), "radius_m": r, "peak_rgb": list(f)} for t, c, r, f in LIGHT_POOLS
+                ],
+                "pool_ramp_s": POOL_RAMP_S,
+            },
+            "short": {"seconds": SHORT_S},
         }
         return {name: params[name] for name in self.names}
 
@@ -248,6 +351,106 @@ def jpeg_roundtrip(bgr: np.ndarray, quality: int = JPEG_QUALITY) -> np.ndarray:
     if not ok:  # pragma: no cover - cv2 always encodes a valid uint8 image
         raise RuntimeError("cv2.imencode failed to encode a JPEG frame")
     return cv2.imdecode(buf, cv2.IMREAD_COLOR)
+
+
+def _smooth(x: np.ndarray | float) -> np.ndarray:
+    """Smoothstep of ``x`` clipped to [0, 1]."""
+    y = np.clip(x, 0.0, 1.0)
+    return y * y * (3 - 2 * y)
+
+
+CLOUD_FIELDS = ("u0_m", "w_m", "length_m", "width_m", "opacity")
+"""Names of the columns of :func:`cloud_train` (scene.json)."""
+
+
+@functools.lru_cache(maxsize=1)
+def cloud_train() -> np.ndarray:
+    """``(CLOUD_COUNT, 5)`` clouds of the ``clouds`` condition: along-wind centre at time 0 ``u0``, across-wind
+    centre ``w``, length, width (metres) and core opacity; the first cloud's centre is at ``u0 = 10`` m (its rear
+    half over the view at time 0), the others follow it upwind (they drift over the view later)."""
+    rng = np.random.default_rng(CLOUD_SEED)
+    out = []
+    u = 10.0
+    for k in range(CLOUD_COUNT):
+        length = rng.uniform(*CLOUD_LENGTH_M)
+        if k:
+            u -= 0.5 * length + rng.uniform(*CLOUD_GAP_M)
+        out.append((u, rng.uniform(2.0, 28.0), length, rng.uniform(*CLOUD_WIDTH_M), rng.uniform(*CLOUD_OPACITY)))
+        u -= 0.5 * length
+    return np.asarray(out)
+
+
+def cloud_cover(xy: np.ndarray, t: float) -> np.ndarray:
+    """Fraction of direct sunlight the clouds remove at ground points ``xy`` (..., 2) metres at time ``t`` seconds.
+
+    Each cloud is an ellipse (length along the wind, width across) drifting at :data:`CLOUD_WIND`; its cover is its
+    opacity (times a drifting texture, :data:`CLOUD_TEXTURE`) inside, falling smoothly to 0 over
+    :data:`CLOUD_EDGE_M` metres across its rim; overlapping clouds combine as ``1 - prod(1 - cover)``.
+
+    Returns:
+        (...,) cover in [0, 1) (0 where a point is not finite).
+    """
+    from wptrack.synth.render import value_noise
+
+    xy = np.asarray(xy, dtype=np.float64)
+    speed, direction = CLOUD_WIND
+    c, s = math.cos(math.radians(direction)), math.sin(math.radians(direction))
+    ok = np.isfinite(xy[..., 0]) & np.isfinite(xy[..., 1])
+    x, y = np.where(ok, xy[..., 0], 0.0), np.where(ok, xy[..., 1], 0.0)
+    u = x * c + y * s - speed * t  # along the wind, in the clouds' frame
+    w = -x * s + y * c
+    texture = 1.0 + CLOUD_TEXTURE * (value_noise(u / 6.0 + 17.0, w / 6.0 + 5.0, CLOUD_SEED) - 0.5)
+    clear = np.ones_like(u)
+    for u0, w0, length, width, opacity in cloud_train():
+        a, b = 0.5 * length, 0.5 * width
+        rho = np.sqrt(((u - u0) / a) ** 2 + ((w - w0) / b) ** 2)
+        inside = (1.0 - rho) * min(a, b)  # about the distance inside the rim, metres
+        cover = opacity * _smooth(inside / CLOUD_EDGE_M + 0.5)
+        clear *= 1.0 - np.clip(cover * texture, 0.0, 0.95)
+    return np.where(ok, 1.0 - clear, 0.0)
+
+
+def cloud_shadow_foot(points: np.ndarray, sun: np.ndarray) -> np.ndarray:
+    """Ground points ``(..., 2)`` whose cloud cover shades 3-D ``points`` (..., 3): the points moved along the
+    sun direction ``sun`` (unit, towards the sun) down to z = 0 (the clouds are far above: their shadow on a point
+    at height z is the ground shadow shifted towards the sun's azimuth)."""
+    p = np.asarray(points, dtype=np.float64)
+    sun = np.asarray(sun, dtype=np.float64)
+    return p[..., :2] - (p[..., 2:3] / sun[2]) * sun[:2]
+
+
+def cloud_darkening(cover: np.ndarray, share: np.ndarray) -> np.ndarray:
+    """``(..., 3)`` R, G, B radiance factors of surfaces with direct-light ``share`` (...,) under cloud ``cover``
+    (...,): ``1 - cover * share * CLOUD_TINT``."""
+    return 1.0 - (np.asarray(cover) * np.asarray(share))[..., None] * np.asarray(CLOUD_TINT)
+
+
+def exposure_gain(t: float) -> np.ndarray:
+    """(3,) R, G, B global gain of the ``exposure`` condition at time ``t`` seconds: the auto-exposure jumps and the
+    white-balance shifts so far (1 before the first)."""
+    out = np.ones(3)
+    for at, factor in EXPOSURE_STEPS:
+        out = out * (1.0 + (factor - 1.0) * _smooth((t - at) / EXPOSURE_RAMP_S))
+    for at, rgb in AWB_SHIFTS:
+        out = out * (1.0 + (np.asarray(rgb) - 1.0) * _smooth((t - at) / AWB_RAMP_S))
+    return out
+
+
+def light_pool_factor(points: np.ndarray, t: float) -> np.ndarray:
+    """``(..., 3)`` R, G, B factors of the ``exposure`` condition's lights at 3-D ``points`` (..., 3) at time ``t``:
+    ``1 + on(t) (peak - 1) exp(-r^2 / (2 radius^2))`` per light, ``r`` the horizontal distance to its centre (1 where
+    a point is not finite)."""
+    p = np.asarray(points, dtype=np.float64)
+    out = np.ones((*p.shape[:-1], 3))
+    ok = np.isfinite(p[..., 0]) & np.isfinite(p[..., 1])
+    x, y = np.where(ok, p[..., 0], 1e9), np.where(ok, p[..., 1], 1e9)
+    for at, (cx, cy), radius, peak in LIGHT_POOLS:
+        on = float(_smooth((t - at) / POOL_RAMP_S))
+        if on <= 0.0:
+            continue
+        fall = np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2.0 * radius**2))
+        out = out * (1.0 + on * (np.asarray(peak) - 1.0) * fall[..., None])
+    return out
 
 
 # ----------------------------------------------------------------------------------------------------- retiming

@@ -87,6 +87,8 @@ from wptrack.synth.plaza_background import (
     NOISE_SIGMA,
     plaza_background,
     plaza_camera,
+    static_points,
+    static_share,
 )
 from wptrack.synth.plaza_cast import _dark_car
 from wptrack.synth.render import value_noise
@@ -198,6 +200,7 @@ class PlazaScene(Scene):
         self.actors = list(actors)
         self.fps = float(fps)
         self.default_frames = int(frames)
+        self.base_frames = int(frames)
         cam = plaza_camera()
         self.rig = Rig(cameras=(cam,), volume=((-16.0, 3.0, 0.0), (16.0, 27.0, 3.0)))
         self.noise_sigma = NOISE_SIGMA
@@ -213,6 +216,8 @@ class PlazaScene(Scene):
             raise RuntimeError(f"conditions {missing}: not registered (import wptrack.synth.plaza_crowd)")
         if self.conditions.dark_car:
             self.actors = _dark_car(self.actors)
+        if self.conditions.short_clip:
+            self.actors = self._short_clip(self.actors)
         if self.conditions.static_start:
             self.actors = self._static_start(self.actors)
         if self.conditions.stop_and_go:
@@ -220,13 +225,30 @@ class PlazaScene(Scene):
 
     def with_conditions(self, conditions: PlazaConditions) -> PlazaScene:
         """The same scene (actors, length, frame rate) rendered under ``conditions``."""
-        return PlazaScene(self.base_actors, frames=self.default_frames, fps=self.fps, conditions=conditions)
+        return PlazaScene(self.base_actors, frames=self.base_frames, fps=self.fps, conditions=conditions)
 
     # -- conditions that change the motion (the ground truth follows)
 
     def _span(self) -> tuple[float, float]:
         """Scene times the retiming maps cover, seconds (beyond: slope 1)."""
         return -2.0, self.default_frames / self.fps + 60.0
+
+    def _short_clip(self, actors: list[PlazaActor]) -> list[PlazaActor]:
+        """``short``: a clip of :data:`~wptrack.synth.conditions.SHORT_S` seconds, starting where the default
+        timeline's next ``SHORT_S`` seconds hold the most objects in view (the first such start); it becomes the
+        scene's default length."""
+        self.actors, self._states = actors, None
+        n = self.default_frames
+        clip = min(max(int(round(C.SHORT_S * self.fps)), 1), n)
+        count = self.states(n).present[:, :n].sum(axis=0)
+        sums = np.convolve(count, np.ones(clip), mode="valid")  # sums[s]: objects in view over frames s .. s+clip-1
+        start = int(np.argmax(sums))
+        self._states = None
+        self.default_frames = clip
+        self.short_origin_s = start / self.fps
+        span = self._span()
+        warp = TimeWarp.build([], origin=span[0] + self.short_origin_s, span=span)
+        return [replace(a, track=Retimed(a.track, warp)) for a in actors]
 
     def _static_start(self, actors: list[PlazaActor]) -> list[PlazaActor]:
         """``static-start``: freeze the whole scene at the first frame with the most objects in view, then play."""
@@ -249,7 +271,9 @@ class PlazaScene(Scene):
         for a, actor in enumerate(actors):
             if actor.shape.cls != HUMAN or not np.any(present[a]):
                 continue
-            track = actor.track.inner if isinstance(actor.track, Retimed) else actor.track
+            track = actor.track
+            while isinstance(track, Retimed):
+                track = track.inner
             key = id(track.formation) if hasattr(track, "formation") else -1 - a
             groups.setdefault(key, []).append(a)
         out = list(actors)
@@ -364,7 +388,26 @@ class PlazaScene(Scene):
         out = b * np.array([1.0 + warm, 1.0, 1.0 - warm])
         if self.conditions.light_change:
             out = out * light_change_factor(t)
+        if self.conditions.exposure:
+            out = out * C.exposure_gain(t)
         return out
+
+    def local_light(self, index: int) -> np.ndarray:
+        """(H, W) float64 mean R, G, B factor by which the local illumination conditions (``clouds``, the lights of
+        ``exposure``) change the static scene's radiance at frame ``index`` (1 where they change nothing; global
+        gains and the objects' cast shadows are left out): the ground truth of where the light changed locally."""
+        cond = self.conditions
+        bg = plaza_background(sun=True) if cond.sun_shadows else plaza_background()
+        h, w = bg.view.camera.height, bg.view.camera.width
+        out = np.ones((h, w, 3))
+        t = index / self.fps
+        if cond.clouds:
+            pts = static_points(cond.sun_shadows)
+            cover = C.cloud_cover(C.cloud_shadow_foot(pts, bg.light.unit), t)
+            out *= C.cloud_darkening(cover, static_share(cond.sun_shadows))
+        if cond.exposure:
+            out *= C.light_pool_factor(static_points(cond.sun_shadows), t)
+        return out.mean(axis=2)
 
     def primitives(self, index: int) -> list[tuple[PlazaActor, list[_Prim]]]:
         """Body parts of every actor on its path at frame ``index``."""
@@ -415,6 +458,11 @@ class PlazaScene(Scene):
         actors = self.primitives(index)
         sun = light.unit
         tint = np.asarray(bg.shadow_tint, dtype=np.float32)
+        # clouds: the share of direct sunlight in each pixel's radiance (static surfaces, then the cast shadows and
+        # the objects change it), dimmed at the end by the cloud cover at its 3-D point; exposure: the lights' pools
+        # at each pixel's 3-D point (static surface or object)
+        share = static_share(cond.sun_shadows).copy() if cond.clouds else None
+        points = static_points(cond.sun_shadows).copy() if cond.clouds or cond.exposure else None
         up = np.array([0.0, 0.0, 1e-3])
         for _actor, prims in actors:
             # shadow footprint: the parts' corners and their projections along the sun on z = 0
@@ -443,6 +491,9 @@ class PlazaScene(Scene):
             soft = cv2.GaussianBlur(hard2, (5, 5), 1.0) if bg.soft_shadows else hard2
             amount = bg.shadow_strength * soft * bg.sunlit[v0:v1, u0:u1] * valid.reshape(v1 - v0, u1 - u0)
             img[v0:v1, u0:u1] *= 1.0 - amount[..., None] * tint[None, None, :]
+            if share is not None:  # the direct light left in the shadow
+                sub = share[v0:v1, u0:u1]
+                sub *= (1.0 - soft) / np.maximum(1.0 - amount, 1e-6)
 
         zbuf = view.depth.copy()
         labels = np.zeros((h, w), dtype=np.int32)
@@ -472,11 +523,20 @@ class PlazaScene(Scene):
                 if prim.top_rgb is not None:
                     albedo = np.where(nloc[:, 2:3] > 0.55, prim.top_rgb[None, :], albedo)
                 img[v0:v1, u0:u1][front] = albedo * (light.ambient + light.diffuse * lam)[:, None]
+                if share is not None:
+                    share[v0:v1, u0:u1][front] = light.diffuse * lam / (light.ambient + light.diffuse * lam)
+                if points is not None:
+                    points[v0:v1, u0:u1][front] = view.origin[None, :] + tf[:, None] * d[front.ravel()]
                 zsub[front] = tf
                 labels[v0:v1, u0:u1][front] = actor.oid + 1
             totals[actor.oid] = int(np.count_nonzero(covered))
         pixels = {oid: (int(np.count_nonzero(labels == oid + 1)), total) for oid, total in totals.items()}
 
+        if share is not None:
+            cover = C.cloud_cover(C.cloud_shadow_foot(points, sun), t)
+            img *= C.cloud_darkening(cover, share).astype(np.float32)
+        if cond.exposure:
+            img *= C.light_pool_factor(points, t).astype(np.float32)
         scale = (255.0 * light.exposure * self.gain(index)).astype(np.float32)
         img *= scale[None, None, :]
         if cond.sensor_noise:

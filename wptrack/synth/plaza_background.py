@@ -13,6 +13,7 @@ import numpy as np
 
 from wptrack.cameras.rig import Camera
 from wptrack.synth.actors import _Prim, _Rgb
+from wptrack.synth.conditions import CLOUD_SIDE_SHARE
 from wptrack.synth.render import Box, Cylinder, Light, StaticView, noisy, render_static, solid, value_noise, wood
 
 log = logging.getLogger(__name__)
@@ -307,3 +308,30 @@ def plaza_background(sun: bool = False) -> PlazaBackground:
 
 
 # ----------------------------------------------------------------------------------------------------- rendering
+
+
+@functools.lru_cache(maxsize=2)
+def static_points(sun: bool) -> np.ndarray:
+    """(H, W, 3) float64 world points of the static plaza seen by each pixel (inf where a ray hits nothing)."""
+    view = plaza_background(sun=sun).view
+    h, w = view.camera.height, view.camera.width
+    depth = view.depth.reshape(-1).astype(np.float64)
+    out = view.origin[None, :] + np.where(np.isfinite(depth), depth, np.inf)[:, None] * view.dirs
+    out = out.reshape(h, w, 3)
+    out.setflags(write=False)
+    return out
+
+
+@functools.lru_cache(maxsize=2)
+def static_share(sun: bool) -> np.ndarray:
+    """(H, W) float32 share of direct sunlight in the static plaza's radiance: the shadow strength where the surface
+    faces up (times the part of the sun it sees), :data:`~wptrack.synth.conditions.CLOUD_SIDE_SHARE` on other
+    surfaces, 0 on the sky."""
+    bg = plaza_background(sun=sun)
+    view = bg.view
+    h, w = view.camera.height, view.camera.width
+    out = np.where(np.isfinite(view.depth), np.float32(CLOUD_SIDE_SHARE), np.float32(0.0)).reshape(-1)
+    out[view.up_index] = bg.shadow_strength * bg.sunlit.reshape(-1)[view.up_index]
+    out = out.reshape(h, w).astype(np.float32)
+    out.setflags(write=False)
+    return out

@@ -1,0 +1,172 @@
+"""Background windows of the offline model (:mod:`wptrack.motion.background`): which frames each window samples
+(:func:`plan_windows`), which two windows a frame interpolates between (:func:`bracket`), and the reader of the
+samples (:class:`_Sampler`: seeks only across gaps of :data:`SEEK_GAP` frames or more, grabs forward otherwise,
+keeping on its way the next window's samples). The design is in :mod:`wptrack.motion.background` ("Windows",
+"Drift", "Passes").
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from wptrack.core.errors import FrameError
+from wptrack.io.frames import ArraySource, FrameSource, ImageSequenceSource, VideoSource, _read_image, _to_bgr
+
+log = logging.getLogger("wptrack.motion.background")  # the model's warnings (short recordings, unreadable samples)
+
+#: Sample gap (frames) from which the sampler seeks instead of grabbing the frames in between. OpenCV's FFmpeg
+#: reader seeks 16 frames before the target and decodes forward from there (more after a sparse keyframe), and
+#: ``grab`` decodes as much as ``read`` (it only skips the colour conversion): a seek cost 17-27 decodes of a
+#: 1920x1080 FFV1 video on the CI machine, so grabbing forward is cheaper up to about 20 frames.
+SEEK_GAP = 24
+
+
+@dataclass(frozen=True)
+class Window:
+    """One background window: its sampled frame indices and their mean (the window's centre, frames)."""
+
+    samples: tuple[int, ...]
+
+    @property
+    def centre(self) -> float:
+        return float(np.mean(self.samples))
+
+
+def plan_windows(frames: int, window: int, samples: int, name: str = "recording") -> list[Window]:
+    """Background windows covering ``frames`` frames (see the module docstring).
+
+    Args:
+        frames: Number of frames ``T`` (>= 1).
+        window: Window length ``L`` in frames (>= 1).
+        samples: Sampled frames per window (>= 1).
+        name: Source label for the warnings.
+
+    Returns:
+        The windows in time order (centres strictly increasing).
+    """
+    if frames < 1:
+        raise FrameError(f"{name}: no frames to build a background from")
+    if frames < window:
+        log.warning(
+            "%s: %d frames, shorter than the background window of %d frames; using one window over all of them",
+            name,
+            frames,
+            window,
+        )
+        window = frames
+    if frames < 3:
+        log.warning("%s: background from %d frame(s); whatever stands in them is background", name, frames)
+    k = min(samples, window)
+    count = 1 if frames == window else math.ceil((frames - window) / max(window // 2, 1)) + 1
+    starts = np.round(np.linspace(0, frames - window, count)).astype(int)
+    out = []
+    for s in starts:
+        idx = s + np.floor((np.arange(k) + 0.5) * window / k).astype(int)
+        out.append(Window(tuple(int(i) for i in np.unique(np.clip(idx, s, s + window - 1)))))
+    return out
+
+
+def bracket(centres: list[float], t: int) -> tuple[int, int, float]:
+    """``(i, j, w)``: frame ``t`` uses ``(1 - w) * window_i + w * window_j`` (linear in the centres, clamped)."""
+    if t <= centres[0] or len(centres) == 1:
+        return 0, 0, 0.0
+    if t >= centres[-1]:
+        n = len(centres) - 1
+        return n, n, 0.0
+    j = int(np.searchsorted(centres, t, side="right"))
+    i = j - 1
+    return i, j, float((t - centres[i]) / (centres[j] - centres[i]))
+
+
+class _Stopped(Exception):
+    """A sampler's read stopped by :meth:`OfflineBackground.close` (its result is dropped)."""
+
+
+class _Sampler:
+    """Reads given frame indices of a source (increasing within a call), for the window backgrounds.
+
+    A video is read forward: the frames between samples closer than :data:`SEEK_GAP` are grabbed, not sought, and
+    those of them that the next window samples (``ahead``) are kept, so that window, which overlaps this one by
+    half, does not seek back and decode them again (each frame is decoded about once by the sampler instead of
+    twice).
+
+    One thread at a time uses it (:class:`OfflineBackground`'s caller or its prefetch worker); with ``notes`` a
+    list, its warnings are kept there for the caller to log, and ``stop`` set by another thread ends a video read
+    at its next frame (:class:`_Stopped`).
+    """
+
+    def __init__(self, source: FrameSource) -> None:
+        self.source = source
+        self.cap: Any = None
+        self.pos = 0  # index of the frame the next read() returns
+        self.kept: dict[int, np.ndarray] = {}  # frames passed by an earlier read that a later one samples
+        self.notes: list[tuple[Any, ...]] | None = None  # a list: warnings kept here (for another thread to log)
+        self.stop = threading.Event()  # set (by another thread): a video read stops at its next frame
+
+    def _warn(self, message: str, *args: Any) -> None:
+        if self.notes is None:
+            log.warning(message, *args)
+        else:
+            self.notes.append((message, *args))
+
+    def read(self, indices: tuple[int, ...], ahead: tuple[int, ...] = ()) -> list[np.ndarray]:
+        """The frames at ``indices`` (fewer when some cannot be read); a video keeps those of ``ahead`` (the next
+        read's indices) that it passes on the way."""
+        s = self.source
+        if isinstance(s, ArraySource):
+            return [_to_bgr(np.ascontiguousarray(s.frames[i])) for i in indices]
+        if isinstance(s, ImageSequenceSource):
+            out = [_read_image(s.files[i]) for i in indices]
+            return [f for f in out if f is not None and f.shape[:2] == (s.height, s.width)]
+        if isinstance(s, VideoSource):
+            return self._read_video(indices, set(ahead))
+        return [f for i, f in enumerate(s) if i in set(indices)]  # any other source: one decoding pass
+
+    def _read_video(self, indices: tuple[int, ...], ahead: set[int]) -> list[np.ndarray]:
+        import cv2
+
+        if self.cap is None:
+            self.cap = self.source._open()  # type: ignore[attr-defined]
+            self.pos = 0
+        kept, self.kept = self.kept, {}
+        out = []
+        for i in indices:
+            if self.stop.is_set():
+                raise _Stopped(f"{self.source.name}: background read stopped")
+            frame = kept.get(i)
+            if frame is None:
+                if i < self.pos or i - self.pos >= SEEK_GAP:
+                    self.cap.set(cv2.CAP_PROP_POS_FRAMES, float(i))
+                    self.pos = i
+                ok = True
+                while ok and self.pos < i:
+                    if self.stop.is_set():
+                        raise _Stopped(f"{self.source.name}: background read stopped")
+                    ok = self.cap.grab()
+                    if ok and self.pos in ahead:
+                        ok, passed = self.cap.retrieve()
+                        if ok and passed is not None:
+                            self.kept[self.pos] = passed
+                    self.pos += 1
+                ok, frame = self.cap.read() if ok else (False, None)
+                if not ok or frame is None:
+                    self._warn("%s: cannot read frame %d for the background; skipped", self.source.name, i)
+                    break  # the video ends earlier than it reported
+                self.pos += 1
+            if i in ahead:
+                self.kept[i] = frame
+            if frame.ndim == 3 and frame.shape[2] == 3 and frame.shape[:2] == (self.source.height, self.source.width):
+                out.append(frame)
+        return out
+
+    def close(self) -> None:
+        self.kept = {}
+        if self.cap is not None:
+            self.cap.release()
+            self.cap = None
