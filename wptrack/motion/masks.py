@@ -387,8 +387,12 @@ class MotionMasks:
         return None if model is None else model.background(window)
 
     def __iter__(self) -> Iterator[np.ndarray]:
-        for mask, _ in self.evidence(probability=False):
-            yield mask
+        evidence = self.evidence(probability=False)
+        try:
+            for mask, _ in evidence:
+                yield mask
+        finally:  # a consumer leaving early stops the mask threads now, not when the generator is collected
+            evidence.close()
 
     def evidence(self, probability: bool = True) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
         """Yield ``(mask, prob)`` per frame.
