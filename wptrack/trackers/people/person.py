@@ -202,6 +202,23 @@ class PersonFilter(ParticleFilter):
         super()._readback()
         wp.copy(self.support_host, self.support)
 
+    def _launch_position(self) -> None:
+        """The ground position of this frame's estimate into the tracker's ``slot_xy[slot]`` (the next people's gate
+        and person terms, the rectangles and the column tops read it), in the frame chain: on CUDA it is part of the
+        person's graph instead of a launch of its own."""
+        tr = self.tracker
+        wp.launch(
+            kpeople.person_xy_kernel,
+            dim=1,
+            inputs=[self.est, int(kreduce.EST_MEAN), self.slot],
+            outputs=[tr.slot_xy],
+            device=self.device,
+        )
+
+    def stages(self, src: int, dst: int):
+        """:meth:`ParticleFilter.stages` and the estimate's ground position into the tracker's ``slot_xy``."""
+        return [*super().stages(src, dst), ("position", self._launch_position)]
+
     def spawn(self, xy: np.ndarray, frame: int) -> None:
         """Start the filter on a new person standing at ``xy`` (ground, metres): particles uniform in the
         configured cylinder, with random horizontal velocities (``BirthConfig.init_speed``), each with the

@@ -219,7 +219,6 @@ class PeopleTracker(Population):
         self._hist_host = wp.zeros(self.hist.shape, dtype=wp.float32, device="cpu", pinned=pinned)
         self.slot_xy = wp.zeros(b.max_people, dtype=wp.vec2, device=d)  # ground position per pool slot
         self.slot_alive = wp.zeros(b.max_people, dtype=wp.int32, device=d)  # 1 where the slot tracks somebody
-        self.people_xy = wp.zeros(b.max_people, dtype=wp.vec2, device=d)  # the tracked people's ground positions
         body = config.body
         self.column_z_lo = 0.05
         self.column_nz = int((float(self.volume[1][2]) - self.column_z_lo) / body.step) + 1
@@ -378,21 +377,23 @@ class PeopleTracker(Population):
         wp.copy(self._hist_host, self.hist)
 
     def _evidence(self, n: int) -> None:
-        """The silhouette column tops of the ``n`` people tracked after this frame (``people_xy[:n]``, filled on the
-        device from their estimates), copied to the host asynchronously (the frame's one synchronisation follows)."""
+        """The silhouette column tops of every pool slot (``slot_xy``, filled on the device from the estimates of the
+        ``n`` people tracked this frame; a free slot's row is not read), copied to the host asynchronously (the
+        frame's one synchronisation follows)."""
         if n:
             body = self.config.body
             axes = kpeople.COLUMN_AXES
+            slots = len(self.pool)
             wp.launch(
                 kpeople.column_seen_kernel,
-                dim=(n, axes, self.column_nz),
-                inputs=[self.drig.cams, self.mask, self.people_xy, self.column_z_lo, body.step, body.search],
+                dim=(slots, axes, self.column_nz),
+                inputs=[self.drig.cams, self.mask, self.slot_xy, self.column_z_lo, body.step, body.search],
                 outputs=[self.column_seen],
                 device=self.device,
             )
             wp.launch(
                 kpeople.column_top_kernel,
-                dim=(n, axes),
+                dim=(slots, axes),
                 inputs=[
                     self.column_seen,
                     self.column_z_lo,
@@ -435,17 +436,8 @@ class PeopleTracker(Population):
         t1 = time.perf_counter()
         self._observe()
         active = [k for k in range(len(self.pool)) if self.slot_id[k] >= 0]
-        for j, k in enumerate(active):
-            p = self.pool[k]
-            p.launch_frame()
-            for index, out in ((j, self.people_xy), (k, self.slot_xy)):
-                wp.launch(
-                    kpeople.person_xy_kernel,
-                    dim=1,
-                    inputs=[p.est, int(kreduce.EST_MEAN), index],
-                    outputs=[out],
-                    device=self.device,
-                )
+        for k in active:
+            self.pool[k].launch_frame()  # its chain ends with its ground position in slot_xy[k]
         self._coverage()
         self._evidence(len(active))
         wp.copy(self._sigma_host, self.sigma_n)
@@ -454,13 +446,13 @@ class PeopleTracker(Population):
         people = []
         self.clock += self.frame_dt
         self._update_appearance(active)
-        tops = self._top_host.numpy().max(axis=1)  # the highest of each person's axes
+        tops = self._top_host.numpy().max(axis=1)  # the highest of each slot's axes
         body = self.config.body
-        for j, k in enumerate(active):
+        for k in active:
             self.slot_age[k] += 1
             person = self.pool[k].estimate_from_host(int(self.slot_id[k]), int(self.slot_age[k]))
-            if tops[j] > 0:
-                person.top = float(tops[j])
+            if tops[k] > 0:
+                person.top = float(tops[k])
                 if body.centroid == "standing":
                     person.centroid[2] = body.ratio * person.top  # standing-person model (BodyConfig)
             people.append(person)
@@ -469,7 +461,7 @@ class PeopleTracker(Population):
             for person, grid in zip(people, grids, strict=True):
                 person.occupancy = grid
         est = PeopleEstimate(frame=self.frames_done, people=people, sigma_n=float(self._sigma_host.numpy()[0]))
-        self._update_population(est, active, tops[: len(active)] > 0)
+        self._update_population(est, active, tops[active] > 0)
         self.frames_done += 1
         est.timings.update(upload=t1 - t0, filter=t2 - t1, population=time.perf_counter() - t2)
         return est
