@@ -110,6 +110,8 @@ class PeopleTracker(Population):
             by all motion / by the unexplained motion, -1 where the camera does not see it.
         hist: (max_people, cameras, 2, 17) float32 the people's appearance histograms (``kernels.people.coverage``).
         slot_xy, slot_alive: (max_people,) each pool slot's ground position and whether it tracks somebody.
+        sigma_n, cover, free_cover, hist and top (max_people, axes: the column tops) are views of one float32 buffer
+        copied to its pinned host twin once per frame.
 
     Raises:
         ConfigError: fewer than two cameras, a bad configuration or a pool that does not fit the device.
@@ -154,7 +156,6 @@ class PeopleTracker(Population):
         self.bgr = wp.zeros(3 * npx, dtype=wp.uint8, device=d)
         self.bgr_prev = wp.zeros(3 * npx, dtype=wp.uint8, device=d)
         self.mask = wp.zeros(npx, dtype=wp.uint8, device=d)
-        self.sigma_n = wp.zeros(1, dtype=wp.float32, device=d)
         # eq. 18 over every NOISE_STRIDE-th pixel (a mean square estimated from ~1e5 values is as good as from all)
         self.noise_values = 3 * len(range(0, npx, NOISE_STRIDE))
         self.noise_blocks, self.noise_chunk = block_partition(self.noise_values, not self.is_cuda, BLOCK, MAX_BLOCKS)
@@ -162,7 +163,6 @@ class PeopleTracker(Population):
         pinned = self.is_cuda
         self._bgr_host = wp.zeros(3 * npx, dtype=wp.uint8, device="cpu", pinned=pinned)
         self._mask_host = wp.zeros(npx, dtype=wp.uint8, device="cpu", pinned=pinned)
-        self._sigma_host = wp.zeros(1, dtype=wp.float32, device="cpu", pinned=pinned)
         # ground evidence map over the working area (the rig's volume, else the ground two cameras see)
         b = config.birth
         self.area = working_area(rig, config.area)
@@ -192,9 +192,6 @@ class PeopleTracker(Population):
         self._pixel_dims = (ncam, maxh, maxw)  # of the reduced masks
         self._rows = max(c.height for c in rig.cameras)  # of the full images
         cells = self.nx * self.ny
-        self.cover = wp.zeros((ncam, cells), dtype=wp.float32, device=d)  # coverage of all motion, -1: unseen
-        self.free_cover = wp.zeros((ncam, cells), dtype=wp.float32, device=d)  # of the unexplained motion
-        self._cover_host = wp.zeros((ncam, cells), dtype=wp.float32, device="cpu", pinned=pinned)
         cell_area = wp.zeros((ncam, cells), dtype=wp.float32, device=d)
         wp.launch(
             kcov.box_area_kernel,
@@ -205,7 +202,6 @@ class PeopleTracker(Population):
             device=d,
         )
         self.cell_area = cell_area.numpy().reshape(ncam, self.ny, self.nx)  # pixels of each cell's rectangle
-        self._free_cover_host = wp.zeros((ncam, cells), dtype=wp.float32, device="cpu", pinned=pinned)
         self.boxes = wp.zeros((b.max_people, ncam), dtype=wp.vec4, device=d)  # tracked people's rectangles per slot
         self.full_boxes = wp.zeros((b.max_people, ncam), dtype=wp.vec4, device=d)  # the same in the full images
         pc = config.person
@@ -215,8 +211,6 @@ class PeopleTracker(Population):
         self.terms.slope, self.terms.offset = pc.slope_offset
         self.terms.exclusion_radius, self.terms.exclusion_weight = pc.exclusion_radius, pc.exclusion_weight
         nb = int(kcov.HIST_BINS)
-        self.hist = wp.zeros((b.max_people, ncam, int(kcov.HIST_PARTS), nb + 1), dtype=wp.float32, device=d)
-        self._hist_host = wp.zeros(self.hist.shape, dtype=wp.float32, device="cpu", pinned=pinned)
         self.slot_xy = wp.zeros(b.max_people, dtype=wp.vec2, device=d)  # ground position per pool slot
         self.slot_alive = wp.zeros(b.max_people, dtype=wp.int32, device=d)  # 1 where the slot tracks somebody
         body = config.body
@@ -224,8 +218,23 @@ class PeopleTracker(Population):
         self.column_nz = int((float(self.volume[1][2]) - self.column_z_lo) / body.step) + 1
         axes = kpeople.COLUMN_AXES
         self.column_seen = wp.zeros((b.max_people, axes, self.column_nz), dtype=wp.uint8, device=d)
-        self.top = wp.zeros((b.max_people, axes), dtype=wp.float32, device=d)  # per person and axis
-        self._top_host = wp.zeros((b.max_people, axes), dtype=wp.float32, device="cpu", pinned=pinned)
+        # what the host reads of a frame, in one float32 buffer (one copy per frame into its pinned twin): sigma_n,
+        # the coverage of all motion (-1: unseen) and of the unexplained motion, the appearance histograms, the tops
+        shapes = {
+            "sigma_n": (1,),
+            "cover": (ncam, cells),
+            "free_cover": (ncam, cells),
+            "hist": (b.max_people, ncam, int(kcov.HIST_PARTS), nb + 1),
+            "top": (b.max_people, axes),
+        }
+        self._readback = wp.zeros(sum(math.prod(v) for v in shapes.values()), dtype=wp.float32, device=d)
+        self._readback_host = wp.zeros(self._readback.shape, dtype=wp.float32, device="cpu", pinned=pinned)
+        start = 0
+        for name, shape in shapes.items():
+            end = start + math.prod(shape)
+            setattr(self, name, self._readback[start:end].reshape(shape))
+            setattr(self, f"_{name}_host", self._readback_host[start:end].reshape(shape))
+            start = end
         self.min_votes = min(b.min_cameras, len(rig))
         self._centres: tuple[np.ndarray, np.ndarray] | None = None
         # the pool of person filters, allocated once
@@ -328,7 +337,8 @@ class PeopleTracker(Population):
     def _coverage(self) -> None:
         """The tracked people's rectangles after this frame (``boxes``: what the others explain in the next frame's
         rectangle terms) and the person rectangles' coverage on the evidence map's cells (``kernels.people.coverage``):
-        of all motion, and of the motion outside the tracked people's rectangles; copied to the host asynchronously."""
+        of all motion, and of the motion outside the tracked people's rectangles; the appearance histograms (all read
+        back by :meth:`step`'s one copy)."""
         pc, b, d = self.config.person, self.config.birth, self.device
         cams = self.sdrig.cams
         origin = wp.vec2(*self.grid_origin)
@@ -357,8 +367,6 @@ class PeopleTracker(Population):
             outputs=[self.free_cover],
             device=d,
         )
-        wp.copy(self._cover_host, self.cover)
-        wp.copy(self._free_cover_host, self.free_cover)
         self.hist.zero_()
         wp.launch(
             kcov.person_boxes_kernel,
@@ -374,12 +382,10 @@ class PeopleTracker(Population):
             outputs=[self.hist],
             device=d,
         )
-        wp.copy(self._hist_host, self.hist)
 
     def _evidence(self, n: int) -> None:
         """The silhouette column tops of every pool slot (``slot_xy``, filled on the device from the estimates of the
-        ``n`` people tracked this frame; a free slot's row is not read), copied to the host asynchronously (the
-        frame's one synchronisation follows)."""
+        ``n`` people tracked this frame; a free slot's row is not read), read back by :meth:`step`'s one copy."""
         if n:
             body = self.config.body
             axes = kpeople.COLUMN_AXES
@@ -405,7 +411,6 @@ class PeopleTracker(Population):
                 outputs=[self.top],
                 device=self.device,
             )
-            wp.copy(self._top_host, self.top)
 
     # --- the frame --------------------------------------------------------------------------------------
     def step(
@@ -440,7 +445,7 @@ class PeopleTracker(Population):
             self.pool[k].launch_frame()  # its chain ends with its ground position in slot_xy[k]
         self._coverage()
         self._evidence(len(active))
-        wp.copy(self._sigma_host, self.sigma_n)
+        wp.copy(self._readback_host, self._readback)  # sigma_n, coverage, histograms, tops: one copy
         wp.synchronize_device(self.device)  # the frame's one synchronisation: estimates, evidence, tops on the host
         t2 = time.perf_counter()
         people = []
@@ -460,7 +465,7 @@ class PeopleTracker(Population):
             grids = self._occupancy_grids(active)
             for person, grid in zip(people, grids, strict=True):
                 person.occupancy = grid
-        est = PeopleEstimate(frame=self.frames_done, people=people, sigma_n=float(self._sigma_host.numpy()[0]))
+        est = PeopleEstimate(frame=self.frames_done, people=people, sigma_n=float(self._sigma_n_host.numpy()[0]))
         self._update_population(est, active, tops[active] > 0)
         self.frames_done += 1
         est.timings.update(upload=t1 - t0, filter=t2 - t1, population=time.perf_counter() - t2)
