@@ -27,6 +27,8 @@ from wptrack.kernels.people import occupancy as kocc
 _GOLDEN = 0x9E3779B97F4A7C15
 DESCRIPTOR_BLOCK = 64
 """Lanes per particle of the GPU descriptor (they share the disc pixels)."""
+GATE_BLOCK = 64
+"""Lanes of the GPU gate (``kernels.people.coverage.gate_kernel``): they share its grid points (49 at 25 frames/s)."""
 GATE_SPACING = 0.125
 """Spacing of the points the gate tries around a person's last position, metres
 (``kernels.people.coverage.gate_kernel``)."""
@@ -189,12 +191,13 @@ class PersonFilter(ParticleFilter):
         """Whether this frame's masks show the person (``kernels.people.coverage.gate_kernel``, into
         :attr:`observe`)."""
         tr, pc = self.tracker, self.tracker.config.person
-        wp.launch(
+        wp.launch_tiled(
             kcov.gate_kernel,
-            dim=1,
+            dim=[1],
             inputs=[tr.sdrig.cams, tr.integral, tr.boxes, tr.slot_xy, self.slot, tr.terms]
             + [pc.gate_reach, WALK_SPEED, tr.dt, GATE_SPACING, pc.gate, pc.gate_left],
             outputs=[self.observe, self.support],
+            block_dim=GATE_BLOCK,
             device=self.device,
         )
 
