@@ -28,7 +28,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 import warp as wp
@@ -236,6 +236,7 @@ class PeopleTracker(Population):
             setattr(self, f"_{name}_host", self._readback_host[start:end].reshape(shape))
             start = end
         self.min_votes = min(b.min_cameras, len(rig))
+        self._commands: dict[str, list[Callable[[], None]]] = {}  # the frame's fixed device work (:meth:`_replay`)
         self._centres: tuple[np.ndarray, np.ndarray] | None = None
         # the pool of person filters, allocated once
         self.pool = [PersonFilter(self, k) for k in range(b.max_people)]
@@ -289,128 +290,120 @@ class PeopleTracker(Population):
         wp.copy(self.bgr, self._bgr_host)
         wp.copy(self.mask, self._mask_host)
 
+    def _replay(self, name: str, build: Callable[[], list[Callable[[], None]]]) -> None:
+        """Run the fixed command list ``name`` of the frame: built by ``build`` on its first run (launches recorded
+        with ``record_cmd=True``: their arguments are packed once, a replay costs a few microseconds of host time
+        instead of a full ``wp.launch``; the buffers and parameters are the tracker's, fixed), replayed after."""
+        cmds = self._commands.get(name)
+        if cmds is None:
+            cmds = self._commands[name] = build()
+        for cmd in cmds:
+            cmd()
+
+    def _record(self, kernel, dim, inputs: list, outputs: list, block_dim: int | None = None) -> Callable[[], None]:
+        """A recorded launch of ``kernel`` on the tracker's device (tiled with ``block_dim``), to replay."""
+        args = dict(dim=dim, inputs=inputs, outputs=outputs, device=self.device, record_cmd=True)
+        if block_dim is None:
+            return wp.launch(kernel, **args).launch
+        return wp.launch_tiled(kernel, block_dim=block_dim, **args).launch
+
     def _observe(self) -> None:
-        d = self.device
+        """sigma_n of eq. 18 from the previous and this frame, and the reduced masks' integral image."""
         if self.frames_done == 0:
             wp.copy(self.bgr_prev, self.bgr)  # no previous frame: sigma_n = 0 (the floor of eqs. 15-17)
-        wp.launch_tiled(
-            kdesc.noise_partials_kernel,
-            dim=[self.noise_blocks],
-            inputs=[self.bgr_prev, self.bgr, self.noise_values, NOISE_STRIDE, self.noise_chunk],
-            outputs=[self.noise_part],
-            block_dim=BLOCK,
-            device=d,
-        )
-        wp.launch_tiled(
-            kdesc.noise_sigma_kernel,
-            dim=[1],
-            inputs=[self.noise_part, self.noise_blocks, self.noise_values],
-            outputs=[self.sigma_n],
-            block_dim=BLOCK,
-            device=d,
-        )
-        wp.copy(self.bgr_prev, self.bgr)
-        wp.launch(
-            kcov.downsample_mask_kernel,
-            dim=self._pixel_dims,
-            inputs=[self.drig.cams, self.mask, self.box_scale, self.sdrig.cams],
-            outputs=[self.small_mask],
-            device=d,
-        )
-        self._integral(self.small_mask, self.integral)
+        self._replay("observe", self._observe_commands)
 
-    def _integral(self, mask: wp.array, out: wp.array) -> None:
+    def _observe_commands(self) -> list[Callable[[], None]]:
+        nb, nv = self.noise_blocks, self.noise_values
+        return [
+            self._record(
+                kdesc.noise_partials_kernel,
+                [nb],
+                [self.bgr_prev, self.bgr, nv, NOISE_STRIDE, self.noise_chunk],
+                [self.noise_part],
+                BLOCK,
+            ),
+            self._record(kdesc.noise_sigma_kernel, [1], [self.noise_part, nb, nv], [self.sigma_n], BLOCK),
+            lambda: wp.copy(self.bgr_prev, self.bgr),
+            self._record(
+                kcov.downsample_mask_kernel,
+                self._pixel_dims,
+                [self.drig.cams, self.mask, self.box_scale, self.sdrig.cams],
+                [self.small_mask],
+            ),
+            *self._integral(self.small_mask, self.integral),
+        ]
+
+    def _integral(self, mask: wp.array, out: wp.array) -> list[Callable[[], None]]:
         """The (H+1) x (W+1) integral image of every camera's reduced ``mask`` (block counts) into ``out``
-        (``kernels.colour.hsi``'s four segmented scans)."""
-        cams, d = self.sdrig.cams, self.device
-        wp.launch(
-            kcolour.row_segment_sums_kernel, dim=self._row_dims, inputs=[cams, mask], outputs=[self._row_seg], device=d
-        )
-        wp.launch(
-            kcolour.row_scan_kernel, dim=self._row_dims, inputs=[cams, mask, self._row_seg], outputs=[out], device=d
-        )
-        wp.launch(
-            kcolour.col_segment_sums_kernel, dim=self._col_dims, inputs=[cams, out], outputs=[self._col_seg], device=d
-        )
-        wp.launch(kcolour.col_scan_kernel, dim=self._col_dims, inputs=[cams, self._col_seg], outputs=[out], device=d)
+        (``kernels.colour.hsi``'s four segmented scans), as recorded launches."""
+        cams = self.sdrig.cams
+        return [
+            self._record(kcolour.row_segment_sums_kernel, self._row_dims, [cams, mask], [self._row_seg]),
+            self._record(kcolour.row_scan_kernel, self._row_dims, [cams, mask, self._row_seg], [out]),
+            self._record(kcolour.col_segment_sums_kernel, self._col_dims, [cams, out], [self._col_seg]),
+            self._record(kcolour.col_scan_kernel, self._col_dims, [cams, self._col_seg], [out]),
+        ]
 
     def _coverage(self) -> None:
         """The tracked people's rectangles after this frame (``boxes``: what the others explain in the next frame's
         rectangle terms) and the person rectangles' coverage on the evidence map's cells (``kernels.people.coverage``):
         of all motion, and of the motion outside the tracked people's rectangles; the appearance histograms (all read
         back by :meth:`step`'s one copy)."""
-        pc, b, d = self.config.person, self.config.birth, self.device
-        cams = self.sdrig.cams
-        origin = wp.vec2(*self.grid_origin)
+        self._replay("coverage", self._coverage_commands)
+
+    def _coverage_commands(self) -> list[Callable[[], None]]:
+        pc, b = self.config.person, self.config.birth
+        cams, full = self.sdrig.cams, self.drig.cams
         dims = (len(self.rig), self.nx * self.ny)
-        common = [origin, b.cell, self.nx, pc.half_width, pc.height, pc.min_visible, self.terms.unit]
-        wp.launch(kcov.coverage_kernel, dim=dims, inputs=[cams, self.integral, *common], outputs=[self.cover], device=d)
-        wp.launch(
-            kcov.person_boxes_kernel,
-            dim=(len(self.pool), len(self.rig)),
-            inputs=[cams, self.slot_xy, self.slot_alive, pc.half_width, pc.height],
-            outputs=[self.boxes],
-            device=d,
-        )
-        wp.launch(
-            kcov.explained_mask_kernel,
-            dim=self._pixel_dims,
-            inputs=[cams, self.small_mask, self.boxes, len(self.pool)],
-            outputs=[self.free_mask],
-            device=d,
-        )
-        self._integral(self.free_mask, self.free_integral)
-        wp.launch(
-            kcov.coverage_kernel,
-            dim=dims,
-            inputs=[cams, self.free_integral, *common],
-            outputs=[self.free_cover],
-            device=d,
-        )
-        self.hist.zero_()
-        wp.launch(
-            kcov.person_boxes_kernel,
-            dim=(len(self.pool), len(self.rig)),
-            inputs=[self.drig.cams, self.slot_xy, self.slot_alive, pc.half_width, pc.height],
-            outputs=[self.full_boxes],
-            device=d,
-        )
-        wp.launch(
-            kcov.person_histogram_kernel,
-            dim=(len(self.pool), len(self.rig), int(kcov.HIST_PARTS), self._rows),
-            inputs=[self.drig.cams, self.bgr, self.mask, self.full_boxes],
-            outputs=[self.hist],
-            device=d,
-        )
+        common = [wp.vec2(*self.grid_origin), b.cell, self.nx, pc.half_width, pc.height, pc.min_visible]
+        common.append(self.terms.unit)
+        boxes_dims = (len(self.pool), len(self.rig))
+        people = [self.slot_xy, self.slot_alive, pc.half_width, pc.height]
+        return [
+            self._record(kcov.coverage_kernel, dims, [cams, self.integral, *common], [self.cover]),
+            self._record(kcov.person_boxes_kernel, boxes_dims, [cams, *people], [self.boxes]),
+            self._record(
+                kcov.explained_mask_kernel,
+                self._pixel_dims,
+                [cams, self.small_mask, self.boxes, len(self.pool)],
+                [self.free_mask],
+            ),
+            *self._integral(self.free_mask, self.free_integral),
+            self._record(kcov.coverage_kernel, dims, [cams, self.free_integral, *common], [self.free_cover]),
+            self.hist.zero_,
+            self._record(kcov.person_boxes_kernel, boxes_dims, [full, *people], [self.full_boxes]),
+            self._record(
+                kcov.person_histogram_kernel,
+                (*boxes_dims, int(kcov.HIST_PARTS), self._rows),
+                [full, self.bgr, self.mask, self.full_boxes],
+                [self.hist],
+            ),
+        ]
 
     def _evidence(self, n: int) -> None:
         """The silhouette column tops of every pool slot (``slot_xy``, filled on the device from the estimates of the
         ``n`` people tracked this frame; a free slot's row is not read), read back by :meth:`step`'s one copy."""
         if n:
-            body = self.config.body
-            axes = kpeople.COLUMN_AXES
-            slots = len(self.pool)
-            wp.launch(
+            self._replay("columns", self._column_commands)
+
+    def _column_commands(self) -> list[Callable[[], None]]:
+        body, slots, axes = self.config.body, len(self.pool), kpeople.COLUMN_AXES
+        gap, votes = int(round(body.max_gap / body.step)), min(body.min_cameras, len(self.rig))
+        return [
+            self._record(
                 kpeople.column_seen_kernel,
-                dim=(slots, axes, self.column_nz),
-                inputs=[self.drig.cams, self.mask, self.slot_xy, self.column_z_lo, body.step, body.search],
-                outputs=[self.column_seen],
-                device=self.device,
-            )
-            wp.launch(
+                (slots, axes, self.column_nz),
+                [self.drig.cams, self.mask, self.slot_xy, self.column_z_lo, body.step, body.search],
+                [self.column_seen],
+            ),
+            self._record(
                 kpeople.column_top_kernel,
-                dim=(slots, axes),
-                inputs=[
-                    self.column_seen,
-                    self.column_z_lo,
-                    body.step,
-                    self.column_nz,
-                    min(body.min_cameras, len(self.rig)),
-                    int(round(body.max_gap / body.step)),
-                ],
-                outputs=[self.top],
-                device=self.device,
-            )
+                (slots, axes),
+                [self.column_seen, self.column_z_lo, body.step, self.column_nz, votes, gap],
+                [self.top],
+            ),
+        ]
 
     # --- the frame --------------------------------------------------------------------------------------
     def step(
