@@ -35,9 +35,9 @@ import warp as wp
 
 from wptrack.cameras.rig import Camera, Rig
 from wptrack.cameras.structs import DeviceRig
-from wptrack.core.device import block_partition, resolve_device
+from wptrack.core.device import block_partition, device_guard, resolve_device
 from wptrack.core.errors import ConfigError, FrameError
-from wptrack.core.filter import BLOCK, MAX_BLOCKS, arrays_state, check_state, load_arrays
+from wptrack.core.filter import BLOCK, MAX_BLOCKS, arrays_state, check_state, load_arrays, no_gc
 from wptrack.io.frames import camera_frame
 from wptrack.kernels.colour import hsi as kcolour
 from wptrack.kernels.core import reduce as kreduce
@@ -95,7 +95,8 @@ class PeopleTracker(Population):
         rig: calibrated cameras with overlapping views (ground plane z = 0; ``rig.volume`` bounds the evidence map).
         config: :class:`wptrack.trackers.people.config.PeopleConfig`.
         device: ``auto``, ``cpu``, ``cuda`` or ``cuda:N``.
-        use_graph: capture each person's frame chain as a CUDA graph (default: on CUDA).
+        use_graph: capture each person's frame chain and the tracker's fixed per-frame work as CUDA graphs (default:
+            on CUDA).
         keep_particles: particles per person and frame returned for reports and hulls (0: none).
 
     Time: the frame interval dt is ``1 / config.fps`` (``DEFAULT_FPS`` when None) unless :meth:`step` is given
@@ -237,6 +238,7 @@ class PeopleTracker(Population):
             start = end
         self.min_votes = min(b.min_cameras, len(rig))
         self._commands: dict[str, list[Callable[[], None]]] = {}  # the frame's fixed device work (:meth:`_replay`)
+        self._graphs: dict[str, object] = {}  # their CUDA graphs (use_graph)
         self._centres: tuple[np.ndarray, np.ndarray] | None = None
         # the pool of person filters, allocated once
         self.pool = [PersonFilter(self, k) for k in range(b.max_people)]
@@ -293,10 +295,22 @@ class PeopleTracker(Population):
     def _replay(self, name: str, build: Callable[[], list[Callable[[], None]]]) -> None:
         """Run the fixed command list ``name`` of the frame: built by ``build`` on its first run (launches recorded
         with ``record_cmd=True``: their arguments are packed once, a replay costs a few microseconds of host time
-        instead of a full ``wp.launch``; the buffers and parameters are the tracker's, fixed), replayed after."""
+        instead of a full ``wp.launch``; the buffers and parameters are the tracker's, fixed), replayed after; with
+        ``use_graph`` the second run captures the list as a CUDA graph (like each person's chain) and later runs
+        launch it (one launch instead of the list's)."""
         cmds = self._commands.get(name)
         if cmds is None:
             cmds = self._commands[name] = build()
+        elif self.use_graph:
+            graph = self._graphs.get(name)
+            if graph is None:
+                with device_guard(self.device).exclusive(), no_gc():  # no other thread's device work in the graph
+                    with wp.ScopedCapture(device=self.device) as capture:
+                        for cmd in cmds:
+                            cmd()
+                graph = self._graphs[name] = capture.graph
+            wp.capture_launch(graph)
+            return
         for cmd in cmds:
             cmd()
 
