@@ -11,6 +11,7 @@ Units: metres, seconds, pixels.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -218,7 +219,7 @@ class PersonFilter(ParticleFilter):
             device=self.device,
         )
 
-    def stages(self, src: int, dst: int):
+    def stages(self, src: int, dst: int) -> list[tuple[str, Callable[[], None]]]:
         """:meth:`ParticleFilter.stages` and the estimate's ground position into the tracker's ``slot_xy``."""
         return [*super().stages(src, dst), ("position", self._launch_position)]
 
