@@ -397,7 +397,8 @@ class PeopleTracker(Population):
 
     def _evidence(self, n: int) -> None:
         """The silhouette column tops of every pool slot (``slot_xy``, filled on the device from the estimates of the
-        ``n`` people tracked this frame; a free slot's row is not read), read back by :meth:`step`'s one copy."""
+        ``n`` people tracked this frame; a free slot's columns are empty and its row is not read), read back by
+        :meth:`step`'s one copy."""
         if n:
             self._replay("columns", self._column_commands)
 
@@ -408,7 +409,7 @@ class PeopleTracker(Population):
             self._record(
                 kpeople.column_seen_kernel,
                 (slots, axes, self.column_nz),
-                [self.drig.cams, self.mask, self.slot_xy, self.column_z_lo, body.step, body.search],
+                [self.drig.cams, self.mask, self.slot_xy, self.slot_alive, self.column_z_lo, body.step, body.search],
                 [self.column_seen],
             ),
             self._record(
