@@ -343,7 +343,8 @@ def test_person_log_terms_match_numpy(device, rng, slope, weight):
 def test_gate_picks_the_best_point_within_reach_and_shifts(device, rng, dt):
     """The gate's support is the best coverage of what the others leave of the rectangle (where that is at least
     ``min_left`` of it) on the grid of ``spacing`` within ``reach + speed dt`` of the person's last position (a slower
-    frame rate searches farther); observe[1] takes the old observe[0]."""
+    frame rate searches farther); observe[1] takes the old observe[0]. The same support bit for bit whether one lane
+    or a block of 64 (fewer than the 169 points of the slower frame rate: lanes take several) shares the points."""
     rig = make_rig()
     drig = DeviceRig(rig, device)
     flat = blob_masks(rig, rng)
@@ -378,29 +379,36 @@ def test_gate_picks_the_best_point_within_reach_and_shifts(device, rng, dt):
     best = float(np.max(np.where(ok, c[:, 0] / np.maximum(c[:, 1], 1), 0.0)))
     assert 0 < best < 1
     dt_dev = wp.array([dt], dtype=wp.float32, device=device)
-    for threshold, expect in ((best - 0.01, 1), (best + 0.01, 0)):
-        observe = wp.array(np.array([7, 5], np.int32), device=device)
-        support = wp.zeros(1, dtype=wp.float32, device=device)
-        wp.launch(
+    supports = []
+    for block in (1, 64):
+        for threshold, expect in ((best - 0.01, 1), (best + 0.01, 0)):
+            observe = wp.array(np.array([7, 5], np.int32), device=device)
+            support = wp.zeros(1, dtype=wp.float32, device=device)
+            wp.launch_tiled(
+                kcov.gate_kernel,
+                dim=[1],
+                inputs=[drig.cams, I, boxes, pdev, 0, terms, reach, speed, dt_dev, spacing, threshold, min_left],
+                outputs=[observe, support],
+                block_dim=block,
+                device=device,
+            )
+            np.testing.assert_array_equal(observe.numpy(), [expect, 7])  # [1] takes the old [0]
+            assert support.numpy()[0] == pytest.approx(best, rel=1e-5, abs=1e-6)
+            supports.append(support.numpy()[0])
+        off = make_terms(slope=0.0)
+        observe = wp.array(np.array([0, 0], np.int32), device=device)
+        support = wp.full(1, 5.0, dtype=wp.float32, device=device)
+        wp.launch_tiled(
             kcov.gate_kernel,
-            dim=1,
-            inputs=[drig.cams, I, boxes, pdev, 0, terms, reach, speed, dt_dev, spacing, threshold, min_left],
+            dim=[1],
+            inputs=[drig.cams, I, boxes, pdev, 0, off, reach, speed, dt_dev, spacing, 0.99, min_left],
             outputs=[observe, support],
+            block_dim=block,
             device=device,
         )
-        np.testing.assert_array_equal(observe.numpy(), [expect, 7])  # [1] takes the old [0]
-        assert support.numpy()[0] == pytest.approx(best, rel=1e-5, abs=1e-6)
-    off = make_terms(slope=0.0)
-    observe = wp.array(np.array([0, 0], np.int32), device=device)
-    support = wp.zeros(1, dtype=wp.float32, device=device)
-    wp.launch(
-        kcov.gate_kernel,
-        dim=1,
-        inputs=[drig.cams, I, boxes, pdev, 0, off, reach, speed, dt_dev, spacing, 0.99, min_left],
-        outputs=[observe, support],
-        device=device,
-    )
-    np.testing.assert_array_equal(observe.numpy(), [1, 0])  # the term off: always seen
+        np.testing.assert_array_equal(observe.numpy(), [1, 0])  # the term off: always seen
+        assert support.numpy()[0] == 0.0
+    assert len(set(supports)) == 1  # a maximum: the lanes' split does not change it
 
 
 def test_person_histograms_match_numpy(device, rng):

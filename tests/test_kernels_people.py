@@ -856,7 +856,9 @@ def test_column_seen_counts(device, rng):
         inside = (z > 0) & (px >= 0) & (py >= 0) & (px < cam.width) & (py < cam.height)
         q = drig.pixel_offsets[c] + np.clip(py, 0, cam.height - 1) * cam.width + np.clip(px, 0, cam.width - 1)
         ref += inside & (mask[q] != 0)
-    seen = wp.zeros((len(people), kpeople.COLUMN_AXES, nz), dtype=wp.uint8, device=device)
+    seen = wp.full((len(people), kpeople.COLUMN_AXES, nz), 7, dtype=wp.uint8, device=device)
+    alive = np.ones(len(people), np.int32)
+    alive[2] = 0  # a free slot: its row is zero
     wp.launch(
         kpeople.column_seen_kernel,
         dim=seen.shape,
@@ -864,6 +866,7 @@ def test_column_seen_counts(device, rng):
             drig.cams,
             wp.array(mask, dtype=wp.uint8, device=device),
             wp.array(people, dtype=wp.vec2, device=device),
+            wp.array(alive, dtype=wp.int32, device=device),
             z_lo,
             dz,
             search,
@@ -871,9 +874,12 @@ def test_column_seen_counts(device, rng):
         outputs=[seen],
         device=device,
     )
-    got = seen.numpy().reshape(-1)
+    got = seen.numpy().reshape(len(people), -1)
+    ref = ref.reshape(len(people), -1)
+    assert ref[2].any()  # the free slot's position is in view: only alive zeroes it
+    ref[2] = 0
     np.testing.assert_array_equal(got, ref)
-    assert len(np.unique(got)) >= 3 and not got[-9 * nz :].any()  # 0, 1, 2+ cameras; nothing seen out of view
+    assert len(np.unique(got)) >= 3 and not got[-1].any()  # 0, 1, 2+ cameras; nothing seen out of view
 
 
 @pytest.mark.parametrize(("min_cameras", "max_gap"), [(2, 2), (1, 0), (3, 3), (2, 10)])

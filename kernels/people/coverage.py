@@ -435,25 +435,34 @@ def gate_kernel(
     the background model has absorbed, or hidden: the filter then predicts without weighting, instead of following
     the nearest other silhouette). A fraction, so the rule does not depend on the images' resolution. Always 1 when
     the rectangle term is off (``terms.slope == 0``). ``support[0]`` = the best such coverage (0 when off). Launch
-    dim 1."""
-    observe[1] = observe[0]
+    ``wp.launch_tiled(dim=[1], block_dim=B)``: the block's lanes share the (2 m + 1)^2 grid points (point j is
+    (j // (2 m + 1) - m, j % (2 m + 1) - m) spacings away), their best coverages reduced with ``wp.tile_max`` (a
+    maximum: the same for any B; one lane on the CPU); lane 0 writes."""
+    _block, lane = wp.tid()
     if terms.slope == 0.0:
-        observe[0] = 1
-        support[0] = 0.0
+        if lane == 0:
+            observe[1] = observe[0]
+            observe[0] = 1
+            support[0] = 0.0
         return
     best = float(0.0)
     p = people[own]
     m = int(wp.ceil((reach + speed * dt[0]) / spacing))
-    for a in range(-m, m + 1):
-        for b in range(-m, m + 1):
-            x = wp.vec3(p[0] + spacing * float(a), p[1] + spacing * float(b), 0.0)
-            on, area, full = box_counts_left(
-                cams, integral, boxes, own, x, terms.half_width, terms.height, terms.min_visible, terms.unit
-            )
-            if area > 0.0 and area >= min_left * full:
-                best = wp.max(best, on / area)
-    observe[0] = wp.where(best > min_coverage, 1, 0)
-    support[0] = wp.float32(best)
+    side = 2 * m + 1
+    for j in range(lane, side * side, wp.block_dim()):
+        a = j / side - m
+        b = j % side - m
+        x = wp.vec3(p[0] + spacing * float(a), p[1] + spacing * float(b), 0.0)
+        on, area, full = box_counts_left(
+            cams, integral, boxes, own, x, terms.half_width, terms.height, terms.min_visible, terms.unit
+        )
+        if area > 0.0 and area >= min_left * full:
+            best = wp.max(best, on / area)
+    top = wp.tile_max(wp.tile(best))
+    if lane == 0:
+        observe[1] = observe[0]
+        observe[0] = wp.where(top[0] > min_coverage, 1, 0)
+        support[0] = wp.float32(top[0])
 
 
 HIST_H = wp.constant(8)

@@ -299,6 +299,7 @@ def column_seen_kernel(
     cams: wp.array(dtype=Camera),
     mask: wp.array(dtype=wp.uint8),
     people: wp.array(dtype=wp.vec2),
+    alive: wp.array(dtype=wp.int32),
     z_lo: float,
     dz: float,
     search: float,
@@ -310,9 +311,13 @@ def column_seen_kernel(
     ``seen[i, a, k]`` = the number of cameras whose motion mask is set at the projection of the point at height
     ``z_lo + k * dz`` metres on axis ``a`` of person ``i``: axis 0..8 is the person's estimated ground position
     ``people[i]`` moved by ``search`` metres times ``(a // 3 - 1, a % 3 - 1)`` (the head is narrow and a walking
-    person's estimate lags a little). Points behind a camera or outside its image count for nothing. Launch dim
-    ``(n, COLUMN_AXES, nz)``: one thread per point, so the mask reads of a column run in parallel."""
+    person's estimate lags a little). Points behind a camera or outside its image count for nothing. A row with
+    ``alive[i] == 0`` (a free slot of the tracker's pool) is zero, nothing projected. Launch dim ``(n,
+    COLUMN_AXES, nz)``: one thread per point, so the mask reads of a column run in parallel."""
     i, a, k = wp.tid()
+    if alive[i] == 0:
+        seen[i, a, k] = wp.uint8(0)
+        return
     axis = people[i] + search * wp.vec2(float(a // 3 - 1), float(a % 3 - 1))
     x = wp.vec3(axis[0], axis[1], z_lo + dz * float(k))
     n = int(0)

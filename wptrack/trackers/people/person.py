@@ -11,6 +11,7 @@ Units: metres, seconds, pixels.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,6 +28,8 @@ from wptrack.kernels.people import occupancy as kocc
 _GOLDEN = 0x9E3779B97F4A7C15
 DESCRIPTOR_BLOCK = 64
 """Lanes per particle of the GPU descriptor (they share the disc pixels)."""
+GATE_BLOCK = 64
+"""Lanes of the GPU gate (``kernels.people.coverage.gate_kernel``): they share its grid points (49 at 25 frames/s)."""
 GATE_SPACING = 0.125
 """Spacing of the points the gate tries around a person's last position, metres
 (``kernels.people.coverage.gate_kernel``)."""
@@ -189,18 +192,36 @@ class PersonFilter(ParticleFilter):
         """Whether this frame's masks show the person (``kernels.people.coverage.gate_kernel``, into
         :attr:`observe`)."""
         tr, pc = self.tracker, self.tracker.config.person
-        wp.launch(
+        wp.launch_tiled(
             kcov.gate_kernel,
-            dim=1,
+            dim=[1],
             inputs=[tr.sdrig.cams, tr.integral, tr.boxes, tr.slot_xy, self.slot, tr.terms]
             + [pc.gate_reach, WALK_SPEED, tr.dt, GATE_SPACING, pc.gate, pc.gate_left],
             outputs=[self.observe, self.support],
+            block_dim=GATE_BLOCK,
             device=self.device,
         )
 
     def _readback(self) -> None:
         super()._readback()
         wp.copy(self.support_host, self.support)
+
+    def _launch_position(self) -> None:
+        """The ground position of this frame's estimate into the tracker's ``slot_xy[slot]`` (the next people's gate
+        and person terms, the rectangles and the column tops read it), in the frame chain: on CUDA it is part of the
+        person's graph instead of a launch of its own."""
+        tr = self.tracker
+        wp.launch(
+            kpeople.person_xy_kernel,
+            dim=1,
+            inputs=[self.est, int(kreduce.EST_MEAN), self.slot],
+            outputs=[tr.slot_xy],
+            device=self.device,
+        )
+
+    def stages(self, src: int, dst: int) -> list[tuple[str, Callable[[], None]]]:
+        """:meth:`ParticleFilter.stages` and the estimate's ground position into the tracker's ``slot_xy``."""
+        return [*super().stages(src, dst), ("position", self._launch_position)]
 
     def spawn(self, xy: np.ndarray, frame: int) -> None:
         """Start the filter on a new person standing at ``xy`` (ground, metres): particles uniform in the

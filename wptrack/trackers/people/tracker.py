@@ -28,16 +28,16 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 import warp as wp
 
 from wptrack.cameras.rig import Camera, Rig
 from wptrack.cameras.structs import DeviceRig
-from wptrack.core.device import block_partition, resolve_device
+from wptrack.core.device import block_partition, device_guard, resolve_device
 from wptrack.core.errors import ConfigError, FrameError
-from wptrack.core.filter import BLOCK, MAX_BLOCKS, arrays_state, check_state, load_arrays
+from wptrack.core.filter import BLOCK, MAX_BLOCKS, arrays_state, check_state, load_arrays, no_gc
 from wptrack.io.frames import camera_frame
 from wptrack.kernels.colour import hsi as kcolour
 from wptrack.kernels.core import reduce as kreduce
@@ -95,7 +95,8 @@ class PeopleTracker(Population):
         rig: calibrated cameras with overlapping views (ground plane z = 0; ``rig.volume`` bounds the evidence map).
         config: :class:`wptrack.trackers.people.config.PeopleConfig`.
         device: ``auto``, ``cpu``, ``cuda`` or ``cuda:N``.
-        use_graph: capture each person's frame chain as a CUDA graph (default: on CUDA).
+        use_graph: capture each person's frame chain and the tracker's fixed per-frame work as CUDA graphs (default:
+            on CUDA).
         keep_particles: particles per person and frame returned for reports and hulls (0: none).
 
     Time: the frame interval dt is ``1 / config.fps`` (``DEFAULT_FPS`` when None) unless :meth:`step` is given
@@ -110,6 +111,8 @@ class PeopleTracker(Population):
             by all motion / by the unexplained motion, -1 where the camera does not see it.
         hist: (max_people, cameras, 2, 17) float32 the people's appearance histograms (``kernels.people.coverage``).
         slot_xy, slot_alive: (max_people,) each pool slot's ground position and whether it tracks somebody.
+        sigma_n, cover, free_cover, hist and top (max_people, axes: the column tops) are views of one float32 buffer
+        copied to its pinned host twin once per frame.
 
     Raises:
         ConfigError: fewer than two cameras, a bad configuration or a pool that does not fit the device.
@@ -154,7 +157,6 @@ class PeopleTracker(Population):
         self.bgr = wp.zeros(3 * npx, dtype=wp.uint8, device=d)
         self.bgr_prev = wp.zeros(3 * npx, dtype=wp.uint8, device=d)
         self.mask = wp.zeros(npx, dtype=wp.uint8, device=d)
-        self.sigma_n = wp.zeros(1, dtype=wp.float32, device=d)
         # eq. 18 over every NOISE_STRIDE-th pixel (a mean square estimated from ~1e5 values is as good as from all)
         self.noise_values = 3 * len(range(0, npx, NOISE_STRIDE))
         self.noise_blocks, self.noise_chunk = block_partition(self.noise_values, not self.is_cuda, BLOCK, MAX_BLOCKS)
@@ -162,7 +164,6 @@ class PeopleTracker(Population):
         pinned = self.is_cuda
         self._bgr_host = wp.zeros(3 * npx, dtype=wp.uint8, device="cpu", pinned=pinned)
         self._mask_host = wp.zeros(npx, dtype=wp.uint8, device="cpu", pinned=pinned)
-        self._sigma_host = wp.zeros(1, dtype=wp.float32, device="cpu", pinned=pinned)
         # ground evidence map over the working area (the rig's volume, else the ground two cameras see)
         b = config.birth
         self.area = working_area(rig, config.area)
@@ -192,9 +193,6 @@ class PeopleTracker(Population):
         self._pixel_dims = (ncam, maxh, maxw)  # of the reduced masks
         self._rows = max(c.height for c in rig.cameras)  # of the full images
         cells = self.nx * self.ny
-        self.cover = wp.zeros((ncam, cells), dtype=wp.float32, device=d)  # coverage of all motion, -1: unseen
-        self.free_cover = wp.zeros((ncam, cells), dtype=wp.float32, device=d)  # of the unexplained motion
-        self._cover_host = wp.zeros((ncam, cells), dtype=wp.float32, device="cpu", pinned=pinned)
         cell_area = wp.zeros((ncam, cells), dtype=wp.float32, device=d)
         wp.launch(
             kcov.box_area_kernel,
@@ -205,7 +203,6 @@ class PeopleTracker(Population):
             device=d,
         )
         self.cell_area = cell_area.numpy().reshape(ncam, self.ny, self.nx)  # pixels of each cell's rectangle
-        self._free_cover_host = wp.zeros((ncam, cells), dtype=wp.float32, device="cpu", pinned=pinned)
         self.boxes = wp.zeros((b.max_people, ncam), dtype=wp.vec4, device=d)  # tracked people's rectangles per slot
         self.full_boxes = wp.zeros((b.max_people, ncam), dtype=wp.vec4, device=d)  # the same in the full images
         pc = config.person
@@ -215,19 +212,33 @@ class PeopleTracker(Population):
         self.terms.slope, self.terms.offset = pc.slope_offset
         self.terms.exclusion_radius, self.terms.exclusion_weight = pc.exclusion_radius, pc.exclusion_weight
         nb = int(kcov.HIST_BINS)
-        self.hist = wp.zeros((b.max_people, ncam, int(kcov.HIST_PARTS), nb + 1), dtype=wp.float32, device=d)
-        self._hist_host = wp.zeros(self.hist.shape, dtype=wp.float32, device="cpu", pinned=pinned)
         self.slot_xy = wp.zeros(b.max_people, dtype=wp.vec2, device=d)  # ground position per pool slot
         self.slot_alive = wp.zeros(b.max_people, dtype=wp.int32, device=d)  # 1 where the slot tracks somebody
-        self.people_xy = wp.zeros(b.max_people, dtype=wp.vec2, device=d)  # the tracked people's ground positions
         body = config.body
         self.column_z_lo = 0.05
         self.column_nz = int((float(self.volume[1][2]) - self.column_z_lo) / body.step) + 1
         axes = kpeople.COLUMN_AXES
         self.column_seen = wp.zeros((b.max_people, axes, self.column_nz), dtype=wp.uint8, device=d)
-        self.top = wp.zeros((b.max_people, axes), dtype=wp.float32, device=d)  # per person and axis
-        self._top_host = wp.zeros((b.max_people, axes), dtype=wp.float32, device="cpu", pinned=pinned)
+        # what the host reads of a frame, in one float32 buffer (one copy per frame into its pinned twin): sigma_n,
+        # the coverage of all motion (-1: unseen) and of the unexplained motion, the appearance histograms, the tops
+        shapes = {
+            "sigma_n": (1,),
+            "cover": (ncam, cells),
+            "free_cover": (ncam, cells),
+            "hist": (b.max_people, ncam, int(kcov.HIST_PARTS), nb + 1),
+            "top": (b.max_people, axes),
+        }
+        self._readback = wp.zeros(sum(math.prod(v) for v in shapes.values()), dtype=wp.float32, device=d)
+        self._readback_host = wp.zeros(self._readback.shape, dtype=wp.float32, device="cpu", pinned=pinned)
+        start = 0
+        for name, shape in shapes.items():
+            end = start + math.prod(shape)
+            setattr(self, name, self._readback[start:end].reshape(shape))
+            setattr(self, f"_{name}_host", self._readback_host[start:end].reshape(shape))
+            start = end
         self.min_votes = min(b.min_cameras, len(rig))
+        self._commands: dict[str, list[Callable[[], None]]] = {}  # the frame's fixed device work (:meth:`_replay`)
+        self._graphs: dict[str, object] = {}  # their CUDA graphs (use_graph)
         self._centres: tuple[np.ndarray, np.ndarray] | None = None
         # the pool of person filters, allocated once
         self.pool = [PersonFilter(self, k) for k in range(b.max_people)]
@@ -281,130 +292,133 @@ class PeopleTracker(Population):
         wp.copy(self.bgr, self._bgr_host)
         wp.copy(self.mask, self._mask_host)
 
+    def _replay(self, name: str, build: Callable[[], list[Callable[[], None]]]) -> None:
+        """Run the fixed command list ``name`` of the frame: built by ``build`` on its first run (launches recorded
+        with ``record_cmd=True``: their arguments are packed once, a replay costs a few microseconds of host time
+        instead of a full ``wp.launch``; the buffers and parameters are the tracker's, fixed), replayed after; with
+        ``use_graph`` the second run captures the list as a CUDA graph (like each person's chain) and later runs
+        launch it (one launch instead of the list's)."""
+        cmds = self._commands.get(name)
+        if cmds is None:
+            cmds = self._commands[name] = build()
+        elif self.use_graph:
+            graph = self._graphs.get(name)
+            if graph is None:
+                with device_guard(self.device).exclusive(), no_gc():  # no other thread's device work in the graph
+                    with wp.ScopedCapture(device=self.device) as capture:
+                        for cmd in cmds:
+                            cmd()
+                graph = self._graphs[name] = capture.graph
+            wp.capture_launch(graph)
+            return
+        for cmd in cmds:
+            cmd()
+
+    def _record(self, kernel, dim, inputs: list, outputs: list, block_dim: int | None = None) -> Callable[[], None]:
+        """A recorded launch of ``kernel`` on the tracker's device (tiled with ``block_dim``), to replay."""
+        args = dict(dim=dim, inputs=inputs, outputs=outputs, device=self.device, record_cmd=True)
+        if block_dim is None:
+            return wp.launch(kernel, **args).launch
+        return wp.launch_tiled(kernel, block_dim=block_dim, **args).launch
+
     def _observe(self) -> None:
-        d = self.device
+        """sigma_n of eq. 18 from the previous and this frame, and the reduced masks' integral image."""
         if self.frames_done == 0:
             wp.copy(self.bgr_prev, self.bgr)  # no previous frame: sigma_n = 0 (the floor of eqs. 15-17)
-        wp.launch_tiled(
-            kdesc.noise_partials_kernel,
-            dim=[self.noise_blocks],
-            inputs=[self.bgr_prev, self.bgr, self.noise_values, NOISE_STRIDE, self.noise_chunk],
-            outputs=[self.noise_part],
-            block_dim=BLOCK,
-            device=d,
-        )
-        wp.launch_tiled(
-            kdesc.noise_sigma_kernel,
-            dim=[1],
-            inputs=[self.noise_part, self.noise_blocks, self.noise_values],
-            outputs=[self.sigma_n],
-            block_dim=BLOCK,
-            device=d,
-        )
-        wp.copy(self.bgr_prev, self.bgr)
-        wp.launch(
-            kcov.downsample_mask_kernel,
-            dim=self._pixel_dims,
-            inputs=[self.drig.cams, self.mask, self.box_scale, self.sdrig.cams],
-            outputs=[self.small_mask],
-            device=d,
-        )
-        self._integral(self.small_mask, self.integral)
+        self._replay("observe", self._observe_commands)
 
-    def _integral(self, mask: wp.array, out: wp.array) -> None:
+    def _observe_commands(self) -> list[Callable[[], None]]:
+        nb, nv = self.noise_blocks, self.noise_values
+        return [
+            self._record(
+                kdesc.noise_partials_kernel,
+                [nb],
+                [self.bgr_prev, self.bgr, nv, NOISE_STRIDE, self.noise_chunk],
+                [self.noise_part],
+                BLOCK,
+            ),
+            self._record(kdesc.noise_sigma_kernel, [1], [self.noise_part, nb, nv], [self.sigma_n], BLOCK),
+            lambda: wp.copy(self.bgr_prev, self.bgr),
+            self._record(
+                kcov.downsample_mask_kernel,
+                self._pixel_dims,
+                [self.drig.cams, self.mask, self.box_scale, self.sdrig.cams],
+                [self.small_mask],
+            ),
+            *self._integral(self.small_mask, self.integral),
+        ]
+
+    def _integral(self, mask: wp.array, out: wp.array) -> list[Callable[[], None]]:
         """The (H+1) x (W+1) integral image of every camera's reduced ``mask`` (block counts) into ``out``
-        (``kernels.colour.hsi``'s four segmented scans)."""
-        cams, d = self.sdrig.cams, self.device
-        wp.launch(
-            kcolour.row_segment_sums_kernel, dim=self._row_dims, inputs=[cams, mask], outputs=[self._row_seg], device=d
-        )
-        wp.launch(
-            kcolour.row_scan_kernel, dim=self._row_dims, inputs=[cams, mask, self._row_seg], outputs=[out], device=d
-        )
-        wp.launch(
-            kcolour.col_segment_sums_kernel, dim=self._col_dims, inputs=[cams, out], outputs=[self._col_seg], device=d
-        )
-        wp.launch(kcolour.col_scan_kernel, dim=self._col_dims, inputs=[cams, self._col_seg], outputs=[out], device=d)
+        (``kernels.colour.hsi``'s four segmented scans), as recorded launches."""
+        cams = self.sdrig.cams
+        return [
+            self._record(kcolour.row_segment_sums_kernel, self._row_dims, [cams, mask], [self._row_seg]),
+            self._record(kcolour.row_scan_kernel, self._row_dims, [cams, mask, self._row_seg], [out]),
+            self._record(kcolour.col_segment_sums_kernel, self._col_dims, [cams, out], [self._col_seg]),
+            self._record(kcolour.col_scan_kernel, self._col_dims, [cams, self._col_seg], [out]),
+        ]
 
     def _coverage(self) -> None:
         """The tracked people's rectangles after this frame (``boxes``: what the others explain in the next frame's
         rectangle terms) and the person rectangles' coverage on the evidence map's cells (``kernels.people.coverage``):
-        of all motion, and of the motion outside the tracked people's rectangles; copied to the host asynchronously."""
-        pc, b, d = self.config.person, self.config.birth, self.device
-        cams = self.sdrig.cams
-        origin = wp.vec2(*self.grid_origin)
+        of all motion, and of the motion outside the tracked people's rectangles; the appearance histograms (all read
+        back by :meth:`step`'s one copy)."""
+        self._replay("coverage", self._coverage_commands)
+
+    def _coverage_commands(self) -> list[Callable[[], None]]:
+        pc, b = self.config.person, self.config.birth
+        cams, full = self.sdrig.cams, self.drig.cams
         dims = (len(self.rig), self.nx * self.ny)
-        common = [origin, b.cell, self.nx, pc.half_width, pc.height, pc.min_visible, self.terms.unit]
-        wp.launch(kcov.coverage_kernel, dim=dims, inputs=[cams, self.integral, *common], outputs=[self.cover], device=d)
-        wp.launch(
-            kcov.person_boxes_kernel,
-            dim=(len(self.pool), len(self.rig)),
-            inputs=[cams, self.slot_xy, self.slot_alive, pc.half_width, pc.height],
-            outputs=[self.boxes],
-            device=d,
-        )
-        wp.launch(
-            kcov.explained_mask_kernel,
-            dim=self._pixel_dims,
-            inputs=[cams, self.small_mask, self.boxes, len(self.pool)],
-            outputs=[self.free_mask],
-            device=d,
-        )
-        self._integral(self.free_mask, self.free_integral)
-        wp.launch(
-            kcov.coverage_kernel,
-            dim=dims,
-            inputs=[cams, self.free_integral, *common],
-            outputs=[self.free_cover],
-            device=d,
-        )
-        wp.copy(self._cover_host, self.cover)
-        wp.copy(self._free_cover_host, self.free_cover)
-        self.hist.zero_()
-        wp.launch(
-            kcov.person_boxes_kernel,
-            dim=(len(self.pool), len(self.rig)),
-            inputs=[self.drig.cams, self.slot_xy, self.slot_alive, pc.half_width, pc.height],
-            outputs=[self.full_boxes],
-            device=d,
-        )
-        wp.launch(
-            kcov.person_histogram_kernel,
-            dim=(len(self.pool), len(self.rig), int(kcov.HIST_PARTS), self._rows),
-            inputs=[self.drig.cams, self.bgr, self.mask, self.full_boxes],
-            outputs=[self.hist],
-            device=d,
-        )
-        wp.copy(self._hist_host, self.hist)
+        common = [wp.vec2(*self.grid_origin), b.cell, self.nx, pc.half_width, pc.height, pc.min_visible]
+        common.append(self.terms.unit)
+        boxes_dims = (len(self.pool), len(self.rig))
+        people = [self.slot_xy, self.slot_alive, pc.half_width, pc.height]
+        return [
+            self._record(kcov.coverage_kernel, dims, [cams, self.integral, *common], [self.cover]),
+            self._record(kcov.person_boxes_kernel, boxes_dims, [cams, *people], [self.boxes]),
+            self._record(
+                kcov.explained_mask_kernel,
+                self._pixel_dims,
+                [cams, self.small_mask, self.boxes, len(self.pool)],
+                [self.free_mask],
+            ),
+            *self._integral(self.free_mask, self.free_integral),
+            self._record(kcov.coverage_kernel, dims, [cams, self.free_integral, *common], [self.free_cover]),
+            self.hist.zero_,
+            self._record(kcov.person_boxes_kernel, boxes_dims, [full, *people], [self.full_boxes]),
+            self._record(
+                kcov.person_histogram_kernel,
+                (*boxes_dims, int(kcov.HIST_PARTS), self._rows),
+                [full, self.bgr, self.mask, self.full_boxes],
+                [self.hist],
+            ),
+        ]
 
     def _evidence(self, n: int) -> None:
-        """The silhouette column tops of the ``n`` people tracked after this frame (``people_xy[:n]``, filled on the
-        device from their estimates), copied to the host asynchronously (the frame's one synchronisation follows)."""
+        """The silhouette column tops of every pool slot (``slot_xy``, filled on the device from the estimates of the
+        ``n`` people tracked this frame; a free slot's columns are empty and its row is not read), read back by
+        :meth:`step`'s one copy."""
         if n:
-            body = self.config.body
-            axes = kpeople.COLUMN_AXES
-            wp.launch(
+            self._replay("columns", self._column_commands)
+
+    def _column_commands(self) -> list[Callable[[], None]]:
+        body, slots, axes = self.config.body, len(self.pool), kpeople.COLUMN_AXES
+        gap, votes = int(round(body.max_gap / body.step)), min(body.min_cameras, len(self.rig))
+        return [
+            self._record(
                 kpeople.column_seen_kernel,
-                dim=(n, axes, self.column_nz),
-                inputs=[self.drig.cams, self.mask, self.people_xy, self.column_z_lo, body.step, body.search],
-                outputs=[self.column_seen],
-                device=self.device,
-            )
-            wp.launch(
+                (slots, axes, self.column_nz),
+                [self.drig.cams, self.mask, self.slot_xy, self.slot_alive, self.column_z_lo, body.step, body.search],
+                [self.column_seen],
+            ),
+            self._record(
                 kpeople.column_top_kernel,
-                dim=(n, axes),
-                inputs=[
-                    self.column_seen,
-                    self.column_z_lo,
-                    body.step,
-                    self.column_nz,
-                    min(body.min_cameras, len(self.rig)),
-                    int(round(body.max_gap / body.step)),
-                ],
-                outputs=[self.top],
-                device=self.device,
-            )
-            wp.copy(self._top_host, self.top)
+                (slots, axes),
+                [self.column_seen, self.column_z_lo, body.step, self.column_nz, votes, gap],
+                [self.top],
+            ),
+        ]
 
     # --- the frame --------------------------------------------------------------------------------------
     def step(
@@ -435,32 +449,23 @@ class PeopleTracker(Population):
         t1 = time.perf_counter()
         self._observe()
         active = [k for k in range(len(self.pool)) if self.slot_id[k] >= 0]
-        for j, k in enumerate(active):
-            p = self.pool[k]
-            p.launch_frame()
-            for index, out in ((j, self.people_xy), (k, self.slot_xy)):
-                wp.launch(
-                    kpeople.person_xy_kernel,
-                    dim=1,
-                    inputs=[p.est, int(kreduce.EST_MEAN), index],
-                    outputs=[out],
-                    device=self.device,
-                )
+        for k in active:
+            self.pool[k].launch_frame()  # its chain ends with its ground position in slot_xy[k]
         self._coverage()
         self._evidence(len(active))
-        wp.copy(self._sigma_host, self.sigma_n)
+        wp.copy(self._readback_host, self._readback)  # sigma_n, coverage, histograms, tops: one copy
         wp.synchronize_device(self.device)  # the frame's one synchronisation: estimates, evidence, tops on the host
         t2 = time.perf_counter()
         people = []
         self.clock += self.frame_dt
         self._update_appearance(active)
-        tops = self._top_host.numpy().max(axis=1)  # the highest of each person's axes
+        tops = self._top_host.numpy().max(axis=1)  # the highest of each slot's axes
         body = self.config.body
-        for j, k in enumerate(active):
+        for k in active:
             self.slot_age[k] += 1
             person = self.pool[k].estimate_from_host(int(self.slot_id[k]), int(self.slot_age[k]))
-            if tops[j] > 0:
-                person.top = float(tops[j])
+            if tops[k] > 0:
+                person.top = float(tops[k])
                 if body.centroid == "standing":
                     person.centroid[2] = body.ratio * person.top  # standing-person model (BodyConfig)
             people.append(person)
@@ -468,8 +473,8 @@ class PeopleTracker(Population):
             grids = self._occupancy_grids(active)
             for person, grid in zip(people, grids, strict=True):
                 person.occupancy = grid
-        est = PeopleEstimate(frame=self.frames_done, people=people, sigma_n=float(self._sigma_host.numpy()[0]))
-        self._update_population(est, active, tops[: len(active)] > 0)
+        est = PeopleEstimate(frame=self.frames_done, people=people, sigma_n=float(self._sigma_n_host.numpy()[0]))
+        self._update_population(est, active, tops[active] > 0)
         self.frames_done += 1
         est.timings.update(upload=t1 - t0, filter=t2 - t1, population=time.perf_counter() - t2)
         return est
