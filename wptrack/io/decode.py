@@ -31,6 +31,8 @@ from typing import Any
 
 import numpy as np
 
+from wptrack.io.prefetch import put_until
+
 log = logging.getLogger(__name__)
 
 CHUNK = 8
@@ -95,13 +97,7 @@ def parallel_frames(open_capture: Any, count: int, workers: int, stop: threading
     halt = stop or threading.Event()
 
     def put(q: queue.Queue, item: Any) -> bool:
-        while not halt.is_set():
-            try:
-                q.put(item, timeout=0.1)
-                return True
-            except queue.Full:
-                continue
-        return False
+        return put_until(q, item, halt)
 
     def work(k: int) -> None:
         q = queues[k]

@@ -4,9 +4,36 @@ errors re-raised in the consumer; the time each side spent working and waiting g
 
 from __future__ import annotations
 
+import queue
+import threading
 import time
+from typing import Any
 
 from wptrack.io import timeline
+
+POLL_S = 0.1
+"""Seconds a blocked queue operation waits before it looks at its stop event again."""
+
+
+def put_until(q: queue.Queue, item: Any, stop: threading.Event) -> bool:
+    """Put ``item`` into ``q``, waiting while it is full; False (not put) once ``stop`` is set."""
+    while not stop.is_set():
+        try:
+            q.put(item, timeout=POLL_S)
+            return True
+        except queue.Full:
+            continue
+    return False
+
+
+def get_until(q: queue.Queue, stop: threading.Event, default: Any = None) -> Any:
+    """The next item of ``q``, waiting while it is empty; ``default`` once ``stop`` is set."""
+    while not stop.is_set():
+        try:
+            return q.get(timeout=POLL_S)
+        except queue.Empty:
+            continue
+    return default
 
 
 class prefetch:  # noqa: N801 - used like a function: ``for frame in prefetch(frames): ...``
@@ -55,13 +82,7 @@ class prefetch:  # noqa: N801 - used like a function: ``for frame in prefetch(fr
             pass
         t0 = time.perf_counter()
         try:
-            while not self._stop.is_set():
-                try:
-                    self._queue.put(item, timeout=0.1)
-                    return True
-                except queue.Full:
-                    continue
-            return False
+            return put_until(self._queue, item, self._stop)
         finally:
             timeline.record(self.name + timeline.BLOCKED_SUFFIX, time.perf_counter() - t0)
 

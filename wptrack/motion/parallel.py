@@ -26,6 +26,7 @@ import numpy as np
 
 from wptrack.core.errors import FrameError
 from wptrack.io import timeline
+from wptrack.io.prefetch import get_until, put_until
 
 MASK_WORKERS_ENV = "WPTRACK_MASK_WORKERS"
 """Environment variable: threads making the offline masks of one video (default: :func:`mask_workers`)."""
@@ -79,21 +80,10 @@ def parallel_evidence(
     outbox = [queue.Queue(maxsize=2) for _ in range(workers)]
 
     def put(q: queue.Queue, item: Any) -> bool:
-        while not stop.is_set():
-            try:
-                q.put(item, timeout=0.1)
-                return True
-            except queue.Full:
-                continue
-        return False
+        return put_until(q, item, stop)
 
     def get(q: queue.Queue) -> Any:
-        while not stop.is_set():
-            try:
-                return q.get(timeout=0.1)
-            except queue.Empty:
-                continue
-        return _END
+        return get_until(q, stop, _END)
 
     def feed() -> None:
         count = 0  # frames handed out; an error concerns frame `count`
