@@ -330,11 +330,13 @@ KEEP_WEIGHT = wp.constant(0.25)
 @wp.func
 def weighted_median(values: neighbours_vec, weights: neighbours_vec, count: int, total: float):
     """The smallest of ``values[:count]`` whose weight with that of the values below it reaches half the total
-    (a lower weighted median; ties broken by the value)."""
+    (a lower weighted median; ties broken by the value). A value's sum of weights is taken only while it could be
+    smaller than the best found so far."""
     best = float(0.0)
     found = int(0)
     for i in range(count):
-        if weights[i] > 0.0:
+        # a value not below the best found cannot replace it: its sum is skipped (the same answer, fewer sums)
+        if weights[i] > 0.0 and (found == 0 or values[i] < best):
             below = float(0.0)
             for j in range(count):
                 if values[j] <= values[i]:
