@@ -170,7 +170,8 @@ class ForegroundParams:
 @wp.func
 def local_gain(local: wp.array(dtype=wp.vec3), params: ForegroundParams, p: int):
     """The local illumination field at pixel ``p``: the exponential of the tiles' log gains interpolated bilinearly
-    between the tile centres (clamped at the image border)."""
+    between the tile centres (clamped at the image border); exactly 1 where the four tiles' log gains are all 0
+    (``exp(0) = 1``: the exponentials are skipped)."""
     px = p % params.width
     py = p // params.width
     u = (float(px) + 0.5) / float(params.tile) - 0.5
@@ -181,8 +182,15 @@ def local_gain(local: wp.array(dtype=wp.vec3), params: ForegroundParams, p: int)
     j1 = wp.min(j0 + 1, params.tiles_y - 1)
     fu = wp.clamp(u - float(i0), 0.0, 1.0)
     fv = wp.clamp(v - float(j0), 0.0, 1.0)
-    top = (1.0 - fu) * local[j0 * params.tiles_x + i0] + fu * local[j0 * params.tiles_x + i1]
-    bottom = (1.0 - fu) * local[j1 * params.tiles_x + i0] + fu * local[j1 * params.tiles_x + i1]
+    q00 = local[j0 * params.tiles_x + i0]
+    q01 = local[j0 * params.tiles_x + i1]
+    q10 = local[j1 * params.tiles_x + i0]
+    q11 = local[j1 * params.tiles_x + i1]
+    zero = wp.vec3(0.0, 0.0, 0.0)
+    if q00 == zero and q01 == zero and q10 == zero and q11 == zero:
+        return wp.vec3(1.0, 1.0, 1.0)  # no local change around (the usual case): exp(0) = 1 without the exps
+    top = (1.0 - fu) * q00 + fu * q01
+    bottom = (1.0 - fu) * q10 + fu * q11
     g = (1.0 - fv) * top + fv * bottom
     return wp.vec3(wp.exp(g[0]), wp.exp(g[1]), wp.exp(g[2]))
 
