@@ -55,7 +55,9 @@ def _patch(device, frame, bg, mad, gain, w, params, radius):
     b, m = _arr(bg, device), _arr(mad, device)
     wp.launch(kil.luma_kernel, dim=n, inputs=[_arr(frame, device), wp.vec3(*gain), b, m, b, m, w, params],
               outputs=[luma], device=device)  # fmt: skip
-    wp.launch(kil.patch_rows_kernel, dim=n, inputs=[luma, W, H, radius], outputs=[rows], device=device)
+    grads = wp.zeros(n, dtype=wp.vec4, device=device)
+    wp.launch(kil.luma_grad_kernel, dim=n, inputs=[luma, W, H], outputs=[grads], device=device)
+    wp.launch(kil.patch_rows_kernel, dim=n, inputs=[luma, grads, W, H, radius], outputs=[rows], device=device)
     wp.launch(kil.patch_kernel, dim=n, inputs=[rows, luma, W, H, radius], outputs=[patch], device=device)
     return luma, patch, rows
 

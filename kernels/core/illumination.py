@@ -98,8 +98,27 @@ def luma_grad(luma: wp.array(dtype=wp.vec3), x: int, y: int, width: int, height:
 
 
 @wp.kernel
+def luma_grad_kernel(
+    luma: wp.array(dtype=wp.vec3),
+    width: int,
+    height: int,
+    grads: wp.array(dtype=wp.vec4),
+):
+    """Per pixel, :func:`luma_grad` once, for :func:`patch_rows_kernel` (which reads each pixel's gradients in
+    ``2 radius + 1`` row sums).
+
+    Args:
+        luma: ``(H W,)`` :func:`luma_kernel`'s output. width, height: Image size, pixels.
+        grads: ``(H W,)`` output ``(df/dx, df/dy, db/dx, db/dy)``.
+    """
+    p = wp.tid()
+    grads[p] = luma_grad(luma, p % width, p // width, width, height)
+
+
+@wp.kernel
 def patch_rows_kernel(
     luma: wp.array(dtype=wp.vec3),
+    grads: wp.array(dtype=wp.vec4),
     width: int,
     height: int,
     radius: int,
@@ -107,11 +126,13 @@ def patch_rows_kernel(
 ):
     """First (horizontal) pass of :func:`patch_kernel`: per pixel, the sums over its row neighbours
     ``x - radius .. x + radius`` inside the image of ``f, b, f^2, b^2, f b`` (of ``f - 128`` and ``b - 128``),
-    ``grad f . grad b``, ``|grad f|^2``, ``|grad b|^2`` (:func:`luma_grad`) and their count. One thread per pixel
+    ``grad f . grad b``, ``|grad f|^2``, ``|grad b|^2`` (:func:`luma_grad`, from :func:`luma_grad_kernel`) and their
+    count. One thread per pixel
     (each sum read afresh: no sliding sums, no float32 cancellation).
 
     Args:
-        luma: ``(H W,)`` :func:`luma_kernel`'s output. width, height: Image size, pixels. radius: Patch radius.
+        luma: ``(H W,)`` :func:`luma_kernel`'s output. grads: ``(H W,)`` :func:`luma_grad_kernel`'s output.
+        width, height: Image size, pixels. radius: Patch radius.
         rows: ``(H W,)`` output row sums.
     """
     p = wp.tid()
@@ -120,7 +141,7 @@ def patch_rows_kernel(
     acc = rows_vec()
     for xx in range(wp.max(x - radius, 0), wp.min(x + radius + 1, width)):
         v = luma[y * width + xx]
-        g = luma_grad(luma, xx, y, width, height)
+        g = grads[y * width + xx]
         f = v[0] - 128.0  # centred: smaller float32 sums of squares (variances are differences of them)
         b = v[1] - 128.0
         acc[0] += f

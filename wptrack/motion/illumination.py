@@ -105,6 +105,7 @@ class LightField:
         n_tiles = p.tiles_x * p.tiles_y
         # per-pixel luminance and patch statistics, per-tile gains and the smoothed field
         self._luma = wp.zeros(n, dtype=wp.vec3, device=device)
+        self._grads = wp.zeros(n, dtype=wp.vec4, device=device)
         self._rows9 = wp.zeros(n, dtype=kil.rows_vec, device=device)
         self.rows, self.luma = self._rows9, self._luma
         self.patch = wp.zeros(n, dtype=kbg.patch_vec, device=device)
@@ -128,7 +129,9 @@ class LightField:
         wp.launch(kil.luma_kernel, dim=self.pixels, inputs=[frame, gain, b0, m0, b1, m1, w, p], outputs=[self._luma],
                   device=dev)  # fmt: skip
         r = int(c.illum_patch)
-        wp.launch(kil.patch_rows_kernel, dim=self.pixels, inputs=[self._luma, width, height, r],
+        wp.launch(kil.luma_grad_kernel, dim=self.pixels, inputs=[self._luma, width, height], outputs=[self._grads],
+                  device=dev)  # fmt: skip
+        wp.launch(kil.patch_rows_kernel, dim=self.pixels, inputs=[self._luma, self._grads, width, height, r],
                   outputs=[self._rows9], device=dev)  # fmt: skip
         if p.tile:
             n = p.tiles_x * p.tiles_y
