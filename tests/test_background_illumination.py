@@ -55,9 +55,11 @@ def _patch(device, frame, bg, mad, gain, w, params, radius):
     b, m = _arr(bg, device), _arr(mad, device)
     wp.launch(kil.luma_kernel, dim=n, inputs=[_arr(frame, device), wp.vec3(*gain), b, m, b, m, w, params],
               outputs=[luma], device=device)  # fmt: skip
-    wp.launch(kil.patch_rows_kernel, dim=n, inputs=[luma, W, H, radius], outputs=[rows], device=device)
+    grads = wp.zeros(n, dtype=wp.vec4, device=device)
+    wp.launch(kil.luma_grad_kernel, dim=n, inputs=[luma, W, H], outputs=[grads], device=device)
+    wp.launch(kil.patch_rows_kernel, dim=n, inputs=[luma, grads, W, H, radius], outputs=[rows], device=device)
     wp.launch(kil.patch_kernel, dim=n, inputs=[rows, luma, W, H, radius], outputs=[patch], device=device)
-    return luma, patch
+    return luma, patch, rows
 
 
 @pytest.mark.parametrize("radius", [1, 3])
@@ -66,7 +68,7 @@ def test_luma_and_patch_kernels_match_numpy(device, rng, radius):
     mad = rng.integers(0, 6, bg.shape, dtype=np.uint8)
     gain = (0.9, 1.0, 1.1)
     p = _params(spread_cap=5.0)
-    luma, patch = _patch(device, frame, bg, mad, gain, 0.0, p, radius)
+    luma, patch, _ = _patch(device, frame, bg, mad, gain, 0.0, p, radius)
     lum_ref = ref.luma(frame, gain, bg, mad, bg, mad, 0.0, 3.0, 5.0)
     np.testing.assert_allclose(luma.numpy().reshape(H, W, 3), lum_ref, rtol=1e-5, atol=1e-4)
     st_ref = ref.patch(lum_ref, radius)
@@ -89,11 +91,20 @@ def test_tile_gain_smooth_and_field_match_numpy(device, rng):
     mad = np.full(bg.shape, 2, np.uint8)
     gain = (1.0, 1.0, 1.0)
     p = _params(tile=12)
-    _, patch = _patch(device, frame, bg, mad, gain, 0.0, p, 3)
+    luma, patch, rows = _patch(device, frame, bg, mad, gain, 0.0, p, 3)
     ntiles = p.tiles_x * p.tiles_y
     tiles = wp.zeros(ntiles, dtype=wp.vec4, device=device)
     b = _arr(bg, device)
     st = patch.numpy().reshape(H, W, 6)
+    # the patch statistics at the tiles' vote subsample only (every 2nd pixel of a 12-px tile): patch_kernel's there,
+    # NaN (untouched) elsewhere
+    sparse = wp.array(np.full((H * W, 6), np.nan, np.float32), dtype=kbg.patch_vec, device=device)
+    wp.launch(kil.patch_samples_kernel, dim=ntiles * 64, inputs=[rows, luma, p, H, 3], outputs=[sparse], device=device)
+    got_sparse = sparse.numpy().reshape(H, W, 6)
+    sampled = np.zeros((H, W), bool)
+    sampled[::2, ::2] = True
+    np.testing.assert_array_equal(got_sparse[sampled], st[sampled])
+    assert np.isnan(got_sparse[~sampled]).all()
     for shadows in (1, 0):  # cast shadows (ratio 0.5 in the shadow band [0.4, 0.6]) vote or not
         wp.launch(kil.tile_gain_kernel, dim=ntiles, inputs=[_arr(frame, device), wp.vec3(*gain), b, b, 0.0, patch, p,
                   H, shadows], outputs=[tiles], device=device)  # fmt: skip
@@ -139,7 +150,7 @@ def test_foreground_kernel_local_field_and_veto_match_numpy(device, rng, tile, v
     gain = np.array([1.0, 1.0, 1.0])
     p = _params(tile=tile, veto_ncc=veto)
     n = H * W
-    _, patch = _patch(device, frame, bg, mad, gain, 0.0, p, 3)
+    luma, patch, rows = _patch(device, frame, bg, mad, gain, 0.0, p, 3)
     st = patch.numpy().reshape(H, W, 6)
     if tile:
         tiles_host = ref.tile_gains(frame, gain, bg, bg, 0.0, st, tile, p.veto_texture, p.verify_ncc, (0.4, 0.6, 0.1),
@@ -152,8 +163,9 @@ def test_foreground_kernel_local_field_and_veto_match_numpy(device, rng, tile, v
     outs = [wp.zeros(n, dtype=wp.uint8, device=device), wp.zeros(n, dtype=wp.float32, device=device),
             wp.zeros(n, dtype=wp.uint8, device=device), wp.zeros(n, dtype=wp.vec3, device=device)]  # fmt: skip
     b, m = _arr(bg, device), _arr(mad, device)
+    written = wp.array(np.full((n, 6), np.nan, np.float32), dtype=kbg.patch_vec, device=device)
     wp.launch(kbg.foreground_kernel, dim=n, inputs=[_arr(frame, device), b, m, b, m, 0.0, wp.vec3(*gain), p, local,
-              patch], outputs=outs, device=device)  # fmt: skip
+              rows, luma, 3, H], outputs=[written, *outs], device=device)  # fmt: skip
     veto_args = None
     if veto:
         veto_args = dict(
@@ -177,6 +189,11 @@ def test_foreground_kernel_local_field_and_veto_match_numpy(device, rng, tile, v
     assert ok.mean() > 0.99
     np.testing.assert_array_equal(outs[0].numpy()[ok], r["packed"].reshape(-1)[ok])
     np.testing.assert_allclose(outs[1].numpy()[ok], r["prob"].reshape(-1)[ok], atol=1e-4)
+    # the veto computed its candidates' patch statistics (patch_kernel's, exactly) and wrote them, nothing else
+    tested = (~r["shadow"] & (r["z"] > 3.0)).reshape(-1) if veto else np.zeros(n, bool)
+    got = written.numpy()
+    np.testing.assert_array_equal(got[tested & ok], st.reshape(-1, 6)[tested & ok])
+    assert np.isnan(got[~tested & ok]).all() and (tested.sum() > 100 or not veto)
     fg = r["level"] == 2
     obj = fg[22:32, 12:20].mean()
     dark = fg[:, W // 2 + 8 :].mean()

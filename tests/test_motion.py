@@ -105,9 +105,12 @@ def test_foreground_kernel_matches_numpy(device, rng, shadow, gain, low, cap, hi
             wp.vec3(*gain),
             p,
             wp.zeros(1, dtype=wp.vec3, device=device),
-            wp.zeros(1, dtype=kbg.patch_vec, device=device),
+            wp.zeros(1, dtype=kbg.rows_vec, device=device),
+            wp.zeros(1, dtype=wp.vec3, device=device),
+            3,
+            1,
         ],
-        outputs=[mask, prob, shad, diff],
+        outputs=[wp.zeros(1, dtype=kbg.patch_vec, device=device), mask, prob, shad, diff],
         device=device,
     )
     ref = numpy_masks.foreground(

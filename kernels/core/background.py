@@ -137,6 +137,55 @@ def median_mad_kernel(
 #: scales), and the fit's distance from a gain.
 patch_vec = wp.types.vector(length=6, dtype=wp.float32)
 
+#: Row sums of :func:`wptrack.kernels.core.illumination.patch_rows_kernel`: f, b, f^2, b^2, f b,
+#: grad f . grad b, |grad f|^2, |grad b|^2, count.
+rows_vec = wp.types.vector(length=9, dtype=wp.float32)
+
+
+@wp.func
+def patch_at(
+    rows: wp.array(dtype=rows_vec), luma: wp.array(dtype=wp.vec3), width: int, height: int, radius: int, p: int
+):
+    """The patch statistics of pixel ``p`` (:func:`wptrack.kernels.core.illumination.patch_kernel`, which calls this:
+    the same operations, so the same values) from the row sums ``rows`` and the luminance ``luma`` of
+    :func:`wptrack.kernels.core.illumination.patch_rows_kernel` and ``luma_kernel``; for the kernels that need them
+    at a few pixels only (the tiles' votes, the veto's candidates)."""
+    y = p // width
+    x = p % width
+    acc = rows_vec()
+    for yy in range(wp.max(y - radius, 0), wp.min(y + radius + 1, height)):
+        acc += rows[yy * width + x]
+    n = acc[8]
+    mf = acc[0] / n
+    mb = acc[1] / n
+    vf = wp.max(acc[2] / n - mf * mf, 0.0)
+    vb = wp.max(acc[3] / n - mb * mb, 0.0)
+    cov = acc[4] / n - mf * mb
+    ncc = float(0.0)
+    if vf * vb > 0.0:
+        ncc = cov / wp.sqrt(vf * vb)
+    gc = float(0.0)
+    if acc[6] * acc[7] > 0.0:
+        gc = acc[5] / wp.sqrt(acc[6] * acc[7])
+    alpha = float(0.0)
+    if vb > 0.0:
+        alpha = cov / vb
+    beta = mf - alpha * mb
+    c = luma[p]
+    s = c[2]
+    resid = wp.sqrt(3.0) * wp.abs((c[0] - 128.0) - alpha * (c[1] - 128.0) - beta) / s
+    out = patch_vec()
+    out[0] = ncc
+    out[1] = gc
+    out[2] = wp.sqrt(3.0 * vb) / s
+    out[3] = wp.sqrt(3.0 * vf) / s
+    out[4] = resid
+    gap = float(9.0)
+    if alpha > 0.0 and mf + 128.0 > 0.0 and mb + 128.0 > 0.0:
+        gap = wp.min(wp.abs(wp.log(alpha * (mb + 128.0) / (mf + 128.0))), 9.0)
+    out[5] = gap
+    return out
+
 
 @wp.struct
 class ForegroundParams:
@@ -170,7 +219,8 @@ class ForegroundParams:
 @wp.func
 def local_gain(local: wp.array(dtype=wp.vec3), params: ForegroundParams, p: int):
     """The local illumination field at pixel ``p``: the exponential of the tiles' log gains interpolated bilinearly
-    between the tile centres (clamped at the image border)."""
+    between the tile centres (clamped at the image border); exactly 1 where the four tiles' log gains are all 0
+    (``exp(0) = 1``: the exponentials are skipped)."""
     px = p % params.width
     py = p // params.width
     u = (float(px) + 0.5) / float(params.tile) - 0.5
@@ -181,8 +231,15 @@ def local_gain(local: wp.array(dtype=wp.vec3), params: ForegroundParams, p: int)
     j1 = wp.min(j0 + 1, params.tiles_y - 1)
     fu = wp.clamp(u - float(i0), 0.0, 1.0)
     fv = wp.clamp(v - float(j0), 0.0, 1.0)
-    top = (1.0 - fu) * local[j0 * params.tiles_x + i0] + fu * local[j0 * params.tiles_x + i1]
-    bottom = (1.0 - fu) * local[j1 * params.tiles_x + i0] + fu * local[j1 * params.tiles_x + i1]
+    q00 = local[j0 * params.tiles_x + i0]
+    q01 = local[j0 * params.tiles_x + i1]
+    q10 = local[j1 * params.tiles_x + i0]
+    q11 = local[j1 * params.tiles_x + i1]
+    zero = wp.vec3(0.0, 0.0, 0.0)
+    if q00 == zero and q01 == zero and q10 == zero and q11 == zero:
+        return wp.vec3(1.0, 1.0, 1.0)  # no local change around (the usual case): exp(0) = 1 without the exps
+    top = (1.0 - fu) * q00 + fu * q01
+    bottom = (1.0 - fu) * q10 + fu * q11
     g = (1.0 - fv) * top + fv * bottom
     return wp.vec3(wp.exp(g[0]), wp.exp(g[1]), wp.exp(g[2]))
 
@@ -220,6 +277,10 @@ def foreground_kernel(
     gain: wp.vec3,
     params: ForegroundParams,
     local: wp.array(dtype=wp.vec3),
+    rows: wp.array(dtype=rows_vec),
+    luma: wp.array(dtype=wp.vec3),
+    radius: int,
+    height: int,
     patch: wp.array(dtype=patch_vec),
     mask: wp.array(dtype=wp.uint8),
     prob: wp.array(dtype=wp.float32),
@@ -239,8 +300,13 @@ def foreground_kernel(
             of the frame over the background beyond the global gain
             (:func:`wptrack.kernels.core.illumination.tile_smooth_kernel`), interpolated bilinearly between the tile
             centres; the frame is divided by its exponential too. Read only when ``params.tile > 0``.
-        patch: ``(H W,)`` the patch statistics of :func:`wptrack.kernels.core.illumination.patch_kernel`, for the
-            illumination veto; read only when ``params.veto_ncc > 0`` or ``params.veto_grad > 0``.
+        rows, luma: ``(H W,)`` the row sums and luminance of :func:`wptrack.kernels.core.illumination.patch_rows_kernel`
+            and ``luma_kernel``, for the illumination veto: the patch statistics (:func:`patch_at`) are computed
+            from them at the pixels the veto tests only; read only when ``params.veto_ncc > 0`` or
+            ``params.veto_grad > 0``. radius: The patch radius, pixels. height: Image height, pixels.
+        patch: ``(H W,)`` output: the patch statistics (as :func:`wptrack.kernels.core.illumination.patch_kernel`'s)
+            of the pixels the veto tested (foreground candidates, ``z > T_low`` and not a cast shadow); other pixels
+            are left as they were.
         mask: ``(H W,)`` output ``level + 4 shadow``: level 2 = foreground, 1 = weak foreground
             (``T_low < z <= T``), 0 = background (and every cast shadow or illumination change); ``shadow`` as
             below (one array for the driver to copy).
@@ -291,7 +357,9 @@ def foreground_kernel(
             elif a <= params.shadow_edge_hi:
                 is_shadow = 1
     if is_shadow < 2 and (params.veto_ncc > 0.0 or params.veto_grad > 0.0) and z > params.low_threshold:
-        if illumination_change(patch[p], params, ib, bb, ii):
+        st = patch_at(rows, luma, params.width, height, radius, p)
+        patch[p] = st
+        if illumination_change(st, params, ib, bb, ii):
             is_shadow = 3
     fg = int(0)
     pr = float(0.0)

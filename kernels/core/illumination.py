@@ -20,16 +20,15 @@ from wptrack.kernels.core.background import (
     MAX_SAMPLES,
     ForegroundParams,
     local_gain,
+    patch_at,
     patch_vec,
+    rows_vec,
     samples_vec,
     select_rank,
     unlit,
 )
 
 wp.set_module_options({"enable_backward": False})
-
-#: Row sums of :func:`patch_rows_kernel`: f, b, f^2, b^2, f b, grad f . grad b, |grad f|^2, |grad b|^2, count.
-rows_vec = wp.types.vector(length=9, dtype=wp.float32)
 
 #: Quantisation of a log brightness ratio to 0..255: ``q = 128 + round(LOG_STEPS ln(ratio))`` (ratios 1/4 .. 4,
 #: steps of 1.09 %), so a tile's median ratio is a selection on 8-bit values (:func:`select_rank`).
@@ -99,8 +98,27 @@ def luma_grad(luma: wp.array(dtype=wp.vec3), x: int, y: int, width: int, height:
 
 
 @wp.kernel
+def luma_grad_kernel(
+    luma: wp.array(dtype=wp.vec3),
+    width: int,
+    height: int,
+    grads: wp.array(dtype=wp.vec4),
+):
+    """Per pixel, :func:`luma_grad` once, for :func:`patch_rows_kernel` (which reads each pixel's gradients in
+    ``2 radius + 1`` row sums).
+
+    Args:
+        luma: ``(H W,)`` :func:`luma_kernel`'s output. width, height: Image size, pixels.
+        grads: ``(H W,)`` output ``(df/dx, df/dy, db/dx, db/dy)``.
+    """
+    p = wp.tid()
+    grads[p] = luma_grad(luma, p % width, p // width, width, height)
+
+
+@wp.kernel
 def patch_rows_kernel(
     luma: wp.array(dtype=wp.vec3),
+    grads: wp.array(dtype=wp.vec4),
     width: int,
     height: int,
     radius: int,
@@ -108,11 +126,13 @@ def patch_rows_kernel(
 ):
     """First (horizontal) pass of :func:`patch_kernel`: per pixel, the sums over its row neighbours
     ``x - radius .. x + radius`` inside the image of ``f, b, f^2, b^2, f b`` (of ``f - 128`` and ``b - 128``),
-    ``grad f . grad b``, ``|grad f|^2``, ``|grad b|^2`` (:func:`luma_grad`) and their count. One thread per pixel
+    ``grad f . grad b``, ``|grad f|^2``, ``|grad b|^2`` (:func:`luma_grad`, from :func:`luma_grad_kernel`) and their
+    count. One thread per pixel
     (each sum read afresh: no sliding sums, no float32 cancellation).
 
     Args:
-        luma: ``(H W,)`` :func:`luma_kernel`'s output. width, height: Image size, pixels. radius: Patch radius.
+        luma: ``(H W,)`` :func:`luma_kernel`'s output. grads: ``(H W,)`` :func:`luma_grad_kernel`'s output.
+        width, height: Image size, pixels. radius: Patch radius.
         rows: ``(H W,)`` output row sums.
     """
     p = wp.tid()
@@ -121,7 +141,7 @@ def patch_rows_kernel(
     acc = rows_vec()
     for xx in range(wp.max(x - radius, 0), wp.min(x + radius + 1, width)):
         v = luma[y * width + xx]
-        g = luma_grad(luma, xx, y, width, height)
+        g = grads[y * width + xx]
         f = v[0] - 128.0  # centred: smaller float32 sums of squares (variances are differences of them)
         b = v[1] - 128.0
         acc[0] += f
@@ -170,41 +190,42 @@ def patch_kernel(
         patch: ``(H W,)`` output ``(ncc, gc, tex_b, tex_f, resid, gap)``.
     """
     p = wp.tid()
-    y = p // width
-    x = p % width
-    acc = rows_vec()
-    for yy in range(wp.max(y - radius, 0), wp.min(y + radius + 1, height)):
-        acc += rows[yy * width + x]
-    n = acc[8]
-    mf = acc[0] / n
-    mb = acc[1] / n
-    vf = wp.max(acc[2] / n - mf * mf, 0.0)
-    vb = wp.max(acc[3] / n - mb * mb, 0.0)
-    cov = acc[4] / n - mf * mb
-    ncc = float(0.0)
-    if vf * vb > 0.0:
-        ncc = cov / wp.sqrt(vf * vb)
-    gc = float(0.0)
-    if acc[6] * acc[7] > 0.0:
-        gc = acc[5] / wp.sqrt(acc[6] * acc[7])
-    alpha = float(0.0)
-    if vb > 0.0:
-        alpha = cov / vb
-    beta = mf - alpha * mb
-    c = luma[p]
-    s = c[2]
-    resid = wp.sqrt(3.0) * wp.abs((c[0] - 128.0) - alpha * (c[1] - 128.0) - beta) / s
-    out = patch_vec()
-    out[0] = ncc
-    out[1] = gc
-    out[2] = wp.sqrt(3.0 * vb) / s
-    out[3] = wp.sqrt(3.0 * vf) / s
-    out[4] = resid
-    gap = float(9.0)
-    if alpha > 0.0 and mf + 128.0 > 0.0 and mb + 128.0 > 0.0:
-        gap = wp.min(wp.abs(wp.log(alpha * (mb + 128.0) / (mf + 128.0))), 9.0)
-    out[5] = gap
-    patch[p] = out
+    patch[p] = patch_at(rows, luma, width, height, radius, p)
+
+
+#: Most subsample pixels of a tile in each direction (:func:`tile_gain_kernel`: every ``ceil(tile / 8)``-th pixel).
+TILE_SAMPLES = wp.constant(8)
+
+
+@wp.kernel
+def patch_samples_kernel(
+    rows: wp.array(dtype=rows_vec),
+    luma: wp.array(dtype=wp.vec3),
+    params: ForegroundParams,
+    height: int,
+    radius: int,
+    patch: wp.array(dtype=patch_vec),
+):
+    """:func:`patch_kernel` at the pixels :func:`tile_gain_kernel` reads only (each tile's regular subsample of at
+    most 8 x 8 pixels; the same values: :func:`~wptrack.kernels.core.background.patch_at`); other pixels are left
+    as they were. One thread per tile and subsample slot (launch with ``dim = tiles_y tiles_x 64``).
+
+    Args:
+        rows, luma: ``(H W,)`` :func:`patch_rows_kernel`'s sums and :func:`luma_kernel`'s output.
+        params: ``tile``, ``tiles_x``, ``width``. height: Image height, pixels. radius: Patch radius, pixels.
+        patch: ``(H W,)`` output, written at the subsample.
+    """
+    t = wp.tid()
+    k = t % (TILE_SAMPLES * TILE_SAMPLES)
+    tile = t // (TILE_SAMPLES * TILE_SAMPLES)
+    tx = tile % params.tiles_x
+    ty = tile // params.tiles_x
+    step = wp.max(1, (params.tile + 7) // 8)
+    yy = ty * params.tile + (k // TILE_SAMPLES) * step
+    xx = tx * params.tile + (k % TILE_SAMPLES) * step
+    if yy < wp.min((ty + 1) * params.tile, height) and xx < wp.min((tx + 1) * params.tile, params.width):
+        p = yy * params.width + xx
+        patch[p] = patch_at(rows, luma, params.width, height, radius, p)
 
 
 @wp.func
@@ -330,11 +351,13 @@ KEEP_WEIGHT = wp.constant(0.25)
 @wp.func
 def weighted_median(values: neighbours_vec, weights: neighbours_vec, count: int, total: float):
     """The smallest of ``values[:count]`` whose weight with that of the values below it reaches half the total
-    (a lower weighted median; ties broken by the value)."""
+    (a lower weighted median; ties broken by the value). A value's sum of weights is taken only while it could be
+    smaller than the best found so far."""
     best = float(0.0)
     found = int(0)
     for i in range(count):
-        if weights[i] > 0.0:
+        # a value not below the best found cannot replace it: its sum is skipped (the same answer, fewer sums)
+        if weights[i] > 0.0 and (found == 0 or values[i] < best):
             below = float(0.0)
             for j in range(count):
                 if values[j] <= values[i]:

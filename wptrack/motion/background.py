@@ -489,13 +489,11 @@ class OfflineBackground:
             self.params.shadow_lo, self.params.shadow_hi = self.shadow_bounds(i, j, w)
         if self.light.active:
             self.light.measure(frame_in, wp.vec3(*gain), b0, m0, b1, m1, w)
-        wp.launch(
-            kbg.foreground_kernel,
-            dim=self.pixels,
-            inputs=[frame_in, b0, m0, b1, m1, w, wp.vec3(*gain), self.params, self.light.local, self.light.patch],
-            outputs=[self._mask, self._prob, self._shadow, self._diff],
-            device=self.device,
-        )
+        light = self.light  # the veto computes its candidates' patch statistics from the frame's rows and luma
+        inputs = [frame_in, b0, m0, b1, m1, w, wp.vec3(*gain), self.params, light.local, light.rows, light.luma]
+        outputs = [light.patch, self._mask, self._prob, self._shadow, self._diff]
+        wp.launch(kbg.foreground_kernel, dim=self.pixels, inputs=[*inputs, int(self.config.illum_patch),
+                  self.source.height], outputs=outputs, device=self.device)  # fmt: skip
         packed = self._mask
         if self._packed is not None:
             r = int(self.config.neighbourhood)

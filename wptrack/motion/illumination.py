@@ -70,7 +70,11 @@ class LightField:
         active: Whether any patch work is done (a field or a veto); when False, :meth:`measure` is not needed.
         tiles: Whether there is a field (``illum_tiles > 0``).
         local: ``(tiles_y tiles_x,)`` vec3 device array: the field's log gains per tile (B, G, R).
-        patch: ``(H W,)`` patch statistics (:data:`wptrack.kernels.core.background.patch_vec`) of the last frame.
+        patch: ``(H W,)`` patch statistics (:data:`wptrack.kernels.core.background.patch_vec`) of the last frame, at
+            the pixels that read them only (the tiles' vote subsample, written by :meth:`measure`; the veto's
+            candidates, written by the foreground kernel); other pixels hold older values.
+        rows, luma: ``(H W,)`` the frame's patch row sums and luminance (the foreground kernel's veto computes its
+            candidates' patch statistics from them).
     """
 
     def __init__(self, config: Any, width: int, height: int, params: Any, device: str) -> None:
@@ -101,7 +105,9 @@ class LightField:
         n_tiles = p.tiles_x * p.tiles_y
         # per-pixel luminance and patch statistics, per-tile gains and the smoothed field
         self._luma = wp.zeros(n, dtype=wp.vec3, device=device)
+        self._grads = wp.zeros(n, dtype=wp.vec4, device=device)
         self._rows9 = wp.zeros(n, dtype=kil.rows_vec, device=device)
+        self.rows, self.luma = self._rows9, self._luma
         self.patch = wp.zeros(n, dtype=kbg.patch_vec, device=device)
         self._tiles = wp.zeros(n_tiles, dtype=wp.vec4, device=device)
         self.local = wp.zeros(n_tiles, dtype=wp.vec3, device=device)
@@ -111,8 +117,9 @@ class LightField:
     ) -> None:
         """Launch the patch statistics of ``frame`` (a flat device or CPU uint8 array, its global ``gain`` a
         ``wp.vec3``) against the background ``(b0, m0)``/``(b1, m1)`` (weight ``w`` of the second) into
-        :attr:`patch` and, with tiles, its local field into :attr:`local`; with ``shadows``, pixels that pass the
-        cast-shadow test (the params' bounds) do not vote for the field."""
+        :attr:`rows` and :attr:`luma` and, with tiles, its local field into :attr:`local` (and the patch statistics
+        of the tiles' votes into :attr:`patch`); with ``shadows``, pixels that pass the cast-shadow test (the
+        params' bounds) do not vote for the field."""
         import warp as wp
 
         from wptrack.kernels.core import illumination as kil
@@ -122,12 +129,16 @@ class LightField:
         wp.launch(kil.luma_kernel, dim=self.pixels, inputs=[frame, gain, b0, m0, b1, m1, w, p], outputs=[self._luma],
                   device=dev)  # fmt: skip
         r = int(c.illum_patch)
-        wp.launch(kil.patch_rows_kernel, dim=self.pixels, inputs=[self._luma, width, height, r],
+        wp.launch(kil.luma_grad_kernel, dim=self.pixels, inputs=[self._luma, width, height], outputs=[self._grads],
+                  device=dev)  # fmt: skip
+        wp.launch(kil.patch_rows_kernel, dim=self.pixels, inputs=[self._luma, self._grads, width, height, r],
                   outputs=[self._rows9], device=dev)  # fmt: skip
-        wp.launch(kil.patch_kernel, dim=self.pixels, inputs=[self._rows9, self._luma, width, height, r],
-                  outputs=[self.patch], device=dev)  # fmt: skip
         if p.tile:
             n = p.tiles_x * p.tiles_y
+            # the patch statistics where the tiles' votes read them; the veto's candidates get theirs in the
+            # foreground kernel (from the same rows)
+            wp.launch(kil.patch_samples_kernel, dim=n * int(kil.TILE_SAMPLES) ** 2,
+                      inputs=[self._rows9, self._luma, p, height, r], outputs=[self.patch], device=dev)  # fmt: skip
             wp.launch(kil.tile_gain_kernel, dim=n, inputs=[frame, gain, b0, b1, w, self.patch, p, height,
                       int(shadows)], outputs=[self._tiles], device=dev)  # fmt: skip
             wp.launch(kil.tile_smooth_kernel, dim=n,
