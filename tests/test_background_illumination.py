@@ -103,7 +103,9 @@ def test_tile_gain_smooth_and_field_match_numpy(device, rng):
     got_sparse = sparse.numpy().reshape(H, W, 6)
     sampled = np.zeros((H, W), bool)
     sampled[::2, ::2] = True
-    np.testing.assert_array_equal(got_sparse[sampled], st[sampled])
+    # the same function (patch_at) in another kernel: bit for bit on the CPU; CUDA may fuse its arithmetic otherwise
+    exact = "cpu" in str(device)
+    np.testing.assert_allclose(got_sparse[sampled], st[sampled], rtol=0 if exact else 1e-5, atol=0 if exact else 1e-5)
     assert np.isnan(got_sparse[~sampled]).all()
     for shadows in (1, 0):  # cast shadows (ratio 0.5 in the shadow band [0.4, 0.6]) vote or not
         wp.launch(kil.tile_gain_kernel, dim=ntiles, inputs=[_arr(frame, device), wp.vec3(*gain), b, b, 0.0, patch, p,
@@ -192,7 +194,9 @@ def test_foreground_kernel_local_field_and_veto_match_numpy(device, rng, tile, v
     # the veto computed its candidates' patch statistics (patch_kernel's, exactly) and wrote them, nothing else
     tested = (~r["shadow"] & (r["z"] > 3.0)).reshape(-1) if veto else np.zeros(n, bool)
     got = written.numpy()
-    np.testing.assert_array_equal(got[tested & ok], st.reshape(-1, 6)[tested & ok])
+    exact = "cpu" in str(device)  # bit for bit on the CPU; CUDA may fuse patch_at's arithmetic otherwise
+    want = st.reshape(-1, 6)[tested & ok]
+    np.testing.assert_allclose(got[tested & ok], want, rtol=0 if exact else 1e-5, atol=0 if exact else 1e-5)
     assert np.isnan(got[~tested & ok]).all() and (tested.sum() > 100 or not veto)
     fg = r["level"] == 2
     obj = fg[22:32, 12:20].mean()
