@@ -198,6 +198,7 @@ def test_internal_error_is_not_a_user_error_and_keeps_the_run(scene, tmp_path, c
     assert main(_args(scene, out)) == EXIT_INTERNAL != 2
     err = capsys.readouterr().err
     assert "Traceback" in err and "wptrack: internal error: RuntimeError: injected fault" in err
+    assert f"the run in {out} keeps its outputs so far" in err
     assert "wptrack: error:" not in err
     run = json.loads((out / "run.json").read_text())
     assert run["status"] == "failed" and "injected fault" in run["error"] and run["last_frame"] == 24

@@ -291,6 +291,24 @@ def test_missing_motmetrics_is_a_config_error(monkeypatch):
         evaluate(gt, gt)
 
 
+def test_evaluate_cli_writes_mot_files_for_ground_truth_without_z(mm, tmp_path, capsys):
+    """`wptrack evaluate RUN --groundtruth frame,id,x,y.csv` (the EPFL terrace's table) scores and writes its
+    MOTChallenge files with z = 0 (it crashed with KeyError 'z' after printing the metrics)."""
+    import json
+
+    from wptrack.cli import main
+
+    gt = _write_csv(tmp_path / "gt.csv", ["frame", "id", "x", "y"], [(0, 1, 0.0, 0.0), (1, 1, 0.1, 0.0)])
+    run = tmp_path / "run"
+    run.mkdir()
+    _write_csv(run / "tracks.csv", ["frame", "id", "x", "y", "z"], [(0, 7, 0.2, 0.0, 0.9), (1, 7, 0.3, 0.0, 0.9)])
+    args = ["evaluate", str(run), "--groundtruth", str(gt), "--threshold", "1", "--out", str(tmp_path / "ev.json")]
+    assert main(args) == 0
+    assert json.loads((tmp_path / "ev.json").read_text())["mota"] == pytest.approx(1.0)
+    world = (run / "mot" / "gt" / "world.txt").read_text().splitlines()
+    assert len(world) == 2 and all(float(line.split(",")[-1]) == 0.0 for line in world)  # z on the ground
+
+
 def test_ground_plane_table_without_z(mm, tmp_path):
     """Ground-plane annotations (frame,id,x,y: the EPFL datasets) are scored like tables with z; a z column that is
     present is still checked."""

@@ -327,9 +327,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         import traceback
 
         traceback.print_exc(file=sys.stderr)
+        run_dir = getattr(e, "run_dir", None)  # set by the run loop: the run keeps its outputs, marked failed
+        kept = f"; the run in {run_dir} keeps its outputs so far and its run.json says 'failed'" if run_dir else ""
         print(
             f"wptrack: internal error: {type(e).__name__}: {e} (a bug in wptrack, not in the input; please report "
-            "it with the traceback above; a run keeps its outputs so far and run.json says 'failed')",
+            f"it with the traceback above{kept})",
             file=sys.stderr,
         )
         return EXIT_INTERNAL

@@ -107,6 +107,8 @@ def write_mot_files(
         raise ConfigError(f"{what}: missing column(s) {', '.join(missing)} for the MOTChallenge files")
     frame = _integers(what, "frame", np.asarray(columns["frame"]), non_negative=True)
     ids = _integers(what, "id", np.asarray(columns["id"]), non_negative=False)
+    if "z" not in columns:  # ground-plane annotations (frame,id,x,y: EPFL's): on the ground
+        columns = {**columns, "z": np.zeros(len(frame))}
     xyz = np.column_stack([_numeric(what, k, np.asarray(columns[k])) for k in ("x", "y", "z")])
     conf = np.asarray(columns["existence"], dtype=np.float64) if "existence" in columns else np.ones(len(frame))
     keep = np.all(np.isfinite(xyz), axis=1)

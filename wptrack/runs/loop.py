@@ -345,6 +345,10 @@ def run_tracker(
                 if e.nothing_written:
                     clear_run_outputs(out_dir)
                 raise
+            except Exception as e:  # a bug: the CLI's message names the run (its run.json says 'failed')
+                with contextlib.suppress(AttributeError, TypeError):
+                    e.run_dir = out_dir
+                raise
     except KeyboardInterrupt as e:
         if getattr(e, "nothing_written", False) and created:
             with contextlib.suppress(OSError):
