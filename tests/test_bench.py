@@ -153,6 +153,20 @@ def test_bench_templates_tiny(tmp_path, capsys):
     assert "fps" in text and "templates" in text
 
 
+def test_bench_bad_out_is_said_before_the_cases(tmp_path, capsys):
+    """`--out` naming a folder (or lying under a file) is one `wptrack: error:` line, exit 2, before any case runs
+    (it was an internal error, IsADirectoryError or FileNotFoundError, after the first case)."""
+    blocker = tmp_path / "blocker"
+    blocker.write_text("x")
+    argv = ["bench", "--tracker", "templates", "--device", "cpu", "--particles", "100", "--objects", "1"]
+    for out in (tmp_path, blocker / "b.json"):
+        assert main([*argv, "--frames", "2", "--out", str(out)]) == 2
+        captured = capsys.readouterr()
+        err = captured.err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("wptrack: error:") and "not writable" in err[0], err
+        assert "frame ms" not in captured.out, "no case may run"
+
+
 def test_bench_templates_rejects_cameras(capsys):
     assert main(["bench", "--tracker", "templates", "--device", "cpu", "--cameras", "2"]) == 2
     assert "--objects" in capsys.readouterr().err

@@ -47,8 +47,10 @@ def _run_camera(run_dir: Path, rig_path, camera_arg):
 def cmd_evaluate(args) -> int:
     from wptrack.evaluation.mot import average, evaluate
     from wptrack.evaluation.motfiles import MOT_DIR, write_mot_files
-    from wptrack.io.atomic import atomic_write_json
+    from wptrack.io.atomic import atomic_write_json, ensure_writable_file
 
+    if args.out:  # a bad --out is said before the scoring and the MOTChallenge files, not as a traceback after them
+        ensure_writable_file(args.out)
     runs = []
     for given in args.tracks:
         tracks = Path(given)
@@ -315,11 +317,13 @@ def cmd_bench(args) -> int:
 
     from wptrack.bench import HEADER, format_row, load_suite
     from wptrack.core.device import resolve_device
-    from wptrack.io.atomic import atomic_write_json
+    from wptrack.io.atomic import atomic_write_json, ensure_writable_file
     from wptrack.io.run import versions
 
     suite = load_suite(args.tracker)
     device = resolve_device(args.device)
+    if args.out:  # said before the cases run, not as a traceback after the first
+        ensure_writable_file(args.out)
     import warp as wp
 
     second = getattr(suite, "second", "cameras")  # the case's second field: cameras, or objects (templates)
