@@ -128,6 +128,8 @@ BAD_INPUTS = {
     "sigma zero": (lambda s, t: ["--sigma", "0"], "sigma"),
     "sigma negative": (lambda s, t: ["--sigma", "-0.1"], "sigma"),
     "unknown resampling": (lambda s, t: ["--resampling", "bogus"], "resampling"),
+    # the colour run ran and silently skipped the error report of a missing --groundtruth
+    "missing groundtruth": (lambda s, t: ["--groundtruth", str(t / "nope.csv")], "nope.csv"),
 }
 
 
