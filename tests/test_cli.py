@@ -130,7 +130,15 @@ BAD_INPUTS = {
     "unknown resampling": (lambda s, t: ["--resampling", "bogus"], "resampling"),
     # the colour run ran and silently skipped the error report of a missing --groundtruth
     "missing groundtruth": (lambda s, t: ["--groundtruth", str(t / "nope.csv")], "nope.csv"),
+    # a ground-plane table (the EPFL terrace's frame,id,x,y) was an internal error, KeyError 'z'
+    "groundtruth without z": (lambda s, t: ["--groundtruth", str(_ground_plane_gt(t))], "frame,id,x,y,z"),
 }
+
+
+def _ground_plane_gt(tmp_path):
+    p = tmp_path / "gt_xy.csv"
+    p.write_text("frame,id,x,y\n0,0,0.42,0.45\n1,0,0.42,0.45\n")
+    return p
 
 
 def _garbage(tmp_path):
