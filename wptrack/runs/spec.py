@@ -301,7 +301,8 @@ def check_scoring(cmd: TrackCommand, groundtruth: str | None) -> None:
     said first, nor without the error report asked for.
 
     Raises:
-        ConfigError: the file is missing, or motmetrics cannot be imported.
+        ConfigError: the file is missing, is a box annotation (.xml) of a scored run, or motmetrics cannot be
+            imported.
     """
     from pathlib import Path
 
@@ -311,6 +312,11 @@ def check_scoring(cmd: TrackCommand, groundtruth: str | None) -> None:
         raise ConfigError(f"--groundtruth: ground-truth file not found: {groundtruth}")
     if not cmd.scores:
         return
+    if str(groundtruth).lower().endswith(".xml"):  # image boxes need the boxes' image size: said before the run
+        raise ConfigError(
+            f"--groundtruth {groundtruth}: a run is scored against a frame,id,x,y[,z] table; score image boxes (.xml) "
+            f"after the run with wptrack evaluate RUN --groundtruth {groundtruth} --rig RIG [--box-size WxH]"
+        )
     from wptrack.evaluation.mot import _import_motmetrics
 
     _import_motmetrics()
