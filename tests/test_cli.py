@@ -266,3 +266,15 @@ def test_missing_groundtruth_is_named_as_ground_truth(scene, tmp_path, capsys):
     (tmp_path / "gt.csv").write_text("frame,id,x,y,z\n0,1,0.4,0.4,0.0\n")
     assert main(["evaluate", str(tmp_path / "nothing"), "--groundtruth", str(tmp_path / "gt.csv")]) == 2
     assert "tracks file not found" in capsys.readouterr().err
+
+
+def test_no_convergence_line_names_the_criterion():
+    """`wptrack demo --frames 20` printed 'did not converge (final error 0.2 cm)': converged at frame 14, but the
+    criterion (below 5 cm for 10 frames) needs 10 frames; the line names the criterion."""
+    from wptrack.cli.track import colour_summary_lines
+    from wptrack.evaluation.convergence import summarize
+
+    errors = [0.4] * 14 + [0.002] * 6
+    summary = {"frames": 20, "device": "cpu", "score_mode": "direct", "error": summarize(errors).as_dict()}
+    line = colour_summary_lines(summary, "out")[1]
+    assert line.startswith("did not converge") and "5 cm for 10 frames" in line and "0.2 cm" in line, line
