@@ -272,3 +272,26 @@ def test_bench_notes_only_for_the_default_grid(capsys):
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].startswith("resampling alone") and "frame ms" not in lines[0]
     assert lines[1].startswith("resample ordinary")
+
+
+def test_bench_counts_are_positive_whole_numbers(capsys):
+    """`--particles 1.5` ran one particle, `--particles 0` / `--objects 0` / `--cameras 0` failed after the table's
+    header: now argparse's one line, exit 2, before anything runs; `1e2` still reads as 100."""
+    from wptrack.cli.common import positive_count
+
+    assert positive_count("1e2") == 100 and positive_count("2000") == 2000
+    base = ["bench", "--device", "cpu", "--frames", "2"]
+    for extra in (
+        ["--tracker", "templates", "--particles", "1.5", "--objects", "1"],
+        ["--tracker", "templates", "--particles", "0", "--objects", "1"],
+        ["--tracker", "templates", "--particles", "100", "--objects", "0"],
+        ["--tracker", "color", "--particles", "100", "--cameras", "0"],
+    ):
+        try:
+            code = main([*base, *extra])
+        except SystemExit as e:  # argparse's errors exit from the parser
+            code = e.code
+        captured = capsys.readouterr()
+        err = captured.err.strip().splitlines()
+        assert code == 2 and len(err) == 1 and err[0].startswith("wptrack: error:"), (extra, err)
+        assert "frame ms" not in captured.out, extra
