@@ -153,6 +153,20 @@ def test_bench_templates_tiny(tmp_path, capsys):
     assert "fps" in text and "templates" in text
 
 
+def test_bench_bad_out_is_said_before_the_cases(tmp_path, capsys):
+    """`--out` naming a folder (or lying under a file) is one `wptrack: error:` line, exit 2, before any case runs
+    (it was an internal error, IsADirectoryError or FileNotFoundError, after the first case)."""
+    blocker = tmp_path / "blocker"
+    blocker.write_text("x")
+    argv = ["bench", "--tracker", "templates", "--device", "cpu", "--particles", "100", "--objects", "1"]
+    for out in (tmp_path, blocker / "b.json"):
+        assert main([*argv, "--frames", "2", "--out", str(out)]) == 2
+        captured = capsys.readouterr()
+        err = captured.err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("wptrack: error:") and "not writable" in err[0], err
+        assert "frame ms" not in captured.out, "no case may run"
+
+
 def test_bench_templates_rejects_cameras(capsys):
     assert main(["bench", "--tracker", "templates", "--device", "cpu", "--cameras", "2"]) == 2
     assert "--objects" in capsys.readouterr().err
@@ -258,3 +272,26 @@ def test_bench_notes_only_for_the_default_grid(capsys):
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].startswith("resampling alone") and "frame ms" not in lines[0]
     assert lines[1].startswith("resample ordinary")
+
+
+def test_bench_counts_are_positive_whole_numbers(capsys):
+    """`--particles 1.5` ran one particle, `--particles 0` / `--objects 0` / `--cameras 0` failed after the table's
+    header: now argparse's one line, exit 2, before anything runs; `1e2` still reads as 100."""
+    from wptrack.cli.common import positive_count
+
+    assert positive_count("1e2") == 100 and positive_count("2000") == 2000
+    base = ["bench", "--device", "cpu", "--frames", "2"]
+    for extra in (
+        ["--tracker", "templates", "--particles", "1.5", "--objects", "1"],
+        ["--tracker", "templates", "--particles", "0", "--objects", "1"],
+        ["--tracker", "templates", "--particles", "100", "--objects", "0"],
+        ["--tracker", "color", "--particles", "100", "--cameras", "0"],
+    ):
+        try:
+            code = main([*base, *extra])
+        except SystemExit as e:  # argparse's errors exit from the parser
+            code = e.code
+        captured = capsys.readouterr()
+        err = captured.err.strip().splitlines()
+        assert code == 2 and len(err) == 1 and err[0].startswith("wptrack: error:"), (extra, err)
+        assert "frame ms" not in captured.out, extra

@@ -128,7 +128,17 @@ BAD_INPUTS = {
     "sigma zero": (lambda s, t: ["--sigma", "0"], "sigma"),
     "sigma negative": (lambda s, t: ["--sigma", "-0.1"], "sigma"),
     "unknown resampling": (lambda s, t: ["--resampling", "bogus"], "resampling"),
+    # the colour run ran and silently skipped the error report of a missing --groundtruth
+    "missing groundtruth": (lambda s, t: ["--groundtruth", str(t / "nope.csv")], "nope.csv"),
+    # a ground-plane table (the EPFL terrace's frame,id,x,y) was an internal error, KeyError 'z'
+    "groundtruth without z": (lambda s, t: ["--groundtruth", str(_ground_plane_gt(t))], "frame,id,x,y,z"),
 }
+
+
+def _ground_plane_gt(tmp_path):
+    p = tmp_path / "gt_xy.csv"
+    p.write_text("frame,id,x,y\n0,0,0.42,0.45\n1,0,0.42,0.45\n")
+    return p
 
 
 def _garbage(tmp_path):
@@ -256,3 +266,15 @@ def test_missing_groundtruth_is_named_as_ground_truth(scene, tmp_path, capsys):
     (tmp_path / "gt.csv").write_text("frame,id,x,y,z\n0,1,0.4,0.4,0.0\n")
     assert main(["evaluate", str(tmp_path / "nothing"), "--groundtruth", str(tmp_path / "gt.csv")]) == 2
     assert "tracks file not found" in capsys.readouterr().err
+
+
+def test_no_convergence_line_names_the_criterion():
+    """`wptrack demo --frames 20` printed 'did not converge (final error 0.2 cm)': converged at frame 14, but the
+    criterion (below 5 cm for 10 frames) needs 10 frames; the line names the criterion."""
+    from wptrack.cli.track import colour_summary_lines
+    from wptrack.evaluation.convergence import summarize
+
+    errors = [0.4] * 14 + [0.002] * 6
+    summary = {"frames": 20, "device": "cpu", "score_mode": "direct", "error": summarize(errors).as_dict()}
+    line = colour_summary_lines(summary, "out")[1]
+    assert line.startswith("did not converge") and "5 cm for 10 frames" in line and "0.2 cm" in line, line

@@ -205,6 +205,20 @@ def test_groundtruth_scoring_checked_before_tracking(scene, capsys, monkeypatch)
     assert code == 2 and "nope.csv" in err and "not found" in err and not out.exists()
 
 
+def test_box_groundtruth_refused_before_tracking(scene, capsys):
+    """`track templates --groundtruth boxes.xml` (PETS/Milan boxes, as `wptrack evaluate` takes them with --rig and
+    --box-size) tracked the whole video, then failed on the table's columns; now one line before anything runs,
+    naming the `wptrack evaluate` command that scores boxes."""
+    pytest.importorskip("motmetrics")
+    boxes = scene / "boxes.xml"
+    boxes.write_text('<dataset><frame number="0"><objectlist></objectlist></frame></dataset>')
+    out = scene / "xml"
+    code, text, err = _run(_template_args(scene, out, "--groundtruth", str(boxes)), capsys)
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("wptrack: error:") and "wptrack evaluate" in err
+    assert not out.exists() and "tracked" not in text
+
+
 def test_report_is_written_when_scoring_fails(scene, capsys, monkeypatch):
     """Issue 30 item 2: a scoring failure after the run still leaves the --report (then exits 2 with the error)."""
     pytest.importorskip("pyvista")

@@ -556,3 +556,58 @@ def test_cli_evaluate_reads_a_towncentre_groundtruth_csv(mm, tmp_path, capsys):
     tracks = _write_csv(tmp_path / "tracks.csv", ["frame", "id", "x", "y", "z"], rows)
     assert main(["evaluate", str(tracks), "--groundtruth", str(TOWNCENTRE_TINY)]) == 0
     assert "MOTA 1.000, IDF1 1.000" in capsys.readouterr().out
+
+
+def test_evaluate_cli_out_file_folder_and_mistakes(mm, tmp_path, capsys):
+    """`wptrack evaluate ... --out new/ev.json` creates the folder (it was an internal error, FileNotFoundError, after
+    the metrics and the MOTChallenge files); `--out` naming a folder is one `wptrack: error:` line and exit 2 before
+    anything is written (it was IsADirectoryError after the MOTChallenge files)."""
+    from wptrack.cli import main
+
+    gt = _write_csv(tmp_path / "gt.csv", ["frame", "id", "x", "y"], [(0, 1, 0.0, 0.0), (1, 1, 0.1, 0.0)])
+    run = tmp_path / "run"
+    run.mkdir()
+    _write_csv(run / "tracks.csv", ["frame", "id", "x", "y", "z"], [(0, 7, 0.2, 0.0, 0.9), (1, 7, 0.3, 0.0, 0.9)])
+    out = tmp_path / "new" / "deeper" / "ev.json"
+    assert main(["evaluate", str(run), "--groundtruth", str(gt), "--out", str(out)]) == 0
+    assert json.loads(out.read_text())["mota"] == pytest.approx(1.0)
+    capsys.readouterr()
+    run2 = tmp_path / "run2"
+    run2.mkdir()
+    (run2 / "tracks.csv").write_text((run / "tracks.csv").read_text())
+    assert main(["evaluate", str(run2), "--groundtruth", str(gt), "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("wptrack: error:") and "is a folder" in err[0], err
+    assert not (run2 / "mot").exists(), "nothing may be written for a bad --out"
+    blocker = tmp_path / "blocker"
+    blocker.write_text("x")
+    assert main(["evaluate", str(run2), "--groundtruth", str(gt), "--out", str(blocker / "ev.json")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not writable" in err[0] and "Traceback" not in err[0], err
+    assert not (run2 / "mot").exists()
+
+
+def test_evaluate_cli_says_when_the_run_stops_before_the_ground_truth(mm, tmp_path, capsys, caplog):
+    """A run tracked with --max-frames is scored over all the ground truth's frames, the rest as misses (walking the
+    docs, 30 PETS frames scored MOTA 0.04 against 400 labelled frames without a word): a warning names the frames;
+    a run that covers the ground truth gets none."""
+    import logging
+
+    from wptrack.cli import main
+
+    rows = [(f, 1, 0.1 * f, 0.0) for f in range(6)]
+    gt = _write_csv(tmp_path / "gt.csv", ["frame", "id", "x", "y"], rows)
+    run = tmp_path / "run"
+    run.mkdir()
+    _write_csv(run / "tracks.csv", ["frame", "id", "x", "y", "z"], [(f, 7, 0.1 * f, 0.0, 0.0) for f in range(2)])
+    (run / "run.json").write_text(json.dumps({"status": "complete", "last_frame": 2}))
+    with caplog.at_level(logging.WARNING, logger="wptrack"):
+        assert main(["evaluate", str(run), "--groundtruth", str(gt), "--no-mot"]) == 0
+    notes = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(notes) == 1 and "end at frame 2" in notes[0] and "3 later labelled frames" in notes[0], notes
+    caplog.clear()
+    (run / "run.json").write_text(json.dumps({"status": "complete", "last_frame": 5}))  # frames 2-5 had no track
+    with caplog.at_level(logging.WARNING, logger="wptrack"):
+        assert main(["evaluate", str(run), "--groundtruth", str(gt), "--no-mot"]) == 0
+    assert not [r for r in caplog.records if r.levelno == logging.WARNING]
+    capsys.readouterr()

@@ -9,7 +9,14 @@ import numpy as np
 import pytest
 
 from wptrack.core.errors import OutputError, WptrackError
-from wptrack.io.atomic import atomic_file, atomic_save_npz, atomic_write_json, atomic_write_text, ensure_writable_dir
+from wptrack.io.atomic import (
+    atomic_file,
+    atomic_save_npz,
+    atomic_write_json,
+    atomic_write_text,
+    ensure_writable_dir,
+    ensure_writable_file,
+)
 from wptrack.io.run import RunWriter, versions
 from wptrack.io.tables import read_tracks
 
@@ -63,6 +70,20 @@ def test_ensure_writable_dir_on_file(tmp_path):
     with pytest.raises(OutputError, match="not writable") as err:
         ensure_writable_dir(f / "sub" / "dir")
     assert str(f / "sub" / "dir") in str(err.value)
+
+
+def test_ensure_writable_file(tmp_path):
+    """An output file's folder is created; a folder or a path under a file is an OutputError naming the path."""
+    from wptrack.core.errors import OutputError
+
+    target = ensure_writable_file(tmp_path / "a" / "b" / "out.json")
+    assert target.parent.is_dir() and not target.exists()
+    with pytest.raises(OutputError, match="is a folder"):
+        ensure_writable_file(tmp_path / "a")
+    f = tmp_path / "file"
+    f.write_text("x")
+    with pytest.raises(OutputError, match="not writable"):
+        ensure_writable_file(f / "out.json")
 
 
 @pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() == 0, reason="root ignores directory permissions")

@@ -366,6 +366,11 @@ def test_cli_report_errors_one_line(tmp_path, capsys):
     assert len(err) == 1 and err[0].startswith("wptrack: error:") and "run.json" in err[0]
     assert main(["report", str(tmp_path), "--sweep", str(tmp_path / "nothing")]) == 2
     assert "sigma sweep" in capsys.readouterr().err
+    other = tmp_path / "groundtruth.csv"  # another table: the line said only "cannot read sigma sweep ...: 'sigma'"
+    other.write_text("frame,id,x,y,z\n0,0,0.4,0.5,0.06\n")
+    assert main(["report", str(tmp_path), "--sweep", str(other)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "missing column 'sigma'" in err[0] and "wptrack convergence" in err[0], err
 
 
 # ------------------------------------------------------------------------------------------------- sweeps, CLI

@@ -26,7 +26,7 @@ from wptrack.cli.commands import (
     cmd_report,
     cmd_synth,
 )
-from wptrack.cli.common import Parser, add_device, positive_int
+from wptrack.cli.common import Parser, add_device, positive_count, positive_int
 from wptrack.cli.track import add_track_parsers
 from wptrack.core.config import add_arguments
 from wptrack.core.errors import ConfigError, WptrackError
@@ -213,10 +213,17 @@ def build_parser(batch_tracker: str | None = None) -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", parents=[common], help="benchmark suites: stage times, NumPy baseline, equivalence")
     b.add_argument("--tracker", default="color", help="suite name (default: color)")
-    b.add_argument("--particles", type=float, nargs="+", help="particle counts (default: the suite's grid)")
-    b.add_argument("--cameras", type=int, nargs="+", help="camera counts (default: the suite's grid)")
-    b.add_argument("--objects", type=int, nargs="+", help="object counts of the templates suite (default: its grid)")
-    b.add_argument("--runs", type=int, nargs="+", help="runs K per batch of the batch suite (default: its grid)")
+    b.add_argument("--particles", type=positive_count, nargs="+", help="particle counts (default: the suite's grid)")
+    b.add_argument("--cameras", type=positive_int, nargs="+", help="camera counts (default: the suite's grid)")
+    b.add_argument(
+        "--objects",
+        type=positive_int,
+        nargs="+",
+        help="object counts of the templates and people suites (default: their grids)",
+    )
+    b.add_argument(
+        "--runs", type=positive_int, nargs="+", help="runs K per batch of the batch suite (default: its grid)"
+    )
     b.add_argument(
         "--frames",
         type=positive_int,

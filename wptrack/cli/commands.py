@@ -44,11 +44,41 @@ def _run_camera(run_dir: Path, rig_path, camera_arg):
     return camera, rig.ground_plane
 
 
+def _short_run_note(run_dir: Path, tracks: Path, groundtruth) -> str | None:
+    """A run that stops before the ground truth does (``--max-frames``) is scored over all the ground truth's frames,
+    its missing frames as misses: the note that says so, or None. The run's last frame is run.json's ``last_frame``
+    (frames without a track count), else the tracks' last frame."""
+    import json
+
+    import numpy as np
+
+    from wptrack.io.run import RUN_FILE
+    from wptrack.io.tables import read_tracks
+
+    try:
+        last = json.loads((run_dir / RUN_FILE).read_text(encoding="utf-8")).get("last_frame")
+    except (OSError, ValueError):
+        last = None
+    if last is None:
+        frames = read_tracks(tracks)["frame"]
+        last = int(np.max(frames)) if len(frames) else None
+    gt = groundtruth if isinstance(groundtruth, dict) else read_tracks(groundtruth, what="ground truth file")
+    if last is None or not len(gt["frame"]) or int(np.max(gt["frame"])) <= int(last):
+        return None
+    later = np.unique(np.asarray(gt["frame"])[np.asarray(gt["frame"]) > int(last)]).size
+    return (
+        f"{tracks}: the tracks end at frame {int(last)}, the ground truth at frame {int(np.max(gt['frame']))}: its "
+        f"{later} later labelled frames are scored as misses (track the whole video to compare with published numbers)"
+    )
+
+
 def cmd_evaluate(args) -> int:
     from wptrack.evaluation.mot import average, evaluate
     from wptrack.evaluation.motfiles import MOT_DIR, write_mot_files
-    from wptrack.io.atomic import atomic_write_json
+    from wptrack.io.atomic import atomic_write_json, ensure_writable_file
 
+    if args.out:  # a bad --out is said before the scoring and the MOTChallenge files, not as a traceback after them
+        ensure_writable_file(args.out)
     runs = []
     for given in args.tracks:
         tracks = Path(given)
@@ -72,6 +102,9 @@ def cmd_evaluate(args) -> int:
     evaluations = {}
     for given, tracks in runs:
         ev = evaluate(groundtruth, tracks, threshold=args.threshold)
+        note = _short_run_note(tracks.parent, tracks, groundtruth)
+        if note is not None:
+            log.warning(note)
         evaluations[str(given)] = ev
         print((f"{given}: " if len(runs) > 1 else "") + evaluation_line(ev, args.threshold))
         if not args.no_mot:  # MOTChallenge files beside the tracks: RUN/mot/, the ground truth in RUN/mot/gt/
@@ -315,11 +348,13 @@ def cmd_bench(args) -> int:
 
     from wptrack.bench import HEADER, format_row, load_suite
     from wptrack.core.device import resolve_device
-    from wptrack.io.atomic import atomic_write_json
+    from wptrack.io.atomic import atomic_write_json, ensure_writable_file
     from wptrack.io.run import versions
 
     suite = load_suite(args.tracker)
     device = resolve_device(args.device)
+    if args.out:  # said before the cases run, not as a traceback after the first
+        ensure_writable_file(args.out)
     import warp as wp
 
     second = getattr(suite, "second", "cameras")  # the case's second field: cameras, or objects (templates)

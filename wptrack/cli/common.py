@@ -23,6 +23,17 @@ def positive_int(text: str) -> int:
     return v
 
 
+def positive_count(text: str) -> int:
+    """A whole positive count that may be written as a float (``1e6``, ``2000``): bench's particle counts."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive whole number (e.g. 1000 or 1e6), got {text!r}") from None
+    if not (v >= 1 and v.is_integer()):
+        raise argparse.ArgumentTypeError(f"expected a positive whole number (e.g. 1000 or 1e6), got {text!r}")
+    return int(v)
+
+
 def add_device(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default="auto", help="auto (CUDA when available), cpu, cuda or cuda:N")
 

@@ -40,7 +40,10 @@ def colour_summary_lines(summary: dict, out_dir: str | Path) -> list[str]:
     err = summary.get("error")
     if err:
         if err["converged_at"] is None:
-            lines.append(f"did not converge (final error {100 * err['final_error']:.1f} cm)")
+            lines.append(  # the criterion (evaluation.convergence.summarize's defaults): a short run can end below it
+                f"did not converge (error below 5 cm for 10 frames in a row never reached; final error "
+                f"{100 * err['final_error']:.1f} cm)"
+            )
         else:
             lines.append(
                 f"converged at frame {err['converged_at']}; error after convergence: mean "

@@ -214,6 +214,28 @@ def ensure_writable_dir(path: str | os.PathLike) -> Path:
     return p
 
 
+def ensure_writable_file(path: str | os.PathLike) -> Path:
+    """Before a command's work: create an output file's folder (with parents) and check that the file can be written
+    there, so that a bad ``--out FILE`` is said first, not as a traceback after the work.
+
+    Args:
+        path: File path.
+
+    Returns:
+        The path as a :class:`~pathlib.Path`.
+
+    Raises:
+        OutputError: ``output file 'x' is not writable: <reason>`` when the path is a folder, or
+            ``output directory 'y' is not writable: <reason>`` when its folder cannot be created or written
+            (:func:`ensure_writable_dir`).
+    """
+    p = Path(path)
+    if p.is_dir():
+        raise OutputError(f"output file '{p}' is not writable: it is a folder")
+    ensure_writable_dir(p.parent)
+    return p
+
+
 def copy_atomic(src: str | os.PathLike, dst: str | os.PathLike) -> None:
     """Copy ``src`` to ``dst`` atomically (``dst`` is never half-written)."""
     import shutil

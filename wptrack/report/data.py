@@ -311,7 +311,12 @@ def load_sweep(path: str | Path) -> dict[str, Any]:
         raise ConfigError(f"no sigma sweep at {path}: expected {SWEEP_FILE} from 'wptrack convergence --out DIR'")
     try:
         table = read_sweep(csv_path)
-    except (OSError, KeyError, ValueError) as e:
+    except KeyError as e:  # another table (a groundtruth.csv): name the column, not just the key
+        raise ConfigError(
+            f"cannot read sigma sweep {csv_path}: missing column {e} (expected {SWEEP_FILE} from 'wptrack convergence "
+            f"--out DIR')"
+        ) from None
+    except (OSError, ValueError) as e:
         raise ConfigError(f"cannot read sigma sweep {csv_path}: {e}") from None
     summary = None
     sj = csv_path.parent / "summary.json"

@@ -296,18 +296,27 @@ EVALUATION_FILE = "evaluation.json"
 
 
 def check_scoring(cmd: TrackCommand, groundtruth: str | None) -> None:
-    """Before a run that is scored against ``groundtruth``: the file exists and the scoring package is importable,
-    so the run does not end, minutes later, in an error that could have been said first.
+    """Before a run given a ``groundtruth``: the file exists (for every tracker) and, for a run that is scored against
+    it, the scoring package is importable, so the run does not end, minutes later, in an error that could have been
+    said first, nor without the error report asked for.
 
     Raises:
-        ConfigError: the file is missing, or motmetrics cannot be imported.
+        ConfigError: the file is missing, is a box annotation (.xml) of a scored run, or motmetrics cannot be
+            imported.
     """
     from pathlib import Path
 
-    if groundtruth is None or not cmd.scores:
+    if groundtruth is None:
         return
-    if not Path(groundtruth).is_file():
+    if not Path(groundtruth).is_file():  # also for a tracker that reports its own error (colour): never skipped
         raise ConfigError(f"--groundtruth: ground-truth file not found: {groundtruth}")
+    if not cmd.scores:
+        return
+    if str(groundtruth).lower().endswith(".xml"):  # image boxes need the boxes' image size: said before the run
+        raise ConfigError(
+            f"--groundtruth {groundtruth}: a run is scored against a frame,id,x,y[,z] table; score image boxes (.xml) "
+            f"after the run with wptrack evaluate RUN --groundtruth {groundtruth} --rig RIG [--box-size WxH]"
+        )
     from wptrack.evaluation.mot import _import_motmetrics
 
     _import_motmetrics()

@@ -73,7 +73,12 @@ class ColourRun(TrackerRun):
         device = resolve_device(device)
         self._truth = None
         if groundtruth is not None and Path(groundtruth).exists():
-            gt = read_tracks(groundtruth)
+            gt = read_tracks(groundtruth, what="ground truth file")
+            if "z" not in gt:  # the ball's error is 3D; a ground-plane table (frame,id,x,y) cannot give it
+                raise ConfigError(
+                    f"--groundtruth {groundtruth}: the colour tracker's error is 3D; expected the columns frame,id,"
+                    f"x,y,z (as wptrack synth writes), got {','.join(gt)}"
+                )
             self._truth = np.column_stack([gt["x"], gt["y"], gt["z"]])
         self.tracker = ColorTracker(rig, target, config=config, device=device)
         self.total = len(self._frames)
