@@ -69,9 +69,11 @@ def _pass(masks: MotionMasks, prefetch: bool, reads: list | None = None) -> tupl
 
 @pytest.mark.parametrize("kind", ["video", "images", "array"])
 @pytest.mark.parametrize(("frames", "window", "samples"), [(40, 16, 8), (150, 80, 3)])  # grabs; seeks (gap 26+)
-def test_prefetch_gives_the_same_masks(device, rng, tmp_path, kind, frames, window, samples):
+def test_prefetch_gives_the_same_masks(device, rng, tmp_path, kind, frames, window, samples, monkeypatch):
     """Byte-identical masks and probabilities with and without the worker, >= 3 windows, the reads after the
-    first done by the worker, in window order; a second pass (restart at frame 0 after a full pass) equal too."""
+    first done by the worker, in window order; a second pass (restart at frame 0 after a full pass) equal too.
+    One mask thread (on a CUDA host several are the default; their shared reads: tests/test_pipeline.py)."""
+    monkeypatch.setenv("WPTRACK_MASK_WORKERS", "1")
     video = _scene(rng, frames)
     spec = _spec(kind, video, tmp_path)
     config = MaskConfig(window=window, samples=samples, device=device)
@@ -222,3 +224,28 @@ def test_close_joins_the_worker(device, rng, tmp_path):
     model.evidence(0, video[0])  # usable after close
     model.close()
     assert threading.active_count() == start
+
+
+def test_prefetch_starts_after_a_window_built_for_a_report(device, rng, tmp_path, monkeypatch):
+    """A run builds window 0 for its report (background(0), no prefetch) before the mask pass: the pass still reads
+    every later window in the worker, in order and once (it read window 1 in the mask thread, while the other mask
+    threads waited for it)."""
+    monkeypatch.setenv("WPTRACK_MASK_WORKERS", "1")
+    video = _scene(rng, 40)
+    config = MaskConfig(window=16, samples=8, device=device)
+    masks = MotionMasks(open_source(_spec("video", video, tmp_path)), config)
+    reads: list = []
+    model = masks.model
+
+    def recording(i):
+        reads.append((i, threading.current_thread().name))
+        return B.OfflineBackground._read(model, i)
+
+    model._read = recording
+    masks.background(0)
+    assert reads == [(0, threading.current_thread().name)]
+    list(masks.evidence())
+    windows = len(model.windows)
+    assert windows >= 3
+    assert [i for i, _ in reads] == list(range(windows))
+    assert all(name.startswith(WORKER) for _, name in reads[1:]), reads

@@ -693,16 +693,27 @@ def _moving_boxes(rng, frames: int = 48, h: int = 48, w: int = 64) -> np.ndarray
 @pytest.mark.parametrize("workers", ["2", "3"])
 def test_masks_in_several_threads_equal_one_model(tmp_path, rng, monkeypatch, workers):
     """WPTRACK_MASK_WORKERS: the offline masks made by several models in threads (frames round robin) equal one
-    model's, mask and probability, frame for frame, over several background windows; the first model's windows
-    are the stream's (its on_build still called)."""
+    model's, mask and probability, frame for frame, over several background windows; the models share their windows
+    (WindowShare): each window is built once (the stream's on_build called once per window, whichever model built
+    it) and the sampler reads the same frames in the same order as for one model."""
     from wptrack.io.video import write_video
+    from wptrack.motion import windows as W
     from wptrack.motion.masks import MaskConfig, open_masks
 
     path = tmp_path / "v.avi"
     write_video(path, _moving_boxes(rng))
     config = MaskConfig(window=16, samples=5, device="cpu")  # 5 windows over 48 frames
+    reads: list[tuple[int, ...]] = []
+    sampler_read = W._Sampler.read
+
+    def read(self, indices, ahead=()):
+        reads.append(tuple(indices))
+        return sampler_read(self, indices, ahead)
+
+    monkeypatch.setattr(W._Sampler, "read", read)
     monkeypatch.setenv("WPTRACK_MASK_WORKERS", "1")
     one = list(open_masks(video=path, config=config).evidence())
+    one_reads, reads[:] = list(reads), []
     monkeypatch.setenv("WPTRACK_MASK_WORKERS", workers)
     stream = open_masks(video=path, config=config)
     assert stream.workers == int(workers)
@@ -710,7 +721,8 @@ def test_masks_in_several_threads_equal_one_model(tmp_path, rng, monkeypatch, wo
     stream.model.on_build = lambda window, centre, image: built.append(window)
     many = list(stream.evidence())
     assert len(many) == len(one) == 48 and len(stream.model.windows) >= 4
-    assert sorted(set(built)) == list(range(len(stream.model.windows)))
+    assert sorted(built) == list(range(len(stream.model.windows)))  # each window built once
+    assert reads == one_reads and len(one_reads) == len(stream.model.windows)
     assert sum(int(m.sum()) for m, _ in one) > 0
     for (m1, p1), (m2, p2) in zip(one, many, strict=True):
         np.testing.assert_array_equal(m1, m2)

@@ -62,6 +62,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import wait as wait_futures
@@ -176,6 +177,52 @@ class _WindowRead:
     error: Exception | None = None
 
 
+class WindowShare:
+    """The built windows of one source, shared by several :class:`OfflineBackground` models that make its masks in
+    threads (:func:`wptrack.motion.parallel.parallel_evidence`): each window is built once, by the first model that
+    needs it, and the others wait for it and use the same device arrays and statistics (they are read only after the
+    build). Without it every model built every window (``W`` times the decoding of the samples and the window
+    kernels: at 1080p on an H100 host the mask threads spent most of their time there).
+
+    The windows' reader (the sampler and its prefetch worker) is the share's too: every frame needs the window before
+    the one it builds, so the windows are built one after another in time order, whichever model builds them, and
+    the sampler reads the same frames in the same order as for one model alone (the same masks, also from a video
+    whose seeks are not exact). Windows before the earliest one a model still needs are dropped.
+
+    Args:
+        source: The frames the models read (the sampler's).
+
+    Attributes:
+        built: ``{window: (median, mad)}`` device arrays of the built windows.
+        bg_sub, bg_gain, scale, nb_scale, ratio: The windows' host statistics (see :class:`OfflineBackground`).
+    """
+
+    def __init__(self, source: FrameSource) -> None:
+        self.lock = threading.Lock()
+        self.sampler = _Sampler(source)
+        self.read_lock = threading.Lock()  # the sampler serves one read at a time
+        self.executor: ThreadPoolExecutor | None = None  # the prefetch worker (one thread), made on first use
+        self.pending: tuple[int, Future] | None = None  # (window, its read) submitted to the worker
+        self.built: dict[int, tuple[Any, Any]] = {}
+        self.bg_sub: dict[int, np.ndarray] = {}
+        self.bg_gain: dict[int, np.ndarray] = {}
+        self.scale: dict[int, float] = {}
+        self.nb_scale: dict[int, float] = {}
+        self.ratio: dict[int, float | None] = {}
+        self.building: dict[int, threading.Event] = {}  # windows being built, set when done (or failed)
+        self.failed: dict[int, BaseException] = {}  # a failed build's error, raised by the models that waited
+        self.positions: dict[int, int] = {}  # id(model) -> the first window its current frame needs
+
+    def drop_before(self, model: Any, i: int) -> None:
+        """``model``'s frames now need windows ``>= i``: drop the windows no model needs any more."""
+        with self.lock:
+            self.positions[id(model)] = i
+            keep = min(self.positions.values())
+            for old in [k for k in self.built if k < keep]:
+                for stats in (self.built, self.bg_sub, self.bg_gain):
+                    stats.pop(old, None)
+
+
 class OfflineBackground:
     """Windowed median/MAD background of one source and the per-frame foreground evidence.
 
@@ -203,7 +250,7 @@ class OfflineBackground:
     prefetch.
     """
 
-    def __init__(self, source: FrameSource, config: Any, device: str) -> None:
+    def __init__(self, source: FrameSource, config: Any, device: str, share: WindowShare | None = None) -> None:
         import warp as wp
 
         from wptrack.kernels.core import background as kbg
@@ -231,10 +278,13 @@ class OfflineBackground:
         self._diff = wp.zeros(self.pixels, dtype=wp.vec3, device=device)
         self._packed = wp.zeros(self.pixels, dtype=wp.uint8, device=device) if config.neighbourhood else None
         self._rows = wp.zeros(self.pixels, dtype=wp.vec4, device=device) if config.neighbourhood else None
-        self._built: dict[int, tuple[Any, Any]] = {}
-        self._scale: dict[int, float] = {}  # image-wide median noise scale of each built window
-        self._nb_scale: dict[int, float] = {}  # neighbourhood_scale of each built window
-        self._ratio: dict[int, float | None] = {}  # learnt shadow ratio of each built window (None: not learnt)
+        # the built windows and their statistics: this model's own, or shared with the other models of the source
+        # (WindowShare: each window built once)
+        self._share = WindowShare(source) if share is None else share
+        self._built = self._share.built
+        self._scale = self._share.scale  # image-wide median noise scale of each built window
+        self._nb_scale = self._share.nb_scale  # neighbourhood_scale of each built window
+        self._ratio = self._share.ratio  # learnt shadow ratio of each built window (None: not learnt)
         # channel values of a pixel subsample (every 13th pixel) for the windows' gains (illumination changes) and
         # shadow ratios: flat indices pixel-major (3 P',) and channel-major (3, P')
         pixels = np.arange(0, self.pixels, 13)
@@ -243,13 +293,10 @@ class OfflineBackground:
         # a frame's gain: every m-th pixel of that subsample, at most GAIN_PIXELS pixels
         self._gain_step = max(1, math.ceil(len(pixels) / GAIN_PIXELS))
         self._gain_index = np.ascontiguousarray(self._sub_channels[:, :: self._gain_step])
-        self._bg_sub: dict[int, np.ndarray] = {}  # each window's (3, P') compensated median at the subsample
-        self._bg_gain: dict[int, np.ndarray] = {}  # ... at the frame gain's pixels
+        self._bg_sub = self._share.bg_sub  # each window's (3, P') compensated median at the subsample
+        self._bg_gain = self._share.bg_gain  # ... at the frame gain's pixels
         self.last_gain = np.ones(3)  # the global gain of the last frame given to evidence() (B, G, R)
         self._stacks: dict[int, Any] = {}
-        self._sampler = _Sampler(source)
-        self._executor: ThreadPoolExecutor | None = None  # the prefetch worker (one thread), made on first use
-        self._pending: tuple[int, Future] | None = None  # (window, its read) submitted to the worker
         self._prefetch = True  # False: every window read in the calling thread (tests compare the two)
         # issue 27 (opt-in, wptrack.motion.masks.MotionMasks.attach_cleanup): a DeviceCleanup makes evidence() resolve
         # and clean the mask on the device and download it instead of the levels; want_prob False skips the
@@ -273,8 +320,32 @@ class OfflineBackground:
         self.params = p
         self.light = LightField(config, source.width, source.height, p, device)
 
+    @property
+    def _sampler(self) -> _Sampler:
+        return self._share.sampler
+
+    @property
+    def _executor(self) -> ThreadPoolExecutor | None:
+        return self._share.executor
+
+    @_executor.setter
+    def _executor(self, value: ThreadPoolExecutor | None) -> None:
+        self._share.executor = value
+
+    @property
+    def _pending(self) -> tuple[int, Future] | None:
+        return self._share.pending
+
+    @_pending.setter
+    def _pending(self, value: tuple[int, Future] | None) -> None:
+        self._share.pending = value
+
     def _read(self, i: int) -> _WindowRead:
         """Read window ``i``'s samples and prepare them on the host (any thread; no Warp call: see the class)."""
+        with self._share.read_lock:
+            return self._read_unlocked(i)
+
+    def _read_unlocked(self, i: int) -> _WindowRead:
         ahead = self.windows[i + 1].samples if i + 1 < len(self.windows) else ()
         notes: list[tuple[Any, ...]] = []
         self._sampler.notes = notes
@@ -296,7 +367,8 @@ class OfflineBackground:
     def _take(self, i: int) -> _WindowRead:
         """Window ``i``'s read: the worker's when it was prefetched, else read now (a pending read of another
         window is cancelled, or waited for and dropped, first: the sampler serves one thread at a time)."""
-        pending, self._pending = self._pending, None
+        with self._share.lock:
+            pending, self._pending = self._pending, None
         if pending is not None and pending[0] == i:
             got = pending[1].result()
         else:
@@ -311,21 +383,57 @@ class OfflineBackground:
 
     def _submit(self, i: int) -> None:
         """Start reading window ``i``'s samples in the worker (unless built, pending or past the last)."""
-        if not self._prefetch or i >= len(self.windows) or i in self._built or self._pending is not None:
-            return
-        if self._executor is None:
-            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wptrack-background")
-        self._pending = (i, self._executor.submit(self._read, i))
+        share = self._share
+        with share.lock:
+            if not self._prefetch or i >= len(self.windows) or i in share.built or i in share.building:
+                return
+            if share.pending is not None:
+                if share.pending[0] not in share.built:
+                    return  # a read still to be taken
+                share.pending[1].cancel()  # its window was built without it (read again): drop it
+            if share.executor is None:
+                share.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wptrack-background")
+            share.pending = (i, share.executor.submit(self._read, i))
 
     def _window(self, i: int, prefetch: bool = False) -> tuple[Any, Any]:
         """``(median, mad)`` device arrays of window ``i`` (built on first use; with ``prefetch``, building it
-        starts the worker's read of window ``i + 1``)."""
+        starts the worker's read of window ``i + 1``). With a shared :class:`WindowShare` the first model that needs
+        a window builds it and the others wait for it."""
+        share = self._share
+        with share.lock:
+            done = share.built.get(i)
+            waiting = share.building.get(i) if done is None else None
+            if done is None and waiting is None:
+                share.building[i] = threading.Event()
+                share.failed.pop(i, None)
+        if done is not None:
+            if prefetch:  # built by another call (e.g. background(0) for a report): the next read still starts here
+                self._submit(i + 1)
+            return done
+        if waiting is not None:  # another model builds it: wait, then use it
+            waiting.wait()
+            with share.lock:
+                if i in share.failed:
+                    raise share.failed[i]
+                if i in share.built:
+                    return share.built[i]
+            return self._window(i, prefetch)  # built and already dropped (a restart): build it again
+        try:
+            return self._build(i, prefetch)
+        except BaseException as e:
+            with share.lock:
+                share.failed[i] = e
+            raise
+        finally:
+            with share.lock:
+                share.building.pop(i).set()
+
+    def _build(self, i: int, prefetch: bool) -> tuple[Any, Any]:
+        """Build window ``i`` (this model claimed it in its :class:`WindowShare`); ``(median, mad)``."""
         import warp as wp
 
         from wptrack.kernels.core import background as kbg
 
-        if i in self._built:
-            return self._built[i]
         got = self._take(i)
         frames = got.frames
         if not frames:
@@ -374,7 +482,6 @@ class OfflineBackground:
             self._bg_sub[i], self._bg_gain[i] = bg_sub, np.ascontiguousarray(bg_sub[:, :: self._gain_step])
         elif c.mode_band > 0:
             self._mode(stack, g, mad, median)
-        self._built[i] = (median, mad)
         if c.spread_cap > 0 or c.shadow_band > 0 or c.neighbourhood > 0:
             mad_host = download(mad)
             self._scale[i] = spread_scale(mad_host)
@@ -396,6 +503,8 @@ class OfflineBackground:
                 self._ratio[i] = ratio
                 log.info("%s: background window %d: learnt shadow ratio %s", self.source.name, i, ratio)
         log.debug("%s: background window %d from %d frames", self.source.name, i, k)
+        with self._share.lock:  # last: another model takes a built window's statistics without waiting
+            self._built[i] = (median, mad)
         if self.on_build is not None:
             image = download(median).reshape(self.source.height, self.source.width, 3).copy()
             self.on_build(i, float(self.centres[i]), image)
@@ -462,10 +571,7 @@ class OfflineBackground:
         from wptrack.kernels.core import background as kbg
 
         i, j, w = bracket(self.centres, t)
-        for old in [k for k in self._built if k < i]:
-            del self._built[old]
-            self._bg_sub.pop(old, None)
-            self._bg_gain.pop(old, None)
+        self._share.drop_before(self, i)
         b0, m0 = self._window(i, prefetch=True)
         b1, m1 = self._window(j, prefetch=True)
         flat = np.ascontiguousarray(frame, dtype=np.uint8).reshape(-1)

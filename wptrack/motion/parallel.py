@@ -4,11 +4,12 @@ stage of a GPU run at 1080p, mostly host work per frame in one thread).
 :func:`parallel_evidence` gives the frames of a :class:`wptrack.motion.masks.MotionMasks` round robin to ``W``
 worker threads, each with an :class:`wptrack.motion.background.OfflineBackground` of its own (the first is the
 stream's ``model``, so its ``on_build`` callback and its windows serve the caller as before), and yields the masks in
-frame order. A frame's evidence depends on that frame and the windows around it only, and every model builds the
-same windows from the same samples, so the masks are those of one model, frame for frame (tested). The cost: each
-model builds each window and its reader decodes the samples, so the window work is done ``W`` times, and ``W`` times
-the model's device buffers. Queues of 2 per worker bound the memory. Errors (the source's, a model's) are raised in
-the caller at the frame they concern; leaving the iteration early stops the threads.
+frame order. A frame's evidence depends on that frame and the windows around it only, and the models share their
+windows (:class:`wptrack.motion.background.WindowShare`: each built once, by the first model that needs it, from the
+samples one shared reader reads in the same order as for one model), so the masks are those of one model, frame for
+frame (tested). The cost: ``W`` times a model's per-frame device buffers. Queues of 2 per worker bound the memory.
+Errors (the source's, a model's) are raised in the caller at the frame they concern; leaving the iteration early
+stops the threads.
 
 Opt-in (``WPTRACK_MASK_WORKERS=N``, :func:`mask_workers`): measured on the CPU only, where the mask step is not the
 slowest stage of a run (the filter is) and extra models cost the two cores more than they save.
@@ -71,10 +72,14 @@ def parallel_evidence(
     width, height = masks.size
     guard = device_guard(masks.model.device)  # a tracker's graph capture waits for the workers' device work
     with guard.shared():
-        models = [masks.model] + [OfflineBackground(masks.source, c, masks.model.device) for _ in range(workers - 1)]
+        share = masks.model._share  # each window built once, by the first model that needs it (WindowShare)
+        models = [masks.model] + [
+            OfflineBackground(masks.source, c, masks.model.device, share=share) for _ in range(workers - 1)
+        ]
     for model in models[1:]:  # the first model's clean-up and probability settings for every model
         masks.attach_cleanup(model)
         model.want_prob = masks.model.want_prob
+        model.on_build = masks.model.on_build  # whichever model builds a window reports it
     stop = threading.Event()
     inbox = [queue.Queue(maxsize=2) for _ in range(workers)]
     outbox = [queue.Queue(maxsize=2) for _ in range(workers)]
