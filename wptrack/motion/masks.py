@@ -535,6 +535,17 @@ def write_masks(
     masks = open_masks(video=video, config=config)
     out = ensure_writable_dir(out_dir)
     fps = masks.source.fps or 25.0
+    first: list[np.ndarray] = []  # the first window's background, kept when the pass builds it (not built again)
+    if masks.model is not None:
+        report = masks.model.on_build
+
+        def keep_first(window: int, centre: float, image: np.ndarray) -> None:
+            if window == 0 and not first:
+                first.append(image)
+            if report is not None:
+                report(window, centre, image)
+
+        masks.model.on_build = keep_first
     t0 = time.perf_counter()
     frames = 0
     with BackgroundWriter(VideoWriter(out / "masks.avi", fps=fps, size=masks.size, grey=True)) as mw:
@@ -566,7 +577,7 @@ def write_masks(
         "config": dataclasses.asdict(config),
         "outputs": ["masks.avi"] + (["probability.avi"] if probability else []),
     }
-    background = masks.background()
+    background = first[0] if first else masks.background()
     if background is not None:
         import cv2
 
