@@ -101,3 +101,23 @@ def test_blind_camera_warning_prints_plain_numbers(caplog):
         Rig((cam,), volume=((40.0, 40.0, 0.0), (42.0, 42.0, 2.0)), source="r.yaml")
     text = caplog.text
     assert "sees nothing of the working volume [40.0, 40.0, 0.0]..[42.0, 42.0, 2.0] m" in text and "np." not in text
+
+
+def test_particles_beyond_memory_name_a_limit_that_exists(tmp_path, capsys, monkeypatch):
+    """--particles so many that not one object fits: the error named "max_objects 0" as the limit (not a valid
+    value); it now gives the particles that fit and says that no object count does at that many particles."""
+    import wptrack.core.memory as memory
+    from wptrack.cli import main
+
+    monkeypatch.setattr(memory, "available_bytes", lambda dev: 8 * 2**20)
+    Rig(cameras=(_camera(),)).save(tmp_path / "rig.yaml")
+    masks = tmp_path / "m.avi"
+    write_video(masks, [np.zeros((H, W, 3), np.uint8)] * 3, fps=10)
+    out = tmp_path / "out"
+    argv = ["track", "templates", "--rig", str(tmp_path / "rig.yaml"), "--masks", str(masks), "--out", str(out)]
+    code = main([*argv, "--max-objects", "8", "--particles", "1000000", "--device", "cpu", "-q"])
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.strip().splitlines() if not ln.startswith("Warp CUDA warning")]
+    assert code == 2 and len(lines) == 1 and "max_objects 0" not in err, err
+    assert "particles at max_objects 8 (not even max_objects 1 fits at 1000000 particles)" in lines[0], err
+    assert not out.exists()
