@@ -121,3 +121,63 @@ def test_particles_beyond_memory_name_a_limit_that_exists(tmp_path, capsys, monk
     assert code == 2 and len(lines) == 1 and "max_objects 0" not in err, err
     assert "particles at max_objects 8 (not even max_objects 1 fits at 1000000 particles)" in lines[0], err
     assert not out.exists()
+
+
+# ------------------------------------------------------------------------------------------ a camera that moves
+def _scene(rng, frames: int, pan_px: float = 0.0, width: int = W) -> np.ndarray:
+    """A textured view (paving tiles) with a dark box walking across; ``pan_px``: the camera pans this many pixels a
+    frame (a window sliding over a wider view): (frames, H, width, 3) uint8."""
+    wide = cv2.resize(rng.uniform(40, 220, (H // 6, 3 * width // 6, 3)).astype(np.uint8), (3 * width, H),
+                      interpolation=cv2.INTER_NEAREST)  # fmt: skip
+    out = []
+    for t in range(frames):
+        left = width + int(round(pan_px * t))  # from the middle third: pans either way
+        view = wide[:, left : left + width].copy()
+        u = 10 + 3 * t
+        view[50:90, u : u + 10] = 20
+        out.append(np.clip(view + rng.normal(0, 2, view.shape), 0, 255).astype(np.uint8))
+    return np.stack(out)
+
+
+def test_camera_motion_watch_tells_a_pan_from_a_fixed_camera(rng):
+    from wptrack.motion.camera_motion import CameraMotionWatch
+
+    for pan, warned in ((0.0, None), (2.0, 15), (-1.0, 15), (0.5, 20)):
+        watch = CameraMotionWatch(name="cam")
+        for i, frame in enumerate(_scene(rng, 40, pan)):
+            watch.add(i, frame)
+        assert watch.moved_at == warned, (pan, watch.moved_at, watch.largest)
+        if pan:
+            assert watch.largest == pytest.approx(abs(pan) * warned, abs=1.5)
+        else:
+            assert watch.largest < 1.0
+    shaken = _scene(rng, 40)  # a shake of 4 px for 6 frames (the flood guard's case): no warning
+    for t in range(10, 16):
+        shaken[t] = np.roll(shaken[t], 4 if t % 2 else -4, axis=1)
+    watch = CameraMotionWatch()
+    for i, frame in enumerate(shaken):
+        watch.add(i, frame)
+    assert watch.moved_at is None and watch.largest >= 3.0  # it saw the shake, and it did not last
+    with pytest.raises(Exception, match="CameraMotionWatch.fraction"):
+        CameraMotionWatch(fraction=0.0)
+
+
+def test_masks_of_a_moving_camera_warn_once(tmp_path, rng, caplog):
+    """``wptrack masks`` (and every tracker, through MotionMasks) on a panning camera: one warning naming the video,
+    the shift and the frame; none for the same scene from a fixed camera, none for given masks."""
+    from wptrack.motion.masks import MaskConfig, open_masks
+
+    for pan in (0.0, 2.0):
+        video = tmp_path / f"pan{pan}.avi"
+        write_video(video, list(_scene(rng, 30, pan)), fps=10)
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="wptrack.motion.camera_motion"):
+            for method in ("offline", "mog2"):
+                assert len(list(open_masks(video=str(video), config=MaskConfig(method=method, device="cpu")))) == 30
+            list(open_masks(masks=str(video)))  # given masks: not camera frames, not watched
+        warnings = [r.getMessage() for r in caplog.records if "the camera seems to move" in r.getMessage()]
+        if pan:
+            assert len(warnings) == 2 and all(w.startswith(f"{video}: the view has shifted by about 30 px") for w in
+                                              warnings) and "at frame 15" in warnings[0], warnings  # fmt: skip
+        else:
+            assert warnings == []
