@@ -181,3 +181,18 @@ def test_masks_of_a_moving_camera_warn_once(tmp_path, rng, caplog):
                                               warnings) and "at frame 15" in warnings[0], warnings  # fmt: skip
         else:
             assert warnings == []
+
+
+def test_max_objects_beyond_the_cap_names_it(tmp_path, capsys):
+    from wptrack.cli import main
+
+    Rig(cameras=(_camera(),)).save(tmp_path / "rig.yaml")
+    masks = tmp_path / "m.avi"
+    write_video(masks, [np.zeros((H, W, 3), np.uint8)] * 3, fps=10)
+    out = tmp_path / "out"
+    argv = ["track", "templates", "--rig", str(tmp_path / "rig.yaml"), "--masks", str(masks), "--out", str(out)]
+    assert main([*argv, "--max-objects", "100000", "--device", "cpu", "-q"]) == 2
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.strip().splitlines() if not ln.startswith("Warp CUDA warning")]
+    assert len(lines) == 1 and lines[0] == "wptrack: error: max_objects: expected a positive integer <= 64, got 100000"
+    assert not out.exists()
