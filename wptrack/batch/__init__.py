@@ -68,6 +68,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from wptrack.batch.address import check_ray_address
 from wptrack.batch.manifest import Manifest, RunSpec, _load_function, load_manifest, track_parts, validate
 from wptrack.core.errors import ConfigError, WptrackError
 
@@ -400,6 +401,8 @@ def run_batch(
             raise ConfigError(f"--address {address}: Ray is not installed (pip install 'wptrack[ray]')")
         log.warning("Ray is not installed: running the batch in this process, one run after another")
         use_ray = False
+    if use_ray:
+        check_ray_address(address)
     created = not Path(out_dir).exists()
     out = ensure_writable_dir(Path(out_dir).expanduser().absolute())  # workers elsewhere (other cwd, node)
     results: dict[str, dict[str, Any]] = {}

@@ -90,11 +90,21 @@ class Rig:
                     "%s: camera '%s' sees nothing of the working volume %s..%s m (check its pose: R/rvec, t)",
                     source,
                     name,
-                    list(self.volume[0]),
-                    list(self.volume[1]),
+                    _fmt(self.volume[0].tolist()),
+                    _fmt(self.volume[1].tolist()),
                 )
         if self.ground is not None and not isinstance(self.ground, GroundPlane):
             object.__setattr__(self, "ground", GroundPlane.from_dict(self.ground, source))
+        if self.ground is not None:  # every camera above the plane, on its normal's side: else nothing stands in view
+            for cam in cameras:
+                height = float((cam.center - self.ground.origin) @ self.ground.normal)
+                if not height > 0:
+                    raise RigError(
+                        f"{source}: ground: camera '{cam.name}' is {-height:.2f} m below the ground plane (origin "
+                        f"{_fmt(self.ground.origin.tolist())}, normal {_fmt(self.ground.normal.tolist())}): the plane "
+                        "must lie below every camera, its normal pointing up towards them; check the sign of 'normal' "
+                        "and the height of 'origin'"
+                    )
 
     @property
     def ground_plane(self) -> GroundPlane:

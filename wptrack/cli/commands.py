@@ -332,10 +332,20 @@ def cmd_batch(args) -> int:
 
 # --- masks ---------------------------------------------------------------------------------------------------
 def cmd_masks(args) -> int:
-    from wptrack.core.config import from_namespace
+    from wptrack.core.config import from_namespace, option_map
     from wptrack.motion.masks import MaskConfig, write_masks
+    from wptrack.motion.options import check_mask_options
 
     config = from_namespace(MaskConfig, args, base=MaskConfig(device=args.device))
+    if config.method != "given":  # given: write_masks says there is nothing to make
+        check_mask_options(
+            config, [f for f in option_map(MaskConfig) if getattr(args, f.replace("-", "_")) is not None]
+        )
+        if config.method != "offline" and args.device != "auto":
+            raise ConfigError(
+                f"--device {args.device}: the offline background model's device; {config.method} runs on the CPU "
+                "(OpenCV), so it has no effect: leave it out"
+            )
     summary = write_masks(args.video, args.out, config, probability=args.probability, max_frames=args.max_frames)
     print(f"{summary['frames']} masks ({config.method}) in {summary['seconds']:.1f} s: " + ", ".join(
         f"{args.out}/{name}" for name in summary["outputs"]))  # fmt: skip

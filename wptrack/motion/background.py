@@ -66,7 +66,6 @@ import threading
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import wait as wait_futures
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -84,7 +83,7 @@ from wptrack.motion.stats import (
     shadow_ratio,
     spread_scale,
 )
-from wptrack.motion.windows import _Sampler, bracket, plan_windows
+from wptrack.motion.windows import WindowShare, _Sampler, _WindowRead, bracket, plan_windows
 
 log = logging.getLogger(__name__)
 
@@ -151,76 +150,6 @@ def resolve_levels(packed: np.ndarray, prob: np.ndarray | None = None) -> np.nda
     if (levels == 1).any():
         return hysteresis(levels)
     return (levels == 2).view(np.uint8)
-
-
-@dataclass
-class _WindowRead:
-    """A window's samples as read from the source and prepared on the host (NumPy only, no device work): what
-    :meth:`OfflineBackground._read` returns, in the prefetch worker or in the calling thread.
-
-    Attributes:
-        frames: The K readable samples, ``(H, W, 3)`` uint8 C-contiguous each.
-        sub: ``(K, 3, P')`` uint8 their channel values at the pixel subsample (None when no frame).
-        gains: ``(K, 3)`` float32 their gains (:func:`sample_gains_channels`).
-        bg_sub: ``(3, P')`` float64 the compensated median at the subsample.
-        bg_gain: ``(3, P'')`` float64 it at the frame gain's pixels.
-        notes: The sampler's warnings, ``(message, *args)``, logged by the thread that takes the read.
-        error: The exception the read raised, re-raised by the thread that takes it.
-    """
-
-    frames: list[np.ndarray]
-    sub: np.ndarray | None = None
-    gains: np.ndarray | None = None
-    bg_sub: np.ndarray | None = None
-    bg_gain: np.ndarray | None = None
-    notes: list[tuple[Any, ...]] = field(default_factory=list)
-    error: Exception | None = None
-
-
-class WindowShare:
-    """The built windows of one source, shared by several :class:`OfflineBackground` models that make its masks in
-    threads (:func:`wptrack.motion.parallel.parallel_evidence`): each window is built once, by the first model that
-    needs it, and the others wait for it and use the same device arrays and statistics (they are read only after the
-    build). Without it every model built every window (``W`` times the decoding of the samples and the window
-    kernels: at 1080p on an H100 host the mask threads spent most of their time there).
-
-    The windows' reader (the sampler and its prefetch worker) is the share's too: every frame needs the window before
-    the one it builds, so the windows are built one after another in time order, whichever model builds them, and
-    the sampler reads the same frames in the same order as for one model alone (the same masks, also from a video
-    whose seeks are not exact). Windows before the earliest one a model still needs are dropped.
-
-    Args:
-        source: The frames the models read (the sampler's).
-
-    Attributes:
-        built: ``{window: (median, mad)}`` device arrays of the built windows.
-        bg_sub, bg_gain, scale, nb_scale, ratio: The windows' host statistics (see :class:`OfflineBackground`).
-    """
-
-    def __init__(self, source: FrameSource) -> None:
-        self.lock = threading.Lock()
-        self.sampler = _Sampler(source)
-        self.read_lock = threading.Lock()  # the sampler serves one read at a time
-        self.executor: ThreadPoolExecutor | None = None  # the prefetch worker (one thread), made on first use
-        self.pending: tuple[int, Future] | None = None  # (window, its read) submitted to the worker
-        self.built: dict[int, tuple[Any, Any]] = {}
-        self.bg_sub: dict[int, np.ndarray] = {}
-        self.bg_gain: dict[int, np.ndarray] = {}
-        self.scale: dict[int, float] = {}
-        self.nb_scale: dict[int, float] = {}
-        self.ratio: dict[int, float | None] = {}
-        self.building: dict[int, threading.Event] = {}  # windows being built, set when done (or failed)
-        self.failed: dict[int, BaseException] = {}  # a failed build's error, raised by the models that waited
-        self.positions: dict[int, int] = {}  # id(model) -> the first window its current frame needs
-
-    def drop_before(self, model: Any, i: int) -> None:
-        """``model``'s frames now need windows ``>= i``: drop the windows no model needs any more."""
-        with self.lock:
-            self.positions[id(model)] = i
-            keep = min(self.positions.values())
-            for old in [k for k in self.built if k < keep]:
-                for stats in (self.built, self.bg_sub, self.bg_gain):
-                    stats.pop(old, None)
 
 
 class OfflineBackground:

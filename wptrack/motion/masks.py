@@ -406,6 +406,11 @@ class MotionMasks:
         width, height = self.size
         model = self.model
         frames = prefetch(self.source, depth=self.prefetch_depth) if self.prefetch_depth else self.source
+        watched = frames
+        if c.method != "given":  # camera frames: one warning if the camera moves (wptrack.motion.camera_motion)
+            from wptrack.motion.camera_motion import CameraMotionWatch, watch_frames
+
+            watched = watch_frames(frames, CameraMotionWatch(name=self.name))
         subtractor = None if c.method in ("given", "offline") else self._subtractor()
         if model is not None:
             from wptrack.core.device import device_guard
@@ -416,9 +421,9 @@ class MotionMasks:
             if model is not None and self.workers > 1:  # several models in threads, masks in frame order
                 from wptrack.motion.parallel import parallel_evidence
 
-                yield from parallel_evidence(self, frames, self.workers, lambda raw: clean_mask(raw, c), probability)
+                yield from parallel_evidence(self, watched, self.workers, lambda raw: clean_mask(raw, c), probability)
                 return
-            for index, frame in enumerate(frames):
+            for index, frame in enumerate(watched):
                 if frame.shape[:2] != (height, width):
                     raise FrameError(
                         f"{self.name}: {self._kind} {index} is {frame.shape[1]}x{frame.shape[0]} pixels, but the "

@@ -226,7 +226,20 @@ def parts_from_namespace(cmd: TrackCommand, args: Any) -> dict[str, Any]:
         if part.name == "config" and getattr(args, "config_file", None):
             base = load_file(part.cls, args.config_file)
         out[part.name] = from_namespace(part.cls, args, base=base, prefix=part.prefix)
+    masks = next((p for p in cmd.parts if p.name == "masks"), None)
+    if masks is not None:
+        given = [f for f in option_map(masks.cls, masks.prefix) if getattr(args, f.replace("-", "_"), None) is not None]
+        _check_mask_options(out, given, masks.prefix, "--")
     return out
+
+
+def _check_mask_options(parts: Mapping[str, Any], flags: Sequence[str], prefix: str, dashes: str) -> None:
+    """The mask options given (``flags``, with ``prefix``) are used by the run's mask method (the masks are given
+    when the inputs name ``masks``): :func:`wptrack.motion.options.check_mask_options`."""
+    from wptrack.motion.options import check_mask_options
+
+    given_masks = bool(getattr(parts.get("inputs"), "masks", None))
+    check_mask_options(parts["masks"], flags, prefix=prefix, dashes=dashes, given_masks=given_masks)
 
 
 def options_from_namespace(cmd: TrackCommand, args: Any, exclude: Sequence[str] = ()) -> dict[str, Any]:
@@ -283,6 +296,12 @@ def parts_from_options(cmd: TrackCommand, values: Mapping[str, Any], where: str 
         except ConfigError as e:
             text = str(e)
             raise ConfigError(text if text.startswith(where) else f"{where}{text}") from None
+    masks = next((p for p in cmd.parts if p.name == "masks"), None)
+    if masks is not None:
+        try:
+            _check_mask_options(out, [masks.prefix + k for k in split["masks"]], masks.prefix, "")
+        except ConfigError as e:
+            raise ConfigError(f"{where}{e}") from None
     return out
 
 

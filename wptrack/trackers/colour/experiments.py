@@ -181,7 +181,7 @@ def sweep_batch(
     seeds) and is written with :func:`write_sweep` (``out_dir/errors.csv``, ``summary.json``). Completed runs are
     reused when the sweep is run again.
     """
-    from wptrack.batch import run_batch
+    from wptrack.batch import check_ray_address, run_batch
     from wptrack.batch.manifest import Manifest, RunSpec
 
     if len(sigmas) == 0:
@@ -190,6 +190,7 @@ def sweep_batch(
         raise ConfigError(f"sigma: values must be > 0 metres, got {list(sigmas)}")
     if not (0 < jump_at < iterations):
         raise ConfigError(f"jump_at: expected 0 < jump_at < iterations ({iterations}), got {jump_at}")
+    check_ray_address(address)  # a Ray head that does not answer: said before the sweep's folder is made
     out = ensure_writable_dir(out_dir)
     device = resolve_device(device)  # resolved here: every run on the same device
     common = {"particles": particles, "iterations": iterations, "jump_at": jump_at, "jump": jump,

@@ -43,8 +43,12 @@ def check_template_fits(n: int, r: int, scheme: str, partition: bool, fixed: int
             fit_r += 1
         fit_n = max(usable, 0) // particle_bytes(r, scheme, partition)
         need = n * particle_bytes(r, scheme, partition) + fixed
+        limit = (
+            f"max_objects {fit_r} at {n} particles, or {fit_n} particles at max_objects {r}"
+            if fit_r > 0  # else "max_objects 0" would be named as a limit: no object at all fits at n particles
+            else f"{fit_n} particles at max_objects {r} (not even max_objects 1 fits at {n} particles)"
+        )
         raise ConfigError(
             f"max_objects: {r} objects x {n} particles need {need / 2**30:.2f} GiB on {device} but only "
-            f"{free / 2**30:.2f} GiB is free; the limit here is max_objects {fit_r} at {n} "
-            f"particles, or {fit_n} particles at max_objects {r}"
+            f"{free / 2**30:.2f} GiB is free; the limit here is {limit}"
         ) from None
