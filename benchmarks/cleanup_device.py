@@ -22,8 +22,8 @@ def main() -> None:
     import warp as wp
     from test_kernels_morphology import _packed  # the tests' structured levels (blobs, fringes, a serpentine)
 
-    from wptrack.motion.background import resolve_levels
     from wptrack.motion.cleanup import DeviceCleanup
+    from wptrack.motion.levels import resolve_levels
     from wptrack.motion.masks import MaskConfig, clean_mask
 
     ap = argparse.ArgumentParser()

@@ -14,6 +14,7 @@ from wptrack.io.video import write_video
 from wptrack.motion import background as B
 from wptrack.motion import stats as S
 from wptrack.motion import windows as Wn
+from wptrack.motion.levels import hysteresis
 from wptrack.motion.masks import MaskConfig
 
 H, W = 60, 80
@@ -110,7 +111,7 @@ def test_hysteresis_large_random_levels_equal_label_lookup(rng):
         keep = np.zeros(count, np.uint8)
         keep[labels[levels == 2]] = 1
         keep[0] = 0
-        got = B.hysteresis(levels)
+        got = hysteresis(levels)
         assert got.dtype == np.uint8
         np.testing.assert_array_equal(got, keep[labels])
 

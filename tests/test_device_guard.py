@@ -95,6 +95,46 @@ def test_new_shared_work_waits_for_a_capture_in_progress_and_one_waiting():
     assert order == ["first frame", "capture", "later frame"]
 
 
+def test_a_paused_shared_section_lets_a_waiting_capture_and_other_shared_work_through():
+    """A mask thread waits (inside its shared section) for a window that the builder thread makes under the guard,
+    and a capture asks for the device meanwhile: without pausing, the capture waits for the mask thread, the builder
+    for the capture, the mask thread for the builder. Paused, the capture runs, then the builder, then the mask thread
+    holds its section again (and a new capture waits for it)."""
+    guard = DeviceGuard()
+    built = threading.Event()
+    order: list[str] = []
+    mask_in = threading.Event()
+
+    def mask_thread():
+        with guard.shared():
+            mask_in.set()
+            with guard.paused():
+                assert built.wait(WAIT)
+            order.append("mask resumed")
+            assert guard._shared == 1
+
+    def capture():
+        with guard.exclusive():
+            order.append("capture")
+
+    def builder():
+        with guard.shared():
+            order.append("build")
+            built.set()
+
+    mask, mask_done = _in_thread(mask_thread)
+    assert mask_in.wait(WAIT)
+    cap, cap_done = _in_thread(capture)
+    assert cap_done.wait(WAIT)  # not held back by the paused section
+    b, b_done = _in_thread(builder)
+    assert b_done.wait(WAIT) and mask_done.wait(WAIT)
+    for t in (mask, cap, b):
+        t.join()
+    assert order == ["capture", "build", "mask resumed"] and guard._shared == 0
+    with guard.paused():  # outside a shared section: nothing to give up
+        assert guard._shared == 0
+
+
 def test_one_guard_per_device(device):
     """Every name of a device gives its one guard (the tracker may say ``cuda``, the masks ``cuda:0``)."""
     import warp as wp

@@ -10,8 +10,8 @@ import pytest
 import warp as wp
 
 from wptrack.kernels.core import morphology as km
-from wptrack.motion.background import hysteresis, resolve_levels
 from wptrack.motion.cleanup import DeviceCleanup, ellipse_runs
+from wptrack.motion.levels import hysteresis, resolve_levels
 from wptrack.motion.masks import MaskConfig, clean_mask
 
 

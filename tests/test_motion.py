@@ -355,7 +355,7 @@ def _hysteresis_ref(levels: np.ndarray) -> np.ndarray:
 
 
 def test_hysteresis_matches_flood_reference(rng):
-    from wptrack.motion.background import hysteresis
+    from wptrack.motion.levels import hysteresis
 
     for density in (0.05, 0.3, 0.6):
         levels = (rng.random((40, 50)) < density).astype(np.uint8)
@@ -407,7 +407,7 @@ def test_spread_cap_finds_object_standing_in_many_samples(rng):
 
 
 def test_resolve_levels_penumbra_near_shadow_only():
-    from wptrack.motion.background import PENUMBRA_PX, resolve_levels
+    from wptrack.motion.levels import PENUMBRA_PX, resolve_levels
 
     packed = np.zeros((30, 60), np.uint8)
     packed[5:25, 5:15] = 8  # cast shadow (umbra)

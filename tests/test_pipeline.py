@@ -718,10 +718,13 @@ def test_masks_in_several_threads_equal_one_model(tmp_path, rng, monkeypatch, wo
     stream = open_masks(video=path, config=config)
     assert stream.workers == int(workers)
     built = []
-    stream.model.on_build = lambda window, centre, image: built.append(window)
+    stream.model.on_build = lambda window, centre, image: built.append((window, threading.current_thread().name))
     many = list(stream.evidence())
     assert len(many) == len(one) == 48 and len(stream.model.windows) >= 4
-    assert sorted(built) == list(range(len(stream.model.windows)))  # each window built once
+    assert sorted(w for w, _ in built) == list(range(len(stream.model.windows)))  # each window built once
+    # the first by a mask thread, the later ones ahead of their frames by the prefetch worker
+    assert [name.startswith("wptrack-background") for _, name in sorted(built)] == [False] + [True] * (len(built) - 1)
+    assert stream.model._share.ahead is None  # the stream's model alone again after the pass
     assert reads == one_reads and len(one_reads) == len(stream.model.windows)
     assert sum(int(m.sum()) for m, _ in one) > 0
     for (m1, p1), (m2, p2) in zip(one, many, strict=True):

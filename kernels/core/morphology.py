@@ -14,7 +14,7 @@ Images are ``wp.array2d(dtype=wp.uint8)`` of shape ``(H, W)``, values 0/1 unless
   forth and back and lets a weak pixel join when one of its 8 neighbours has joined, in place; the sweeps alternate
   until one changes nothing (``changed`` stays 0). Joining only ever adds pixels, so the order of the writes does
   not matter: the fixpoint is the union of the 8-connected components of ``level > 0`` that hold a strong pixel, the
-  host's connected-components result (``wptrack.motion.background.hysteresis``), in a few sweeps for blob-shaped
+  host's connected-components result (``wptrack.motion.levels.hysteresis``), in a few sweeps for blob-shaped
   components (a path that turns back on itself costs a sweep per turn).
 """
 

@@ -69,12 +69,12 @@ def foreground(
     formulas), the frame divided by its ``(3,)`` channel ``gain`` first; ``low_threshold`` (default: ``threshold``)
     is the hysteresis threshold, ``spread_cap`` the largest noise scale (8-bit units, 0: none), ``shadow_edge_hi``
     (default ``shadow_hi``) the penumbra candidates' upper ratio. ``packed`` is the kernel's ``level + 4 shadow``;
-    ``mask`` is :func:`wptrack.motion.background.resolve_levels` of it (after :func:`neighbourhood` with ``radius`` and
+    ``mask`` is :func:`wptrack.motion.levels.resolve_levels` of it (after :func:`neighbourhood` with ``radius`` and
     ``nb_scale`` when ``radius > 0``) for 2-D images, ``level == 2`` otherwise. ``field``: the ``(..., 3)`` local
     illumination gains the frame is divided by too (:func:`local_field`); ``veto``: the keyword arguments of
     :func:`illumination_change` but ``x`` and ``b`` (its pixels, tested where ``z > low_threshold`` and not a cast
     shadow, get shadow code 3: background)."""
-    from wptrack.motion.background import resolve_levels
+    from wptrack.motion.levels import resolve_levels
 
     edge_hi = shadow_hi if shadow_edge_hi is None else shadow_edge_hi
     low = threshold if low_threshold is None else low_threshold

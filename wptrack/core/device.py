@@ -304,6 +304,7 @@ class DeviceGuard:
         self._shared = 0
         self._exclusive = False
         self._waiting = 0
+        self._local = threading.local()  # .depth: this thread's shared sections in progress
 
     @contextmanager
     def shared(self) -> Iterator[None]:
@@ -311,12 +312,35 @@ class DeviceGuard:
         with self._cond:
             self._cond.wait_for(lambda: not self._exclusive and not self._waiting)
             self._shared += 1
+        self._local.depth = getattr(self._local, "depth", 0) + 1
+        try:
+            yield
+        finally:
+            self._local.depth -= 1
+            with self._cond:
+                self._shared -= 1
+                self._cond.notify_all()
+
+    @contextmanager
+    def paused(self) -> Iterator[None]:
+        """Inside this thread's shared sections, give them up while waiting for another thread's shared work (with
+        no device work of this thread in flight): a capture waiting meanwhile must not hold that work back, or the
+        two would wait for each other. Outside a shared section it does nothing."""
+        depth = getattr(self._local, "depth", 0)
+        if depth == 0:
+            yield
+            return
+        with self._cond:
+            self._shared -= depth
+            self._cond.notify_all()
+        self._local.depth = 0
         try:
             yield
         finally:
             with self._cond:
-                self._shared -= 1
-                self._cond.notify_all()
+                self._cond.wait_for(lambda: not self._exclusive and not self._waiting)
+                self._shared += depth
+            self._local.depth = depth
 
     @contextmanager
     def exclusive(self) -> Iterator[None]:

@@ -74,6 +74,7 @@ from wptrack.core.device import download
 from wptrack.core.errors import FrameError
 from wptrack.io.frames import FrameSource
 from wptrack.motion.illumination import LightField
+from wptrack.motion.levels import resolve_levels
 from wptrack.motion.stats import (
     GAIN_PIXELS,
     channel_gains,
@@ -86,70 +87,6 @@ from wptrack.motion.stats import (
 from wptrack.motion.windows import WindowShare, _Sampler, _WindowRead, bracket, plan_windows
 
 log = logging.getLogger(__name__)
-
-
-def hysteresis(levels: np.ndarray) -> np.ndarray:
-    """Hysteresis of a mask of levels: weak pixels (1) count only when 8-connected to a strong one (2).
-
-    Args:
-        levels: ``(H, W)`` uint8 with values 0 (background), 1 (weak) and 2 (strong foreground).
-
-    Returns:
-        ``(H, W)`` uint8 mask with values ``{0, 1}``: the connected components of ``levels > 0`` that hold a
-        strong pixel. (Computed as ``levels > 0`` less the weak pixels of the components without a strong pixel,
-        which hold weak pixels only: sparse work on the few weak pixels instead of a lookup per image pixel.)
-    """
-    import cv2
-
-    union = (levels > 0).view(np.uint8)
-    count, labels = cv2.connectedComponents(union, connectivity=8)
-    good = np.zeros(count, dtype=bool)
-    good[labels[levels == 2]] = True
-    weak = np.flatnonzero(levels == 1)
-    weak_labels = labels.reshape(-1)[weak]
-    union.reshape(-1)[weak[~good[weak_labels]]] = 0
-    return union
-
-
-PENUMBRA_PX = 3
-"""Penumbra candidates within this many pixels of a cast shadow are shadow (:func:`resolve_levels`)."""
-
-
-def _disc(diameter: int) -> np.ndarray:
-    import cv2
-
-    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (diameter, diameter))
-
-
-def resolve_levels(packed: np.ndarray, prob: np.ndarray | None = None) -> np.ndarray:
-    """The binary mask of a frame from the kernel's packed output ``level + 4 shadow``
-    (:func:`wptrack.kernels.core.background.foreground_kernel`).
-
-    Penumbra candidates (shadow 1) within :data:`PENUMBRA_PX` pixels of a cast shadow (shadow 2) are shadow
-    (background, probability 0 in ``prob``, changed in place): the brighter rim of a soft shadow; the others keep
-    their level (a shirt of the paving's colour attached to dark trousers taken for a shadow is not eaten whole);
-    then :func:`hysteresis`.
-
-    Args:
-        packed: ``(H, W)`` uint8 kernel output.
-        prob: ``(H, W)`` float32 probability to zero on the penumbrae, or ``None``.
-
-    Returns:
-        ``(H, W)`` uint8 mask with values ``{0, 1}``.
-    """
-    import cv2
-
-    levels = packed & 3
-    shadow = packed >> 2
-    if (shadow == 1).any():
-        near = cv2.dilate((shadow == 2).view(np.uint8), _disc(2 * PENUMBRA_PX + 1))
-        penumbra = (near > 0) & (shadow == 1)
-        levels[penumbra] = 0
-        if prob is not None:
-            prob[penumbra] = 0.0
-    if (levels == 1).any():
-        return hysteresis(levels)
-    return (levels == 2).view(np.uint8)
 
 
 class OfflineBackground:
@@ -176,7 +113,9 @@ class OfflineBackground:
     and reads the same frames in the same order as without the worker, so the masks are the same; its warnings
     are logged, and its errors raised, by the calling thread when it takes the read. A request for another window
     first waits for (or cancels) the pending read and drops it. :meth:`background` and :meth:`spread` do not
-    prefetch.
+    prefetch. Several models in threads (:class:`~wptrack.motion.windows.WindowShare`, ``share``) share the windows,
+    the sampler and the worker; there the worker also builds each window after the first (a builder model of the
+    share, its device work in the device guard's shared section like the mask threads').
     """
 
     def __init__(self, source: FrameSource, config: Any, device: str, share: WindowShare | None = None) -> None:
@@ -296,14 +235,17 @@ class OfflineBackground:
     def _take(self, i: int) -> _WindowRead:
         """Window ``i``'s read: the worker's when it was prefetched, else read now (a pending read of another
         window is cancelled, or waited for and dropped, first: the sampler serves one thread at a time)."""
-        with self._share.lock:
-            pending, self._pending = self._pending, None
-        if pending is not None and pending[0] == i:
-            got = pending[1].result()
-        else:
-            if pending is not None and not pending[1].cancel():
-                wait_futures([pending[1]])
+        if self._share.ahead is not None:  # the pending task (if any) is the builder's, for another window
             got = self._read(i)
+        else:
+            with self._share.lock:
+                pending, self._pending = self._pending, None
+            if pending is not None and pending[0] == i:
+                got = pending[1].result()
+            else:
+                if pending is not None and not pending[1].cancel():
+                    wait_futures([pending[1]])
+                got = self._read(i)
         for note in got.notes:
             log.warning(*note)
         if got.error is not None:
@@ -311,10 +253,14 @@ class OfflineBackground:
         return got
 
     def _submit(self, i: int) -> None:
-        """Start reading window ``i``'s samples in the worker (unless built, pending or past the last)."""
+        """Start reading window ``i``'s samples in the worker (unless built, pending or past the last); with a
+        builder (:attr:`WindowShare.ahead`) the worker also builds it (:meth:`_build_ahead`), at most two windows
+        beyond the frames' (device memory stays bounded on long recordings)."""
         share = self._share
         with share.lock:
             if not self._prefetch or i >= len(self.windows) or i in share.built or i in share.building:
+                return
+            if share.ahead is not None and i > max(share.positions.values(), default=0) + 2:
                 return
             if share.pending is not None:
                 if share.pending[0] not in share.built:
@@ -322,7 +268,31 @@ class OfflineBackground:
                 share.pending[1].cancel()  # its window was built without it (read again): drop it
             if share.executor is None:
                 share.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wptrack-background")
-            share.pending = (i, share.executor.submit(self._read, i))
+            if share.ahead is not None:
+                share.building[i] = threading.Event()  # claimed by the builder: the models wait for it
+                share.failed.pop(i, None)
+                share.pending = (i, share.executor.submit(share.ahead._build_ahead, i))
+            else:
+                share.pending = (i, share.executor.submit(self._read, i))
+
+    def _build_ahead(self, i: int) -> None:
+        """The worker's task with a builder: read window ``i`` and build it (this model is the share's builder; its
+        device work inside the device guard's shared section, as the mask threads' is), then release the models
+        waiting for it."""
+        share = self._share
+        with share.lock:
+            if share.pending is not None and share.pending[0] == i:
+                share.pending = None  # taken by this task: the build's prefetch may submit the next window
+        try:
+            got = self._read(i)
+            with share.guard.shared():
+                self._build(i, prefetch=True, got=got)
+        except BaseException as e:  # noqa: BLE001 - raised by the models that wait for the window
+            with share.lock:
+                share.failed[i] = e
+        finally:
+            with share.lock:
+                share.building.pop(i).set()
 
     def _window(self, i: int, prefetch: bool = False) -> tuple[Any, Any]:
         """``(median, mad)`` device arrays of window ``i`` (built on first use; with ``prefetch``, building it
@@ -340,7 +310,11 @@ class OfflineBackground:
                 self._submit(i + 1)
             return done
         if waiting is not None:  # another model builds it: wait, then use it
-            waiting.wait()
+            if share.guard is not None:
+                with share.guard.paused():  # the builder's device work may wait for a capture that waits for us
+                    waiting.wait()
+            else:
+                waiting.wait()
             with share.lock:
                 if i in share.failed:
                     raise share.failed[i]
@@ -357,13 +331,20 @@ class OfflineBackground:
             with share.lock:
                 share.building.pop(i).set()
 
-    def _build(self, i: int, prefetch: bool) -> tuple[Any, Any]:
-        """Build window ``i`` (this model claimed it in its :class:`WindowShare`); ``(median, mad)``."""
+    def _build(self, i: int, prefetch: bool, got: _WindowRead | None = None) -> tuple[Any, Any]:
+        """Build window ``i`` (this model claimed it in its :class:`WindowShare`) from its read ``got`` (None: take
+        it); ``(median, mad)``."""
         import warp as wp
 
         from wptrack.kernels.core import background as kbg
 
-        got = self._take(i)
+        if got is None:
+            got = self._take(i)
+        else:
+            for note in got.notes:
+                log.warning(*note)
+            if got.error is not None:
+                raise got.error
         frames = got.frames
         if not frames:
             if self._built:
@@ -577,8 +558,11 @@ class OfflineBackground:
         """Stop and join the prefetch worker (a read in progress stops at its next frame and is dropped) and
         release the sampler's video reader. The model stays usable: a later call reads again (a new worker)."""
         pending, self._pending = self._pending, None
-        if pending is not None:
-            pending[1].cancel()
+        if pending is not None and pending[1].cancel() and self._share.ahead is not None:
+            with self._share.lock:  # a build that will not run: release its claim
+                event = self._share.building.pop(pending[0], None)
+            if event is not None:
+                event.set()
         if self._executor is not None:
             self._sampler.stop.set()
             try:

@@ -1,5 +1,5 @@
 """The clean-up of the offline model's foreground on the device (issue 27): the penumbra test, the hysteresis and the
-morphological opening and closing of :func:`wptrack.motion.background.resolve_levels` and
+morphological opening and closing of :func:`wptrack.motion.levels.resolve_levels` and
 :func:`wptrack.motion.masks.clean_mask`, as Warp kernels (:mod:`wptrack.kernels.core.morphology`), so a mask made
 on the GPU can stay there (no download of the levels, no host connected components, no upload for the tracker).
 
@@ -49,7 +49,7 @@ class DeviceCleanup:
         open_px, close_px: Diameters of the opening and the closing (0 or 1: off), as ``MaskConfig``.
         device: Warp device.
         penumbra_px: Penumbra candidates within this many pixels of a cast shadow's core are shadow
-            (``wptrack.motion.background.PENUMBRA_PX``).
+            (``wptrack.motion.levels.PENUMBRA_PX``).
 
     Raises:
         ConfigError: a diameter below 0.

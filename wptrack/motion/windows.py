@@ -232,6 +232,11 @@ class WindowShare:
         self.building: dict[int, threading.Event] = {}  # windows being built, set when done (or failed)
         self.failed: dict[int, BaseException] = {}  # a failed build's error, raised by the models that waited
         self.positions: dict[int, int] = {}  # id(model) -> the first window its current frame needs
+        self.ahead: Any = None
+        """A model that builds the windows in the prefetch worker, ahead of the frames that need them (None: the first
+        model that needs a window builds it, and the others wait meanwhile); set by
+        :func:`wptrack.motion.parallel.parallel_evidence` with ``guard``."""
+        self.guard: Any = None  # the device's DeviceGuard: the builder's device work is shared work
 
     def drop_before(self, model: Any, i: int) -> None:
         """``model``'s frames now need windows ``>= i``: drop the windows no model needs any more."""
