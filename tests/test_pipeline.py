@@ -722,8 +722,8 @@ def test_masks_in_several_threads_equal_one_model(tmp_path, rng, monkeypatch, wo
     many = list(stream.evidence())
     assert len(many) == len(one) == 48 and len(stream.model.windows) >= 4
     assert sorted(w for w, _ in built) == list(range(len(stream.model.windows)))  # each window built once
-    # the first by a mask thread, the later ones ahead of their frames by the prefetch worker
-    assert [name.startswith("wptrack-background") for _, name in sorted(built)] == [False] + [True] * (len(built) - 1)
+    # the first by a mask thread, the later ones ahead of their frames by the build worker
+    assert [name.startswith("wptrack-build") for _, name in sorted(built)] == [False] + [True] * (len(built) - 1)
     assert stream.model._share.ahead is None  # the stream's model alone again after the pass
     assert reads == one_reads and len(one_reads) == len(stream.model.windows)
     assert sum(int(m.sum()) for m, _ in one) > 0

@@ -114,8 +114,8 @@ class OfflineBackground:
     are logged, and its errors raised, by the calling thread when it takes the read. A request for another window
     first waits for (or cancels) the pending read and drops it. :meth:`background` and :meth:`spread` do not
     prefetch. Several models in threads (:class:`~wptrack.motion.windows.WindowShare`, ``share``) share the windows,
-    the sampler and the worker; there the worker also builds each window after the first (a builder model of the
-    share, its device work in the device guard's shared section like the mask threads').
+    the sampler and the worker; there a build worker builds each window after the first from the reader's read (a
+    builder model of the share, its device work in the device guard's shared section like the mask threads').
     """
 
     def __init__(self, source: FrameSource, config: Any, device: str, share: WindowShare | None = None) -> None:
@@ -271,20 +271,23 @@ class OfflineBackground:
             if share.ahead is not None:
                 share.building[i] = threading.Event()  # claimed by the builder: the models wait for it
                 share.failed.pop(i, None)
-                share.pending = (i, share.executor.submit(share.ahead._build_ahead, i))
+                if share.build_executor is None:
+                    share.build_executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wptrack-build")
+                read = share.executor.submit(share.ahead._read, i)  # the reader reads on while a window is built
+                share.pending = (i, share.build_executor.submit(share.ahead._build_ahead, i, read))
             else:
                 share.pending = (i, share.executor.submit(self._read, i))
 
-    def _build_ahead(self, i: int) -> None:
-        """The worker's task with a builder: read window ``i`` and build it (this model is the share's builder; its
-        device work inside the device guard's shared section, as the mask threads' is), then release the models
-        waiting for it."""
+    def _build_ahead(self, i: int, read: Future) -> None:
+        """The build worker's task: build window ``i`` from its ``read`` (the reader's; this model is the share's
+        builder, its device work inside the device guard's shared section as the mask threads' is), then release the
+        models waiting for it. The next window's read starts when this build starts."""
         share = self._share
         with share.lock:
             if share.pending is not None and share.pending[0] == i:
                 share.pending = None  # taken by this task: the build's prefetch may submit the next window
         try:
-            got = self._read(i)
+            got = read.result()
             with share.guard.shared():
                 self._build(i, prefetch=True, got=got)
         except BaseException as e:  # noqa: BLE001 - raised by the models that wait for the window
@@ -563,11 +566,13 @@ class OfflineBackground:
                 event = self._share.building.pop(pending[0], None)
             if event is not None:
                 event.set()
-        if self._executor is not None:
+        if self._executor is not None or self._share.build_executor is not None:
             self._sampler.stop.set()
             try:
-                self._executor.shutdown(wait=True, cancel_futures=True)
+                for executor in (self._share.build_executor, self._executor):
+                    if executor is not None:
+                        executor.shutdown(wait=True, cancel_futures=True)
             finally:
-                self._executor = None
+                self._executor = self._share.build_executor = None
                 self._sampler.stop.clear()
         self._sampler.close()

@@ -6,11 +6,11 @@ worker threads, each with an :class:`wptrack.motion.background.OfflineBackground
 stream's ``model``, so its ``on_build`` callback and its windows serve the caller as before), and yields the masks in
 frame order. A frame's evidence depends on that frame and the windows around it only, and the models share their
 windows (:class:`wptrack.motion.background.WindowShare`: each built once, by the first model that needs it, from the
-samples one shared reader reads in the same order as for one model; the windows after the first are read and built
-by that reader's worker thread ahead of the frames that need them), so the masks are those of one model, frame for
-frame (tested). The cost: ``W`` times a model's per-frame device buffers. Queues of 2 per worker bound the memory.
-Errors (the source's, a model's) are raised in the caller at the frame they concern; leaving the iteration early
-stops the threads.
+samples one shared reader reads in the same order as for one model; the windows after the first are read by that
+reader's worker thread and built by a build worker, ahead of the frames that need them), so the masks are those of
+one model, frame for frame (tested). The cost: ``W`` times a model's per-frame device buffers. Queues of 2 per
+worker bound the memory. Errors (the source's, a model's) are raised in the caller at the frame they concern; leaving
+the iteration early stops the threads.
 
 Opt-in (``WPTRACK_MASK_WORKERS=N``, :func:`mask_workers`): measured on the CPU only, where the mask step is not the
 slowest stage of a run (the filter is) and extra models cost the two cores more than they save.
@@ -77,7 +77,7 @@ def parallel_evidence(
         models = [masks.model] + [
             OfflineBackground(masks.source, c, masks.model.device, share=share) for _ in range(workers - 1)
         ]
-        # the windows after the first are read and built by the prefetch worker, ahead of the frames that need them
+        # the windows after the first are read by the reader and built by a build worker, ahead of their frames
         # (a build in a mask thread held the others back: at 1080p ~1 s per window on an H100 host)
         builder = OfflineBackground(masks.source, c, masks.model.device, share=share)
     for model in models[1:]:  # the first model's clean-up and probability settings for every model

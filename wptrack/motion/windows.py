@@ -223,6 +223,7 @@ class WindowShare:
         self.read_lock = threading.Lock()  # the sampler serves one read at a time
         self.executor: ThreadPoolExecutor | None = None  # the prefetch worker (one thread), made on first use
         self.pending: tuple[int, Future] | None = None  # (window, its read) submitted to the worker
+        self.build_executor: ThreadPoolExecutor | None = None  # with a builder (``ahead``): its build worker
         self.built: dict[int, tuple[Any, Any]] = {}
         self.bg_sub: dict[int, np.ndarray] = {}
         self.bg_gain: dict[int, np.ndarray] = {}
