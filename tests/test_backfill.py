@@ -145,6 +145,33 @@ def test_backfill_tracks_file_keeps_every_line_and_the_frame_order(tmp_path):
     assert not list(tmp_path.glob("*.tmp"))
 
 
+def test_backfill_reaches_the_runs_first_frame(tmp_path):
+    """A run's first frame has no row (the filter adds objects after a frame's estimate): with ``first_frame`` the
+    tracks are extended down to it, rows and file alike, and never before it; without it the table's first frame
+    bounds them (as before)."""
+    t = _table({1: (1, 30, (6.0, 2.0), (0.1, 0.0), 0.4), 2: (3, 30, (-6.0, 2.0), (0.0, 0.1), 0.4)})
+    added, _ = backfill_rows(t, _to_world, _always, frames=20, min_rows=15)
+    assert added["frame"].tolist() == [2, 1]  # track 2 only, down to frame 1: the table's first frame
+    added, _ = backfill_rows(t, _to_world, _always, frames=20, min_rows=15, first_frame=0)
+    assert sorted(zip(added["id"].tolist(), added["frame"].tolist(), strict=True)) == [(1, 0), (2, 0), (2, 1), (2, 2)]
+    np.testing.assert_allclose(added["gx"][added["id"] == 1], [5.9])
+    added, _ = backfill_rows(t, _to_world, _always, frames=2, min_rows=15, first_frame=0)
+    assert sorted(zip(added["id"].tolist(), added["frame"].tolist(), strict=True)) == [(1, 0), (2, 1), (2, 2)]
+    lines = [HEADER]
+    for f in range(1, 30):
+        x = 6.0 + 0.1 * (f - 1)
+        lines.append(f"{f},3,{x:.6f},2.000000,0.000000,human,0.4,0.4,1.7,0.3,1.5,0.8,{x:.6f},2.000000,0.1,0.1,0")
+    path = tmp_path / "tracks.csv"
+    path.write_text("\n".join(lines) + "\n")
+    assert backfill_tracks_file(path, _to_world, _always, frames=4, min_rows=15) == 0
+    assert path.read_text().splitlines() == lines
+    assert backfill_tracks_file(path, _to_world, _always, frames=4, min_rows=15, first_frame=0) == 1
+    out = path.read_text().splitlines()
+    assert out[0] == HEADER and out[2:] == lines[1:]
+    row = out[1].split(",")
+    assert row[0] == "0" and row[1] == "3" and float(row[2]) == pytest.approx(5.9)
+
+
 def test_backfill_tracks_file_errors_name_the_file(tmp_path):
     path = tmp_path / "tracks.csv"
     path.write_text("frame,id,x,y\n0,1,0.0,0.0\n")
@@ -207,6 +234,9 @@ def test_a_completed_template_run_is_backfilled(tmp_path, capsys):
     for tid in np.unique(kept["id"][filled]):  # backfilled rows come before the track's first own row
         own = every["frame"][every["id"] == tid]
         assert kept["frame"][filled & (kept["id"] == tid)].max() < own.min()
+    # the run's first frame has no row of the tracker's own; the backfill reaches it (the people in view from the
+    # start)
+    assert every["frame"].min() > 0 and kept["frame"].min() == 0
     if run["stitched_tracks"] == 0:
         assert len(kept["frame"]) - int(filled.sum()) == int(np.isin(every["id"], kept["id"]).sum())
 

@@ -835,7 +835,9 @@ def test_uoh_box_sums_exact_past_2_47(device, rng, cpu_blocks, block_dim, h, col
 # ------------------------------------------------------------------------------------------ 4-5. candidates
 
 
-def candidate_case(device, rng, min_gain: float, min_area: int, beta: float = 0.5, block_dim: int = CANDIDATE_BLOCK):
+def candidate_case(
+    device, rng, min_gain: float, min_area: int, beta: float = 0.5, block_dim: int = CANDIDATE_BLOCK, cost=None
+):
     cam = random_camera(rng)
     plane = GroundPlane()
     config = TemplateConfig(
@@ -873,6 +875,7 @@ def candidate_case(device, rng, min_gain: float, min_area: int, beta: float = 0.
             beta,
             min_gain,
             min_area,
+            wp.array(np.zeros(cands.count) if cost is None else cost, dtype=wp.float32, device=device),
         ],
         outputs=[score, area],
         block_dim=block_dim,
@@ -944,6 +947,33 @@ def test_candidate_min_area_rule(device):
     assert np.all(score[small] == NEG_INF32)
     np.testing.assert_allclose(score[~small], gain_ref[~small], rtol=1e-6, atol=1e-6)
     np.testing.assert_allclose(score0, gain_ref, rtol=1e-6, atol=1e-6)
+
+
+def test_candidate_cost_gates_and_ranks(device):
+    """With a cost per candidate (TemplateConfig.add_cost), a candidate is eligible when its gain reaches both
+    min_gain x area and its cost, and its score is the gain less the cost: candidates whose gain is above min_gain x
+    area but below their cost get -3e38, the others gain - cost; zero costs leave the scores of eq. 11 unchanged."""
+    min_gain, min_area = 0.05, 30
+    score0, _, area_ref, gain_ref, *_ = candidate_case(device, np.random.default_rng(11), min_gain, min_area)
+    base = (area_ref >= min_area) & (gain_ref >= min_gain * area_ref)
+    # a cost per candidate that splits the eligible ones: a third of them cannot pay it
+    half = np.float32(np.median(gain_ref[base]) / 2)
+    cost = np.where(np.arange(len(gain_ref)) % 3 == 0, 1e9, half).astype(np.float32)
+    score, area, area_ref2, gain_ref2, *_ = candidate_case(
+        device, np.random.default_rng(11), min_gain, min_area, cost=cost
+    )
+    np.testing.assert_array_equal(gain_ref2, gain_ref)
+    need = np.maximum(min_gain * area_ref, cost.astype(np.float64))
+    eligible = (area_ref >= min_area) & (gain_ref >= need)
+    tie = np.abs(gain_ref - need) <= 1e-6 * np.maximum(np.abs(gain_ref), 1.0)
+    ok = ~tie
+    np.testing.assert_allclose(score[ok & eligible], (gain_ref - cost)[ok & eligible], rtol=1e-6, atol=1e-3)
+    assert np.all(score[ok & ~eligible] == NEG_INF32)
+    priced_out = ok & base & ~eligible
+    assert priced_out.sum() >= 3 and (ok & eligible).sum() >= 3, "both outcomes must be exercised"
+    assert np.all(score0[priced_out] > NEG_INF32)  # eligible without the cost
+    # the argmax (the proposed addition) is the eligible candidate of the largest gain less cost
+    assert int(np.argmax(score)) == int(np.argmax(np.where(eligible, gain_ref - cost, -np.inf)))
 
 
 def choose(device, best: int, best_score: float, slot_count, cand_kind=(1, 2, 2, 1), next_label=5):

@@ -260,10 +260,11 @@ def candidate_score_kernel(
     beta: float,
     min_gain: float,
     min_area: int,
+    cost: wp.array(dtype=wp.float32),
     score: wp.array(dtype=wp.float32),
     area: wp.array(dtype=wp.int32),
 ):
-    """Addition gain of every candidate (eq. 11, see the module docstring).
+    """Addition gain of every candidate (eq. 11, see the module docstring), less its cost.
 
     Launch with ``wp.launch_tiled(dim=[C], block_dim=B)``: block ``c`` is candidate ``c`` and its lanes stride
     over the rows of its pieces (one lane on the CPU backend); ``tile_sum`` combines the lanes' sums.
@@ -278,11 +279,14 @@ def candidate_score_kernel(
     Most candidates are settled without their rows: the gain times N is at most A, the UOH mass they cover
     (``beta >= 0`` and coverage <= N make the background term non-positive), and A is at most the UOH mass of
     their bounding box, four reads of the summed-area table ``a_sat`` (``uoh_box_sums_kernel``). A candidate whose
-    bound lies more than 1e-3 pixels below min_gain x area is not eligible whatever its rows hold (the float64
-    row sums err by far less), and gets -3e38 as before.
+    bound lies more than 1e-3 pixels below min_gain x area (or below its cost) is not eligible whatever its rows
+    hold (the float64 row sums err by far less), and gets -3e38 as before.
     """
     c, lane = wp.tid()
     pa = cand_area[c]
+    need = wp.float64(min_gain) * wp.float64(pa)
+    if cost[c] > 0.0:
+        need = wp.max(need, wp.float64(cost[c]))
     settled = pa < min_area
     if not settled and beta >= 0.0:
         bx = box[c]
@@ -290,7 +294,7 @@ def candidate_score_kernel(
         if bx[0] <= bx[2]:
             mass = a_sat[bx[3] + 1, bx[2] + 1] - a_sat[bx[1], bx[2] + 1] - a_sat[bx[3] + 1, bx[0]] + a_sat[bx[1], bx[0]]
             bound = wp.float64(mass) / wp.float64(n)
-        settled = bound < wp.float64(min_gain) * wp.float64(pa) - wp.float64(1.0e-3)
+        settled = bound < need - wp.float64(1.0e-3)
     if settled:  # uniform over the block: every lane returns here or none does
         if lane == 0:
             area[c] = pa
@@ -301,8 +305,8 @@ def candidate_score_kernel(
     if lane == 0:
         gain = gt[0] / wp.float64(n)
         area[c] = pa
-        if gain >= wp.float64(min_gain) * wp.float64(pa):
-            score[c] = wp.float32(gain)
+        if gain >= need:
+            score[c] = wp.float32(gain - wp.float64(cost[c]))
         else:
             score[c] = NEG_INF
 

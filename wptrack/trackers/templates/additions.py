@@ -154,6 +154,15 @@ class Candidates:
         self.kind = wp.array(self.kind_np, dtype=wp.int32, device=d)
         self.pos = wp.array(self.pos_np, dtype=wp.vec2, device=d)
         self.heading = wp.array(self.heading_np, dtype=wp.float32, device=d)
+        # beyond the paper (TemplateConfig.add_cost): what each candidate's object costs a particle at its addition
+        # (eq. 5 at age 0: a_r + b_r of its class, pixels at this image's size), 0 when off
+        area_scale = camera.width * camera.height / config.reference_area if config.reference_area > 0 else 1.0
+        priors = {int(kraster.KIND_HUMAN): config.human, int(kraster.KIND_VEHICLE): config.vehicle,
+                  int(kraster.KIND_CYCLIST): config.cyclist}  # fmt: skip
+        cost_np = np.zeros(c, dtype=np.float32)
+        for kind, prior in priors.items():
+            cost_np[self.kind_np == kind] = config.add_cost * (prior.cost_a + prior.cost_b) * area_scale
+        self.cost = wp.array(cost_np, dtype=wp.float32, device=d)
         self.score = wp.zeros(c, dtype=wp.float32, device=d)
         self.area = wp.zeros(c, dtype=wp.int32, device=d)
         self.blocks = min((c + BLOCK - 1) // BLOCK, MAX_BLOCKS)
@@ -217,6 +226,7 @@ def score_candidates(t: TemplateTracker) -> None:
             float(cfg.add_beta),
             float(cfg.add_min_gain),
             t.min_area,
+            c.cost,
         ],
         outputs=[c.score, c.area],
         block_dim=CANDIDATE_BLOCK,

@@ -140,6 +140,7 @@ def backfill_rows(
     fit_rows: int = 8,
     guard: float = 1.0,
     fps: float = 1.0,
+    first_frame: int | None = None,
 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """The rows that extend each lasting track back over the frames before its first row.
 
@@ -156,6 +157,9 @@ def backfill_rows(
         guard: Smallest ground distance to another track's row in the same frame, metres (raised to half the sum
             of the two objects' lengths when larger).
         fps: Frame rate, for the ``speed`` column of the added rows (m/s).
+        first_frame: The run's first frame: no row is added before it (default: the table's first frame). A run's
+            first frame never has a row (the filter starts without objects and adds them after a frame's
+            estimate), so a completed run passes its own first frame, 0.
 
     Returns:
         ``(rows, source)``: the added rows as columns (same keys as ``table``; tracks by id, frames backwards from
@@ -182,7 +186,8 @@ def backfill_rows(
             t.first, t.size, t.heading = i, size, float(heading[i])
         t.add(int(frame[i]), g, fit_rows)
         occupied.setdefault(int(frame[i]), []).append((g[0], g[1], size[0]))
-    plan = _plan(tracks, _windows(tracks, int(frame.min()), frames, min_rows), occupied, in_view, guard)
+    start = int(frame.min()) if first_frame is None else min(int(first_frame), int(frame.min()))
+    plan = _plan(tracks, _windows(tracks, start, frames, min_rows), occupied, in_view, guard)
     if not plan:
         return empty, np.zeros(0, dtype=np.int64)
     src = np.array([tracks[tid].first for tid, *_ in plan], dtype=np.int64)
@@ -271,6 +276,7 @@ def backfill_tracks_file(
     fit_rows: int = 8,
     guard: float = 1.0,
     fps: float = 1.0,
+    first_frame: int | None = None,
 ) -> int:
     """Extend the lasting tracks of a tracks CSV back in time (as :func:`backfill_rows`), in place and atomically.
 
@@ -278,7 +284,8 @@ def backfill_tracks_file(
     new ``frame, x, y, z, gx, gy``, ``speed`` (m/s), ``existence`` 0 and ``degenerate`` 0 (floats as ``%.6f``), and
     follows the existing lines of its frame. Three streaming passes (the tracks' counts and first rows; the rows
     in the frames a track may be extended over; the copy), so memory grows with the tracks and the backfilled
-    frames, not with the length of the run. Returns the number of rows added.
+    frames, not with the length of the run. ``first_frame``: the run's first frame (as :func:`backfill_rows`;
+    default: the file's first frame). Returns the number of rows added.
 
     Raises:
         OutputError: The file lacks a needed column, holds a value that is not a number where one is needed, is
@@ -301,6 +308,8 @@ def backfill_tracks_file(
             t.add(f, (number(cells, "gx"), number(cells, "gy")), fit_rows)
         if start is None:
             return 0
+        if first_frame is not None:
+            start = min(start, int(first_frame))
         windows = _windows(tracks, start, frames, min_rows)
         if not windows:
             return 0

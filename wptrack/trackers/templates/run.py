@@ -353,9 +353,11 @@ class TemplateRun(TrackerRun):
         def in_view(ground: np.ndarray, size: np.ndarray, heading: np.ndarray) -> np.ndarray:
             return box_fraction_in_image(camera, plane, ground, size, heading) >= least
 
+        # from the run's first frame (0, never reported: the filter adds objects after a frame's estimate)
         added = backfill_tracks_file(
-            path, plane.to_world, in_view, cfg.backfill_frames, int(cfg.backfill_min_frames), fps=cfg.frame_rate
-        )
+            path, plane.to_world, in_view, cfg.backfill_frames, int(cfg.backfill_min_frames), fps=cfg.frame_rate,
+            first_frame=0,
+        )  # fmt: skip
         stitched = stitch_tracks_file(path, cfg.stitch_frames, float(cfg.stitch_distance))
         log.info("%s: %d rows backfilled, %d tracks stitched to their predecessors", path, added, stitched)
         return {
