@@ -196,7 +196,7 @@ class PersonFilter(ParticleFilter):
             kcov.gate_kernel,
             dim=[1],
             inputs=[tr.sdrig.cams, tr.integral, tr.boxes, tr.slot_xy, self.slot, tr.terms]
-            + [pc.gate_reach, WALK_SPEED, tr.dt, GATE_SPACING, pc.gate, pc.gate_left],
+            + [pc.gate_reach, WALK_SPEED, tr.dt, GATE_SPACING, pc.gate, pc.gate_left, pc.gate_cameras],
             outputs=[self.observe, self.support],
             block_dim=GATE_BLOCK,
             device=self.device,
