@@ -387,7 +387,7 @@ def test_gate_picks_the_best_point_within_reach_and_shifts(device, rng, dt):
             wp.launch_tiled(
                 kcov.gate_kernel,
                 dim=[1],
-                inputs=[drig.cams, I, boxes, pdev, 0, terms, reach, speed, dt_dev, spacing, threshold, min_left, 0],
+                inputs=[drig.cams, I, boxes, pdev, 0, terms, reach, speed, dt_dev, spacing, threshold, min_left, 0, 0],
                 outputs=[observe, support],
                 block_dim=block,
                 device=device,
@@ -401,7 +401,7 @@ def test_gate_picks_the_best_point_within_reach_and_shifts(device, rng, dt):
         wp.launch_tiled(
             kcov.gate_kernel,
             dim=[1],
-            inputs=[drig.cams, I, boxes, pdev, 0, off, reach, speed, dt_dev, spacing, 0.99, min_left, 0],
+            inputs=[drig.cams, I, boxes, pdev, 0, off, reach, speed, dt_dev, spacing, 0.99, min_left, 0, 0],
             outputs=[observe, support],
             block_dim=block,
             device=device,
@@ -667,7 +667,7 @@ def test_gate_per_camera_takes_the_kth_camera(device, rng, k):
         wp.launch_tiled(
             kcov.gate_kernel,
             dim=[1],
-            inputs=[drig.cams, I, boxes, pdev, 0, terms, reach, speed, dt_dev, spacing, threshold, min_left, k],
+            inputs=[drig.cams, I, boxes, pdev, 0, terms, reach, speed, dt_dev, spacing, threshold, min_left, k, 0],
             outputs=[observe, support],
             block_dim=block,
             device=device,
@@ -733,3 +733,47 @@ def test_balanced_rectangle_term_weights_each_camera_by_its_own_rectangle(device
         )
         np.testing.assert_allclose(out.numpy(), expect, rtol=1e-4, atol=1e-3)
     assert np.abs(ref - pooled_ref).max() > 0.1  # the weights matter
+
+
+def test_gate_per_camera_use_splits_weighting_and_removal(device, rng):
+    """``use`` = 1: the support (removal) is the per-camera one, the weighting decision pooled; ``use`` = 2 the other
+    way round (k = 2, two cameras)."""
+    rig = make_rig()
+    drig = DeviceRig(rig, device)
+    flat = blob_masks(rig, rng)
+    I = integral(rig, drig, flat, device)  # noqa: E741
+    people = rng.uniform(1.0, 3.0, (3, 2)).astype(np.float32)
+    pdev = wp.array(people, dtype=wp.vec2, device=device)
+    boxes = wp.zeros((3, 2), dtype=wp.vec4, device=device)
+    wp.launch(
+        kcov.person_boxes_kernel,
+        dim=(3, 2),
+        inputs=[drig.cams, pdev, wp.array(np.ones(3, np.int32), device=device), HW, HEIGHT],
+        outputs=[boxes],
+        device=device,
+    )
+    terms = make_terms(weight=0.0)
+    dt_dev = wp.array([0.04], dtype=wp.float32, device=device)
+    args = [drig.cams, I, boxes, pdev, 0, terms, 0.25, 1.5, dt_dev, 0.125]
+
+    def gate(threshold, k, use):
+        observe = wp.array(np.array([7, 5], np.int32), device=device)
+        support = wp.zeros(1, dtype=wp.float32, device=device)
+        wp.launch_tiled(
+            kcov.gate_kernel,
+            dim=[1],
+            inputs=[*args, threshold, 0.25, k, use],
+            outputs=[observe, support],
+            block_dim=1,
+            device=device,
+        )
+        return int(observe.numpy()[0]), float(support.numpy()[0])
+
+    _, pooled = gate(0.5, 0, 0)
+    _, per_camera = gate(0.5, 2, 0)
+    assert 0 < per_camera < pooled - 0.01  # the second camera's coverage is below the pooled one
+    t = 0.5 * (per_camera + pooled)
+    assert gate(t, 2, 0) == (0, pytest.approx(per_camera))
+    assert gate(t, 2, 1) == (1, pytest.approx(per_camera))  # weighted (pooled), support per camera
+    assert gate(t, 2, 2) == (0, pytest.approx(pooled))  # not weighted (per camera), support pooled
+    assert gate(t, 0, 2) == (1, pytest.approx(pooled))  # k = 0: pooled whatever use says

@@ -634,6 +634,7 @@ def gate_kernel(
     min_coverage: float,
     min_left: float,
     cameras: int,
+    use: int,
     observe: wp.array(dtype=wp.int32),
     support: wp.array(dtype=wp.float32),
 ):
@@ -648,7 +649,9 @@ def gate_kernel(
     ``cameras`` = k > 0 the coverage at a point is instead the k-th largest of the cameras' own coverages
     (:func:`kth_camera_coverage`: each camera judges what the others leave of its rectangle, where that is at least
     ``min_left`` of it): k cameras must each see the person (a position is fixed by two views; one camera's
-    silhouette alone is a ray, where a filter can slide in depth onto another person's silhouette). Always 1 when
+    silhouette alone is a ray, where a filter can slide in depth onto another person's silhouette); ``use`` says for
+    what: 0 both outputs, 1 only ``support`` (removal; ``observe`` pooled), 2 only ``observe`` (weighting; ``support``
+    pooled). Always 1 when
     the rectangle term is off (``terms.slope == 0``). ``support[0]`` = the best such coverage (0 when off). Launch
     ``wp.launch_tiled(dim=[1], block_dim=B)``: the block's lanes share the (2 m + 1)^2 grid points (point j is
     (j // (2 m + 1) - m, j % (2 m + 1) - m) spacings away), their best coverages reduced with ``wp.tile_max`` (a
@@ -661,6 +664,7 @@ def gate_kernel(
             support[0] = 0.0
         return
     best = float(0.0)
+    best_k = float(0.0)
     p = people[own]
     m = int(wp.ceil((reach + speed * dt[0]) / spacing))
     side = 2 * m + 1
@@ -682,18 +686,25 @@ def gate_kernel(
                 min_left,
                 cameras,
             )
-            best = wp.max(best, cov)
-        else:
+            best_k = wp.max(best_k, cov)
+        if cameras == 0 or use != 0:
             on, area, full = box_counts_left(
                 cams, integral, boxes, own, x, terms.half_width, terms.height, terms.min_visible, terms.unit
             )
             if area > 0.0 and area >= min_left * full:
                 best = wp.max(best, on / area)
     top = wp.tile_max(wp.tile(best))
+    top_k = wp.tile_max(wp.tile(best_k))
     if lane == 0:
+        seen = top[0]  # observe (weighting) and support (removal): pooled
+        shown = top[0]
+        if cameras > 0 and use != 1:
+            seen = top_k[0]
+        if cameras > 0 and use != 2:
+            shown = top_k[0]
         observe[1] = observe[0]
-        observe[0] = wp.where(top[0] > min_coverage, 1, 0)
-        support[0] = wp.float32(top[0])
+        observe[0] = wp.where(seen > min_coverage, 1, 0)
+        support[0] = wp.float32(shown)
 
 
 HIST_H = wp.constant(8)

@@ -36,6 +36,7 @@ __all__ = [
 
 OUTSIDE_MODES = ("background", "neutral")
 EXPLAINED_MODES = ("empty", "neutral")
+GATE_USES = ("both", "removal", "weighting")
 
 
 @dataclass(frozen=True)
@@ -416,6 +417,9 @@ class PersonConfig:
             their rectangle (where that is at least ``gate_left`` of it; a camera where the person is hidden does not
             judge), so one camera's silhouette alone, a ray along which a filter slides in depth, does not keep a
             person seen (``kernels.people.coverage.kth_camera_coverage``). Ours: 0.
+        gate_cameras_use: what that per-camera rule decides (with ``gate_cameras`` > 0): ``both``, ``removal``
+            (whether the person is seen for ``remove_seconds``; the weighting stays pooled) or ``weighting``
+            (whether the filter is weighted; removal stays pooled). Ours: both.
         balance_cameras: weight each camera's rectangle term of a particle by the mean area of the person's own
             rectangles over the cameras divided by its area in that camera (at its last position): every camera holds
             the same evidence about a person whatever its distance, so a near camera's large silhouette does not
@@ -485,6 +489,11 @@ class PersonConfig:
         0,
         help="0: the gate pools the cameras; k: k cameras must each show the person (where not hidden by others)",
         lo=0,
+    )
+    gate_cameras_use: str = param(
+        "both",
+        help="what the per-camera gate decides: both, removal (weighting pooled) or weighting (removal pooled)",
+        choices=GATE_USES,
     )
     balance_cameras: bool = param(
         False,
