@@ -414,10 +414,11 @@ def test_gate_cameras_needs_that_many_views(device, blank):
 
     rig = rig3()
     xy = np.array([2.0, 2.0])
-    support = {}
-    for cams in (0, 2):
+    support, weighted = {}, {}
+    for cams in (0, 2, None):  # None: the defaults (two cameras, for the removal)
         cfg = _config()
-        cfg = replace(cfg, person=replace(cfg.person, gate_cameras=cams))
+        if cams is not None:
+            cfg = replace(cfg, person=replace(cfg.person, gate_cameras=cams, gate_cameras_use="both"))
         tr = PeopleTracker(rig, cfg, device=device, keep_particles=0)
         tr.add_person(xy)
         rng = np.random.default_rng(31)
@@ -427,9 +428,11 @@ def test_gate_cameras_needs_that_many_views(device, blank):
                 masks = [m if c >= blank else np.zeros_like(m) for c, m in enumerate(masks)]
             est = tr.step(images, masks)
         support[cams] = est.people[0].support
+        weighted[cams] = int(tr.pool[0].observe.numpy()[0])  # the gate's weighting decision (slot 0)
     gate = _config().person.gate
     assert support[0] > gate
     if blank == 1:
-        assert support[2] > gate  # two cameras still show it
+        assert support[2] > gate and support[None] > gate  # two cameras still show it
     else:
-        assert support[2] <= gate
+        assert support[2] <= gate and support[None] <= gate
+        assert weighted == {0: 1, 2: 0, None: 1}  # by default only the removal asks two views
