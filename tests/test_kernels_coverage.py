@@ -387,7 +387,7 @@ def test_gate_picks_the_best_point_within_reach_and_shifts(device, rng, dt):
             wp.launch_tiled(
                 kcov.gate_kernel,
                 dim=[1],
-                inputs=[drig.cams, I, boxes, pdev, 0, terms, reach, speed, dt_dev, spacing, threshold, min_left],
+                inputs=[drig.cams, I, boxes, pdev, 0, terms, reach, speed, dt_dev, spacing, threshold, min_left, 0, 0],
                 outputs=[observe, support],
                 block_dim=block,
                 device=device,
@@ -401,7 +401,7 @@ def test_gate_picks_the_best_point_within_reach_and_shifts(device, rng, dt):
         wp.launch_tiled(
             kcov.gate_kernel,
             dim=[1],
-            inputs=[drig.cams, I, boxes, pdev, 0, off, reach, speed, dt_dev, spacing, 0.99, min_left],
+            inputs=[drig.cams, I, boxes, pdev, 0, off, reach, speed, dt_dev, spacing, 0.99, min_left, 0, 0],
             outputs=[observe, support],
             block_dim=block,
             device=device,
@@ -524,3 +524,256 @@ def test_reduced_masks_count_blocks_and_their_rectangles_scale(device, rng, scal
     both = (covs[0] >= 0) & (covs[1] >= 0)
     assert both.sum() > 100
     assert np.median(np.abs(covs[0] - covs[1])[both]) < 0.03
+
+
+def test_left_mask_and_left_coverage_match_numpy(device, rng):
+    """The part of a candidate's rectangle the tracked people's rectangles leave (left_mask_kernel's map, counted
+    with its integral image) and the unexplained motion's coverage of that part (left_coverage_kernel), against
+    NumPy, on blocks of 2 x 2 pixels (``unit`` 4: the free mask holds block counts, the left map one per block)."""
+    rig = make_rig()
+    drig = DeviceRig(rig, device)
+    flat = blob_masks(rig, rng)
+    people = rng.uniform(0.5, 3.5, (4, 2)).astype(np.float32)
+    alive = np.array([1, 1, 0, 1], np.int32)
+    boxes = wp.zeros((4, 2), dtype=wp.vec4, device=device)
+    wp.launch(
+        kcov.person_boxes_kernel,
+        dim=(4, 2),
+        inputs=[drig.cams, wp.array(people, dtype=wp.vec2, device=device), wp.array(alive, device=device), HW, HEIGHT],
+        outputs=[boxes],
+        device=device,
+    )
+    free = wp.zeros(len(flat), dtype=wp.uint8, device=device)
+    wp.launch(
+        kcov.explained_mask_kernel,
+        dim=(2, 72, 96),
+        inputs=[drig.cams, wp.array(flat, dtype=wp.uint8, device=device), boxes, 4],
+        outputs=[free],
+        device=device,
+    )
+    left = wp.zeros(len(flat), dtype=wp.uint8, device=device)
+    wp.launch(kcov.left_mask_kernel, dim=(2, 72, 96), inputs=[drig.cams, boxes, 4], outputs=[left], device=device)
+    got_boxes = boxes.numpy()
+    expect_left = [np.ones((c.height, c.width), np.uint8) for c in rig.cameras]
+    for c in range(2):
+        for b in got_boxes[:, c]:
+            u0, v0, u1, v1 = (int(v) for v in b)
+            expect_left[c][v0:v1, u0:u1] = 0
+    np.testing.assert_array_equal(left.numpy(), np.concatenate([e.reshape(-1) for e in expect_left]))
+    assert 0 < left.numpy().sum() < len(flat)
+    # pretend the masks were block sums of 2 x 2 pixels: the free mask's pixels hold up to 4, the areas count blocks
+    free4 = wp.array(free.numpy() * 4, dtype=wp.uint8, device=device)
+    If, Il = integral(rig, drig, free4.numpy(), device), integral(rig, drig, left.numpy(), device)
+    origin, cell, nx, ny, unit = (-0.5, -0.5), 0.2, 25, 22, 4.0
+    cov = wp.zeros((2, nx * ny), dtype=wp.float32, device=device)
+    part = wp.zeros((2, nx * ny), dtype=wp.float32, device=device)
+    wp.launch(
+        kcov.left_coverage_kernel,
+        dim=(2, nx * ny),
+        inputs=[drig.cams, If, Il, wp.vec2(*origin), cell, nx, HW, HEIGHT, VIS, unit],
+        outputs=[cov, part],
+        device=device,
+    )
+    t = np.arange(nx * ny)
+    xy = np.column_stack([origin[0] + cell * (t % nx + 0.5), origin[1] + cell * (t // nx + 0.5)])
+    cboxes, full = box_ref(rig, drig, xy.astype(np.float32).astype(np.float64), device)
+    fmask = masks_2d(rig, free4.numpy())
+    checked = hidden = 0
+    for c in range(2):
+        a = (cboxes[c, :, 2] - cboxes[c, :, 0]) * (cboxes[c, :, 3] - cboxes[c, :, 1])
+        seen = (full[c] > 0) & (a > 0) & (a >= VIS * full[c])
+        rest = np.array([count_ref(expect_left[c], b) for b in cboxes[c]], np.float64)
+        on = np.array([count_ref(fmask[c], b) for b in cboxes[c]], np.float64)
+        ref_part = np.where(seen, rest / np.maximum(a, 1), -1.0)
+        ref_cov = np.where(seen, np.where(rest > 0, on / np.maximum(rest * unit, 1), 0.0), -1.0)
+        same = np.isclose(part.numpy()[c], ref_part, atol=1e-6)  # a rounding tie can move an edge by a pixel
+        assert same.mean() > 0.97 and seen.sum() > 100
+        np.testing.assert_allclose(cov.numpy()[c][same], ref_cov[same], rtol=1e-5, atol=1e-6)
+        checked += int((same & seen).sum())
+        hidden += int((same & seen & (ref_part < 0.5)).sum())
+    assert checked > 200 and hidden > 5  # some candidates are half hidden by the tracked people
+
+
+@wp.kernel
+def _camera_counts_kernel(
+    cams: wp.array(dtype=kcam.Camera),
+    integral: wp.array(dtype=wp.int32),
+    boxes: wp.array2d(dtype=wp.vec4),
+    own: int,
+    points: wp.array(dtype=wp.vec3),
+    out: wp.array2d(dtype=wp.vec4),
+):
+    i, c = wp.tid()
+    seen, on, area, full = kcov.camera_counts_left(cams[c], c, integral, boxes, own, points[i], HW, HEIGHT, VIS)
+    out[i, c] = wp.vec4(float(seen), on, area, full)
+
+
+@pytest.mark.parametrize("k", [1, 2, 3])
+def test_gate_per_camera_takes_the_kth_camera(device, rng, k):
+    """``cameras`` = k: the gate's support is the best, over its grid points, of the k-th largest coverage among the
+    cameras that judge the point (what the others leave of the rectangle there is at least ``min_left`` of it), 0
+    where fewer than k judge (k = 3 with two cameras: never seen); the per-camera counts add up to the pooled
+    ones (``box_counts_left``)."""
+    rig = make_rig()
+    drig = DeviceRig(rig, device)
+    flat = blob_masks(rig, rng)
+    I = integral(rig, drig, flat, device)  # noqa: E741
+    people = rng.uniform(1.0, 3.0, (3, 2)).astype(np.float32)
+    pdev = wp.array(people, dtype=wp.vec2, device=device)
+    boxes = wp.zeros((3, 2), dtype=wp.vec4, device=device)
+    wp.launch(
+        kcov.person_boxes_kernel,
+        dim=(3, 2),
+        inputs=[drig.cams, pdev, wp.array(np.ones(3, np.int32), device=device), HW, HEIGHT],
+        outputs=[boxes],
+        device=device,
+    )
+    reach, speed, spacing, min_left, dt = 0.25, 1.5, 0.125, 0.25, 0.04
+    m = int(np.ceil((reach + speed * np.float32(dt)) / spacing))
+    pts = np.array(
+        [
+            [people[0, 0] + spacing * a, people[0, 1] + spacing * b, 0.0]
+            for a in range(-m, m + 1)
+            for b in range(-m, m + 1)
+        ],
+        np.float32,
+    )
+    pts_dev = wp.array(pts, dtype=wp.vec3, device=device)
+    per = wp.zeros((len(pts), 2), dtype=wp.vec4, device=device)
+    wp.launch(
+        _camera_counts_kernel, dim=(len(pts), 2), inputs=[drig.cams, I, boxes, 0, pts_dev], outputs=[per], device=device
+    )
+    pooled = wp.zeros(len(pts), dtype=wp.vec3, device=device)
+    wp.launch(_counts_kernel, dim=len(pts), inputs=[drig.cams, I, boxes, 0, pts_dev], outputs=[pooled], device=device)
+    p = per.numpy().astype(np.float64)  # (points, cameras, [seen, on, area, full])
+    np.testing.assert_allclose(p[..., 1].sum(1), pooled.numpy()[:, 0], rtol=1e-6)
+    np.testing.assert_allclose(p[..., 2].sum(1), pooled.numpy()[:, 1], rtol=1e-6)
+    np.testing.assert_allclose(p[..., 3].sum(1), pooled.numpy()[:, 2], rtol=1e-6)
+    judge = (p[..., 0] > 0) & (p[..., 2] > 0) & (p[..., 2] >= min_left * p[..., 3])
+    cov = np.where(judge, p[..., 1] / np.maximum(p[..., 2], 1), -np.inf)
+    ranked = -np.sort(-cov, axis=1)  # largest first
+    kth = ranked[:, k - 1] if k <= 2 else np.full(len(pts), -np.inf)
+    best = float(np.max(np.where(np.isfinite(kth), kth, 0.0)))
+    assert (judge.sum(1) == 2).any() and (judge.sum(1) < 2).any() or k == 3
+    if k < 3:
+        assert 0 < best < 1
+    terms = make_terms(weight=0.0)
+    dt_dev = wp.array([dt], dtype=wp.float32, device=device)
+    threshold = best - 0.01 if k < 3 else 0.01
+    got = []
+    for block in (1, 64):
+        observe = wp.array(np.array([7, 5], np.int32), device=device)
+        support = wp.zeros(1, dtype=wp.float32, device=device)
+        wp.launch_tiled(
+            kcov.gate_kernel,
+            dim=[1],
+            inputs=[drig.cams, I, boxes, pdev, 0, terms, reach, speed, dt_dev, spacing, threshold, min_left, k, 0],
+            outputs=[observe, support],
+            block_dim=block,
+            device=device,
+        )
+        assert support.numpy()[0] == pytest.approx(best, rel=1e-5, abs=1e-6)
+        assert observe.numpy()[0] == (1 if k < 3 else 0)
+        got.append(support.numpy()[0])
+    assert got[0] == got[1]
+    if k == 2:  # the second camera's coverage is below the pooled one somewhere: the rule is stricter
+        pooled_best = np.max(np.where(judge.any(1), pooled.numpy()[:, 0] / np.maximum(pooled.numpy()[:, 1], 1), 0))
+        assert best < pooled_best
+
+
+def test_balanced_rectangle_term_weights_each_camera_by_its_own_rectangle(device, rng):
+    """``PersonTerms.balance``: each camera's rectangle term (what the others leave of the rectangle, as in the
+    pooled term) is weighted by the mean area of the person's own rectangles over the cameras divided by its own in
+    that camera (1 where its own is empty), against NumPy from the per-camera counts; off, the pooled term."""
+    rig = make_rig()
+    drig = DeviceRig(rig, device)
+    flat = blob_masks(rig, rng)
+    I = integral(rig, drig, flat, device)  # noqa: E741
+    people = rng.uniform(0.5, 3.5, (4, 2)).astype(np.float32)
+    own = 1
+    people[own] = (1.0, 3.2)  # nearer camera a than camera b: its rectangles differ in size
+    boxes = wp.zeros((4, 2), dtype=wp.vec4, device=device)
+    alive = wp.array(np.ones(4, np.int32), device=device)
+    pdev = wp.array(people, dtype=wp.vec2, device=device)
+    wp.launch(
+        kcov.person_boxes_kernel,
+        dim=(4, 2),
+        inputs=[drig.cams, pdev, alive, HW, HEIGHT],
+        outputs=[boxes],
+        device=device,
+    )
+    pts = np.column_stack([people[own] + rng.normal(0, 0.4, (200, 2)), np.zeros(200)]).astype(np.float32)
+    pts_dev = wp.array(pts, dtype=wp.vec3, device=device)
+    per = wp.zeros((len(pts), 2), dtype=wp.vec4, device=device)
+    wp.launch(
+        _camera_counts_kernel,
+        dim=(len(pts), 2),
+        inputs=[drig.cams, I, boxes, own, pts_dev],
+        outputs=[per],
+        device=device,
+    )
+    p = per.numpy().astype(np.float64)
+    ob = boxes.numpy()[own].astype(np.float64)
+    a_own = (ob[:, 2] - ob[:, 0]) * (ob[:, 3] - ob[:, 1])
+    assert np.all(a_own > 0) and max(a_own) > 1.5 * min(a_own)
+    w = a_own.mean() / a_own
+    slope, offset = 0.02, 0.004
+    ref = np.sum(np.where(p[..., 0] > 0, w * (slope * p[..., 1] - offset * p[..., 2]), 0.0), axis=1)
+    pooled_ref = np.sum(np.where(p[..., 0] > 0, slope * p[..., 1] - offset * p[..., 2], 0.0), axis=1)
+    for balance, expect in ((1, ref), (0, pooled_ref)):
+        terms = make_terms(slope=slope, offset=offset, weight=0.0)
+        terms.balance = balance
+        out = wp.zeros(len(pts), dtype=wp.float32, device=device)
+        wp.launch(
+            _terms_kernel,
+            dim=len(pts),
+            inputs=[drig.cams, I, pdev, alive, boxes, own, terms, pts_dev],
+            outputs=[out],
+            device=device,
+        )
+        np.testing.assert_allclose(out.numpy(), expect, rtol=1e-4, atol=1e-3)
+    assert np.abs(ref - pooled_ref).max() > 0.1  # the weights matter
+
+
+def test_gate_per_camera_use_splits_weighting_and_removal(device, rng):
+    """``use`` = 1: the support (removal) is the per-camera one, the weighting decision pooled; ``use`` = 2 the other
+    way round (k = 2, two cameras)."""
+    rig = make_rig()
+    drig = DeviceRig(rig, device)
+    flat = blob_masks(rig, rng)
+    I = integral(rig, drig, flat, device)  # noqa: E741
+    people = rng.uniform(1.0, 3.0, (3, 2)).astype(np.float32)
+    pdev = wp.array(people, dtype=wp.vec2, device=device)
+    boxes = wp.zeros((3, 2), dtype=wp.vec4, device=device)
+    wp.launch(
+        kcov.person_boxes_kernel,
+        dim=(3, 2),
+        inputs=[drig.cams, pdev, wp.array(np.ones(3, np.int32), device=device), HW, HEIGHT],
+        outputs=[boxes],
+        device=device,
+    )
+    terms = make_terms(weight=0.0)
+    dt_dev = wp.array([0.04], dtype=wp.float32, device=device)
+    args = [drig.cams, I, boxes, pdev, 0, terms, 0.25, 1.5, dt_dev, 0.125]
+
+    def gate(threshold, k, use):
+        observe = wp.array(np.array([7, 5], np.int32), device=device)
+        support = wp.zeros(1, dtype=wp.float32, device=device)
+        wp.launch_tiled(
+            kcov.gate_kernel,
+            dim=[1],
+            inputs=[*args, threshold, 0.25, k, use],
+            outputs=[observe, support],
+            block_dim=1,
+            device=device,
+        )
+        return int(observe.numpy()[0]), float(support.numpy()[0])
+
+    _, pooled = gate(0.5, 0, 0)
+    _, per_camera = gate(0.5, 2, 0)
+    assert 0 < per_camera < pooled - 0.01  # the second camera's coverage is below the pooled one
+    t = 0.5 * (per_camera + pooled)
+    assert gate(t, 2, 0) == (0, pytest.approx(per_camera))
+    assert gate(t, 2, 1) == (1, pytest.approx(per_camera))  # weighted (pooled), support per camera
+    assert gate(t, 2, 2) == (0, pytest.approx(pooled))  # not weighted (per camera), support pooled
+    assert gate(t, 0, 2) == (1, pytest.approx(pooled))  # k = 0: pooled whatever use says

@@ -373,3 +373,66 @@ def test_standing_person_lost_from_the_masks_is_held_longer(device):
     by_name = {name: removed.get(pid) for pid, name in ids.items()}
     assert by_name["walker"] is not None and by_name["walker"] - 50 <= b.remove_seconds * tr.fps + 2
     assert by_name["still"] is None or by_name["still"] - 50 >= min(b.hold_seconds * tr.fps, 60)
+
+
+@pytest.mark.parametrize("explained", ["neutral", "empty"])
+def test_birth_beside_a_tracked_person_judges_what_the_others_leave(device, explained):
+    """POM's gain for births (``BirthConfig.explained == "neutral"``): a person 0.8 m behind a tracked one on camera
+    c0's line of sight (c0 sees it mostly inside the tracked one's rectangle) is judged by the cameras that see it,
+    and its cell is a birth cell; with ``empty`` c0 finds its rectangle nearly empty (the tracked one's pixels
+    cleared) and vetoes every cell."""
+    from dataclasses import replace
+
+    rig = rig3()
+    cfg = _config()
+    cfg = replace(cfg, birth=replace(cfg.birth, explained=explained))
+    near = np.array([1.5, 1.5])
+    far = near + 0.8 / np.sqrt(2.0)
+    tr = PeopleTracker(rig, cfg, device=device, keep_particles=0)
+    tr.add_person(near)
+    tr.step(*render(rig, [(near, COLOURS[0]), (far, COLOURS[1])], np.random.default_rng(21)))
+    gx, gy = tr._cell_centres()
+    cell = np.unravel_index(np.argmin((gx - far[0]) ** 2 + (gy - far[1]) ** 2), gx.shape)
+    shape = (len(rig), tr.ny, tr.nx)
+    free = tr._free_cover_host.numpy().reshape(shape)[(slice(None), *cell)]
+    _, _, births = tr._evidence_maps()
+    if explained == "neutral":
+        left = tr._free_left_host.numpy().reshape(shape)[(slice(None), *cell)]
+        assert left[0] < cfg.person.gate_left and np.all(left[1:] > 0.8)  # c0 does not judge, c1 and c2 do
+        assert births[cell] and np.all(free > 0.5)
+    else:
+        assert free[0] < 0.15 and np.all(free[1:] > 0.5)
+        assert not births.any()
+
+
+@pytest.mark.parametrize("blank", [1, 2])
+def test_gate_cameras_needs_that_many_views(device, blank):
+    """``PersonConfig.gate_cameras`` = 2: a person is seen while two cameras each show it; when the masks of all
+    but one camera lose it (``blank`` = 2) one view's silhouette (a ray) no longer keeps it seen, while the pooled
+    gate (0) still is (one camera's coverage carries the others' empty views)."""
+    from dataclasses import replace
+
+    rig = rig3()
+    xy = np.array([2.0, 2.0])
+    support, weighted = {}, {}
+    for cams in (0, 2, None):  # None: the defaults (two cameras, for the removal)
+        cfg = _config()
+        if cams is not None:
+            cfg = replace(cfg, person=replace(cfg.person, gate_cameras=cams, gate_cameras_use="both"))
+        tr = PeopleTracker(rig, cfg, device=device, keep_particles=0)
+        tr.add_person(xy)
+        rng = np.random.default_rng(31)
+        for t in range(6):
+            images, masks = render(rig, [(xy, COLOURS[0])], rng)
+            if t >= 3:
+                masks = [m if c >= blank else np.zeros_like(m) for c, m in enumerate(masks)]
+            est = tr.step(images, masks)
+        support[cams] = est.people[0].support
+        weighted[cams] = int(tr.pool[0].observe.numpy()[0])  # the gate's weighting decision (slot 0)
+    gate = _config().person.gate
+    assert support[0] > gate
+    if blank == 1:
+        assert support[2] > gate and support[None] > gate  # two cameras still show it
+    else:
+        assert support[2] <= gate and support[None] <= gate
+        assert weighted == {0: 1, 2: 0, None: 1}  # by default only the removal asks two views

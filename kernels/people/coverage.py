@@ -16,11 +16,18 @@ where a whole person's rectangle is covered in every camera that sees it; the pa
 lets a particle cloud slide along one camera's viewing ray when the other camera's mask loses the person).
 :func:`person_boxes_kernel` and :func:`explained_mask_kernel` clear the pixels of the tracked people's rectangles,
 so that the birth map shows only motion nobody explains (the ghosts two people's silhouettes make where other
-cameras' rays cross are inside tracked people's rectangles). :func:`exclusion_log_penalty` keeps two people's
-particles apart.
+cameras' rays cross are inside tracked people's rectangles); :func:`left_mask_kernel` and
+:func:`left_coverage_kernel` give the part of a candidate's rectangle they leave (POM's gain for births, optional).
+:func:`exclusion_log_penalty` keeps two people's particles apart. :func:`gate_kernel` says whether a frame's masks
+show a person, pooling the cameras or per camera (:func:`kth_camera_coverage`).
 
 Units: metres (world, z up, floor z = 0), pixels. Rectangles are ``vec4(u0, v0, u1, v1)``: columns [u0, u1), rows
 [v0, v1) of the image, integers stored as floats, clipped to the image; ``u1 <= u0`` means empty.
+
+Length: one module for the person rectangle on purpose: its projection, its counts on the integral images (whole,
+what the other people leave, per camera), the evidence map, the particle terms, the gate and the appearance
+histograms all share :func:`person_box` and :func:`box_count`, and each kernel is tested against one NumPy
+reference of that rectangle (tests/test_kernels_coverage.py).
 """
 
 import warp as wp
@@ -267,6 +274,73 @@ def explained_mask_kernel(
     free[i] = m
 
 
+@wp.kernel
+def left_mask_kernel(
+    cams: wp.array(dtype=Camera),
+    boxes: wp.array2d(dtype=wp.vec4),
+    n: int,
+    left: wp.array(dtype=wp.uint8),
+):
+    """``left`` = 1 at the pixels outside the first ``n`` rectangles of ``boxes`` (from :func:`person_boxes_kernel`),
+    0 inside one: the part of the image no tracked person explains, whose integral image gives the part of a
+    candidate's rectangle the tracked people leave (:func:`left_coverage_kernel`). Launch dim ``(cameras, max
+    height, max width)``; flat per-frame pixel buffers (``Camera.pixel_offset``)."""
+    c, v, u = wp.tid()
+    cam = cams[c]
+    if v >= cam.height or u >= cam.width:
+        return
+    fu = float(u)
+    fv = float(v)
+    m = wp.uint8(1)
+    for j in range(n):
+        b = boxes[j, c]
+        if fu >= b[0] and fu < b[2] and fv >= b[1] and fv < b[3]:
+            m = wp.uint8(0)
+    left[cam.pixel_offset + v * cam.width + u] = m
+
+
+@wp.kernel
+def left_coverage_kernel(
+    cams: wp.array(dtype=Camera),
+    free_integral: wp.array(dtype=wp.int32),
+    left_integral: wp.array(dtype=wp.int32),
+    origin: wp.vec2,
+    cell: float,
+    nx: int,
+    half_width: float,
+    height: float,
+    min_visible: float,
+    unit: float,
+    coverage: wp.array2d(dtype=wp.float32),
+    left: wp.array2d(dtype=wp.float32),
+):
+    """The evidence map of POM's gain (Fleuret et al., PAMI 2008, section 4: the masks as the union of the people's
+    rectangles): at every cell of the grid of :func:`coverage_kernel` and in every camera, the part of a person's
+    rectangle that the tracked people's rectangles leave (``left``, a fraction of the rectangle inside the image,
+    from ``left_integral``, the integral image of :func:`left_mask_kernel`'s map) and the fraction of that part the
+    unexplained motion covers (``coverage``, from ``free_integral``, the integral image of
+    :func:`explained_mask_kernel`'s mask; 0 where nothing is left): pixels another person explains are neither
+    evidence for a newcomer nor against it, as in the rectangle term of a particle (:func:`box_counts_left`).
+    Both -1 where the camera does not see the cell's person (:func:`box_counts`). Launch dim ``(cameras, nx *
+    ny)``; ``unit`` as in :func:`box_counts` (the free integral counts mask pixels, the left one blocks)."""
+    c, t = wp.tid()
+    cam = cams[c]
+    x = origin[0] + cell * (float(t % nx) + 0.5)
+    y = origin[1] + cell * (float(t / nx) + 0.5)
+    box, full = person_box(cam, x, y, half_width, height)
+    area = (box[2] - box[0]) * (box[3] - box[1])
+    if full <= 0.0 or area <= 0.0 or area < min_visible * full:
+        coverage[c, t] = wp.float32(-1.0)
+        left[c, t] = wp.float32(-1.0)
+        return
+    rest = float(box_count(cam, left_integral, box))
+    cov = float(0.0)
+    if rest > 0.0:
+        cov = float(box_count(cam, free_integral, box)) / (rest * unit)
+    coverage[c, t] = wp.float32(cov)
+    left[c, t] = wp.float32(rest / area)
+
+
 @wp.struct
 class PersonTerms:
     """Parameters of the person-level terms of a particle's log-weight (:func:`person_log_terms`)."""
@@ -279,12 +353,45 @@ class PersonTerms:
     offset: float
     exclusion_radius: float  # metres (exclusion_log_penalty)
     exclusion_weight: float  # nats at distance 0
+    balance: int  # 1: each camera's rectangle term weighted by the mean own-rectangle area / its own (0: off)
 
 
 @wp.func
 def overlap(a: wp.vec4, b: wp.vec4):
     """The intersection of two rectangles (possibly empty: u1 <= u0 or v1 <= v0)."""
     return wp.vec4(wp.max(a[0], b[0]), wp.max(a[1], b[1]), wp.min(a[2], b[2]), wp.min(a[3], b[3]))
+
+
+@wp.func
+def camera_counts_left(
+    cam: Camera,
+    c: int,
+    integral: wp.array(dtype=wp.int32),
+    boxes: wp.array2d(dtype=wp.vec4),
+    own: int,
+    x: wp.vec3,
+    half_width: float,
+    height: float,
+    min_visible: float,
+):
+    """``(seen, on, area, full)`` of camera ``c`` for the rectangle of a person standing at (x[0], x[1]): whether the
+    camera sees it (:func:`box_counts`' rule), its mask pixels and its pixels inside the image without the parts
+    inside the other tracked people's rectangles (``boxes`` row ``c`` of every person but ``own``; overlapping ones
+    are subtracted each, floored at 0), and its pixels inside the image before that; areas in the integral's pixels
+    (:func:`box_counts_left` multiplies them by ``unit``). Zeros when the camera does not see it."""
+    box, full = person_box(cam, x[0], x[1], half_width, height)
+    area = (box[2] - box[0]) * (box[3] - box[1])
+    if full > 0.0 and area > 0.0 and area >= min_visible * full:
+        whole = area
+        on = float(box_count(cam, integral, box))
+        for k in range(boxes.shape[0]):
+            if k != own:
+                shared = overlap(box, boxes[k, c])
+                if shared[2] > shared[0] and shared[3] > shared[1]:
+                    on -= float(box_count(cam, integral, shared))
+                    area -= (shared[2] - shared[0]) * (shared[3] - shared[1])
+        return int(1), wp.max(on, 0.0), wp.max(area, 0.0), whole
+    return int(0), float(0.0), float(0.0), float(0.0)
 
 
 @wp.func
@@ -303,26 +410,74 @@ def box_counts_left(
     mask pixels and its pixels inside the image, both without the parts inside the other tracked people's
     rectangles (``boxes`` from :func:`person_boxes_kernel`, all rows but ``own``; overlapping ones are subtracted
     each, floored at 0 per camera), and its pixels inside the image before that (:func:`box_log_likelihood`); areas
-    times ``unit`` (:func:`box_counts`)."""
+    times ``unit`` (:func:`box_counts`). Per camera: :func:`camera_counts_left`."""
     on_sum = float(0.0)
     area_sum = float(0.0)
     full_sum = float(0.0)
     for c in range(cams.shape[0]):
-        cam = cams[c]
-        box, full = person_box(cam, x[0], x[1], half_width, height)
-        area = (box[2] - box[0]) * (box[3] - box[1])
-        if full > 0.0 and area > 0.0 and area >= min_visible * full:
-            full_sum += area
-            on = float(box_count(cam, integral, box))
-            for k in range(boxes.shape[0]):
-                if k != own:
-                    shared = overlap(box, boxes[k, c])
-                    if shared[2] > shared[0] and shared[3] > shared[1]:
-                        on -= float(box_count(cam, integral, shared))
-                        area -= (shared[2] - shared[0]) * (shared[3] - shared[1])
-            on_sum += wp.max(on, 0.0)
-            area_sum += wp.max(area, 0.0)
+        seen, on, area, full = camera_counts_left(cams[c], c, integral, boxes, own, x, half_width, height, min_visible)
+        if seen != 0:
+            full_sum += full
+            on_sum += on
+            area_sum += area
     return on_sum, area_sum * unit, full_sum * unit
+
+
+@wp.func
+def camera_coverage_left(
+    cams: wp.array(dtype=Camera),
+    c: int,
+    integral: wp.array(dtype=wp.int32),
+    boxes: wp.array2d(dtype=wp.vec4),
+    own: int,
+    x: wp.vec3,
+    half_width: float,
+    height: float,
+    min_visible: float,
+    unit: float,
+    min_left: float,
+):
+    """Camera ``c``'s coverage of what the other people's rectangles leave of the rectangle of a person at (x[0],
+    x[1]) (:func:`camera_counts_left`), or -1 when the camera does not judge it (does not see it, or the others leave
+    less than ``min_left`` of it)."""
+    seen, on, area, full = camera_counts_left(cams[c], c, integral, boxes, own, x, half_width, height, min_visible)
+    if seen != 0 and area > 0.0 and area >= min_left * full:
+        return on / (area * unit)
+    return float(-1.0)
+
+
+@wp.func
+def kth_camera_coverage(
+    cams: wp.array(dtype=Camera),
+    integral: wp.array(dtype=wp.int32),
+    boxes: wp.array2d(dtype=wp.vec4),
+    own: int,
+    x: wp.vec3,
+    half_width: float,
+    height: float,
+    min_visible: float,
+    unit: float,
+    min_left: float,
+    k: int,
+):
+    """The ``k``-th largest (1 = the largest) of the judging cameras' coverages (:func:`camera_coverage_left`) of the
+    rectangle of a person at (x[0], x[1]), 0 when fewer than ``k`` cameras judge it: "at least ``k`` cameras each see
+    this much of the person". Ties are ranked by camera index; cost: cameras^2 rectangle counts."""
+    out = float(0.0)
+    for i in range(cams.shape[0]):
+        ci = camera_coverage_left(cams, i, integral, boxes, own, x, half_width, height, min_visible, unit, min_left)
+        if ci >= 0.0:
+            rank = int(0)
+            for j in range(cams.shape[0]):
+                if j != i:
+                    cj = camera_coverage_left(
+                        cams, j, integral, boxes, own, x, half_width, height, min_visible, unit, min_left
+                    )
+                    if cj > ci or (cj == ci and j < i):
+                        rank += 1
+            if rank == k - 1:
+                out = ci
+    return out
 
 
 @wp.func
@@ -358,6 +513,47 @@ def box_log_likelihood(
 
 
 @wp.func
+def balanced_box_log_likelihood(
+    cams: wp.array(dtype=Camera),
+    integral: wp.array(dtype=wp.int32),
+    boxes: wp.array2d(dtype=wp.vec4),
+    own: int,
+    x: wp.vec3,
+    half_width: float,
+    height: float,
+    min_visible: float,
+    unit: float,
+    slope: float,
+    offset: float,
+):
+    """:func:`box_log_likelihood` with every camera's term ``slope * on_c - offset * area_c`` weighted by ``w_c = A /
+    A_c``: ``A_c`` the area of the person's own rectangle in camera c at its last position (``boxes[own, c]``, the
+    same for all its particles, so each camera's term keeps its sum over the rectangle and its peak where the person
+    stands), ``A`` the mean of ``A_c`` over the cameras where it is not empty (w_c = 1 where it is). Each camera
+    then holds the same number of samples of the person whatever its distance: a camera near the person no longer
+    outweighs a far one whose parallax fixes the depth along the near one's rays (the mask pixels of a large
+    silhouette are not more independent than those of a small one)."""
+    total_area = float(0.0)
+    n = float(0.0)
+    for c in range(cams.shape[0]):
+        b = boxes[own, c]
+        a = (b[2] - b[0]) * (b[3] - b[1])
+        if b[2] > b[0] and b[3] > b[1]:
+            total_area += a
+            n += 1.0
+    out = float(0.0)
+    for c in range(cams.shape[0]):
+        seen, on, area, full = camera_counts_left(cams[c], c, integral, boxes, own, x, half_width, height, min_visible)
+        if seen != 0:
+            w = float(1.0)
+            b = boxes[own, c]
+            if b[2] > b[0] and b[3] > b[1]:
+                w = (total_area / n) / ((b[2] - b[0]) * (b[3] - b[1]))
+            out += w * (slope * on - offset * area * unit)
+    return out
+
+
+@wp.func
 def exclusion_log_penalty(
     others: wp.array(dtype=wp.vec2), alive: wp.array(dtype=wp.int32), own: int, x: wp.vec3, radius: float, weight: float
 ):
@@ -390,7 +586,21 @@ def person_log_terms(
     """:func:`box_log_likelihood` + :func:`exclusion_log_penalty` of a particle at ``x`` of the person in slot ``own``
     (each skipped when its weight, ``terms.slope`` or ``terms.exclusion_weight``, is 0)."""
     total = float(0.0)
-    if terms.slope != 0.0:
+    if terms.slope != 0.0 and terms.balance != 0:
+        total += balanced_box_log_likelihood(
+            cams,
+            integral,
+            boxes,
+            own,
+            x,
+            terms.half_width,
+            terms.height,
+            terms.min_visible,
+            terms.unit,
+            terms.slope,
+            terms.offset,
+        )
+    elif terms.slope != 0.0:
         total += box_log_likelihood(
             cams,
             integral,
@@ -423,6 +633,8 @@ def gate_kernel(
     spacing: float,
     min_coverage: float,
     min_left: float,
+    cameras: int,
+    use: int,
     observe: wp.array(dtype=wp.int32),
     support: wp.array(dtype=wp.float32),
 ):
@@ -433,7 +645,13 @@ def gate_kernel(
     ``min_coverage`` of what the other people's rectangles leave of it (:func:`box_counts_left`, all cameras that
     see it together), that part being at least ``min_left`` of the rectangle; else 0 (a person standing still whom
     the background model has absorbed, or hidden: the filter then predicts without weighting, instead of following
-    the nearest other silhouette). A fraction, so the rule does not depend on the images' resolution. Always 1 when
+    the nearest other silhouette). A fraction, so the rule does not depend on the images' resolution. With
+    ``cameras`` = k > 0 the coverage at a point is instead the k-th largest of the cameras' own coverages
+    (:func:`kth_camera_coverage`: each camera judges what the others leave of its rectangle, where that is at least
+    ``min_left`` of it): k cameras must each see the person (a position is fixed by two views; one camera's
+    silhouette alone is a ray, where a filter can slide in depth onto another person's silhouette); ``use`` says for
+    what: 0 both outputs, 1 only ``support`` (removal; ``observe`` pooled), 2 only ``observe`` (weighting; ``support``
+    pooled). Always 1 when
     the rectangle term is off (``terms.slope == 0``). ``support[0]`` = the best such coverage (0 when off). Launch
     ``wp.launch_tiled(dim=[1], block_dim=B)``: the block's lanes share the (2 m + 1)^2 grid points (point j is
     (j // (2 m + 1) - m, j % (2 m + 1) - m) spacings away), their best coverages reduced with ``wp.tile_max`` (a
@@ -446,6 +664,7 @@ def gate_kernel(
             support[0] = 0.0
         return
     best = float(0.0)
+    best_k = float(0.0)
     p = people[own]
     m = int(wp.ceil((reach + speed * dt[0]) / spacing))
     side = 2 * m + 1
@@ -453,16 +672,39 @@ def gate_kernel(
         a = j / side - m
         b = j % side - m
         x = wp.vec3(p[0] + spacing * float(a), p[1] + spacing * float(b), 0.0)
-        on, area, full = box_counts_left(
-            cams, integral, boxes, own, x, terms.half_width, terms.height, terms.min_visible, terms.unit
-        )
-        if area > 0.0 and area >= min_left * full:
-            best = wp.max(best, on / area)
+        if cameras > 0:
+            cov = kth_camera_coverage(
+                cams,
+                integral,
+                boxes,
+                own,
+                x,
+                terms.half_width,
+                terms.height,
+                terms.min_visible,
+                terms.unit,
+                min_left,
+                cameras,
+            )
+            best_k = wp.max(best_k, cov)
+        if cameras == 0 or use != 0:
+            on, area, full = box_counts_left(
+                cams, integral, boxes, own, x, terms.half_width, terms.height, terms.min_visible, terms.unit
+            )
+            if area > 0.0 and area >= min_left * full:
+                best = wp.max(best, on / area)
     top = wp.tile_max(wp.tile(best))
+    top_k = wp.tile_max(wp.tile(best_k))
     if lane == 0:
+        seen = top[0]  # observe (weighting) and support (removal): pooled
+        shown = top[0]
+        if cameras > 0 and use != 1:
+            seen = top_k[0]
+        if cameras > 0 and use != 2:
+            shown = top_k[0]
         observe[1] = observe[0]
-        observe[0] = wp.where(top[0] > min_coverage, 1, 0)
-        support[0] = wp.float32(top[0])
+        observe[0] = wp.where(seen > min_coverage, 1, 0)
+        support[0] = wp.float32(shown)
 
 
 HIST_H = wp.constant(8)

@@ -7,6 +7,10 @@ The kernels these parameters feed are in ``kernels/people/filter.py``, ``kernels
 ``kernels/people/descriptor.py`` and ``kernels/people/occupancy.py``. Each field is declared once with
 :func:`wptrack.core.config.param` (the command line and the batch manifests derive from it); each section checks its
 fields with :func:`wptrack.core.config.check` and adds the checks that relate two fields.
+
+Length: one module for the tracker's whole configuration on purpose: each section documents its fields with the
+measurements that chose their defaults, and the sections are read together (the gate and the births share the
+rectangle's probabilities).
 """
 
 from __future__ import annotations
@@ -31,6 +35,8 @@ __all__ = [
 ]
 
 OUTSIDE_MODES = ("background", "neutral")
+EXPLAINED_MODES = ("empty", "neutral")
+GATE_USES = ("both", "removal", "weighting")
 
 
 @dataclass(frozen=True)
@@ -275,6 +281,13 @@ class BirthConfig:
             Ours: 0.8.
         appearance_seconds: memory of a person's appearance histograms (an exponential average over the frames
             where enough of its pixels are its own), seconds. Ours: 3.
+        explained: what the pixels inside the tracked people's rectangles count as in the evidence map:
+            ``empty`` (cleared from the masks but still part of a candidate's rectangle: a newcomer standing beside a
+            tracked person, whose rectangle the other's overlaps in one camera, looks like an empty rectangle there
+            and that camera vetoes the birth) or ``neutral`` (POM's gain of adding a person, Fleuret et al. PAMI
+            2008, section 4, as in the particles' rectangle term: a candidate is judged on the part of its rectangle
+            the tracked people leave; a camera judges only where that part is at least ``PersonConfig.gate_left`` of
+            the rectangle, and ``min_cameras`` cameras must judge). Ours: empty.
 
     At most one person is added per frame (the strongest unexplained region): the motion the new person explains
     is discounted from the next frame on, so the ghosts that two real people's silhouettes make where other
@@ -352,6 +365,13 @@ class BirthConfig:
         lo_open=True,
     )
 
+    explained: str = param(
+        "empty",
+        help="what the pixels inside the tracked people's rectangles count as in the evidence map: empty, or neutral "
+        "(POM's gain: a candidate is judged on what the tracked people leave of its rectangle)",
+        choices=EXPLAINED_MODES,
+    )
+
     def __post_init__(self) -> None:
         check(self, "birth.")
         if not self.init_z[0] < self.init_z[1]:
@@ -392,6 +412,24 @@ class PersonConfig:
         gate_reach: see ``gate``, metres. Ours: 0.25.
         gate_left: and only where the others leave at least this fraction of the rectangle (a person hidden behind
             others is not judged on a sliver). Ours: 0.25.
+        gate_cameras: 0: the gate pools the cameras that see the rectangle (one camera's coverage can carry
+            another's empty view); k >= 1: k cameras must each cover more than ``gate`` of what the others leave of
+            their rectangle (where that is at least ``gate_left`` of it; a camera where the person is hidden does not
+            judge), so one camera's silhouette alone, a ray along which a filter slides in depth, does not keep a
+            person seen (``kernels.people.coverage.kth_camera_coverage``). Ours: 2, for the removal only (below).
+        gate_cameras_use: what that per-camera rule decides (with ``gate_cameras`` > 0): ``both``, ``removal``
+            (whether the person is seen for ``remove_seconds``; the weighting stays pooled) or ``weighting``
+            (whether the filter is weighted; removal stays pooled). Ours: removal. Same commands, tracker seeds 0-3
+            (issue 31): terrace at 3.125 frames/s MOTA -0.304 -> +0.041 (better on every seed; false positives 102
+            -> 42), at 25 frames/s 0.234 -> 0.250 (false positives 449 -> 340, misses 516 -> 606); the offices
+            unchanged (scene 1 0.950 / 0.946, scene 0 0.974, s2-office-lowfps both scenes). ``both``: 3.125
+            frames/s -0.063 but 25 frames/s 0.211 and the office's exit 0.950 -> 0.929 (the unweighted filter
+            stops inside the room); ``weighting``: 3.125 frames/s -0.49.
+        balance_cameras: weight each camera's rectangle term of a particle by the mean area of the person's own
+            rectangles over the cameras divided by its area in that camera (at its last position): every camera holds
+            the same evidence about a person whatever its distance, so a near camera's large silhouette does not
+            outweigh the far camera that fixes the depth along its rays
+            (``kernels.people.coverage.balanced_box_log_likelihood``). Ours: off.
         stop_seconds: an unseen person's velocity decays with this time constant, seconds (people stop more
             often than they walk on unseen). Ours: 1.
     """
@@ -451,6 +489,21 @@ class PersonConfig:
         hi=1.0,
         lo_open=True,
         hi_open=True,
+    )
+    gate_cameras: int = param(
+        2,
+        help="0: the gate pools the cameras; k: k cameras must each show the person (where not hidden by others)",
+        lo=0,
+    )
+    gate_cameras_use: str = param(
+        "removal",
+        help="what the per-camera gate decides: both, removal (weighting pooled) or weighting (removal pooled)",
+        choices=GATE_USES,
+    )
+    balance_cameras: bool = param(
+        False,
+        help="weight each camera's rectangle term by the mean own-rectangle area over its own (cameras hold equal "
+        "evidence whatever their distance)",
     )
     stop_seconds: float = param(
         1.0,

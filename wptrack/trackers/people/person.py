@@ -24,6 +24,7 @@ from wptrack.kernels.people import coverage as kcov
 from wptrack.kernels.people import descriptor as kdesc
 from wptrack.kernels.people import filter as kpeople
 from wptrack.kernels.people import occupancy as kocc
+from wptrack.trackers.people.config import GATE_USES
 
 _GOLDEN = 0x9E3779B97F4A7C15
 DESCRIPTOR_BLOCK = 64
@@ -196,7 +197,8 @@ class PersonFilter(ParticleFilter):
             kcov.gate_kernel,
             dim=[1],
             inputs=[tr.sdrig.cams, tr.integral, tr.boxes, tr.slot_xy, self.slot, tr.terms]
-            + [pc.gate_reach, WALK_SPEED, tr.dt, GATE_SPACING, pc.gate, pc.gate_left],
+            + [pc.gate_reach, WALK_SPEED, tr.dt, GATE_SPACING, pc.gate, pc.gate_left, pc.gate_cameras]
+            + [GATE_USES.index(pc.gate_cameras_use)],
             outputs=[self.observe, self.support],
             block_dim=GATE_BLOCK,
             device=self.device,

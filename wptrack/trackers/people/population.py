@@ -191,16 +191,25 @@ class Population:
         person explains the masks better than nobody); ``free_evidence`` the same for the motion the tracked people
         leave unexplained;
         ``births``: cells of the working area seen by ``min_cameras`` cameras where every camera that sees them
-        finds more unexplained motion than an empty rectangle would have (its term > 0)."""
+        finds more unexplained motion than an empty rectangle would have (its term > 0); with
+        ``BirthConfig.explained == "neutral"`` the terms count only the part of the rectangle the tracked people's
+        rectangles leave, and only cameras where that part is at least ``PersonConfig.gate_left`` judge (and count
+        towards ``min_cameras``)."""
         slope, offset = self.config.person.slope_offset
         shape = (len(self.rig), self.ny, self.nx)
         cover = self._cover_host.numpy().reshape(shape)
         free = self._free_cover_host.numpy().reshape(shape)
         seen = cover >= 0
         evidence = np.where(seen, (slope * cover - offset) * self.cell_area, 0.0).sum(axis=0)
-        terms = np.where(seen, (slope * free - offset) * self.cell_area, 0.0)
+        if self.config.birth.explained == "empty":
+            terms = np.where(seen, (slope * free - offset) * self.cell_area, 0.0)
+            judged = seen
+        else:  # POM's gain: what the tracked people's rectangles leave of the candidate's
+            left = self._free_left_host.numpy().reshape(shape)
+            terms = np.where(seen, (slope * free - offset) * self.cell_area * np.maximum(left, 0.0), 0.0)
+            judged = seen & (left >= self.config.person.gate_left)
         free_evidence = terms.sum(axis=0)
-        births = (seen.sum(axis=0) >= self.min_votes) & np.all(~seen | (terms > 0), axis=0) & self.area_map
+        births = (judged.sum(axis=0) >= self.min_votes) & np.all(~judged | (terms > 0), axis=0) & self.area_map
         return evidence, free_evidence, births
 
     def _update_population(self, est: PeopleEstimate, active: list[int], column: np.ndarray) -> None:

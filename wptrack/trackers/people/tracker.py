@@ -21,6 +21,10 @@ One frame::
 
 Units: metres (world frame, z up for the ground evidence map: the rig's ground is z = 0), pixels, seconds (the
 frame interval dt from ``PeopleConfig.fps`` or the frames' timestamps).
+
+Length: the frame's device side in one class (buffers allocated once, the recorded launches and CUDA graphs of the
+observation, the rectangles and the evidence map, the one readback per frame, checkpoints); the population logic
+is in ``population.py``, one person's filter in ``person.py``.
 """
 
 from __future__ import annotations
@@ -184,6 +188,8 @@ class PeopleTracker(Population):
         self.integral = wp.zeros(self.sdrig.total_integral, dtype=wp.int32, device=d)
         self.free_mask = wp.zeros(self.sdrig.total_pixels, dtype=wp.uint8, device=d)
         self.free_integral = wp.zeros(self.sdrig.total_integral, dtype=wp.int32, device=d)
+        self.left_mask = wp.zeros(self.sdrig.total_pixels, dtype=wp.uint8, device=d)  # 1 outside every rectangle
+        self.left_integral = wp.zeros(self.sdrig.total_integral, dtype=wp.int32, device=d)
         maxw, maxh = self.sdrig.max_width, self.sdrig.max_height
         seg = int(kcolour.SEGMENT)
         self._row_dims = (ncam, maxh, -(-maxw // seg))
@@ -211,6 +217,7 @@ class PeopleTracker(Population):
         self.terms.unit = float(s * s)
         self.terms.slope, self.terms.offset = pc.slope_offset
         self.terms.exclusion_radius, self.terms.exclusion_weight = pc.exclusion_radius, pc.exclusion_weight
+        self.terms.balance = int(pc.balance_cameras)
         nb = int(kcov.HIST_BINS)
         self.slot_xy = wp.zeros(b.max_people, dtype=wp.vec2, device=d)  # ground position per pool slot
         self.slot_alive = wp.zeros(b.max_people, dtype=wp.int32, device=d)  # 1 where the slot tracks somebody
@@ -225,6 +232,7 @@ class PeopleTracker(Population):
             "sigma_n": (1,),
             "cover": (ncam, cells),
             "free_cover": (ncam, cells),
+            "free_left": (ncam, cells),
             "hist": (b.max_people, ncam, int(kcov.HIST_PARTS), nb + 1),
             "top": (b.max_people, axes),
         }
@@ -384,7 +392,7 @@ class PeopleTracker(Population):
                 [self.free_mask],
             ),
             *self._integral(self.free_mask, self.free_integral),
-            self._record(kcov.coverage_kernel, dims, [cams, self.free_integral, *common], [self.free_cover]),
+            *self._free_coverage_commands(dims, common),
             self.hist.zero_,
             self._record(kcov.person_boxes_kernel, boxes_dims, [full, *people], [self.full_boxes]),
             self._record(
@@ -392,6 +400,25 @@ class PeopleTracker(Population):
                 (*boxes_dims, int(kcov.HIST_PARTS), self._rows),
                 [full, self.bgr, self.mask, self.full_boxes],
                 [self.hist],
+            ),
+        ]
+
+    def _free_coverage_commands(self, dims: tuple[int, int], common: list) -> list[Callable[[], None]]:
+        """The evidence map of the unexplained motion (``free_cover``) as recorded launches: its coverage of the whole
+        rectangle (``BirthConfig.explained == "empty"``), or, ``neutral``, of the part the tracked people's
+        rectangles leave, with that part's fraction in ``free_left`` (``kernels.people.coverage.left_coverage_kernel``;
+        ``free_left`` is not written otherwise)."""
+        cams = self.sdrig.cams
+        if self.config.birth.explained == "empty":
+            return [self._record(kcov.coverage_kernel, dims, [cams, self.free_integral, *common], [self.free_cover])]
+        return [
+            self._record(kcov.left_mask_kernel, self._pixel_dims, [cams, self.boxes, len(self.pool)], [self.left_mask]),
+            *self._integral(self.left_mask, self.left_integral),
+            self._record(
+                kcov.left_coverage_kernel,
+                dims,
+                [cams, self.free_integral, self.left_integral, *common],
+                [self.free_cover, self.free_left],
             ),
         ]
 
