@@ -272,6 +272,7 @@ def test_given_masks_of_wrong_size(tmp_path):
         ({"shadow_lo": 0}, "shadow_lo"),
         ({"shadow_lo": 0.5, "shadow_hi": 0.5}, "shadow_hi"),
         ({"shadow_chroma": -0.1}, "shadow_chroma"),
+        ({"shadow_texture": 1.0}, "shadow_texture"),
         ({"device": "gpu"}, "device"),
     ],
 )
@@ -518,3 +519,59 @@ def test_neighbourhood_scale_independent_vs_correlated_noise(rng):
     ones = np.ones((k, 3))
     assert 0.85 < neighbourhood_scale(iid, ones, bg, mad, 1, 3.0) <= 1.0
     assert neighbourhood_scale(corr, ones, bg, mad, 1, 3.0) < 0.6  # 4 x 4 blocks: neighbours move together
+
+
+def _textured_shadow_and_dark_object(rng, texture: float):
+    """A floor of neutral grey 4 x 4 blocks (135..155) crossed by a moving cast shadow (ratio 0.8: it darkens the
+    blocks, their texture stays) and a larger moving object of uniform dark grey (60: ratios 0.39..0.44, the
+    blocks' texture replaced), the most frequent dark neutral foreground: the masks with the learnt band and the
+    given ``shadow_texture``: ``(mask at frame 6, learnt ratio, shadow region, object region)``."""
+    blocks = rng.uniform(135, 155, (H // 4, W // 4, 1)).astype(np.float32)
+    floor = np.repeat(cv2.resize(blocks, (W, H), interpolation=cv2.INTER_NEAREST)[..., None], 3, axis=2)
+    frames = 25
+    video = np.empty((frames, H, W, 3), np.uint8)
+    for t in range(frames):
+        img = floor.copy()
+        img[2:28, 3 * t : 3 * t + 21] *= 0.8
+        img[30:72, max(110 - 6 * t, 0) : max(158 - 6 * t, 0)] = 60.0
+        video[t] = np.clip(img + rng.normal(0, 2.0, img.shape), 0, 255).astype(np.uint8)
+    config = MaskConfig(window=frames, samples=frames, device="cpu", fg_low=2.0, neighbourhood=0, illum_tiles=0,
+                        illum_veto=0.0, shadow_texture=texture)  # fmt: skip
+    masks = open_masks(video=video, config=config)
+    got = np.stack(list(masks))
+    t = 6
+    shadow, obj = np.s_[4:26, 3 * t + 2 : 3 * t + 19], np.s_[32:70, 112 - 6 * t : 156 - 6 * t]
+    return got[t], masks.model._ratio[0], shadow, obj
+
+
+def test_learnt_shadow_ratio_from_textured_votes_keeps_dark_clothes(rng):
+    """Dark uniform clothes outnumber the cast shadows' pixels: every vote teaches the band the clothes' ratio and
+    eats them (the terrace's learnt ratios were 0.35-0.41 where its shadows are faint); the votes that keep the
+    floor's texture teach the shadows' 0.8: the shadow goes, the clothes stay."""
+    old, old_ratio, shadow, obj = _textured_shadow_and_dark_object(rng, 0.0)
+    assert old_ratio is not None and old_ratio < 0.6
+    assert old[obj].mean() < 0.6
+    new, new_ratio, shadow, obj = _textured_shadow_and_dark_object(rng, 0.7)
+    assert new_ratio is not None and abs(new_ratio - 0.8) < 0.03
+    assert new[obj].mean() > 0.95 and new[shadow].mean() < 0.05
+
+
+def test_shadow_ratio_texture_votes_fall_back_to_all_on_a_flat_floor(rng):
+    """The votes kept by the texture test decide only when there are enough of them (min_count): none kept (a flat
+    floor) gives the ratio of every vote; enough kept give theirs."""
+    from wptrack.motion.stats import shadow_ratio
+
+    n = 2000
+    background = np.full((n, 3), 150.0)
+    samples = np.repeat(background[None], 4, axis=0).astype(np.uint8)
+    samples[:, :600] = 61  # dark clothes: ratio 0.41
+    samples[:, 600:900] = 121  # shadows: ratio 0.81
+    args = (np.ones((4, 3)), background, np.ones((n, 3)), 4.0, 3.0, 0.1)
+    keep = np.zeros((4, n), bool)
+    everything = shadow_ratio(samples, *args)
+    assert abs(everything - 0.41) < 0.011
+    assert shadow_ratio(samples, *args, keep=keep) == everything
+    keep[:, 600:900] = True
+    assert abs(shadow_ratio(samples, *args, keep=keep) - 0.81) < 0.011
+    keep[:, 640:900] = False  # 4 x 40 = 160 votes kept < min_count 200
+    assert shadow_ratio(samples, *args, keep=keep) == everything
