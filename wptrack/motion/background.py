@@ -399,7 +399,7 @@ class OfflineBackground:
                     keep = self.light.sample_patches(stack, gains, median, mad, self._sub_pixels, cap)
                 ratio = shadow_ratio(
                     sub.transpose(0, 2, 1), gains, self._bg_sub[i].T, mad_host[self._sub].reshape(-1, 3),
-                    c.fg_threshold, c.noise_floor, c.shadow_chroma, keep=keep,
+                    c.fg_threshold, c.noise_floor, c.shadow_chroma, keep=keep, sharp=c.shadow_peak,
                 )  # fmt: skip
                 self._ratio[i] = ratio
                 log.info("%s: background window %d: learnt shadow ratio %s", self.source.name, i, ratio)

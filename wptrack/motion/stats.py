@@ -174,6 +174,7 @@ def shadow_ratio(
     bin_width: float = 0.02,
     min_count: int = 200,
     keep: np.ndarray | None = None,
+    sharp: float = 0.0,
 ) -> float | None:
     """The brightness ratio of the cast shadows of a recording, learnt from a window's samples.
 
@@ -194,6 +195,12 @@ def shadow_ratio(
             dark clothes of the shadow's colour replace it and would otherwise teach the band their own ratio);
             when fewer than ``min_count`` of them lie inside the search range (a flat floor: nothing to test), every
             vote counts.
+        sharp: 0: the highest peak. Else the sharpest: the peak that stands highest above the mean ``m`` of the
+            histogram within ``+- sharp`` of it (votes outside the search range included: a top-hat), among the
+            peaks that stand out of it by at least 3 Poisson standard deviations (``s - m >= 3 sqrt(max(m, 1))``;
+            none: the highest peak). The shadows of one sky darken one floor by one ratio and make a narrow peak;
+            dark clothes a broad hump, which may be higher (the EPFL terrace: clothes at 0.33-0.45 outnumber the
+            shadows at 0.87-0.89 in every window).
 
     Returns:
         The ratio at the peak, or ``None``.
@@ -219,8 +226,13 @@ def shadow_ratio(
     counts = None
     if keep is not None:
         counts, _ = np.histogram(np.concatenate(kept), bins=edges)
+    chosen = None
+    if keep is not None:
+        chosen = np.concatenate(kept)
+        counts, _ = np.histogram(chosen, bins=edges)
     if counts is None or counts.sum() < min_count:  # too little texture to test: every vote
-        counts, _ = np.histogram(np.concatenate(votes), bins=edges)
+        chosen = np.concatenate(votes)
+        counts, _ = np.histogram(chosen, bins=edges)
     if counts.sum() < min_count:
         return None
     smooth = np.convolve(counts.astype(np.float64), [0.25, 0.5, 0.25], mode="same")
@@ -228,4 +240,13 @@ def shadow_ratio(
     if not peaks:
         return None
     best = max(peaks, key=lambda i: smooth[i])
+    if sharp > 0:
+        wide = max(1, int(round(sharp / bin_width)))
+        outer = np.arange(lo - wide * bin_width, hi + (wide + 0.5) * bin_width, bin_width)
+        around, _ = np.histogram(chosen, bins=outer)
+        mean = np.convolve(around.astype(np.float64), np.ones(2 * wide + 1) / (2 * wide + 1), mode="same")
+        mean = mean[wide : wide + len(smooth)]
+        standing = [i for i in peaks if smooth[i] - mean[i] >= 3.0 * np.sqrt(max(mean[i], 1.0))]
+        if standing:
+            best = max(standing, key=lambda i: smooth[i] - mean[i])
     return float(edges[best] + bin_width / 2)
