@@ -273,6 +273,7 @@ def test_given_masks_of_wrong_size(tmp_path):
         ({"shadow_lo": 0.5, "shadow_hi": 0.5}, "shadow_hi"),
         ({"shadow_chroma": -0.1}, "shadow_chroma"),
         ({"shadow_texture": 1.0}, "shadow_texture"),
+        ({"shadow_peak": 0.5}, "shadow_peak"),
         ({"device": "gpu"}, "device"),
     ],
 )
