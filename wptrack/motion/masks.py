@@ -145,9 +145,9 @@ class MaskConfig:
         hi=1.0, hi_open=True,
     )  # fmt: skip
     shadow_peak: float = param(
-        0.1, help="offline: learn the shadow ratio at the sharpest peak of the votes' ratios (highest over their mean "
-        "within +- this), not the highest: one sky darkens one floor by one ratio, dark clothes make a broad hump "
-        "(0: the highest peak)", lo=0.0, hi=0.3,
+        0.1, help="offline: learn the shadow ratio at the most significant peak of the votes' ratios (excess over "
+        "their mean within +- this, in Poisson deviations), not the highest: one sky darkens one floor by one ratio, "
+        "dark clothes make a broad hump (0: the highest peak)", lo=0.0, hi=0.3,
     )  # fmt: skip
     soft_scale: float = param(
         1.0, help="offline: scale of the foreground probability 1 / (1 + exp(-(z - T) / k))", units="robust sigmas",

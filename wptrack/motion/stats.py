@@ -195,12 +195,12 @@ def shadow_ratio(
             dark clothes of the shadow's colour replace it and would otherwise teach the band their own ratio);
             when fewer than ``min_count`` of them lie inside the search range (a flat floor: nothing to test), every
             vote counts.
-        sharp: 0: the highest peak. Else the sharpest: the peak that stands highest above the mean ``m`` of the
-            histogram within ``+- sharp`` of it (votes outside the search range included: a top-hat), among the
-            peaks that stand out of it by at least 3 Poisson standard deviations (``s - m >= 3 sqrt(max(m, 1))``;
-            none: the highest peak). The shadows of one sky darken one floor by one ratio and make a narrow peak;
-            dark clothes a broad hump, which may be higher (the EPFL terrace: clothes at 0.33-0.45 outnumber the
-            shadows at 0.87-0.89 in every window).
+        sharp: 0: the highest peak. Else the most significant: the peak whose excess over the mean ``m`` of the
+            histogram within ``+- sharp`` of it (votes outside the search range included: a top-hat) is the most
+            Poisson standard deviations, ``(s - m) / sqrt(max(m, 1))``, among the peaks with at least 3 (none: the
+            highest peak). The shadows of one sky darken one floor by one ratio and make a narrow peak; dark clothes
+            a broad hump, which may be higher (the EPFL terrace: clothes at 0.33-0.47 outnumber the shadows at
+            0.81-0.89 in 31 of its 32 windows; the excess alone, ``s - m``, still chose the clothes in 5).
 
     Returns:
         The ratio at the peak, or ``None``.
@@ -248,5 +248,5 @@ def shadow_ratio(
         mean = mean[wide : wide + len(smooth)]
         standing = [i for i in peaks if smooth[i] - mean[i] >= 3.0 * np.sqrt(max(mean[i], 1.0))]
         if standing:
-            best = max(standing, key=lambda i: smooth[i] - mean[i])
+            best = max(standing, key=lambda i: (smooth[i] - mean[i]) / np.sqrt(max(mean[i], 1.0)))
     return float(edges[best] + bin_width / 2)
