@@ -404,3 +404,19 @@ def test_cli_masks_illumination_options(tmp_path, rng, capsys):
     err = capsys.readouterr().err
     assert code == 2 and err.startswith("wptrack: error: MaskConfig.mode_band") and "Traceback" not in err
     assert not (tmp_path / "b").exists()
+
+
+def test_patch_pixels_kernel_equals_patch_kernel_at_listed_pixels(device, rng):
+    """The packed patch statistics of listed pixels are patch_kernel's there (the same patch_at)."""
+    bg, frame = _scene(rng)
+    mad = np.full(bg.shape, 2, np.uint8)
+    luma, patch, rows = _patch(device, frame, bg, mad, (1.0, 1.0, 1.0), 0.0, _params(), 3)
+    pixels = np.concatenate([[0, H * W - 1, W - 1], rng.choice(H * W, 200, replace=False)]).astype(np.int32)
+    out = wp.zeros(len(pixels), dtype=kbg.patch_vec, device=device)
+    wp.launch(kil.patch_pixels_kernel, dim=len(pixels), inputs=[rows, luma, wp.array(pixels, dtype=wp.int32,
+              device=device), W, H, 3], outputs=[out], device=device)  # fmt: skip
+    exact = "cpu" in str(device)
+    full = patch.numpy().reshape(H * W, 6)
+    np.testing.assert_allclose(out.numpy().reshape(-1, 6), full[pixels], rtol=0 if exact else 1e-5,
+                               atol=0 if exact else 1e-5)  # fmt: skip
+    assert np.ptp(full[pixels][:, 0]) > 0.5  # the pixels differ (an index mix-up would show)

@@ -152,7 +152,8 @@ def _changed(field: str):
     special = {"method": "mog2", "device": "cpu", "samples": 3, "window": 4, "threshold": 50, "learning_rate": 0.5,
                "shadow_hi": 0.9, "illum_tiles": 0, "neighbourhood": 0, "illum_verify": 0.5, "illum_veto": 0.3,
                "shadow_lo": 0.6, "illum_keep": 0.5, "illum_dead": 0.1, "illum_grad": 0.5, "shadow_band": 0.2,
-               "mode_band": 0.0, "spread_cap": 0.0, "fg_low": 2.0, "illum_radius": 1, "illum_patch": 2}  # fmt: skip
+               "mode_band": 0.0, "spread_cap": 0.0, "fg_low": 2.0, "illum_radius": 1, "illum_patch": 2,
+               "shadow_texture": 0.5, "shadow_peak": 0.2}  # fmt: skip
     return special.get(field, default * 2 if default else 1)
 
 

@@ -272,6 +272,8 @@ def test_given_masks_of_wrong_size(tmp_path):
         ({"shadow_lo": 0}, "shadow_lo"),
         ({"shadow_lo": 0.5, "shadow_hi": 0.5}, "shadow_hi"),
         ({"shadow_chroma": -0.1}, "shadow_chroma"),
+        ({"shadow_texture": 1.0}, "shadow_texture"),
+        ({"shadow_peak": 0.5}, "shadow_peak"),
         ({"device": "gpu"}, "device"),
     ],
 )
@@ -545,3 +547,82 @@ def test_write_masks_keeps_the_first_background_of_its_pass(tmp_path, rng, monke
     assert len(windows) >= 3 and reads == [tuple(w) for w in windows]  # each window read once, in order
     again = open_masks(video=path, config=config).background(0)
     np.testing.assert_array_equal(cv2.imread(str(tmp_path / "out" / "background.png")), again)
+
+
+def _textured_shadow_and_dark_object(rng, texture: float):
+    """A floor of neutral grey 4 x 4 blocks (135..155) crossed by a moving cast shadow (ratio 0.8: it darkens the
+    blocks, their texture stays) and a larger moving object of uniform dark grey (60: ratios 0.39..0.44, the
+    blocks' texture replaced), the most frequent dark neutral foreground: the masks with the learnt band and the
+    given ``shadow_texture``: ``(mask at frame 6, learnt ratio, shadow region, object region)``."""
+    blocks = rng.uniform(135, 155, (H // 4, W // 4, 1)).astype(np.float32)
+    floor = np.repeat(cv2.resize(blocks, (W, H), interpolation=cv2.INTER_NEAREST)[..., None], 3, axis=2)
+    frames = 25
+    video = np.empty((frames, H, W, 3), np.uint8)
+    for t in range(frames):
+        img = floor.copy()
+        img[2:28, 3 * t : 3 * t + 21] *= 0.8
+        img[30:72, max(110 - 6 * t, 0) : max(158 - 6 * t, 0)] = 60.0
+        video[t] = np.clip(img + rng.normal(0, 2.0, img.shape), 0, 255).astype(np.uint8)
+    config = MaskConfig(window=frames, samples=frames, device="cpu", fg_low=2.0, neighbourhood=0, illum_tiles=0,
+                        illum_veto=0.0, shadow_texture=texture, shadow_peak=0.0)  # fmt: skip
+    masks = open_masks(video=video, config=config)
+    got = np.stack(list(masks))
+    t = 6
+    shadow, obj = np.s_[4:26, 3 * t + 2 : 3 * t + 19], np.s_[32:70, 112 - 6 * t : 156 - 6 * t]
+    return got[t], masks.model._ratio[0], shadow, obj
+
+
+def test_learnt_shadow_ratio_from_textured_votes_keeps_dark_clothes(rng):
+    """Dark uniform clothes outnumber the cast shadows' pixels: every vote (the highest peak, shadow_peak 0) teaches
+    the band the clothes' ratio and eats them (TownCentre learnt 0.43 where its textured votes say 0.87); the votes
+    that keep the floor's texture teach the shadows' 0.8: the shadow goes, the clothes stay."""
+    old, old_ratio, shadow, obj = _textured_shadow_and_dark_object(rng, 0.0)
+    assert old_ratio is not None and old_ratio < 0.6
+    assert old[obj].mean() < 0.6
+    new, new_ratio, shadow, obj = _textured_shadow_and_dark_object(rng, 0.7)
+    assert new_ratio is not None and abs(new_ratio - 0.8) < 0.03
+    assert new[obj].mean() > 0.95 and new[shadow].mean() < 0.05
+
+
+def test_shadow_ratio_texture_votes_fall_back_to_all_on_a_flat_floor(rng):
+    """The votes kept by the texture test decide only when there are enough of them (min_count): none kept (a flat
+    floor) gives the ratio of every vote; enough kept give theirs."""
+    from wptrack.motion.stats import shadow_ratio
+
+    n = 2000
+    background = np.full((n, 3), 150.0)
+    samples = np.repeat(background[None], 4, axis=0).astype(np.uint8)
+    samples[:, :600] = 61  # dark clothes: ratio 0.41
+    samples[:, 600:900] = 121  # shadows: ratio 0.81
+    args = (np.ones((4, 3)), background, np.ones((n, 3)), 4.0, 3.0, 0.1)
+    keep = np.zeros((4, n), bool)
+    everything = shadow_ratio(samples, *args)
+    assert abs(everything - 0.41) < 0.011
+    assert shadow_ratio(samples, *args, keep=keep) == everything
+    keep[:, 600:900] = True
+    assert abs(shadow_ratio(samples, *args, keep=keep) - 0.81) < 0.011
+    keep[:, 640:900] = False  # 4 x 40 = 160 votes kept < min_count 200
+    assert shadow_ratio(samples, *args, keep=keep) == everything
+
+
+def test_shadow_ratio_sharp_peak_beats_a_higher_broad_hump(rng):
+    """Faint shadows of one sky (ratio 0.88, narrow: 600 votes) and dark clothes spread over 0.32-0.48 (a broad hump,
+    more votes per bin at its top): the highest peak is the clothes', the sharpest the shadows'; a spike of a few
+    votes above the hump's flat part does not stand out by 3 Poisson deviations and is not chosen."""
+    from wptrack.motion.stats import shadow_ratio
+
+    clothes = rng.uniform(0.32, 0.48, 3000)  # 375 votes per 0.02 bin
+    shadows = rng.normal(0.88, 0.01, 600)  # ~230 votes in its top bin
+    a = np.concatenate([clothes, shadows])
+    n = len(a)
+    background = np.full((n, 3), 200.0)
+    samples = np.repeat(np.round(a * 200)[:, None], 3, axis=1)[None].astype(np.uint8)
+    args = (np.ones((1, 3)), background, np.zeros((n, 3)), 0.0, 1e-3, 0.1)
+    highest = shadow_ratio(samples, *args)
+    assert 0.32 < highest < 0.48
+    assert abs(shadow_ratio(samples, *args, sharp=0.1) - 0.88) < 0.021
+    spike = np.concatenate([clothes, np.full(20, 0.405)])  # a few votes on the hump: not significant
+    n2 = len(spike)
+    s2 = np.repeat(np.round(spike * 200)[:, None], 3, axis=1)[None].astype(np.uint8)
+    args2 = (np.ones((1, 3)), np.full((n2, 3), 200.0), np.zeros((n2, 3)), 0.0, 1e-3, 0.1)
+    assert shadow_ratio(s2, *args2, sharp=0.1) == shadow_ratio(s2, *args2)  # no standing peak: the highest

@@ -10,7 +10,8 @@ texture (selection on quantised log ratios, :data:`LOG_STEPS`), :func:`tile_smoo
 weighted median; :func:`wptrack.kernels.core.background.foreground_kernel` divides the frame by that field
 (:func:`~wptrack.kernels.core.background.local_gain`, bilinear between tile centres) and vetoes what
 :func:`~wptrack.kernels.core.background.illumination_change` explains; :func:`compensate_kernel` divides a window's
-samples by their own fields.
+samples by their own fields; :func:`patch_pixels_kernel` gives the patch statistics of listed pixels (the texture
+test of a window's shadow votes).
 """
 
 import warp as wp
@@ -226,6 +227,30 @@ def patch_samples_kernel(
     if yy < wp.min((ty + 1) * params.tile, height) and xx < wp.min((tx + 1) * params.tile, params.width):
         p = yy * params.width + xx
         patch[p] = patch_at(rows, luma, params.width, height, radius, p)
+
+
+@wp.kernel
+def patch_pixels_kernel(
+    rows: wp.array(dtype=rows_vec),
+    luma: wp.array(dtype=wp.vec3),
+    pixels: wp.array(dtype=wp.int32),
+    width: int,
+    height: int,
+    radius: int,
+    patch: wp.array(dtype=patch_vec),
+):
+    """:func:`patch_kernel` at a list of pixels (the same values:
+    :func:`~wptrack.kernels.core.background.patch_at`), packed: ``patch[i]`` is pixel ``pixels[i]``'s. For the
+    texture test of a window's shadow votes (a pixel subsample of each sample). One thread per listed pixel.
+
+    Args:
+        rows, luma: ``(H W,)`` :func:`patch_rows_kernel`'s sums and :func:`luma_kernel`'s output.
+        pixels: ``(P,)`` flat pixel indices ``y W + x``.
+        width, height: Image size, pixels. radius: Patch radius, pixels.
+        patch: ``(P,)`` output ``(ncc, gc, tex_b, tex_f, resid, gap)`` per listed pixel.
+    """
+    i = wp.tid()
+    patch[i] = patch_at(rows, luma, width, height, radius, pixels[i])
 
 
 @wp.func

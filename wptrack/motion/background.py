@@ -187,6 +187,10 @@ class OfflineBackground:
         p.chroma_max = float(config.shadow_chroma)
         self.params = p
         self.light = LightField(config, source.width, source.height, p, device)
+        # the shadow votes' pixels (the subsample above) on the device, for their texture test
+        self._sub_pixels = (
+            wp.array(pixels.astype(np.int32), dtype=wp.int32, device=device) if self.light.textured_votes else None
+        )
 
     @property
     def _sampler(self) -> _Sampler:
@@ -409,9 +413,13 @@ class OfflineBackground:
                 )
             if self.config.shadow_band > 0 and self.config.detect_shadows:
                 c = self.config
+                keep = None
+                if self.light.textured_votes:  # only votes that keep the ground's texture (not dark clothes)
+                    cap = float(c.spread_cap * self._scale[i]) if c.spread_cap > 0 else 0.0
+                    keep = self.light.sample_patches(stack, gains, median, mad, self._sub_pixels, cap)
                 ratio = shadow_ratio(
                     sub.transpose(0, 2, 1), gains, self._bg_sub[i].T, mad_host[self._sub].reshape(-1, 3),
-                    c.fg_threshold, c.noise_floor, c.shadow_chroma,
+                    c.fg_threshold, c.noise_floor, c.shadow_chroma, keep=keep, sharp=c.shadow_peak,
                 )  # fmt: skip
                 self._ratio[i] = ratio
                 log.info("%s: background window %d: learnt shadow ratio %s", self.source.name, i, ratio)
@@ -445,6 +453,13 @@ class OfflineBackground:
         clothes at 0.6-0.7, which the fixed bounds took for shadow, stay foreground). Ratios above the band, up to
         ``shadow_hi``, are penumbra candidates (shadow only where attached to an umbra, :func:`resolve_levels`).
         No learnt ratio: the configured ``[shadow_lo, shadow_hi]``.
+
+        The ratio is learnt from the votes that keep the ground's texture (``MaskConfig.shadow_texture``,
+        :meth:`wptrack.motion.illumination.LightField.sample_patches`) where there are enough of them: dark neutral
+        clothes on a grey floor vote too, and where they outnumber the shadows (the EPFL terrace and Oxford
+        TownCentre: learnt 0.33-0.47, the band then ate trousers and coats) they taught the band their own ratio; a
+        cast shadow darkens the ground's texture, clothes replace it (TownCentre at 1080p: 0.87 from the textured
+        votes). A floor too flat for the test at the sampled pixels keeps every vote (the terrace at 360x288, PETS).
 
         Until 2026-11-24 the learnt ratio could lower ``shadow_lo`` but not raise it, because raising it on the
         PETS clip made the darker shadows at the people's feet foreground and the joint template filter then lost

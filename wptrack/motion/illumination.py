@@ -36,6 +36,8 @@ from typing import Any
 
 import numpy as np
 
+from wptrack.core.device import download
+
 ILLUM_MIN_WEIGHT = 2.0
 """Smallest total weight (sum of the tiles' voting fractions) of a tile neighbourhood whose weighted median sets the
 local illumination field; below it the field is 1 there
@@ -68,6 +70,8 @@ class LightField:
 
     Attributes:
         active: Whether any patch work is done (a field or a veto); when False, :meth:`measure` is not needed.
+        textured_votes: Whether the windows' shadow votes are texture-tested (``shadow_texture``, with a learnt
+            band): :meth:`sample_patches` is used.
         tiles: Whether there is a field (``illum_tiles > 0``).
         local: ``(tiles_y tiles_x,)`` vec3 device array: the field's log gains per tile (B, G, R).
         patch: ``(H W,)`` patch statistics (:data:`wptrack.kernels.core.background.patch_vec`) of the last frame, at
@@ -101,7 +105,10 @@ class LightField:
         p.illum_hi = float(c.illum_hi)
         self.tiles = bool(p.tile)
         self.active = bool(p.tile or p.veto_ncc > 0 or p.veto_grad > 0)
-        n = self.pixels if self.active else 1
+        self.textured_votes = bool(
+            getattr(c, "shadow_texture", 0.0) > 0 and getattr(c, "shadow_band", 0.0) > 0 and c.detect_shadows
+        )
+        n = self.pixels if self.active or self.textured_votes else 1
         n_tiles = p.tiles_x * p.tiles_y
         # per-pixel luminance and patch statistics, per-tile gains and the smoothed field
         self._luma = wp.zeros(n, dtype=wp.vec3, device=device)
@@ -125,14 +132,9 @@ class LightField:
         from wptrack.kernels.core import illumination as kil
 
         c, p, dev = self.config, self.params, self.device
-        width, height = self.width, self.height
-        wp.launch(kil.luma_kernel, dim=self.pixels, inputs=[frame, gain, b0, m0, b1, m1, w, p], outputs=[self._luma],
-                  device=dev)  # fmt: skip
+        height = self.height
+        self._patch_rows(frame, gain, b0, m0, b1, m1, w)
         r = int(c.illum_patch)
-        wp.launch(kil.luma_grad_kernel, dim=self.pixels, inputs=[self._luma, width, height], outputs=[self._grads],
-                  device=dev)  # fmt: skip
-        wp.launch(kil.patch_rows_kernel, dim=self.pixels, inputs=[self._luma, self._grads, width, height, r],
-                  outputs=[self._rows9], device=dev)  # fmt: skip
         if p.tile:
             n = p.tiles_x * p.tiles_y
             # the patch statistics where the tiles' votes read them; the veto's candidates get theirs in the
@@ -145,6 +147,65 @@ class LightField:
                       inputs=[self._tiles, p.tiles_x, p.tiles_y, int(c.illum_radius), ILLUM_WIDEN, ILLUM_MIN_WEIGHT,
                               float(c.illum_keep), float(c.illum_dead)],
                       outputs=[self.local], device=dev)  # fmt: skip
+
+    def _patch_rows(self, frame: Any, gain: Any, b0: Any, m0: Any, b1: Any, m1: Any, w: float) -> None:
+        """Launch the luminance, gradients and patch row sums of ``frame`` against the background into
+        :attr:`luma` and :attr:`rows`."""
+        import warp as wp
+
+        from wptrack.kernels.core import illumination as kil
+
+        p, dev, width, height = self.params, self.device, self.width, self.height
+        wp.launch(kil.luma_kernel, dim=self.pixels, inputs=[frame, gain, b0, m0, b1, m1, w, p], outputs=[self._luma],
+                  device=dev)  # fmt: skip
+        wp.launch(kil.luma_grad_kernel, dim=self.pixels, inputs=[self._luma, width, height], outputs=[self._grads],
+                  device=dev)  # fmt: skip
+        wp.launch(kil.patch_rows_kernel, dim=self.pixels,
+                  inputs=[self._luma, self._grads, width, height, int(self.config.illum_patch)],
+                  outputs=[self._rows9], device=dev)  # fmt: skip
+
+    def sample_patches(
+        self, stack: Any, gains: np.ndarray, median: Any, mad: Any, pixels: Any, spread_cap: float
+    ) -> np.ndarray:
+        """The texture test of a window's shadow votes: for each sample ``k`` of ``stack`` (``(K, 3 H W)`` uint8 on
+        the device, divided by ``gains[k]``), whether its patch at each pixel of ``pixels`` (``(P,)`` int32 device
+        array of flat pixel indices) keeps the background's texture as a gain: the background patch is textured
+        (``tex_b >= illum_texture``, ``tex_f >= illum_texture / 2``), the patches correlate (NCC ``>=
+        shadow_texture``), the fit is a gain (``gap <= illum_gap``) and the pixel follows it (``resid <=
+        illum_resid``); the statistics of :func:`~wptrack.kernels.core.background.patch_at` against ``(median,
+        mad)`` with the window's own noise-scale cap ``spread_cap`` (8-bit units, 0: none).
+
+        Returns:
+            ``(K, P)`` bool.
+        """
+        import warp as wp
+
+        from wptrack.kernels.core import illumination as kil
+
+        c, p = self.config, self.params
+        n = pixels.shape[0]
+        out = wp.zeros(n, dtype=kil.patch_vec, device=self.device)
+        frame_cap = p.spread_cap
+        p.spread_cap = float(spread_cap)
+        keep = np.zeros((stack.shape[0], n), dtype=bool)
+        try:
+            for k in range(stack.shape[0]):
+                g = wp.vec3(*(float(v) for v in gains[k]))
+                self._patch_rows(stack[k], g, median, mad, median, mad, 0.0)
+                wp.launch(kil.patch_pixels_kernel, dim=n,
+                          inputs=[self._rows9, self._luma, pixels, self.width, self.height, int(c.illum_patch)],
+                          outputs=[out], device=self.device)  # fmt: skip
+                st = download(out).reshape(n, 6)
+                keep[k] = (
+                    (st[:, 2] >= c.illum_texture)
+                    & (st[:, 3] >= 0.5 * c.illum_texture)
+                    & (st[:, 0] >= c.shadow_texture)
+                    & (st[:, 5] <= c.illum_gap)
+                    & (st[:, 4] <= c.illum_resid)
+                )
+        finally:
+            p.spread_cap = frame_cap
+        return keep
 
     def compensate(self, stack: Any, gains: np.ndarray, median: Any, mad: Any, spread_cap: float) -> None:
         """Divide each sample of a window's ``stack`` (``(K, 3 H W)`` uint8 on the device, in place) by its global

@@ -137,6 +137,18 @@ class MaskConfig:
         0.08, help="offline: learn the recording's shadow brightness ratio r and take r +- this as shadow (0: the "
         "fixed bounds)", lo=0.0, hi=0.5,
     )  # fmt: skip
+    shadow_texture: float = param(
+        0.7, help="offline: the learnt shadow ratio counts only the votes that keep the ground's texture: a pixel "
+        "whose background patch is textured (illum_texture) and whose sample patch correlates with it at least this "
+        "much (NCC) and follows it as a gain (illum_gap, illum_resid); a cast shadow darkens the ground's texture, "
+        "dark clothes replace it; with too few such votes (a flat floor), every vote (0: every vote)", lo=0.0,
+        hi=1.0, hi_open=True,
+    )  # fmt: skip
+    shadow_peak: float = param(
+        0.1, help="offline: learn the shadow ratio at the most significant peak of the votes' ratios (excess over "
+        "their mean within +- this, in Poisson deviations), not the highest: one sky darkens one floor by one ratio, "
+        "dark clothes make a broad hump (0: the highest peak)", lo=0.0, hi=0.3,
+    )  # fmt: skip
     soft_scale: float = param(
         1.0, help="offline: scale of the foreground probability 1 / (1 + exp(-(z - T) / k))", units="robust sigmas",
         symbol="k", lo=0.0, lo_open=True,
