@@ -527,7 +527,7 @@ def test_write_masks_keeps_the_first_background_of_its_pass(tmp_path, rng, monke
     pass reads each window once: the first window is not read a second time for the image (at 1080p that read was
     ~2 s of a 15 s run)."""
     from wptrack.motion import windows as Wn
-    from wptrack.motion.masks import write_masks
+    from wptrack.motion.writing import write_masks
 
     monkeypatch.setenv("WPTRACK_MASK_WORKERS", "1")
     video = _stand_then_move(rng, frames=48)

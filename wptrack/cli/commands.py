@@ -333,8 +333,9 @@ def cmd_batch(args) -> int:
 # --- masks ---------------------------------------------------------------------------------------------------
 def cmd_masks(args) -> int:
     from wptrack.core.config import from_namespace, option_map
-    from wptrack.motion.masks import MaskConfig, write_masks
+    from wptrack.motion.masks import MaskConfig
     from wptrack.motion.options import check_mask_options
+    from wptrack.motion.writing import write_masks
 
     config = from_namespace(MaskConfig, args, base=MaskConfig(device=args.device))
     if config.method != "given":  # given: write_masks says there is nothing to make

@@ -73,7 +73,8 @@ def _s3_masks(res, masks: str, mask_config) -> Path:
     ``wptrack.motion.masks`` (``masks`` = ``"offline"``: the default pipeline; ``"mog2"``) and cached next to it."""
     from dataclasses import replace
 
-    from wptrack.motion.masks import MaskConfig, write_masks
+    from wptrack.motion.masks import MaskConfig
+    from wptrack.motion.writing import write_masks
 
     if masks == "perfect":
         return Path(res.mask_videos[0])

@@ -1,0 +1,116 @@
+"""``wptrack masks``: make a video's motion masks and write them (masks.avi, probability.avi, background.png,
+masks.json), atomically."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from typing import Any
+
+import numpy as np
+
+from wptrack.motion.masks import MaskConfig, open_masks
+
+__all__ = ["write_masks"]
+
+
+def _mask_frame(mask: np.ndarray) -> np.ndarray:
+    return mask * np.uint8(255)
+
+
+def _probability_frame(prob: np.ndarray) -> np.ndarray:
+    return np.round(prob * 255.0).astype(np.uint8)
+
+
+def write_masks(
+    video: str | os.PathLike | np.ndarray,
+    out_dir: str | os.PathLike,
+    config: MaskConfig = MaskConfig(),
+    probability: bool = False,
+    max_frames: int | None = None,
+) -> dict[str, Any]:
+    """Make a video's motion masks and write them (``wptrack masks``).
+
+    Outputs in ``out_dir``: ``masks.avi`` (masks as 0/255 grey frames, lossless FFV1 where OpenCV has it, one
+    channel), ``probability.avi`` (with ``probability``: the foreground probability times 255, one channel),
+    ``background.png`` (offline method: the first window's background) and ``masks.json`` (inputs, config, frame
+    count, codec, timing). Videos are encoded by writer threads (:class:`wptrack.io.video.BackgroundWriter`) and
+    written atomically: an error leaves no half-written video.
+
+    Args:
+        video: Camera frames (any :func:`wptrack.io.frames.open_source` spec).
+        out_dir: Output folder (created).
+        config: Mask settings (``method`` ``"given"`` is refused: there is nothing to make).
+        probability: Also write ``probability.avi``.
+        max_frames: Stop after this many frames (``None``: all).
+
+    Returns:
+        The summary written to ``masks.json``.
+
+    Raises:
+        ConfigError: ``method="given"``.
+        FrameError: The video cannot be read.
+        OutputError: ``out_dir`` or a file in it cannot be written.
+    """
+    import time
+
+    from wptrack.io.atomic import atomic_write_bytes, atomic_write_json, ensure_writable_dir
+    from wptrack.io.video import BackgroundWriter, VideoWriter
+
+    masks = open_masks(video=video, config=config)
+    out = ensure_writable_dir(out_dir)
+    fps = masks.source.fps or 25.0
+    first: list[np.ndarray] = []  # the first window's background, kept when the pass builds it (not built again)
+    if masks.model is not None:
+        report = masks.model.on_build
+
+        def keep_first(window: int, centre: float, image: np.ndarray) -> None:
+            if window == 0 and not first:
+                first.append(image)
+            if report is not None:
+                report(window, centre, image)
+
+        masks.model.on_build = keep_first
+    t0 = time.perf_counter()
+    frames = 0
+    with BackgroundWriter(VideoWriter(out / "masks.avi", fps=fps, size=masks.size, grey=True)) as mw:
+        pw = None
+        if probability:
+            pw = BackgroundWriter(VideoWriter(out / "probability.avi", fps=fps, size=masks.size, grey=True))
+        try:
+            for mask, prob in masks.evidence(probability=probability):
+                if max_frames is not None and frames >= max_frames:
+                    break
+                mw.write(mask, _mask_frame)
+                if pw is not None:
+                    pw.write(prob, _probability_frame)
+                frames += 1
+        except BaseException:
+            if pw is not None:
+                pw.abort()
+            raise
+        if pw is not None:
+            pw.close()
+    elapsed = time.perf_counter() - t0
+    summary: dict[str, Any] = {
+        "video": video if not isinstance(video, np.ndarray) else "array",
+        "frames": frames,
+        "size": list(masks.size),
+        "fps": fps,
+        "codec": mw.writer.codec,
+        "seconds": elapsed,
+        "config": dataclasses.asdict(config),
+        "outputs": ["masks.avi"] + (["probability.avi"] if probability else []),
+    }
+    background = first[0] if first else masks.background()
+    if background is not None:
+        import cv2
+
+        ok, png = cv2.imencode(".png", background)
+        if ok:
+            atomic_write_bytes(out / "background.png", png.tobytes())
+            summary["outputs"].append("background.png")
+        summary["windows"] = [list(w.samples) for w in masks.model.windows]
+    summary["outputs"].append("masks.json")
+    atomic_write_json(out / "masks.json", summary)
+    return summary
