@@ -608,12 +608,8 @@ def _camera_counts_kernel(
     out[i, c] = wp.vec4(float(seen), on, area, full)
 
 
-@pytest.mark.parametrize("k", [1, 2, 3])
-def test_gate_per_camera_takes_the_kth_camera(device, rng, k):
-    """``cameras`` = k: the gate's support is the best, over its grid points, of the k-th largest coverage among the
-    cameras that judge the point (what the others leave of the rectangle there is at least ``min_left`` of it), 0
-    where fewer than k judge (k = 3 with two cameras: never seen); the per-camera counts add up to the pooled
-    ones (``box_counts_left``)."""
+def _three_people(device, rng):
+    """The two-camera rig with blob masks, their integral images and three people's rectangles (``person_boxes``)."""
     rig = make_rig()
     drig = DeviceRig(rig, device)
     flat = blob_masks(rig, rng)
@@ -628,6 +624,16 @@ def test_gate_per_camera_takes_the_kth_camera(device, rng, k):
         outputs=[boxes],
         device=device,
     )
+    return rig, drig, flat, I, people, pdev, boxes
+
+
+@pytest.mark.parametrize("k", [1, 2, 3])
+def test_gate_per_camera_takes_the_kth_camera(device, rng, k):
+    """``cameras`` = k: the gate's support is the best, over its grid points, of the k-th largest coverage among the
+    cameras that judge the point (what the others leave of the rectangle there is at least ``min_left`` of it), 0
+    where fewer than k judge (k = 3 with two cameras: never seen); the per-camera counts add up to the pooled
+    ones (``box_counts_left``)."""
+    rig, drig, flat, I, people, pdev, boxes = _three_people(device, rng)  # noqa: E741
     reach, speed, spacing, min_left, dt = 0.25, 1.5, 0.125, 0.25, 0.04
     m = int(np.ceil((reach + speed * np.float32(dt)) / spacing))
     pts = np.array(
@@ -738,20 +744,7 @@ def test_balanced_rectangle_term_weights_each_camera_by_its_own_rectangle(device
 def test_gate_per_camera_use_splits_weighting_and_removal(device, rng):
     """``use`` = 1: the support (removal) is the per-camera one, the weighting decision pooled; ``use`` = 2 the other
     way round (k = 2, two cameras)."""
-    rig = make_rig()
-    drig = DeviceRig(rig, device)
-    flat = blob_masks(rig, rng)
-    I = integral(rig, drig, flat, device)  # noqa: E741
-    people = rng.uniform(1.0, 3.0, (3, 2)).astype(np.float32)
-    pdev = wp.array(people, dtype=wp.vec2, device=device)
-    boxes = wp.zeros((3, 2), dtype=wp.vec4, device=device)
-    wp.launch(
-        kcov.person_boxes_kernel,
-        dim=(3, 2),
-        inputs=[drig.cams, pdev, wp.array(np.ones(3, np.int32), device=device), HW, HEIGHT],
-        outputs=[boxes],
-        device=device,
-    )
+    rig, drig, flat, I, people, pdev, boxes = _three_people(device, rng)  # noqa: E741
     terms = make_terms(weight=0.0)
     dt_dev = wp.array([0.04], dtype=wp.float32, device=device)
     args = [drig.cams, I, boxes, pdev, 0, terms, 0.25, 1.5, dt_dev, 0.125]

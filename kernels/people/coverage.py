@@ -148,6 +148,25 @@ def box_coverage(
     return on / area
 
 
+@wp.func
+def cell_centre(origin: wp.vec2, cell: float, nx: int, t: int):
+    """Centre (metres) of cell ``t`` = (ix, iy) = (t % nx, t / nx) of a ground grid: ``origin + cell (ix + 1/2,
+    iy + 1/2)``."""
+    return wp.vec2(origin[0] + cell * (float(t % nx) + 0.5), origin[1] + cell * (float(t / nx) + 0.5))
+
+
+@wp.func
+def in_boxes(boxes: wp.array2d(dtype=wp.vec4), n: int, skip: int, c: int, fu: float, fv: float):
+    """Whether pixel (fu, fv) lies in one of the first ``n`` rectangles of ``boxes`` in camera ``c`` other than row
+    ``skip`` (-1: none skipped)."""
+    for k in range(n):
+        if k != skip:
+            b = boxes[k, c]
+            if fu >= b[0] and fu < b[2] and fv >= b[1] and fv < b[3]:
+                return True
+    return False
+
+
 @wp.kernel
 def downsample_mask_kernel(
     cams: wp.array(dtype=Camera),
@@ -194,9 +213,8 @@ def coverage_kernel(
     iy + 1/2)``, metres. ``coverage`` (cameras, nx * ny) out: fraction in [0, 1], -1 where the camera does not see
     the cell's person."""
     c, t = wp.tid()
-    x = origin[0] + cell * (float(t % nx) + 0.5)
-    y = origin[1] + cell * (float(t / nx) + 0.5)
-    coverage[c, t] = wp.float32(box_coverage(cams[c], integral, x, y, half_width, height, min_visible, unit))
+    p = cell_centre(origin, cell, nx, t)
+    coverage[c, t] = wp.float32(box_coverage(cams[c], integral, p[0], p[1], half_width, height, min_visible, unit))
 
 
 @wp.kernel
@@ -216,9 +234,8 @@ def box_area_kernel(
     rule). Launch dim ``(cameras, nx * ny)``."""
     c, t = wp.tid()
     cam = cams[c]
-    x = origin[0] + cell * (float(t % nx) + 0.5)
-    y = origin[1] + cell * (float(t / nx) + 0.5)
-    box, full = person_box(cam, x, y, half_width, height)
+    p = cell_centre(origin, cell, nx, t)
+    box, full = person_box(cam, p[0], p[1], half_width, height)
     a = (box[2] - box[0]) * (box[3] - box[1])
     if full <= 0.0 or a <= 0.0 or a < min_visible * full:
         area[c, t] = wp.float32(-1.0)
@@ -264,13 +281,8 @@ def explained_mask_kernel(
         return
     i = cam.pixel_offset + v * cam.width + u
     m = mask[i]
-    if m != wp.uint8(0):
-        fu = float(u)
-        fv = float(v)
-        for j in range(n):
-            b = boxes[j, c]
-            if fu >= b[0] and fu < b[2] and fv >= b[1] and fv < b[3]:
-                m = wp.uint8(0)
+    if m != wp.uint8(0) and in_boxes(boxes, n, -1, c, float(u), float(v)):
+        m = wp.uint8(0)
     free[i] = m
 
 
@@ -289,13 +301,9 @@ def left_mask_kernel(
     cam = cams[c]
     if v >= cam.height or u >= cam.width:
         return
-    fu = float(u)
-    fv = float(v)
     m = wp.uint8(1)
-    for j in range(n):
-        b = boxes[j, c]
-        if fu >= b[0] and fu < b[2] and fv >= b[1] and fv < b[3]:
-            m = wp.uint8(0)
+    if in_boxes(boxes, n, -1, c, float(u), float(v)):
+        m = wp.uint8(0)
     left[cam.pixel_offset + v * cam.width + u] = m
 
 
@@ -325,9 +333,8 @@ def left_coverage_kernel(
     ny)``; ``unit`` as in :func:`box_counts` (the free integral counts mask pixels, the left one blocks)."""
     c, t = wp.tid()
     cam = cams[c]
-    x = origin[0] + cell * (float(t % nx) + 0.5)
-    y = origin[1] + cell * (float(t / nx) + 0.5)
-    box, full = person_box(cam, x, y, half_width, height)
+    p = cell_centre(origin, cell, nx, t)
+    box, full = person_box(cam, p[0], p[1], half_width, height)
     area = (box[2] - box[0]) * (box[3] - box[1])
     if full <= 0.0 or area <= 0.0 or area < min_visible * full:
         coverage[c, t] = wp.float32(-1.0)
@@ -723,12 +730,7 @@ hist_bins = wp.types.vector(length=16, dtype=wp.float32)
 @wp.func
 def in_any_other(boxes: wp.array2d(dtype=wp.vec4), own: int, c: int, fu: float, fv: float):
     """Whether pixel (fu, fv) lies in the rectangle of another person than ``own`` in camera ``c``."""
-    for k in range(boxes.shape[0]):
-        if k != own:
-            b = boxes[k, c]
-            if fu >= b[0] and fu < b[2] and fv >= b[1] and fv < b[3]:
-                return True
-    return False
+    return in_boxes(boxes, boxes.shape[0], own, c, fu, fv)
 
 
 @wp.kernel
