@@ -188,8 +188,10 @@ class PeopleTracker(Population):
         self.integral = wp.zeros(self.sdrig.total_integral, dtype=wp.int32, device=d)
         self.free_mask = wp.zeros(self.sdrig.total_pixels, dtype=wp.uint8, device=d)
         self.free_integral = wp.zeros(self.sdrig.total_integral, dtype=wp.int32, device=d)
-        self.left_mask = wp.zeros(self.sdrig.total_pixels, dtype=wp.uint8, device=d)  # 1 outside every rectangle
-        self.left_integral = wp.zeros(self.sdrig.total_integral, dtype=wp.int32, device=d)
+        # BirthConfig.explained "neutral" only: 1 outside every rectangle, its integral image (empty otherwise)
+        neutral = self.config.birth.explained == "neutral"
+        self.left_mask = wp.zeros(self.sdrig.total_pixels if neutral else 0, dtype=wp.uint8, device=d)
+        self.left_integral = wp.zeros(self.sdrig.total_integral if neutral else 0, dtype=wp.int32, device=d)
         maxw, maxh = self.sdrig.max_width, self.sdrig.max_height
         seg = int(kcolour.SEGMENT)
         self._row_dims = (ncam, maxh, -(-maxw // seg))
@@ -232,7 +234,7 @@ class PeopleTracker(Population):
             "sigma_n": (1,),
             "cover": (ncam, cells),
             "free_cover": (ncam, cells),
-            "free_left": (ncam, cells),
+            "free_left": (ncam, cells) if neutral else (0,),  # read (and written) with "neutral" births only
             "hist": (b.max_people, ncam, int(kcov.HIST_PARTS), nb + 1),
             "top": (b.max_people, axes),
         }
