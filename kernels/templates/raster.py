@@ -221,12 +221,18 @@ def template_hulls_kernel(
     piece``: ``hull_pts`` (N, R * PIECES, HULL_MAX) hull vertices (pixels) in order around the hull, the first
     one topmost (smallest v; ``hull_chain_span`` relies on it), ``hull_n`` vertex count (0: the piece
     does not exist, is partly behind the camera or misses the image), ``hull_rows`` (first, last) image row the
-    piece covers (clipped to the image), ``hull_depth`` camera depth of the object's ground point (metres).
+    piece covers (clipped to the image), ``hull_depth`` camera depth of the object's ground point (metres; 0 for
+    an empty slot, which is not projected).
     """
     i, q = wp.tid()
     s = q / PIECES
     piece = q - s * PIECES
     k = kind[i, s]
+    if k == 0:  # an empty slot (most of R_max): no pieces; its depth is never read (hull_n = 0)
+        hull_n[i, q] = 0
+        hull_rows[i, q] = wp.vec2i(0, -1)
+        hull_depth[i, q] = 0.0
+        return
     p = pos[i, s]
     a = heading[i, s]
     d = dims[i, s]
