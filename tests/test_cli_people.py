@@ -69,6 +69,7 @@ def test_track_people_writes_outputs(scene, tmp_path, capsys):
     run = json.loads((out / "run.json").read_text())
     assert run["status"] == "complete" and run["tracker"] == "people" and run["summary"]["people"] == 2
     assert run["summary"]["degenerate_estimates"] == 0 and run["stopped_early"] is None
+    assert run["summary"]["births_refused"] == 0  # the pool (max_people 8) had room for both
     idx, verts = read_chunks(out / "hulls")
     assert len(idx) == len(t["frame"]) and verts.shape[1] == 3 and (idx[:, 3] >= 4).all()
     # each hull lies around its person's centroid

@@ -3,13 +3,15 @@ persistent ids, keep them while they pass each other, and leave; bad input; chec
 
 from __future__ import annotations
 
+import logging
+
 import cv2
 import numpy as np
 import pytest
 
 from wptrack.cameras.rig import Camera, Rig
 from wptrack.core.errors import ConfigError, FrameError
-from wptrack.trackers.people.config import OccupancyConfig, PeopleConfig
+from wptrack.trackers.people.config import BirthConfig, OccupancyConfig, PeopleConfig
 from wptrack.trackers.people.run import hull_points
 from wptrack.trackers.people.tracker import PeopleTracker
 
@@ -180,6 +182,23 @@ def test_checkpoint_continues_identically(device, scene):
         assert [p.id for p in est.people] == [p.id for p in ref.people]
         for p, q in zip(est.people, ref.people, strict=True):
             np.testing.assert_array_equal(p.mean, q.mean)
+
+
+def test_a_full_pool_refuses_births_with_one_warning(device, scene, caplog):
+    """A pool of one filter: the crossing's second person finds no free slot frame after frame. One warning for the
+    run (not one a frame), naming the option; every refusal counted (run.json's births_refused), and the count kept
+    by a checkpoint."""
+    rig, _ = scene
+    with caplog.at_level(logging.DEBUG, logger="wptrack.trackers.people.tracker"):
+        tr, _ = run(device, scene, birth=BirthConfig(max_people=1))
+    refusals = [r for r in caplog.records if "no free slot" in r.getMessage()]
+    warnings = [r for r in refusals if r.levelno == logging.WARNING]
+    assert len(tr.tracked_ids) == 1
+    assert len(warnings) == 1 and "--max-people" in warnings[0].getMessage()
+    assert tr.births_refused == len(refusals) >= 2
+    again = PeopleTracker(rig, _config(birth=BirthConfig(max_people=1)), device=device, keep_particles=100)
+    again.load_state_dict(tr.state_dict())
+    assert again.births_refused == tr.births_refused
 
 
 def test_occupancy_integrates_to_one(device, scene):

@@ -297,7 +297,17 @@ class Population:
     def _add(self, xy: np.ndarray, est: PeopleEstimate) -> None:
         free = np.nonzero(self.slot_id < 0)[0]
         if not free.size:
-            log.warning("frame %d: no free slot for a new person at %s (max_people reached)", est.frame, xy.round(2))
+            self.births_refused += 1
+            # once a run (a crowd would repeat it every frame); the count goes to run.json (births_refused)
+            level = logging.WARNING if self.births_refused == 1 else logging.DEBUG
+            log.log(
+                level,
+                "frame %d: no free slot for a new person at %s: %d people (max_people) are tracked; raise --max-people "
+                "(later refusals are counted in run.json, births_refused)",
+                est.frame,
+                xy.round(2),
+                len(self.pool),
+            )
             return
         k = int(free[0])
         self.pool[k].spawn(xy, self.frames_done)
@@ -354,9 +364,11 @@ class Population:
 
     # --- checkpoints of the population ------------------------------------------------------------------------
     def population_state(self) -> dict[str, np.ndarray]:
-        """:data:`HOST_ARRAYS`, the next id, the clock and the people remembered for re-identification."""
+        """:data:`HOST_ARRAYS`, the next id, the births refused, the clock and the people remembered for
+        re-identification."""
         state = {f"__{name}__": getattr(self, name).copy() for name in HOST_ARRAYS}
         state["__next_id__"] = np.int64(self.next_id)
+        state["__births_refused__"] = np.int64(self.births_refused)
         state["__clock__"] = np.float64(self.clock)
         nparts, nb = self.slot_app.shape[1:]
         state["__lost_id__"] = np.array([p["id"] for p in self.lost], dtype=np.int64)
@@ -371,6 +383,8 @@ class Population:
         for name in HOST_ARRAYS:
             setattr(self, name, np.array(state[f"__{name}__"]))
         self.next_id = int(state["__next_id__"])
+        # checkpoints written before the count existed have none: 0
+        self.births_refused = int(state["__births_refused__"]) if "__births_refused__" in state else 0
         self.clock = float(state["__clock__"])
         self.lost = [
             dict(id=int(i), time=float(t), xy=np.array(xy), app=np.array(app), seen=np.array(seen))

@@ -318,6 +318,7 @@ class PeopleRun(TrackerRun):
             "people": len(self._ids),
             "frames_per_person": {str(k): v for k, v in sorted(self._ids.items())},
             "degenerate_estimates": self._degenerate,
+            "births_refused": self.tracker.births_refused,
         }
 
 

@@ -267,6 +267,7 @@ class PeopleTracker(Population):
         self.lost: list[dict] = []  # people removed for lack of support: id, time, x, y, appearance (re-id)
         self.clock = 0.0  # seconds since the first frame (sum of the frame intervals)
         self.next_id = 0
+        self.births_refused = 0  # people not added because every slot of the pool was taken (max_people)
         self.frames_done = 0
         log.info(
             "people tracker: %d particles per person, up to %d people, %d cameras, %g frames/s%s, evidence map %dx%d, "
