@@ -420,3 +420,21 @@ def test_patch_pixels_kernel_equals_patch_kernel_at_listed_pixels(device, rng):
     np.testing.assert_allclose(out.numpy().reshape(-1, 6), full[pixels], rtol=0 if exact else 1e-5,
                                atol=0 if exact else 1e-5)  # fmt: skip
     assert np.ptp(full[pixels][:, 0]) > 0.5  # the pixels differ (an index mix-up would show)
+
+
+@pytest.mark.parametrize("radius", [1, 2, 4])
+def test_tile_smooth_weighted_median_ties_and_zero_weights(device, rng, radius):
+    """The tiles' weighted medians on quantised log gains (many equal values), weights that are often 0 and sums
+    that reach exactly half the total (multiples of 1/8): the lower weighted median of the NumPy reference, tile by
+    tile."""
+    ty, tx = 9, 13
+    tiles = np.zeros((ty, tx, 4), np.float32)
+    tiles[..., :3] = rng.integers(-4, 5, (ty, tx, 3)) / ref.LOG_STEPS
+    tiles[..., 3] = rng.integers(0, 3, (ty, tx)) / 8.0 * (rng.random((ty, tx)) < 0.7)
+    dev = wp.array(tiles.reshape(-1, 4), dtype=wp.vec4, device=device)
+    local = wp.zeros(ty * tx, dtype=wp.vec3, device=device)
+    wp.launch(kil.tile_smooth_kernel, dim=ty * tx, inputs=[dev, tx, ty, radius, 0, 0.25, 0.0, 0.0], outputs=[local],
+              device=device)  # fmt: skip
+    expected = ref.tile_smooth(tiles.astype(np.float64), radius, 0.25)
+    assert np.count_nonzero(expected) > ty * tx  # most tiles have a median, and it is not always 0
+    np.testing.assert_allclose(local.numpy().reshape(ty, tx, 3), expected, atol=1e-6)

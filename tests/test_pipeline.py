@@ -775,7 +775,7 @@ def test_masks_in_threads_raise_at_the_failing_frame_and_stop(tmp_path, rng, mon
 def test_device_cleanup_in_the_offline_model_gives_the_host_masks(tmp_path, rng, monkeypatch):
     """WPTRACK_DEVICE_CLEANUP=1: the offline model resolves and cleans its masks with the device kernels
     (wptrack.motion.cleanup) and downloads the mask: the same masks and probabilities as the host path, also with
-    the masks made in two threads, and no probability when none is asked for."""
+    the masks made in two threads, and no probability (the same masks) when none is asked for."""
     from wptrack.io.video import write_video
     from wptrack.motion.masks import MaskConfig, open_masks
 
@@ -785,6 +785,11 @@ def test_device_cleanup_in_the_offline_model_gives_the_host_masks(tmp_path, rng,
     monkeypatch.delenv("WPTRACK_DEVICE_CLEANUP", raising=False)
     monkeypatch.setenv("WPTRACK_MASK_WORKERS", "1")
     host = list(open_masks(video=path, config=config).evidence())
+    # asked for the masks only (as the trackers iterate), the kernel skips the probability: the same masks
+    masks_only = list(open_masks(video=path, config=config).evidence(probability=False))
+    assert all(p is None for _, p in masks_only)
+    for (m1, _), (m2, _) in zip(host, masks_only, strict=True):
+        np.testing.assert_array_equal(m1, m2)
     monkeypatch.setenv("WPTRACK_DEVICE_CLEANUP", "1")
     for workers in ("1", "2"):
         monkeypatch.setenv("WPTRACK_MASK_WORKERS", workers)
@@ -795,6 +800,9 @@ def test_device_cleanup_in_the_offline_model_gives_the_host_masks(tmp_path, rng,
         for (m1, p1), (m2, p2) in zip(host, got, strict=True):
             np.testing.assert_array_equal(m1, m2)
             np.testing.assert_array_equal(p1, p2)
-        assert all(p is None for _, p in stream.evidence(probability=False))
+        masks_only = list(stream.evidence(probability=False))
+        assert all(p is None for _, p in masks_only)
+        for (m1, _), (m2, _) in zip(host, masks_only, strict=True):
+            np.testing.assert_array_equal(m1, m2)
     with_area = open_masks(video=path, config=MaskConfig(window=16, samples=5, min_area=20, device="cpu"))
     assert with_area.model.cleanup is None  # min_area is a host filter: the host path

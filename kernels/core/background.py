@@ -214,6 +214,7 @@ class ForegroundParams:
     illum_chroma: float  # largest chromaticity distortion of a local illumination change
     illum_lo: float  # brightness ratio range of a local illumination change
     illum_hi: float
+    no_prob: int  # 1: the probability is not asked for (foreground_kernel leaves ``prob`` as it is); 0: written
 
 
 @wp.func
@@ -310,7 +311,7 @@ def foreground_kernel(
         mask: ``(H W,)`` output ``level + 4 shadow``: level 2 = foreground, 1 = weak foreground
             (``T_low < z <= T``), 0 = background (and every cast shadow or illumination change); ``shadow`` as
             below (one array for the driver to copy).
-        prob: ``(H W,)`` output foreground probability in ``[0, 1]``.
+        prob: ``(H W,)`` output foreground probability in ``[0, 1]`` (left as it is with ``params.no_prob``).
         diff: ``(H W,)`` output normalised difference ``(I - B) / s`` per channel (B, G, R; robust standard
             deviations), for :func:`neighbourhood_kernel`.
         shadow: ``(H W,)`` output, 2 = cast shadow (counted as background), 1 = penumbra candidate (its ``mask``
@@ -362,15 +363,17 @@ def foreground_kernel(
         if illumination_change(st, params, ib, bb, ii):
             is_shadow = 3
     fg = int(0)
-    pr = float(0.0)
     if is_shadow < 2:
-        pr = 1.0 / (1.0 + wp.exp(-(z - params.threshold) / params.soft_scale))
         if z > params.threshold:
             fg = 2
         elif z > params.low_threshold:
             fg = 1
     mask[p] = wp.uint8(fg + 4 * is_shadow)
-    prob[p] = pr
+    if params.no_prob == 0:
+        pr = float(0.0)
+        if is_shadow < 2:
+            pr = 1.0 / (1.0 + wp.exp(-(z - params.threshold) / params.soft_scale))
+        prob[p] = pr
     shadow[p] = wp.uint8(is_shadow)
     diff[p] = d / s
 

@@ -375,21 +375,38 @@ KEEP_WEIGHT = wp.constant(0.25)
 
 @wp.func
 def weighted_median(values: neighbours_vec, weights: neighbours_vec, count: int, total: float):
-    """The smallest of ``values[:count]`` whose weight with that of the values below it reaches half the total
-    (a lower weighted median; ties broken by the value). A value's sum of weights is taken only while it could be
-    smaller than the best found so far."""
-    best = float(0.0)
-    found = int(0)
+    """The smallest of ``values[:count]`` of positive weight whose weight with that of the values below it reaches
+    half the total (a lower weighted median; ties broken by the value).
+
+    The values of positive weight are sorted (insertion) and their distinct values tried in ascending order: the
+    weight below a value only grows with it, so the first that reaches half the total is the smallest. Each sum is
+    taken over ``values`` in index order (the float32 sums, and so the medians, of the definition bit for bit)."""
+    sv = neighbours_vec()
+    n = int(0)
     for i in range(count):
-        # a value not below the best found cannot replace it: its sum is skipped (the same answer, fewer sums)
-        if weights[i] > 0.0 and (found == 0 or values[i] < best):
+        if weights[i] > 0.0:
+            vi = values[i]
+            j = n
+            while j > 0 and sv[j - 1] > vi:
+                sv[j] = sv[j - 1]
+                j -= 1
+            sv[j] = vi
+            n += 1
+    best = float(0.0)
+    for k in range(n):
+        v = sv[k]
+        tried = False
+        if k > 0:
+            if sv[k - 1] == v:
+                tried = True
+        if not tried:
             below = float(0.0)
             for j in range(count):
-                if values[j] <= values[i]:
+                if values[j] <= v:
                     below += weights[j]
-            if below >= 0.5 * total and (found == 0 or values[i] < best):
-                best = values[i]
-                found = 1
+            if below >= 0.5 * total:
+                best = v
+                break
     return best
 
 

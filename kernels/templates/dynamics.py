@@ -186,6 +186,22 @@ def template_predict_kernel(
         else:
             dst.logw[j] = src.logw[a]
     k = src.kind[a, s]
+    rounds = add.shape[0] / 2  # the frame's additions (beyond the paper: TemplateConfig.additions; eq. 12: one)
+    mine = int(-1)  # the addition that targets this slot
+    for r in range(rounds):
+        if add[2 * r] == s:
+            mine = r
+    if k == KIND_NONE and mine < 0:
+        # a slot empty at the parent and not added to stays empty (most of R_max): the else branch below, without
+        # the draws it does not use
+        dst.kind[j, s] = KIND_NONE
+        dst.label[j, s] = -1
+        dst.pos[j, s] = wp.vec2(0.0, 0.0)
+        dst.vel[j, s] = wp.vec2(0.0, 0.0)
+        dst.heading[j, s] = 0.0
+        dst.dims[j, s] = src.dims[a, s]
+        dst.age[j, s] = 0.0
+        return
     label = src.label[a, s]
     p = src.pos[a, s]
     v = src.vel[a, s]
@@ -204,7 +220,6 @@ def template_predict_kernel(
                 seen = True
         if not seen and u[1] < dyn.unseen_del:
             k = KIND_NONE
-    rounds = add.shape[0] / 2  # the frame's additions (beyond the paper: TemplateConfig.additions; eq. 12: one)
     if k == KIND_HUMAN and dyn.absorb != 0:
         # beyond the paper (kernels.templates.classify): a vehicle added to this particle (the same draw as the
         # addition below, keyed by the particle) replaces the humans standing on its footprint, in one move
@@ -217,10 +232,6 @@ def template_predict_kernel(
                         half = 0.5 * wp.vec2(dyn.dims_mean_vehicle[0], dyn.dims_mean_vehicle[1])
                         if disc_in_box(p, d[1], cand_pos[cv], cand_heading[cv], half) > 0.0:
                             k = KIND_NONE
-    mine = int(-1)  # the addition that targets this slot
-    for r in range(rounds):
-        if add[2 * r] == s:
-            mine = r
     if k == KIND_NONE and mine >= 0:
         if add_draw(seed, j, f, mine) < dyn.t_add:
             c = add[2 * mine + 1]

@@ -475,9 +475,11 @@ def render_labels_kernel(
     out: wp.array2d(dtype=wp.uint8),
 ):
     """The virtual scene of particle ``best[0]`` with each pixel set to 1 + the slot of the nearest object
-    covering it (0: background); nearer objects hide farther ones (painter's order by ground-point depth).
+    covering it (0: background); nearer objects hide farther ones (painter's order by ground-point depth; equal
+    depths in piece order).
 
-    Launch with ``dim=H``; ``out`` (H, W) uint8.
+    Launch with ``dim=H``; ``out`` (H, W) uint8. A row sorts only the pieces whose rows include it (a pixel row
+    costs the pieces it meets, not ``R_max^2``).
     """
     y = wp.tid()
     i = best[0]
@@ -485,20 +487,29 @@ def render_labels_kernel(
     for x in range(width):
         out[y, x] = wp.uint8(0)
     yf = float(y)
+    # the pieces drawn on this row, in piece order
+    row = vec_pieces()
+    m = int(0)
+    for q in range(pieces):
+        if hull_n[i, q] > 0:
+            r = hull_rows[i, q]
+            if y >= r[0] and y <= r[1]:
+                row[m] = q
+                m += 1
     drawn = vec_pieces()
-    for _pass in range(pieces):
-        # the farthest piece not drawn yet
+    for _pass in range(m):
+        # the farthest piece not drawn yet (the first of equal depths)
         far = int(-1)
         far_d = float(-3.0e38)
-        for q in range(pieces):
-            if drawn[q] == 0 and hull_n[i, q] > 0:
-                if hull_depth[i, q] > far_d:
-                    far_d = hull_depth[i, q]
-                    far = q
-        if far >= 0:
-            drawn[far] = 1
-            r = hull_rows[i, far]
-            if y >= r[0] and y <= r[1]:
-                u0, u1 = hull_span(hull_pts, i, far, hull_n[i, far], yf, width)
-                for x in range(u0, u1 + 1):
-                    out[y, x] = wp.uint8(far / PIECES + 1)
+        for k in range(m):
+            q = row[k]
+            if drawn[k] == 0 and hull_depth[i, q] > far_d:
+                far_d = hull_depth[i, q]
+                far = k
+        if far < 0:
+            break
+        drawn[far] = 1
+        q = row[far]
+        u0, u1 = hull_span(hull_pts, i, q, hull_n[i, q], yf, width)
+        for x in range(u0, u1 + 1):
+            out[y, x] = wp.uint8(q / PIECES + 1)

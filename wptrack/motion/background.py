@@ -167,10 +167,11 @@ class OfflineBackground:
         self._stacks: dict[int, Any] = {}
         self._prefetch = True  # False: every window read in the calling thread (tests compare the two)
         # issue 27 (opt-in, wptrack.motion.masks.MotionMasks.attach_cleanup): a DeviceCleanup makes evidence() resolve
-        # and clean the mask on the device and download it instead of the levels; want_prob False skips the
-        # probability's download
+        # and clean the mask on the device and download it instead of the levels
         self.cleanup: Any = None
         self.want_prob = True
+        """False: evidence() neither computes the foreground probability (the logistic per pixel) nor downloads it,
+        and returns None for it (iterating MotionMasks, as the trackers do, asks for the mask only)."""
         self.on_build: Callable[[int, float, np.ndarray], None] | None = None
         """Called as ``on_build(window, centre, background)`` when a window is built (in the thread that asked
         for it), with its ``(H, W, 3)`` uint8 BGR background: e.g. a run saving the backgrounds for its report."""
@@ -483,7 +484,7 @@ class OfflineBackground:
         _, mad = self._window(i)
         return download(mad).reshape(self.source.height, self.source.width, 3).copy()
 
-    def evidence(self, t: int, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def evidence(self, t: int, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """Foreground of frame ``t``.
 
         Args:
@@ -492,7 +493,8 @@ class OfflineBackground:
 
         Returns:
             ``(mask, prob)``: ``(H, W)`` uint8 mask (1 = foreground, shadows excluded, after the hysteresis, not
-            cleaned) and ``(H, W)`` float32 foreground probability.
+            cleaned) and ``(H, W)`` float32 foreground probability (None with :attr:`want_prob` False: not
+            computed).
         """
         import warp as wp
 
@@ -524,6 +526,7 @@ class OfflineBackground:
         if self.light.active:
             self.light.measure(frame_in, wp.vec3(*gain), b0, m0, b1, m1, w)
         light = self.light  # the veto computes its candidates' patch statistics from the frame's rows and luma
+        self.params.no_prob = int(not self.want_prob)  # not asked for: no logistic per pixel, no download
         inputs = [frame_in, b0, m0, b1, m1, w, wp.vec3(*gain), self.params, light.local, light.rows, light.luma]
         outputs = [light.patch, self._mask, self._prob, self._shadow, self._diff]
         wp.launch(kbg.foreground_kernel, dim=self.pixels, inputs=[*inputs, int(self.config.illum_patch),
@@ -551,7 +554,7 @@ class OfflineBackground:
             packed = self._packed
         shape = (self.source.height, self.source.width)
         if self.cleanup is not None:  # the clean-up on the device: one mask (and the probability if asked) down
-            mask_dev = self.cleanup(packed.reshape(shape), self._prob.reshape(shape))
+            mask_dev = self.cleanup(packed.reshape(shape), self._prob.reshape(shape) if self.want_prob else None)
             if self._stage_mask is None:
                 mask_host, prob = mask_dev.numpy().reshape(-1), self._prob.numpy()
             else:
@@ -563,13 +566,16 @@ class OfflineBackground:
             prob = prob.reshape(shape).copy() if self.want_prob else None
             return mask_host.reshape(shape).copy(), prob
         if self._stage_mask is None:
-            levels, prob = packed.numpy(), self._prob.numpy()
+            levels = packed.numpy()
+            prob = self._prob.numpy() if self.want_prob else None
         else:
             wp.copy(self._stage_mask, packed)
-            wp.copy(self._stage_prob, self._prob)
+            if self.want_prob:
+                wp.copy(self._stage_prob, self._prob)
             wp.synchronize_stream(wp.get_stream(self.device))
-            levels, prob = self._stage_views[1], self._stage_views[2]
-        prob = prob.reshape(shape).copy()  # the caller's own (the buffers are overwritten by the next frame)
+            levels, prob = self._stage_views[1], self._stage_views[2] if self.want_prob else None
+        if prob is not None:
+            prob = prob.reshape(shape).copy()  # the caller's own (the buffers are overwritten by the next frame)
         return resolve_levels(levels.reshape(shape), prob), prob
 
     def close(self) -> None:
