@@ -53,17 +53,22 @@ def _spec(kind: str, video: np.ndarray, tmp_path) -> object:
 
 
 def _pass(masks: MotionMasks, prefetch: bool, reads: list | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """All masks and probabilities of one pass; ``reads`` collects ``(window, thread name)`` of every read."""
+    """All masks and probabilities of one pass; ``reads`` collects ``(window, thread name)`` of every read (by the
+    model or the share's builder, which reads and builds the windows after the first ahead of the frames)."""
     model = masks.model
     model._prefetch = prefetch
+    original = B.OfflineBackground._read
     if reads is not None:
 
-        def recording(i):
+        def recording(self, i):
             reads.append((i, threading.current_thread().name))
-            return B.OfflineBackground._read(model, i)
+            return original(self, i)
 
-        model._read = recording
-    out = list(masks.evidence())
+        B.OfflineBackground._read = recording
+    try:
+        out = list(masks.evidence())
+    finally:
+        B.OfflineBackground._read = original
     return np.stack([m for m, _ in out]), np.stack([p for _, p in out])
 
 
@@ -236,12 +241,13 @@ def test_prefetch_starts_after_a_window_built_for_a_report(device, rng, tmp_path
     masks = MotionMasks(open_source(_spec("video", video, tmp_path)), config)
     reads: list = []
     model = masks.model
+    original = B.OfflineBackground._read
 
-    def recording(i):
+    def recording(self, i):
         reads.append((i, threading.current_thread().name))
-        return B.OfflineBackground._read(model, i)
+        return original(self, i)
 
-    model._read = recording
+    monkeypatch.setattr(B.OfflineBackground, "_read", recording)  # the model's reads and its builder's
     masks.background(0)
     assert reads == [(0, threading.current_thread().name)]
     list(masks.evidence())

@@ -314,6 +314,7 @@ class OfflineBackground:
                 share.building[i] = threading.Event()
                 share.failed.pop(i, None)
         if done is not None:
+            self._log_notes(i)
             if prefetch:  # built by another call (e.g. background(0) for a report): the next read still starts here
                 self._submit(i + 1)
             return done
@@ -323,6 +324,7 @@ class OfflineBackground:
                     waiting.wait()
             else:
                 waiting.wait()
+            self._log_notes(i)
             with share.lock:
                 if i in share.failed:
                     raise share.failed[i]
@@ -339,24 +341,40 @@ class OfflineBackground:
             with share.lock:
                 share.building.pop(i).set()
 
+    def _log_notes(self, i: int) -> None:
+        """Log, in the calling thread, the warnings of window ``i``'s build ahead (by the share's builder), once: the
+        model that takes the window first logs them, as it would have logged its own build's."""
+        with self._share.lock:
+            notes = self._share.notes.pop(i, ())
+        for note in notes:
+            log.warning(*note)
+
     def _build(self, i: int, prefetch: bool, got: _WindowRead | None = None) -> tuple[Any, Any]:
         """Build window ``i`` (this model claimed it in its :class:`WindowShare`) from its read ``got`` (None: take
-        it); ``(median, mad)``."""
+        it); ``(median, mad)``. A build ahead (``got`` given, by the share's builder) keeps its warnings for the model
+        that takes the window (:meth:`_log_notes`): a window built ahead that no frame needs logs nothing."""
         import warp as wp
 
         from wptrack.kernels.core import background as kbg
 
+        ahead = got is not None
+        notes: list[tuple] = []
         if got is None:
             got = self._take(i)
         else:
-            for note in got.notes:
-                log.warning(*note)
+            notes.extend(got.notes)
+            with self._share.lock:
+                self._share.notes[i] = notes  # read by the models after this build (they wait for it)
             if got.error is not None:
                 raise got.error
         frames = got.frames
         if not frames:
             if self._built:
-                log.warning("%s: no frame of background window %d could be read; reusing another", self.source.name, i)
+                note = ("%s: no frame of background window %d could be read; reusing another", self.source.name, i)
+                if ahead:
+                    notes.append(note)
+                else:
+                    log.warning(*note)
                 m = max(self._built)
                 for stats in (self._bg_sub, self._bg_gain, self._scale, self._nb_scale, self._ratio):
                     if m in stats:

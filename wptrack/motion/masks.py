@@ -423,6 +423,7 @@ class MotionMasks:
 
             watched = watch_frames(frames, CameraMotionWatch(name=self.name))
         subtractor = None if c.method in ("given", "offline") else self._subtractor()
+        builder = None
         if model is not None:
             from wptrack.core.device import device_guard
 
@@ -434,6 +435,10 @@ class MotionMasks:
 
                 yield from parallel_evidence(self, watched, self.workers, lambda raw: clean_mask(raw, c), probability)
                 return
+            if model is not None:  # the windows after the first built by a worker, ahead of the frames
+                from wptrack.motion.parallel import build_ahead
+
+                builder = build_ahead(model, guard)
             for index, frame in enumerate(watched):
                 if frame.shape[:2] != (height, width):
                     raise FrameError(
@@ -454,6 +459,10 @@ class MotionMasks:
         finally:
             if isinstance(frames, prefetch):
                 frames.close()
+            if builder is not None:
+                from wptrack.motion.parallel import stop_building_ahead
+
+                stop_building_ahead(model, builder)
             if model is not None:
                 model.close()
 

@@ -53,6 +53,40 @@ def mask_workers(device: str | None = None) -> int:
     return 1
 
 
+def build_ahead(model: Any, guard: Any) -> Any:
+    """Make the windows of ``model``'s :class:`~wptrack.motion.background.WindowShare` after the first read by its
+    reader and built by a build worker, ahead of the frames that need them: a second model of the same source (the
+    builder; its ``on_build`` is the model's) becomes the share's ``ahead``. Without it a model builds a window when
+    its first frame needs it, and the masks wait for the build (~1 s of CPU per 480x360 window with the defaults; at
+    1080p ~1 s on an H100 host): the frames after it stall while one core builds. The same windows, so the same
+    masks. Undo with :func:`stop_building_ahead`.
+
+    Args:
+        model: The stream's :class:`~wptrack.motion.background.OfflineBackground`.
+        guard: Its device guard (a tracker's graph capture waits for the builder's device work).
+
+    Returns:
+        The builder.
+    """
+    from wptrack.motion.background import OfflineBackground
+
+    share = model._share
+    with guard.shared():
+        builder = OfflineBackground(model.source, model.config, model.device, share=share)
+    builder.on_build = model.on_build  # whichever model builds a window reports it
+    share.guard, share.ahead = guard, builder
+    return builder
+
+
+def stop_building_ahead(model: Any, builder: Any) -> None:
+    """Close the ``builder`` of :func:`build_ahead` (a read or build in progress ends first) and leave ``model`` to
+    build its windows alone again."""
+    try:
+        builder.close()
+    finally:
+        model._share.ahead = model._share.guard = None
+
+
 def parallel_evidence(
     masks: Any, frames: Iterable[np.ndarray], workers: int, clean: Any, probability: bool = True
 ) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
@@ -77,15 +111,13 @@ def parallel_evidence(
         models = [masks.model] + [
             OfflineBackground(masks.source, c, masks.model.device, share=share) for _ in range(workers - 1)
         ]
-        # the windows after the first are read by the reader and built by a build worker, ahead of their frames
-        # (a build in a mask thread held the others back: at 1080p ~1 s per window on an H100 host)
-        builder = OfflineBackground(masks.source, c, masks.model.device, share=share)
     for model in models[1:]:  # the first model's clean-up and probability settings for every model
         masks.attach_cleanup(model)
         model.want_prob = masks.model.want_prob
-    for model in models[1:] + [builder]:
         model.on_build = masks.model.on_build  # whichever model builds a window reports it
-    share.guard, share.ahead = guard, builder
+    # the windows after the first are read by the reader and built by a build worker, ahead of their frames (a build
+    # in a mask thread held the others back: at 1080p ~1 s per window on an H100 host)
+    builder = build_ahead(masks.model, guard)
     stop = threading.Event()
     inbox = [queue.Queue(maxsize=2) for _ in range(workers)]
     outbox = [queue.Queue(maxsize=2) for _ in range(workers)]
@@ -156,7 +188,7 @@ def parallel_evidence(
         for t in threads:
             t.join(timeout=30.0)
         try:
-            for model in [builder, *models[1:]]:
+            for model in models[1:]:
                 model.close()
         finally:
-            share.ahead = share.guard = None  # the stream's model alone again
+            stop_building_ahead(masks.model, builder)  # the stream's model alone again

@@ -232,11 +232,12 @@ class WindowShare:
         self.ratio: dict[int, float | None] = {}
         self.building: dict[int, threading.Event] = {}  # windows being built, set when done (or failed)
         self.failed: dict[int, BaseException] = {}  # a failed build's error, raised by the models that waited
+        self.notes: dict[int, list[tuple]] = {}  # an ahead build's warnings, logged by the model that takes it first
         self.positions: dict[int, int] = {}  # id(model) -> the first window its current frame needs
         self.ahead: Any = None
         """A model that builds the windows in the prefetch worker, ahead of the frames that need them (None: the first
         model that needs a window builds it, and the others wait meanwhile); set by
-        :func:`wptrack.motion.parallel.parallel_evidence` with ``guard``."""
+        :func:`wptrack.motion.parallel.build_ahead` with ``guard``)."""
         self.guard: Any = None  # the device's DeviceGuard: the builder's device work is shared work
 
     def drop_before(self, model: Any, i: int) -> None:
