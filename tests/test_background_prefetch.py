@@ -255,3 +255,47 @@ def test_prefetch_starts_after_a_window_built_for_a_report(device, rng, tmp_path
     assert windows >= 3
     assert [i for i, _ in reads] == list(range(windows))
     assert all(name.startswith(WORKER) for _, name in reads[1:]), reads
+
+
+@pytest.mark.parametrize("truncated", [False, True])
+def test_sample_readers_give_the_same_masks(device, rng, tmp_path, monkeypatch, caplog, truncated):
+    """WPTRACK_SAMPLE_READERS=3: a window's samples of an intra-coded video read by three captures at once, in
+    contiguous groups (the others sought to their first frame): byte-identical masks and probabilities to one
+    capture, the groups read in threads of their own; a video that reports more frames than it has gives the same
+    warnings (logged by the calling thread) and masks."""
+    monkeypatch.setenv("WPTRACK_MASK_WORKERS", "1")
+    video = _scene(rng, 300)
+    path = tmp_path / "v.avi"
+    write_video(path, video)
+    config = MaskConfig(window=200, samples=25, device=device)
+    threads: set[str] = set()
+    forward = Wn._read_forward
+
+    def recording(*args, **kwargs):
+        threads.add(threading.current_thread().name)
+        return forward(*args, **kwargs)
+
+    monkeypatch.setattr(Wn, "_read_forward", recording)
+    got = {}
+    for readers in ("1", "3"):
+        monkeypatch.setenv(Wn.SAMPLE_READERS_ENV, readers)
+        source = open_source(path)
+        if truncated:
+            source._count += 120  # the header promises 120 frames more: the last windows' reads fail part way
+        masks = MotionMasks(source, config)
+        assert masks.model._sampler.readers == int(readers)
+        threads.clear()
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="wptrack.motion.background"):
+            out = _pass(masks, prefetch=True)
+        records = [(r.getMessage(), r.threadName) for r in caplog.records if r.name == "wptrack.motion.background"]
+        got[readers] = (out, records, set(threads))
+    (m1, p1), warn1, threads1 = got["1"]
+    (m3, p3), warn3, threads3 = got["3"]
+    np.testing.assert_array_equal(m3, m1)
+    np.testing.assert_array_equal(p3, p1)
+    assert m1.sum() > 0.01 * m1.size
+    assert warn3 == warn1
+    assert any("cannot read frame" in m for m, _ in warn1) == truncated
+    assert not any(name.startswith("wptrack-samples") for name in threads1)
+    assert any(name.startswith("wptrack-samples") for name in threads3), threads3

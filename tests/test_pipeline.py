@@ -627,6 +627,8 @@ def test_parallel_decode_gives_the_sequential_frames(tmp_path, rng, monkeypatch,
     it = iter(src)
     for _ in range(11):
         next(it)
+    # the workers decode (both codecs are intra-only: OpenCV reports FFV1's FOURCC in lower case)
+    assert [t.name for t in threading.enumerate() if t.name.startswith("wptrack-decode") and t.name not in before]
     it.close()
     time.sleep(0.3)
     assert not [t.name for t in threading.enumerate() if t.name.startswith("wptrack-decode") and t.name not in before]

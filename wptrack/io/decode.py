@@ -39,7 +39,8 @@ CHUNK = 8
 """Frames per chunk (each worker decodes this many consecutive frames between seeks)."""
 
 INTRA_CODECS = frozenset({"MJPG", "FFV1", "MJPA", "AVRN", "LJPG", "HFYU", "FFVH", "PNG ", "MPNG", "RGBA", "DIB "})
-"""FOURCCs of codecs whose frames are all keyframes (exact seeks)."""
+"""FOURCCs (upper case; compare :func:`fourcc` upper-cased) of codecs whose seeks land exactly on the frame asked
+for: every frame a keyframe, or (FFV1) frames coded without reference to other frames' pixels."""
 
 
 RATE_TOLERANCE = 0.5
@@ -166,7 +167,7 @@ def frame_items(open_capture: Any, count: int, workers: int | None = None) -> It
     closed."""
     workers = decode_workers() if workers is None else workers
     cap = open_capture()
-    if workers > 1 and count >= 2 * CHUNK and fourcc(cap) in INTRA_CODECS:
+    if workers > 1 and count >= 2 * CHUNK and fourcc(cap).upper() in INTRA_CODECS:  # OpenCV's FFV1 says "ffv1"
         cap.release()
         yield from parallel_frames(open_capture, count, workers)
         return

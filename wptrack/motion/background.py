@@ -32,7 +32,11 @@ Design (kernels and formulas: :mod:`wptrack.kernels.core.background`; the window
   matter: the median is robust to a sample being a frame off. That reading runs ahead in one worker thread: when the
   mask pass builds window ``i``, the worker starts reading (and preparing with NumPy) window ``i + 1``'s samples, so the
   extra decoding overlaps the per-frame work on another core (:class:`OfflineBackground`; the same reads in the same
-  order, so the same masks).
+  order, so the same masks). The windows after the first are also *built* by a worker ahead of the frames
+  (:func:`wptrack.motion.parallel.build_ahead`), so the masks do not stall for a build. On a host with cores to spare
+  (:func:`wptrack.motion.windows.sample_readers`) several captures read a window's samples of an intra-coded video at
+  once, in contiguous groups (the same frames: such seeks are exact), so the first window, read before the first
+  mask, comes sooner.
 * **Gains.** Each window's samples and each frame get a global gain per channel (illumination changes), the median
   of their ratios to the background over a pixel subsample: every 13th pixel for the windows, thinned to at most
   :data:`~wptrack.motion.stats.GAIN_PIXELS` for a frame (the same pixels up to 425,984 pixels per frame, e.g.

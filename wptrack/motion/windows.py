@@ -1,7 +1,8 @@
 """Background windows of the offline model (:mod:`wptrack.motion.background`): which frames each window samples
 (:func:`plan_windows`), which two windows a frame interpolates between (:func:`bracket`), and the reader of the
 samples (:class:`_Sampler`: seeks only across gaps of :data:`SEEK_GAP` frames or more, grabs forward otherwise,
-keeping on its way the next window's samples). The design is in :mod:`wptrack.motion.background` ("Windows",
+keeping on its way the next window's samples; with :func:`sample_readers` > 1, an intra-coded video's window read by
+several captures at once, in contiguous groups). The design is in :mod:`wptrack.motion.background` ("Windows",
 "Drift", "Passes").
 """
 
@@ -26,6 +27,24 @@ log = logging.getLogger("wptrack.motion.background")  # the model's warnings (sh
 #: ``grab`` decodes as much as ``read`` (it only skips the colour conversion): a seek cost 17-27 decodes of a
 #: 1920x1080 FFV1 video on the CI machine, so grabbing forward is cheaper up to about 20 frames.
 SEEK_GAP = 24
+
+SAMPLE_READERS_ENV = "WPTRACK_SAMPLE_READERS"
+"""Environment variable: captures that read one window's samples of an intra-coded video at once (default:
+:func:`sample_readers`)."""
+
+
+def sample_readers() -> int:
+    """Captures reading one window's samples: :data:`SAMPLE_READERS_ENV` when set, else one per 4 host cores, at
+    most 4 (one on the 2-core CI machine: the sampler reads alone, as before). The first window is read before the
+    first mask (300 frames grabbed at 1080p, ~2.5 s on an H100 host: a third of a 600-frame run), and every later one
+    by a thread beside the frames' own decoding; on a host with cores to spare, several captures read a window's
+    samples in contiguous groups at once."""
+    import os
+
+    text = os.environ.get(SAMPLE_READERS_ENV, "").strip()
+    if text:
+        return int(text) if text.isdigit() and int(text) > 0 else 1
+    return max(1, min(4, (os.cpu_count() or 1) // 4))
 
 
 @dataclass(frozen=True)
@@ -102,13 +121,16 @@ class _Sampler:
     at its next frame (:class:`_Stopped`).
     """
 
-    def __init__(self, source: FrameSource) -> None:
+    def __init__(self, source: FrameSource, readers: int | None = None) -> None:
         self.source = source
         self.cap: Any = None
         self.pos = 0  # index of the frame the next read() returns
         self.kept: dict[int, np.ndarray] = {}  # frames passed by an earlier read that a later one samples
         self.notes: list[tuple[Any, ...]] | None = None  # a list: warnings kept here (for another thread to log)
         self.stop = threading.Event()  # set (by another thread): a video read stops at its next frame
+        self.readers = sample_readers() if readers is None else max(1, int(readers))
+        self._intra: bool | None = None  # the video's codec is intra-only (exact seeks); None: not known yet
+        self._pool: ThreadPoolExecutor | None = None  # the other captures' threads (readers > 1)
 
     def _warn(self, message: str, *args: Any) -> None:
         if self.notes is None:
@@ -130,47 +152,158 @@ class _Sampler:
         return [f for i, f in enumerate(s) if i in set(indices)]  # any other source: one decoding pass
 
     def _read_video(self, indices: tuple[int, ...], ahead: set[int]) -> list[np.ndarray]:
-        import cv2
-
         if self.cap is None:
             self.cap = self.source._open()  # type: ignore[attr-defined]
             self.pos = 0
         kept, self.kept = self.kept, {}
+        todo = [i for i in indices if i not in kept]
+        groups = self._groups(todo)
+        if len(groups) > 1:
+            frames, failed = self._read_groups(groups, ahead)
+        else:
+            frames, failed = {}, None
+            self.cap, self.pos, failed = _read_forward(self.cap, self.pos, todo, ahead, frames, self.kept, self.stop,
+                                                       self.source.name)  # fmt: skip
         out = []
         for i in indices:
-            if self.stop.is_set():
-                raise _Stopped(f"{self.source.name}: background read stopped")
-            frame = kept.get(i)
-            if frame is None:
-                if i < self.pos or i - self.pos >= SEEK_GAP:
-                    self.cap.set(cv2.CAP_PROP_POS_FRAMES, float(i))
-                    self.pos = i
-                ok = True
-                while ok and self.pos < i:
-                    if self.stop.is_set():
-                        raise _Stopped(f"{self.source.name}: background read stopped")
-                    ok = self.cap.grab()
-                    if ok and self.pos in ahead:
-                        ok, passed = self.cap.retrieve()
-                        if ok and passed is not None:
-                            self.kept[self.pos] = passed
-                    self.pos += 1
-                ok, frame = self.cap.read() if ok else (False, None)
-                if not ok or frame is None:
-                    self._warn("%s: cannot read frame %d for the background; skipped", self.source.name, i)
-                    break  # the video ends earlier than it reported
-                self.pos += 1
+            if failed is not None and i >= failed:
+                self._warn("%s: cannot read frame %d for the background; skipped", self.source.name, failed)
+                break  # the video ends earlier than it reported
+            frame = kept[i] if i in kept else frames[i]
             if i in ahead:
                 self.kept[i] = frame
             if frame.ndim == 3 and frame.shape[2] == 3 and frame.shape[:2] == (self.source.height, self.source.width):
                 out.append(frame)
         return out
 
+    def _groups(self, todo: list[int]) -> list[list[int]]:
+        """``todo`` (increasing frame indices to decode) cut into contiguous groups, one per capture: several only
+        with :attr:`readers` > 1, an intra-coded video (its seeks land exactly on the frame asked for, so a group read
+        from a seek gives the frames of one forward read) and a span worth it (each group at least ``2 SEEK_GAP``
+        frames: a seek costs about 16 decodes)."""
+        import cv2
+
+        from wptrack.io.decode import INTRA_CODECS, fourcc
+
+        if self.readers < 2 or len(todo) < 2:
+            return [todo]
+        if self._intra is None:
+            self._intra = fourcc(self.cap).upper() in INTRA_CODECS
+        span = todo[-1] - todo[0] + 1
+        n = min(self.readers, len(todo), span // (2 * SEEK_GAP))
+        if not self._intra or n < 2 or int(self.cap.get(cv2.CAP_PROP_FRAME_COUNT)) <= 0:
+            return [todo]
+        cuts = [round(k * len(todo) / n) for k in range(n + 1)]
+        return [todo[cuts[k] : cuts[k + 1]] for k in range(n)]
+
+    def _read_groups(self, groups: list[list[int]], ahead: set[int]) -> tuple[dict[int, np.ndarray], int | None]:
+        """Read ``groups`` at once: the first with the sampler's capture (from where it stands), each other with a
+        capture of its own sought to its first frame; the last group's capture becomes the sampler's (the next
+        window's samples follow it). Returns the frames by index and the first index that could not be read (None:
+        all were)."""
+        import cv2
+
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(max_workers=self.readers - 1, thread_name_prefix="wptrack-samples")
+        name = self.source.name
+
+        def group(g: list[int]) -> tuple[Any, int, dict[int, np.ndarray], dict[int, np.ndarray], int | None]:
+            frames: dict[int, np.ndarray] = {}
+            passed: dict[int, np.ndarray] = {}
+            cap = self.source._open()  # type: ignore[attr-defined]
+            try:
+                cap.set(cv2.CAP_PROP_POS_FRAMES, float(g[0]))
+                if int(round(cap.get(cv2.CAP_PROP_POS_FRAMES))) != g[0]:  # not exact after all: from the start
+                    cap.release()
+                    cap = self.source._open()  # type: ignore[attr-defined]
+                    pos = 0
+                else:
+                    pos = g[0]
+                cap, pos, failed = _read_forward(cap, pos, g, ahead, frames, passed, self.stop, name)
+            except BaseException:
+                cap.release()
+                raise
+            return cap, pos, frames, passed, failed
+
+        futures = [self._pool.submit(group, g) for g in groups[1:]]
+        frames: dict[int, np.ndarray] = {}
+        error: BaseException | None = None
+        try:
+            self.cap, self.pos, failed = _read_forward(self.cap, self.pos, groups[0], ahead, frames, self.kept,
+                                                       self.stop, name)  # fmt: skip
+        except BaseException as e:  # noqa: BLE001 - raised below, after the other groups' captures are released
+            error, failed = e, None
+        results = []
+        for f in futures:
+            try:
+                results.append(f.result())
+            except BaseException as e:  # noqa: BLE001 - the first error is raised below
+                error = error or e
+        if error is not None:
+            for r in results:
+                r[0].release()
+            raise error
+        for _, _, got, passed, g_failed in results:
+            frames.update(got)
+            self.kept.update(passed)
+            if failed is None:
+                failed = g_failed
+        # the last group's capture reads on (the next window's samples come after it); the others are released
+        for cap, *_ in results[:-1]:
+            cap.release()
+        self.cap.release()
+        self.cap, self.pos = results[-1][0], results[-1][1]
+        return frames, failed
+
     def close(self) -> None:
         self.kept = {}
         if self.cap is not None:
             self.cap.release()
             self.cap = None
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+
+
+def _read_forward(
+    cap: Any,
+    pos: int,
+    todo: list[int],
+    ahead: set[int],
+    frames: dict[int, np.ndarray],
+    passed: dict[int, np.ndarray],
+    stop: threading.Event,
+    name: str,
+) -> tuple[Any, int, int | None]:
+    """Read the frames ``todo`` (increasing indices) with ``cap``, which stands at frame ``pos``: seek only across
+    gaps of :data:`SEEK_GAP` frames or more (or back), grab the frames in between, keeping in ``passed`` those of
+    ``ahead``; the frames read go to ``frames``. Returns ``(cap, pos, failed)``: where the capture now stands and the
+    first index that could not be read (None: all were; nothing after it is read). ``stop`` set ends the read
+    (:class:`_Stopped`)."""
+    import cv2
+
+    for i in todo:
+        if stop.is_set():
+            raise _Stopped(f"{name}: background read stopped")
+        if i < pos or i - pos >= SEEK_GAP:
+            cap.set(cv2.CAP_PROP_POS_FRAMES, float(i))
+            pos = i
+        ok = True
+        while ok and pos < i:
+            if stop.is_set():
+                raise _Stopped(f"{name}: background read stopped")
+            ok = cap.grab()
+            if ok and pos in ahead:
+                ok, frame = cap.retrieve()
+                if ok and frame is not None:
+                    passed[pos] = frame
+            pos += 1
+        ok, frame = cap.read() if ok else (False, None)
+        if not ok or frame is None:
+            return cap, pos, i
+        pos += 1
+        frames[i] = frame
+    return cap, pos, None
 
 
 @dataclass
