@@ -60,6 +60,10 @@ Design (kernels and formulas: :mod:`wptrack.kernels.core.background`; the window
   :data:`GAIN_PIXELS`), the hysteresis (one labelling of the foreground, then work on the weak pixels only) and
   one copy of the probability for the caller. On CUDA the frame goes up and the mask and probability come down
   through pinned buffers allocated once (one wait per frame, for the results).
+
+Length: one class on purpose: a window's life (read, build, share between threads, drop) and the per-frame test read
+the same state (the windows' device arrays and host statistics, the share's locks); the kernels, the sampler, the
+statistics and the light field are in their own modules already.
 """
 
 from __future__ import annotations
