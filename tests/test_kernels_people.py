@@ -14,6 +14,7 @@ import warp as wp
 
 from wptrack.cameras.rig import Camera, Rig
 from wptrack.cameras.structs import DeviceRig
+from wptrack.kernels.core.camera import Camera as KCamera
 from wptrack.kernels.people import descriptor as kdesc
 from wptrack.kernels.people import filter as kpeople
 from wptrack.kernels.people import occupancy as kocc
@@ -508,9 +509,12 @@ def test_observation_is_motion_plus_appearance(device, rng):
 
 
 def run_predict(
-    device, pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, frame, dt=1.0, observe=(1, 1), decay=1.0
-):
+    device, pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, frame, dt=1.0, observe=(1, 1), decay=1.0,
+    jump_cams=None, jump_rate=0.0, jump_span=0.0,
+):  # fmt: skip
     n = len(pos)
+    if jump_cams is None:
+        jump_cams = wp.zeros(0, dtype=KCamera, device=device)
     outs = [
         wp.zeros(n, dtype=wp.vec3, device=device),
         wp.zeros(n, dtype=wp.vec3, device=device),
@@ -534,6 +538,9 @@ def run_predict(
             wp.array([decay], dtype=wp.float32, device=device),
             wp.vec2ui(seed, 0),
             wp.array([frame], dtype=wp.int32, device=device),
+            jump_cams,
+            jump_rate,
+            jump_span,
         ],
         outputs=outs,
         device=device,
@@ -686,7 +693,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
         kpeople.step_kernel,
         dim=[nbk],
         inputs=[drig.cams, mask, p_b, 0.0, 1, B, R_N, NB, R_MIN, R_MAX, 2, pos, vel, model, desc, mass, anc]
-        + [logw_prev, flag, sp, sv, dt, alpha, observe, decay, sn, sigma_p, seed, frame, *person, n, chunk],
+        + [logw_prev, flag, sp, sv, dt, alpha, observe, decay, sn, sigma_p, seed, frame, *person, n, chunk, 3.0, 2.0],
         outputs=list(fused.values()),
         block_dim=block,
         device=device,
@@ -695,7 +702,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     wp.launch(
         kpeople.predict_kernel,
         dim=n,
-        inputs=[pos, vel, model, desc, mass, anc, sp, sv, dt, alpha, observe, decay, seed, frame],
+        inputs=[pos, vel, model, desc, mass, anc, sp, sv, dt, alpha, observe, decay, seed, frame, drig.cams, 3.0, 2.0],
         outputs=[sep["pos"], sep["vel"], sep["model"]],
         device=device,
     )
@@ -735,7 +742,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     wp.launch(
         kpeople.predict_kernel,
         dim=n,
-        inputs=[pos, vel, model, desc, mass, anc, sp, sv, dt, alpha, observe, decay, seed, frame],
+        inputs=[pos, vel, model, desc, mass, anc, sp, sv, dt, alpha, observe, decay, seed, frame, drig.cams, 3.0, 2.0],
         outputs=[gpu["pos"], gpu["vel"], gpu["model"]],
         device=device,
     )
@@ -770,7 +777,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
         kpeople.step_kernel,
         dim=[nbk],
         inputs=[drig.cams, mask, p_b, 0.0, 1, B, R_N, NB, R_MIN, R_MAX, 2, pos, vel, model, desc, mass, anc]
-        + [logw_prev, flag, sp, sv, dt, alpha, observe, decay, sn, sigma_p, seed, frame, *person, n, chunk],
+        + [logw_prev, flag, sp, sv, dt, alpha, observe, decay, sn, sigma_p, seed, frame, *person, n, chunk, 3.0, 2.0],
         outputs=list(unseen.values()),
         block_dim=block,
         device=device,
@@ -905,3 +912,39 @@ def test_column_top_walk(device, rng, min_cameras, max_gap):
     )
     np.testing.assert_allclose(top.numpy(), ref, atol=1e-6)
     assert ref[0, 0] == -1.0 and len(np.unique(ref)) > 10 and (ref < 0).sum() == 1
+
+
+def test_ray_jump_moves_a_share_of_the_particles_along_a_camera_ray(device):
+    """``ray_jump`` (through ``predict_kernel``, no other noise): the share of particles that jump is 1 - exp(-rate
+    dt) (binomial bounds), each jumped particle lies on the ground line from one camera's centre through the start
+    point, at an offset uniform in [-span, span] along it, each camera's ray taken about equally, the height kept;
+    rate 0 moves nothing."""
+    rig = make_rig()
+    drig = DeviceRig(rig, device)
+    n, rate, dt, span = 40_000, 2.0, 0.1, 1.5
+    start = np.array([0.7, 0.4, 0.9], np.float32)
+    pos = np.tile(start, (n, 1))
+    vel = np.zeros((n, 3), np.float32)
+    model = np.full((n, 3 * NB), 1.0 / NB, np.float32)
+    mass = np.zeros(n, np.float32)
+    anc = np.arange(n, dtype=np.int32)
+    args = (device, pos, vel, model, model, mass, anc, 0.0, 0.0, 0.0, 11, 5)
+    still, _, _ = run_predict(*args, dt=dt, jump_cams=drig.cams, jump_rate=0.0, jump_span=span)
+    assert np.array_equal(still, pos)
+    got, _, _ = run_predict(*args, dt=dt, jump_cams=drig.cams, jump_rate=rate, jump_span=span)
+    moved = np.any(got != pos, axis=1)
+    p = 1.0 - np.exp(-rate * dt)
+    assert abs(moved.mean() - p) < 4.0 * np.sqrt(p * (1 - p) / n)
+    assert np.array_equal(got[:, 2], pos[:, 2])
+    d = got[moved, :2] - start[:2]
+    centres = np.array([c.center[:2] for c in rig.cameras])
+    rays = start[:2] - centres
+    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+    across = np.abs(d[:, None, 0] * rays[None, :, 1] - d[:, None, 1] * rays[None, :, 0])  # (m, cameras)
+    which = np.argmin(across, axis=1)
+    assert across[np.arange(len(d)), which].max() < 1e-5
+    along = np.sum(d * rays[which], axis=1)
+    assert np.abs(along).max() <= span + 1e-5
+    assert abs(along.mean()) < 0.05 and abs(np.mean(np.abs(along)) - span / 2) < 0.05  # U(-span, span)
+    share = np.bincount(which, minlength=len(centres)) / len(which)
+    assert np.all(np.abs(share - 1 / len(centres)) < 0.03)

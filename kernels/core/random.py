@@ -32,6 +32,7 @@ STREAM_TEMPLATE_NOISE2 = wp.constant(9)  # S3: diffusion noise, next 4 normals p
 STREAM_TEMPLATE_INIT = wp.constant(10)  # S3: prior draws of an added object (dims, heading)
 STREAM_TEMPLATE_INIT2 = wp.constant(11)  # S3: prior draws of an added object (velocity)
 STREAM_PEOPLE_VELOCITY = wp.constant(12)  # S2: velocity noise (position noise uses STREAM_MOTION)
+STREAM_PEOPLE_JUMP = wp.constant(13)  # S2: the jumps along a camera's ray (kernels.people.filter.ray_jump)
 
 
 @wp.func

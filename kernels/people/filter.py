@@ -31,7 +31,14 @@ array (H bins, S bins, V bins; each block sums to 1). At initialisation C_0 is t
 import warp as wp
 
 from wptrack.kernels.core.camera import Camera, pixel_index
-from wptrack.kernels.core.random import STREAM_INIT, STREAM_MOTION, STREAM_PEOPLE_VELOCITY, normal4, uniform4
+from wptrack.kernels.core.random import (
+    STREAM_INIT,
+    STREAM_MOTION,
+    STREAM_PEOPLE_JUMP,
+    STREAM_PEOPLE_VELOCITY,
+    normal4,
+    uniform4,
+)
 from wptrack.kernels.core.reduce import finite_logw, moments_push, moments_store, moments_zero
 from wptrack.kernels.people.coverage import PersonTerms, person_log_terms
 from wptrack.kernels.people.descriptor import appearance_log_prob, descriptor_at
@@ -59,6 +66,41 @@ def constant_velocity(
     p = pos + dt * vel + sigma_pos * wp.vec3(zp[0], zp[1], zp[2])
     v = vel + wp.vec3(sigma_vel * zv[0], sigma_vel * zv[1], sigma_vel_z * zv[2])
     return p, v
+
+
+@wp.func
+def ray_jump(
+    p: wp.vec3,
+    cams: wp.array(dtype=Camera),
+    rate: float,
+    span: float,
+    dt: float,
+    seed: wp.vec2ui,
+    index: int,
+    frame: int,
+):
+    """Ours, beyond the paper: with probability ``1 - exp(-rate dt)`` move the particle at ``p`` along the ground
+    direction of one camera's viewing ray through it (the camera drawn uniformly), by ``U(-span, span)`` metres;
+    otherwise return ``p``. One view fixes a person's position across its rays but not along them: a filter whose
+    other view locked on someone else's silhouette (a multi-view ghost, 1-2 m off along the first camera's ray) is
+    a local optimum its Gaussian walk does not leave, and these particles try the positions along the rays, where the
+    weights (eq. 11 and the rectangle term) decide. Stream ``STREAM_PEOPLE_JUMP``; ``rate`` in jumps per particle and
+    second (the same share of particles per second at any frame rate; 0, the default: no jump), ``span`` metres,
+    ``dt`` seconds."""
+    if rate <= 0.0 or span <= 0.0 or cams.shape[0] == 0:
+        return p
+    u = uniform4(seed, index, frame, STREAM_PEOPLE_JUMP)
+    if u[0] >= 1.0 - wp.exp(-rate * dt):
+        return p
+    c = wp.min(int(u[1] * float(cams.shape[0])), cams.shape[0] - 1)
+    centre = -(wp.transpose(cams[c].R) * cams[c].t)
+    dx = p[0] - centre[0]
+    dy = p[1] - centre[1]
+    n = wp.sqrt(dx * dx + dy * dy)
+    if n < 1.0e-6:
+        return p
+    s = span * (2.0 * u[2] - 1.0) / n
+    return wp.vec3(p[0] + s * dx, p[1] + s * dy, p[2])
 
 
 @wp.func
@@ -97,13 +139,16 @@ def predict_kernel(
     decay: wp.array(dtype=wp.float32),
     seed: wp.vec2ui,
     frame: wp.array(dtype=wp.int32),
+    jump_cams: wp.array(dtype=Camera),
+    jump_rate: float,
+    jump_span: float,
     pos_out: wp.array(dtype=wp.vec3),
     vel_out: wp.array(dtype=wp.vec3),
     model_out: wp.array2d(dtype=wp.float32),
 ):
-    """One prediction per particle: gather the parent ``a = ancestors[i]``, eq. 5 on (pos, vel) and eq. 6 on the
-    appearance: ``model_out[i] = alpha desc[a] + (1 - alpha) model[a]`` (``model[a]`` unchanged when
-    ``mass[a] == 0``).
+    """One prediction per particle: gather the parent ``a = ancestors[i]``, eq. 5 on (pos, vel) (then
+    :func:`ray_jump` with ``jump_cams``, ``jump_rate``, ``jump_span``) and eq. 6 on the appearance: ``model_out[i] =
+    alpha desc[a] + (1 - alpha) model[a]`` (``model[a]`` unchanged when ``mass[a] == 0``).
 
     Args:
         pos, vel: (N,) P_{t-1} (metres), Pdot_{t-1} (metres/second). model: (N, 3 N_b) C_{t-1}.
@@ -124,6 +169,7 @@ def predict_kernel(
     if observe[0] == 0:
         va = va * decay[0]
     p, v = constant_velocity(pos[a], va, dt[0], sigma_pos[0], sigma_vel[0], sigma_vel[1], seed, i, frame[0])
+    p = ray_jump(p, jump_cams, jump_rate, jump_span, dt[0], seed, i, frame[0])
     pos_out[i] = p
     vel_out[i] = v
     appearance_update(model, desc, mass, a, wp.where(observe[1] != 0, alpha[0], 0.0), model_out, i)  # eq. 6
@@ -206,6 +252,8 @@ def step_kernel(
     terms: PersonTerms,
     n: int,
     chunk: int,
+    jump_rate: float,
+    jump_span: float,
     pos_out: wp.array(dtype=wp.vec3),
     vel_out: wp.array(dtype=wp.vec3),
     model_out: wp.array2d(dtype=wp.float32),
@@ -222,9 +270,10 @@ def step_kernel(
     log p(z_t | x_t) = motion + appearance (eq. 11) added to ``logw_prev[i]`` unless ``resampled[0]``, and the
     block's max / MAP / weighted sums (``reduce.moments_push``, outputs as ``reduce.moments_store``).
 
-    Same arguments as :func:`predict_kernel`, :func:`motion_log_likelihood` and ``descriptor.descriptor_kernel``; every
-    ``*_out`` is the other half of a ping-pong pair. Launch ``wp.launch_tiled(dim=[blocks], block_dim=B)``; block
-    ``b`` owns particles ``[b chunk, (b+1) chunk)``. Same values as the separate kernels (tested).
+    Same arguments as :func:`predict_kernel` (its jumps along ``box_cams``' rays), :func:`motion_log_likelihood` and
+    ``descriptor.descriptor_kernel``; every ``*_out`` is the other half of a ping-pong pair. Launch
+    ``wp.launch_tiled(dim=[blocks], block_dim=B)``; block ``b`` owns particles ``[b chunk, (b+1) chunk)``. Same
+    values as the separate kernels (tested).
     """
     b, lane = wp.tid()
     start = b * chunk
@@ -246,6 +295,7 @@ def step_kernel(
         if not seen:
             va = va * dv
         x, u = constant_velocity(pos[a], va, h, sp, sv, svz, seed, i, f)  # eq. 5
+        x = ray_jump(x, box_cams, jump_rate, jump_span, h, seed, i, f)  # ours
         pos_out[i] = x
         vel_out[i] = u
         appearance_update(model, desc, mass, a, al, model_out, i)  # eq. 6

@@ -318,6 +318,8 @@ class PersonFilter(ParticleFilter):
                     tr.terms,
                     self.n,
                     self.chunk,
+                    cfg.dynamics.jump_rate,
+                    cfg.dynamics.jump_span,
                 ],
                 outputs=[
                     self.x[dst],
@@ -353,6 +355,9 @@ class PersonFilter(ParticleFilter):
                 tr.decay,
                 self.seed,
                 self.frame,
+                tr.sdrig.cams,
+                cfg.dynamics.jump_rate,
+                cfg.dynamics.jump_span,
             ],
             outputs=[self.x[dst], self.vel[dst], self.model[dst]],
             device=d,
