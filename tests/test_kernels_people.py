@@ -510,11 +510,13 @@ def test_observation_is_motion_plus_appearance(device, rng):
 
 def run_predict(
     device, pos, vel, model, desc, mass, anc, sp, sv, alpha, seed, frame, dt=1.0, observe=(1, 1), decay=1.0,
-    jump_cams=None, jump_rate=0.0, jump_span=0.0,
+    jump_cams=None, jump_share=0.0, jump_span=0.0, others=None, alive=None, own=0, jump_clear=0.0,
 ):  # fmt: skip
     n = len(pos)
     if jump_cams is None:
         jump_cams = wp.zeros(0, dtype=KCamera, device=device)
+    others = np.zeros((0, 2), np.float32) if others is None else np.asarray(others, np.float32)
+    alive = np.ones(len(others), np.int32) if alive is None else np.asarray(alive, np.int32)
     outs = [
         wp.zeros(n, dtype=wp.vec3, device=device),
         wp.zeros(n, dtype=wp.vec3, device=device),
@@ -539,8 +541,12 @@ def run_predict(
             wp.vec2ui(seed, 0),
             wp.array([frame], dtype=wp.int32, device=device),
             jump_cams,
-            jump_rate,
+            jump_share,
             jump_span,
+            wp.array(others, dtype=wp.vec2, device=device),
+            wp.array(alive, dtype=wp.int32, device=device),
+            own,
+            jump_clear,
         ],
         outputs=outs,
         device=device,
@@ -673,6 +679,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     sv = wp.array([0.004, 0.009], dtype=wp.float32, device=device)
     seed, frame = wp.vec2ui(3, 4), wp.array([7], dtype=wp.int32, device=device)
     p_b, sigma_p = 0.1, 0.3
+    jumps = (0.6, 2.0, 0.3)  # ray_jump: share of the particles, span and clearance (m)
 
     def zeros(shape, dtype=wp.float32):
         return wp.zeros(shape, dtype=dtype, device=device)
@@ -693,7 +700,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
         kpeople.step_kernel,
         dim=[nbk],
         inputs=[drig.cams, mask, p_b, 0.0, 1, B, R_N, NB, R_MIN, R_MAX, 2, pos, vel, model, desc, mass, anc]
-        + [logw_prev, flag, sp, sv, dt, alpha, observe, decay, sn, sigma_p, seed, frame, *person, n, chunk, 3.0, 2.0],
+        + [logw_prev, flag, sp, sv, dt, alpha, observe, decay, sn, sigma_p, seed, frame, *person, n, chunk, *jumps],
         outputs=list(fused.values()),
         block_dim=block,
         device=device,
@@ -702,7 +709,8 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     wp.launch(
         kpeople.predict_kernel,
         dim=n,
-        inputs=[pos, vel, model, desc, mass, anc, sp, sv, dt, alpha, observe, decay, seed, frame, drig.cams, 3.0, 2.0],
+        inputs=[pos, vel, model, desc, mass, anc, sp, sv, dt, alpha, observe, decay, seed, frame, drig.cams]
+        + [*jumps[:2], person[2], person[3], person[5], jumps[2]],
         outputs=[sep["pos"], sep["vel"], sep["model"]],
         device=device,
     )
@@ -742,7 +750,8 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
     wp.launch(
         kpeople.predict_kernel,
         dim=n,
-        inputs=[pos, vel, model, desc, mass, anc, sp, sv, dt, alpha, observe, decay, seed, frame, drig.cams, 3.0, 2.0],
+        inputs=[pos, vel, model, desc, mass, anc, sp, sv, dt, alpha, observe, decay, seed, frame, drig.cams]
+        + [*jumps[:2], person[2], person[3], person[5], jumps[2]],
         outputs=[gpu["pos"], gpu["vel"], gpu["model"]],
         device=device,
     )
@@ -777,7 +786,7 @@ def test_step_kernel_equals_separate_kernels(device, rng, resampled):
         kpeople.step_kernel,
         dim=[nbk],
         inputs=[drig.cams, mask, p_b, 0.0, 1, B, R_N, NB, R_MIN, R_MAX, 2, pos, vel, model, desc, mass, anc]
-        + [logw_prev, flag, sp, sv, dt, alpha, observe, decay, sn, sigma_p, seed, frame, *person, n, chunk, 3.0, 2.0],
+        + [logw_prev, flag, sp, sv, dt, alpha, observe, decay, sn, sigma_p, seed, frame, *person, n, chunk, *jumps],
         outputs=list(unseen.values()),
         block_dim=block,
         device=device,
@@ -915,13 +924,14 @@ def test_column_top_walk(device, rng, min_cameras, max_gap):
 
 
 def test_ray_jump_moves_a_share_of_the_particles_along_a_camera_ray(device):
-    """``ray_jump`` (through ``predict_kernel``, no other noise): the share of particles that jump is 1 - exp(-rate
-    dt) (binomial bounds), each jumped particle lies on the ground line from one camera's centre through the start
-    point, at an offset uniform in [-span, span] along it, each camera's ray taken about equally, the height kept;
-    rate 0 moves nothing."""
+    """``ray_jump`` (through ``predict_kernel``, no other noise): the given share of the particles jumps (binomial
+    bounds), each jumped particle lies on the ground line from one camera's centre through the start point, at an
+    offset uniform in [-span, span] along it, each camera's ray taken about equally, the height kept; share 0 moves
+    nothing; no jump lands within ``jump_clear`` of another tracked person (a dead slot and the filter's own do not
+    count), and without that person there, jumps do land there."""
     rig = make_rig()
     drig = DeviceRig(rig, device)
-    n, rate, dt, span = 40_000, 2.0, 0.1, 1.5
+    n, share, span = 40_000, 0.2, 1.5
     start = np.array([0.7, 0.4, 0.9], np.float32)
     pos = np.tile(start, (n, 1))
     vel = np.zeros((n, 3), np.float32)
@@ -929,12 +939,11 @@ def test_ray_jump_moves_a_share_of_the_particles_along_a_camera_ray(device):
     mass = np.zeros(n, np.float32)
     anc = np.arange(n, dtype=np.int32)
     args = (device, pos, vel, model, model, mass, anc, 0.0, 0.0, 0.0, 11, 5)
-    still, _, _ = run_predict(*args, dt=dt, jump_cams=drig.cams, jump_rate=0.0, jump_span=span)
+    still, _, _ = run_predict(*args, dt=0.1, jump_cams=drig.cams, jump_share=0.0, jump_span=span)
     assert np.array_equal(still, pos)
-    got, _, _ = run_predict(*args, dt=dt, jump_cams=drig.cams, jump_rate=rate, jump_span=span)
+    got, _, _ = run_predict(*args, dt=0.1, jump_cams=drig.cams, jump_share=share, jump_span=span)
     moved = np.any(got != pos, axis=1)
-    p = 1.0 - np.exp(-rate * dt)
-    assert abs(moved.mean() - p) < 4.0 * np.sqrt(p * (1 - p) / n)
+    assert abs(moved.mean() - share) < 4.0 * np.sqrt(share * (1 - share) / n)
     assert np.array_equal(got[:, 2], pos[:, 2])
     d = got[moved, :2] - start[:2]
     centres = np.array([c.center[:2] for c in rig.cameras])
@@ -946,5 +955,14 @@ def test_ray_jump_moves_a_share_of_the_particles_along_a_camera_ray(device):
     along = np.sum(d * rays[which], axis=1)
     assert np.abs(along).max() <= span + 1e-5
     assert abs(along.mean()) < 0.05 and abs(np.mean(np.abs(along)) - span / 2) < 0.05  # U(-span, span)
-    share = np.bincount(which, minlength=len(centres)) / len(which)
-    assert np.all(np.abs(share - 1 / len(centres)) < 0.03)
+    counts = np.bincount(which, minlength=len(centres)) / len(which)
+    assert np.all(np.abs(counts - 1 / len(centres)) < 0.03)
+    # another tracked person 1 m along camera 0's ray
+    other = start[:2] + 1.0 * rays[0]
+    kw = dict(dt=0.1, jump_cams=drig.cams, jump_share=share, jump_span=span, jump_clear=0.5)
+    got, _, _ = run_predict(*args, others=[other, other + 0.01, start[:2]], alive=[1, 0, 1], own=2, **kw)
+    moved = np.any(got != pos, axis=1)
+    near = np.linalg.norm(got[:, :2] - other, axis=1) < 0.5
+    assert not np.any(moved & near) and 0.005 < share - moved.mean() < 0.05  # the few jumps that would land there
+    free, _, _ = run_predict(*args, others=[other], alive=[0], own=1, **kw)
+    assert np.any(np.linalg.norm(free[:, :2] - other, axis=1) < 0.5)  # without that person, jumps land there

@@ -72,25 +72,28 @@ def constant_velocity(
 def ray_jump(
     p: wp.vec3,
     cams: wp.array(dtype=Camera),
-    rate: float,
+    share: float,
     span: float,
-    dt: float,
+    others: wp.array(dtype=wp.vec2),
+    alive: wp.array(dtype=wp.int32),
+    own: int,
+    clear: float,
     seed: wp.vec2ui,
     index: int,
     frame: int,
 ):
-    """Ours, beyond the paper: with probability ``1 - exp(-rate dt)`` move the particle at ``p`` along the ground
-    direction of one camera's viewing ray through it (the camera drawn uniformly), by ``U(-span, span)`` metres;
-    otherwise return ``p``. One view fixes a person's position across its rays but not along them: a filter whose
-    other view locked on someone else's silhouette (a multi-view ghost, 1-2 m off along the first camera's ray) is
-    a local optimum its Gaussian walk does not leave, and these particles try the positions along the rays, where the
-    weights (eq. 11 and the rectangle term) decide. Stream ``STREAM_PEOPLE_JUMP``; ``rate`` in jumps per particle and
-    second (the same share of particles per second at any frame rate; 0, the default: no jump), ``span`` metres,
-    ``dt`` seconds."""
-    if rate <= 0.0 or span <= 0.0 or cams.shape[0] == 0:
+    """Ours, beyond the paper: with probability ``share`` move the particle at ``p`` along the ground direction of one
+    camera's viewing ray through it (the camera drawn uniformly), by ``U(-span, span)`` metres, unless it would land
+    within ``clear`` metres of another tracked person (``others[k]``, ``alive[k] != 0``, ``k != own``: a filter that
+    jumped onto another body would follow it); otherwise return ``p``. One view fixes a person's position across its
+    rays but not along them: a filter whose other view locked on someone else's silhouette (a multi-view ghost, 1-2 m
+    off along the first camera's ray) is a local optimum its Gaussian walk does not leave, and these particles try the
+    positions along the rays, where the weights (eq. 11 and the rectangle term) decide. Stream
+    ``STREAM_PEOPLE_JUMP``; ``share`` per frame (0: no jump), ``span`` and ``clear`` metres."""
+    if share <= 0.0 or span <= 0.0 or cams.shape[0] == 0:
         return p
     u = uniform4(seed, index, frame, STREAM_PEOPLE_JUMP)
-    if u[0] >= 1.0 - wp.exp(-rate * dt):
+    if u[0] >= share:
         return p
     c = wp.min(int(u[1] * float(cams.shape[0])), cams.shape[0] - 1)
     centre = -(wp.transpose(cams[c].R) * cams[c].t)
@@ -100,7 +103,14 @@ def ray_jump(
     if n < 1.0e-6:
         return p
     s = span * (2.0 * u[2] - 1.0) / n
-    return wp.vec3(p[0] + s * dx, p[1] + s * dy, p[2])
+    q = wp.vec3(p[0] + s * dx, p[1] + s * dy, p[2])
+    for k in range(others.shape[0]):  # never onto another tracked person: the filter would follow that body
+        if k != own and alive[k] != 0:
+            ex = q[0] - others[k][0]
+            ey = q[1] - others[k][1]
+            if ex * ex + ey * ey < clear * clear:
+                return p
+    return q
 
 
 @wp.func
@@ -140,14 +150,19 @@ def predict_kernel(
     seed: wp.vec2ui,
     frame: wp.array(dtype=wp.int32),
     jump_cams: wp.array(dtype=Camera),
-    jump_rate: float,
+    jump_share: float,
     jump_span: float,
+    others: wp.array(dtype=wp.vec2),
+    alive: wp.array(dtype=wp.int32),
+    own: int,
+    jump_clear: float,
     pos_out: wp.array(dtype=wp.vec3),
     vel_out: wp.array(dtype=wp.vec3),
     model_out: wp.array2d(dtype=wp.float32),
 ):
     """One prediction per particle: gather the parent ``a = ancestors[i]``, eq. 5 on (pos, vel) (then
-    :func:`ray_jump` with ``jump_cams``, ``jump_rate``, ``jump_span``) and eq. 6 on the appearance: ``model_out[i] =
+    :func:`ray_jump` with ``jump_cams``, ``jump_share``, ``jump_span``, ``others``, ``alive``, ``own``,
+    ``jump_clear``) and eq. 6 on the appearance: ``model_out[i] =
     alpha desc[a] + (1 - alpha) model[a]`` (``model[a]`` unchanged when ``mass[a] == 0``).
 
     Args:
@@ -169,7 +184,7 @@ def predict_kernel(
     if observe[0] == 0:
         va = va * decay[0]
     p, v = constant_velocity(pos[a], va, dt[0], sigma_pos[0], sigma_vel[0], sigma_vel[1], seed, i, frame[0])
-    p = ray_jump(p, jump_cams, jump_rate, jump_span, dt[0], seed, i, frame[0])
+    p = ray_jump(p, jump_cams, jump_share, jump_span, others, alive, own, jump_clear, seed, i, frame[0])
     pos_out[i] = p
     vel_out[i] = v
     appearance_update(model, desc, mass, a, wp.where(observe[1] != 0, alpha[0], 0.0), model_out, i)  # eq. 6
@@ -252,8 +267,9 @@ def step_kernel(
     terms: PersonTerms,
     n: int,
     chunk: int,
-    jump_rate: float,
+    jump_share: float,
     jump_span: float,
+    jump_clear: float,
     pos_out: wp.array(dtype=wp.vec3),
     vel_out: wp.array(dtype=wp.vec3),
     model_out: wp.array2d(dtype=wp.float32),
@@ -295,7 +311,7 @@ def step_kernel(
         if not seen:
             va = va * dv
         x, u = constant_velocity(pos[a], va, h, sp, sv, svz, seed, i, f)  # eq. 5
-        x = ray_jump(x, box_cams, jump_rate, jump_span, h, seed, i, f)  # ours
+        x = ray_jump(x, box_cams, jump_share, jump_span, others, alive, own, jump_clear, seed, i, f)  # ours
         pos_out[i] = x
         vel_out[i] = u
         appearance_update(model, desc, mass, a, al, model_out, i)  # eq. 6

@@ -95,17 +95,22 @@ class DynamicsConfig:
         flag="alpha",
     )
     alpha_interval: float = param(0.04, help="the interval alpha is given for", units="s", lo=0.0, lo_open=True)
-    jump_rate: float = param(
-        0.0, help="ours, opt-in: particles moved along a camera's ray through them, per particle and second (0: off)",
-        units="1/s", lo=0.0,
+    jump: float = param(
+        0.04, help="ours: share of each filter's particles moved along a camera's ray through them a frame (0: off)",
+        lo=0.0, hi=1.0,
     )  # fmt: skip
-    """A particle jumps with probability ``1 - exp(-jump_rate dt)`` a frame (``kernels.people.filter.ray_jump``): a
-    filter one view has locked on someone else's silhouette (a multi-view ghost) sits 1-2 m off along the other view's
-    ray, a local optimum of the weights its Gaussian walk does not leave. Off by default: measured on the EPFL terrace
-    (tracker seeds 0-3, docs/notes.md), 0.25/s (1 % of the particles a frame at 25 frames/s) lifts the 25 frames/s
-    clip's MOTA 0.343 -> 0.508 (false positives 316-394 -> 206-242 a run) but the 3.125 frames/s version loses
-    (0.207 -> 0.131 with the same 1 % a frame), and 1/s costs the synthetic office 0.955 -> 0.951."""
+    """Every frame a particle jumps with this probability (``kernels.people.filter.ray_jump``): a filter one view has
+    locked on someone else's silhouette (a multi-view ghost) sits 1-2 m off along the other view's ray, a local
+    optimum of the weights its Gaussian walk does not leave; the jumped particles try the positions along the rays
+    and the weights decide. A share of each frame's particles, not a rate in time: it is the proposal's exploration,
+    paid per frame at any frame rate. Measured on the EPFL terrace (tracker seeds 0-3, docs/notes.md): 25 frames/s
+    MOTA 0.343 -> 0.518, 3.125 frames/s 0.207 -> 0.221."""
     jump_span: float = param(2.0, help="ours: the longest of those jumps", units="m", lo=0.0)
+    jump_clear: float = param(
+        1.0, help="ours: a jump never lands this close to another tracked person (it is not made)", units="m", lo=0.0
+    )
+    """Without it a jumped particle that lands on another person's body scores as well as on its own person, and the
+    filter follows it (3.125 frames/s: 0.207 -> 0.06-0.13)."""
 
     def __post_init__(self) -> None:
         check(self, "dynamics.")
