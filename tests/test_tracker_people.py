@@ -104,13 +104,14 @@ def test_people_are_added_tracked_and_keep_ids(device, scene):
 
 def test_particles_fill_the_body(device, scene):
     """The particles' mean height (the paper's estimate) sits at about half the 1.7 m person's height: the particles
-    fill the body. A run's median over frames varies with the seed (the cloud wanders up and down the body), so the
-    median is averaged over two tracker seeds."""
+    fill the body. A run's median over frames varies with the seed (the cloud wanders up and down the body: 0.4-1.4 m
+    over tracker seeds 3-10 on the CPU, with or without the jumps along the rays, whose 8-seed means are 0.96-1.00 and
+    0.92-0.94 m for the two people), so the median is averaged over six tracker seeds."""
     from dataclasses import replace
 
     rig, frames = scene
     heights: dict[int, list[float]] = {0: [], 1: []}
-    for seed in (3, 4):
+    for seed in range(3, 9):
         tr = PeopleTracker(rig, replace(_config(), seed=seed), device=device, keep_particles=0)
         ests = [tr.step(images, masks) for _, images, masks in frames]
         for pid in heights:
