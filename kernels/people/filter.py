@@ -9,7 +9,9 @@ Map to the paper:
   over the body's height).
   Noise: Philox streams ``(seed, particle, frame, STREAM_MOTION)`` for the position and ``STREAM_PEOPLE_VELOCITY``
   for the velocity.
-- :func:`predict_kernel`: resampled gather + eq. 5 + the appearance update of eq. 6,
+- :func:`ray_jump` (ours, beyond the paper): a share of the particles moved along a camera's viewing ray each frame,
+  so a filter can leave a multi-view ghost (docs/people.md).
+- :func:`predict_kernel`: resampled gather + eq. 5 (+ :func:`ray_jump`) + the appearance update of eq. 6,
   C_t = alpha A_{t-1} + (1 - alpha) C_{t-1}, where A_{t-1} is the descriptor observed at P_{t-1}
   (``kernels.people.descriptor.descriptor_kernel``). A particle whose A_{t-1} was unseen (mass 0) keeps C_{t-1}.
 - :func:`motion_log_likelihood`: eqs. 7-10, log p(M_t | x_t) = sum over cameras of
@@ -160,10 +162,9 @@ def predict_kernel(
     vel_out: wp.array(dtype=wp.vec3),
     model_out: wp.array2d(dtype=wp.float32),
 ):
-    """One prediction per particle: gather the parent ``a = ancestors[i]``, eq. 5 on (pos, vel) (then
-    :func:`ray_jump` with ``jump_cams``, ``jump_share``, ``jump_span``, ``others``, ``alive``, ``own``,
-    ``jump_clear``) and eq. 6 on the appearance: ``model_out[i] =
-    alpha desc[a] + (1 - alpha) model[a]`` (``model[a]`` unchanged when ``mass[a] == 0``).
+    """One prediction per particle: gather the parent ``a = ancestors[i]``, eq. 5 on (pos, vel), then
+    :func:`ray_jump` (ours), and eq. 6 on the appearance: ``model_out[i] = alpha desc[a] + (1 - alpha) model[a]``
+    (``model[a]`` unchanged when ``mass[a] == 0``).
 
     Args:
         pos, vel: (N,) P_{t-1} (metres), Pdot_{t-1} (metres/second). model: (N, 3 N_b) C_{t-1}.
@@ -176,6 +177,9 @@ def predict_kernel(
             on); with [1] = 0 the appearance model is kept (A_{t-1} was read where the person was not seen). All are
             device arrays so that CUDA graphs see updates.
         seed: 64-bit run seed. frame: [0] frame number (the noise counter).
+        jump_cams: the cameras whose rays :func:`ray_jump` moves particles along (any size: only their centres are
+            read). jump_share: the share of particles that jump (0: none). jump_span: metres. others, alive: (P,)
+            every slot's ground position and whether it tracks somebody; own: this person's slot; jump_clear: metres.
         pos_out, vel_out, model_out: the predicted state (must not alias the inputs).
     """
     i = wp.tid()
