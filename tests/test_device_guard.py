@@ -233,3 +233,39 @@ def test_mask_threads_default_to_three_on_a_gpu_host_only(monkeypatch):
     assert mask_workers("cpu") == mask_workers("cuda:0") == 2
     monkeypatch.setenv("WPTRACK_MASK_WORKERS", "0")
     assert mask_workers("cuda:0") == 1
+
+
+def test_a_window_builds_host_work_lets_a_waiting_capture_through():
+    """A window build runs inside its thread's shared section (a mask thread's frame, or the builder's), and a build
+    at 1080p spends seconds in host work (reading its samples, NumPy statistics, writing the background image). A
+    tracker's capture asking for the device meanwhile must not wait for that host work (and hold every other mask
+    thread back with it): the build gives the section up there (``OfflineBackground._host_part``)."""
+    import numpy as np
+
+    from wptrack.io.frames import ArraySource
+    from wptrack.motion.background import OfflineBackground
+    from wptrack.motion.masks import MaskConfig
+
+    guard = DeviceGuard()
+    rng = np.random.default_rng(0)
+    frames = rng.integers(0, 255, size=(12, 24, 32, 3), dtype=np.uint8)
+    config = MaskConfig(method="offline", window=6, samples=3, device="cpu")
+    model = OfflineBackground(ArraySource(frames), config, "cpu")
+    model._share.guard = guard
+    captured = []
+
+    def capture():
+        with guard.exclusive():
+            captured.append(True)
+
+    def on_build(i, centre, image):
+        assert guard._shared == 0  # given up for the host work
+        _, cap_done = _in_thread(capture)
+        assert cap_done.wait(WAIT)  # the capture got the device while this build's thread is in its section
+
+    model.on_build = on_build
+    with guard.shared():
+        image = model.background(0)
+        assert guard._shared == 1  # held again after the host work
+    assert image.shape == (24, 32, 3) and captured == [True] and guard._shared == 0
+    model.close()

@@ -68,6 +68,7 @@ statistics and the light field are in their own modules already.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import threading
@@ -368,7 +369,8 @@ class OfflineBackground:
         ahead = got is not None
         notes: list[tuple] = []
         if got is None:
-            got = self._take(i)
+            with self._host_part():
+                got = self._take(i)
         else:
             notes.extend(got.notes)
             with self._share.lock:
@@ -419,22 +421,27 @@ class OfflineBackground:
             if c.mode_band > 0:
                 self._mode(stack, ones, mad, median)
             host = download(stack)
-            frames = [host[r].reshape(self.source.height, self.source.width, 3) for r in range(k)]
-            sub = np.ascontiguousarray(host[:, self._sub_channels.reshape(-1)].reshape(k, *self._sub_channels.shape))
-            gains = np.ones((k, 3), dtype=np.float32)
-            bg_sub = median_last(np.moveaxis(sub, 0, -1).astype(np.float64))
-            self._bg_sub[i], self._bg_gain[i] = bg_sub, np.ascontiguousarray(bg_sub[:, :: self._gain_step])
+            with self._host_part():
+                frames = [host[r].reshape(self.source.height, self.source.width, 3) for r in range(k)]
+                sub = host[:, self._sub_channels.reshape(-1)].reshape(k, *self._sub_channels.shape)
+                sub = np.ascontiguousarray(sub)
+                gains = np.ones((k, 3), dtype=np.float32)
+                bg_sub = median_last(np.moveaxis(sub, 0, -1).astype(np.float64))
+                self._bg_sub[i], self._bg_gain[i] = bg_sub, np.ascontiguousarray(bg_sub[:, :: self._gain_step])
         elif c.mode_band > 0:
             self._mode(stack, g, mad, median)
         if c.spread_cap > 0 or c.shadow_band > 0 or c.neighbourhood > 0:
             mad_host = download(mad)
-            self._scale[i] = spread_scale(mad_host)
+            median_host = download(median) if c.neighbourhood > 0 else None
+            with self._host_part():
+                self._scale[i] = spread_scale(mad_host)
             if c.neighbourhood > 0:
                 shape = (self.source.height, self.source.width, 3)
-                self._nb_scale[i] = neighbourhood_scale(
-                    [f.reshape(shape) for f in frames], gains, download(median).reshape(shape), mad_host.reshape(shape),
-                    c.neighbourhood, c.noise_floor,
-                )  # fmt: skip
+                with self._host_part():
+                    self._nb_scale[i] = neighbourhood_scale(
+                        [f.reshape(shape) for f in frames], gains, median_host.reshape(shape), mad_host.reshape(shape),
+                        c.neighbourhood, c.noise_floor,
+                    )  # fmt: skip
                 log.info(
                     "%s: background window %d: neighbourhood noise scale %.2f", self.source.name, i, self._nb_scale[i]
                 )
@@ -444,10 +451,11 @@ class OfflineBackground:
                 if self.light.textured_votes:  # only votes that keep the ground's texture (not dark clothes)
                     cap = float(c.spread_cap * self._scale[i]) if c.spread_cap > 0 else 0.0
                     keep = self.light.sample_patches(stack, gains, median, mad, self._sub_pixels, cap)
-                ratio = shadow_ratio(
-                    sub.transpose(0, 2, 1), gains, self._bg_sub[i].T, mad_host[self._sub].reshape(-1, 3),
-                    c.fg_threshold, c.noise_floor, c.shadow_chroma, keep=keep, sharp=c.shadow_peak,
-                )  # fmt: skip
+                with self._host_part():
+                    ratio = shadow_ratio(
+                        sub.transpose(0, 2, 1), gains, self._bg_sub[i].T, mad_host[self._sub].reshape(-1, 3),
+                        c.fg_threshold, c.noise_floor, c.shadow_chroma, keep=keep, sharp=c.shadow_peak,
+                    )  # fmt: skip
                 self._ratio[i] = ratio
                 log.info("%s: background window %d: learnt shadow ratio %s", self.source.name, i, ratio)
         log.debug("%s: background window %d from %d frames", self.source.name, i, k)
@@ -455,8 +463,18 @@ class OfflineBackground:
             self._built[i] = (median, mad)
         if self.on_build is not None:
             image = download(median).reshape(self.source.height, self.source.width, 3).copy()
-            self.on_build(i, float(self.centres[i]), image)
+            with self._host_part():
+                self.on_build(i, float(self.centres[i]), image)
         return median, mad
+
+    def _host_part(self) -> Any:
+        """Context of a build's host-only work (reading samples, NumPy statistics, writing images), entered with no
+        device work of this thread in flight: it gives up the thread's shared section of the device guard
+        (:meth:`wptrack.core.device.DeviceGuard.paused`) so that a tracker's graph capture waiting for it does not
+        hold every mask thread back for a window build's host seconds (issue 27: in a 1080p profile the tracker's two
+        captures waited 3.2 s in all)."""
+        guard = self._share.guard
+        return guard.paused() if guard is not None else contextlib.nullcontext()
 
     def _mode(self, stack: Any, gains: Any, mad: Any, median: Any) -> None:
         """Rebuild a window's ``median`` and ``mad`` (device arrays, in place) as the densest cluster of each pixel's
