@@ -43,6 +43,25 @@ def test_timeline_summary_overlap_and_waits():
     assert s["overlap"] == pytest.approx(1.5)  # waits and blocked producers are idle, not work
     assert s["stages"]["decode"] == {"total_s": 0.25, "count": 2, "mean_ms": 125.0, "share": 0.5}
     assert timeline.is_wait("wait_decode") and timeline.is_wait("masks_blocked") and not timeline.is_wait("masks")
+    assert "first_item_s" not in s  # the loop got no item
+
+
+def test_timeline_start_up_and_the_rate_after_it():
+    """The start-up (first frame asked for -> first item the loop got) and the items per second after it."""
+    t = timeline.Timeline()
+    t.start()
+    t.started -= 2.0  # asked for the first frame 2 s ago
+    t.item()
+    t.first -= 1.0  # ... and got it 1 s ago (1 s of start-up)
+    for _ in range(4):
+        t.item()
+    t.stop()
+    s = t.summary()
+    assert s["first_item_s"] == pytest.approx(1.0, abs=0.05)
+    assert s["after_first_per_s"] == pytest.approx(4 / (t.stopped - t.first), rel=1e-3)
+    assert 3.5 < s["after_first_per_s"] <= 4.0
+    t.start()  # a new run: no item yet
+    assert t.first is None and t.items == 0 and "first_item_s" not in t.summary()
 
 
 def test_record_goes_to_the_active_timeline_only():
@@ -291,6 +310,8 @@ def test_bench_pipeline_tiny(tmp_path, capsys):
     assert tl["stages"]["masks"]["count"] == tl["stages"]["filter"]["count"] == 6
     assert set(tl["cpu_s"]) >= {"main", "masks", "decode", "write_virtual", "process"}
     assert tl["overlap"] > 0 and r["track"]["summary"]["virtual"] is True
+    assert 0 < tl["first_item_s"] < tl["wall_s"] and tl["after_first_per_s"] > 0  # the start-up apart
+    assert "start-up: the first frame's observation after" in printed
     assert "masks" not in r["track_from_masks"]["timeline"]["stages"]  # decoded masks, not made
 
 

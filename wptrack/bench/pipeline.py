@@ -32,7 +32,9 @@ one H100 at 1080p: track >= 100 frames/s and ratio >= 0.65, masks >= 120 frames/
 track >= 30 frames/s). For the track commands, the stage timeline of the run itself (run.json ``timeline``,
 :mod:`wptrack.io.timeline`): per stage its total seconds, share of the frame loop's wall time and mean ms per frame,
 with ``overlap`` (busy stage time over wall time: how much ran at once) and the waits (``wait_masks``: the filter
-waited for masks; ``wait_decode``: the masks waited for decoding).
+waited for masks; ``wait_decode``: the masks waited for decoding), and the start-up: when the frame loop got its
+first observation (``first_item_s``: with offline masks, after the first background window was read and built) and
+the frames/s after it (``after_first_per_s``, the rate a long recording approaches).
 """
 
 from __future__ import annotations
@@ -460,6 +462,12 @@ class PipelineSuite:
             if cpu:
                 lines.append(
                     "    CPU ms per frame by thread: " + ", ".join(f"{k} {1000 * v / n:.1f}" for k, v in cpu.items())
+                )
+            if "first_item_s" in tl:  # the start-up, and the rate a long recording approaches
+                after = tl.get("after_first_per_s")
+                lines.append(
+                    f"    start-up: the first frame's observation after {tl['first_item_s']:.2f} s"
+                    + (f"; {after:.1f} frames/s after it" if after else "")
                 )
         for k, t in r.get("targets", {}).items():
             lines.append(f"  target {k} >= {t['target']:g}: {t['got']:.2f} {'met' if t['met'] else 'NOT met'}")

@@ -12,6 +12,9 @@ run.json's ``timeline`` (:meth:`Timeline.summary`): per stage the total seconds,
 share of the run's wall time; ``wall_s`` (from the first frame asked for to the last frame written) and
 ``overlap``: the busy stages' total over the wall time (1: one stage at a time; 2: two threads busy on average);
 ``source``: the stage the run loop takes its items from (``wait_<source>``: the time the filter waited for them);
+``first_item_s``: the start-up, from the first frame asked for to the first item the loop got (the first frames
+decoded, an offline background's first window read and built, the first mask made), and ``after_first_per_s`` the
+items per second after it (the steady rate a long recording approaches);
 ``cpu_s``: the CPU time of each of the pipeline's threads (``main``: the loop; ``decode``, ``masks``: the prefetch
 threads; ``write_*``: the writers) and ``process`` (every thread of the process, OpenCV's and the background
 model's workers included). On a shared machine the wall times of the stages include the time other processes had
@@ -55,11 +58,14 @@ class Timeline:
         self._process_cpu = time.process_time()
         self._process_cpu_end: float | None = None
         self.source: str | None = None  # the stage the run loop consumes (its wait is wait_<source>)
+        self.first: float | None = None  # time.perf_counter() when the run loop got its first item (item())
+        self.items = 0  # items the run loop got
 
     def start(self) -> None:
         """Start the wall clock now (the run's first frame is asked for)."""
         self.started = time.perf_counter()
         self.stopped = None
+        self.first, self.items = None, 0
         self._process_cpu = time.process_time()
         self._process_cpu_end = None
 
@@ -67,6 +73,15 @@ class Timeline:
         """Stop the wall clock now (the run's last frame is written)."""
         self.stopped = time.perf_counter()
         self._process_cpu_end = time.process_time()
+
+    def item(self) -> None:
+        """The run loop got an item (a frame's observation): the first one ends the pipeline's start-up (the first
+        frames decoded, an offline background's first window read and built, the first mask made)."""
+        now = time.perf_counter()
+        with self._lock:
+            if self.first is None:
+                self.first = now
+            self.items += 1
 
     def add_cpu(self, thread: str, seconds: float) -> None:
         """Add ``seconds`` of CPU time of the pipeline thread ``thread`` (``time.thread_time`` differences)."""
@@ -112,6 +127,10 @@ class Timeline:
         out = {"wall_s": round(wall, 6), "overlap": round(busy / wall, 3), "stages": stages, "cpu_s": cpu}
         if self.source is not None:
             out["source"] = self.source
+        if self.first is not None:  # the start-up, and the rate of the frames after the first
+            out["first_item_s"] = round(self.first - self.started, 6)
+            if self.items > 1 and end > self.first:
+                out["after_first_per_s"] = round((self.items - 1) / (end - self.first), 3)
         return out
 
 

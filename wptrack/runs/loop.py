@@ -519,6 +519,7 @@ def _frames(
     # "decode_wait": the time the tracker waited for the next decoded frame (the timeline's wait_<stage>)
     for item in prefetch(frames, depth=prefetch_depth, name=stage):
         t_step = time.perf_counter()
+        clock.item()
         out.add_timing("decode_wait", t_step - t_wait)
         est = job.step(item)
         t_record = time.perf_counter()
