@@ -235,3 +235,79 @@ def test_meeting_variant_four_cameras_people_stand_and_talk():
         OfficeConfig(cameras=5)
     with pytest.raises(ConfigError, match="talk"):
         OfficeConfig(talk=-1.0)
+
+
+def test_light_conditions_change_the_light_only(scene):
+    """``clouds`` and ``exposure`` (issue 26's light conditions indoors): the people, their perfect masks and the
+    ground truth stay; the images change as specified. ``clouds``: the daylight by the south windows fades as a cloud
+    passes (the floor by the windows darkens more than the floor far from them, never brightens); ``exposure``: each
+    camera's auto-exposure jumps at its own time, and the light over the aisle brightens the floor under it."""
+    from wptrack.synth import conditions as C
+    from wptrack.synth.office import DAYLIGHT_REACH, EXPOSURE_CAMERA_DELAY_S, OFFICE_LIGHT_POOLS
+
+    rngs = lambda: [np.random.default_rng([5, k]) for k in range(3)]  # noqa: E731
+    clouds = scene.with_conditions(C.parse_conditions("clouds"))
+    exposure = scene.with_conditions(C.parse_conditions("exposure"))
+    assert clouds.config.clouds and not clouds.config.exposure and exposure.config.exposure
+    n = scene.default_frames
+    for lit in (clouds, exposure):
+        t0, t1 = scene.trajectories(n), lit.trajectories(n)
+        assert all(np.array_equal(t0[k], t1[k], equal_nan=True) for k in t0)
+        assert lit.hints()["held_out"]
+    f = _meeting_frame(scene)
+    base_img, _, base_masks = scene.render_frame_masks(f, {}, rngs())
+    for lit in (clouds, exposure):
+        img, _, masks = lit.render_frame_masks(f, {}, rngs())
+        assert all(np.array_equal(a, b) for a, b in zip(masks, base_masks, strict=True))  # same people, same pixels
+        assert any(not np.array_equal(a, b) for a, b in zip(img, base_img, strict=True))
+    assert set(clouds.hints()["conditions"]) == {"clouds"} and set(exposure.hints()["conditions"]) == {"exposure"}
+    assert "conditions" not in scene.hints()
+
+    # clouds: the static floor's factor, by distance from the window wall, over the whole clip
+    pts, share = clouds._static_daylight(0)
+    labels = np.zeros((H, W), dtype=np.int32)
+    near = np.isfinite(pts[:, 1]) & (pts[:, 1] < 1.0) & (share > 0.3)
+    far = np.isfinite(pts[:, 1]) & (pts[:, 1] > 4.0)
+    assert near.sum() > 50 and far.sum() > 50
+    darkest_near = darkest_far = 1.0
+    for i in range(0, n, 10):
+        fac = clouds.light_factors(0, i, labels).reshape(-1, 3)
+        assert np.all(fac <= 1.0 + 1e-12)  # a cloud only takes daylight away
+        darkest_near = min(darkest_near, float(fac[near, 1].min()))
+        darkest_far = min(darkest_far, float(fac[far, 1].min()))
+    assert darkest_near < 0.9  # a passing cloud takes a tenth or more of the light by the windows
+    assert 1.0 - darkest_far < 0.5 * (1.0 - darkest_near)  # ... and much less deep in the room
+    assert np.median(share[near]) > np.exp(3.0 / DAYLIGHT_REACH) * np.median(share[far]) * 0.9  # falls with y
+
+    # exposure: camera 1's first auto-exposure jump comes EXPOSURE_CAMERA_DELAY_S after camera 0's
+    step_t = C.EXPOSURE_STEPS[0][0] + C.EXPOSURE_RAMP_S
+    i0 = int(np.ceil(step_t * scene.fps)) + 1
+    g0 = exposure.light_factors(0, i0, labels).reshape(-1, 3)
+    g1 = exposure.light_factors(1, i0, labels).reshape(-1, 3)
+    gain0 = C.exposure_gain(i0 / scene.fps)
+    gain1 = C.exposure_gain(i0 / scene.fps - EXPOSURE_CAMERA_DELAY_S)
+    assert gain0[1] > gain1[1] * 1.2  # camera 0 has jumped, camera 1 not yet
+    far_from_pools = np.isfinite(pts[:, 0]) & np.all(
+        [np.hypot(pts[:, 0] - c[0], pts[:, 1] - c[1]) > 4 * r for _, c, r, _ in OFFICE_LIGHT_POOLS], axis=0
+    )
+    np.testing.assert_allclose(g0[far_from_pools & np.isfinite(pts[:, 0])][:, 1], gain0[1], rtol=1e-6)
+    assert np.median(g1[far_from_pools][:, 1]) == pytest.approx(gain1[1], rel=1e-6)
+    on, (cx, cy), radius, _ = OFFICE_LIGHT_POOLS[1]
+    after = exposure.light_factors(0, int((on + 1.0) * scene.fps), labels).reshape(-1, 3)
+    before = exposure.light_factors(0, int((on - 1.0) * scene.fps), labels).reshape(-1, 3)
+    under = np.isfinite(pts[:, 0]) & (np.hypot(pts[:, 0] - cx, pts[:, 1] - cy) < radius)
+    assert under.sum() > 10
+    ratio_under = after[under, 0] / before[under, 0]
+    ratio_far = after[far_from_pools, 0] / before[far_from_pools, 0]
+    assert np.median(ratio_under) > 1.15 * np.median(ratio_far)  # the light over the aisle came on
+
+
+def test_office_takes_only_the_light_conditions(tmp_path):
+    from wptrack.synth import conditions as C
+
+    with pytest.raises(ConfigError, match="only the conditions clouds, exposure, got sun"):
+        _scene().with_conditions(C.parse_conditions("clouds,sun"))
+    with pytest.raises(ConfigError, match="office scene: clouds"):
+        OfficeConfig(clouds="yes")
+    with pytest.raises(ConfigError, match="only the conditions"):
+        render_scene("s2-office", tmp_path, frames=1, conditions="crowd")

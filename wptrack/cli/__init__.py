@@ -81,9 +81,9 @@ def build_parser(batch_tracker: str | None = None) -> argparse.ArgumentParser:
     s.add_argument(
         "--conditions",
         default=None,
-        help="s3 scenes only: comma-separated hard conditions, each alone measurable: static-start, stop-and-go, sun, "
-        "light-change, noise, compression, dark-car, crowd, cyclists, clouds, exposure, short; or all (default: none; "
-        "see wptrack.synth.conditions)",
+        help="comma-separated hard conditions, each alone measurable: s3 scenes static-start, stop-and-go, sun, "
+        "light-change, noise, compression, dark-car, crowd, cyclists, clouds, exposure, short, or all; s2-office "
+        "scenes clouds, exposure (default: none; see wptrack.synth.conditions)",
     )
     s.set_defaults(func=cmd_synth)
 

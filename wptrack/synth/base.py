@@ -97,12 +97,13 @@ class Scene(ABC):
         return images, vis, None
 
     def with_conditions(self, conditions: Any) -> Scene:
-        """The same scene under hard conditions (:mod:`wptrack.synth.conditions`); only the s3 scenes take them.
+        """The same scene under hard conditions (:mod:`wptrack.synth.conditions`); the s3 plaza scenes take them all,
+        the s2 office scenes the light conditions (``clouds``, ``exposure``).
 
         Raises:
             ConfigError: the scene takes no conditions.
         """
-        raise ConfigError("this scene takes no conditions (only the s3 plaza scenes do)")
+        raise ConfigError("this scene takes no conditions (the s3 plaza scenes and the s2 office scenes do)")
 
     def save_rig(self, path: Path) -> None:
         """Write the scene's rig file (default: ``self.rig.save(path)``, inline camera entries). Scenes that show

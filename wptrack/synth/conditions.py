@@ -1,4 +1,6 @@
 """Switchable hard conditions of the s3 plaza scenes (issue 10): each one alone, so that its effect can be measured.
+The s2 office scenes take the two light conditions, ``clouds`` and ``exposure``, indoors (daylight from the south
+windows, per-camera auto-exposure, lights in part of the room: :mod:`wptrack.synth.office`).
 
 ``wptrack synth s3-mixed --out DIR --conditions sun,dark-car`` (or ``--conditions all``) renders a plaza scene with
 the chosen conditions; all are off by default and the scenes are then unchanged (the same frames, masks and ground
@@ -436,15 +438,15 @@ def exposure_gain(t: float) -> np.ndarray:
     return out
 
 
-def light_pool_factor(points: np.ndarray, t: float) -> np.ndarray:
+def light_pool_factor(points: np.ndarray, t: float, pools: Sequence[tuple] = LIGHT_POOLS) -> np.ndarray:
     """``(..., 3)`` R, G, B factors of the ``exposure`` condition's lights at 3-D ``points`` (..., 3) at time ``t``:
     ``1 + on(t) (peak - 1) exp(-r^2 / (2 radius^2))`` per light, ``r`` the horizontal distance to its centre (1 where
-    a point is not finite)."""
+    a point is not finite). ``pools``: the lights, as :data:`LIGHT_POOLS` (the plaza's; the office has its own)."""
     p = np.asarray(points, dtype=np.float64)
     out = np.ones((*p.shape[:-1], 3))
     ok = np.isfinite(p[..., 0]) & np.isfinite(p[..., 1])
     x, y = np.where(ok, p[..., 0], 1e9), np.where(ok, p[..., 1], 1e9)
-    for at, (cx, cy), radius, peak in LIGHT_POOLS:
+    for at, (cx, cy), radius, peak in pools:
         on = float(_smooth((t - at) / POOL_RAMP_S))
         if on <= 0.0:
             continue

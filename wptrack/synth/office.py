@@ -77,13 +77,14 @@ from __future__ import annotations
 import functools
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from wptrack.cameras.rig import Camera, Rig
 from wptrack.core.errors import ConfigError
+from wptrack.synth import conditions as C
 from wptrack.synth.actors import Path, Person, _Prim
 from wptrack.synth.base import Scene, register_scene
 from wptrack.synth.plaza import _image_box
@@ -130,6 +131,27 @@ SHIRT_PARTS = (1, 3, 5)
 RIGHT_ARM = 3
 """Index of the right arm (raised for the handshake)."""
 
+OFFICE_CONDITIONS = ("clouds", "exposure")
+"""The hard conditions of :mod:`wptrack.synth.conditions` an office scene takes (``--conditions clouds,exposure``)."""
+DAYLIGHT_REACH = 2.5
+"""clouds: the room's daylight comes through windows along the south wall (y = 0); its share of a surface's light
+falls as ``exp(-y / DAYLIGHT_REACH)`` with the distance y from that wall, metres."""
+DAYLIGHT_SHARE = {"floor": 0.55, "static": 0.3, "person": 0.35}
+"""clouds: share of daylight in the light of the floor, of the other static surfaces (walls, furniture) and of the
+people, at the window wall (the ceiling light gives the rest). A passing cloud removes its opacity's fraction of it:
+the plaza's drifting, soft-edged cloud shadows (:func:`wptrack.synth.conditions.cloud_cover`) seen indoors as
+daylight fading and coming back across the floor, strongest by the windows."""
+EXPOSURE_CAMERA_DELAY_S = 0.8
+"""exposure: each camera runs its own auto-exposure and white balance: camera k's jumps
+(:func:`wptrack.synth.conditions.exposure_gain`) come ``k x`` this many seconds after camera 0's."""
+OFFICE_LIGHT_POOLS = (
+    (2.5, (1.3, 4.0), 1.0, (1.45, 1.36, 1.22)),
+    (7.0, (3.6, 2.6), 0.9, (1.35, 1.3, 1.2)),
+)
+"""exposure: lights switching on in part of the room ``(time s, floor centre (x, y) m, gaussian radius m, (R, G, B)
+peak factor)``: a desk lamp's pool by the north-west desks and a light over the aisle where the people meet
+(:func:`wptrack.synth.conditions.light_pool_factor`)."""
+
 _Rgb = tuple[float, float, float]
 
 
@@ -155,6 +177,10 @@ class OfficeConfig:
         talk: Seconds the two people stand and talk at the meeting point before the handshake (0: they shake
             hands as soon as both have arrived). The paths, speeds and looks do not depend on it; the handshake and
             the rest of the timeline move later by ``talk``.
+        clouds: Daylight from the south windows fading and coming back as clouds pass (:data:`DAYLIGHT_SHARE`).
+        exposure: Per-camera auto-exposure jumps and white-balance shifts, and two lights switching on in part of the
+            room (:data:`OFFICE_LIGHT_POOLS`). Neither condition changes the people, the perfect masks or the ground
+            truth; both off: the scene as before, frame for frame.
     """
 
     two_colour: bool = False
@@ -169,6 +195,8 @@ class OfficeConfig:
     shadow_strength: float = 0.45
     cameras: int = 3
     talk: float = 0.0
+    clouds: bool = False
+    exposure: bool = False
 
     def __post_init__(self) -> None:
         def integer(name: str, lo: int) -> None:
@@ -190,6 +218,9 @@ class OfficeConfig:
             raise ConfigError(f"office scene: cameras: expected 3 or 4, got {self.cameras!r}")
         if isinstance(self.talk, bool) or not isinstance(self.talk, (int, float)) or not (0 <= self.talk < 1e4):
             raise ConfigError(f"office scene: talk: expected seconds >= 0, got {self.talk!r}")
+        for name in ("clouds", "exposure"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ConfigError(f"office scene: {name}: expected True or False, got {getattr(self, name)!r}")
         ramp = self.light_ramp
         if len(ramp) != 2 or not all(isinstance(r, (int, np.integer)) for r in ramp) or not 0 <= ramp[0] < ramp[1]:
             raise ConfigError(f"office scene: light_ramp: expected two frames 0 <= first < last, got {ramp!r}")
@@ -483,6 +514,20 @@ class OfficeScene(Scene):
         self._views: list[StaticView] | None = None
         self._floor: list[tuple[np.ndarray, np.ndarray]] | None = None
         self._states: _States | None = None
+        self._daylight: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # camera -> static points, daylight shares
+
+    def with_conditions(self, conditions: Any) -> OfficeScene:
+        """The same scene under the hard conditions it takes (:data:`OFFICE_CONDITIONS`).
+
+        Raises:
+            ConfigError: a condition the office does not take (the plaza's motion and object conditions).
+        """
+        other = [n for n in conditions.names if n not in OFFICE_CONDITIONS]
+        if other:
+            raise ConfigError(
+                f"the office scenes take only the conditions {', '.join(OFFICE_CONDITIONS)}, got {', '.join(other)}"
+            )
+        return OfficeScene(replace(self.config, clouds=bool(conditions.clouds), exposure=bool(conditions.exposure)))
 
     # -- motion and ground truth
 
@@ -607,9 +652,43 @@ class OfficeScene(Scene):
             "room": list(ROOM),
             "ground": {"origin": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]},
             "two_colour": bool(cfg.two_colour),
-            "held_out": bool(cfg.two_colour or cfg.seed != 0 or cfg.cameras != 3 or cfg.talk > 0 or cfg.fps != 25.0),
+            "held_out": bool(
+                cfg.two_colour or cfg.seed != 0 or cfg.cameras != 3 or cfg.talk > 0 or cfg.fps != 25.0 or self._lit
+            ),
             "clothing_rgb": clothing,
+            **({"conditions": self._describe_conditions()} if self._lit else {}),
         }
+
+    @property
+    def _lit(self) -> bool:
+        """Whether a light condition is on."""
+        return bool(self.config.clouds or self.config.exposure)
+
+    def _describe_conditions(self) -> dict[str, dict[str, Any]]:
+        """Name -> parameters of each condition that is on (scene.json)."""
+        out: dict[str, dict[str, Any]] = {}
+        if self.config.clouds:
+            clouds = C.PlazaConditions(clouds=True).describe()["clouds"]
+            out["clouds"] = {
+                **clouds,
+                "windows": "south wall (y = 0)",
+                "daylight_reach_m": DAYLIGHT_REACH,
+                "daylight_share": dict(DAYLIGHT_SHARE),
+            }
+        if self.config.exposure:
+            out["exposure"] = {
+                "steps": [list(x) for x in C.EXPOSURE_STEPS],
+                "ramp_s": C.EXPOSURE_RAMP_S,
+                "awb_shifts": [[t, list(f)] for t, f in C.AWB_SHIFTS],
+                "awb_ramp_s": C.AWB_RAMP_S,
+                "camera_delay_s": EXPOSURE_CAMERA_DELAY_S,
+                "light_pools": [
+                    {"on_s": t, "centre_m": list(c), "radius_m": r, "peak_rgb": list(f)}
+                    for t, c, r, f in OFFICE_LIGHT_POOLS
+                ],
+                "pool_ramp_s": C.POOL_RAMP_S,
+            }
+        return out
 
     # -- pixels
 
@@ -642,6 +721,49 @@ class OfficeScene(Scene):
         amount = self.config.shadow_strength * (1.0 - _smoothstep((r - 0.35) / 0.65))
         flat = img.reshape(-1, 3)
         flat[idx[near]] *= (1.0 - amount).astype(np.float32)[:, None]
+
+    def _static_daylight(self, cam: int) -> tuple[np.ndarray, np.ndarray]:
+        """Camera ``cam``'s static hit points (H*W, 3) metres (NaN where a ray hits nothing) and their daylight
+        shares (H*W,) (:data:`DAYLIGHT_SHARE`, falling with the distance from the window wall); cached."""
+        got = self._daylight.get(cam)
+        if got is None:
+            view = self.views()[cam]
+            depth = view.depth.ravel().astype(np.float64)
+            pts = view.origin[None, :] + view.dirs * np.where(np.isfinite(depth), depth, np.nan)[:, None]
+            share = np.where(view.label.ravel() == LABEL_FLOOR, DAYLIGHT_SHARE["floor"], DAYLIGHT_SHARE["static"])
+            share = share * np.exp(-np.clip(np.nan_to_num(pts[:, 1], nan=1e9), 0.0, None) / DAYLIGHT_REACH)
+            got = self._daylight[cam] = (pts, share)
+        return got
+
+    def light_factors(self, cam: int, index: int, labels: np.ndarray) -> np.ndarray:
+        """``(H, W, 3)`` R, G, B radiance factors of the light conditions (``clouds``, ``exposure``) in camera ``cam``
+        at frame ``index``, given its label image (``oid + 1`` on each person's visible pixels): static pixels at their
+        own 3-D points, a person's pixels at the person's ground position (daylight share
+        ``DAYLIGHT_SHARE["person"]``, lights at waist height); times the camera's global exposure and white-balance
+        gain. All ones with both conditions off."""
+        cfg = self.config
+        h, w = labels.shape
+        t = index / self.fps
+        pts, share = self._static_daylight(cam)
+        factor = np.ones((h * w, 3))
+        st = self.states(index + 1)
+        flat = labels.ravel()
+        people = [(a, flat == walker.oid + 1) for a, walker in enumerate(self.walkers)]
+        people = [(a, sel) for a, sel in people if np.any(sel)]
+        if cfg.clouds:
+            factor *= C.cloud_darkening(C.cloud_cover(pts[:, :2], t), share)
+            for a, sel in people:
+                g = st.pos[a, index]
+                s = DAYLIGHT_SHARE["person"] * math.exp(-max(float(g[1]), 0.0) / DAYLIGHT_REACH)
+                factor[sel] = C.cloud_darkening(C.cloud_cover(g[None, :], t), np.asarray([s]))[0]
+        if cfg.exposure:
+            pool = C.light_pool_factor(pts, t, OFFICE_LIGHT_POOLS)
+            for a, sel in people:
+                g = st.pos[a, index]
+                pool[sel] = C.light_pool_factor(np.asarray([[g[0], g[1], 1.0]]), t, OFFICE_LIGHT_POOLS)[0]
+            factor *= pool
+            factor *= C.exposure_gain(t - cam * EXPOSURE_CAMERA_DELAY_S)[None, :]
+        return factor.reshape(h, w, 3)
 
     def render_camera(
         self, cam: int, index: int, rng: np.random.Generator, prims: list[list[_Prim]] | None = None
@@ -708,6 +830,8 @@ class OfficeScene(Scene):
             pixels[walker.oid] = (int(np.count_nonzero(labels == walker.oid + 1)), int(np.count_nonzero(covered)))
         scale = np.float32(255.0 * LIGHT.exposure * self.gain(index))
         img *= scale
+        if self._lit:  # the light conditions (off: the frames as before, bit for bit)
+            img *= self.light_factors(cam, index, labels).astype(np.float32)
         if self.config.noise_sigma > 0:
             img += rng.standard_normal((h, w, 3), dtype=np.float32) * np.float32(self.config.noise_sigma)
         bgr = np.clip(np.rint(img[:, :, ::-1]), 0, 255).astype(np.uint8)
