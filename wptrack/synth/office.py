@@ -51,6 +51,12 @@ same 12 s in 38 frames; the tracker's dynamics and its birth and removal times a
 8 s at the meeting point before the handshake (500 frames; the light dims while they stand: the background model
 and the tracker must keep people who do not move).
 
+Light conditions (issue 26, ``--conditions clouds,exposure``, off by default; :data:`OFFICE_CONDITIONS`): ``clouds``,
+daylight from windows along the south wall that fades and comes back across the floor as clouds pass
+(:data:`DAYLIGHT_SHARE`, :data:`DAYLIGHT_REACH`); ``exposure``, each camera's own auto-exposure jumps and white-balance
+shifts (:data:`EXPOSURE_CAMERA_DELAY_S`) and two lights switching on in part of the room (:data:`OFFICE_LIGHT_POOLS`).
+They change the light only: the people, the perfect masks and the ground truth stay (:meth:`OfficeScene.light_factors`).
+
 Ground truth (``groundtruth.csv``): ``frame,id,x,y,z,gx,gy,height,heading,handshake``: the centroid of the body
 volume (volume-weighted mean of the body parts' ellipsoid centres, metres, world frame), the ground position (gx,
 gy) (z = 0 below the body axis), the person's height (metres), heading (radians, ``atan2`` of the facing direction)
