@@ -300,6 +300,9 @@ def test_light_conditions_change_the_light_only(scene):
     ratio_under = after[under, 0] / before[under, 0]
     ratio_far = after[far_from_pools, 0] / before[far_from_pools, 0]
     assert np.median(ratio_under) > 1.15 * np.median(ratio_far)  # the light over the aisle came on
+    ceiling = np.isfinite(pts[:, 0]) & (pts[:, 2] > 2.7) & (np.hypot(pts[:, 0] - cx, pts[:, 1] - cy) < radius)
+    assert ceiling.sum() > 10  # the ceiling above it is not lit by it (a pool on what stands below POOL_TOP)
+    np.testing.assert_allclose(after[ceiling, 0] / before[ceiling, 0], np.median(ratio_far), rtol=0.02)
 
 
 def test_office_takes_only_the_light_conditions(tmp_path):

@@ -156,7 +156,10 @@ OFFICE_LIGHT_POOLS = (
 )
 """exposure: lights switching on in part of the room ``(time s, floor centre (x, y) m, gaussian radius m, (R, G, B)
 peak factor)``: a desk lamp's pool by the north-west desks and a light over the aisle where the people meet
-(:func:`wptrack.synth.conditions.light_pool_factor`)."""
+(:func:`wptrack.synth.conditions.light_pool_factor`). They light what stands below :data:`POOL_TOP` (the floor, the
+furniture, the people), not the ceiling."""
+POOL_TOP = (1.8, 2.6)
+"""exposure: a light pool's effect is whole up to the first height and fades out by the second, metres."""
 
 _Rgb = tuple[float, float, float]
 
@@ -763,7 +766,9 @@ class OfficeScene(Scene):
                 s = DAYLIGHT_SHARE["person"] * math.exp(-max(float(g[1]), 0.0) / DAYLIGHT_REACH)
                 factor[sel] = C.cloud_darkening(C.cloud_cover(g[None, :], t), np.asarray([s]))[0]
         if cfg.exposure:
-            pool = C.light_pool_factor(pts, t, OFFICE_LIGHT_POOLS)
+            lo, hi = POOL_TOP
+            below = 1.0 - _smoothstep((np.nan_to_num(pts[:, 2], nan=hi) - lo) / (hi - lo))
+            pool = 1.0 + (C.light_pool_factor(pts, t, OFFICE_LIGHT_POOLS) - 1.0) * below[:, None]
             for a, sel in people:
                 g = st.pos[a, index]
                 pool[sel] = C.light_pool_factor(np.asarray([[g[0], g[1], 1.0]]), t, OFFICE_LIGHT_POOLS)[0]
