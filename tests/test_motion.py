@@ -626,3 +626,33 @@ def test_shadow_ratio_sharp_peak_beats_a_higher_broad_hump(rng):
     s2 = np.repeat(np.round(spike * 200)[:, None], 3, axis=1)[None].astype(np.uint8)
     args2 = (np.ones((1, 3)), np.full((n2, 3), 200.0), np.zeros((n2, 3)), 0.0, 1e-3, 0.1)
     assert shadow_ratio(s2, *args2, sharp=0.1) == shadow_ratio(s2, *args2)  # no standing peak: the highest
+
+
+@pytest.mark.parametrize("workers", [1, 3])
+def test_a_short_recording_is_said_once(caplog, monkeypatch, workers):
+    """The windows' plan is made once per source: its warnings (a clip shorter than the window) are logged once,
+    whatever models share the windows (the build worker, several mask threads)."""
+    monkeypatch.setenv("WPTRACK_MASK_WORKERS", str(workers))
+    rng = np.random.default_rng(0)
+    frames = rng.integers(0, 255, size=(12, 24, 32, 3), dtype=np.uint8)
+    with caplog.at_level(logging.WARNING):
+        masks = open_masks(frames, config=MaskConfig(method="offline", window=300, samples=5, device="cpu"))
+        assert len(list(masks)) == 12
+    assert caplog.text.count("shorter than the background window") == 1
+
+
+def test_models_sharing_windows_plan_them_alike():
+    from wptrack.io.frames import ArraySource
+    from wptrack.motion.background import OfflineBackground
+
+    frames = np.random.default_rng(1).integers(0, 255, size=(40, 24, 32, 3), dtype=np.uint8)
+    src = ArraySource(frames)
+    first = OfflineBackground(src, MaskConfig(method="offline", window=20, samples=5, device="cpu"), "cpu")
+    same = OfflineBackground(src, MaskConfig(method="offline", window=20, samples=5, device="cpu"), "cpu",
+                             share=first._share)  # fmt: skip
+    assert same.windows is first.windows and len(first.windows) == 3
+    with pytest.raises(ValueError, match="planned for"):
+        OfflineBackground(src, MaskConfig(method="offline", window=10, samples=5, device="cpu"), "cpu",
+                          share=first._share)  # fmt: skip
+    for m in (first, same):
+        m.close()

@@ -135,7 +135,15 @@ class OfflineBackground:
         self.source = source
         self.config = config
         self.device = device
-        self.windows = plan_windows(len(source), config.window, config.samples, source.name)
+        # the windows' plan, shared with the other models of the source (its warnings are said once, by the first)
+        self._share = WindowShare(source) if share is None else share
+        plan = (len(source), int(config.window), int(config.samples))
+        if self._share.windows is None:
+            self._share.windows = plan_windows(*plan, source.name)
+            self._share.plan = plan
+        elif self._share.plan != plan:  # an internal misuse: models sharing windows must plan them alike
+            raise ValueError(f"a WindowShare planned for {self._share.plan} (frames, window, samples), not {plan}")
+        self.windows = self._share.windows
         self.centres = [w.centre for w in self.windows]
         self.pixels = source.width * source.height
         n3 = 3 * self.pixels
@@ -155,9 +163,8 @@ class OfflineBackground:
         self._diff = wp.zeros(self.pixels, dtype=wp.vec3, device=device)
         self._packed = wp.zeros(self.pixels, dtype=wp.uint8, device=device) if config.neighbourhood else None
         self._rows = wp.zeros(self.pixels, dtype=wp.vec4, device=device) if config.neighbourhood else None
-        # the built windows and their statistics: this model's own, or shared with the other models of the source
-        # (WindowShare: each window built once)
-        self._share = WindowShare(source) if share is None else share
+        # the built windows and their statistics (self._share, above): this model's own, or shared with the other
+        # models of the source (WindowShare: each window built once)
         self._built = self._share.built
         self._scale = self._share.scale  # image-wide median noise scale of each built window
         self._nb_scale = self._share.nb_scale  # neighbourhood_scale of each built window

@@ -346,6 +346,7 @@ class WindowShare:
         source: The frames the models read (the sampler's).
 
     Attributes:
+        windows: The windows' plan (:func:`plan_windows`), made by the first model (which logs its warnings once).
         built: ``{window: (median, mad)}`` device arrays of the built windows.
         bg_sub, bg_gain, scale, nb_scale, ratio: The windows' host statistics (see ``OfflineBackground``).
     """
@@ -353,6 +354,8 @@ class WindowShare:
     def __init__(self, source: FrameSource) -> None:
         self.lock = threading.Lock()
         self.sampler = _Sampler(source)
+        self.windows: list[Window] | None = None  # the plan (plan_windows), made once: its warnings said once
+        self.plan: tuple[int, int, int] | None = None  # its (frames, window, samples)
         self.read_lock = threading.Lock()  # the sampler serves one read at a time
         self.executor: ThreadPoolExecutor | None = None  # the prefetch worker (one thread), made on first use
         self.pending: tuple[int, Future] | None = None  # (window, its read) submitted to the worker
