@@ -42,7 +42,7 @@ from wptrack.kernels.core.random import (
     uniform4,
 )
 from wptrack.kernels.core.reduce import finite_logw, moments_push, moments_store, moments_zero
-from wptrack.kernels.people.coverage import PersonTerms, person_log_terms
+from wptrack.kernels.people.coverage import PersonTerms, camera_centre, person_log_terms
 from wptrack.kernels.people.descriptor import appearance_log_prob, descriptor_at
 
 wp.set_module_options({"enable_backward": False})
@@ -98,7 +98,7 @@ def ray_jump(
     if u[0] >= share:
         return p
     c = wp.min(int(u[1] * float(cams.shape[0])), cams.shape[0] - 1)
-    centre = -(wp.transpose(cams[c].R) * cams[c].t)
+    centre = camera_centre(cams[c])
     dx = p[0] - centre[0]
     dy = p[1] - centre[1]
     n = wp.sqrt(dx * dx + dy * dy)
