@@ -103,8 +103,8 @@ class DynamicsConfig:
     locked on someone else's silhouette (a multi-view ghost) sits 1-2 m off along the other view's ray, a local
     optimum of the weights its Gaussian walk does not leave; the jumped particles try the positions along the rays
     and the weights decide. A share of each frame's particles, not a rate in time: it is the proposal's exploration,
-    paid per frame at any frame rate. Measured on the EPFL terrace (tracker seeds 0-3, docs/notes.md): 25 frames/s
-    MOTA 0.343 -> 0.518, 3.125 frames/s 0.207 -> 0.221."""
+    paid per frame at any frame rate. Measured on the EPFL terrace (docs/notes.md): 25 frames/s MOTA 0.343 -> 0.537
+    (tracker seeds 0-3), 3.125 frames/s 0.176 -> 0.196 (seeds 0-7)."""
     jump_span: float = param(2.0, help="ours: the longest of those jumps", units="m", lo=0.0)
     jump_clear: float = param(
         1.0, help="ours: a jump never lands this close to another tracked person (it is not made)", units="m", lo=0.0
