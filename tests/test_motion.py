@@ -473,13 +473,28 @@ def test_learnt_faint_shadow_ratio_keeps_dark_clothes(rng):
     assert learnt[shadow].mean() < 0.05 and learnt[obj].mean() > 0.95
 
 
-@pytest.mark.parametrize(("radius", "scale"), [(1, 1.0), (2, 0.7)])
-def test_neighbourhood_kernel_matches_numpy(device, rng, radius, scale):
+@pytest.mark.parametrize(("radius", "scale", "shadow"), [(1, 1.0, True), (2, 0.7, True), (1, 1.0, False)])
+def test_neighbourhood_kernel_matches_numpy(device, rng, radius, scale, shadow):
+    """The neighbourhood's weak foreground against the NumPy reference: faint coherent regions are marked; with the
+    shadow test on, a region darkened like a cast shadow (the background's colour scaled by 0.88, inside the shadow
+    band, its neighbourhood means over the noise) is not, a region of the same size and strength whose colour
+    changes is."""
     h, w = 70, 81  # several runs of RUN pixels per row and column, the last ones partial
     packed = rng.choice(np.array([0, 0, 0, 1, 2, 4, 8], np.uint8), (h, w))
     diff = rng.normal(0.0, 1.0, (h, w, 3)).astype(np.float32)
     diff[5:15, 5:20] += 1.6  # a faint coherent region
     diff[40:60, 30:70] -= 1.6
+    bg = rng.integers(40, 200, (h, w, 3)).astype(np.uint8)
+    bg[18:36] = (90, 120, 150)  # one ground colour under the shadow and the coloured change (neighbours alike)
+    mad = np.full((h, w, 3), 2, np.uint8)  # s = max(noise floor 3, 1.4826 * 2) = 3
+    u = bg.astype(np.float32) / 3.0
+    diff[20:34, 40:75] = -0.12 * u[20:34, 40:75]  # the soft edge of a cloud's shadow: a = 0.88, no colour change
+    diff[20:34, 5:38] = 0.12 * np.linalg.norm(u[20:34, 5:38], axis=-1, keepdims=True) * np.array([0.9, -0.3, -0.3])
+    params = kbg.ForegroundParams()
+    params.shadow, params.shadow_lo, params.shadow_hi, params.chroma_max = int(shadow), 0.8, 0.95, 0.1
+    params.spread_cap, params.noise_floor = 0.0, 3.0
+    dev_bg = wp.array(bg.reshape(-1), dtype=wp.uint8, device=device)
+    dev_mad = wp.array(mad.reshape(-1), dtype=wp.uint8, device=device)
     out = wp.zeros(h * w, dtype=wp.uint8, device=device)
     rows = wp.zeros(h * w, dtype=wp.vec4, device=device)
     dev_packed = wp.array(packed.reshape(-1), dtype=wp.uint8, device=device)
@@ -495,17 +510,28 @@ def test_neighbourhood_kernel_matches_numpy(device, rng, radius, scale):
     wp.launch(
         kbg.neighbourhood_kernel,
         dim=w * ((h + run - 1) // run),
-        inputs=[dev_packed, rows, w, h, radius, 2.0, scale],
+        inputs=[dev_packed, rows, w, h, radius, 2.0, scale, dev_bg, dev_mad, dev_bg, dev_mad, 0.0, params],
         outputs=[out],
         device=device,
     )
-    ref = numpy_masks.neighbourhood(packed, diff.astype(np.float64), radius, 2.0, scale)
+    cast = (0.8, 0.95, 0.1) if shadow else None
+    ref = numpy_masks.neighbourhood(packed, diff.astype(np.float64), radius, 2.0, scale, u.astype(np.float64), cast)
     got = out.numpy().reshape(h, w)
     np.testing.assert_array_equal(got, ref)
     changed = got != packed
     assert changed.sum() > 20 and np.all(got[changed] == packed[changed] + 1)
     assert np.all((packed[changed] & 3) == 0) and np.all((packed[changed] >> 2) != 2)
     assert changed[5:15, 5:20].mean() > 2 * changed.mean()
+    eligible = ((packed & 3) == 0) & ((packed >> 2) < 2)
+    inner = np.zeros((h, w), bool)
+    inner[22:32, 42:73] = True  # away from the region's rim, where neighbourhoods mix it with the noise around
+    colour = np.zeros((h, w), bool)
+    colour[22:32, 7:36] = True
+    assert changed[colour & eligible].mean() > 0.9  # a coloured change of the same size is an object
+    if shadow:
+        assert not changed[inner & eligible].any()  # the shadow-like darkening is not
+    else:
+        assert changed[inner & eligible].mean() > 0.9  # without the shadow test it is marked like any change
 
 
 def test_neighbourhood_scale_independent_vs_correlated_noise(rng):

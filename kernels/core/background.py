@@ -39,8 +39,8 @@ linearly interpolated between the two nearest windows (weight ``w`` of the secon
   colour, is accepted where it hangs on the object's contrasted parts; isolated noise above ``T_low`` is not).
 
 Then, with a neighbourhood radius (:func:`neighbourhood_rows_kernel`, :func:`neighbourhood_kernel`), a background
-pixel whose neighbours' mean normalised difference is far from 0 becomes weak foreground too (a faint but coherent
-change, e.g. a car painted like the road).
+pixel whose neighbours' mean normalised difference is far from 0, and not a cast shadow's darkening
+(:func:`shadow_like`), becomes weak foreground too (a faint but coherent change, e.g. a car painted like the road).
 
 Local illumination changes (issue 26): the frame is divided by a local light field and a pixel whose patch keeps
 the background's texture is vetoed (:func:`local_gain`, :func:`illumination_change`); the patch statistics and the
@@ -267,6 +267,46 @@ def illumination_change(st: patch_vec, params: ForegroundParams, ib: float, bb: 
     return a >= params.illum_lo and a <= params.illum_hi and cd <= params.illum_chroma
 
 
+@wp.func
+def background_at(
+    bg0: wp.array(dtype=wp.uint8),
+    mad0: wp.array(dtype=wp.uint8),
+    bg1: wp.array(dtype=wp.uint8),
+    mad1: wp.array(dtype=wp.uint8),
+    w: float,
+    params: ForegroundParams,
+    p: int,
+):
+    """Pixel ``p``'s background (B, G, R) between the two windows and its noise scale ``s = max(s0, min(s_cap, 1.4826
+    sqrt(sum_c MAD_c^2 / 3)))``, 8-bit units, as :func:`foreground_kernel` tests the frame against them."""
+    b = wp.vec3(0.0, 0.0, 0.0)
+    mm = float(0.0)
+    for c in range(3):
+        b[c] = float(bg0[3 * p + c])
+        m = float(mad0[3 * p + c])
+        if w > 0.0:  # between two windows (w = 0: one window, half the reads)
+            b[c] = (1.0 - w) * b[c] + w * float(bg1[3 * p + c])
+            m = (1.0 - w) * m + w * float(mad1[3 * p + c])
+        mm += m * m
+    spread = MAD_TO_SIGMA * wp.sqrt(mm / 3.0)
+    if params.spread_cap > 0.0:
+        spread = wp.min(spread, params.spread_cap)
+    return b, wp.max(params.noise_floor, spread)
+
+
+@wp.func
+def shadow_like(m: wp.vec3, u: wp.vec3, params: ForegroundParams):
+    """Whether a neighbourhood's mean normalised difference ``m`` darkens the background ``u = B / s`` as a cast shadow
+    (the shadow test on the mean frame ``B + s m``): ratio ``a = 1 + m.u / u.u`` in ``[shadow_lo, shadow_hi]``,
+    chromaticity distortion ``|m - (a - 1) u| / |u| <= chroma_max``. False with the shadow test off."""
+    uu = wp.dot(u, u)
+    if params.shadow == 0 or uu <= 0.0:
+        return False
+    a = 1.0 + wp.dot(m, u) / uu
+    cd = wp.length(m - (a - 1.0) * u) / wp.sqrt(uu)
+    return a >= params.shadow_lo and a <= params.shadow_hi and cd <= params.chroma_max
+
+
 @wp.kernel
 def foreground_kernel(
     frame: wp.array(dtype=wp.uint8),
@@ -322,30 +362,20 @@ def foreground_kernel(
     lit = gain
     if params.tile > 0:
         lit = wp.cw_mul(gain, local_gain(local, params, p))
+    back, s = background_at(bg0, mad0, bg1, mad1, w, params, p)
     d = wp.vec3(0.0, 0.0, 0.0)
     dd = float(0.0)
-    mm = float(0.0)
     ib = float(0.0)
     bb = float(0.0)
     ii = float(0.0)
     for c in range(3):
-        j = 3 * p + c
-        b = float(bg0[j])
-        m = float(mad0[j])
-        if w > 0.0:  # between two windows (w = 0: one window, half the reads)
-            b = (1.0 - w) * b + w * float(bg1[j])
-            m = (1.0 - w) * m + w * float(mad1[j])
-        x = float(frame[j]) / lit[c]
+        b = back[c]
+        x = float(frame[3 * p + c]) / lit[c]
         d[c] = x - b
         dd += (x - b) * (x - b)
-        mm += m * m
         ib += x * b
         bb += b * b
         ii += x * x
-    spread = MAD_TO_SIGMA * wp.sqrt(mm / 3.0)
-    if params.spread_cap > 0.0:
-        spread = wp.min(spread, params.spread_cap)
-    s = wp.max(params.noise_floor, spread)
     z = wp.sqrt(dd / 3.0) / s
     is_shadow = int(0)
     if params.shadow != 0 and bb >= 1.0 and z > params.low_threshold:
@@ -438,6 +468,12 @@ def neighbourhood_kernel(
     radius: int,
     low_threshold: float,
     scale: float,
+    bg0: wp.array(dtype=wp.uint8),
+    mad0: wp.array(dtype=wp.uint8),
+    bg1: wp.array(dtype=wp.uint8),
+    mad1: wp.array(dtype=wp.uint8),
+    w: float,
+    params: ForegroundParams,
     out: wp.array(dtype=wp.uint8),
 ):
     """Weak foreground from the mean difference of a neighbourhood (a faint but coherent change).
@@ -449,7 +485,9 @@ def neighbourhood_kernel(
     neighbours counted and ``c`` the ``scale`` (under independent
     gaussian noise ``m_c`` has standard deviation ``1 / sqrt(n)``, so with ``scale`` 1 ``z_n`` has the distribution
     of ``z``; a region darker by 1.5 robust standard deviations gives ``z_n`` about 4.5 over 3 x 3 pixels;
-    ``scale < 1`` for spatially correlated noise, measured by the driver). Other pixels are copied.
+    ``scale < 1`` for spatially correlated noise, measured by the driver), unless that mean is a cast shadow's
+    darkening (:func:`shadow_like`): a soft shadow's faint edge, under the per-pixel test's ``z > T_low``. Other
+    pixels are copied.
 
     Args:
         packed: ``(H W,)`` :func:`foreground_kernel`'s ``mask`` (``level + 4 shadow``).
@@ -462,6 +500,7 @@ def neighbourhood_kernel(
         radius: Neighbourhood radius, pixels (>= 1).
         low_threshold: ``T_low``.
         scale: Noise correction ``c`` (1: independent pixels).
+        bg0, mad0, bg1, mad1, w, params: As :func:`foreground_kernel`'s (read where a pixel would be marked).
         out: ``(H W,)`` output, packed like ``packed``.
     """
     t = wp.tid()
@@ -479,7 +518,9 @@ def neighbourhood_kernel(
             if scale * scale * (acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2]) / (3.0 * n) > (
                 low_threshold * low_threshold
             ):
-                v = v + 1
+                b, s = background_at(bg0, mad0, bg1, mad1, w, params, p)
+                if not shadow_like(wp.vec3(acc[0], acc[1], acc[2]) / n, b / s, params):
+                    v = v + 1
         out[p] = wp.uint8(v)
         if y + radius + 1 < height:
             acc += rows[(y + radius + 1) * width + x]

@@ -17,9 +17,9 @@ test of a window's shadow votes).
 import warp as wp
 
 from wptrack.kernels.core.background import (
-    MAD_TO_SIGMA,
     MAX_SAMPLES,
     ForegroundParams,
+    background_at,
     local_gain,
     patch_at,
     patch_vec,
@@ -62,23 +62,13 @@ def luma_kernel(
         luma: ``(H W,)`` output ``(f, b, s)``.
     """
     p = wp.tid()
+    b, s = background_at(bg0, mad0, bg1, mad1, w, params, p)
     f = float(0.0)
     bs = float(0.0)
-    mm = float(0.0)
     for c in range(3):
-        j = 3 * p + c
-        b = float(bg0[j])
-        m = float(mad0[j])
-        if w > 0.0:
-            b = (1.0 - w) * b + w * float(bg1[j])
-            m = (1.0 - w) * m + w * float(mad1[j])
-        f += float(frame[j]) / gain[c]
-        bs += b
-        mm += m * m
-    spread = MAD_TO_SIGMA * wp.sqrt(mm / 3.0)
-    if params.spread_cap > 0.0:
-        spread = wp.min(spread, params.spread_cap)
-    luma[p] = wp.vec3(f / 3.0, bs / 3.0, wp.max(params.noise_floor, spread))
+        f += float(frame[3 * p + c]) / gain[c]
+        bs += b[c]
+    luma[p] = wp.vec3(f / 3.0, bs / 3.0, s)
 
 
 @wp.func

@@ -22,10 +22,19 @@ def median_mad(stack: np.ndarray, gains: np.ndarray | None = None) -> tuple[np.n
 
 
 def neighbourhood(
-    packed: np.ndarray, diff: np.ndarray, radius: int, low_threshold: float, scale: float = 1.0
+    packed: np.ndarray,
+    diff: np.ndarray,
+    radius: int,
+    low_threshold: float,
+    scale: float = 1.0,
+    u: np.ndarray | None = None,
+    shadow: tuple[float, float, float] | None = None,
 ) -> np.ndarray:
     """Reference of :func:`wptrack.kernels.core.background.neighbourhood_kernel` on ``(H, W)`` packed levels and
-    ``(H, W, 3)`` normalised differences (box sums over the usable neighbours, zero outside the image)."""
+    ``(H, W, 3)`` normalised differences (box sums over the usable neighbours, zero outside the image); with
+    ``shadow`` = ``(shadow_lo, shadow_hi, chroma_max)`` and ``u`` the ``(H, W, 3)`` background over its noise scale
+    ``B / s``, a neighbourhood whose mean difference is a cast shadow's darkening of ``u`` is not marked
+    (:func:`wptrack.kernels.core.background.shadow_like`)."""
     import cv2
 
     usable = (((packed & 3) < 2) & ((packed >> 2) == 0)).astype(np.float64)
@@ -39,6 +48,14 @@ def neighbourhood(
     with np.errstate(divide="ignore", invalid="ignore"):
         z2 = np.where(n > 0, scale**2 * (acc * acc).sum(axis=-1) / (3.0 * np.maximum(n, 1.0)), 0.0)
     target = ((packed & 3) == 0) & ((packed >> 2) < 2) & (n > 0) & (z2 > low_threshold**2)
+    if shadow is not None and u is not None:
+        lo, hi, chroma = shadow
+        mean = acc / np.maximum(n, 1.0)[..., None]
+        uu = (u * u).sum(-1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a = 1.0 + (mean * u).sum(-1) / uu
+            cd = np.linalg.norm(mean - (a - 1.0)[..., None] * u, axis=-1) / np.sqrt(uu)
+        target &= ~((uu > 0) & (a >= lo) & (a <= hi) & (cd <= chroma))
     return (packed + target).astype(np.uint8)
 
 
@@ -107,7 +124,8 @@ def foreground(
     diff = (x - b) / s[..., None]
     if level.ndim == 2:
         prob = prob.astype(np.float32)
-        final = neighbourhood(packed, diff, radius, low, nb_scale) if radius > 0 else packed
+        cast = (shadow_lo, shadow_hi, chroma_max) if shadow else None
+        final = neighbourhood(packed, diff, radius, low, nb_scale, b / s[..., None], cast) if radius > 0 else packed
         mask = resolve_levels(final.copy(), prob).astype(bool)
     else:
         mask = level == 2

@@ -595,10 +595,11 @@ class OfflineBackground:
                 device=self.device,
             )
             scale = float((1.0 - w) * self._nb_scale[i] + w * self._nb_scale[j])
+            backs = [b0, m0, b1, m1, w, self.params]  # the neighbourhood's shadow-like test (kernel docstring)
             wp.launch(
                 kbg.neighbourhood_kernel,
                 dim=width * ((height + run - 1) // run),
-                inputs=[self._mask, self._rows, width, height, r, self.params.low_threshold, scale],
+                inputs=[self._mask, self._rows, width, height, r, self.params.low_threshold, scale, *backs],
                 outputs=[self._packed],
                 device=self.device,
             )
