@@ -222,8 +222,10 @@ def test_mode_kernel_matches_numpy(device, k):
     stack = np.clip(lit, 0, 255).astype(np.uint8).reshape(k, -1)
     median = wp.zeros(3 * pixels, dtype=wp.uint8, device=device)
     mad = wp.zeros(3 * pixels, dtype=wp.uint8, device=device)
+    unused = wp.zeros((1, 1), dtype=wp.uint8, device=device)
     wp.launch(kbg.mode_kernel, dim=pixels, inputs=[wp.array(stack, dtype=wp.uint8, device=device),
-              wp.array(gains, dtype=wp.vec3, device=device), 6.0], outputs=[median, mad], device=device)  # fmt: skip
+              wp.array(gains, dtype=wp.vec3, device=device), 6.0, unused, 1, 0.0], outputs=[median, mad],
+              device=device)  # fmt: skip
     m_ref, d_ref = ref.mode(stack, gains, 6.0)
     np.testing.assert_array_equal(median.numpy(), m_ref)
     np.testing.assert_array_equal(mad.numpy(), d_ref)
@@ -233,6 +235,72 @@ def test_mode_kernel_matches_numpy(device, k):
         err_median = np.abs(plain.reshape(-1, 3)[:300].astype(int) - truth[:300]).max(axis=1)
         # the median is within 4 of the background at ~0.6-0.65 of the pixels (seeds vary), the mode at > 0.95
         assert (err_mode <= 4).mean() > 0.95 and (err_median <= 4).mean() < 0.75
+
+
+def _sample_motion(device, stack: np.ndarray, gains: np.ndarray, w: int, h: int, radius: int, lag: int = 1):
+    k = stack.shape[0]
+    a = wp.zeros((k, w * h), dtype=wp.uint8, device=device)
+    b = wp.zeros((k, w * h), dtype=wp.uint8, device=device)
+    st = wp.array(stack, dtype=wp.uint8, device=device)
+    g = wp.array(gains, dtype=wp.vec3, device=device)
+    wp.launch(kbg.sample_change_kernel, dim=(k - lag, w * h), inputs=[st, g, lag], outputs=[a], device=device)
+    wp.launch(kbg.box_mean_kernel, dim=(k, h), inputs=[a, w, h, 1, w, radius], outputs=[b], device=device)
+    wp.launch(kbg.box_mean_kernel, dim=(k, w), inputs=[b, h, w, w, 1, radius], outputs=[a], device=device)
+    return a
+
+
+@pytest.mark.parametrize(("radius", "lag"), [(0, 1), (2, 1), (40, 1), (2, 3)])
+def test_sample_motion_matches_numpy(device, radius, lag):
+    rng = np.random.default_rng(2700 + radius + lag)
+    k, h, w = 6, 17, 23  # odd sizes; radius 40 is wider than the image (every window clipped at both borders)
+    gains = rng.choice([0.75, 1.0, 1.25], (k, 3))  # exact in binary: the kernel's float32 division rounds as NumPy
+    stack = rng.integers(0, 256, (k, 3 * h * w)).astype(np.uint8)
+    got = _sample_motion(device, stack, gains, w, h, radius, lag).numpy()
+    want = ref.sample_motion(stack, gains, w, h, radius, lag)
+    np.testing.assert_array_equal(got[lag:], want[lag:])
+    # a patch mean lies between its pixels' extremes: radius 0 is the change itself
+    change = ref.sample_motion(stack, gains, w, h, 0, lag)
+    assert got[lag:].max() <= change[lag:].max() and (radius > 0 or np.array_equal(got[lag:], change[lag:]))
+
+
+def _standing_scene(rng: np.random.Generator, k: int, h: int, w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``k`` samples of a textured ground (noise +-1 level) where a person stands from sample ``k // 5`` on (the
+    first fifth shows the ground): a dark coat whose folds change between samples (+-5 levels per channel: all
+    within the cluster band of its centre, but a change of ~6 levels a sample where the ground changes by ~1).
+    Returns the ``(K, 3 P)`` stack, the ground ``(P, 3)`` and the coat's ``(H, W)`` footprint."""
+    ground = rng.integers(90, 160, (h, w, 3))
+    stack = np.repeat(ground[None], k, axis=0) + rng.integers(-1, 2, (k, h, w, 3))
+    yy, xx = np.mgrid[0:h, 0:w]
+    footprint = (np.abs(xx - w // 2) <= 6) & (yy >= 4) & (yy < h - 4)
+    for r in range(k // 5, k):
+        stack[r][footprint] = np.array([40, 40, 60]) + rng.integers(-5, 6, (int(footprint.sum()), 3))
+    return np.clip(stack, 0, 255).astype(np.uint8).reshape(k, -1), ground.reshape(-1, 3), footprint
+
+
+@pytest.mark.parametrize(("still", "lag"), [(0.0, 1), (3.0, 1), (3.0, 2)])
+def test_mode_kernel_still_samples_matches_numpy(device, still, lag):
+    rng = np.random.default_rng(2800)
+    k, h, w = 25, 30, 32
+    stack, ground, footprint = _standing_scene(rng, k, h, w)
+    gains = np.ones((k, 3))
+    motion = _sample_motion(device, stack, gains, w, h, 1, lag)
+    median = wp.zeros(3 * h * w, dtype=wp.uint8, device=device)
+    mad = wp.zeros(3 * h * w, dtype=wp.uint8, device=device)
+    wp.launch(kbg.mode_kernel, dim=h * w, inputs=[wp.array(stack, dtype=wp.uint8, device=device),
+              wp.array(gains, dtype=wp.vec3, device=device), 6.0, motion, lag, still], outputs=[median, mad],
+              device=device)  # fmt: skip
+    m_ref, d_ref = ref.mode(stack, gains, 6.0, motion.numpy(), still, lag)
+    np.testing.assert_array_equal(median.numpy(), m_ref)
+    np.testing.assert_array_equal(mad.numpy(), d_ref)
+    # the coat covers its footprint in 4/5 of the samples: the plain densest cluster is the coat there; weighing
+    # the samples that changed from both neighbours 1/8, the ground's five still samples win
+    err = np.abs(m_ref.reshape(-1, 3).astype(int) - ground).max(axis=1).reshape(h, w)
+    ground_found = (err[footprint] <= 4).mean()
+    if still > 0:
+        assert ground_found > 0.9, ground_found
+    else:
+        assert ground_found < 0.1, ground_found
+    assert (err[~footprint] <= 4).mean() > 0.99  # the rest of the ground stays right either way
 
 
 # ----------------------------------------------------------------------------------------------------- sequences
@@ -351,6 +419,42 @@ def test_short_clip_with_people_in_most_frames_background_clean(rng):
     print(errors)
     assert errors[0.0][1] > 0.3  # the median takes the walkers into the background
     assert errors[3.0][1] < 0.05 and errors[3.0][0] < 4.0
+
+
+def standing_sequence(rng: np.random.Generator, frames: int = 100, h: int = 90, w: int = 120):
+    """A short clip of a paved road where two people stand and talk from frame 25 on (3/4 of the clip): dark
+    coats whose folds and sway change their pixels by up to +-8 levels from frame to frame; returns ``(video, true
+    background (H, W, 3) float32, footprint (H, W) bool)`` (the footprint: covered in every frame from 25 on)."""
+    bg = _paving(rng, h, w)
+    video = np.empty((frames, h, w, 3), np.uint8)
+    footprint = np.zeros((h, w), dtype=bool)
+    footprint[30:75, 30:44] = footprint[28:75, 70:86] = True
+    for t in range(frames):
+        img = bg.copy()
+        if t >= 25:
+            img[footprint] = np.array([50.0, 45.0, 60.0]) + rng.uniform(-8, 8, (int(footprint.sum()), 3))
+        video[t] = np.clip(np.round(img + rng.normal(0, 1.0, img.shape)), 0, 255).astype(np.uint8)
+    return video, bg, footprint
+
+
+def test_short_clip_people_standing_background_clean(rng):
+    from wptrack.io.frames import open_source
+    from wptrack.motion.background import OfflineBackground
+    from wptrack.motion.masks import MaskConfig
+
+    video, truth, footprint = standing_sequence(rng)
+    found = {}
+    for still in (0.0, 1.5):
+        model = OfflineBackground(open_source(video), MaskConfig(device="cpu", mode_still=still), "cpu")
+        err = np.abs(model.background(0).astype(np.float64) - truth).max(axis=-1)
+        found[still] = (float((err[footprint] <= 8).mean()), float((err[~footprint] <= 8).mean()))
+        model.close()
+    print(found)
+    # every sample weighing 1, the standing people are the densest cluster (19 of 25 samples): background
+    assert found[0.0][0] < 0.05
+    # their samples changed from both neighbouring samples; the ground's 6 did not
+    assert found[1.5][0] > 0.95
+    assert found[0.0][1] > 0.99 and found[1.5][1] > 0.99  # the rest of the road either way
 
 
 # ----------------------------------------------------------------------------------------------------- config, CLI

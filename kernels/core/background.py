@@ -45,7 +45,8 @@ pixel whose neighbours' mean normalised difference is far from 0, and not a cast
 Local illumination changes (issue 26): the frame is divided by a local light field and a pixel whose patch keeps
 the background's texture is vetoed (:func:`local_gain`, :func:`illumination_change`); the patch statistics and the
 field are made by the kernels of :mod:`wptrack.kernels.core.illumination` (driver:
-:mod:`wptrack.motion.illumination`). :func:`mode_kernel` is the densest-cluster background of short recordings.
+:mod:`wptrack.motion.illumination`). :func:`mode_kernel` is the densest-cluster background of short recordings, its
+samples weighed by how still they are (:func:`sample_change_kernel`, :func:`box_mean_kernel`, :func:`sample_weight`).
 """
 
 import warp as wp
@@ -61,6 +62,9 @@ MAD_TO_SIGMA = wp.constant(1.4826)
 
 #: Per-thread copy of one channel value's K samples (read once from the strided stack, then scanned 16 times).
 samples_vec = wp.types.vector(length=MAX_SAMPLES, dtype=wp.int32)
+
+#: Per-thread weights of one pixel's K samples (:func:`mode_kernel`).
+weights_vec = wp.types.vector(length=MAX_SAMPLES, dtype=wp.float32)
 
 
 @wp.func
@@ -528,11 +532,97 @@ def neighbourhood_kernel(
             acc -= rows[(y - radius) * width + x]
 
 
+#: Weight of a sample that moved (see :func:`mode_kernel`) in the densest-cluster count; a still sample weighs 1.
+MOVING_WEIGHT = wp.constant(0.125)
+
+
+@wp.kernel
+def sample_change_kernel(
+    stack: wp.array2d(dtype=wp.uint8),
+    gains: wp.array(dtype=wp.vec3),
+    lag: int,
+    change: wp.array2d(dtype=wp.uint8),
+):
+    """Per sample ``r >= lag`` and pixel ``p``: the change from sample ``r - lag`` of the window, the largest
+    channel's ``|S_r - S_(r-lag)|`` after both are compensated by their gains (8-bit units). Launched with
+    ``dim=(K - lag, P)``; rows ``0 .. lag - 1`` of ``change`` are not written.
+
+    Args:
+        stack: ``(K, 3 P)`` sampled frames (time order). gains: ``(K,)`` per-sample gains (B, G, R).
+        lag: Samples between the two compared (>= 1).
+        change: ``(K, P)`` output, row ``r`` the change from sample ``r - lag`` to ``r``.
+    """
+    i, p = wp.tid()
+    r = i + lag
+    d = int(0)
+    for c in range(3):
+        a = unlit(float(stack[r, 3 * p + c]), gains[r][c])
+        b = unlit(float(stack[r - lag, 3 * p + c]), gains[r - lag][c])
+        d = wp.max(d, wp.abs(a - b))
+    change[r, p] = wp.uint8(d)
+
+
+@wp.kernel
+def box_mean_kernel(
+    src: wp.array2d(dtype=wp.uint8),
+    length: int,
+    count: int,
+    step: int,
+    stride: int,
+    radius: int,
+    dst: wp.array2d(dtype=wp.uint8),
+):
+    """One pass of a separable box mean over the images in the rows of ``src`` (a running sum per line): line
+    ``l`` of image row ``r`` holds the pixels ``l * stride + x * step``, ``x < length``; each gets the mean of the
+    pixels within ``radius`` of it along the line (the window clipped at the image's border), rounded half up.
+    Horizontal: ``length = W, step = 1, stride = W``; vertical: ``length = H, step = W, stride = 1``. Launched with
+    ``dim=(K, count)``, ``count`` the lines per image (H or W).
+
+    Args:
+        src: ``(K, P)`` images. dst: ``(K, P)`` output (not ``src``).
+    """
+    r, line = wp.tid()
+    base = line * stride
+    acc = int(0)
+    for x in range(wp.min(radius, length - 1) + 1):
+        acc += int(src[r, base + x * step])
+    for x in range(length):
+        lo = wp.max(x - radius, 0)
+        hi = wp.min(x + radius, length - 1)
+        n = hi - lo + 1
+        dst[r, base + x * step] = wp.uint8((acc + n // 2) // n)
+        if x + radius + 1 < length:
+            acc += int(src[r, base + (x + radius + 1) * step])
+        if x - radius >= 0:
+            acc -= int(src[r, base + (x - radius) * step])
+
+
+@wp.func
+def sample_weight(motion: wp.array2d(dtype=wp.uint8), count: int, lag: int, k: int, p: int, still: float):
+    """Weight of sample ``k`` at pixel ``p`` in :func:`mode_kernel`'s count: 1 if it changed by at most ``still``
+    (8-bit units) from the sample ``lag`` before it or the one ``lag`` after it (``motion``: the patch means of
+    :func:`sample_change_kernel`; only the one that exists near the window's ends), else :data:`MOVING_WEIGHT`; 1 for
+    every sample when ``still <= 0`` or the window has no two samples ``lag`` apart."""
+    if still <= 0.0 or count <= lag:
+        return 1.0
+    m = int(256)
+    if k >= lag:
+        m = int(motion[k, p])
+    if k + lag < count:
+        m = wp.min(m, int(motion[k + lag, p]))
+    if float(m) <= still:
+        return 1.0
+    return MOVING_WEIGHT
+
+
 @wp.kernel
 def mode_kernel(
     stack: wp.array2d(dtype=wp.uint8),
     gains: wp.array(dtype=wp.vec3),
     band: float,
+    motion: wp.array2d(dtype=wp.uint8),
+    lag: int,
+    still: float,
     median: wp.array(dtype=wp.uint8),
     mad: wp.array(dtype=wp.uint8),
 ):
@@ -541,14 +631,26 @@ def mode_kernel(
     when the objects differ from sample to sample while the background does not).
 
     The samples are compensated by their gains as in :func:`median_mad_kernel`. The centre is the first sample with
-    the most samples within ``band`` of it in every channel (Chebyshev distance, 8-bit units); the background is
-    the per-channel lower median of those samples, and the MAD the lower median of all samples' absolute deviations
-    from it (as :func:`median_mad_kernel`'s, so a pixel whose samples spread keeps its spread).
+    the largest weight of samples within ``band`` of it in every channel (Chebyshev distance, 8-bit units); the
+    background is the per-channel lower median of those samples, and the MAD the lower median of all samples'
+    absolute deviations from it (as :func:`median_mad_kernel`'s, so a pixel whose samples spread keeps its spread).
+
+    A sample weighs 1 where it is still, :data:`MOVING_WEIGHT` where it changed from both samples ``lag`` before and
+    after it (:func:`sample_weight`): people who stand for most of a short clip are one dense cluster of samples
+    too, but they move (sway, gestures: a patch changes by tens of levels in half a second) where the ground does not
+    (noise: a level or two), so the few samples of the uncovered ground outweigh them (issue 26, short recordings).
+    ``lag`` is 1 (neighbouring samples) unless the samples lie much closer than a fifth of a second (the driver's
+    choice): a short clip sampled every frame or two would find a plain coat's inside unchanged.
 
     Args:
         stack: ``(K, 3 H W)`` sampled frames, ``1 <= K <= MAX_SAMPLES``.
         gains: ``(K,)`` per-sample gains (B, G, R).
         band: Cluster half-width, 8-bit units (> 0).
+        motion: ``(K, H W)`` each sample's change from the one ``lag`` before, patch means
+            (:func:`sample_change_kernel`, :func:`box_mean_kernel`; rows ``< lag`` unused); not read when
+            ``still <= 0``.
+        lag: Samples between the two compared (>= 1).
+        still: Largest change of a still sample, 8-bit units (<= 0: every sample weighs 1).
         median: ``(3 H W,)`` output background. mad: ``(3 H W,)`` output MAD.
     """
     p = wp.tid()
@@ -560,14 +662,17 @@ def mode_kernel(
         vb[k] = unlit(float(stack[k, 3 * p]), gains[k][0])
         vg[k] = unlit(float(stack[k, 3 * p + 1]), gains[k][1])
         vr[k] = unlit(float(stack[k, 3 * p + 2]), gains[k][2])
-    best = int(0)
-    best_count = int(-1)
+    weight = weights_vec()
     for k in range(count):
-        n = int(0)
+        weight[k] = sample_weight(motion, count, lag, k, p, still)
+    best = int(0)
+    best_count = float(-1.0)
+    for k in range(count):
+        n = float(0.0)
         for j in range(count):
             dist = wp.max(wp.abs(vb[j] - vb[k]), wp.max(wp.abs(vg[j] - vg[k]), wp.abs(vr[j] - vr[k])))
             if float(dist) <= band:
-                n += 1
+                n += weight[j]
         if n > best_count:
             best_count = n
             best = k

@@ -341,13 +341,50 @@ def compensate(sample: np.ndarray, gain: np.ndarray, field: np.ndarray) -> np.nd
     return np.clip(np.floor(sample.astype(np.float64) / g + 0.5), 0, 255).astype(np.uint8)
 
 
-def mode(stack: np.ndarray, gains: np.ndarray, band: float) -> tuple[np.ndarray, np.ndarray]:
-    """Reference of :func:`wptrack.kernels.background.mode_kernel` on a ``(K, 3 P)`` uint8 stack."""
+def sample_motion(
+    stack: np.ndarray, gains: np.ndarray, width: int, height: int, radius: int, lag: int = 1
+) -> np.ndarray:
+    """Reference of :func:`wptrack.kernels.background.sample_change_kernel` then :func:`box_mean_kernel` along the
+    rows and the columns: a ``(K, P)`` uint8 array, row ``r >= lag`` each pixel's patch mean of the largest channel
+    change from sample ``r - lag`` to ``r`` (rows before zeros)."""
     k = stack.shape[0]
     g = np.asarray(gains, dtype=np.float64)[:, None, :]
     v = np.clip(np.floor(stack.reshape(k, -1, 3) / g + 0.5), 0, 255).astype(np.int64)  # (K, P, 3)
+    change = np.zeros((k, height, width), dtype=np.int64)
+    change[lag:] = np.abs(v[lag:] - v[:-lag]).max(axis=-1).reshape(k - lag, height, width)
+
+    def box(a: np.ndarray, axis: int) -> np.ndarray:  # running mean along one axis, clipped window, half up
+        n = a.shape[axis]
+        c = np.cumsum(np.moveaxis(a, axis, -1), axis=-1)
+        c = np.concatenate([np.zeros(c.shape[:-1] + (1,), dtype=np.int64), c], axis=-1)
+        x = np.arange(n)
+        lo, hi = np.maximum(x - radius, 0), np.minimum(x + radius, n - 1)
+        total, count = c[..., hi + 1] - c[..., lo], hi - lo + 1
+        return np.moveaxis((total + count // 2) // count, -1, axis)
+
+    return box(box(change, 2), 1).reshape(k, -1).astype(np.uint8)
+
+
+def mode(
+    stack: np.ndarray,
+    gains: np.ndarray,
+    band: float,
+    motion: np.ndarray | None = None,
+    still: float = 0.0,
+    lag: int = 1,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Reference of :func:`wptrack.kernels.background.mode_kernel` on a ``(K, 3 P)`` uint8 stack (``motion``: the
+    ``(K, P)`` of :func:`sample_motion` with the same ``lag``, read when ``still > 0``)."""
+    k = stack.shape[0]
+    g = np.asarray(gains, dtype=np.float64)[:, None, :]
+    v = np.clip(np.floor(stack.reshape(k, -1, 3) / g + 0.5), 0, 255).astype(np.int64)  # (K, P, 3)
+    weight = np.ones((k, v.shape[1]))
+    if still > 0 and k > lag:
+        m = np.full((k + lag, v.shape[1]), 256, dtype=np.int64)  # m[r]: change into sample r from r - lag (if any)
+        m[lag:k] = motion[lag:k]
+        weight = np.where(np.minimum(m[:k], m[lag:]) <= still, 1.0, 0.125)
     dist = np.abs(v[:, None] - v[None, :]).max(axis=-1)  # (K, K, P): dist[j, k]
-    counts = (dist <= band).sum(axis=0)  # (K, P) samples near sample k
+    counts = ((dist <= band) * weight[:, None, :]).sum(axis=0)  # (K, P) weight of the samples near sample k
     best = np.argmax(counts, axis=0)  # first of the largest
     near = np.take_along_axis(dist, best[None, None, :], axis=1)[:, 0, :] <= band  # (K, P)
     median = np.zeros(v.shape[1:], dtype=np.int64)

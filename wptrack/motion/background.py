@@ -52,7 +52,11 @@ Design (kernels and formulas: :mod:`wptrack.kernels.core.background`; the window
   window is, per pixel, the median of its densest cluster of samples (those within ``mode_band`` noise scales of
   the sample with the most such neighbours) instead of the median of all: moving people differ from sample to
   sample, the background does not, so a pixel covered in most samples keeps its background
-  (:func:`~wptrack.kernels.core.background.mode_kernel`).
+  (:func:`~wptrack.kernels.core.background.mode_kernel`). People who *stand* for most of a short clip are one dense
+  cluster too; but they move (sway, gestures), so a sample whose patch changed from both neighbouring samples by
+  more than ``MaskConfig.mode_still`` noise scales counts 1/8 in the cluster (:meth:`OfflineBackground._sample_motion`):
+  the few still samples of the uncovered ground outweigh them (a 100-frame PETS excerpt: two people standing by the
+  sign for 85 of its frames were background, MOTA 0.70 -> 0.87; docs/notes.md).
 * **Hysteresis.** With ``MaskConfig.fg_low``, the kernel marks weak foreground (``fg_low < z <= fg_threshold``)
   beside the strong; :func:`hysteresis` keeps the weak pixels 8-connected to a strong one (OpenCV connected
   components on the host, where the mask goes anyway).
@@ -88,12 +92,16 @@ from wptrack.motion.stats import (
     GAIN_PIXELS,
     channel_gains,
     median_last,
+    motion_radius,
     neighbourhood_scale,
     sample_gains_channels,
     shadow_ratio,
     spread_scale,
 )
 from wptrack.motion.windows import WindowShare, _Sampler, _WindowRead, bracket, plan_windows
+
+STILL_FPS = 25.0
+"""Frame rate assumed for :meth:`OfflineBackground._still_lag` when the source has none (arrays, image folders)."""
 
 log = logging.getLogger(__name__)
 
@@ -181,6 +189,7 @@ class OfflineBackground:
         self._bg_gain = self._share.bg_gain  # ... at the frame gain's pixels
         self.last_gain = np.ones(3)  # the global gain of the last frame given to evidence() (B, G, R)
         self._stacks: dict[int, Any] = {}
+        self._motion: dict[int, tuple] = {}  # two (K, P) uint8 buffers per window size: the samples' patch changes
         self._prefetch = True  # False: every window read in the calling thread (tests compare the two)
         # issue 27 (opt-in, wptrack.motion.masks.MotionMasks.attach_cleanup): a DeviceCleanup makes evidence() resolve
         # and clean the mask on the device and download it instead of the levels
@@ -426,7 +435,7 @@ class OfflineBackground:
             wp.launch(kbg.median_mad_kernel, dim=3 * self.pixels, inputs=[stack, ones], outputs=[median, mad],
                       device=self.device)  # fmt: skip
             if c.mode_band > 0:
-                self._mode(stack, ones, mad, median)
+                self._mode(i, stack, ones, mad, median)
             host = download(stack)
             with self._host_part():
                 frames = [host[r].reshape(self.source.height, self.source.width, 3) for r in range(k)]
@@ -436,7 +445,7 @@ class OfflineBackground:
                 bg_sub = median_last(np.moveaxis(sub, 0, -1).astype(np.float64))
                 self._bg_sub[i], self._bg_gain[i] = bg_sub, np.ascontiguousarray(bg_sub[:, :: self._gain_step])
         elif c.mode_band > 0:
-            self._mode(stack, g, mad, median)
+            self._mode(i, stack, g, mad, median)
         if c.spread_cap > 0 or c.shadow_band > 0 or c.neighbourhood > 0:
             mad_host = download(mad)
             median_host = download(median) if c.neighbourhood > 0 else None
@@ -483,18 +492,66 @@ class OfflineBackground:
         guard = self._share.guard
         return guard.paused() if guard is not None else contextlib.nullcontext()
 
-    def _mode(self, stack: Any, gains: Any, mad: Any, median: Any) -> None:
+    def _mode(self, i: int, stack: Any, gains: Any, mad: Any, median: Any) -> None:
         """Rebuild a window's ``median`` and ``mad`` (device arrays, in place) as the densest cluster of each pixel's
         samples (:func:`wptrack.kernels.core.background.mode_kernel`), the band ``mode_band`` times the image-wide noise
-        scale of the window's first ``mad`` (at least the noise floor)."""
+        scale of the window's first ``mad`` (at least the noise floor), the samples that moved weighing 1/8 (a still
+        sample changed by at most ``mode_still`` times that scale from the sample :meth:`_still_lag` before or after
+        it)."""
         import warp as wp
 
         from wptrack.kernels.core import background as kbg
 
         c = self.config
-        band = float(c.mode_band * max(c.noise_floor, spread_scale(download(mad))))
-        wp.launch(kbg.mode_kernel, dim=self.pixels, inputs=[stack, gains, band], outputs=[median, mad],
+        scale = max(c.noise_floor, spread_scale(download(mad)))
+        band = float(c.mode_band * scale)
+        k = stack.shape[0]
+        lag = self._still_lag(i)
+        still = float(c.mode_still * scale) if c.mode_still > 0 and k > lag else 0.0
+        motion = self._sample_motion(stack, gains, lag) if still > 0 else self._dummy_motion()
+        wp.launch(kbg.mode_kernel, dim=self.pixels, inputs=[stack, gains, band, motion, lag, still],
+                  outputs=[median, mad], device=self.device)  # fmt: skip
+
+    def _still_lag(self, i: int) -> int:
+        """Samples between the two that :meth:`_sample_motion` compares in window ``i``: ``MaskConfig.mode_lag``
+        seconds (at the source's frame rate, :data:`STILL_FPS` when it has none) over the window's mean sample gap,
+        rounded, at least 1: neighbouring samples (1) for every window of 100 frames or more at 25 frames/s; a
+        40-frame clip sampled every 1.6 frames compares samples 3 apart (a plain coat's inside does not change in 1.6
+        frames; the ground between two passers is seen for no longer)."""
+        samples = self.windows[i].samples
+        gap = (samples[-1] - samples[0]) / (len(samples) - 1) if len(samples) > 1 else 1.0
+        fps = self.source.fps or STILL_FPS
+        return max(1, round(self.config.mode_lag * fps / max(gap, 1.0)))
+
+    def _dummy_motion(self) -> Any:
+        """A ``(1, 1)`` stand-in for :func:`mode_kernel`'s ``motion`` when it is not read (``still`` 0)."""
+        import warp as wp
+
+        if 0 not in self._motion:
+            self._motion[0] = (wp.zeros((1, 1), dtype=wp.uint8, device=self.device),)
+        return self._motion[0][0]
+
+    def _sample_motion(self, stack: Any, gains: Any, lag: int) -> Any:
+        """Each window sample's change from the sample ``lag`` before it (:func:`~wptrack.kernels.core.background.
+        sample_change_kernel`), averaged over a square patch of radius :func:`~wptrack.motion.stats.motion_radius`
+        (two box passes): a ``(K, P)`` uint8 device array, rows ``< lag`` unused. The patch mean reaches a little way
+        into a plain coat, whose inside changes little from one sample to the next while its outline does."""
+        import warp as wp
+
+        from wptrack.kernels.core import background as kbg
+
+        k = stack.shape[0]
+        h, w = self.source.height, self.source.width
+        bufs = self._motion.get(k)
+        if bufs is None:
+            bufs = self._motion[k] = tuple(wp.zeros((k, self.pixels), dtype=wp.uint8, device=self.device) for _ in "ab")
+        a, b = bufs
+        rad = motion_radius(w, h)
+        wp.launch(kbg.sample_change_kernel, dim=(k - lag, self.pixels), inputs=[stack, gains, lag], outputs=[a],
                   device=self.device)  # fmt: skip
+        wp.launch(kbg.box_mean_kernel, dim=(k, h), inputs=[a, w, h, 1, w, rad], outputs=[b], device=self.device)
+        wp.launch(kbg.box_mean_kernel, dim=(k, w), inputs=[b, h, w, w, 1, rad], outputs=[a], device=self.device)
+        return a
 
     def shadow_bounds(self, i: int, j: int, w: float) -> tuple[float, float]:
         """Brightness-ratio bounds of the cast-shadow (umbra) test between windows ``i`` and ``j`` (weight ``w`` of

@@ -63,6 +63,7 @@ METHODS: dict[str, dict[str, Any]] = {
     "TN": {"mode_band": 0.0},
     "TG": {"illum_veto": 0.0, "illum_grad": 0.7, "mode_band": 0.0},
     "TM": {"illum_veto": 0.0},
+    "nostill": {"mode_still": 0.0},  # the default with every sample weighing 1 in the densest cluster (before 11-27)
     "default": {},  # MaskConfig() as it is: T + N + M
 }
 

@@ -101,6 +101,13 @@ def sample_gains_channels(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return gains.astype(np.float32), median_last(along / gains.T[:, None, :])
 
 
+def motion_radius(width: int, height: int) -> int:
+    """Radius (pixels) of the patch over which a window sample's change is averaged
+    (:meth:`wptrack.motion.background.OfflineBackground._sample_motion`): 1/240 of the image's longer side, at least
+    1 (2 at 480x360, 8 at 1920x1080), a few centimetres of a person at the usual distances."""
+    return max(1, round(max(width, height) / 240))
+
+
 def spread_scale(mad: np.ndarray, step: int = 7) -> float:
     """Image-wide median of the per-pixel noise scales ``1.4826 sqrt(sum_c MAD_c^2 / 3)`` (8-bit units), over every
     ``step``-th pixel of a flat ``(3 P,)`` MAD array."""
