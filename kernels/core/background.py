@@ -602,8 +602,8 @@ def sample_weight(motion: wp.array2d(dtype=wp.uint8), count: int, lag: int, k: i
     """Weight of sample ``k`` at pixel ``p`` in :func:`mode_kernel`'s count: 1 if it changed by at most ``still``
     (8-bit units) from the sample ``lag`` before it or the one ``lag`` after it (``motion``: the patch means of
     :func:`sample_change_kernel`; only the one that exists near the window's ends), else :data:`MOVING_WEIGHT`; 1 for
-    every sample when ``still <= 0`` or the window has no two samples ``lag`` apart."""
-    if still <= 0.0 or count <= lag:
+    every sample when ``still <= 0``, and for a sample with no other ``lag`` away (no evidence either way)."""
+    if still <= 0.0 or (k < lag and k + lag >= count):
         return 1.0
     m = int(256)
     if k >= lag:

@@ -383,6 +383,8 @@ def mode(
         m = np.full((k + lag, v.shape[1]), 256, dtype=np.int64)  # m[r]: change into sample r from r - lag (if any)
         m[lag:k] = motion[lag:k]
         weight = np.where(np.minimum(m[:k], m[lag:]) <= still, 1.0, 0.125)
+        r = np.arange(k)
+        weight[(r < lag) & (r + lag >= k)] = 1.0  # no sample lag away: no evidence either way
     dist = np.abs(v[:, None] - v[None, :]).max(axis=-1)  # (K, K, P): dist[j, k]
     counts = ((dist <= band) * weight[:, None, :]).sum(axis=0)  # (K, P) weight of the samples near sample k
     best = np.argmax(counts, axis=0)  # first of the largest

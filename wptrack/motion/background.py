@@ -103,6 +103,15 @@ from wptrack.motion.windows import WindowShare, _Sampler, _WindowRead, bracket, 
 STILL_FPS = 25.0
 """Frame rate assumed for :meth:`OfflineBackground._still_lag` when the source has none (arrays, image folders)."""
 
+STILL_NOISE = 2.0
+"""A still sample's change may reach this many times the window's median sample change (over every
+:data:`STILL_STEP`-th pixel; most pixels are background most of the time, so that median is the noise's own change):
+in noisy video the ground's samples differ by their noise (the largest channel's change of a gaussian noise of
+standard deviation s averages ~1.9 s, above ``mode_still`` noise scales), and a noise-free object (a clipped black
+coat) must not count as stiller than the ground."""
+
+STILL_STEP = 7
+
 log = logging.getLogger(__name__)
 
 
@@ -509,6 +518,10 @@ class OfflineBackground:
         lag = self._still_lag(i)
         still = float(c.mode_still * scale) if c.mode_still > 0 and k > lag else 0.0
         motion = self._sample_motion(stack, gains, lag) if still > 0 else self._dummy_motion()
+        if still > 0:  # above the noise's own change: the median change of the window's pixels (mostly background)
+            changes = download(motion)[lag:, :: STILL_STEP]
+            with self._host_part():
+                still = max(still, STILL_NOISE * float(np.median(changes)))
         wp.launch(kbg.mode_kernel, dim=self.pixels, inputs=[stack, gains, band, motion, lag, still],
                   outputs=[median, mad], device=self.device)  # fmt: skip
 
