@@ -519,7 +519,7 @@ class OfflineBackground:
         still = float(c.mode_still * scale) if c.mode_still > 0 and k > lag else 0.0
         motion = self._sample_motion(stack, gains, lag) if still > 0 else self._dummy_motion()
         if still > 0:  # above the noise's own change: the median change of the window's pixels (mostly background)
-            changes = download(motion)[lag:, :: STILL_STEP]
+            changes = download(motion)[lag:, ::STILL_STEP]
             with self._host_part():
                 still = max(still, STILL_NOISE * float(np.median(changes)))
         wp.launch(kbg.mode_kernel, dim=self.pixels, inputs=[stack, gains, band, motion, lag, still],
