@@ -528,13 +528,15 @@ class OfflineBackground:
     def _still_lag(self, i: int) -> int:
         """Samples between the two that :meth:`_sample_motion` compares in window ``i``: ``MaskConfig.mode_lag``
         seconds (at the source's frame rate, :data:`STILL_FPS` when it has none) over the window's mean sample gap,
-        rounded, at least 1: neighbouring samples (1) for every window of 100 frames or more at 25 frames/s; a
-        40-frame clip sampled every 1.6 frames compares samples 3 apart (a plain coat's inside does not change in 1.6
-        frames; the ground between two passers is seen for no longer)."""
+        rounded, at least 1 and at most half the window's samples (so that every sample has another ``lag`` away):
+        neighbouring samples (1) for every window of 100 frames or more at 25 frames/s; a 40-frame clip sampled every
+        1.6 frames compares samples 3 apart (a plain coat's inside does not change in 1.6 frames; the ground between
+        two passers is seen for no longer)."""
         samples = self.windows[i].samples
         gap = (samples[-1] - samples[0]) / (len(samples) - 1) if len(samples) > 1 else 1.0
         fps = self.source.fps or STILL_FPS
-        return max(1, round(self.config.mode_lag * fps / max(gap, 1.0)))
+        lag = round(self.config.mode_lag * fps / max(gap, 1.0))
+        return max(1, min(lag, len(samples) // 2))  # at most half the samples: every sample has one lag away
 
     def _dummy_motion(self) -> Any:
         """A ``(1, 1)`` stand-in for :func:`mode_kernel`'s ``motion`` when it is not read (``still`` 0)."""
