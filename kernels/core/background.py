@@ -47,6 +47,10 @@ the background's texture is vetoed (:func:`local_gain`, :func:`illumination_chan
 field are made by the kernels of :mod:`wptrack.kernels.core.illumination` (driver:
 :mod:`wptrack.motion.illumination`). :func:`mode_kernel` is the densest-cluster background of short recordings, its
 samples weighed by how still they are (:func:`sample_change_kernel`, :func:`box_mean_kernel`, :func:`sample_weight`).
+
+Length: one module for the offline model's per-pixel kernels, because they share its per-thread sample vectors, the
+gain compensation of a sample (:func:`unlit`) and the bitwise selection (:func:`select_rank`); the light field's
+kernels, which share none of them, have their own module (:mod:`wptrack.kernels.core.illumination`).
 """
 
 import warp as wp
