@@ -313,3 +313,25 @@ def test_accuracy_workers_give_the_same_table(tmp_path) -> None:
     assert (tmp_path / "two" / "s3-people" / "s0" / "seed1" / "tracks.csv").exists()
     with pytest.raises(ConfigError, match="workers"):
         template_accuracy(out_dir=tmp_path / "bad", workers=0, **kw)
+
+
+def test_accuracy_masks_made_again_when_the_pipeline_changed(tmp_path, monkeypatch) -> None:
+    """template_accuracy's cached masks are reused for the same configuration and pipeline code, and made again when
+    the pipeline's code changed with the same configuration (a kernel changed, its fields did not)."""
+    import json
+
+    import wptrack.motion.writing as writing
+    from wptrack.motion.masks import MaskConfig
+    from wptrack.trackers.templates.experiments import _s3_masks, _s3_scene
+
+    res = _s3_scene("s3-cars", tmp_path, 4, 2, False)
+    cfg = MaskConfig(window=4, samples=4, device="cpu")
+    video = _s3_masks(res, "offline", cfg)
+    summary = video.parent / "masks.json"
+    first = json.loads(summary.read_text())
+    assert first["code"] == writing.pipeline_hash() and len(first["code"]) == 16
+    stamp = summary.stat().st_mtime_ns
+    assert _s3_masks(res, "offline", cfg) == video and summary.stat().st_mtime_ns == stamp  # reused
+    monkeypatch.setattr(writing, "pipeline_hash", lambda: "0" * 16)
+    assert _s3_masks(res, "offline", cfg) == video
+    assert json.loads(summary.read_text())["code"] == "0" * 16  # made again, by the "changed" pipeline

@@ -18,6 +18,24 @@ def _mask_frame(mask: np.ndarray) -> np.ndarray:
     return mask * np.uint8(255)
 
 
+def pipeline_hash() -> str:
+    """First 16 hex digits of a SHA-256 over the source of the mask pipeline (the modules of :mod:`wptrack.motion`
+    and :mod:`wptrack.kernels.core`, by name): written to ``masks.json`` as ``code``, so that masks cached by an
+    experiment are made again after the pipeline changed, not only its configuration."""
+    import hashlib
+    from importlib.util import find_spec
+    from pathlib import Path
+
+    h = hashlib.sha256()
+    for package in ("wptrack.motion", "wptrack.kernels.core"):
+        spec = find_spec(package)
+        for root in spec.submodule_search_locations if spec is not None else ():
+            for f in sorted(Path(root).glob("*.py")):
+                h.update(f.name.encode())
+                h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
 def _probability_frame(prob: np.ndarray) -> np.ndarray:
     return np.round(prob * 255.0).astype(np.uint8)
 
@@ -100,6 +118,7 @@ def write_masks(
         "codec": mw.writer.codec,
         "seconds": elapsed,
         "config": dataclasses.asdict(config),
+        "code": pipeline_hash(),
         "outputs": ["masks.avi"] + (["probability.avi"] if probability else []),
     }
     background = first[0] if first else masks.background()

@@ -70,11 +70,12 @@ def _s3_scene(
 
 def _s3_masks(res, masks: str, mask_config) -> Path:
     """The motion-mask video of a rendered scene: its perfect silhouettes, or masks made once from its video by
-    ``wptrack.motion.masks`` (``masks`` = ``"offline"``: the default pipeline; ``"mog2"``) and cached next to it."""
+    ``wptrack.motion.masks`` (``masks`` = ``"offline"``: the default pipeline; ``"mog2"``) and cached next to it
+    (made again when their ``masks.json`` records another configuration or another :func:`pipeline_hash`)."""
     from dataclasses import replace
 
     from wptrack.motion.masks import MaskConfig
-    from wptrack.motion.writing import write_masks
+    from wptrack.motion.writing import pipeline_hash, write_masks
 
     if masks == "perfect":
         return Path(res.mask_videos[0])
@@ -82,8 +83,11 @@ def _s3_masks(res, masks: str, mask_config) -> Path:
     cfg = replace(cfg, method=masks)
     out = Path(res.out_dir) / f"masks-{masks}"
     summary = out / "masks.json"
-    if summary.exists() and json.loads(summary.read_text()).get("config") == json.loads(json.dumps(asdict(cfg))):
-        return out / "masks.avi"
+    if summary.exists():
+        cached = json.loads(summary.read_text())
+        # the same configuration *and* the same pipeline code (a changed kernel with the same fields made stale masks)
+        if cached.get("config") == json.loads(json.dumps(asdict(cfg))) and cached.get("code") == pipeline_hash():
+            return out / "masks.avi"
     write_masks(str(res.videos[0]), out, config=cfg)
     return out / "masks.avi"
 
