@@ -522,6 +522,10 @@ class OfflineBackground:
             changes = download(motion)[lag:, ::STILL_STEP]
             with self._host_part():
                 still = max(still, STILL_NOISE * float(np.median(changes)))
+            log.info(
+                "%s: background window %d: densest cluster of samples; one that changed by more than %.1f levels from "
+                "both samples %d away counts 1/8", self.source.name, i, still, lag,
+            )  # fmt: skip
         wp.launch(kbg.mode_kernel, dim=self.pixels, inputs=[stack, gains, band, motion, lag, still],
                   outputs=[median, mad], device=self.device)  # fmt: skip
 
