@@ -641,8 +641,9 @@ def mode_kernel(
 
     A sample weighs 1 where it is still, :data:`MOVING_WEIGHT` where it changed from both samples ``lag`` before and
     after it (:func:`sample_weight`): people who stand for most of a short clip are one dense cluster of samples
-    too, but they move (sway, gestures: a patch changes by tens of levels in half a second) where the ground does not
-    (noise: a level or two), so the few samples of the uncovered ground outweigh them (issue 26, short recordings).
+    too, but they move (sway, gestures: a patch changes by tens of levels from one sample to the next) where the
+    ground does not (noise: a level or two), so the few samples of the uncovered ground outweigh them (issue 26,
+    short recordings).
     ``lag`` is 1 (neighbouring samples) unless the samples lie much closer than a fifth of a second (the driver's
     choice): a short clip sampled every frame or two would find a plain coat's inside unchanged.
 

@@ -111,6 +111,7 @@ standard deviation s averages ~1.9 s, above ``mode_still`` noise scales), and a 
 coat) must not count as stiller than the ground."""
 
 STILL_STEP = 7
+"""Pixel step of the subsample whose median change :data:`STILL_NOISE` multiplies."""
 
 log = logging.getLogger(__name__)
 
@@ -505,8 +506,8 @@ class OfflineBackground:
         """Rebuild a window's ``median`` and ``mad`` (device arrays, in place) as the densest cluster of each pixel's
         samples (:func:`wptrack.kernels.core.background.mode_kernel`), the band ``mode_band`` times the image-wide noise
         scale of the window's first ``mad`` (at least the noise floor), the samples that moved weighing 1/8 (a still
-        sample changed by at most ``mode_still`` times that scale from the sample :meth:`_still_lag` before or after
-        it)."""
+        sample changed by at most ``mode_still`` times that scale, or :data:`STILL_NOISE` times the window's median
+        change if that is more, from the sample :meth:`_still_lag` before or after it)."""
         import warp as wp
 
         from wptrack.kernels.core import background as kbg

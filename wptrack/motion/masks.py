@@ -213,9 +213,10 @@ class MaskConfig:
         "short clip keeps its background (0: the median; else 0.5 to 20)", units="noise scales", lo=0.0, hi=20.0,
     )  # fmt: skip
     mode_still: float = param(
-        1.5, help="offline: with mode_band, a sample whose patch changed by more than this from the samples mode_lag "
-        "before and after it counts 1/8 in the densest cluster (people standing for most of a short clip still move; "
-        "the ground does not; 0: every sample counts 1)", units="noise scales", lo=0.0,
+        1.5, help="offline: with mode_band, a sample whose patch changed by more than this (or twice the window's "
+        "median change, if more) from the samples mode_lag before and after it counts 1/8 in the densest cluster "
+        "(people standing for most of a short clip still move; the ground does not; 0: every sample counts 1)",
+        units="noise scales", lo=0.0,
     )  # fmt: skip
     mode_lag: float = param(
         0.2, help="offline: time between the samples mode_still compares, rounded to whole sample gaps (at least "
