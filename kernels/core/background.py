@@ -102,28 +102,6 @@ def unlit(x: float, g: float):
     return wp.clamp(int(wp.floor(x / g + 0.5)), 0, 255)
 
 
-@wp.func
-def median_mad_at(stack: wp.array2d(dtype=wp.uint8), gains: wp.array(dtype=wp.vec3), j: int):
-    """Lower median of channel value ``j``'s samples ``stack[:, j] / gains[:, j % 3]`` and its MAD, as
-    ``vec2i(median, mad)`` (:func:`median_mad_kernel`)."""
-    c = j % 3
-    count = wp.min(stack.shape[0], MAX_SAMPLES)
-    rank = (count - 1) // 2
-    values = samples_vec()
-    lo = int(255)
-    hi = int(0)
-    for k in range(count):
-        v = unlit(float(stack[k, j]), gains[k][c])
-        values[k] = v
-        lo = wp.min(lo, v)
-        hi = wp.max(hi, v)
-    b = select_rank(values, count, rank, lo, hi)
-    hi = wp.max(hi - b, b - lo)  # the deviations lie in [0, max deviation]
-    for k in range(count):
-        values[k] = wp.abs(values[k] - b)
-    return wp.vec2i(b, select_rank(values, count, rank, 0, hi))
-
-
 @wp.kernel
 def median_mad_kernel(
     stack: wp.array2d(dtype=wp.uint8),
@@ -142,28 +120,23 @@ def median_mad_kernel(
         mad: ``(3 H W,)`` output median absolute deviation (8-bit units).
     """
     j = wp.tid()
-    r = median_mad_at(stack, gains, j)
-    median[j] = wp.uint8(r[0])
-    mad[j] = wp.uint8(r[1])
-
-
-@wp.kernel
-def mad_sub_kernel(
-    stack: wp.array2d(dtype=wp.uint8),
-    gains: wp.array(dtype=wp.vec3),
-    step: int,
-    mad: wp.array(dtype=wp.uint8),
-):
-    """The MADs of :func:`median_mad_kernel` at every ``step``-th pixel only (thread ``t``: channel ``t % 3`` of pixel
-    ``(t // 3) step``), for a noise scale over a pixel subsample where the full statistics are not needed.
-
-    Args:
-        stack: ``(K, 3 P)`` samples. gains: ``(K,)`` per-sample gains. step: Pixel step (>= 1).
-        mad: ``(3 ceil(P / step),)`` output.
-    """
-    t = wp.tid()
-    r = median_mad_at(stack, gains, 3 * (t // 3) * step + t % 3)
-    mad[t] = wp.uint8(r[1])
+    c = j % 3
+    count = wp.min(stack.shape[0], MAX_SAMPLES)
+    rank = (count - 1) // 2
+    values = samples_vec()
+    lo = int(255)
+    hi = int(0)
+    for k in range(count):
+        v = unlit(float(stack[k, j]), gains[k][c])
+        values[k] = v
+        lo = wp.min(lo, v)
+        hi = wp.max(hi, v)
+    b = select_rank(values, count, rank, lo, hi)
+    hi = wp.max(hi - b, b - lo)  # the deviations lie in [0, max deviation]
+    for k in range(count):
+        values[k] = wp.abs(values[k] - b)
+    median[j] = wp.uint8(b)
+    mad[j] = wp.uint8(select_rank(values, count, rank, 0, hi))
 
 
 #: Per-pixel patch statistics of :func:`wptrack.kernels.core.illumination.patch_kernel`: NCC of the luminance

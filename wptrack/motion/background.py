@@ -113,9 +113,6 @@ coat) must not count as stiller than the ground."""
 STILL_STEP = 7
 """Pixel step of the subsample whose median change :data:`STILL_NOISE` multiplies."""
 
-SCALE_STEP = 7
-"""Pixel step of the subsample over which a window's noise scale is the median (:func:`spread_scale`'s default)."""
-
 log = logging.getLogger(__name__)
 
 
@@ -445,11 +442,10 @@ class OfflineBackground:
             cap = float(c.spread_cap * spread_scale(download(mad))) if c.spread_cap > 0 else 0.0
             self.light.compensate(stack, gains, median, mad, cap)
             ones = wp.array(np.ones((k, 3), dtype=np.float32), dtype=wp.vec3, device=self.device)
-            if c.mode_band > 0:  # the densest cluster replaces median and MAD: only the noise scale's pixels needed
-                self._mode(i, stack, ones, mad, median, scale=self._sub_scale(stack, ones))
-            else:
-                wp.launch(kbg.median_mad_kernel, dim=3 * self.pixels, inputs=[stack, ones], outputs=[median, mad],
-                          device=self.device)  # fmt: skip
+            wp.launch(kbg.median_mad_kernel, dim=3 * self.pixels, inputs=[stack, ones], outputs=[median, mad],
+                      device=self.device)  # fmt: skip
+            if c.mode_band > 0:
+                self._mode(i, stack, ones, mad, median)
             host = download(stack)
             with self._host_part():
                 frames = [host[r].reshape(self.source.height, self.source.width, 3) for r in range(k)]
@@ -506,20 +502,7 @@ class OfflineBackground:
         guard = self._share.guard
         return guard.paused() if guard is not None else contextlib.nullcontext()
 
-    def _sub_scale(self, stack: Any, gains: Any) -> float:
-        """:func:`~wptrack.motion.stats.spread_scale` of the window's MADs (samples ``stack`` under ``gains``) computed
-        at its subsample of pixels only (:func:`~wptrack.kernels.core.background.mad_sub_kernel`): the same value as
-        over the full statistics, for a seventh of the work."""
-        import warp as wp
-
-        from wptrack.kernels.core import background as kbg
-
-        n = -(-self.pixels // SCALE_STEP)
-        sub = wp.zeros(3 * n, dtype=wp.uint8, device=self.device)
-        wp.launch(kbg.mad_sub_kernel, dim=3 * n, inputs=[stack, gains, SCALE_STEP], outputs=[sub], device=self.device)
-        return spread_scale(download(sub), step=1)
-
-    def _mode(self, i: int, stack: Any, gains: Any, mad: Any, median: Any, scale: float | None = None) -> None:
+    def _mode(self, i: int, stack: Any, gains: Any, mad: Any, median: Any) -> None:
         """Rebuild a window's ``median`` and ``mad`` (device arrays, in place) as the densest cluster of each pixel's
         samples (:func:`wptrack.kernels.core.background.mode_kernel`), the band ``mode_band`` times the image-wide noise
         scale of the window's first ``mad`` (at least the noise floor), the samples that moved weighing 1/8 (a still
@@ -530,9 +513,7 @@ class OfflineBackground:
         from wptrack.kernels.core import background as kbg
 
         c = self.config
-        if scale is None:
-            scale = spread_scale(download(mad), step=SCALE_STEP)
-        scale = max(c.noise_floor, scale)
+        scale = max(c.noise_floor, spread_scale(download(mad)))
         band = float(c.mode_band * scale)
         k = stack.shape[0]
         lag = self._still_lag(i)
