@@ -200,6 +200,7 @@ class OfflineBackground:
         self.last_gain = np.ones(3)  # the global gain of the last frame given to evidence() (B, G, R)
         self._stacks: dict[int, Any] = {}
         self._motion: dict[int, tuple] = {}  # two (K, P) uint8 buffers per window size: the samples' patch changes
+        self._no_motion: Any = None  # (1, 1) stand-in when mode_still is off
         self._prefetch = True  # False: every window read in the calling thread (tests compare the two)
         # issue 27 (opt-in, wptrack.motion.masks.MotionMasks.attach_cleanup): a DeviceCleanup makes evidence() resolve
         # and clean the mask on the device and download it instead of the levels
@@ -547,9 +548,9 @@ class OfflineBackground:
         """A ``(1, 1)`` stand-in for :func:`mode_kernel`'s ``motion`` when it is not read (``still`` 0)."""
         import warp as wp
 
-        if 0 not in self._motion:
-            self._motion[0] = (wp.zeros((1, 1), dtype=wp.uint8, device=self.device),)
-        return self._motion[0][0]
+        if self._no_motion is None:
+            self._no_motion = wp.zeros((1, 1), dtype=wp.uint8, device=self.device)
+        return self._no_motion
 
     def _sample_motion(self, stack: Any, gains: Any, lag: int) -> Any:
         """Each window sample's change from the sample ``lag`` before it (:func:`~wptrack.kernels.core.background.
