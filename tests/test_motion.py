@@ -53,13 +53,28 @@ def test_median_mad_kernel_matches_numpy(device, rng, k):
         wp.launch(
             kbg.median_mad_kernel,
             dim=stack.shape[1],
-            inputs=[wp.array(stack, dtype=wp.uint8, device=device), wp.array(gains, dtype=wp.vec3, device=device)],
+            inputs=[wp.array(stack, dtype=wp.uint8, device=device), wp.array(gains, dtype=wp.vec3, device=device), 1],
             outputs=[median, mad],
             device=device,
         )
         ref_median, ref_mad = numpy_masks.median_mad(stack, gains)
         np.testing.assert_array_equal(median.numpy(), ref_median)
         np.testing.assert_array_equal(mad.numpy(), ref_mad)
+        # every 7th pixel only (the noise scale's pixels): those as above, the others left as they were
+        sub_median = wp.full(stack.shape[1], 17, dtype=wp.uint8, device=device)
+        sub_mad = wp.full(stack.shape[1], 17, dtype=wp.uint8, device=device)
+        pixels = stack.shape[1] // 3
+        wp.launch(
+            kbg.median_mad_kernel,
+            dim=3 * ((pixels + 6) // 7),
+            inputs=[wp.array(stack, dtype=wp.uint8, device=device), wp.array(gains, dtype=wp.vec3, device=device), 7],
+            outputs=[sub_median, sub_mad],
+            device=device,
+        )
+        chosen = (np.arange(pixels) % 7 == 0).repeat(3)
+        for got, ref in ((sub_median.numpy(), ref_median), (sub_mad.numpy(), ref_mad)):
+            np.testing.assert_array_equal(got[chosen], ref[chosen])
+            assert (got[~chosen] == 17).all()
     if k % 2:  # odd K: the lower median is np.median
         ref_median, _ = numpy_masks.median_mad(stack)
         np.testing.assert_array_equal(ref_median, np.median(stack, axis=0).astype(np.uint8))

@@ -106,21 +106,27 @@ def unlit(x: float, g: float):
 def median_mad_kernel(
     stack: wp.array2d(dtype=wp.uint8),
     gains: wp.array(dtype=wp.vec3),
+    step: int,
     median: wp.array(dtype=wp.uint8),
     mad: wp.array(dtype=wp.uint8),
 ):
     """Per channel value ``j``: lower median of ``stack[:, j] / gains[:, j % 3]`` and its MAD (lower median of
-    absolute deviations).
+    absolute deviations); with ``step > 1`` only at every ``step``-th pixel (launched over ``3 ceil(H W / step)``
+    threads; the other pixels' values are left as they are).
 
     Args:
         stack: ``(K, 3 H W)`` sampled frames, ``1 <= K <= MAX_SAMPLES``.
         gains: ``(K,)`` global gain of each sample per channel (B, G, R) relative to the window (1: none): the
             samples are compensated for global illumination changes before the statistics.
+        step: Pixels between two computed pixels (1: every pixel): the densest cluster's band needs the image-wide
+            noise scale only, which reads every 7th pixel's MAD.
         median: ``(3 H W,)`` output background.
         mad: ``(3 H W,)`` output median absolute deviation (8-bit units).
     """
     j = wp.tid()
     c = j % 3
+    if step > 1:
+        j = 3 * (j // 3) * step + c
     count = wp.min(stack.shape[0], MAX_SAMPLES)
     rank = (count - 1) // 2
     values = samples_vec()
@@ -670,16 +676,29 @@ def mode_kernel(
     weight = weights_vec()
     for k in range(count):
         weight[k] = sample_weight(motion, count, lag, k, p, still)
+    # each pair once (the distance is symmetric): n[k] is the weight of the samples within the band of sample k,
+    # itself included; the weights are multiples of MOVING_WEIGHT = 1/8 summing to at most 64, exact in float32,
+    # so the order of the sums changes nothing
+    n = weights_vec()
+    for k in range(count):
+        n[k] = weight[k]
+    for k in range(count):
+        bk = vb[k]
+        gk = vg[k]
+        rk = vr[k]
+        nk = n[k]
+        wk = weight[k]
+        for j in range(k + 1, count):
+            dist = wp.max(wp.abs(vb[j] - bk), wp.max(wp.abs(vg[j] - gk), wp.abs(vr[j] - rk)))
+            if float(dist) <= band:
+                nk += weight[j]
+                n[j] += wk
+        n[k] = nk
     best = int(0)
     best_count = float(-1.0)
     for k in range(count):
-        n = float(0.0)
-        for j in range(count):
-            dist = wp.max(wp.abs(vb[j] - vb[k]), wp.max(wp.abs(vg[j] - vg[k]), wp.abs(vr[j] - vr[k])))
-            if float(dist) <= band:
-                n += weight[j]
-        if n > best_count:
-            best_count = n
+        if n[k] > best_count:
+            best_count = n[k]
             best = k
     for c in range(3):
         values = samples_vec()

@@ -90,6 +90,7 @@ from wptrack.motion.illumination import LightField
 from wptrack.motion.levels import resolve_levels
 from wptrack.motion.stats import (
     GAIN_PIXELS,
+    SCALE_STEP,
     channel_gains,
     median_last,
     motion_radius,
@@ -391,8 +392,6 @@ class OfflineBackground:
         that takes the window (:meth:`_log_notes`): a window built ahead that no frame needs logs nothing."""
         import warp as wp
 
-        from wptrack.kernels.core import background as kbg
-
         ahead = got is not None
         notes: list[tuple] = []
         if got is None:
@@ -433,18 +432,18 @@ class OfflineBackground:
         median = wp.zeros(3 * self.pixels, dtype=wp.uint8, device=self.device)
         mad = wp.zeros(3 * self.pixels, dtype=wp.uint8, device=self.device)
         g = wp.array(gains, dtype=wp.vec3, device=self.device)
-        wp.launch(
-            kbg.median_mad_kernel, dim=3 * self.pixels, inputs=[stack, g], outputs=[median, mad], device=self.device
-        )
         c = self.config
-        if self.light.tiles and c.illum_windows:
+        compensate = bool(self.light.tiles and c.illum_windows)
+        # the last median/MAD pass before the densest cluster's serves only the image-wide noise scale of its band
+        # (spread_scale: every SCALE_STEP-th pixel's MAD), so it computes those pixels only
+        self._median_mad(stack, g, median, mad, SCALE_STEP if c.mode_band > 0 and not compensate else 1)
+        if compensate:
             # each sample under its own light: divide it by its global gain and local field against this first
             # median, then the statistics again (unit gains) on what now differs only by what moved
             cap = float(c.spread_cap * spread_scale(download(mad))) if c.spread_cap > 0 else 0.0
             self.light.compensate(stack, gains, median, mad, cap)
             ones = wp.array(np.ones((k, 3), dtype=np.float32), dtype=wp.vec3, device=self.device)
-            wp.launch(kbg.median_mad_kernel, dim=3 * self.pixels, inputs=[stack, ones], outputs=[median, mad],
-                      device=self.device)  # fmt: skip
+            self._median_mad(stack, ones, median, mad, SCALE_STEP if c.mode_band > 0 else 1)
             if c.mode_band > 0:
                 self._mode(i, stack, ones, mad, median)
             host = download(stack)
@@ -493,6 +492,17 @@ class OfflineBackground:
             with self._host_part():
                 self.on_build(i, float(self.centres[i]), image)
         return median, mad
+
+    def _median_mad(self, stack: Any, gains: Any, median: Any, mad: Any, step: int) -> None:
+        """Per-channel median and MAD of a window's samples (:func:`~wptrack.kernels.core.background.
+        median_mad_kernel`) into ``median`` and ``mad``, at every ``step``-th pixel (the others left as they are)."""
+        import warp as wp
+
+        from wptrack.kernels.core import background as kbg
+
+        dim = 3 * ((self.pixels + step - 1) // step)
+        wp.launch(kbg.median_mad_kernel, dim=dim, inputs=[stack, gains, step], outputs=[median, mad],
+                  device=self.device)  # fmt: skip
 
     def _host_part(self) -> Any:
         """Context of a build's host-only work (reading samples, NumPy statistics, writing images), entered with no

@@ -108,7 +108,11 @@ def motion_radius(width: int, height: int) -> int:
     return max(1, round(max(width, height) / 240))
 
 
-def spread_scale(mad: np.ndarray, step: int = 7) -> float:
+#: Pixels between two of those :func:`spread_scale` reads by default.
+SCALE_STEP = 7
+
+
+def spread_scale(mad: np.ndarray, step: int = SCALE_STEP) -> float:
     """Image-wide median of the per-pixel noise scales ``1.4826 sqrt(sum_c MAD_c^2 / 3)`` (8-bit units), over every
     ``step``-th pixel of a flat ``(3 P,)`` MAD array."""
     m = mad.reshape(-1, 3)[::step].astype(np.float64)
