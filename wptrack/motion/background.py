@@ -106,13 +106,10 @@ STILL_FPS = 25.0
 
 STILL_NOISE = 2.0
 """A still sample's change may reach this many times the window's median sample change (over every
-:data:`STILL_STEP`-th pixel; most pixels are background most of the time, so that median is the noise's own change):
-in noisy video the ground's samples differ by their noise (the largest channel's change of a gaussian noise of
-standard deviation s averages ~1.9 s, above ``mode_still`` noise scales), and a noise-free object (a clipped black
-coat) must not count as stiller than the ground."""
-
-STILL_STEP = 7
-"""Pixel step of the subsample whose median change :data:`STILL_NOISE` multiplies."""
+:data:`~wptrack.motion.stats.SCALE_STEP`-th pixel, the noise scale's subsample; most pixels are background most of
+the time, so that median is the noise's own change): in noisy video the ground's samples differ by their noise (the
+largest channel's change of a gaussian noise of standard deviation s averages ~1.9 s, above ``mode_still`` noise
+scales), and a noise-free object (a clipped black coat) must not count as stiller than the ground."""
 
 log = logging.getLogger(__name__)
 
@@ -531,7 +528,7 @@ class OfflineBackground:
         still = float(c.mode_still * scale) if c.mode_still > 0 and k > lag else 0.0
         motion = self._sample_motion(stack, gains, lag) if still > 0 else self._dummy_motion()
         if still > 0:  # above the noise's own change: the median change of the window's pixels (mostly background)
-            changes = download(motion)[lag:, ::STILL_STEP]
+            changes = download(motion)[lag:, ::SCALE_STEP]
             with self._host_part():
                 still = max(still, STILL_NOISE * float(np.median(changes)))
             log.info(

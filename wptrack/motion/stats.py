@@ -108,7 +108,8 @@ def motion_radius(width: int, height: int) -> int:
     return max(1, round(max(width, height) / 240))
 
 
-#: Pixels between two of those :func:`spread_scale` reads by default.
+#: Pixels between two of a window's image-wide noise statistics reads (:func:`spread_scale`'s MADs, the median sample
+#: change of ``OfflineBackground._mode``).
 SCALE_STEP = 7
 
 
