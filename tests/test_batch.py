@@ -475,7 +475,8 @@ def test_pool_size():
 
 
 def test_decode_threads_shared_among_a_runs_videos(scene, monkeypatch):
-    from wptrack.io.frames import DECODE_THREADS_ENV, open_frames
+    from wptrack.io.decode import DECODE_THREADS_ENV
+    from wptrack.io.frames import open_frames
 
     d = scene["dir"]
     videos = [str(d / "cam1.avi"), str(d / "cam2.avi")]

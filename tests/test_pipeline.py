@@ -617,14 +617,22 @@ def test_track_prints_where_the_time_went(tmp_path, capsys):
     assert tl["source"] == "masks" and tl["stages"]["wait_masks"]["count"] >= 4
 
 
-@pytest.mark.parametrize("codec", ["MJPG", "FFV1"])
-def test_parallel_decode_gives_the_sequential_frames(tmp_path, rng, monkeypatch, codec):
-    """Decoding in worker threads (WPTRACK_DECODE_WORKERS): several captures on chunks of an intra-only video give the
-    frames of one sequential read, in order; a truncated video stops at the same frame; a consumer that stops early
-    leaves no decoding thread behind."""
-    from wptrack.io import decode
+@pytest.mark.parametrize(
+    ("codec", "jpeg", "env", "prefix"),
+    [
+        ("MJPG", "1", "WPTRACK_JPEG_WORKERS", "wptrack-jpeg"),  # JPEG packets decoded by threads (wptrack.io.jpeg)
+        ("MJPG", "0", "WPTRACK_DECODE_WORKERS", "wptrack-decode"),  # FFmpeg's decoder, captures on chunks
+        ("FFV1", "1", "WPTRACK_DECODE_WORKERS", "wptrack-decode"),
+    ],
+)
+def test_parallel_decode_gives_the_sequential_frames(tmp_path, rng, monkeypatch, codec, jpeg, env, prefix):
+    """Decoding in worker threads (WPTRACK_DECODE_WORKERS: several captures on chunks of an intra-only video;
+    WPTRACK_JPEG_WORKERS: a Motion-JPEG video's packets decoded by several threads) gives the frames of one
+    sequential read, in order; a truncated video stops at the same frame; a consumer that stops early leaves no
+    decoding thread behind."""
     from wptrack.io.frames import open_source
 
+    monkeypatch.setenv("WPTRACK_JPEG_DECODE", jpeg)
     n = 45  # chunks of 8: the last one partial
     path = tmp_path / f"v_{codec}.avi"
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*codec), 25, (40, 32))
@@ -634,12 +642,12 @@ def test_parallel_decode_gives_the_sequential_frames(tmp_path, rng, monkeypatch,
         writer.write(rng.integers(0, 256, (32, 40, 3), dtype=np.uint8))
     writer.release()
     src = open_source(path)
-    monkeypatch.setenv("WPTRACK_DECODE_WORKERS", "1")
+    assert src.jpeg == (codec == "MJPG" and jpeg == "1")
+    monkeypatch.setenv(env, "1")
     one = list(src)
     assert len(one) == n
     for workers in ("2", "3"):
-        monkeypatch.setenv("WPTRACK_DECODE_WORKERS", workers)
-        assert decode.decode_workers() == int(workers)
+        monkeypatch.setenv(env, workers)
         many = list(src)
         assert len(many) == n and src.stopped_early is None
         for a, b in zip(one, many, strict=True):
@@ -649,19 +657,19 @@ def test_parallel_decode_gives_the_sequential_frames(tmp_path, rng, monkeypatch,
     for _ in range(11):
         next(it)
     # the workers decode (both codecs are intra-only: OpenCV reports FFV1's FOURCC in lower case)
-    assert [t.name for t in threading.enumerate() if t.name.startswith("wptrack-decode") and t.name not in before]
+    assert [t.name for t in threading.enumerate() if t.name.startswith(prefix) and t.name not in before]
     it.close()
     time.sleep(0.3)
-    assert not [t.name for t in threading.enumerate() if t.name.startswith("wptrack-decode") and t.name not in before]
+    assert not [t.name for t in threading.enumerate() if t.name.startswith(prefix) and t.name not in before]
 
     cut = tmp_path / f"cut_{codec}.avi"  # cut short: no index at the end of the AVI
     data = path.read_bytes()
     cut.write_bytes(data[: len(data) * 2 // 3])
-    monkeypatch.setenv("WPTRACK_DECODE_WORKERS", "1")
+    monkeypatch.setenv(env, "1")
     src = open_source(cut)
     seq = list(src)
     seq_stop = src.stopped_early
-    monkeypatch.setenv("WPTRACK_DECODE_WORKERS", "3")
+    monkeypatch.setenv(env, "3")
     par = list(src)
     assert 0 < len(par) == len(seq) < n and src.stopped_early == seq_stop
     for a, b in zip(seq, par, strict=True):

@@ -77,11 +77,11 @@ def process_age() -> float | None:
 
 
 def set_decode_threads(threads: int) -> None:
-    """Give this process's video decoding ``threads`` threads (:data:`wptrack.io.frames.DECODE_THREADS_ENV`, read
+    """Give this process's video decoding ``threads`` threads (:data:`wptrack.io.decode.DECODE_THREADS_ENV`, read
     when a video is opened, and OpenCV's thread pool)."""
     import cv2
 
-    from wptrack.io.frames import DECODE_THREADS_ENV
+    from wptrack.io.decode import DECODE_THREADS_ENV
 
     n = max(1, int(threads))
     os.environ[DECODE_THREADS_ENV] = str(n)

@@ -23,8 +23,9 @@ within 1.5x of that, ratio >= 0.67).
 
 With ``--variant ENV=VALUE[,ENV=VALUE...]`` (repeatable) the masks and track commands run again under each set of
 environment variables (the thread levers of issue 27: ``WPTRACK_MASK_WORKERS``, ``WPTRACK_DECODE_WORKERS``,
-``WPTRACK_CPU_THREADS``, ``WPTRACK_DECODE_THREADS``), on the same video in the same run, so one command compares
-them against the defaults and the same decode rate.
+``WPTRACK_CPU_THREADS``, ``WPTRACK_DECODE_THREADS``; ``WPTRACK_JPEG_DECODE=0``: Motion-JPEG by FFmpeg's
+decoder), on the same video in the same run, so one command compares them against the defaults and the same decode
+rate.
 
 Each command is warmed up first on 3 frames (kernels compiled and cached, not timed). Reported per command: wall
 time of ``main()``, frames/s, and ``ratio`` = its frames/s over the decode-only frames/s (issue 27's targets on
@@ -237,7 +238,7 @@ def _cli(argv: list[str]) -> tuple[float, float]:
 
 VARIANT_ENV = (
     "WPTRACK_MASK_WORKERS", "WPTRACK_DECODE_WORKERS", "WPTRACK_CPU_THREADS", "WPTRACK_DECODE_THREADS",
-    "WPTRACK_DEVICE_CLEANUP", "WPTRACK_SAMPLE_READERS",
+    "WPTRACK_DEVICE_CLEANUP", "WPTRACK_SAMPLE_READERS", "WPTRACK_JPEG_DECODE", "WPTRACK_JPEG_WORKERS",
 )  # fmt: skip
 """The environment variables ``--variant`` may set."""
 

@@ -168,7 +168,7 @@ def cpu_split_threads(n: int) -> int:
     at most :data:`CPU_SPLIT_MAX`, with at least :data:`CPU_SPLIT_MIN` particles each."""
     import os
 
-    from wptrack.io.frames import decode_threads
+    from wptrack.io.decode import decode_threads
 
     env = os.environ.get("WPTRACK_CPU_THREADS", "").strip()
     if env.isdigit() and int(env) > 0:

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from wptrack.io.jpeg import JPEG_CODECS, JpegCapture, jpeg_enabled, jpeg_frames, jpeg_workers, open_raw
 from wptrack.io.prefetch import put_until
 
 log = logging.getLogger(__name__)
@@ -63,6 +64,24 @@ def rate_note(fps: float, index: int, interval_ms: float) -> dict[str, Any] | No
     return {"frame": index, "interval_ms": round(interval_ms, 3), "expected_ms": round(expected, 3), "reason": reason}
 
 
+DECODE_THREADS_ENV = "WPTRACK_DECODE_THREADS"
+"""Environment variable: the threads a run's video decoding may use (unset: OpenCV's and FFmpeg's defaults, as
+many as the machine has cores, per video). When set to N, OpenCV's thread pool gets N threads and the N are shared
+out among the run's videos (each FFmpeg decoder ``max(1, N // videos)`` threads), so several runs on one machine
+(a batch's workers) do not oversubscribe its cores. ``wptrack batch`` sets it in each worker to the cores the
+worker holds. Decoded frames do not depend on it."""
+
+
+def decode_threads() -> int | None:
+    """The thread budget of :data:`DECODE_THREADS_ENV` (None: unset, empty or not a positive integer)."""
+    text = os.environ.get(DECODE_THREADS_ENV, "").strip()
+    try:
+        n = int(text)
+    except ValueError:
+        return None
+    return n if n > 0 else None
+
+
 def decode_workers() -> int:
     """Decoding threads per video: the environment variable ``WPTRACK_DECODE_WORKERS`` (default 1: one thread)."""
     text = os.environ.get("WPTRACK_DECODE_WORKERS", "").strip()
@@ -75,6 +94,28 @@ def fourcc(cap: Any) -> str:
 
     code = int(cap.get(cv2.CAP_PROP_FOURCC))
     return "".join(chr((code >> (8 * k)) & 0xFF) for k in range(4)) if code > 0 else ""
+
+
+def is_jpeg_video(path: str) -> bool:
+    """``path`` is a Motion-JPEG video whose first packet ``cv2.imdecode`` reads, and :func:`jpeg_enabled`: read it
+    as a :class:`JpegCapture` (else with FFmpeg's decoder, as any other video)."""
+    import cv2
+
+    if not jpeg_enabled():
+        return False
+    cap = open_raw(path)
+    try:
+        if not cap.isOpened() or fourcc(cap).upper() not in JPEG_CODECS or cap.get(cv2.CAP_PROP_FORMAT) != -1:
+            return False
+        ok, frame = JpegCapture(cap).read()
+    except cv2.error:
+        return False
+    finally:
+        cap.release()
+    if not ok or frame is None:
+        log.debug("%s: its JPEG packets do not decode alone; read with FFmpeg's decoder", path)
+        return False
+    return True
 
 
 _END = object()
@@ -161,12 +202,21 @@ def parallel_frames(open_capture: Any, count: int, workers: int, stop: threading
 
 
 def frame_items(open_capture: Any, count: int, workers: int | None = None) -> Iterator[Any]:
-    """The items of :func:`parallel_frames` for a video's first ``count`` frames: decoded by ``workers`` captures
-    (default :func:`decode_workers`) when it is more than one, the video long enough and its codec intra-only, else by
-    one capture in this thread (:func:`read_sequential`). The captures are released when the iteration ends or is
-    closed."""
-    workers = decode_workers() if workers is None else workers
+    """The items of :func:`parallel_frames` for a video's first ``count`` frames: a Motion-JPEG video's packets
+    decoded by ``workers`` threads (default :func:`wptrack.io.jpeg.jpeg_workers`; :func:`wptrack.io.jpeg.jpeg_frames`);
+    another video decoded by ``workers`` captures (default :func:`decode_workers`) when it is more than one, the video
+    long enough and its codec intra-only, else by one capture in this thread (:func:`read_sequential`). The captures
+    are released when the iteration ends or is closed."""
     cap = open_capture()
+    if isinstance(cap, JpegCapture):  # Motion-JPEG packets: decoded by threads at once, read by this one
+        if workers is None:  # within a batch worker's decoding budget
+            workers = min(jpeg_workers(), decode_threads() or jpeg_workers())
+        try:
+            yield from jpeg_frames(cap, count, workers)
+        finally:
+            cap.release()
+        return
+    workers = decode_workers() if workers is None else workers
     if workers > 1 and count >= 2 * CHUNK and fourcc(cap).upper() in INTRA_CODECS:  # OpenCV's FFV1 says "ffv1"
         cap.release()
         yield from parallel_frames(open_capture, count, workers)

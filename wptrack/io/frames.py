@@ -28,6 +28,8 @@ from typing import Any
 import numpy as np
 
 from wptrack.core.errors import ConfigError, FrameError
+from wptrack.io.decode import decode_threads, is_jpeg_video
+from wptrack.io.jpeg import open_jpeg
 
 log = logging.getLogger(__name__)
 
@@ -36,24 +38,6 @@ IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
 
 _STOP_HINT = "(use --stop-at-shortest to track the common part)"
-
-
-DECODE_THREADS_ENV = "WPTRACK_DECODE_THREADS"
-"""Environment variable: the threads a run's video decoding may use (unset: OpenCV's and FFmpeg's defaults, as
-many as the machine has cores, per video). When set to N, OpenCV's thread pool gets N threads and the N are shared
-out among the run's videos (each FFmpeg decoder ``max(1, N // videos)`` threads), so several runs on one machine
-(a batch's workers) do not oversubscribe its cores. ``wptrack batch`` sets it in each worker to the cores the
-worker holds. Decoded frames do not depend on it."""
-
-
-def decode_threads() -> int | None:
-    """The thread budget of :data:`DECODE_THREADS_ENV` (None: unset, empty or not a positive integer)."""
-    text = os.environ.get(DECODE_THREADS_ENV, "").strip()
-    try:
-        n = int(text)
-    except ValueError:
-        return None
-    return n if n > 0 else None
 
 
 def _natural_key(path: str) -> list[Any]:
@@ -197,6 +181,7 @@ class VideoSource(FrameSource):
             raise FrameError(f"video file not found: {self.path}")
         if not is_uri and os.path.isdir(self.path):
             raise FrameError(f"{self.path} is a folder, not a video file")
+        self.jpeg = is_jpeg_video(self.path)
         cap = self._open()
         try:
             ok, frame = cap.read()
@@ -229,9 +214,13 @@ class VideoSource(FrameSource):
     """FFmpeg decoder threads of this video (None: :func:`decode_threads`, else OpenCV's default); set by
     :class:`SyncedFrames` to its share of the budget."""
 
+    jpeg: bool = False  #: a Motion-JPEG video read as JPEG packets (wptrack.io.jpeg: only retrieved frames decode)
+
     def _open(self) -> Any:
         import cv2
 
+        if self.jpeg:
+            return open_jpeg(self.path)
         threads = self.threads or decode_threads()
         if threads is None:
             cap = cv2.VideoCapture(self.path)
