@@ -59,8 +59,13 @@ def test_sample_gains_and_frame_gain_equal_numpy_formulas(rng, k):
     np.testing.assert_array_equal(S.frame_gain(samples[0], dark), np.ones(3))
 
 
+@pytest.mark.parametrize("threads", [1, 3])
 @pytest.mark.parametrize("n", [1, 2, 7, 24, 25, 64, 65, 300, 301])
-def test_median_last_equals_numpy_median(rng, n):
+def test_median_last_equals_numpy_median(rng, n, threads, monkeypatch):
+    """The same numbers as np.median, in the calling thread and with the rows split among threads (as a 1080p
+    window's statistics are; here from 64 elements on)."""
+    monkeypatch.setattr(S, "PARALLEL_MIN", 64)
+    monkeypatch.setattr(S, "host_threads", lambda: threads)
     ints = rng.integers(0, 256, (4, 50, n), dtype=np.uint8)
     floats = ints / rng.uniform(0.5, 1.5, n)
     singles = (floats * np.float32(np.pi)).astype(np.float32)  # float32 means round as np.median's do

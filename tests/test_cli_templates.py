@@ -183,6 +183,45 @@ def test_offline_masks_keep_backgrounds_for_the_report(scene, capsys):
     assert _background_for(_backgrounds(scene / "nowhere"), 5) is None
 
 
+def test_background_saver_writes_in_its_thread_and_flushes(tmp_path, monkeypatch):
+    """The saver hands each window's image to its own thread (the build does not wait for the PNG): flush returns
+    once every image is written, an error of that thread is raised by the next call, and an image handed over after
+    close is written in the caller's thread."""
+    import threading
+
+    from wptrack.trackers.templates import run as R
+
+    gate, threads = threading.Event(), []
+    real = R.BackgroundSaver._save
+
+    def slow(self, *a):
+        threads.append(threading.current_thread().name)
+        gate.wait(5)
+        real(self, *a)
+
+    monkeypatch.setattr(R.BackgroundSaver, "_save", slow)
+    saver = R.BackgroundSaver(tmp_path / "bg")
+    saver(0, 12.0, np.zeros((8, 10, 3), np.uint8))  # returns while the image waits
+    assert not (tmp_path / "bg" / "index.json").exists()
+    gate.set()
+    saver.flush()
+    index = json.loads((tmp_path / "bg" / "index.json").read_text())
+    assert index["windows"] == [{"window": 0, "centre": 12.0, "file": "window_0000.png"}]
+    assert threads[0].startswith("wptrack-backgrounds")
+
+    def fail(self, *a):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(R.BackgroundSaver, "_save", fail)
+    saver(1, 30.0, np.zeros((8, 10, 3), np.uint8))
+    with pytest.raises(OSError, match="disk full"):
+        saver.flush()
+    monkeypatch.setattr(R.BackgroundSaver, "_save", slow)
+    saver.close()
+    saver(2, 50.0, np.zeros((8, 10, 3), np.uint8))  # after close: in this thread
+    assert threads[-1] == threading.current_thread().name and (tmp_path / "bg" / "window_0002.png").exists()
+
+
 def _template_args(scene, out, *extra):
     return [
         "track", "templates", "--rig", str(scene / "scene/rig.yaml"), "--masks", str(scene / "scene/cam0_mask.avi"),

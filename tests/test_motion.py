@@ -561,6 +561,14 @@ def test_neighbourhood_scale_independent_vs_correlated_noise(rng):
     ones = np.ones((k, 3))
     assert 0.85 < neighbourhood_scale(iid, ones, bg, mad, 1, 3.0) <= 1.0
     assert neighbourhood_scale(corr, ones, bg, mad, 1, 3.0) < 0.6  # 4 x 4 blocks: neighbours move together
+    from wptrack.motion import stats
+
+    alone = neighbourhood_scale(corr, ones, bg, mad, 1, 3.0)
+    for threads in (1, 3):  # the samples in threads, the rows of their medians too: the same number
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(stats, "host_threads", lambda t=threads: t)
+            mp.setattr(stats, "PARALLEL_MIN", 64)
+            assert neighbourhood_scale(corr, ones, bg, mad, 1, 3.0) == alone
 
 
 def test_write_masks_keeps_the_first_background_of_its_pass(tmp_path, rng, monkeypatch):

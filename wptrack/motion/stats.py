@@ -8,6 +8,10 @@ recording's learnt cast-shadow brightness ratio (:func:`shadow_ratio`). The desi
 
 from __future__ import annotations
 
+import os
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 GAIN_PIXELS = 32768
@@ -73,11 +77,50 @@ def sample_gains(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return gains, np.ascontiguousarray(background.T)
 
 
+PARALLEL_MIN = 1 << 20
+"""Elements of an array from which :func:`median_last` splits its rows among :func:`host_threads` threads (a 1080p
+window's gains and subsample medians: 12 million; a frame's gain: 0.1 million, in the calling thread)."""
+
+
+def host_threads() -> int:
+    """Threads for a window build's host statistics: the cores this process may use, at most 8, no more than a
+    batch worker holds (``WPTRACK_DECODE_THREADS``). The results do not depend on it."""
+    from wptrack.io.decode import decode_threads
+
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # not on Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(8, cores, decode_threads() or cores))
+
+
+def thread_map(fn: Callable, items: list, threads: int | None = None) -> list:
+    """``[fn(item) for item in items]``, computed by up to ``threads`` (default :func:`host_threads`) threads at
+    once (NumPy and OpenCV release the GIL in their loops), in the calling thread when that is one."""
+    threads = min(len(items), host_threads() if threads is None else threads)
+    if threads < 2:
+        return [fn(item) for item in items]
+    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="wptrack-stats") as pool:
+        return list(pool.map(fn, items))
+
+
 def median_last(x: np.ndarray) -> np.ndarray:
     """``np.median(x, axis=-1)`` of an array without NaNs, the same numbers and dtype (the mean of the middle value,
     or of the two middle values, as ``np.median`` takes it), faster: rows sorted (float rows of at most 64 values:
     NumPy's vectorised sort beats selection there) or partitioned at the middle only (``np.median`` also
-    partitions at the last value, for its NaN check, and costs several times more)."""
+    partitions at the last value, for its NaN check, and costs several times more). From :data:`PARALLEL_MIN`
+    elements the rows are split among threads (:func:`thread_map`; each row's median is its own: the same numbers)."""
+    threads = host_threads() if x.size >= PARALLEL_MIN and x.ndim > 1 else 1
+    if threads > 1:
+        rows = x.reshape(-1, x.shape[-1])
+        cuts = np.linspace(0, rows.shape[0], min(threads, rows.shape[0]) + 1).round().astype(int)
+        parts = thread_map(_median_rows, [rows[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)], threads)
+        return np.concatenate(parts).reshape(x.shape[:-1])
+    return _median_rows(x)
+
+
+def _median_rows(x: np.ndarray) -> np.ndarray:
+    """:func:`median_last` in the calling thread."""
     n = x.shape[-1]
     h = n // 2
     lo = h if n % 2 else h - 1
@@ -154,16 +197,18 @@ def neighbourhood_scale(
     s = np.maximum(noise_floor, 1.4826 * np.sqrt((mad.astype(np.float32) ** 2).mean(axis=2)))[..., None]
     b = median.astype(np.float32)
     pick = np.unique(np.linspace(0, len(samples) - 1, min(max_samples, len(samples))).round().astype(int))
-    single, mean = [], []
-    for k in pick:
+
+    def one(k: int) -> tuple[np.ndarray, np.ndarray]:  # a sample's normalised differences, alone and averaged
         d = samples[k].astype(np.float32)
         d /= gains[k].astype(np.float32)
         d -= b
         d /= s
-        single.append(np.abs(d[radius:-radius:3, radius:-radius:3]).ravel())
-        mean.append(np.abs(cv2.blur(d, (2 * radius + 1, 2 * radius + 1))[radius:-radius:3, radius:-radius:3]).ravel())
-    s1 = float(median_last(np.concatenate(single)))
-    sn = float(median_last(np.concatenate(mean)))
+        single = np.abs(d[radius:-radius:3, radius:-radius:3]).ravel()
+        return single, np.abs(cv2.blur(d, (2 * radius + 1, 2 * radius + 1))[radius:-radius:3, radius:-radius:3]).ravel()
+
+    parts = thread_map(one, list(pick))  # in threads, in order: the same numbers
+    s1 = float(median_last(np.concatenate([p[0] for p in parts])))
+    sn = float(median_last(np.concatenate([p[1] for p in parts])))
     if sn <= 0:
         return 1.0
     return float(np.clip(s1 / (np.sqrt(n) * sn), 1.0 / np.sqrt(n), 1.0))
@@ -220,27 +265,26 @@ def shadow_ratio(
     b = background.astype(np.float64)
     s = np.maximum(noise_floor, 1.4826 * np.sqrt((mad.astype(np.float64) ** 2).mean(axis=1)))
     bb = (b * b).sum(axis=1)
-    votes = []
-    kept = []
-    for k, (xk, g) in enumerate(zip(samples, gains, strict=True)):
-        x = xk.astype(np.float64) / g[None, :]
+    if len(gains) != len(samples):
+        raise ValueError(f"{len(samples)} samples but {len(gains)} gains")
+
+    def one(k: int) -> tuple[np.ndarray, np.ndarray | None]:  # sample k's votes: all, and those kept
+        x = samples[k].astype(np.float64) / gains[k][None, :]
         z = np.sqrt(((x - b) ** 2).mean(axis=1)) / s
         fg = np.flatnonzero((z > threshold) & (bb >= 1.0))  # the ratios of the foreground pixels only
         x, bf, bbf = x[fg], b[fg], bb[fg]
         ib = (x * bf).sum(axis=1)
         a = ib / np.maximum(bbf, 1.0)
         cd = np.sqrt(np.maximum((x * x).sum(axis=1) - a * ib, 0.0) / np.maximum(bbf, 1.0))
-        votes.append(a[cd <= chroma_max])
-        if keep is not None:
-            kept.append(a[(cd <= chroma_max) & keep[k][fg]])
+        return a[cd <= chroma_max], None if keep is None else a[(cd <= chroma_max) & keep[k][fg]]
+
+    parts = thread_map(one, list(range(len(samples))))  # samples in threads, votes in order: the same numbers
+    votes = [p[0] for p in parts]
     lo, hi = SHADOW_SEARCH
     edges = np.arange(lo, hi + bin_width / 2, bin_width)
-    counts = None
+    counts = chosen = None
     if keep is not None:
-        counts, _ = np.histogram(np.concatenate(kept), bins=edges)
-    chosen = None
-    if keep is not None:
-        chosen = np.concatenate(kept)
+        chosen = np.concatenate([p[1] for p in parts])
         counts, _ = np.histogram(chosen, bins=edges)
     if counts is None or counts.sum() < min_count:  # too little texture to test: every vote
         chosen = np.concatenate(votes)
