@@ -1,7 +1,7 @@
 """Track tables (``tracks.csv``, ``groundtruth.csv``, ``best.csv``): one CSV cell format for every writer
 (:func:`format_cell`: integers as integers, floats ``%.6f``, ``nan``/``inf`` spelled out), reading into columns
 (:func:`read_tracks`), and the offline edits of a finished or resumed run (:func:`truncate_csv_after`,
-:func:`drop_short_tracks`).
+:func:`drop_short_tracks`, :func:`smooth_tracks_file`).
 """
 
 from __future__ import annotations
@@ -116,6 +116,68 @@ def drop_short_tracks(path: Path, all_path: Path, min_frames: int) -> int:
             if next(csv.reader([line]))[col] in keep:
                 dst.write(line.encode("utf-8"))
     return len(counts) - len(keep)
+
+
+def smooth_tracks_file(path: Path, half_window: int, columns: Sequence[str]) -> int:
+    """Smooth the ``columns`` of every track of the tracks CSV ``path`` over time, in place and atomically
+    (:func:`wptrack.core.smoothing.smooth_track`: a weighted line over +- ``half_window`` frames at each row).
+
+    Only those cells change (written ``%.6f``); every other cell and the rows' order are kept. Two streaming passes
+    (the columns by track, then the copy): memory grows with the rows' smoothed values, 8 bytes a cell.
+
+    Args:
+        path: A tracks CSV with ``frame``, ``id`` and ``columns``, one row per track and frame.
+        half_window: ``W``, frames (0: nothing changes).
+        columns: The columns to smooth (e.g. ``x, y, z``), numbers.
+
+    Returns:
+        The number of rows whose cells were rewritten.
+
+    Raises:
+        OutputError: A column is missing or holds a value that is not a number, a track has two rows in one frame,
+            or the file cannot be read or written (it is then left as it was).
+    """
+    from wptrack.core.smoothing import smooth_track
+
+    path = Path(path)
+    if half_window <= 0:
+        return 0
+    try:
+        with open(path, encoding="utf-8", newline="") as fh:
+            reader = csv.reader(fh)
+            header = next(reader, None) or []
+            missing = [c for c in ("frame", "id", *columns) if c not in header]
+            if missing:
+                raise OutputError(f"{path}: no {', '.join(missing)} column(s) to smooth the tracks by")
+            fcol, icol = header.index("frame"), header.index("id")
+            cols = [header.index(c) for c in columns]
+            tracks: dict[str, list[tuple[int, list[float]]]] = {}
+            for row in reader:
+                try:
+                    tracks.setdefault(row[icol], []).append((int(row[fcol]), [float(row[c]) for c in cols]))
+                except (ValueError, IndexError):
+                    raise OutputError(f"{path}: a frame, id or {', '.join(columns)} cell is not a number") from None
+    except OSError as e:
+        raise OutputError(f"cannot read {path}: {e.strerror or e}") from None
+    smoothed: dict[tuple[str, int], np.ndarray] = {}
+    for tid, rows in tracks.items():
+        frames = np.array([f for f, _ in rows], dtype=np.int64)
+        if len(np.unique(frames)) != len(frames):
+            raise OutputError(f"{path}: track {tid} has two rows in one frame; cannot smooth it")
+        out = smooth_track(frames, np.array([v for _, v in rows]), half_window)
+        smoothed.update({(tid, int(f)): out[k] for k, f in enumerate(frames)})
+    try:
+        with open(path, encoding="utf-8", newline="") as src, atomic_file(path) as dst:
+            lines = iter(src)
+            dst.write(next(lines).encode("utf-8"))
+            for line in lines:
+                row = next(csv.reader([line]))
+                for c, v in zip(cols, smoothed[(row[icol], int(row[fcol]))], strict=True):
+                    row[c] = format_cell(float(v))
+                dst.write((",".join(row) + "\n").encode("utf-8"))
+    except OSError as e:
+        raise OutputError(f"cannot write {path}: {e.strerror or e}") from None
+    return len(smoothed)
 
 
 def _column_array(name: str, values: list[str]) -> np.ndarray:

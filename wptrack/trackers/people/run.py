@@ -15,10 +15,13 @@ Outputs::
                            1 / m^3) with its origin and voxel edge (Figs. 6 and 8)
     out_dir/masks_camK.avi the motion masks used (only with ``save_masks``)
     out_dir/run.json       configuration, inputs, device, versions, timings, summary
+
+When the run completes, ``tracks.csv``'s positions are smoothed over time (``PeopleConfig.smooth_seconds``).
 """
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterator, Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -29,6 +32,8 @@ import numpy as np
 from wptrack.core.config import REQUIRED, check, param
 from wptrack.core.errors import ConfigError
 from wptrack.runs.loop import TrackerRun, run_tracker
+
+log = logging.getLogger(__name__)
 
 PEOPLE_COLUMNS = [
     "frame",
@@ -296,6 +301,17 @@ class PeopleRun(TrackerRun):
             self._hulls.close()
         for writer in self._mask_writers:
             writer.close()
+
+    def finish_tracks(self, path: Path) -> dict[str, Any]:
+        """Smooth the completed run's ``tracks.csv`` over time (``PeopleConfig.smooth_seconds``,
+        ``wptrack.core.smoothing``); the run.json record ``smooth_seconds, smooth_frames, smoothed_rows``."""
+        from wptrack.io.tables import smooth_tracks_file
+
+        cfg = self.tracker.config
+        frames = int(round(cfg.smooth_seconds * float(self._fps)))
+        rows = smooth_tracks_file(path, frames, ("x", "y", "z"))
+        log.info("%s: %d rows smoothed over +-%d frames", path, rows, frames)
+        return {"smooth_seconds": float(cfg.smooth_seconds), "smooth_frames": frames, "smoothed_rows": rows}
 
     def state_dict(self) -> dict[str, Any]:
         ids = sorted(self._ids)

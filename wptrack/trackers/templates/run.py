@@ -382,12 +382,15 @@ class TemplateRun(TrackerRun):
 
     def finish_tracks(self, path: Path) -> dict[str, Any]:
         """Complete the finished run's ``tracks.csv`` offline (``wptrack.trackers.templates.backfill``): backfill the
-        lasting tracks (``TemplateConfig.backfill_seconds``), then stitch the tracks that continue each other
-        (``stitch_seconds``).
+        lasting tracks (``TemplateConfig.backfill_seconds``), stitch the tracks that continue each other
+        (``stitch_seconds``), then smooth every track's positions over time (``smooth_seconds``,
+        ``wptrack.core.smoothing``).
 
         Returns the run.json record: ``backfill_seconds, backfill_frames, backfill_min_frames, backfilled_rows,
-        stitch_seconds, stitch_frames, stitch_distance, stitched_tracks``.
+        stitch_seconds, stitch_frames, stitch_distance, stitched_tracks, smooth_seconds, smooth_frames,
+        smoothed_rows``.
         """
+        from wptrack.io.tables import smooth_tracks_file
         from wptrack.trackers.templates.backfill import backfill_tracks_file, stitch_tracks_file
         from wptrack.trackers.templates.tracker import box_fraction_in_image
 
@@ -404,7 +407,11 @@ class TemplateRun(TrackerRun):
             first_frame=0,
         )  # fmt: skip
         stitched = stitch_tracks_file(path, cfg.stitch_frames, float(cfg.stitch_distance))
-        log.info("%s: %d rows backfilled, %d tracks stitched to their predecessors", path, added, stitched)
+        smoothed = smooth_tracks_file(path, cfg.smooth_frames, ("x", "y", "z", "gx", "gy"))
+        log.info(
+            "%s: %d rows backfilled, %d tracks stitched to their predecessors, %d rows smoothed over +-%d frames",
+            path, added, stitched, smoothed, cfg.smooth_frames,
+        )  # fmt: skip
         return {
             "backfill_seconds": float(cfg.backfill_seconds),
             "backfill_frames": cfg.backfill_frames,
@@ -414,6 +421,9 @@ class TemplateRun(TrackerRun):
             "stitch_frames": cfg.stitch_frames,
             "stitch_distance": float(cfg.stitch_distance),
             "stitched_tracks": stitched,
+            "smooth_seconds": float(cfg.smooth_seconds),
+            "smooth_frames": cfg.smooth_frames,
+            "smoothed_rows": smoothed,
         }
 
     def summary(self) -> dict[str, Any]:
