@@ -212,7 +212,7 @@ def frame_items(open_capture: Any, count: int, workers: int | None = None) -> It
         if workers is None:  # within a batch worker's decoding budget
             workers = min(jpeg_workers(), decode_threads() or jpeg_workers())
         try:
-            yield from jpeg_frames(cap, count, workers)
+            yield from jpeg_frames(cap, count, workers) if workers > 1 else read_sequential(cap, count)
         finally:
             cap.release()
         return

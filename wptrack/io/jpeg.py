@@ -138,18 +138,12 @@ def open_jpeg(path: str) -> JpegCapture:
 def jpeg_frames(cap: JpegCapture, count: int, workers: int) -> Iterator[tuple[int, bool, np.ndarray | None, float]]:
     """The items of :func:`wptrack.io.decode.read_sequential` (``(index, ok, frame, ms)`` for frames ``0 .. count -
     1`` in order, ``ok`` False at the first frame that cannot be read, nothing after it) from a :class:`JpegCapture`
-    whose packets ``workers`` threads decode at once. This thread reads the packets (cheap) and keeps at most
+    whose packets ``workers`` threads decode at once (:func:`wptrack.io.decode.frame_items` reads a video in the
+    calling thread when one is to decode it). This thread reads the packets (cheap) and keeps at most
     ``2 workers`` frames in flight, so memory stays bounded whatever the consumer's speed."""
     import cv2
 
-    if workers < 2:  # in this thread
-        for i in range(count):
-            ok, frame = cap.read()
-            ok = bool(ok and frame is not None)
-            yield i, ok, frame, cap.get(cv2.CAP_PROP_POS_MSEC) if ok else 0.0
-            if not ok:
-                return
-        return
+    workers = max(1, int(workers))
     pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="wptrack-jpeg")
     pending: deque[tuple[int, Future | None, float]] = deque()
     try:
