@@ -123,7 +123,7 @@ def smooth_tracks_file(path: Path, half_window: int, columns: Sequence[str]) -> 
     (:func:`wptrack.core.smoothing.smooth_track`: a weighted line over +- ``half_window`` frames at each row).
 
     Only those cells change (written ``%.6f``); every other cell and the rows' order are kept. Two streaming passes
-    (the columns by track, then the copy): memory grows with the rows' smoothed values, 8 bytes a cell.
+    (the columns, then the copy): memory grows with the rows, 8 bytes a frame, id and smoothed cell (twice).
 
     Args:
         path: A tracks CSV with ``frame``, ``id`` and ``columns``, one row per track and frame.
@@ -137,11 +137,15 @@ def smooth_tracks_file(path: Path, half_window: int, columns: Sequence[str]) -> 
         OutputError: A column is missing or holds a value that is not a number, a track has two rows in one frame,
             or the file cannot be read or written (it is then left as it was).
     """
+    from array import array
+
     from wptrack.core.smoothing import smooth_track
 
     path = Path(path)
     if half_window <= 0:
         return 0
+    frames, tids, cells = array("q"), array("q"), array("d")  # the rows in file order, 8 bytes a value
+    ids: dict[str, int] = {}
     try:
         with open(path, encoding="utf-8", newline="") as fh:
             reader = csv.reader(fh)
@@ -151,33 +155,39 @@ def smooth_tracks_file(path: Path, half_window: int, columns: Sequence[str]) -> 
                 raise OutputError(f"{path}: no {', '.join(missing)} column(s) to smooth the tracks by")
             fcol, icol = header.index("frame"), header.index("id")
             cols = [header.index(c) for c in columns]
-            tracks: dict[str, list[tuple[int, list[float]]]] = {}
             for row in reader:
                 try:
-                    tracks.setdefault(row[icol], []).append((int(row[fcol]), [float(row[c]) for c in cols]))
+                    frames.append(int(row[fcol]))
+                    tids.append(ids.setdefault(row[icol], len(ids)))
+                    cells.extend(float(row[c]) for c in cols)
                 except (ValueError, IndexError):
                     raise OutputError(f"{path}: a frame, id or {', '.join(columns)} cell is not a number") from None
     except OSError as e:
         raise OutputError(f"cannot read {path}: {e.strerror or e}") from None
-    smoothed: dict[tuple[str, int], np.ndarray] = {}
-    for tid, rows in tracks.items():
-        frames = np.array([f for f, _ in rows], dtype=np.int64)
-        if len(np.unique(frames)) != len(frames):
-            raise OutputError(f"{path}: track {tid} has two rows in one frame; cannot smooth it")
-        out = smooth_track(frames, np.array([v for _, v in rows]), half_window)
-        smoothed.update({(tid, int(f)): out[k] for k, f in enumerate(frames)})
+    f = np.frombuffer(frames, dtype=np.int64)
+    t = np.frombuffer(tids, dtype=np.int64)
+    values = np.frombuffer(cells, dtype=np.float64).reshape(len(f), len(cols))
+    smoothed = np.empty_like(values)
+    order = np.lexsort((f, t))  # by track, then frame
+    starts = np.flatnonzero(np.r_[True, np.diff(t[order]) != 0, True])
+    names = {v: k for k, v in ids.items()}
+    for a, b in zip(starts[:-1], starts[1:], strict=True):
+        rows = order[a:b]
+        if len(np.unique(f[rows])) != len(rows):
+            raise OutputError(f"{path}: track {names[int(t[rows[0]])]} has two rows in one frame; cannot smooth it")
+        smoothed[rows] = smooth_track(f[rows], values[rows], half_window)
     try:
         with open(path, encoding="utf-8", newline="") as src, atomic_file(path) as dst:
             lines = iter(src)
             dst.write(next(lines).encode("utf-8"))
-            for line in lines:
+            for k, line in enumerate(lines):
                 row = next(csv.reader([line]))
-                for c, v in zip(cols, smoothed[(row[icol], int(row[fcol]))], strict=True):
+                for c, v in zip(cols, smoothed[k], strict=True):
                     row[c] = format_cell(float(v))
                 dst.write((",".join(row) + "\n").encode("utf-8"))
     except OSError as e:
         raise OutputError(f"cannot write {path}: {e.strerror or e}") from None
-    return len(smoothed)
+    return len(f)
 
 
 def _column_array(name: str, values: list[str]) -> np.ndarray:
