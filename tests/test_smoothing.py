@@ -80,6 +80,12 @@ def test_tracks_file_smoothed_in_place(tmp_path, rng):
         np.testing.assert_allclose(t["y"][m], -0.02 * frames, atol=2e-6)  # a line: kept
 
 
+def test_tracks_file_without_rows_is_left_as_it_is(tmp_path):
+    path = tmp_path / "tracks.csv"
+    path.write_text("frame,id,x,y\n")
+    assert smooth_tracks_file(path, 3, ("x", "y")) == 0 and path.read_text() == "frame,id,x,y\n"
+
+
 def test_tracks_file_errors_leave_it_as_it_was(tmp_path):
     path = tmp_path / "tracks.csv"
     path.write_text("frame,id,x,y\n0,1,0.0,0.0\n0,1,1.0,1.0\n")

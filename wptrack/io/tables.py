@@ -164,6 +164,8 @@ def smooth_tracks_file(path: Path, half_window: int, columns: Sequence[str]) -> 
                     raise OutputError(f"{path}: a frame, id or {', '.join(columns)} cell is not a number") from None
     except OSError as e:
         raise OutputError(f"cannot read {path}: {e.strerror or e}") from None
+    if not frames:  # no rows: nothing to smooth
+        return 0
     f = np.frombuffer(frames, dtype=np.int64)
     t = np.frombuffer(tids, dtype=np.int64)
     values = np.frombuffer(cells, dtype=np.float64).reshape(len(f), len(cols))
