@@ -42,6 +42,7 @@ __all__ = [
     "add_arguments",
     "check",
     "describe",
+    "env_count",
     "fields_of",
     "from_dict",
     "from_namespace",
@@ -548,3 +549,14 @@ def describe(cls: type) -> str:
             f"{p.help if p else ''} |"
         )
     return "\n".join(rows) + "\n"
+
+
+def env_count(name: str, default: int) -> int:
+    """A thread or worker count from the environment variable ``name`` (the run-time levers of issue 27, e.g.
+    ``WPTRACK_MASK_WORKERS``): ``default`` when it is unset or empty, else its value when a positive integer, else 1."""
+    import os
+
+    text = os.environ.get(name, "").strip()
+    if not text:
+        return default
+    return int(text) if text.isdigit() and int(text) > 0 else 1

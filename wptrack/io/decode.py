@@ -84,8 +84,9 @@ def decode_threads() -> int | None:
 
 def decode_workers() -> int:
     """Decoding threads per video: the environment variable ``WPTRACK_DECODE_WORKERS`` (default 1: one thread)."""
-    text = os.environ.get("WPTRACK_DECODE_WORKERS", "").strip()
-    return int(text) if text.isdigit() and int(text) > 0 else 1
+    from wptrack.core.config import env_count
+
+    return env_count("WPTRACK_DECODE_WORKERS", 1)
 
 
 def fourcc(cap: Any) -> str:

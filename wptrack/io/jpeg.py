@@ -56,10 +56,9 @@ def jpeg_enabled() -> bool:
 def jpeg_workers() -> int:
     """Threads decoding one Motion-JPEG video's frames: :data:`JPEG_WORKERS_ENV` when set, else one per 4 host
     cores, at most 4 (one on a 2-core machine: the frames are decoded in the reading thread, as before)."""
-    text = os.environ.get(JPEG_WORKERS_ENV, "").strip()
-    if text:
-        return int(text) if text.isdigit() and int(text) > 0 else 1
-    return max(1, min(4, (os.cpu_count() or 1) // 4))
+    from wptrack.core.config import env_count
+
+    return env_count(JPEG_WORKERS_ENV, max(1, min(4, (os.cpu_count() or 1) // 4)))
 
 
 def decode_packet(packet: np.ndarray | None) -> np.ndarray | None:

@@ -45,12 +45,10 @@ _END = object()
 def mask_workers(device: str | None = None) -> int:
     """Threads making one video's offline masks: :data:`MASK_WORKERS_ENV` when set, else
     :data:`GPU_MASK_WORKERS` on a CUDA ``device`` of a host with >= 8 cores, else 1."""
-    text = os.environ.get(MASK_WORKERS_ENV, "").strip()
-    if text:
-        return int(text) if text.isdigit() and int(text) > 0 else 1
-    if device is not None and device.startswith("cuda") and (os.cpu_count() or 1) >= 8:
-        return GPU_MASK_WORKERS
-    return 1
+    from wptrack.core.config import env_count
+
+    gpu_host = device is not None and device.startswith("cuda") and (os.cpu_count() or 1) >= 8
+    return env_count(MASK_WORKERS_ENV, GPU_MASK_WORKERS if gpu_host else 1)
 
 
 def build_ahead(model: Any, guard: Any) -> Any:

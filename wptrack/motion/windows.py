@@ -41,10 +41,9 @@ def sample_readers() -> int:
     samples in contiguous groups at once."""
     import os
 
-    text = os.environ.get(SAMPLE_READERS_ENV, "").strip()
-    if text:
-        return int(text) if text.isdigit() and int(text) > 0 else 1
-    return max(1, min(4, (os.cpu_count() or 1) // 4))
+    from wptrack.core.config import env_count
+
+    return env_count(SAMPLE_READERS_ENV, max(1, min(4, (os.cpu_count() or 1) // 4)))
 
 
 @dataclass(frozen=True)
