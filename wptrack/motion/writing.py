@@ -20,19 +20,26 @@ def _mask_frame(mask: np.ndarray) -> np.ndarray:
 
 def pipeline_hash() -> str:
     """First 16 hex digits of a SHA-256 over the source of the mask pipeline (the modules of :mod:`wptrack.motion`
-    and :mod:`wptrack.kernels.core`, by name): written to ``masks.json`` as ``code``, so that masks cached by an
-    experiment are made again after the pipeline changed, not only its configuration."""
+    and :mod:`wptrack.kernels.core`, and the video readers :mod:`wptrack.io.frames`, :mod:`~wptrack.io.decode` and
+    :mod:`~wptrack.io.jpeg`, whose decoder sets the frames' pixels, by name): written to ``masks.json`` as ``code``,
+    so that masks cached by an experiment are made again after the pipeline changed, not only its configuration."""
     import hashlib
     from importlib.util import find_spec
     from pathlib import Path
 
-    h = hashlib.sha256()
+    files: list[Path] = []
     for package in ("wptrack.motion", "wptrack.kernels.core"):
         spec = find_spec(package)
         for root in spec.submodule_search_locations if spec is not None else ():
-            for f in sorted(Path(root).glob("*.py")):
-                h.update(f.name.encode())
-                h.update(f.read_bytes())
+            files += sorted(Path(root).glob("*.py"))
+    for module in ("wptrack.io.frames", "wptrack.io.decode", "wptrack.io.jpeg"):
+        spec = find_spec(module)
+        if spec is not None and spec.origin:
+            files.append(Path(spec.origin))
+    h = hashlib.sha256()
+    for f in files:
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
     return h.hexdigest()[:16]
 
 
