@@ -408,6 +408,8 @@ def test_actor_killed_mid_run_is_retried_elsewhere(ray_local, tmp_path):
     assert [r["status"] for r in res] == ["complete"] * 4
     assert by_id["victim"]["attempts"] == 2 and by_id["victim"]["summary"]["pid"] != killed[0]
     assert all(r["summary"]["threads"] == "1" for r in res)  # decode threads = the worker's cores
+    if hasattr(os, "sched_setaffinity") and len(os.sched_getaffinity(0)) >= 2:
+        assert all(r["worker_cores"] == 1 for r in res)  # each worker bound to a core of its own (the new one too)
     assert sorted(p.name for p in (out / "victim").iterdir()) == [BATCH_FILE, "partial.txt", "run.json"]
     assert_clean(out)
     rows = {r["id"]: r for r in read_summary(out)}

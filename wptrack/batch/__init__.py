@@ -186,7 +186,7 @@ def execute_run(
 
     Returns:
         The run's result row: id, tracker, status, attempts, seconds, host, error, summary, timings, stages
-        (:mod:`wptrack.batch.worker`), started_at / ended_at (seconds since the epoch), worker_runs.
+        (:mod:`wptrack.batch.worker`), started_at / ended_at (seconds since the epoch), worker_runs, worker_cores.
     """
     from wptrack.batch.worker import finish_stages, set_decode_threads, start_run
     from wptrack.io.atomic import atomic_write_json
@@ -211,6 +211,7 @@ def execute_run(
         "pid": os.getpid(),
         "gpus": os.environ.get("CUDA_VISIBLE_DEVICES"),
         "worker_runs": info["worker_runs"],
+        "worker_cores": info["worker_cores"],
         "started_at": started,
     }
     stages: dict[str, Any] = {}
@@ -270,7 +271,7 @@ def _flatten(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
 
 SUMMARY_COLUMNS = [
     "id", "tracker", "status", "reused", "attempts", "seconds", "frames_per_s", "host", "gpus", "pid", "worker_runs",
-    "error",
+    "worker_cores", "error",
 ]  # fmt: skip
 
 
@@ -347,6 +348,7 @@ def run_batch(
     pool: str = "actors",
     on_start: Callable[[int, int], None] | None = None,
     keep_workers: bool = False,
+    pin_cores: bool = True,
 ) -> list[dict[str, Any]]:
     """Run every run of ``manifest`` not already completed in ``out_dir``; write ``out_dir/summary.csv``.
 
@@ -370,6 +372,8 @@ def run_batch(
         on_start: called once before the runs with (runs in the manifest, runs to run).
         keep_workers: ``pool="actors"`` on a Ray instance this process joined before: leave the warm workers up for
             the next batch (:func:`wptrack.batch.actors.release_workers` stops them).
+        pin_cores: ``pool="actors"`` on Linux: bind each worker to a block of ``cpus_per_task`` cores of its own
+            (:mod:`wptrack.batch.affinity`), so runs at once do not crowd the same cores; False: threads float.
 
     Returns:
         The results in manifest order: ``status`` ``complete`` or ``failed``, ``reused`` for skipped runs.
@@ -429,7 +433,9 @@ def run_batch(
 
     if pending and use_ray:
         try:
-            _run_ray(pending, out, address, gpus_per_task, cpus_per_task, retries, record, pool, keep_workers)
+            _run_ray(
+                pending, out, address, gpus_per_task, cpus_per_task, retries, record, pool, keep_workers, pin_cores
+            )
         except ConfigError:  # the cluster cannot run the tasks: leave nothing behind
             if created and not any(out.iterdir()):
                 out.rmdir()
@@ -476,6 +482,7 @@ def _run_ray(
     record: Callable[[dict[str, Any]], None],
     pool: str = "actors",
     keep_workers: bool = False,
+    pin_cores: bool = True,
 ) -> None:
     import ray
 
@@ -499,7 +506,7 @@ def _run_ray(
         threads = max(1, int(cpus_per_task))
         if pool == "actors":
             keep = keep_workers and not started  # a Ray instance we started ends with the batch
-            _run_pool(pending, out, resources, gpus_per_task, cpus_per_task, retries, record, keep)
+            _run_pool(pending, out, resources, gpus_per_task, cpus_per_task, retries, record, keep, pin_cores)
             return
         # GPU tasks: a fresh worker per run (max_calls=1), as CUDA_VISIBLE_DEVICES is fixed when CUDA starts
         task = ray.remote(num_gpus=gpus_per_task, num_cpus=cpus_per_task, max_calls=1 if gpus_per_task > 0 else 0)(
@@ -531,6 +538,7 @@ def _run_pool(
     retries: int,
     record: Callable[[dict[str, Any]], None],
     keep: bool = False,
+    pin_cores: bool = True,
 ) -> None:
     """The runs on warm actors (:mod:`wptrack.batch.actors`), one per worker slot of the cluster."""
     from wptrack.batch.actors import NoWorkers, pool_size, run_actor_pool
@@ -561,6 +569,7 @@ def _run_pool(
             device,
             modules,
             keep=keep,
+            pin=pin_cores,
         )
     except NoWorkers as e:
         raise ConfigError(f"{e}; see the Ray logs") from None

@@ -51,12 +51,16 @@ class RunWorker:
         device: the runs' device to start before the first run (``auto``: the actor's GPU, or ``cpu``); None: no
             Warp start (a batch of Python functions).
         modules: the modules the runs will import (the trackers' job modules), imported now.
+        pin: bind this process to a free block of ``threads`` cores of its node first
+            (:func:`wptrack.batch.affinity.pin_worker`; left unbound where none is free).
     """
 
-    def __init__(self, threads: int, device: str | None, modules: Sequence[str] = ()) -> None:
+    def __init__(self, threads: int, device: str | None, modules: Sequence[str] = (), pin: bool = False) -> None:
+        from wptrack.batch.affinity import pin_worker
         from wptrack.batch.worker import prepare, set_decode_threads
 
         t0 = time.perf_counter()
+        self._cores = pin_worker(threads) if pin else []
         set_decode_threads(threads)
         if device is not None:
             from wptrack.core.device import quiet_warp
@@ -73,6 +77,7 @@ class RunWorker:
             "pid": os.getpid(),
             "host": socket.gethostname(),
             "gpus": os.environ.get("CUDA_VISIBLE_DEVICES"),
+            "cores": list(self._cores),
             **self._warm,
         }
 
@@ -179,6 +184,7 @@ def run_actor_pool(
     modules: Sequence[str] = (),
     on_worker: Callable[[dict[str, Any]], None] | None = None,
     keep: bool = False,
+    pin: bool = False,
 ) -> None:
     """Run ``pending`` (objects with an ``id``) on ``workers`` warm actors.
 
@@ -196,6 +202,7 @@ def run_actor_pool(
         on_worker: called with each actor's :meth:`RunWorker.ready` once it is ready.
         keep: leave the live actors up for the next batch of this process (see the module docstring); a kept pool
             of this shape is used first.
+        pin: bind each actor to a block of ``int(cpus_per_task)`` cores of its own (:mod:`wptrack.batch.affinity`).
 
     Raises:
         NoWorkers: no actor could be started (they failed their warm-up, 3 times per worker in all); the runs
@@ -215,12 +222,12 @@ def run_actor_pool(
     last_start_error: BaseException | None = None
 
     def start() -> None:
-        actor = remote.remote(threads, device, tuple(modules))
+        actor = remote.remote(threads, device, tuple(modules), pin)
         actors.append(actor)
         starting[actor.ready.remote()] = actor
 
     retire = _kill
-    key = (float(gpus_per_task), float(cpus_per_task), device, tuple(sorted(modules)))
+    key = (float(gpus_per_task), float(cpus_per_task), device, tuple(sorted(modules)), bool(pin))
     for actor in _take_kept(key):  # ready() again: a kept worker may have died since
         actors.append(actor)
         starting[actor.ready.remote()] = actor

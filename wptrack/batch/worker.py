@@ -21,7 +21,8 @@ the first run of a warm worker) or warm (a worker that ran others before). Its r
 * ``cpu_s``: the process's CPU time (every thread: the tracker, the decoding threads) over the run; ``cpu_s /
   total_s`` is the cores the run kept busy.
 
-With the process: ``worker_runs`` (runs this process ran before: 0 = a cold worker) and ``worker_age_s``.
+With the process: ``worker_runs`` (runs this process ran before: 0 = a cold worker), ``worker_age_s`` and
+``worker_cores`` (the cores it may run on: its CPU affinity, a block of its own on a pinned worker).
 """
 
 from __future__ import annotations
@@ -125,8 +126,16 @@ def prepare(device: str | None, modules: Sequence[str] = ()) -> dict[str, float]
 
 
 def start_run() -> dict[str, Any]:
-    """Called as a run starts: the process's state (``worker_runs``, ``worker_age_s``) and the CPU clock."""
-    info = {"worker_runs": _PROCESS["runs"], "worker_age_s": process_age(), "_cpu0": cpu_seconds()}
+    """Called as a run starts: the process's state (``worker_runs``, ``worker_age_s``, ``worker_cores``) and the CPU
+    clock."""
+    from wptrack.batch.affinity import usable_cores
+
+    info = {
+        "worker_runs": _PROCESS["runs"],
+        "worker_age_s": process_age(),
+        "worker_cores": len(usable_cores()),
+        "_cpu0": cpu_seconds(),
+    }
     _PROCESS["runs"] += 1
     return info
 

@@ -47,6 +47,7 @@ warm actors over every GPU (or CPU core).
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import shutil
@@ -79,7 +80,9 @@ def format_row(r: dict) -> str:
     )
     one = (
         f"\n       one run {r['run_s_1']:.2f} s alone, {r['run_s_g']:.2f} s with {r['workers'] * r['slots']} workers; "
-        f"busy {r['busy_1']:.3f} / {r['busy_g']:.3f}; {r['cpus_per_task']:g} cores per worker; pool start "
+        f"busy {r['busy_1']:.3f} / {r['busy_g']:.3f}; {r['cpus_per_task']:g} cores per worker "
+        f"({'bound to their own' if r.get('pin_cores') else 'free'}: may use {r.get('worker_cores_1')} / "
+        f"{r.get('worker_cores_g')}); pool start "
         f"{r['pool_start_1']:.2f} / {r['pool_start_g']:.2f} s, E with it {r['parallel_efficiency_cold']:.3f}"
     )
     if r.get("t1_from"):
@@ -214,7 +217,15 @@ def _stage_means(results: list[dict]) -> dict[str, float]:
 
 
 def _timed_batch(
-    manifest: Path, out: Path, gpus: int, slots: int, cpus_per_task: float, pool: str, gpu: bool, warm: Path | None
+    manifest: Path,
+    out: Path,
+    gpus: int,
+    slots: int,
+    cpus_per_task: float,
+    pool: str,
+    gpu: bool,
+    warm: Path | None,
+    pin: bool = True,
 ) -> dict[str, Any]:
     """One batch on a fresh local Ray instance offering ``gpus`` GPUs x ``slots`` workers (GPU) or ``gpus`` cores
     (CPU); its wall time, mean run seconds, busy fraction, stage means and the runs' start/end times. With ``warm``
@@ -231,7 +242,7 @@ def _timed_batch(
     cpus = max(1, int(np.ceil(cpus_per_task * workers)))
     kw = {"num_gpus": gpus, "num_cpus": cpus} if gpu else {"num_cpus": cpus, "num_gpus": 0}
     ray.init(address="local", include_dashboard=False, log_to_driver=False, **kw)
-    shape = {"gpus_per_task": 1.0 / slots if gpu else 0, "cpus_per_task": cpus_per_task, "pool": pool}
+    shape = {"gpus_per_task": 1.0 / slots if gpu else 0, "cpus_per_task": cpus_per_task, "pool": pool, "pin_cores": pin}
     keep = warm is not None and pool == "actors"
     try:
         pool_start = 0.0
@@ -265,6 +276,7 @@ def _timed_batch(
         "cycle_s": (ends[-1] - starts[0]) / len(res),
         "used": sorted({f"{r.get('gpus') or '-'}:{(r.get('summary') or {}).get('device')}" for r in res}),
         "workers_seen": len({(r.get("host"), r.get("pid")) for r in res}),
+        "worker_cores": sorted({r.get("worker_cores") for r in res if r.get("worker_cores") is not None}),
     }
 
 
@@ -283,6 +295,7 @@ def parallel_efficiency(
     length: str = "-",
     warm: bool = True,
     baselines: dict | None = None,
+    pin: bool = True,
 ) -> dict[str, Any]:
     """Measure E = T1 / (G TG) (see the module docstring) and return the numbers as a dict.
 
@@ -302,17 +315,19 @@ def parallel_efficiency(
             to T1 and TG); False: the pool starts inside the timed batch.
         baselines: a dict kept between calls: a T1 measured on ``t1_runs`` runs is measured once per case shape and
             reused for every K.
+        pin: actors: each worker bound to a block of ``cpus_per_task`` cores of its own in both batches
+            (``run_batch(pin_cores=...)``).
     """
     import ray
 
     from wptrack.batch import execute_run
     from wptrack.batch.manifest import load_manifest
-    from wptrack.core.device import quiet_warp
+    from wptrack.core.device import host_cores, quiet_warp
 
     quiet_warp(True)
     slots = max(1, int(slots)) if gpu else 1
     if cpus_per_task is None:
-        cpus_per_task = float(max(1, (os.cpu_count() or 1) // (workers * slots))) if gpu else 1.0
+        cpus_per_task = float(max(1, host_cores() // (workers * slots))) if gpu else 1.0
     tmp = tempfile.TemporaryDirectory(prefix="wptrack-batch-bench-") if work_dir is None else None
     work = Path(tmp.name if tmp else work_dir)
     try:
@@ -325,16 +340,18 @@ def parallel_efficiency(
         batches = work / f"batches-{tracker}-{pool}-{particles}-{runs}-{frames}-{slots}"
         shutil.rmtree(batches, ignore_errors=True)  # every run runs (none reused from an earlier measurement)
         execute_run(load_manifest(tiny).runs[0], batches / "compile")  # compile the kernels into the cache
-        key = (tracker, pool, particles, frames, k1, cpus_per_task, warm_manifest is not None)
+        key = (tracker, pool, particles, frames, k1, cpus_per_task, warm_manifest is not None, pin)
         if k1 < runs and baselines is not None and key in baselines:
             one, w1 = baselines[key]
         else:
             w1 = batches / "w1"
-            one = _timed_batch(manifest_1, w1, 1, 1, cpus_per_task, pool, gpu, warm_manifest)
+            one = _timed_batch(manifest_1, w1, 1, 1, cpus_per_task, pool, gpu, warm_manifest, pin)
             if k1 < runs and baselines is not None:
                 baselines[key] = (one, w1)
         t1 = one["seconds"] if k1 == runs else one["overhead_s"] + runs * one["cycle_s"]
-        many = _timed_batch(manifest, batches / f"w{workers}", workers, slots, cpus_per_task, pool, gpu, warm_manifest)
+        many = _timed_batch(
+            manifest, batches / f"w{workers}", workers, slots, cpus_per_task, pool, gpu, warm_manifest, pin
+        )
         tg = many["seconds"]
         s1, sg = one["pool_start_s"], many["pool_start_s"]
         ids = [s.id for s in load_manifest(manifest_1).runs]
@@ -355,6 +372,9 @@ def parallel_efficiency(
             "workers": int(workers),
             "slots": int(slots),
             "cpus_per_task": float(cpus_per_task),
+            "pin_cores": bool(pin and pool == "actors"),
+            "worker_cores_1": one["worker_cores"],
+            "worker_cores_g": many["worker_cores"],
             "frames": int(frames),
             "t1_s": t1,
             "t1_from": None if k1 == runs else k1,
@@ -429,6 +449,13 @@ def main(argv=None) -> int:
     ap.add_argument("--cpus-per-task", type=float, default=None, help="cores per worker (default: cores / workers)")
     ap.add_argument("--t1-runs", type=int, default=None, help="measure T1 on this many runs, extrapolated to K")
     ap.add_argument("--cold", action="store_true", help="actors: start the pool inside the timed batches")
+    ap.add_argument(
+        "--pin",
+        nargs="+",
+        default=["on"],
+        choices=("on", "off"),
+        help="actors: workers bound to cores of their own (on, default) or free on every core (off); both: a row each",
+    )
     ap.add_argument("--out", default=None, help="write the results as JSON here (rewritten after each case)")
     ap.add_argument("--work", default=None, help="work folder (videos, run outputs; default: a temporary one)")
     a = ap.parse_args(argv)
@@ -441,12 +468,14 @@ def main(argv=None) -> int:
             particles = int(a.particles or (1_000_000 if tracker == "color" else 1000))
             for length in a.length:
                 frames = a.frames or LENGTHS[tracker][length]
-                for pool in a.pool:
+                for pool, pin in itertools.product(a.pool, a.pin):
+                    if pool == "tasks" and pin == "on" and "off" in a.pin:
+                        continue  # tasks are never pinned: one row
                     for slots in a.slots if gpu else [1]:
                         for k in a.runs:
                             r = parallel_efficiency(
                                 k, a.gpus if gpu else a.cpus, particles, frames, gpu, a.work or tmp, pool, tracker,
-                                slots, a.cpus_per_task, a.t1_runs, length, not a.cold, baselines,
+                                slots, a.cpus_per_task, a.t1_runs, length, not a.cold, baselines, pin == "on",
                             )  # fmt: skip
                             results.append(r)
                             print(format_row(r), flush=True)

@@ -190,6 +190,13 @@ def build_parser(batch_tracker: str | None = None) -> argparse.ArgumentParser:
         help="actors (default): warm workers, one per GPU (per --gpus-per-task share), that take the runs from a "
         "queue; tasks: one Ray task in a fresh worker process per run",
     )
+    bt.add_argument(
+        "--no-pin-cores",
+        dest="pin_cores",
+        action="store_false",
+        help="actors: leave the workers' threads free on all of a node's cores (default: each worker bound to a "
+        "block of --cpus-per-task cores of its own, Linux)",
+    )
     vg = bt.add_argument_group("a batch over recordings, without a manifest")
     vg.add_argument(
         "--videos",

@@ -316,6 +316,7 @@ def cmd_batch(args) -> int:
             on_result=say,
             pool=args.pool,
             on_start=start,
+            pin_cores=args.pin_cores,
         )
     finally:
         if bar is not None:

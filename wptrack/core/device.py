@@ -161,6 +161,15 @@ CPU_SPLIT_MAX = 4
 """Most threads a split launch uses (the CI box has 2 cores; more rarely pays beside the run's other threads)."""
 
 
+def host_cores() -> int:
+    """The cores this process may run on: its CPU affinity (a batch worker bound to a block of cores, ``taskset``, a
+    container's cpuset), ``os.cpu_count()`` where the platform has none. Thread pools are sized from it."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
 def cpu_split_threads(n: int) -> int:
     """Threads over which :class:`CpuSplit` runs a per-particle launch of ``n`` particles on the CPU backend: the
     environment variable ``WPTRACK_CPU_THREADS`` (1 turns the split off), else the cores this process may use
@@ -174,7 +183,7 @@ def cpu_split_threads(n: int) -> int:
     if env.isdigit() and int(env) > 0:
         cores = int(env)
     else:
-        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        cores = host_cores()
         cores = min(cores, decode_threads() or cores)
     return max(1, min(cores, CPU_SPLIT_MAX, n // CPU_SPLIT_MIN))
 

@@ -8,7 +8,6 @@ recording's learnt cast-shadow brightness ratio (:func:`shadow_ratio`). The desi
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
@@ -85,12 +84,10 @@ window's gains and subsample medians: 12 million; a frame's gain: 0.1 million, i
 def host_threads() -> int:
     """Threads for a window build's host statistics: the cores this process may use, at most 8, no more than a
     batch worker holds (``WPTRACK_DECODE_THREADS``). The results do not depend on it."""
+    from wptrack.core.device import host_cores
     from wptrack.io.decode import decode_threads
 
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):  # not on Linux
-        cores = os.cpu_count() or 1
+    cores = host_cores()
     return max(1, min(8, cores, decode_threads() or cores))
 
 
