@@ -401,7 +401,7 @@ def test_actor_killed_mid_run_is_retried_elsewhere(ray_local, tmp_path):
     thread = threading.Thread(target=killer, daemon=True)
     thread.start()
     out = tmp_path / "out"
-    res = run_batch(path, out, gpus_per_task=0, cpus_per_task=1, pool="actors")
+    res = run_batch(path, out, gpus_per_task=0, cpus_per_task=1, pool="actors", pin_cores=True)
     thread.join(timeout=5)
     assert killed, "the victim run never started"
     by_id = {r["id"]: r for r in res}

@@ -348,7 +348,7 @@ def run_batch(
     pool: str = "actors",
     on_start: Callable[[int, int], None] | None = None,
     keep_workers: bool = False,
-    pin_cores: bool = True,
+    pin_cores: bool = False,
 ) -> list[dict[str, Any]]:
     """Run every run of ``manifest`` not already completed in ``out_dir``; write ``out_dir/summary.csv``.
 
@@ -373,7 +373,8 @@ def run_batch(
         keep_workers: ``pool="actors"`` on a Ray instance this process joined before: leave the warm workers up for
             the next batch (:func:`wptrack.batch.actors.release_workers` stops them).
         pin_cores: ``pool="actors"`` on Linux: bind each worker to a block of ``cpus_per_task`` cores of its own
-            (:mod:`wptrack.batch.affinity`), so runs at once do not crowd the same cores; False: threads float.
+            (:mod:`wptrack.batch.affinity`), so runs at once do not crowd the same cores; False (default): the
+            workers' threads may run on every core of their node.
 
     Returns:
         The results in manifest order: ``status`` ``complete`` or ``failed``, ``reused`` for skipped runs.
@@ -482,7 +483,7 @@ def _run_ray(
     record: Callable[[dict[str, Any]], None],
     pool: str = "actors",
     keep_workers: bool = False,
-    pin_cores: bool = True,
+    pin_cores: bool = False,
 ) -> None:
     import ray
 
@@ -538,7 +539,7 @@ def _run_pool(
     retries: int,
     record: Callable[[dict[str, Any]], None],
     keep: bool = False,
-    pin_cores: bool = True,
+    pin_cores: bool = False,
 ) -> None:
     """The runs on warm actors (:mod:`wptrack.batch.actors`), one per worker slot of the cluster."""
     from wptrack.batch.actors import NoWorkers, pool_size, run_actor_pool

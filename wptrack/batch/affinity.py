@@ -14,7 +14,12 @@ whole physical cores (siblings together) of one socket where ``n`` allows. A wor
 worker of the node holds by an exclusive ``flock`` on a per-block lock file (node-local, in the temporary
 directory); the kernel releases the lock when the worker's process ends, so a replaced worker's block is free for
 its successor. Where no block is free (more workers than blocks, fractional cores) or the platform has no
-``sched_setaffinity``, the worker is left unbound, as before.
+``sched_setaffinity``, the worker is left unbound.
+
+Off by default (``wptrack batch --pin-cores``): measured on a 2-GPU virtual machine (32 vCPUs, one socket, no
+hyperthreads visible; BENCHMARKS.md, issue 32) it did not keep runs from slowing each other down (colour runs E 0.920
+bound, 0.779 free, in that pair; template runs 0.823 bound, 0.965 free): a VM's vCPUs hide the host's cores, and
+what the runs share there (memory bandwidth, the host's siblings) no binding inside the VM separates.
 """
 
 from __future__ import annotations

@@ -225,7 +225,7 @@ def _timed_batch(
     pool: str,
     gpu: bool,
     warm: Path | None,
-    pin: bool = True,
+    pin: bool = False,
 ) -> dict[str, Any]:
     """One batch on a fresh local Ray instance offering ``gpus`` GPUs x ``slots`` workers (GPU) or ``gpus`` cores
     (CPU); its wall time, mean run seconds, busy fraction, stage means and the runs' start/end times. With ``warm``
@@ -295,7 +295,7 @@ def parallel_efficiency(
     length: str = "-",
     warm: bool = True,
     baselines: dict | None = None,
-    pin: bool = True,
+    pin: bool = False,
 ) -> dict[str, Any]:
     """Measure E = T1 / (G TG) (see the module docstring) and return the numbers as a dict.
 
@@ -452,9 +452,10 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--pin",
         nargs="+",
-        default=["on"],
+        default=["off"],
         choices=("on", "off"),
-        help="actors: workers bound to cores of their own (on, default) or free on every core (off); both: a row each",
+        help="actors: workers bound to cores of their own (on: wptrack batch --pin-cores) or free on every core (off, "
+        "default); both: a row each",
     )
     ap.add_argument("--out", default=None, help="write the results as JSON here (rewritten after each case)")
     ap.add_argument("--work", default=None, help="work folder (videos, run outputs; default: a temporary one)")

@@ -191,11 +191,10 @@ def build_parser(batch_tracker: str | None = None) -> argparse.ArgumentParser:
         "queue; tasks: one Ray task in a fresh worker process per run",
     )
     bt.add_argument(
-        "--no-pin-cores",
-        dest="pin_cores",
-        action="store_false",
-        help="actors: leave the workers' threads free on all of a node's cores (default: each worker bound to a "
-        "block of --cpus-per-task cores of its own, Linux)",
+        "--pin-cores",
+        action="store_true",
+        help="actors: bind each worker to a block of --cpus-per-task cores of its own (Linux; default: the workers' "
+        "threads may run on all of a node's cores)",
     )
     vg = bt.add_argument_group("a batch over recordings, without a manifest")
     vg.add_argument(
