@@ -219,15 +219,14 @@ def test_download_copies_without_switching_the_current_stream(device):
 
 
 def test_mask_threads_default_to_three_on_a_gpu_host_only(monkeypatch):
-    import os
-
+    import wptrack.core.config as config
     from wptrack.motion.parallel import GPU_MASK_WORKERS, mask_workers
 
     monkeypatch.delenv("WPTRACK_MASK_WORKERS", raising=False)
-    monkeypatch.setattr(os, "cpu_count", lambda: 16)
+    monkeypatch.setattr(config, "host_cores", lambda: 16)  # the cores this process may use (its CPU affinity)
     assert mask_workers("cuda:0") == GPU_MASK_WORKERS == 3
     assert mask_workers("cpu") == mask_workers(None) == 1
-    monkeypatch.setattr(os, "cpu_count", lambda: 4)
+    monkeypatch.setattr(config, "host_cores", lambda: 4)
     assert mask_workers("cuda:0") == 1  # few cores: the threads would take the decoder's
     monkeypatch.setenv("WPTRACK_MASK_WORKERS", "2")
     assert mask_workers("cpu") == mask_workers("cuda:0") == 2

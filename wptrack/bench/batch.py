@@ -322,7 +322,8 @@ def parallel_efficiency(
 
     from wptrack.batch import execute_run
     from wptrack.batch.manifest import load_manifest
-    from wptrack.core.device import host_cores, quiet_warp
+    from wptrack.core.config import host_cores
+    from wptrack.core.device import quiet_warp
 
     quiet_warp(True)
     slots = max(1, int(slots)) if gpu else 1

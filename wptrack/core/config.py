@@ -551,6 +551,17 @@ def describe(cls: type) -> str:
     return "\n".join(rows) + "\n"
 
 
+def host_cores() -> int:
+    """The cores this process may run on: its CPU affinity (a batch worker bound to a block of cores, ``taskset``, a
+    container's cpuset), ``os.cpu_count()`` where the platform has none. Thread pools are sized from it."""
+    import os
+
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
 def env_count(name: str, default: int) -> int:
     """A thread or worker count from the environment variable ``name`` (the run-time levers of issue 27, e.g.
     ``WPTRACK_MASK_WORKERS``): ``default`` when it is unset or empty, else its value when a positive integer, else 1."""

@@ -161,15 +161,6 @@ CPU_SPLIT_MAX = 4
 """Most threads a split launch uses (the CI box has 2 cores; more rarely pays beside the run's other threads)."""
 
 
-def host_cores() -> int:
-    """The cores this process may run on: its CPU affinity (a batch worker bound to a block of cores, ``taskset``, a
-    container's cpuset), ``os.cpu_count()`` where the platform has none. Thread pools are sized from it."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):
-        return os.cpu_count() or 1
-
-
 def cpu_split_threads(n: int) -> int:
     """Threads over which :class:`CpuSplit` runs a per-particle launch of ``n`` particles on the CPU backend: the
     environment variable ``WPTRACK_CPU_THREADS`` (1 turns the split off), else the cores this process may use
@@ -177,6 +168,7 @@ def cpu_split_threads(n: int) -> int:
     at most :data:`CPU_SPLIT_MAX`, with at least :data:`CPU_SPLIT_MIN` particles each."""
     import os
 
+    from wptrack.core.config import host_cores
     from wptrack.io.decode import decode_threads
 
     env = os.environ.get("WPTRACK_CPU_THREADS", "").strip()

@@ -56,8 +56,7 @@ def jpeg_enabled() -> bool:
 def jpeg_workers() -> int:
     """Threads decoding one Motion-JPEG video's frames: :data:`JPEG_WORKERS_ENV` when set, else one per 4 host
     cores, at most 4 (one on a 2-core machine: the frames are decoded in the reading thread, as before)."""
-    from wptrack.core.config import env_count
-    from wptrack.core.device import host_cores
+    from wptrack.core.config import env_count, host_cores
 
     return env_count(JPEG_WORKERS_ENV, max(1, min(4, host_cores() // 4)))
 

@@ -44,8 +44,7 @@ _END = object()
 def mask_workers(device: str | None = None) -> int:
     """Threads making one video's offline masks: :data:`MASK_WORKERS_ENV` when set, else
     :data:`GPU_MASK_WORKERS` on a CUDA ``device`` of a host with >= 8 cores, else 1."""
-    from wptrack.core.config import env_count
-    from wptrack.core.device import host_cores
+    from wptrack.core.config import env_count, host_cores
 
     gpu_host = device is not None and device.startswith("cuda") and host_cores() >= 8
     return env_count(MASK_WORKERS_ENV, GPU_MASK_WORKERS if gpu_host else 1)

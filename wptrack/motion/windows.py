@@ -39,8 +39,7 @@ def sample_readers() -> int:
     first mask (300 frames grabbed at 1080p, ~2.5 s on an H100 host: a third of a 600-frame run), and every later one
     by a thread beside the frames' own decoding; on a host with cores to spare, several captures read a window's
     samples in contiguous groups at once."""
-    from wptrack.core.config import env_count
-    from wptrack.core.device import host_cores
+    from wptrack.core.config import env_count, host_cores
 
     return env_count(SAMPLE_READERS_ENV, max(1, min(4, host_cores() // 4)))
 
