@@ -65,43 +65,39 @@ def _claim(n: int, locks: str, ready, release, out) -> None:
 @linux
 @pytest.mark.skipif(len(usable_cores()) < 2, reason="needs two cores")
 def test_workers_claim_disjoint_blocks_and_free_them_when_they_end(tmp_path):
-    """Two live workers of one core each get two different cores (every thread bound, the earlier one too); with
-    every block held a third stays unbound; a worker that ends frees its block for the next."""
+    """Live workers of one core each get different cores (every thread bound, one started before the pin too); with
+    every block held one more stays unbound; a killed worker's core is free for the next."""
     cores = usable_cores()
     ctx = mp.get_context("spawn")
     out = ctx.Queue()
     releases = []  # one per worker (a process killed while it waits on an Event shared with others blocks set())
-    n_blocks = len(cores)  # blocks of one core
     procs = []
-    try:
-        blocks = []
-        for _ in range(n_blocks + 1):
-            ready, release = ctx.Event(), ctx.Event()
-            releases.append(release)
-            p = ctx.Process(target=_claim, args=(1, str(tmp_path), ready, release, out))
-            p.start()
-            procs.append(p)
-            assert ready.wait(60)
-            block, process_affinity, thread_affinity = out.get(timeout=10)
-            blocks.append(block)
-            if block:
-                assert process_affinity == thread_affinity == block
-            else:
-                assert process_affinity == cores  # unbound: as it was
-        assert all(len(b) == 1 for b in blocks[:n_blocks]) and blocks[n_blocks] == []
-        assert sorted(b[0] for b in blocks[:n_blocks]) == sorted(cores)
-        # the first worker is killed: its core is free for a new one
-        procs[0].kill()
-        procs[0].join(10)
-        releases[0] = None
+
+    def spawn() -> tuple[list[int], list[int], list[int]]:
+        """A worker claiming one core: (its block, its process's affinity, its early thread's affinity)."""
         ready, release = ctx.Event(), ctx.Event()
         releases.append(release)
         p = ctx.Process(target=_claim, args=(1, str(tmp_path), ready, release, out))
         p.start()
         procs.append(p)
         assert ready.wait(60)
-        block, _, _ = out.get(timeout=10)
-        assert block == blocks[0]
+        return out.get(timeout=10)
+
+    try:
+        blocks = []
+        for _ in range(len(cores) + 1):  # blocks of one core: one worker more than there are
+            block, process_affinity, thread_affinity = spawn()
+            blocks.append(block)
+            if block:
+                assert process_affinity == thread_affinity == block
+            else:
+                assert process_affinity == cores  # unbound: as it was
+        assert all(len(b) == 1 for b in blocks[:-1]) and blocks[-1] == []
+        assert sorted(b[0] for b in blocks[:-1]) == sorted(cores)
+        procs[0].kill()  # the first worker is killed: its core is free for a new one
+        procs[0].join(10)
+        releases[0] = None
+        assert spawn()[0] == blocks[0]
     finally:
         for release in releases:
             if release is not None:
