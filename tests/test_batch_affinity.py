@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from wptrack.batch.affinity import core_blocks, ordered_cores, pin_worker, usable_cores
-from wptrack.core.config import host_cores
+from wptrack.batch.affinity import core_blocks, ordered_cores, pin_worker
+from wptrack.core.config import host_cores, usable_cores
 
 linux = pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="CPU affinity is Linux-only")
 

@@ -5,8 +5,8 @@ run's video decoding threads above all, sized to the cores the worker holds) flo
 A run alone then decodes on the whole host, and with G workers at once the runs crowd the same cores (and the
 hyperthread siblings, caches and memory of one socket) while other cores sit idle: each run slows down
 (BENCHMARKS.md, issue 32: one decode-bound run 1.2-1.4 s alone, 1.6-2.2 s beside three others on a 64-core host). A
-worker bound to a block of ``cpus_per_task`` cores runs as fast alone as beside the others, and the others'
-decoding cannot take its cores.
+worker bound to a block of ``cpus_per_task`` cores should run alone as it does beside the others: their decoding
+cannot take its cores (nor it theirs).
 
 The blocks: the cores this process may use, ordered by socket, then physical core, then hyperthread (Linux's
 ``/sys/devices/system/cpu/cpu*/topology``), cut into ``len(cores) // n`` consecutive blocks of ``n``: a block holds
@@ -32,18 +32,12 @@ import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
+from wptrack.core.config import usable_cores
+
 log = logging.getLogger(__name__)
 
 _HELD: list[int] = []
 """File descriptors of this process's block locks (kept open for the process's life)."""
-
-
-def usable_cores() -> list[int]:
-    """The CPU ids this process may run on (its affinity; ``range(os.cpu_count())`` where the platform has none)."""
-    try:
-        return sorted(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        return list(range(os.cpu_count() or 1))
 
 
 def _topology(cpu: int, root: Path) -> tuple[int, int]:

@@ -128,12 +128,12 @@ def prepare(device: str | None, modules: Sequence[str] = ()) -> dict[str, float]
 def start_run() -> dict[str, Any]:
     """Called as a run starts: the process's state (``worker_runs``, ``worker_age_s``, ``worker_cores``) and the CPU
     clock."""
-    from wptrack.batch.affinity import usable_cores
+    from wptrack.core.config import host_cores
 
     info = {
         "worker_runs": _PROCESS["runs"],
         "worker_age_s": process_age(),
-        "worker_cores": len(usable_cores()),
+        "worker_cores": host_cores(),
         "_cpu0": cpu_seconds(),
     }
     _PROCESS["runs"] += 1

@@ -551,15 +551,20 @@ def describe(cls: type) -> str:
     return "\n".join(rows) + "\n"
 
 
-def host_cores() -> int:
-    """The cores this process may run on: its CPU affinity (a batch worker bound to a block of cores, ``taskset``, a
-    container's cpuset), ``os.cpu_count()`` where the platform has none. Thread pools are sized from it."""
+def usable_cores() -> list[int]:
+    """The CPU ids this process may run on: its CPU affinity (a batch worker bound to a block of cores, ``taskset``,
+    a container's cpuset), ``range(os.cpu_count())`` where the platform has none."""
     import os
 
     try:
-        return max(1, len(os.sched_getaffinity(0)))
+        return sorted(os.sched_getaffinity(0))
     except (AttributeError, OSError):
-        return os.cpu_count() or 1
+        return list(range(os.cpu_count() or 1))
+
+
+def host_cores() -> int:
+    """How many cores this process may run on (:func:`usable_cores`); thread pools are sized from it."""
+    return max(1, len(usable_cores()))
 
 
 def env_count(name: str, default: int) -> int:
