@@ -18,8 +18,9 @@ its successor. Where no block is free (more workers than blocks, fractional core
 
 Off by default (``wptrack batch --pin-cores``): measured on a 2-GPU virtual machine (32 vCPUs, one socket, no
 hyperthreads visible; BENCHMARKS.md, issue 32) it did not keep runs from slowing each other down (colour runs E 0.920
-bound, 0.779 free, in that pair; template runs 0.823 bound, 0.965 free): a VM's vCPUs hide the host's cores, and
-what the runs share there (memory bandwidth, the host's siblings) no binding inside the VM separates.
+bound, 0.779 free, in that pair; template runs 0.823 bound, 0.965 free), nor on a 4-GPU one (64 vCPUs: colour 0.617
+bound, 0.615 free; templates 0.869, 0.836): a VM's vCPUs hide the host's cores, and what the runs share there
+(memory bandwidth, the host's siblings) no binding inside the VM separates.
 """
 
 from __future__ import annotations
