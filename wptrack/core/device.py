@@ -168,15 +168,10 @@ def cpu_split_threads(n: int) -> int:
     at most :data:`CPU_SPLIT_MAX`, with at least :data:`CPU_SPLIT_MIN` particles each."""
     import os
 
-    from wptrack.core.config import host_cores
-    from wptrack.io.decode import decode_threads
+    from wptrack.io.decode import thread_budget
 
     env = os.environ.get("WPTRACK_CPU_THREADS", "").strip()
-    if env.isdigit() and int(env) > 0:
-        cores = int(env)
-    else:
-        cores = host_cores()
-        cores = min(cores, decode_threads() or cores)
+    cores = int(env) if env.isdigit() and int(env) > 0 else thread_budget()
     return max(1, min(cores, CPU_SPLIT_MAX, n // CPU_SPLIT_MIN))
 
 

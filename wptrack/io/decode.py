@@ -82,6 +82,15 @@ def decode_threads() -> int | None:
     return n if n > 0 else None
 
 
+def thread_budget() -> int:
+    """The threads a run's host work may keep busy: the cores this process may use (its CPU affinity), no more than
+    a batch worker holds (:func:`decode_threads`, set by ``wptrack batch``)."""
+    from wptrack.core.config import host_cores
+
+    cores = host_cores()
+    return min(cores, decode_threads() or cores)
+
+
 def decode_workers() -> int:
     """Decoding threads per video: the environment variable ``WPTRACK_DECODE_WORKERS`` (default 1: one thread)."""
     from wptrack.core.config import env_count

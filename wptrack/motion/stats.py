@@ -84,11 +84,9 @@ window's gains and subsample medians: 12 million; a frame's gain: 0.1 million, i
 def host_threads() -> int:
     """Threads for a window build's host statistics: the cores this process may use, at most 8, no more than a
     batch worker holds (``WPTRACK_DECODE_THREADS``). The results do not depend on it."""
-    from wptrack.core.config import host_cores
-    from wptrack.io.decode import decode_threads
+    from wptrack.io.decode import thread_budget
 
-    cores = host_cores()
-    return max(1, min(8, cores, decode_threads() or cores))
+    return max(1, min(8, thread_budget()))
 
 
 def thread_map(fn: Callable, items: list, threads: int | None = None) -> list:
