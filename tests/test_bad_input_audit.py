@@ -5,6 +5,7 @@ are all identical, image folders of different lengths, and the blind-camera warn
 from __future__ import annotations
 
 import logging
+import re
 
 import cv2
 import numpy as np
@@ -162,6 +163,35 @@ def test_camera_motion_watch_tells_a_pan_from_a_fixed_camera(rng):
         CameraMotionWatch(fraction=0.0)
 
 
+def test_camera_motion_watch_tells_a_fast_pan_and_its_shift(rng, caplog):
+    """A pan of 6 % of the width a frame leaves the first frame's view within three samples, where the shift against
+    it reads noise or aliases (the audit: 20 px a frame at 320 wide went unwarned; 15 px a frame was warned as 32 px
+    for 225). The steps between samples add up: warned at frame 15 with their sum; a shake of the same size back and
+    forth is not a pan."""
+    from wptrack.motion.camera_motion import CameraMotionWatch
+
+    for pan in (10.0, -10.0):
+        watch = CameraMotionWatch(name="cam")
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="wptrack.motion.camera_motion"):
+            for i, frame in enumerate(_scene(rng, 16, pan)):  # 150 px: the whole wider view's margin
+                watch.add(i, frame)
+        assert watch.moved_at == 15, (pan, watch.moved_at)
+        assert watch.largest == pytest.approx(150.0, abs=3.0)
+        (message,) = [r.getMessage() for r in caplog.records]
+        said = re.match(
+            r"cam: the view has shifted by about (\d+) px \(\d+ % of its width\) in 15 frames, at frame 15:", message
+        )
+        assert said and abs(int(said.group(1)) - 150) <= 3, message
+    frames = _scene(rng, 40)
+    for t in range(40):  # a shake of 10 px each way, every sample seeing a large step
+        frames[t] = np.roll(frames[t], 10 if (t // 5) % 2 else -10, axis=1)
+    watch = CameraMotionWatch()
+    for i, frame in enumerate(frames):
+        watch.add(i, frame)
+    assert watch.moved_at is None and watch.largest >= 15.0
+
+
 def test_masks_of_a_moving_camera_warn_once(tmp_path, rng, caplog):
     """``wptrack masks`` (and every tracker, through MotionMasks) on a panning camera: one warning naming the video,
     the shift and the frame; none for the same scene from a fixed camera, none for given masks."""
@@ -196,3 +226,24 @@ def test_max_objects_beyond_the_cap_names_it(tmp_path, capsys):
     lines = [ln for ln in err.strip().splitlines() if not ln.startswith("Warp CUDA warning")]
     assert len(lines) == 1 and lines[0] == "wptrack: error: max_objects: expected a positive integer <= 64, got 100000"
     assert not out.exists()
+
+
+def test_a_file_that_is_no_video_gets_one_error_line_without_opencv_warnings(tmp_path):
+    """A video cut to its header (the audit): OpenCV's own ``[ WARN:0@...] global cap.cpp`` line came before
+    wptrack's error; the CLI now sets ``OPENCV_LOG_LEVEL`` to ERROR unless the user set it or asked for -v. Run in a
+    process of its own: OpenCV reads the variable once."""
+    import os
+    import subprocess
+    import sys
+
+    path = tmp_path / "v.avi"
+    write_video(path, [np.full((H, W, 3), 90, np.uint8)] * 5, fps=10)
+    cut = tmp_path / "cut.avi"
+    cut.write_bytes(path.read_bytes()[:100])
+    env = {k: v for k, v in os.environ.items() if not k.startswith("OPENCV_")}
+    argv = [sys.executable, "-m", "wptrack.cli", "masks", "--video", str(cut), "--out", str(tmp_path / "o"), "-q"]
+    done = subprocess.run(argv, capture_output=True, text=True, env=env, timeout=120)
+    assert done.returncode == 2, done.stderr
+    assert "[ WARN" not in done.stderr and "Traceback" not in done.stderr, done.stderr
+    assert f"wptrack: error: cannot open video {cut}" in done.stderr
+    assert not (tmp_path / "o").exists()

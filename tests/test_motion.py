@@ -315,6 +315,28 @@ def test_cli_masks_happy_path(tmp_path, rng, capsys):
     assert info["config"]["method"] == "offline" and info["frames"] == 30 and info["config"]["window"] == 30
 
 
+def test_cli_masks_of_a_truncated_video_say_where_it_ended(tmp_path, rng, capsys):
+    """masks.json records a truncated video as run.json does (``stopped_early``), and its windows list the frames
+    read, not the planned samples past the end (the audit: frames 4-9 listed for a video that ended after 4)."""
+    video = _stand_then_move(rng, frames=30)
+    path = tmp_path / "v.avi"
+    write_video(path, video)
+    data = path.read_bytes()
+    cut = tmp_path / "cut.avi"
+    cut.write_bytes(data[: len(data) // 2])
+    out = tmp_path / "out"
+    assert main(["masks", "--video", str(cut), "--out", str(out), "--device", "cpu", "-q"]) == 0, capsys.readouterr()
+    info = json.loads((out / "masks.json").read_text())
+    read = info["frames"]
+    assert 0 < read < 30 and len(list(open_source(out / "masks.avi"))) == read
+    assert info["stopped_early"]["frame"] == read and info["stopped_early"]["expected"] == 30
+    assert info["windows"] and all(0 <= f < read for w in info["windows"] for f in w)
+    whole = tmp_path / "whole"
+    assert main(["masks", "--video", str(path), "--out", str(whole), "--device", "cpu", "-q"]) == 0
+    info = json.loads((whole / "masks.json").read_text())
+    assert "stopped_early" not in info and max(max(w) for w in info["windows"]) >= read
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [

@@ -66,6 +66,26 @@ def test_flood_guard_flags_jumps_and_holds_the_last_normal_mask(caplog) -> None:
         FloodGuard(fraction=0.0)
 
 
+def test_flood_guard_logs_the_first_floods_then_counts(caplog) -> None:
+    """A camera shaken every other frame (the audit: 20 flood lines for 40 frames): the first ``max_warnings`` floods
+    are logged, then one line says the rest are counted; every flooded frame is still held and counted."""
+    guard = FloodGuard(name="cam0.avi", max_warnings=2)
+    normal = np.zeros((10, 10), np.uint8)
+    normal[:2, :2] = 1
+    shaken = np.zeros((10, 10), np.uint8)
+    shaken[:, :3] = 1
+    with caplog.at_level(logging.WARNING):
+        out = [guard.filter(normal if t % 2 == 0 else shaken) for t in range(20)]
+    assert guard.flooded == list(range(1, 20, 2)) and all(o is not shaken for o in out)
+    lines = [r.getMessage() for r in caplog.records]
+    assert len(lines) == 3, lines
+    assert lines[0].startswith("cam0.avi: frame 1: motion mask flooded (30.0% foreground")
+    assert lines[1].startswith("cam0.avi: frame 3: motion mask flooded (30.0% foreground")
+    assert lines[2].startswith("cam0.avi: frame 5: motion mask flooded again (3 floods so far")
+    with pytest.raises(ConfigError, match="FloodGuard.max_warnings"):
+        FloodGuard(max_warnings=-1)
+
+
 def _shaken_video(tmp_path, rng) -> tuple[str, np.ndarray]:
     """24 frames of a static textured scene with a dark box walking across; frames 10-15 shaken by 3-4 pixels."""
     frames = _textured(rng, 24)

@@ -319,6 +319,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         import os
 
         os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")  # AV_LOG_QUIET; read when OpenCV first opens a video
+        # OpenCV's own "[ WARN:0@...] global cap.cpp:..." lines before wptrack's error about the same file
+        os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")
     level = logging.DEBUG if debug else logging.INFO if args.verbose else logging.WARNING
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     from wptrack.core.device import quiet_warp

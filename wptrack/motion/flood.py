@@ -9,7 +9,9 @@ Objects entering the view change the fraction gradually, over many frames.
 :class:`FloodGuard` flags a frame as flooded when its foreground fraction ``f`` is above ``fraction``, or when it
 jumps above the median ``m`` of the last ``history`` unflooded frames by both ``f - m > jump`` and ``f > ratio * m``.
 A run hands the tracker the last unflooded mask instead of a flooded one (the objects keep their predicted motion,
-nothing is added for the flood, nothing is lost), counts the flooded frames in run.json and logs each flood once.
+nothing is added for the flood, nothing is lost), counts the flooded frames in run.json and logs each flood once, the
+first ``max_warnings`` floods of a video one by one (a camera shaken every other frame floods half of its frames: one
+line each would bury the log), then one line saying that the rest are counted, not logged.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ class FloodGuard:
         ratio: Smallest factor over the recent median that counts as a flood (> 1).
         history: Number of recent unflooded frames whose median is the reference (>= 1).
         name: Source label for the log.
+        max_warnings: Floods logged one by one; after them one line says that the rest are only counted (>= 0).
         flooded: Indices of the flooded frames seen so far.
     """
 
@@ -45,6 +48,7 @@ class FloodGuard:
     ratio: float = 2.0
     history: int = 15
     name: str = "masks"
+    max_warnings: int = 5
     flooded: list[int] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -56,6 +60,9 @@ class FloodGuard:
             raise ConfigError(f"FloodGuard.ratio: expected a factor > 1, got {self.ratio!r}")
         if int(self.history) != self.history or self.history < 1:
             raise ConfigError(f"FloodGuard.history: expected an integer >= 1 (frames), got {self.history!r}")
+        if int(self.max_warnings) != self.max_warnings or self.max_warnings < 0:
+            raise ConfigError(f"FloodGuard.max_warnings: expected an integer >= 0, got {self.max_warnings!r}")
+        self._floods = 0  # floods begun (runs of consecutive flooded frames), this process
         self._recent: deque[float] = deque(maxlen=int(self.history))
         self._good: np.ndarray | None = None
         self._frame = 0
@@ -83,15 +90,25 @@ class FloodGuard:
             self._good = mask
             return mask
         if not self.flooded or self.flooded[-1] != index - 1:
+            self._floods += 1
             ref = f"{np.median(self._recent):.1%}" if self._recent else "none yet"
-            log.warning(
-                "%s: frame %d: motion mask flooded (%.1f%% foreground, recent median %s: camera shake?); "
-                "tracking the last normal mask until it ends",
-                self.name,
-                index,
-                100.0 * f,
-                ref,
-            )
+            if self._floods <= self.max_warnings:
+                log.warning(
+                    "%s: frame %d: motion mask flooded (%.1f%% foreground, recent median %s: camera shake?); "
+                    "tracking the last normal mask until it ends",
+                    self.name,
+                    index,
+                    100.0 * f,
+                    ref,
+                )
+            elif self._floods == self.max_warnings + 1:
+                log.warning(
+                    "%s: frame %d: motion mask flooded again (%d floods so far: a shaking camera?); further floods "
+                    "are held the same way and counted (run.json flooded_frames), not logged",
+                    self.name,
+                    index,
+                    self._floods,
+                )
         self.flooded.append(index)
         return self._good if self._good is not None else np.zeros_like(mask)
 

@@ -128,6 +128,10 @@ def write_masks(
         "code": pipeline_hash(),
         "outputs": ["masks.avi"] + (["probability.avi"] if probability else []),
     }
+    for key in ("stopped_early", "variable_rate"):  # a truncated or variable-rate video, as a tracker's run.json says
+        note = getattr(masks.source, key, None)
+        if note is not None:
+            summary["variable_frame_rate" if key == "variable_rate" else key] = note
     background = first[0] if first else masks.background()
     if background is not None:
         import cv2
@@ -136,7 +140,10 @@ def write_masks(
         if ok:
             atomic_write_bytes(out / "background.png", png.tobytes())
             summary["outputs"].append("background.png")
-        summary["windows"] = [list(w.samples) for w in masks.model.windows]
+        # the frames each window's background was built from (a truncated video's planned samples past its end were
+        # never read)
+        end = frames if summary.get("stopped_early") else None
+        summary["windows"] = [[int(f) for f in w.samples if end is None or f < end] for w in masks.model.windows]
     summary["outputs"].append("masks.json")
     atomic_write_json(out / "masks.json", summary)
     return summary
