@@ -122,7 +122,7 @@ def test_camera_that_does_not_see_the_ground(tmp_path, capsys):
     out = tmp_path / "out"
     rig = _rig(tmp_path, look_up=True)
     code, _, err = _run(["track", "templates", "--rig", rig, "--masks", _masks(tmp_path, 0), "--out", str(out)], capsys)
-    assert code == 2 and "does not see the ground plane" in err
+    assert code == 2 and f"wptrack: error: {rig}: camera 'cam0' does not see the ground plane" in err, err
     assert not out.exists()
 
 

@@ -90,14 +90,24 @@ class Candidates:
         ground, dist = ground_rays(camera, plane, grid)
         return ground[dist <= max_range]
 
-    def __init__(self, camera: Camera, plane: GroundPlane, cam_struct, plane_struct, config: TemplateConfig, device):
+    def __init__(
+        self,
+        camera: Camera,
+        plane: GroundPlane,
+        cam_struct,
+        plane_struct,
+        config: TemplateConfig,
+        device,
+        source: str = "<memory>",
+    ):
         step = int(config.candidate_step_px)
         frac = float(config.candidate_step_width)
         body = 2.0 * float(config.human.dims_mean[1])
         ground = self._grid(camera, plane, step, 0, config.max_range, frac, body)
         if len(ground) == 0:
+            where = "" if source == "<memory>" else f"{source}: "  # the rig file, as the rig's own errors say
             raise RigError(
-                f"camera '{camera.name}' does not see the ground plane (origin {plane.origin.tolist()}, normal "
+                f"{where}camera '{camera.name}' does not see the ground plane (origin {plane.origin.tolist()}, normal "
                 f"{plane.normal.tolist()}) within {config.max_range} m: no image pixel's ray meets it in front of "
                 "the camera; check the rig's pose and its 'ground' entry"
             )

@@ -153,7 +153,7 @@ class TemplateTracker(FrameChain):
         image_bytes = h * (w + 1) * (4 + 4 + 8) + (h + 1) * (w + 1) * 8 + h * w * (1 + 4 + 1)
         self.partition = bool(config.partition)
         check_template_fits(n, r, config.resampling, self.partition, image_bytes, d)
-        self.candidates = Candidates(self.camera, self.plane, self.cam, self.plane_struct, config, d)
+        self.candidates = Candidates(self.camera, self.plane, self.cam, self.plane_struct, config, d, rig.source)
         log.info(
             "template tracker: %d particles x %d slots, %d addition candidates, camera %s %dx%d on %s",
             n,
