@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 
 import numpy as np
@@ -342,3 +343,39 @@ def test_csv_appender_writes_the_one_cell_format(tmp_path):
     w.add([[2, 4, np.float32(1.5), "human"]])
     w.close()
     assert read_tracks(path)["x"][2] == 1.5 and path.read_text().endswith("2,4,1.500000,human\n")
+
+
+@pytest.mark.parametrize(
+    ("value", "cell"),
+    [
+        (0.1234567891, "0.123457"),
+        (np.float32(1.5), "1.500000"),
+        (np.float64(-2.0000004), "-2.000000"),
+        (-0.0, "-0.000000"),
+        (1e20, "100000000000000000000.000000"),
+        (float("nan"), "nan"),
+        (np.float32("nan"), "nan"),
+        (np.float64("inf"), "inf"),
+        (-math.inf, "-inf"),
+        (np.array(2.5), "2.500000"),
+        (np.array(np.float32("-inf")), "-inf"),
+        (7, "7"),
+        (np.int64(-3), "-3"),
+        (True, "1"),
+        (np.bool_(False), "0"),
+        (None, ""),
+        ("human", "human"),
+    ],
+)
+def test_format_cell_each_type(value, cell):
+    """The one cell format of every CSV the runs write (the float fast path included: most cells of a run)."""
+    from wptrack.io.tables import format_cell
+
+    assert format_cell(value) == cell
+
+
+def test_format_cell_refuses_line_breaks():
+    from wptrack.io.tables import format_cell
+
+    with pytest.raises(ValueError, match="line breaks"):
+        format_cell("a\nb")

@@ -335,11 +335,13 @@ class GroundPlane:
         object.__setattr__(self, "origin", _readonly(origin))
         object.__setattr__(self, "normal", _readonly(normal))
         object.__setattr__(self, "x_axis", _readonly(axis / na))
+        # computed once: the trackers map every reported object with it each frame (np.cross costs ~30 us a call)
+        object.__setattr__(self, "_y_axis", _readonly(np.cross(self.normal, self.x_axis)))
 
     @property
     def y_axis(self) -> np.ndarray:
-        """(3,) unit in-plane direction of the ground y coordinate (``normal x x_axis``)."""
-        return np.cross(self.normal, self.x_axis)
+        """(3,) unit in-plane direction of the ground y coordinate (``normal x x_axis``; read-only)."""
+        return self._y_axis
 
     def to_world(self, xy: np.ndarray, height: np.ndarray | float = 0.0) -> np.ndarray:
         """World points of ground coordinates ``xy`` (..., 2) at ``height`` above the plane, metres -> (..., 3)."""

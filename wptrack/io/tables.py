@@ -60,8 +60,15 @@ def truncate_csv_after(path: str | os.PathLike, frame: int) -> int:
     return len(kept) - 1
 
 
+_FLOATS = (float, np.float64, np.float32)
+
+
 def format_cell(value: Any) -> Any:
     """Format one CSV cell: ints as ints, floats with ``%.6f`` (``nan``/``inf`` spelled out), strings as-is."""
+    if type(value) in _FLOATS:  # most cells (every row of every frame): the float branch below, without the tests
+        v = float(value)
+        if math.isfinite(v):
+            return f"{v:.6f}"
     if isinstance(value, np.ndarray) and value.ndim == 0:
         value = value.item()
     if value is None:
