@@ -47,7 +47,7 @@ def _arr(a: np.ndarray, device: str, dtype=wp.uint8) -> wp.array:
     return wp.array(np.ascontiguousarray(a).reshape(-1), dtype=dtype, device=device)
 
 
-def _patch(device, frame, bg, mad, gain, w, params, radius):
+def _patch(device, frame, bg, mad, gain, w, params, radius, gradients=1):
     n = H * W
     luma = wp.zeros(n, dtype=wp.vec3, device=device)
     rows = wp.zeros(n, dtype=kil.rows_vec, device=device)
@@ -57,7 +57,8 @@ def _patch(device, frame, bg, mad, gain, w, params, radius):
               outputs=[luma], device=device)  # fmt: skip
     grads = wp.zeros(n, dtype=wp.vec4, device=device)
     wp.launch(kil.luma_grad_kernel, dim=n, inputs=[luma, W, H], outputs=[grads], device=device)
-    wp.launch(kil.patch_rows_kernel, dim=n, inputs=[luma, grads, W, H, radius], outputs=[rows], device=device)
+    wp.launch(kil.patch_rows_kernel, dim=n, inputs=[luma, grads, W, H, radius, gradients], outputs=[rows],
+              device=device)  # fmt: skip
     wp.launch(kil.patch_kernel, dim=n, inputs=[rows, luma, W, H, radius], outputs=[patch], device=device)
     return luma, patch, rows
 
@@ -84,6 +85,20 @@ def test_luma_and_patch_kernels_match_numpy(device, rng, radius):
     # the darkened, textured background correlates; the object's patches do not
     assert np.median(st_ref[5:15, 60:80, 0]) > 0.9 and np.median(st_ref[5:15, 60:80, 1]) > 0.9
     assert np.median(st_ref[24:30, 13:19, 0]) < 0.5
+
+
+def test_patch_rows_without_gradients_change_only_the_gradient_correlation(device, rng):
+    """Without the gradient sums (the gradient veto off, the default: LightField skips them) every statistic but
+    the gradient correlation is the same bit for bit, and that one is 0."""
+    bg, frame = _scene(rng)
+    mad = rng.integers(0, 6, bg.shape, dtype=np.uint8)
+    p = _params()
+    _, with_grads, _ = _patch(device, frame, bg, mad, (0.9, 1.0, 1.1), 0.0, p, 3, gradients=1)
+    _, without, _ = _patch(device, frame, bg, mad, (0.9, 1.0, 1.1), 0.0, p, 3, gradients=0)
+    a, b = with_grads.numpy(), without.numpy()
+    tol = 0.0 if "cpu" in str(device) else 1e-6  # CUDA may contract the two variants' arithmetic differently
+    np.testing.assert_allclose(b[:, [0, 2, 3, 4, 5]], a[:, [0, 2, 3, 4, 5]], rtol=tol, atol=tol)
+    assert np.all(b[:, 1] == 0.0) and np.abs(a[:, 1]).max() > 0.5
 
 
 def test_tile_gain_smooth_and_field_match_numpy(device, rng):

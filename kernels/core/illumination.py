@@ -113,6 +113,7 @@ def patch_rows_kernel(
     width: int,
     height: int,
     radius: int,
+    gradients: int,
     rows: wp.array(dtype=rows_vec),
 ):
     """First (horizontal) pass of :func:`patch_kernel`: per pixel, the sums over its row neighbours
@@ -122,8 +123,11 @@ def patch_rows_kernel(
     (each sum read afresh: no sliding sums, no float32 cancellation).
 
     Args:
-        luma: ``(H W,)`` :func:`luma_kernel`'s output. grads: ``(H W,)`` :func:`luma_grad_kernel`'s output.
+        luma: ``(H W,)`` :func:`luma_kernel`'s output. grads: ``(H W,)`` :func:`luma_grad_kernel`'s output (read
+            only with ``gradients``).
         width, height: Image size, pixels. radius: Patch radius.
+        gradients: 1: the gradient sums too; 0: they stay 0 (so :func:`patch_kernel`'s gradient correlation is 0):
+            only the gradient veto (``veto_grad > 0``, off by default) reads them, and they are 40 % of the sums.
         rows: ``(H W,)`` output row sums.
     """
     p = wp.tid()
@@ -132,7 +136,6 @@ def patch_rows_kernel(
     acc = rows_vec()
     for xx in range(wp.max(x - radius, 0), wp.min(x + radius + 1, width)):
         v = luma[y * width + xx]
-        g = grads[y * width + xx]
         f = v[0] - 128.0  # centred: smaller float32 sums of squares (variances are differences of them)
         b = v[1] - 128.0
         acc[0] += f
@@ -140,9 +143,11 @@ def patch_rows_kernel(
         acc[2] += f * f
         acc[3] += b * b
         acc[4] += f * b
-        acc[5] += g[0] * g[2] + g[1] * g[3]
-        acc[6] += g[0] * g[0] + g[1] * g[1]
-        acc[7] += g[2] * g[2] + g[3] * g[3]
+        if gradients != 0:
+            g = grads[y * width + xx]
+            acc[5] += g[0] * g[2] + g[1] * g[3]
+            acc[6] += g[0] * g[0] + g[1] * g[1]
+            acc[7] += g[2] * g[2] + g[3] * g[3]
         acc[8] += 1.0
     rows[p] = acc
 

@@ -163,10 +163,12 @@ class LightField:
         p, dev, width, height = self.params, self.device, self.width, self.height
         wp.launch(kil.luma_kernel, dim=self.pixels, inputs=[frame, gain, b0, m0, b1, m1, w, p], outputs=[self._luma],
                   device=dev)  # fmt: skip
-        wp.launch(kil.luma_grad_kernel, dim=self.pixels, inputs=[self._luma, width, height], outputs=[self._grads],
-                  device=dev)  # fmt: skip
+        gradients = int(p.veto_grad > 0)  # only the gradient veto reads the gradient correlation (off by default)
+        if gradients:
+            wp.launch(kil.luma_grad_kernel, dim=self.pixels, inputs=[self._luma, width, height],
+                      outputs=[self._grads], device=dev)  # fmt: skip
         wp.launch(kil.patch_rows_kernel, dim=self.pixels,
-                  inputs=[self._luma, self._grads, width, height, int(self.config.illum_patch)],
+                  inputs=[self._luma, self._grads, width, height, int(self.config.illum_patch), gradients],
                   outputs=[self._rows9], device=dev)  # fmt: skip
 
     def sample_patches(
