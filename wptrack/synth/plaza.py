@@ -83,6 +83,7 @@ from wptrack.synth.plaza_background import (
     CAMERA_POSITION,
     FPS,
     FRAMES,
+    IN_VIEW,
     MIN_IN_IMAGE,
     NOISE_SIGMA,
     plaza_background,
@@ -117,10 +118,11 @@ class _States:
     frames: int
     pos: np.ndarray  # (A, N, 2)
     active: np.ndarray  # (A, N) on its path
-    present: np.ndarray  # (A, N) in the ground truth
+    present: np.ndarray  # (A, N) in view (IN_VIEW of the box holding it): the scene's timing, rules and hints
     heading: np.ndarray  # (A, N)
     speed: np.ndarray  # (A, N)
     phase: np.ndarray  # (A, N)
+    labelled: np.ndarray  # (A, N) in the ground truth (MIN_IN_IMAGE of its labelled box)
 
 
 # ----------------------------------------------------------------------------------------------------- background
@@ -143,7 +145,7 @@ def _image_box(cam: Camera, corners: np.ndarray, pad: int = 2) -> tuple[int, int
 
 
 def image_box_cover(
-    cam: Camera, shape: Person | Car, pos: np.ndarray, heading: np.ndarray
+    cam: Camera, shape: Person | Car, pos: np.ndarray, heading: np.ndarray, labelled: bool = False
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """How much of an object's image bounding box lies inside the image, per frame.
 
@@ -152,12 +154,17 @@ def image_box_cover(
         shape: The object's :class:`Person` or :class:`Car` (its :meth:`box`).
         pos: (N, 2) ground positions, metres.
         heading: (N,) headings, radians.
+        labelled: The box of its ground-truth dimensions (``shape.dims``: a person's body diameter square, as the
+            template tracker's reported box, ``wptrack.trackers.templates.readout``) instead of the box holding the
+            whole person (:meth:`box`, arms swinging out included).
 
     Returns:
         ``(ok, area, inside)``: (N,) bool, all box corners in front of the camera; (N,) area of the image bounding
         box of the 8 box corners and (N,) the part of it inside the image, square pixels.
     """
     half, height = shape.box()
+    if labelled:
+        half = 0.5 * np.asarray(shape.dims, dtype=np.float64)
     c, s = np.cos(heading), np.sin(heading)
     local = _BOX_SIGNS * half[None, :] + np.array([0.0, 0.0, 0.5 * height])
     wx = pos[:, 0, None] + c[:, None] * local[None, :, 0] - s[:, None] * local[None, :, 1]
@@ -305,6 +312,7 @@ class PlazaScene(Scene):
         pos = np.zeros((count, n, 2))
         active = np.zeros((count, n), dtype=bool)
         present = np.zeros((count, n), dtype=bool)
+        labelled = np.zeros((count, n), dtype=bool)
         heading = np.zeros((count, n))
         speed = np.zeros((count, n))
         phase = np.zeros((count, n))
@@ -326,10 +334,13 @@ class PlazaScene(Scene):
             stride = actor.shape.stride(sp)
             ph = 2 * np.pi * np.cumsum(sp * dt / stride) + 1.3 * actor.oid
             pos[a], active[a], heading[a], speed[a], phase[a] = p, act, ang, sp, ph
-            # in the ground truth where >= MIN_IN_IMAGE of the object's image bounding box is inside the image
+            # in view (the scenes' draws, timings and hints) where >= IN_VIEW of the box holding the object is
+            # inside the image; in the ground truth where >= MIN_IN_IMAGE of the box of its labelled dimensions is
             ok, area, inside = image_box_cover(cam, actor.shape, p, ang)
-            present[a] = act & ok & (inside >= MIN_IN_IMAGE * area)
-        self._states = _States(n, pos, active, present, heading, speed, phase)
+            present[a] = act & ok & (inside >= IN_VIEW * area)
+            ok, area, inside = image_box_cover(cam, actor.shape, p, ang, labelled=True)
+            labelled[a] = act & ok & (inside >= MIN_IN_IMAGE * area)
+        self._states = _States(n, pos, active, present, heading, speed, phase, labelled)
         return self._states
 
     def trajectories(self, frames: int) -> dict[int, np.ndarray]:
@@ -338,7 +349,7 @@ class PlazaScene(Scene):
         out = {}
         for a, actor in enumerate(self.actors):
             traj = np.full((frames, 3), np.nan)
-            sel = st.present[a, :frames]
+            sel = st.labelled[a, :frames]
             traj[sel, :2] = st.pos[a, :frames][sel]
             traj[sel, 2] = 0.0
             out[actor.oid] = traj
@@ -362,7 +373,9 @@ class PlazaScene(Scene):
         return sorted({actor.shape.cls for actor in self.actors})
 
     def max_objects(self, frames: int | None = None) -> int:
-        """Largest number of objects in the ground truth at once over ``frames`` (default: the scene's)."""
+        """Largest number of objects in view at once over ``frames`` (default: the scene's): :data:`IN_VIEW` of the
+        box holding each, which the ground truth's :data:`MIN_IN_IMAGE` is stricter than (a tracker holds an object
+        from its first pixels)."""
         n = self.default_frames if frames is None else int(frames)
         return int(self.states(n).present[:, :n].sum(axis=0).max())
 
