@@ -45,12 +45,14 @@ clutter (people) or on the road (cars), and in view long enough (:mod:`wptrack.s
 Ground truth (``groundtruth.csv``): ``frame,id,x,y,z,class,length,width,height,orientation`` with the object's
 ground-contact centre (z = 0), class ``human`` or ``vehicle``, its dimensions in metres (a human's length and width
 are its body diameter: the width over the shoulders and arms) and its heading in the ground plane (radians,
-``atan2(dy, dx)`` of the velocity, world frame). An object is listed on the frames where at least 25 % of its image
-bounding box lies inside the image (it is rendered, and in the masks, whenever it is on its path). ``cam0_mask.avi``
-holds the perfect foreground masks: the visible pixels of the moving objects (shadows excluded). The per-frame
-``visibility`` of scene.json is the visible fraction of the least visible object of the ground truth (hidden by
-clutter or another object; null when there is none). ``max_objects`` counts the objects of the ground truth at once
-over the scene's default length (180 frames at 15 fps).
+``atan2(dy, dx)`` of the velocity, world frame). An object is listed on the frames where at least 90 % of the image
+bounding box of its listed dimensions lies inside the image (``MIN_IN_IMAGE``: nearly whole in view, as real clips'
+annotators label people; until 2026-11-27 25 % of a box holding a person's arms' reach); it is rendered, and in the
+masks, whenever it is on its path. ``cam0_mask.avi`` holds the perfect foreground masks: the visible pixels of the
+moving objects (shadows excluded). The per-frame ``visibility`` of scene.json is the visible fraction of the least
+visible object in view (``IN_VIEW``: 25 % of the box holding it; hidden by clutter or another object; null when there
+is none), and ``max_objects`` counts the objects in view at once over the scene's default length (180 frames at 15
+fps): both as before the ground truth's rule changed, as are the scenes' draws and timings.
 
 Hard conditions, each a switch off by default (objects standing in view at frame 0, people stopping and walking
 on, a low sun with hard shadows, a global illumination change, stronger sensor noise, JPEG compression, a car as
