@@ -117,7 +117,8 @@ class LightField:
         n_tiles = p.tiles_x * p.tiles_y
         # per-pixel luminance and patch statistics, per-tile gains and the smoothed field
         self._luma = wp.zeros(n, dtype=wp.vec3, device=device)
-        self._grads = wp.zeros(n, dtype=wp.vec4, device=device)
+        # the luminance gradients: read by the gradient veto only (off by default), a stand-in element otherwise
+        self._grads = wp.zeros(n if p.veto_grad > 0 else 1, dtype=wp.vec4, device=device)
         self._rows9 = wp.zeros(n, dtype=kil.rows_vec, device=device)
         self.rows, self.luma = self._rows9, self._luma
         self.patch = wp.zeros(n, dtype=kbg.patch_vec, device=device)

@@ -128,10 +128,11 @@ def write_masks(
         "code": pipeline_hash(),
         "outputs": ["masks.avi"] + (["probability.avi"] if probability else []),
     }
-    for key in ("stopped_early", "variable_rate"):  # a truncated or variable-rate video, as a tracker's run.json says
-        note = getattr(masks.source, key, None)
+    # a truncated or variable-rate video, under the keys a tracker's run.json uses
+    for attr, key in (("stopped_early", "stopped_early"), ("variable_rate", "variable_frame_rate")):
+        note = getattr(masks.source, attr, None)
         if note is not None:
-            summary["variable_frame_rate" if key == "variable_rate" else key] = note
+            summary[key] = note
     background = first[0] if first else masks.background()
     if background is not None:
         import cv2
