@@ -237,3 +237,26 @@ def test_image_folders_need_a_frame_rate(scene, tmp_path, capsys):
     video = tmp_path / "video"
     assert main([*_args(scene, video), "--max-frames", "5"]) == 0
     assert json.loads((video / "run.json").read_text())["config"]["tracker"]["fps"] == 25.0  # the videos' own
+
+
+def test_saved_masks_are_the_masks_used_as_1bit_png_frames(scene, tmp_path):
+    """--save-masks writes each camera's masks as an AVI of 1-bit PNG images (wptrack.io.avi), frame for frame the
+    given masks (0/255)."""
+    import cv2
+
+    from wptrack.io.frames import open_source
+
+    out = tmp_path / "run"
+    assert main([*_args(scene, out), "--occupancy-every", "0", "--save-masks"]) == 0
+    names = Rig.load(scene / "rig.yaml").names
+    for k, name in enumerate(names):
+        path = out / f"masks_{name}.avi"
+        cap = cv2.VideoCapture(str(path))
+        code = int(cap.get(cv2.CAP_PROP_FOURCC))
+        cap.release()
+        assert "".join(chr((code >> (8 * i)) & 0xFF) for i in range(4)) == "MPNG"
+        saved = [np.asarray(f)[..., 0] for f in open_source(str(path))]
+        given = [np.asarray(f)[..., 0] for f in open_source(str(scene / f"mask{k}.avi"))]
+        assert len(saved) == len(given) == 60 and sum(int((g > 127).sum()) for g in given) > 1000
+        for s, g in zip(saved, given, strict=True):
+            np.testing.assert_array_equal(s, np.where(g > 127, 255, 0))

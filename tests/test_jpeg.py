@@ -103,3 +103,57 @@ def test_threads_keep_a_bounded_number_of_frames_in_flight(tmp_path, rng, monkey
     assert not [t.name for t in threading.enumerate() if t.name.startswith("wptrack-jpeg") and t.name not in before]
     for a, b in zip(consumed, one[:10], strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("kind", ["bilevel", "grey", "bgr"])
+def test_png_videos_are_read_as_packets_exactly(tmp_path, rng, monkeypatch, kind):
+    """wptrack's own PNG videos (masks.avi: wptrack.io.avi) are read as packets too: the frames exact (lossless), in
+    order through the decoding threads, seeks included; FFmpeg's decoder gives the same frames."""
+    from wptrack.io.avi import PngAviWriter
+
+    h, w = 36, 50
+    if kind == "bgr":
+        frames = rng.integers(0, 256, (9, h, w, 3), dtype=np.uint8)
+    else:
+        frames = rng.integers(0, 256, (9, h, w), dtype=np.uint8)
+        if kind == "bilevel":
+            frames = np.where(frames > 200, 255, 0).astype(np.uint8)
+    path = tmp_path / "m.avi"
+    with PngAviWriter(path, 25.0, (w, h), bilevel=kind == "bilevel", workers=2) as writer:
+        for f in frames:
+            writer.write(f)
+    expect = frames if kind == "bgr" else np.repeat(frames[..., None], 3, axis=3)
+    monkeypatch.setenv(jpeg.JPEG_WORKERS_ENV, "3")  # several decoding threads: frames still in order
+    src = open_source(path)
+    assert src.jpeg and len(src) == 9
+    np.testing.assert_array_equal(np.stack(list(src)), expect)
+    from wptrack.io.frames import VideoReader
+
+    reader = VideoReader(src, seek_gap=1)  # random access (a seek to each frame)
+    for k in (6, 2, 8):
+        np.testing.assert_array_equal(reader.read(k), expect[k])
+    reader.close()
+    monkeypatch.setenv(jpeg.JPEG_DECODE_ENV, "0")
+    ffmpeg = open_source(path)
+    assert not ffmpeg.jpeg
+    np.testing.assert_array_equal(np.stack(list(ffmpeg)), expect)
+
+
+def test_png_packets_decode_to_bgr_whatever_their_channels(rng):
+    """decode_packet gives (H, W, 3) BGR for 1-bit, 8-bit grey, BGR and BGRA PNG images alike (and JPEG as before)."""
+    grey = rng.integers(0, 256, (7, 11), dtype=np.uint8)
+    bgr = rng.integers(0, 256, (7, 11, 3), dtype=np.uint8)
+    bgra = np.concatenate([bgr, rng.integers(0, 256, (7, 11, 1), dtype=np.uint8)], axis=2)
+    mask = np.where(grey > 100, 255, 0).astype(np.uint8)
+    cases = [
+        (cv2.imencode(".png", mask, [cv2.IMWRITE_PNG_BILEVEL, 1])[1], np.repeat(mask[..., None], 3, axis=2)),
+        (cv2.imencode(".png", grey)[1], np.repeat(grey[..., None], 3, axis=2)),
+        (cv2.imencode(".png", bgr)[1], bgr),
+        (cv2.imencode(".png", bgra)[1], bgr),
+    ]
+    for packet, expect in cases:
+        got = jpeg.decode_packet(packet)
+        assert got.shape == (7, 11, 3) and got.dtype == np.uint8
+        np.testing.assert_array_equal(got, expect)
+    jpg = cv2.imencode(".jpg", bgr)[1]
+    np.testing.assert_array_equal(jpeg.decode_packet(jpg), cv2.imdecode(jpg, cv2.IMREAD_COLOR))

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from wptrack.io.jpeg import JPEG_CODECS, JpegCapture, jpeg_enabled, jpeg_frames, jpeg_workers, open_raw
+from wptrack.io.jpeg import PACKET_CODECS, JpegCapture, jpeg_enabled, jpeg_frames, jpeg_workers, open_raw
 from wptrack.io.prefetch import put_until
 
 log = logging.getLogger(__name__)
@@ -107,15 +107,16 @@ def fourcc(cap: Any) -> str:
 
 
 def is_jpeg_video(path: str) -> bool:
-    """``path`` is a Motion-JPEG video whose first packet ``cv2.imdecode`` reads, and :func:`jpeg_enabled`: read it
-    as a :class:`JpegCapture` (else with FFmpeg's decoder, as any other video)."""
+    """``path`` is a Motion-JPEG video (or a video of PNG images, :data:`wptrack.io.jpeg.PNG_CODECS`: wptrack's masks)
+    whose first packet ``cv2.imdecode`` reads, and :func:`jpeg_enabled`: read it as a :class:`JpegCapture` (else with
+    FFmpeg's decoder, as any other video)."""
     import cv2
 
     if not jpeg_enabled():
         return False
     cap = open_raw(path)
     try:
-        if not cap.isOpened() or fourcc(cap).upper() not in JPEG_CODECS or cap.get(cv2.CAP_PROP_FORMAT) != -1:
+        if not cap.isOpened() or fourcc(cap).upper() not in PACKET_CODECS or cap.get(cv2.CAP_PROP_FORMAT) != -1:
             return False
         ok, frame = JpegCapture(cap).read()
     except cv2.error:
@@ -123,7 +124,7 @@ def is_jpeg_video(path: str) -> bool:
     finally:
         cap.release()
     if not ok or frame is None:
-        log.debug("%s: its JPEG packets do not decode alone; read with FFmpeg's decoder", path)
+        log.debug("%s: its packets do not decode alone; read with FFmpeg's decoder", path)
         return False
     return True
 

@@ -18,6 +18,9 @@ a video in wptrack opens it through :meth:`wptrack.io.frames.VideoSource._open`,
 throughout (the background model's samples and the frames it is compared with). ``WPTRACK_JPEG_DECODE=0`` keeps
 FFmpeg's decoder (and its per-frame decoding of skipped frames).
 
+The masks wptrack writes (``masks.avi``: an AVI of PNG images, :mod:`wptrack.io.avi`) are read the same way: their
+packets are PNG images, which ``cv2.imdecode`` decodes exactly (lossless) and several threads decode at once.
+
 A video whose first packet ``cv2.imdecode`` cannot read (e.g. an AVI1 stream without Huffman tables) is read by
 FFmpeg as any other video.
 """
@@ -39,6 +42,14 @@ log = logging.getLogger(__name__)
 
 JPEG_CODECS = frozenset({"MJPG", "JPEG"})
 """FOURCCs (upper case) of videos whose packets are baseline JPEG images that ``cv2.imdecode`` reads."""
+
+PNG_CODECS = frozenset({"MPNG", "PNG ", "PNG1"})
+"""FOURCCs (upper case) of videos whose packets are PNG images (wptrack's own masks: :mod:`wptrack.io.avi`)."""
+
+PACKET_CODECS = JPEG_CODECS | PNG_CODECS
+"""FOURCCs of the videos read as packets decoded by ``cv2.imdecode`` (:class:`JpegCapture`)."""
+
+_PNG_SIGNATURE = b"\x89PNG"
 
 JPEG_DECODE_ENV = "WPTRACK_JPEG_DECODE"
 """Environment variable: ``0`` reads Motion-JPEG videos with FFmpeg's decoder like any other (default: JPEG
@@ -62,12 +73,25 @@ def jpeg_workers() -> int:
 
 
 def decode_packet(packet: np.ndarray | None) -> np.ndarray | None:
-    """One JPEG packet (a uint8 array of its bytes) as an (H, W, 3) uint8 BGR image; None when it is not one."""
+    """One JPEG or PNG packet (a uint8 array of its bytes) as an (H, W, 3) uint8 BGR image; None when it is not one.
+
+    A PNG packet (a mask of :mod:`wptrack.io.avi`: 1-bit or 8-bit grey) is decoded as it is stored and its grey
+    channel repeated (half the time of ``IMREAD_COLOR``'s conversion inside the decoder, the same pixels)."""
     import cv2
 
     if packet is None or packet.size == 0:
         return None
-    return cv2.imdecode(packet.reshape(-1), cv2.IMREAD_COLOR)
+    data = packet.reshape(-1)
+    if bytes(data[:4]) != _PNG_SIGNATURE:
+        return cv2.imdecode(data, cv2.IMREAD_COLOR)
+    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    if image is None or image.dtype != np.uint8:  # 16-bit PNG: let OpenCV convert it as a colour image
+        return None if image is None else cv2.imdecode(data, cv2.IMREAD_COLOR)
+    if image.ndim == 2:
+        return cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+    if image.shape[2] == 4:
+        return cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
+    return image
 
 
 class JpegCapture:

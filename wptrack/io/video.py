@@ -1,7 +1,7 @@
-"""Writing videos: :class:`VideoWriter` (lossless FFV1 for masks, MJPG/MP4 by suffix; written to a temporary file and
-renamed into place when closed; one grey channel for masks), :class:`BackgroundWriter` (the encoding in a thread of
-its own, behind a bounded queue), :func:`continue_video` (a resumed run goes on writing one file) and
-:func:`write_video`."""
+"""Writing videos: :class:`VideoWriter` (lossless FFV1, MJPG/MP4 by suffix, or an AVI of PNG images encoded by several
+threads for masks (:mod:`wptrack.io.avi`); written to a temporary file and renamed into place when closed; one grey
+channel for masks), :class:`BackgroundWriter` (the encoding in a thread of its own, behind a bounded queue),
+:func:`continue_video` (a resumed run goes on writing one file) and :func:`write_video`."""
 
 from __future__ import annotations
 
@@ -28,15 +28,22 @@ VIDEO_CODECS: dict[str, tuple[str, ...]] = {
     ".mov": ("mp4v", "MJPG"),
 }
 
+PNG_CODECS = frozenset({"PNG", "MPNG"})
+"""Values of :class:`VideoWriter`'s ``codec`` that select the AVI of PNG images (:class:`wptrack.io.avi.PngAviWriter`,
+FOURCC ``MPNG``): lossless, encoded by several threads (a 1920x1080 mask: ~3 ms a thread instead of FFV1's 19 ms in
+one)."""
+
 
 class VideoWriter:
     """Write frames to a video file, atomically, with a lossless codec where possible.
 
     The codec is chosen by extension (:data:`VIDEO_CODECS`): ``.avi`` tries FFV1 (lossless) then MJPG;
-    ``.mkv`` FFV1, MJPG, mp4v; ``.mp4`` mp4v then avc1; ``.mov`` mp4v then MJPG. Frames are written to a hidden
-    temporary file in the same folder, renamed to ``path`` by :meth:`close`; leaving the ``with`` block by an
-    exception (including Ctrl-C) deletes the temporary file, so no broken video is left behind. If no frame
-    was written, no file is created.
+    ``.mkv`` FFV1, MJPG, mp4v; ``.mp4`` mp4v then avc1; ``.mov`` mp4v then MJPG. ``codec="PNG"`` (``.avi`` only)
+    writes PNG images instead, encoded by a pool of threads (:class:`wptrack.io.avi.PngAviWriter`, FOURCC ``MPNG``;
+    lossless, read by OpenCV as any AVI): the masks' writer, where FFV1's one encoding thread was the bottleneck.
+    Frames are written to a hidden temporary file in the same folder, renamed to ``path`` by :meth:`close`; leaving
+    the ``with`` block by an exception (including Ctrl-C) deletes the temporary file, so no broken video is left
+    behind. If no frame was written, no file is created.
 
     Args:
         path: Output video path.
@@ -45,23 +52,43 @@ class VideoWriter:
         grey: Write one grey channel (``(H, W)`` frames; a BGR frame is converted): for masks, a third of the
             encoding work of BGR with FFV1 (1440x1080 mask: 8 instead of 30 ms of CPU per frame on the CI machine);
             readers get the grey values in all three channels back.
+        codec: ``None``: by extension (above); ``"PNG"`` (or ``"MPNG"``): an AVI of PNG images (:data:`PNG_CODECS`).
+        bilevel: With ``codec="PNG"`` and ``grey``: 1-bit PNG images, for masks whose values are 0 and 255 only (the
+            caller's contract: a frame with other values makes the writer fail, see
+            :class:`wptrack.io.avi.PngAviWriter`); read back as 0 and 255.
 
     Attributes:
-        codec: The FOURCC in use (``None`` until the writer is opened).
+        codec: The FOURCC in use (``None`` until the writer is opened; ``"MPNG"`` with ``codec="PNG"``).
         frames_written: Number of frames written so far.
 
     Raises:
+        ConfigError: An unknown ``codec``, ``"PNG"`` for another extension than ``.avi``, or ``bilevel`` without
+            ``codec="PNG"`` and ``grey``.
         OutputError: Unsupported extension, missing output folder, or no codec could be opened.
     """
 
     def __init__(
-        self, path: str | os.PathLike, fps: float = 25.0, size: tuple[int, int] | None = None, grey: bool = False
+        self,
+        path: str | os.PathLike,
+        fps: float = 25.0,
+        size: tuple[int, int] | None = None,
+        grey: bool = False,
+        codec: str | None = None,
+        bilevel: bool = False,
     ) -> None:
         self.path = Path(path)
         self.grey = bool(grey)
         ext = self.path.suffix.lower()
         if ext not in VIDEO_CODECS:
             raise OutputError(f"cannot write video {self.path}: unsupported extension (use {', '.join(VIDEO_CODECS)})")
+        self.png = codec is not None and codec.upper() in PNG_CODECS
+        if codec is not None and not self.png:
+            raise ConfigError(f"video codec must be None or 'PNG', got {codec!r}")
+        if self.png and ext != ".avi":
+            raise ConfigError(f"cannot write video {self.path} with PNG images: only to an .avi file")
+        self.bilevel = bool(bilevel)
+        if self.bilevel and not (self.png and self.grey):
+            raise ConfigError(f"video {self.path}: bilevel frames need codec='PNG' and grey=True")
         if not fps or fps <= 0:
             raise ConfigError(f"video fps must be > 0, got {fps}")
         if not self.path.parent.is_dir():
@@ -81,6 +108,13 @@ class VideoWriter:
         import cv2
 
         assert self.size is not None
+        if self.png:
+            from wptrack.io.avi import PNG_FOURCC, PngAviWriter
+
+            self._writer = PngAviWriter(self._tmp, self.fps, self.size, bilevel=self.bilevel)
+            self.codec = PNG_FOURCC
+            log.debug("writing %s with PNG images (%dx%d @ %g fps)", self.path, *self.size, self.fps)
+            return
         tried = []
         for fourcc in VIDEO_CODECS[self.path.suffix.lower()]:
             writer = cv2.VideoWriter(
@@ -120,6 +154,22 @@ class VideoWriter:
         self._writer.write(np.ascontiguousarray(frame))
         self.frames_written += 1
 
+    def flush(self) -> None:
+        """Have every frame written so far encoded (the PNG writer's frames in flight; OpenCV's writers encode as
+        they go). An error encoding a frame is raised here."""
+        if self.png and self._writer is not None and not self._closed:
+            self._writer.flush()
+
+    def _release(self) -> None:
+        """Finish the encoder's file (the PNG writer: encode the frames in flight, write the index; an error encoding
+        a frame is raised here)."""
+        if self._writer is None:
+            return
+        if self.png:
+            self._writer.close()
+        else:
+            self._writer.release()
+
     def _remove_tmp(self) -> None:
         discard(self._tmp)
 
@@ -132,8 +182,11 @@ class VideoWriter:
         if self._closed:
             return self.path if self.path.exists() and self.frames_written else None
         self._closed = True
-        if self._writer is not None:
-            self._writer.release()
+        try:
+            self._release()
+        except BaseException:
+            self._remove_tmp()
+            raise
         if self.frames_written == 0:
             self._remove_tmp()
             log.warning("no frames written to %s; no video created", self.path)
@@ -148,7 +201,10 @@ class VideoWriter:
             return
         self._closed = True
         if self._writer is not None:
-            self._writer.release()
+            if self.png:
+                self._writer.abort()
+            else:
+                self._writer.release()
         self._remove_tmp()
 
     def __enter__(self) -> VideoWriter:
@@ -267,10 +323,18 @@ class BackgroundWriter:
             timeline.record(timeline.WAIT_PREFIX + self.stage, time.perf_counter() - t0)
 
     def flush(self) -> None:
-        """Wait until every queued frame is encoded."""
+        """Wait until every queued frame is encoded (the writer's own frames in flight too: its ``flush``, called
+        here while the writer thread waits for the next frame)."""
         if not self._closed:
             self._queue.join()
         self._raise()
+        flush = getattr(self.writer, "flush", None)
+        if flush is not None and not self._closed and not self._failed:
+            try:
+                flush()
+            except BaseException:
+                self._failed = True  # close() deletes the file
+                raise
 
     def _stop(self) -> None:
         self._closed = True
@@ -308,11 +372,18 @@ class BackgroundWriter:
             self.abort()
 
 
-def continue_video(path: str | os.PathLike, keep: int, fps: float = 25.0, grey: bool = False) -> VideoWriter:
+def continue_video(
+    path: str | os.PathLike,
+    keep: int,
+    fps: float = 25.0,
+    grey: bool = False,
+    codec: str | None = None,
+    bilevel: bool = False,
+) -> VideoWriter:
     """A :class:`VideoWriter` for ``path`` that starts with the first ``keep`` frames of the video already there, for
     a resumed run: it goes on writing one file, as an uninterrupted run does, and the old file is replaced only
     when the new one is closed (atomic, see :class:`VideoWriter`). The frames are decoded and encoded again
-    (exact with the lossless FFV1 codec).
+    (exact with the lossless codecs: FFV1, PNG).
 
     When ``path`` holds fewer than ``keep`` frames (missing, or a run killed before it closed the video), the
     missing frames are written black (with a warning), so frame ``i`` of the video stays frame ``i`` of the run.
@@ -322,8 +393,12 @@ def continue_video(path: str | os.PathLike, keep: int, fps: float = 25.0, grey: 
         keep: Frames of the existing video to copy first (the frames before the resume point).
         fps: Frames per second.
         grey: One grey channel (:class:`VideoWriter`).
+        codec: ``None`` (by extension) or ``"PNG"`` (:class:`VideoWriter`): the new file's codec, whatever the old
+            one's.
+        bilevel: 1-bit PNG images, for 0/255 masks (:class:`VideoWriter`); the old frames are taken as masks (grey
+            values above 127 written 255, the others 0: exact for the 0/255 frames of a lossless masks video).
     """
-    writer = VideoWriter(path, fps=fps, grey=grey)
+    writer = VideoWriter(path, fps=fps, grey=grey, codec=codec, bilevel=bilevel)
     copied = 0
     target = Path(path)
     if keep > 0 and target.exists():
@@ -335,6 +410,8 @@ def continue_video(path: str | os.PathLike, keep: int, fps: float = 25.0, grey: 
                 ok, frame = cap.read()
                 if not ok:
                     break
+                if bilevel:  # 0/255 whatever the old codec (an MJPG fallback's masks are not exactly 0/255)
+                    frame = cv2.threshold(_to_grey(frame), 127, 255, cv2.THRESH_BINARY)[1]
                 writer.write(frame)
                 copied += 1
         finally:

@@ -13,7 +13,7 @@ Outputs::
                            them with ``wptrack.io.chunklog.read_chunks``
     out_dir/occupancy.npz  every ``occupancy_every`` frames, each person's occupancy pdf on a voxel grid (float16,
                            1 / m^3) with its origin and voxel edge (Figs. 6 and 8)
-    out_dir/masks_camK.avi the motion masks used (only with ``save_masks``)
+    out_dir/masks_camK.avi the motion masks used (only with ``save_masks``; 0/255 grey frames as 1-bit PNG images)
     out_dir/run.json       configuration, inputs, device, versions, timings, summary
 
 When the run completes, ``tracks.csv``'s positions are smoothed over time (``PeopleConfig.smooth_seconds``).
@@ -232,7 +232,10 @@ class PeopleRun(TrackerRun):
             self._load_npz_logs(out_dir, resume_after)
         if self._save_masks:  # a resumed run rewrites them: the frames up to the resume point, then the new ones
             keep = 0 if resume_after is None else resume_after + 1
-            self._mask_writers = [continue_video(out_dir / f"masks_{n}.avi", keep, fps=self._fps) for n in self._names]
+            self._mask_writers = [
+                continue_video(out_dir / f"masks_{n}.avi", keep, fps=self._fps, grey=True, codec="PNG", bilevel=True)
+                for n in self._names
+            ]
 
     def step(self, item: Any) -> Any:
         images, *masks = item
@@ -258,7 +261,7 @@ class PeopleRun(TrackerRun):
         if grids:
             self._occupancy.add(est.frame, grids)
         for writer, m in zip(self._mask_writers, self._frame_masks, strict=False):
-            writer.write(np.repeat(((np.asarray(m) != 0) * 255).astype(np.uint8)[..., None], 3, axis=2))
+            writer.write((np.asarray(m) != 0).astype(np.uint8) * np.uint8(255))  # 1-bit PNG images, encoded in threads
         if est.frame % 100 == 99:
             self.flush()
 

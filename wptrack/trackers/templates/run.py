@@ -14,7 +14,7 @@ Outputs (all written incrementally or atomically, so an interrupted run leaves v
     out_dir/best.csv       the same columns for the objects of the best particle (its whole scene hypothesis)
     out_dir/virtual.avi    the best particle's virtual scene per frame (paper Fig. 5), one colour per object id
                            (by default only for frames up to VIRTUAL_AUTO_PIXELS; --virtual / --no-virtual decide)
-    out_dir/masks.avi      the motion masks used (only with save_masks; one grey channel, 0/255)
+    out_dir/masks.avi      the motion masks used (only with save_masks; 0/255 grey frames as 1-bit PNG images)
     out_dir/backgrounds/   offline masks: the background of each window used, for the report (BackgroundSaver)
     out_dir/run.json       configuration, inputs, device, versions, timings, summary
 """
@@ -315,7 +315,8 @@ class TemplateRun(TrackerRun):
             )
         if self._save_masks:
             self._mwriter = BackgroundWriter(
-                continue_video(out_dir / "masks.avi", keep, fps=self._fps, grey=True), stage="write_masks"
+                continue_video(out_dir / "masks.avi", keep, fps=self._fps, grey=True, codec="PNG", bilevel=True),
+                stage="write_masks",
             )
         model = getattr(self._stream, "model", None)
         if model is not None:  # offline masks: keep each background window for the report's Fig. 5 panels
