@@ -80,6 +80,41 @@ def test_median_mad_kernel_matches_numpy(device, rng, k):
         np.testing.assert_array_equal(ref_median, np.median(stack, axis=0).astype(np.uint8))
 
 
+def test_gather_columns_kernel_matches_numpy(device, rng):
+    """A window's subsample gathered on the device is NumPy's fancy indexing of the stack's rows."""
+    stack = rng.integers(0, 256, (7, 3 * 900), dtype=np.uint8)
+    columns = np.ascontiguousarray(rng.permutation(stack.shape[1])[:500].astype(np.int32))
+    out = wp.full((7, 500), 3, dtype=wp.uint8, device=device)
+    wp.launch(
+        kbg.gather_columns_kernel,
+        dim=out.shape,
+        inputs=[wp.array(stack, dtype=wp.uint8, device=device), wp.array(columns, dtype=wp.int32, device=device)],
+        outputs=[out],
+        device=device,
+    )
+    np.testing.assert_array_equal(out.numpy(), stack[:, columns])
+
+
+def test_window_build_reads_the_same_samples_on_every_device(device, rng):
+    """What a build's host statistics read of its compensated samples (the neighbourhood scale's samples and the
+    subsample's channel values; on CUDA gathered and downloaded alone) is the stack's rows and columns."""
+    from wptrack.io.frames import ArraySource
+    from wptrack.motion.background import OfflineBackground
+
+    frames = _noisy(rng, _texture(rng), 30)
+    model = OfflineBackground(ArraySource(frames), MaskConfig(method="offline", window=30, samples=9), device)
+    host = rng.integers(0, 256, (9, 3 * H * W), dtype=np.uint8)
+    picks = [0, 4, 8]
+    got, sub = model._compensated_samples(wp.array(host, dtype=wp.uint8, device=device), picks)
+    assert [r for r, f in enumerate(got) if f is not None] == picks
+    for r in picks:
+        np.testing.assert_array_equal(got[r].reshape(-1), host[r])
+    channels = model._sub_channels
+    assert sub.shape == (9, *channels.shape)
+    np.testing.assert_array_equal(sub, host[:, channels.reshape(-1)].reshape(9, *channels.shape))
+    model.close()
+
+
 @pytest.mark.parametrize(
     ("shadow", "gain", "low", "cap", "hi", "edge_hi"),
     [

@@ -547,6 +547,24 @@ MOVING_WEIGHT = wp.constant(0.125)
 
 
 @wp.kernel
+def gather_columns_kernel(
+    stack: wp.array2d(dtype=wp.uint8),
+    columns: wp.array(dtype=wp.int32),
+    out: wp.array2d(dtype=wp.uint8),
+):
+    """``out[r, j] = stack[r, columns[j]]``: the channel values of a pixel subsample of each of a window's samples
+    (the host statistics' input: a few MB to download instead of the whole ``(K, 3 H W)`` stack). Launched with
+    ``dim=(K, J)``.
+
+    Args:
+        stack: ``(K, 3 P)`` sampled frames. columns: ``(J,)`` flat channel-value indices into a row of ``stack``.
+        out: ``(K, J)`` output.
+    """
+    r, j = wp.tid()
+    out[r, j] = stack[r, columns[j]]
+
+
+@wp.kernel
 def sample_change_kernel(
     stack: wp.array2d(dtype=wp.uint8),
     gains: wp.array(dtype=wp.vec3),

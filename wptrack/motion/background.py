@@ -94,6 +94,7 @@ from wptrack.motion.stats import (
     channel_gains,
     median_last,
     motion_radius,
+    neighbourhood_picks,
     neighbourhood_scale,
     sample_gains_channels,
     shadow_ratio,
@@ -226,6 +227,11 @@ class OfflineBackground:
         self._sub_pixels = (
             wp.array(pixels.astype(np.int32), dtype=wp.int32, device=device) if self.light.textured_votes else None
         )
+        # CUDA: the subsample's channel values gathered on the device (a build downloads those, not its whole stack)
+        self._sub_columns = (
+            None if on_cpu else wp.array(self._sub_channels.reshape(-1).astype(np.int32), dtype=wp.int32, device=device)
+        )
+        self._sub_stacks: dict[int, Any] = {}  # (K, 3 P') uint8 device buffers by window size
 
     @property
     def _sampler(self) -> _Sampler:
@@ -320,13 +326,18 @@ class OfflineBackground:
     def _build_ahead(self, i: int, read: Future) -> None:
         """The build worker's task: build window ``i`` from its ``read`` (the reader's; this model is the share's
         builder, its device work inside the device guard's shared section as the mask threads' is), then release the
-        models waiting for it. The next window's read starts when this build starts."""
+        models waiting for it. The next window's read starts when this build starts. A build of window ``i - 1``
+        still in progress (a mask thread's, at the start of a run) is waited for first."""
         share = self._share
         with share.lock:
             if share.pending is not None and share.pending[0] == i:
                 share.pending = None  # taken by this task: the build's prefetch may submit the next window
         try:
             got = read.result()
+            with share.lock:
+                before = share.building.get(i - 1)
+            if before is not None:  # the window before it first: at the start of a run its build is the start-up
+                before.wait()  # (the frames wait for it), and two builds at once slowed it down (issue 27)
             with share.guard.shared():
                 self._build(i, prefetch=True, got=got)
         except BaseException as e:  # noqa: BLE001 - raised by the models that wait for the window
@@ -443,11 +454,8 @@ class OfflineBackground:
             self._median_mad(stack, ones, median, mad, SCALE_STEP if c.mode_band > 0 else 1)
             if c.mode_band > 0:
                 self._mode(i, stack, ones, mad, median)
-            host = download(stack)
+            frames, sub = self._compensated_samples(stack, neighbourhood_picks(k) if c.neighbourhood > 0 else [])
             with self._host_part():
-                frames = [host[r].reshape(self.source.height, self.source.width, 3) for r in range(k)]
-                sub = host[:, self._sub_channels.reshape(-1)].reshape(k, *self._sub_channels.shape)
-                sub = np.ascontiguousarray(sub)
                 gains = np.ones((k, 3), dtype=np.float32)
                 bg_sub = median_last(np.moveaxis(sub, 0, -1).astype(np.float64))
                 self._bg_sub[i], self._bg_gain[i] = bg_sub, np.ascontiguousarray(bg_sub[:, :: self._gain_step])
@@ -458,29 +466,28 @@ class OfflineBackground:
             median_host = download(median) if c.neighbourhood > 0 else None
             with self._host_part():
                 self._scale[i] = spread_scale(mad_host)
-            if c.neighbourhood > 0:
+            nb_scale: Future | None = None
+            if c.neighbourhood > 0:  # host work only: in a thread of its own, beside the shadow votes' device work
                 shape = (self.source.height, self.source.width, 3)
+                pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wptrack-nbscale")
+                nb_scale = pool.submit(
+                    neighbourhood_scale,
+                    [None if f is None else f.reshape(shape) for f in frames], gains, median_host.reshape(shape),
+                    mad_host.reshape(shape), c.neighbourhood, c.noise_floor,
+                )  # fmt: skip
+                pool.shutdown(wait=False)
+            try:
+                self._learn_shadows(i, stack, gains, median, mad, sub, mad_host)
+            except BaseException:
+                if nb_scale is not None:
+                    wait_futures([nb_scale])  # the thread ends before the error leaves the build
+                raise
+            if nb_scale is not None:
                 with self._host_part():
-                    self._nb_scale[i] = neighbourhood_scale(
-                        [f.reshape(shape) for f in frames], gains, median_host.reshape(shape), mad_host.reshape(shape),
-                        c.neighbourhood, c.noise_floor,
-                    )  # fmt: skip
+                    self._nb_scale[i] = nb_scale.result()
                 log.info(
                     "%s: background window %d: neighbourhood noise scale %.2f", self.source.name, i, self._nb_scale[i]
                 )
-            if self.config.shadow_band > 0 and self.config.detect_shadows:
-                c = self.config
-                keep = None
-                if self.light.textured_votes:  # only votes that keep the ground's texture (not dark clothes)
-                    cap = float(c.spread_cap * self._scale[i]) if c.spread_cap > 0 else 0.0
-                    keep = self.light.sample_patches(stack, gains, median, mad, self._sub_pixels, cap)
-                with self._host_part():
-                    ratio = shadow_ratio(
-                        sub.transpose(0, 2, 1), gains, self._bg_sub[i].T, mad_host[self._sub].reshape(-1, 3),
-                        c.fg_threshold, c.noise_floor, c.shadow_chroma, keep=keep, sharp=c.shadow_peak,
-                    )  # fmt: skip
-                self._ratio[i] = ratio
-                log.info("%s: background window %d: learnt shadow ratio %s", self.source.name, i, ratio)
         log.debug("%s: background window %d from %d frames", self.source.name, i, k)
         with self._share.lock:  # last: another model takes a built window's statistics without waiting
             self._built[i] = (median, mad)
@@ -489,6 +496,54 @@ class OfflineBackground:
             with self._host_part():
                 self.on_build(i, float(self.centres[i]), image)
         return median, mad
+
+    def _learn_shadows(
+        self, i: int, stack: Any, gains: np.ndarray, median: Any, mad: Any, sub: np.ndarray, mad_host: np.ndarray
+    ) -> None:
+        """Window ``i``'s learnt shadow ratio (``shadow_band`` with ``detect_shadows``; :func:`shadow_ratio` of the
+        subsample ``sub`` ``(K, 3, P')``, its votes kept by the light field's texture test where that is on)."""
+        c = self.config
+        if not (c.shadow_band > 0 and c.detect_shadows):
+            return
+        keep = None
+        if self.light.textured_votes:  # only votes that keep the ground's texture (not dark clothes)
+            cap = float(c.spread_cap * self._scale[i]) if c.spread_cap > 0 else 0.0
+            keep = self.light.sample_patches(stack, gains, median, mad, self._sub_pixels, cap)
+        with self._host_part():
+            ratio = shadow_ratio(
+                sub.transpose(0, 2, 1), gains, self._bg_sub[i].T, mad_host[self._sub].reshape(-1, 3),
+                c.fg_threshold, c.noise_floor, c.shadow_chroma, keep=keep, sharp=c.shadow_peak,
+            )  # fmt: skip
+        self._ratio[i] = ratio
+        log.info("%s: background window %d: learnt shadow ratio %s", self.source.name, i, ratio)
+
+    def _compensated_samples(self, stack: Any, picks: list[int]) -> tuple[list[np.ndarray | None], np.ndarray]:
+        """The host data a window's statistics need of its compensated samples ``stack`` (``(K, 3 H W)`` uint8):
+        ``(frames, sub)``, the samples ``picks`` as flat ``(3 H W,)`` arrays (None for the others) and the
+        subsample's channel values ``(K, 3, P')``. On CUDA only those are downloaded (the subsample gathered on the
+        device, :func:`~wptrack.kernels.core.background.gather_columns_kernel`): at 1920x1080 the whole stack is 155
+        MB, whose download and indexing took ~0.25 s of each window build on an H100 host (issue 27: the first
+        window's build is the start-up of every run)."""
+        import warp as wp
+
+        from wptrack.kernels.core import background as kbg
+
+        k = stack.shape[0]
+        if self._sub_columns is None:  # CPU: the stack is host memory already
+            host = download(stack)
+            with self._host_part():
+                sub = np.ascontiguousarray(
+                    host[:, self._sub_channels.reshape(-1)].reshape(k, *self._sub_channels.shape)
+                )
+            return [host[r] if r in picks else None for r in range(k)], sub
+        buf = self._sub_stacks.get(k)
+        if buf is None:
+            buf = self._sub_stacks[k] = wp.empty((k, self._sub_columns.shape[0]), dtype=wp.uint8, device=self.device)
+        wp.launch(kbg.gather_columns_kernel, dim=buf.shape, inputs=[stack, self._sub_columns], outputs=[buf],
+                  device=self.device)  # fmt: skip
+        sub = download(buf).reshape(k, *self._sub_channels.shape)
+        frames: list[np.ndarray | None] = [download(stack[r]) if r in picks else None for r in range(k)]
+        return frames, sub
 
     def _median_mad(self, stack: Any, gains: Any, median: Any, mad: Any, step: int) -> None:
         """Per-channel median and MAD of a window's samples (:func:`~wptrack.kernels.core.background.

@@ -54,11 +54,15 @@ def channel_gains(values: np.ndarray, background: np.ndarray) -> np.ndarray:
         ``[0.05, 20]``.
     """
     out = np.ones((values.shape[0], 3))
-    for c in range(3):
+
+    def one(c: int) -> np.ndarray | None:  # a channel's ratios and their medians (the channels in threads)
         b = background[c]
         ok = np.flatnonzero(b >= MIN_GAIN_LEVEL)
-        if ok.size >= 16:
-            out[:, c] = median_last(values[:, c, ok] / b[ok])
+        return median_last(values[:, c, ok] / b[ok]) if ok.size >= 16 else None
+
+    for c, gains in enumerate(thread_map(one, [0, 1, 2])):
+        if gains is not None:
+            out[:, c] = gains
     return np.clip(out, 0.05, 20.0)
 
 
@@ -158,6 +162,11 @@ def spread_scale(mad: np.ndarray, step: int = SCALE_STEP) -> float:
     return float(np.median(1.4826 * np.sqrt((m * m).mean(axis=1))))
 
 
+def neighbourhood_picks(count: int, max_samples: int = 5) -> list[int]:
+    """The samples of a window of ``count`` that :func:`neighbourhood_scale` reads: ``max_samples`` evenly chosen."""
+    return [int(k) for k in np.unique(np.linspace(0, count - 1, min(max_samples, count)).round().astype(int))]
+
+
 def neighbourhood_scale(
     samples: np.ndarray,
     gains: np.ndarray,
@@ -176,8 +185,9 @@ def neighbourhood_scale(
     must beat the recording's real neighbourhood noise.
 
     Args:
-        samples: ``(K, H, W, 3)`` uint8 a window's samples (an array or a sequence of K ``(H, W, 3)`` frames).
-            gains: ``(K, 3)`` their global gains.
+        samples: ``(K, H, W, 3)`` uint8 a window's samples (an array or a sequence of K ``(H, W, 3)`` frames; only
+            those of :func:`neighbourhood_picks` are read, the others may be None). gains: ``(K, 3)`` their global
+            gains.
         median: ``(H, W, 3)`` uint8 the window's background. mad: ``(H, W, 3)`` uint8 its MAD.
         radius: Neighbourhood radius, pixels.
         noise_floor: Smallest noise scale, 8-bit units.
@@ -191,7 +201,7 @@ def neighbourhood_scale(
     n = (2 * radius + 1) ** 2
     s = np.maximum(noise_floor, 1.4826 * np.sqrt((mad.astype(np.float32) ** 2).mean(axis=2)))[..., None]
     b = median.astype(np.float32)
-    pick = np.unique(np.linspace(0, len(samples) - 1, min(max_samples, len(samples))).round().astype(int))
+    pick = neighbourhood_picks(len(samples), max_samples)
 
     def one(k: int) -> tuple[np.ndarray, np.ndarray]:  # a sample's normalised differences, alone and averaged
         d = samples[k].astype(np.float32)
