@@ -165,6 +165,7 @@ class OfflineBackground:
         self.pixels = source.width * source.height
         n3 = 3 * self.pixels
         on_cpu = wp.get_device(device).is_cpu
+        self._on_cpu = on_cpu
         # CUDA: the frame goes up and the results come down through pinned host buffers (allocated once, copied
         # asynchronously, one wait per frame); CPU: the kernel reads the caller's frame and writes arrays that
         # NumPy views share
@@ -326,8 +327,10 @@ class OfflineBackground:
     def _build_ahead(self, i: int, read: Future) -> None:
         """The build worker's task: build window ``i`` from its ``read`` (the reader's; this model is the share's
         builder, its device work inside the device guard's shared section as the mask threads' is), then release the
-        models waiting for it. The next window's read starts when this build starts. A build of window ``i - 1``
-        still in progress (a mask thread's, at the start of a run) is waited for first."""
+        models waiting for it. The next window's read starts when this build starts. On CUDA a build of window ``i -
+        1`` still in progress (a mask thread's, at the start of a run: the frames wait for it) is waited for first:
+        two builds at once share the device and slowed the first down (issue 27; an H100 host's start-up 1.45 ->
+        1.06-1.11 s with this build's other cuts). On the CPU they run on two cores side by side, as before."""
         share = self._share
         with share.lock:
             if share.pending is not None and share.pending[0] == i:
@@ -336,8 +339,8 @@ class OfflineBackground:
             got = read.result()
             with share.lock:
                 before = share.building.get(i - 1)
-            if before is not None:  # the window before it first: at the start of a run its build is the start-up
-                before.wait()  # (the frames wait for it), and two builds at once slowed it down (issue 27)
+            if before is not None and not self._on_cpu:  # CUDA: the window before it first (see above)
+                before.wait()
             with share.guard.shared():
                 self._build(i, prefetch=True, got=got)
         except BaseException as e:  # noqa: BLE001 - raised by the models that wait for the window
@@ -529,7 +532,7 @@ class OfflineBackground:
         from wptrack.kernels.core import background as kbg
 
         k = stack.shape[0]
-        if self._sub_columns is None:  # CPU: the stack is host memory already
+        if self._on_cpu:  # the stack is host memory already
             host = download(stack)
             with self._host_part():
                 sub = np.ascontiguousarray(
