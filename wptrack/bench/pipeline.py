@@ -239,6 +239,7 @@ def _cli(argv: list[str]) -> tuple[float, float]:
 VARIANT_ENV = (
     "WPTRACK_MASK_WORKERS", "WPTRACK_DECODE_WORKERS", "WPTRACK_CPU_THREADS", "WPTRACK_DECODE_THREADS",
     "WPTRACK_DEVICE_CLEANUP", "WPTRACK_SAMPLE_READERS", "WPTRACK_JPEG_DECODE", "WPTRACK_JPEG_WORKERS",
+    "WPTRACK_PNG_WORKERS",
 )  # fmt: skip
 """The environment variables ``--variant`` may set."""
 
