@@ -55,12 +55,13 @@ def channel_gains(values: np.ndarray, background: np.ndarray) -> np.ndarray:
     """
     out = np.ones((values.shape[0], 3))
 
-    def one(c: int) -> np.ndarray | None:  # a channel's ratios and their medians (the channels in threads)
+    def one(c: int) -> np.ndarray | None:  # a channel's ratios and their medians
         b = background[c]
         ok = np.flatnonzero(b >= MIN_GAIN_LEVEL)
         return median_last(values[:, c, ok] / b[ok]) if ok.size >= 16 else None
 
-    for c, gains in enumerate(thread_map(one, [0, 1, 2])):
+    threads = None if values.size >= PARALLEL_MIN else 1  # a window's samples in threads; a frame's gain in this one
+    for c, gains in enumerate(thread_map(one, [0, 1, 2], threads)):
         if gains is not None:
             out[:, c] = gains
     return np.clip(out, 0.05, 20.0)
