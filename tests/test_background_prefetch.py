@@ -299,33 +299,3 @@ def test_sample_readers_give_the_same_masks(device, rng, tmp_path, monkeypatch, 
     assert any("cannot read frame" in m for m, _ in warn1) == truncated
     assert not any(name.startswith("wptrack-samples") for name in threads1)
     assert any(name.startswith("wptrack-samples") for name in threads3), threads3
-
-
-@pytest.mark.parametrize("on_cpu", [True, False])
-def test_builder_waits_for_the_window_being_built_on_cuda(rng, on_cpu, monkeypatch):
-    """The share's builder builds window i after a build of window i - 1 still in progress on CUDA (two builds at
-    once share the device, and the frames wait for the first), beside it on the CPU (two cores)."""
-    from concurrent.futures import Future
-
-    from wptrack.io.frames import ArraySource
-
-    masks = MotionMasks(ArraySource(_scene(rng, 40)), MaskConfig(window=20, samples=5, device="cpu"))
-    model = masks.model
-    builder = B.OfflineBackground(model.source, model.config, model.device, share=model._share)
-    builder._on_cpu = on_cpu  # what it decides by (the device's kind)
-    built = threading.Event()
-    monkeypatch.setattr(builder, "_build", lambda i, prefetch, got: built.set())
-    share = model._share
-    share.guard = type("Guard", (), {"shared": lambda self: __import__("contextlib").nullcontext()})()
-    first = threading.Event()
-    share.building[0], share.building[1] = first, threading.Event()
-    read: Future = Future()
-    read.set_result(None)
-    worker = threading.Thread(target=builder._build_ahead, args=(1, read))
-    worker.start()
-    assert built.wait(0.5) is on_cpu  # CUDA: not before window 0's build ends
-    first.set()
-    worker.join(5)
-    assert built.is_set() and not worker.is_alive() and 1 not in share.building
-    builder.close()
-    model.close()

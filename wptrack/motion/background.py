@@ -327,20 +327,13 @@ class OfflineBackground:
     def _build_ahead(self, i: int, read: Future) -> None:
         """The build worker's task: build window ``i`` from its ``read`` (the reader's; this model is the share's
         builder, its device work inside the device guard's shared section as the mask threads' is), then release the
-        models waiting for it. The next window's read starts when this build starts. On CUDA a build of window ``i -
-        1`` still in progress (a mask thread's, at the start of a run: the frames wait for it) is waited for first:
-        two builds at once share the device and slowed the first down (issue 27; an H100 host's start-up 1.45 ->
-        1.06-1.11 s with this build's other cuts). On the CPU they run on two cores side by side, as before."""
+        models waiting for it. The next window's read starts when this build starts."""
         share = self._share
         with share.lock:
             if share.pending is not None and share.pending[0] == i:
                 share.pending = None  # taken by this task: the build's prefetch may submit the next window
         try:
             got = read.result()
-            with share.lock:
-                before = share.building.get(i - 1)
-            if before is not None and not self._on_cpu:  # CUDA: the window before it first (see above)
-                before.wait()
             with share.guard.shared():
                 self._build(i, prefetch=True, got=got)
         except BaseException as e:  # noqa: BLE001 - raised by the models that wait for the window
