@@ -17,13 +17,35 @@ import os
 import tempfile
 import uuid
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from wptrack.core.errors import OutputError
 
 log = logging.getLogger(__name__)
+
+_Finishing = TypeVar("_Finishing", bound="FinishOnExit")
+
+
+class FinishOnExit:
+    """The ``with`` block of a writer that finishes a file: leaving it normally calls ``close()`` (the file complete,
+    in place), leaving it by an exception (Ctrl-C included) calls ``abort()`` (nothing half-written is left)."""
+
+    def close(self) -> Any:
+        raise NotImplementedError
+
+    def abort(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self: _Finishing) -> _Finishing:
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
 
 
 def fsync_dir(directory: Path) -> None:

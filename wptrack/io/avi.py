@@ -49,11 +49,12 @@ from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import BinaryIO
 
 import numpy as np
 
 from wptrack.core.errors import ConfigError, OutputError
+from wptrack.io.atomic import FinishOnExit
 
 log = logging.getLogger(__name__)
 
@@ -140,7 +141,7 @@ def _u32(values: array) -> bytes:
     return swapped.tobytes()
 
 
-class PngAviWriter:
+class PngAviWriter(FinishOnExit):
     """Write frames to an AVI file as PNG images (FOURCC ``MPNG``), encoded by a thread pool, in order.
 
     :meth:`write` copies the frame and hands it to a pool of ``workers`` threads; at most ``in_flight`` frames are
@@ -468,15 +469,6 @@ class PngAviWriter:
         kept)."""
         if not self._closed:
             self._drop()
-
-    def __enter__(self) -> PngAviWriter:
-        return self
-
-    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
 
 
 def _chunk(fourcc: bytes, body: bytes) -> bytes:

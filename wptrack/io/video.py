@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from wptrack.core.errors import ConfigError, OutputError
-from wptrack.io.atomic import commit, discard, temp_path
+from wptrack.io.atomic import FinishOnExit, commit, discard, temp_path
 from wptrack.io.frames import _to_bgr
 
 log = logging.getLogger(__name__)
@@ -34,7 +34,7 @@ FOURCC ``MPNG``): lossless, encoded by several threads (a 1920x1080 mask: ~3 ms 
 one)."""
 
 
-class VideoWriter:
+class VideoWriter(FinishOnExit):
     """Write frames to a video file, atomically, with a lossless codec where possible.
 
     The codec is chosen by extension (:data:`VIDEO_CODECS`): ``.avi`` tries FFV1 (lossless) then MJPG;
@@ -207,15 +207,6 @@ class VideoWriter:
                 self._writer.release()
         self._remove_tmp()
 
-    def __enter__(self) -> VideoWriter:
-        return self
-
-    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
-
 
 def _to_grey(frame: np.ndarray) -> np.ndarray:
     if frame.ndim == 2:
@@ -227,7 +218,7 @@ def _to_grey(frame: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
 
 
-class BackgroundWriter:
+class BackgroundWriter(FinishOnExit):
     """A video writer whose frames are prepared and encoded by a thread of its own, behind a bounded queue, so a
     run's frame loop does not wait for the encoder (FFV1 at 1440x1080: 57 ms of CPU per BGR frame on the CI
     machine, more than a frame of tracking).
@@ -361,15 +352,6 @@ class BackgroundWriter:
             self._stop()
         self._error = None
         self.writer.abort()
-
-    def __enter__(self) -> BackgroundWriter:
-        return self
-
-    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
 
 
 def continue_video(
