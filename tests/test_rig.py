@@ -493,3 +493,14 @@ def test_python_api_validation() -> None:
     with pytest.raises(RigError, match="volume: min must be < max"):
         Rig((good,), volume=(np.ones(3), np.zeros(3)))
     assert Camera("x", 320.0, 240, good.K, None, good.R, good.t).width == 320  # integral float accepted
+
+
+def test_rvec_is_computed_once_and_read_only() -> None:
+    """Camera.rvec (what project() passes to OpenCV every call) is R's Rodrigues vector, computed once, read-only."""
+    R, _ = cv2.Rodrigues(np.array([0.3, -1.1, 0.4]))
+    cam = Camera("c", 64, 48, [[50.0, 0, 32], [0, 50.0, 24], [0, 0, 1]], None, R, [0.1, 0.2, 3.0])
+    expected, _ = cv2.Rodrigues(np.array(R))
+    np.testing.assert_allclose(cam.rvec, expected.reshape(3), rtol=0, atol=1e-12)
+    assert cam.rvec is cam.rvec and not cam.rvec.flags.writeable
+    with pytest.raises(ValueError):
+        cam.rvec[0] = 1.0

@@ -232,3 +232,38 @@ def test_max_objects_beyond_memory_is_a_clear_error_before_allocation(tmp_path, 
     assert not out.exists()
     TemplateTracker(Rig.load(rig), TemplateConfig(particles=2000, max_objects=fit_r), device="cpu")
     TemplateTracker(Rig.load(rig), TemplateConfig(particles=fit_n, max_objects=64), device="cpu")
+
+
+def test_flood_guard_counts_any_mask_alike(rng) -> None:
+    """The guard's foreground count (OpenCV's for 2D uint8 masks) is NumPy's for every mask it may be given."""
+    from wptrack.motion.flood import _count_nonzero
+
+    masks = [
+        (rng.random((37, 53)) < 0.3).astype(np.uint8) * rng.integers(1, 256, (37, 53)).astype(np.uint8),
+        rng.random((37, 53)) < 0.2,  # bool
+        (rng.random((9, 11, 3)) < 0.5).astype(np.uint8),  # 3D
+        np.zeros((0, 4), np.uint8),
+        np.asfortranarray((rng.random((20, 30)) < 0.4).astype(np.uint8)),
+    ]
+    for m in masks:
+        assert _count_nonzero(m) == np.count_nonzero(m)
+
+
+def test_template_upload_is_the_nonzero_mask(rng) -> None:
+    """TemplateTracker.upload turns any mask into 0/1 on the device (uint8 through OpenCV's min, others by NumPy)."""
+    from wptrack.trackers.templates.config import TemplateConfig
+    from wptrack.trackers.templates.tracker import TemplateTracker
+
+    cam = Camera(
+        "c", 40, 30, [[40.0, 0, 20], [0, 40.0, 15], [0, 0, 1]], None,
+        [[1, 0, 0], [0, 0, -1], [0, 1, 0]], [0, 2.0, 10.0],
+    )  # fmt: skip
+    tracker = TemplateTracker(Rig([cam]), TemplateConfig(particles=8, max_objects=2), device="cpu")
+    for m in (
+        rng.integers(0, 256, (30, 40), dtype=np.uint8) * (rng.random((30, 40)) < 0.5),
+        rng.random((30, 40)) < 0.5,
+        np.asfortranarray(rng.integers(0, 3, (30, 40)).astype(np.uint8)),
+        rng.random((30, 40)).astype(np.float32) * (rng.random((30, 40)) < 0.5),
+    ):
+        tracker.upload(m)
+        np.testing.assert_array_equal(tracker.q.numpy(), (m != 0).astype(np.uint8))

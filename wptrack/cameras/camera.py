@@ -13,6 +13,7 @@ and name) and the field.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from collections.abc import Mapping, Sequence
@@ -77,13 +78,14 @@ class Camera:
         """(3,) camera centre in world coordinates, metres (``-R.T @ t``)."""
         return -self.R.T @ self.t
 
-    @property
+    @functools.cached_property
     def rvec(self) -> np.ndarray:
-        """(3,) Rodrigues rotation vector of ``R``, radians."""
+        """(3,) Rodrigues rotation vector of ``R``, radians (read-only; computed once: :meth:`project` runs every frame
+        for the template tracker's report rule, and ``cv2.Rodrigues`` was 5 % of a 1080p run's main thread)."""
         import cv2
 
         rvec, _ = cv2.Rodrigues(np.array(self.R))
-        return np.asarray(rvec, dtype=np.float64).reshape(3)
+        return _readonly(np.asarray(rvec, dtype=np.float64).reshape(3))
 
     @property
     def fx(self) -> float:

@@ -82,7 +82,7 @@ class FloodGuard:
         Args:
             mask: ``(H, W)`` motion mask (nonzero = foreground).
         """
-        f = float(np.count_nonzero(mask)) / max(mask.size, 1)
+        f = float(_count_nonzero(mask)) / max(mask.size, 1)
         index = self._frame
         self._frame += 1
         if not self.is_flooded(f):
@@ -120,3 +120,13 @@ class FloodGuard:
         """Restore from :meth:`state` (the recent history restarts empty)."""
         self.flooded = [int(i) for i in state.get("job.flooded_frames", [])]
         self._frame = int(frames_done)
+
+
+def _count_nonzero(mask: np.ndarray) -> int:
+    """``np.count_nonzero`` of a mask; a 2D uint8 one by OpenCV (~20 times faster at 1920x1080: NumPy's count was 9 %
+    of a 1080p run's main thread)."""
+    if mask.ndim == 2 and mask.dtype == np.uint8 and mask.size:
+        import cv2
+
+        return int(cv2.countNonZero(mask))
+    return int(np.count_nonzero(mask))

@@ -302,7 +302,13 @@ class TemplateTracker(FrameChain):
             FrameError: the mask's size differs from the camera's calibrated size, or it is not 2D.
         """
         m = camera_frame(mask, self.camera, "mask", f" in {self.rig.source}")
-        np.copyto(self.q_host.numpy(), m != 0, casting="unsafe")
+        host = self.q_host.numpy()
+        if m.dtype == np.uint8 and m.flags.c_contiguous:  # min(m, 1) = (m != 0) for uint8, one pass by OpenCV
+            import cv2
+
+            cv2.min(m, 1, dst=host)
+        else:
+            np.copyto(host, m != 0, casting="unsafe")
         wp.copy(self.q, self.q_host)
 
     # --- the chain -----------------------------------------------------------------------------------------
