@@ -249,7 +249,7 @@ def test_flood_guard_counts_any_mask_alike(rng) -> None:
         assert _count_nonzero(m) == np.count_nonzero(m)
 
 
-def test_template_upload_is_the_nonzero_mask(rng) -> None:
+def test_template_upload_is_the_nonzero_mask(device, rng) -> None:
     """TemplateTracker.upload turns any mask into 0/1 on the device (uint8 through OpenCV's min, others by NumPy)."""
     from wptrack.trackers.templates.config import TemplateConfig
     from wptrack.trackers.templates.tracker import TemplateTracker
@@ -258,7 +258,7 @@ def test_template_upload_is_the_nonzero_mask(rng) -> None:
         "c", 40, 30, [[40.0, 0, 20], [0, 40.0, 15], [0, 0, 1]], None,
         [[1, 0, 0], [0, 0, -1], [0, 1, 0]], [0, 2.0, 10.0],
     )  # fmt: skip
-    tracker = TemplateTracker(Rig([cam]), TemplateConfig(particles=8, max_objects=2), device="cpu")
+    tracker = TemplateTracker(Rig([cam]), TemplateConfig(particles=8, max_objects=2), device=device)
     for m in (
         rng.integers(0, 256, (30, 40), dtype=np.uint8) * (rng.random((30, 40)) < 0.5),
         rng.random((30, 40)) < 0.5,
