@@ -28,7 +28,7 @@ VIDEO_CODECS: dict[str, tuple[str, ...]] = {
     ".mov": ("mp4v", "MJPG"),
 }
 
-PNG_CODECS = frozenset({"PNG", "MPNG"})
+PNG_CODEC_NAMES = frozenset({"PNG", "MPNG"})
 """Values of :class:`VideoWriter`'s ``codec`` that select the AVI of PNG images (:class:`wptrack.io.avi.PngAviWriter`,
 FOURCC ``MPNG``): lossless, encoded by several threads (a 1920x1080 mask: ~3 ms a thread instead of FFV1's 19 ms in
 one)."""
@@ -52,7 +52,8 @@ class VideoWriter(FinishOnExit):
         grey: Write one grey channel (``(H, W)`` frames; a BGR frame is converted): for masks, a third of the
             encoding work of BGR with FFV1 (1440x1080 mask: 8 instead of 30 ms of CPU per frame on the CI machine);
             readers get the grey values in all three channels back.
-        codec: ``None``: by extension (above); ``"PNG"`` (or ``"MPNG"``): an AVI of PNG images (:data:`PNG_CODECS`).
+        codec: ``None``: by extension (above); ``"PNG"`` (or ``"MPNG"``): an AVI of PNG images
+            (:data:`PNG_CODEC_NAMES`).
         bilevel: With ``codec="PNG"`` and ``grey``: 1-bit PNG images, for masks whose values are 0 and 255 only (the
             caller's contract: a frame with other values makes the writer fail, see
             :class:`wptrack.io.avi.PngAviWriter`); read back as 0 and 255.
@@ -81,7 +82,7 @@ class VideoWriter(FinishOnExit):
         ext = self.path.suffix.lower()
         if ext not in VIDEO_CODECS:
             raise OutputError(f"cannot write video {self.path}: unsupported extension (use {', '.join(VIDEO_CODECS)})")
-        self.png = codec is not None and codec.upper() in PNG_CODECS
+        self.png = codec is not None and codec.upper() in PNG_CODEC_NAMES
         if codec is not None and not self.png:
             raise ConfigError(f"video codec must be None or 'PNG', got {codec!r}")
         if self.png and ext != ".avi":

@@ -165,7 +165,6 @@ class OfflineBackground:
         self.pixels = source.width * source.height
         n3 = 3 * self.pixels
         on_cpu = wp.get_device(device).is_cpu
-        self._on_cpu = on_cpu
         # CUDA: the frame goes up and the results come down through pinned host buffers (allocated once, copied
         # asynchronously, one wait per frame); CPU: the kernel reads the caller's frame and writes arrays that
         # NumPy views share
@@ -525,7 +524,7 @@ class OfflineBackground:
         from wptrack.kernels.core import background as kbg
 
         k = stack.shape[0]
-        if self._on_cpu:  # the stack is host memory already
+        if self._sub_columns is None:  # the CPU: the stack is host memory already
             host = download(stack)
             with self._host_part():
                 sub = np.ascontiguousarray(

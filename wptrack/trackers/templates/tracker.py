@@ -172,6 +172,7 @@ class TemplateTracker(FrameChain):
         self.use_occlusion = config.occlusion_del > 0.0 or config.occlusion_noise > 0.0
         self.q = wp.zeros((h, w), dtype=wp.uint8, device=d)
         self.q_host = wp.zeros((h, w), dtype=wp.uint8, device="cpu", pinned=self.is_cuda)
+        self._q_view = self.q_host.numpy()  # its NumPy view, made once
         self.qrow = wp.zeros((h, w + 1), dtype=wp.int32, device=d)
         self.qtotal = wp.zeros(1, dtype=wp.int32, device=d)
         self.cov_diff = wp.zeros((h, w + 1), dtype=wp.int32, device=d)
@@ -302,7 +303,7 @@ class TemplateTracker(FrameChain):
             FrameError: the mask's size differs from the camera's calibrated size, or it is not 2D.
         """
         m = camera_frame(mask, self.camera, "mask", f" in {self.rig.source}")
-        host = self.q_host.numpy()
+        host = self._q_view
         if m.dtype == np.uint8 and m.flags.c_contiguous:  # min(m, 1) = (m != 0) for uint8, one pass by OpenCV
             import cv2
 
