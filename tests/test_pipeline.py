@@ -10,6 +10,7 @@ import time
 import cv2
 import numpy as np
 import pytest
+import warp as wp
 
 from wptrack.io import timeline
 from wptrack.io.prefetch import prefetch
@@ -842,3 +843,20 @@ def test_device_cleanup_in_the_offline_model_gives_the_host_masks(tmp_path, rng,
             np.testing.assert_array_equal(m1, m2)
     with_area = open_masks(video=path, config=MaskConfig(window=16, samples=5, min_area=20, device="cpu"))
     assert with_area.model.cleanup is None  # min_area is a host filter: the host path
+
+
+def test_device_cleanup_default_by_device_and_override(monkeypatch, device):
+    """The masks are cleaned on the device by default on CUDA, on the host on the CPU; WPTRACK_DEVICE_CLEANUP=0/1
+    overrides either way and any other value is a clear error."""
+    from wptrack.core.errors import ConfigError
+    from wptrack.motion.masks import DEVICE_CLEANUP_ENV, device_cleanup
+
+    monkeypatch.delenv(DEVICE_CLEANUP_ENV, raising=False)
+    assert device_cleanup(device) == wp.get_device(device).is_cuda
+    monkeypatch.setenv(DEVICE_CLEANUP_ENV, "0")
+    assert device_cleanup(device) is False
+    monkeypatch.setenv(DEVICE_CLEANUP_ENV, " 1 ")
+    assert device_cleanup(device) is True
+    monkeypatch.setenv(DEVICE_CLEANUP_ENV, "yes")
+    with pytest.raises(ConfigError, match="WPTRACK_DEVICE_CLEANUP: expected 0 or 1"):
+        device_cleanup(device)

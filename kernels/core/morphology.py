@@ -9,13 +9,14 @@ Images are ``wp.array2d(dtype=wp.uint8)`` of shape ``(H, W)``, values 0/1 unless
 * :func:`unpack_kernel`, :func:`penumbra_kernel`: the offline model's packed output ``level + 4 shadow``
   (``kernels.core.background.foreground_kernel``) split into levels (0 background, 1 weak, 2 strong) and the cast
   shadow's core (shadow 2); penumbra candidates (shadow 1) near a core (the core dilated) become background.
-* :func:`hysteresis_seed_kernel`, :func:`hysteresis_rows_kernel`, :func:`hysteresis_cols_kernel`: the weak pixels
-  8-connected to a strong one join the mask. Seeded with the strong pixels, each sweep walks a row (or a column)
-  forth and back and lets a weak pixel join when one of its 8 neighbours has joined, in place; the sweeps alternate
-  until one changes nothing (``changed`` stays 0). Joining only ever adds pixels, so the order of the writes does
-  not matter: the fixpoint is the union of the 8-connected components of ``level > 0`` that hold a strong pixel, the
-  host's connected-components result (``wptrack.motion.levels.hysteresis``), in a few sweeps for blob-shaped
-  components (a path that turns back on itself costs a sweep per turn).
+* :func:`label_init_kernel`, :func:`label_merge_kernel`, :func:`label_flatten_kernel`, :func:`strong_roots_kernel`,
+  :func:`hysteresis_kernel`: the hysteresis, the weak pixels 8-connected to a strong one joining the mask, as a
+  connected-components labelling of ``level > 0`` by union-find (Playne and Hawick, "A new algorithm for parallel
+  connected-component labelling on GPUs", IEEE TPDS 2018): every pixel starts as its own tree, joins its
+  neighbours' trees by atomic minima (the root of a component is its smallest pixel index, whatever the order of the
+  joins), points at its root; the roots of components with a strong pixel are marked and the mask read off them. A
+  fixed chain of five launches, no read-back (an earlier version swept rows and columns until nothing changed,
+  reading a flag back every two sweeps: ~3 waits for the device a 1080p frame, slower than the host).
 """
 
 import warp as wp
@@ -84,75 +85,106 @@ def penumbra_kernel(
             prob[y, x] = 0.0
 
 
-@wp.kernel
-def hysteresis_seed_kernel(levels: wp.array2d(dtype=wp.uint8), mask: wp.array2d(dtype=wp.uint8)):
-    """``mask = levels == 2`` (the strong pixels). Launch ``dim=(H, W)``."""
-    y, x = wp.tid()
-    mask[y, x] = wp.uint8(0)
-    if levels[y, x] == wp.uint8(2):
-        mask[y, x] = wp.uint8(1)
+@wp.func
+def root_of(labels: wp.array(dtype=wp.int32), a: int) -> int:
+    """The root of pixel ``a``'s tree (a label that points to itself). Labels only ever decrease towards their
+    root, so a chain read while other threads link trees (a stale value included) still ends at a root."""
+    b = labels[a]
+    while b != a:
+        a = b
+        b = labels[a]
+    return a
 
 
 @wp.func
-def joins(levels: wp.array2d(dtype=wp.uint8), mask: wp.array2d(dtype=wp.uint8), y: int, x: int, h: int, w: int):
-    """Whether pixel ``(y, x)`` is weak, not yet in ``mask``, and has an 8-neighbour in ``mask``."""
-    if levels[y, x] == wp.uint8(0) or mask[y, x] != wp.uint8(0):
-        return False
-    for dy in range(-1, 2):
-        yy = y + dy
-        if yy >= 0 and yy < h:
-            for dx in range(-1, 2):
-                xx = x + dx
-                if xx >= 0 and xx < w:
-                    if mask[yy, xx] != wp.uint8(0):
-                        return True
-    return False
+def link(labels: wp.array(dtype=wp.int32), a: int, b: int):
+    """Join the trees of pixels ``a`` and ``b``: the larger root is linked under the smaller one by an atomic
+    minimum; when another thread linked that root meanwhile (the minimum returns another value than the root), the
+    join is retried from there (Playne and Hawick, IEEE TPDS 2018, union-find labelling)."""
+    done = int(0)
+    while done == 0:
+        a = root_of(labels, a)
+        b = root_of(labels, b)
+        if a < b:
+            old = wp.atomic_min(labels, b, a)
+            if old == b:
+                done = 1
+            else:
+                b = old
+        elif b < a:
+            old = wp.atomic_min(labels, a, b)
+            if old == a:
+                done = 1
+            else:
+                a = old
+        else:
+            done = 1
 
 
 @wp.kernel
-def hysteresis_rows_kernel(
-    levels: wp.array2d(dtype=wp.uint8),
-    mask: wp.array2d(dtype=wp.uint8),
-    changed: wp.array(dtype=wp.int32),
-):
-    """One row per thread, left to right then right to left: weak pixels next to the mask join it (in place);
-    ``changed[0] = 1`` when any did. Launch ``dim=H``."""
-    y = wp.tid()
-    h = levels.shape[0]
-    w = levels.shape[1]
-    grew = int(0)
-    for x in range(w):
-        if joins(levels, mask, y, x, h, w):
-            mask[y, x] = wp.uint8(1)
-            grew = 1
-    for k in range(w):
-        x = w - 1 - k
-        if joins(levels, mask, y, x, h, w):
-            mask[y, x] = wp.uint8(1)
-            grew = 1
-    if grew != 0:
-        changed[0] = 1
+def label_init_kernel(levels: wp.array2d(dtype=wp.uint8), labels: wp.array(dtype=wp.int32)):
+    """Each pixel of ``levels > 0`` its own tree: ``labels[y W + x] = y W + x``, -1 elsewhere. Launch ``dim=(H,
+    W)``."""
+    y, x = wp.tid()
+    p = y * levels.shape[1] + x
+    if levels[y, x] != wp.uint8(0):
+        labels[p] = p
+    else:
+        labels[p] = -1
 
 
 @wp.kernel
-def hysteresis_cols_kernel(
-    levels: wp.array2d(dtype=wp.uint8),
-    mask: wp.array2d(dtype=wp.uint8),
-    changed: wp.array(dtype=wp.int32),
-):
-    """:func:`hysteresis_rows_kernel` along the columns, top to bottom then bottom to top. Launch ``dim=W``."""
-    x = wp.tid()
-    h = levels.shape[0]
+def label_merge_kernel(levels: wp.array2d(dtype=wp.uint8), labels: wp.array(dtype=wp.int32)):
+    """Join each pixel of ``levels > 0`` with its 8-neighbours of ``levels > 0`` to its left and in the row above
+    (the other four join it from their side): afterwards each tree is one 8-connected component. Launch ``dim=(H,
+    W)``."""
+    y, x = wp.tid()
     w = levels.shape[1]
-    grew = int(0)
-    for y in range(h):
-        if joins(levels, mask, y, x, h, w):
-            mask[y, x] = wp.uint8(1)
-            grew = 1
-    for k in range(h):
-        y = h - 1 - k
-        if joins(levels, mask, y, x, h, w):
-            mask[y, x] = wp.uint8(1)
-            grew = 1
-    if grew != 0:
-        changed[0] = 1
+    if levels[y, x] == wp.uint8(0):
+        return
+    p = y * w + x
+    if x > 0 and levels[y, x - 1] != wp.uint8(0):
+        link(labels, p, p - 1)
+    if y > 0:
+        if x > 0 and levels[y - 1, x - 1] != wp.uint8(0):
+            link(labels, p, p - w - 1)
+        if levels[y - 1, x] != wp.uint8(0):
+            link(labels, p, p - w)
+        if x < w - 1 and levels[y - 1, x + 1] != wp.uint8(0):
+            link(labels, p, p - w + 1)
+
+
+@wp.kernel
+def label_flatten_kernel(levels: wp.array2d(dtype=wp.uint8), labels: wp.array(dtype=wp.int32)):
+    """Point every labelled pixel at its root (the smallest pixel index of its component). Launch ``dim=(H, W)``."""
+    y, x = wp.tid()
+    if levels[y, x] != wp.uint8(0):
+        p = y * levels.shape[1] + x
+        labels[p] = root_of(labels, p)
+
+
+@wp.kernel
+def strong_roots_kernel(
+    levels: wp.array2d(dtype=wp.uint8), labels: wp.array(dtype=wp.int32), strong: wp.array(dtype=wp.uint8)
+):
+    """``strong[root] = 1`` for the components that hold a strong pixel (level 2); ``strong`` must hold zeros
+    (every writer writes 1: the order does not matter). Launch ``dim=(H, W)`` after :func:`label_flatten_kernel`."""
+    y, x = wp.tid()
+    if levels[y, x] == wp.uint8(2):
+        strong[labels[y * levels.shape[1] + x]] = wp.uint8(1)
+
+
+@wp.kernel
+def hysteresis_kernel(
+    levels: wp.array2d(dtype=wp.uint8),
+    labels: wp.array(dtype=wp.int32),
+    strong: wp.array(dtype=wp.uint8),
+    mask: wp.array2d(dtype=wp.uint8),
+):
+    """``mask = 1`` on the components of ``levels > 0`` that hold a strong pixel, 0 elsewhere (the host's
+    ``wptrack.motion.levels.hysteresis``). Launch ``dim=(H, W)`` after :func:`strong_roots_kernel`."""
+    y, x = wp.tid()
+    m = wp.uint8(0)
+    if levels[y, x] != wp.uint8(0):
+        m = strong[labels[y * levels.shape[1] + x]]
+    mask[y, x] = m

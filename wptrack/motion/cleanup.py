@@ -5,9 +5,11 @@ on the GPU can stay there (no download of the levels, no host connected componen
 
 :class:`DeviceCleanup` gives the same mask as the host functions, pixel for pixel (tested on every device, the
 structuring elements are OpenCV's ellipses). What it leaves to the host: ``min_area`` (a connected-components size
-filter; off by default). On the CPU backend the host functions are faster (OpenCV's SIMD code on several cores
-against a Warp launch on one core: the hysteresis sweeps walk every row and column), so the offline model keeps them
-there; on a GPU the kernels take a few hundred microseconds at 1080p against 3-5 ms of host work and two copies.
+filter; off by default). On the CPU backend the host functions are faster (OpenCV's SIMD code against Warp launches
+on one core), so the offline model keeps them there; on a GPU the kernels (a fixed chain of launches, no read-back:
+the hysteresis is a union-find labelling, ``kernels.core.morphology``) replace ~9 ms of host work a 1080p frame in
+each mask thread (the levels' download, the penumbra test, the connected components, the opening and closing) with
+one download of the mask (docs/notes.md).
 """
 
 from __future__ import annotations
@@ -18,10 +20,6 @@ import numpy as np
 import warp as wp
 
 from wptrack.core.errors import ConfigError
-
-SWEEPS_PER_CHECK = 2
-"""Row + column sweep pairs of the hysteresis between two reads of its ``changed`` flag (each read waits for the
-device)."""
 
 
 def ellipse_runs(diameter: int) -> np.ndarray:
@@ -70,9 +68,9 @@ class DeviceCleanup:
         self.mask = wp.zeros(self.shape, dtype=wp.uint8, device=d)
         self.work = wp.zeros(self.shape, dtype=wp.uint8, device=d)
         self.out = wp.zeros(self.shape, dtype=wp.uint8, device=d)
-        self.changed = wp.zeros(1, dtype=wp.int32, device=d)
-        self._cuda = wp.get_device(d).is_cuda
-        self._changed_host = wp.zeros(1, dtype=wp.int32, device="cpu", pinned=self._cuda)
+        pixels = self.shape[0] * self.shape[1]
+        self.labels = wp.zeros(pixels, dtype=wp.int32, device=d)  # union-find trees of levels > 0 (row-major index)
+        self.strong = wp.zeros(pixels, dtype=wp.uint8, device=d)  # 1 at the roots of components with a strong pixel
         self._no_prob = wp.zeros((1, 1), dtype=wp.float32, device=d)
 
         def runs(diameter: int) -> tuple[Any, int] | None:
@@ -84,7 +82,6 @@ class DeviceCleanup:
         self._penumbra = runs(2 * int(penumbra_px) + 1)
         self._open = runs(open_px)
         self._close = runs(close_px)
-        self.sweeps = 0  # hysteresis sweep pairs of the last call (diagnostics)
 
     def _morph(self, src: Any, element: tuple[Any, int], erode: bool, dst: Any) -> None:
         from wptrack.kernels.core import morphology as km
@@ -95,22 +92,19 @@ class DeviceCleanup:
         )  # fmt: skip
 
     def _hysteresis(self) -> None:
+        """``mask`` = the components of ``levels > 0`` that hold a strong pixel (``kernels.core.morphology``)."""
         from wptrack.kernels.core import morphology as km
 
-        d, (h, w) = self.device, self.shape
-        wp.launch(km.hysteresis_seed_kernel, dim=self.shape, inputs=[self.levels], outputs=[self.mask], device=d)
-        self.sweeps = 0
-        while self.sweeps <= h + w:  # each pair of sweeps that changes anything adds a pixel at least
-            self.changed.zero_()
-            for _ in range(SWEEPS_PER_CHECK):
-                wp.launch(km.hysteresis_rows_kernel, dim=h, inputs=[self.levels, self.mask, self.changed], device=d)
-                wp.launch(km.hysteresis_cols_kernel, dim=w, inputs=[self.levels, self.mask, self.changed], device=d)
-                self.sweeps += 1
-            wp.copy(self._changed_host, self.changed)
-            if self._cuda:  # the stream's work only, as the offline model waits for its results
-                wp.synchronize_stream(wp.get_stream(d))
-            if int(self._changed_host.numpy()[0]) == 0:
-                return
+        d, shape = self.device, self.shape
+        wp.launch(km.label_init_kernel, dim=shape, inputs=[self.levels], outputs=[self.labels], device=d)
+        wp.launch(km.label_merge_kernel, dim=shape, inputs=[self.levels, self.labels], device=d)
+        wp.launch(km.label_flatten_kernel, dim=shape, inputs=[self.levels, self.labels], device=d)
+        self.strong.zero_()
+        wp.launch(km.strong_roots_kernel, dim=shape, inputs=[self.levels, self.labels], outputs=[self.strong], device=d)
+        wp.launch(
+            km.hysteresis_kernel, dim=shape, inputs=[self.levels, self.labels, self.strong], outputs=[self.mask],
+            device=d,
+        )  # fmt: skip
 
     def __call__(self, packed: Any, prob: Any = None) -> Any:
         """The cleaned mask of one frame.

@@ -4,27 +4,75 @@ hysteresis (:class:`wptrack.motion.background.OfflineBackground`; their device c
 
 from __future__ import annotations
 
+import functools
+import threading
+
 import numpy as np
 
 
-def hysteresis(levels: np.ndarray) -> np.ndarray:
+class LevelsWork:
+    """Scratch buffers of :func:`resolve_levels` and :func:`hysteresis` for one frame size, so that a frame's
+    resolution allocates nothing but the mask it returns (and the few labels it gathers).
+
+    A 1080p frame's temporaries (levels, shadow flags, the dilated umbra, the int32 components image: ~17 MB) were
+    allocated afresh every frame, and fresh pages cost a page fault each: on an H100 host's mask thread
+    ``resolve_levels`` took 7.9 ms a 1080p frame, two thirds of it the kernel zeroing new pages (docs/notes.md). One
+    instance per thread (an :class:`~wptrack.motion.background.OfflineBackground` keeps its own); not thread-safe.
+
+    Args:
+        shape: ``(H, W)`` of the frames, pixels.
+    """
+
+    def __init__(self, shape: tuple[int, int]) -> None:
+        self.shape = (int(shape[0]), int(shape[1]))
+        self.levels = np.empty(self.shape, np.uint8)  # level of each pixel (0, 1 weak, 2 strong)
+        self.shadow = np.empty(self.shape, np.uint8)  # its shadow code (0, 1 penumbra candidate, 2 umbra)
+        self.near = np.empty(self.shape, np.uint8)  # umbrae dilated by the penumbra's width
+        self.flag = np.empty(self.shape, bool)  # comparisons
+        self.flag2 = np.empty(self.shape, bool)
+        self.labels = np.empty(self.shape, np.int32)  # connected components of levels > 0
+        self.morph = np.empty(self.shape, np.uint8)  # the clean-up's intermediate images (masks.clean_mask)
+        self.morph2 = np.empty(self.shape, np.uint8)
+
+    def fits(self, shape: tuple[int, ...]) -> bool:
+        """Whether these buffers serve frames of ``shape``."""
+        return tuple(shape) == self.shape
+
+
+_local = threading.local()
+
+
+def thread_work(shape: tuple[int, ...]) -> LevelsWork:
+    """The calling thread's :class:`LevelsWork` for frames of ``shape`` (made on its first use, remade when the
+    size changes, released with the thread): the mask threads of a run each have their own."""
+    work = getattr(_local, "work", None)
+    if work is None or not work.fits(shape):
+        work = _local.work = LevelsWork(shape)
+    return work
+
+
+def hysteresis(levels: np.ndarray, work: LevelsWork | None = None) -> np.ndarray:
     """Hysteresis of a mask of levels: weak pixels (1) count only when 8-connected to a strong one (2).
 
     Args:
         levels: ``(H, W)`` uint8 with values 0 (background), 1 (weak) and 2 (strong foreground).
+        work: Scratch buffers of this frame size (:class:`LevelsWork`; ``None``: the calling thread's,
+            :func:`thread_work`).
 
     Returns:
-        ``(H, W)`` uint8 mask with values ``{0, 1}``: the connected components of ``levels > 0`` that hold a
-        strong pixel. (Computed as ``levels > 0`` less the weak pixels of the components without a strong pixel,
-        which hold weak pixels only: sparse work on the few weak pixels instead of a lookup per image pixel.)
+        ``(H, W)`` uint8 mask with values ``{0, 1}`` (a new array): the connected components of ``levels > 0`` that
+        hold a strong pixel. (Computed as ``levels > 0`` less the weak pixels of the components without a strong
+        pixel, which hold weak pixels only: sparse work on the few weak pixels instead of a lookup per image pixel.)
     """
     import cv2
 
-    union = (levels > 0).view(np.uint8)
-    count, labels = cv2.connectedComponents(union, connectivity=8)
+    if work is None or not work.fits(levels.shape):
+        work = thread_work(levels.shape)
+    union = np.greater(levels, 0).view(np.uint8)
+    count, labels = cv2.connectedComponents(union, work.labels, connectivity=8)
     good = np.zeros(count, dtype=bool)
-    good[labels[levels == 2]] = True
-    weak = np.flatnonzero(levels == 1)
+    good[labels[np.equal(levels, 2, out=work.flag)]] = True
+    weak = np.flatnonzero(np.equal(levels, 1, out=work.flag))
     weak_labels = labels.reshape(-1)[weak]
     union.reshape(-1)[weak[~good[weak_labels]]] = 0
     return union
@@ -34,13 +82,14 @@ PENUMBRA_PX = 3
 """Penumbra candidates within this many pixels of a cast shadow are shadow (:func:`resolve_levels`)."""
 
 
+@functools.cache
 def _disc(diameter: int) -> np.ndarray:
     import cv2
 
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (diameter, diameter))
 
 
-def resolve_levels(packed: np.ndarray, prob: np.ndarray | None = None) -> np.ndarray:
+def resolve_levels(packed: np.ndarray, prob: np.ndarray | None = None, work: LevelsWork | None = None) -> np.ndarray:
     """The binary mask of a frame from the kernel's packed output ``level + 4 shadow``
     (:func:`wptrack.kernels.core.background.foreground_kernel`).
 
@@ -50,22 +99,28 @@ def resolve_levels(packed: np.ndarray, prob: np.ndarray | None = None) -> np.nda
     then :func:`hysteresis`.
 
     Args:
-        packed: ``(H, W)`` uint8 kernel output.
+        packed: ``(H, W)`` uint8 kernel output (not changed).
         prob: ``(H, W)`` float32 probability to zero on the penumbrae, or ``None``.
+        work: Scratch buffers of this frame size (:class:`LevelsWork`; ``None``: the calling thread's,
+            :func:`thread_work`).
 
     Returns:
-        ``(H, W)`` uint8 mask with values ``{0, 1}``.
+        ``(H, W)`` uint8 mask with values ``{0, 1}`` (a new array).
     """
     import cv2
 
-    levels = packed & 3
-    shadow = packed >> 2
-    if (shadow == 1).any():
-        near = cv2.dilate((shadow == 2).view(np.uint8), _disc(2 * PENUMBRA_PX + 1))
-        penumbra = (near > 0) & (shadow == 1)
+    if work is None or not work.fits(packed.shape):
+        work = thread_work(packed.shape)
+    levels = np.bitwise_and(packed, 3, out=work.levels)
+    shadow = np.right_shift(packed, 2, out=work.shadow)
+    candidates = np.equal(shadow, 1, out=work.flag)
+    if candidates.any():
+        umbra = np.equal(shadow, 2, out=work.flag2).view(np.uint8)
+        near = cv2.dilate(umbra, _disc(2 * PENUMBRA_PX + 1), dst=work.near)
+        penumbra = np.logical_and(candidates, near, out=work.flag2)
         levels[penumbra] = 0
         if prob is not None:
             prob[penumbra] = 0.0
-    if (levels == 1).any():
-        return hysteresis(levels)
-    return (levels == 2).view(np.uint8)
+    if np.equal(levels, 1, out=work.flag).any():
+        return hysteresis(levels, work)
+    return np.equal(levels, 2).view(np.uint8)

@@ -27,6 +27,7 @@ processed.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -246,6 +247,7 @@ class MaskConfig:
             fail("device", "'auto', 'cpu', 'cuda' or 'cuda:N'")
 
 
+@functools.cache
 def _kernel(diameter: int) -> np.ndarray:
     import cv2
 
@@ -267,10 +269,23 @@ def clean_mask(mask: np.ndarray, config: MaskConfig) -> np.ndarray:
     """
     import cv2
 
-    if config.open_px > 1:
-        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, _kernel(config.open_px))
-    if config.close_px > 1:
-        mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, _kernel(config.close_px))
+    from wptrack.motion.levels import thread_work
+
+    if config.open_px > 1 or config.close_px > 1:
+        # OpenCV's opening and closing as their erosions and dilations into the thread's scratch images (the same
+        # pixels, OpenCV's default border: outside counts as foreground for an erosion, background for a dilation),
+        # so a frame allocates only the mask it returns (fresh pages cost a page fault each: levels.LevelsWork)
+        work = thread_work(mask.shape)
+        steps = []
+        if config.open_px > 1:
+            k = _kernel(config.open_px)
+            steps += [(cv2.erode, k), (cv2.dilate, k)]
+        if config.close_px > 1:
+            k = _kernel(config.close_px)
+            steps += [(cv2.dilate, k), (cv2.erode, k)]
+        for i, (op, k) in enumerate(steps):
+            last = i == len(steps) - 1
+            mask = op(mask, k) if last else op(mask, k, dst=work.morph if i % 2 == 0 else work.morph2)
     if config.min_area > 1:
         count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
         keep = stats[:, cv2.CC_STAT_AREA] >= config.min_area
@@ -293,6 +308,29 @@ def given_mask(image: np.ndarray, threshold: int) -> np.ndarray:
     else:
         peak = image
     return cv2.threshold(np.ascontiguousarray(peak), int(threshold), 1, cv2.THRESH_BINARY)[1]
+
+
+DEVICE_CLEANUP_ENV = "WPTRACK_DEVICE_CLEANUP"
+"""Environment variable: ``1`` resolves and cleans the offline masks on the device whatever it is, ``0`` on the host
+(default: on a CUDA device, :func:`device_cleanup`)."""
+
+
+def device_cleanup(device: Any) -> bool:
+    """Whether the offline model's masks on ``device`` are resolved and cleaned there
+    (:class:`wptrack.motion.cleanup.DeviceCleanup`): on a CUDA device unless :data:`DEVICE_CLEANUP_ENV` says ``0``;
+    on the CPU only when it says ``1``.
+
+    Raises:
+        ConfigError: :data:`DEVICE_CLEANUP_ENV` set to something else than 0 or 1.
+    """
+    import warp as wp
+
+    value = os.environ.get(DEVICE_CLEANUP_ENV, "").strip()
+    if value not in ("", "0", "1"):
+        raise ConfigError(f"{DEVICE_CLEANUP_ENV}: expected 0 or 1, got {value!r}")
+    if value:
+        return value == "1"
+    return bool(wp.get_device(device).is_cuda)
 
 
 class MotionMasks:
@@ -394,10 +432,11 @@ class MotionMasks:
         return self._model
 
     def attach_cleanup(self, model: Any) -> None:
-        """With ``WPTRACK_DEVICE_CLEANUP=1`` (issue 27, opt-in until measured on a GPU): the model resolves and cleans
-        its masks on the device (:class:`wptrack.motion.cleanup.DeviceCleanup`, the same masks) and downloads the
-        mask instead of the levels; not with ``min_area`` (a host filter)."""
-        if os.environ.get("WPTRACK_DEVICE_CLEANUP", "").strip() == "1" and self.config.min_area <= 1:
+        """On a CUDA device (issue 27) the model resolves and cleans its masks on the device
+        (:class:`wptrack.motion.cleanup.DeviceCleanup`, the same masks) and downloads the mask instead of the levels;
+        not with ``min_area`` (a host filter). ``WPTRACK_DEVICE_CLEANUP=1`` asks for it on the CPU device too (slower
+        there), ``=0`` keeps the host's clean-up on a GPU."""
+        if self.config.min_area <= 1 and device_cleanup(model.device):
             from wptrack.motion.cleanup import DeviceCleanup
 
             model.cleanup = DeviceCleanup(*self.size, self.config.open_px, self.config.close_px, model.device)
