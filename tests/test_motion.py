@@ -762,3 +762,63 @@ def test_models_sharing_windows_plan_them_alike():
                           share=first._share)  # fmt: skip
     for m in (first, same):
         m.close()
+
+
+def test_resolve_levels_scratch_buffers_per_thread_and_size(rng):
+    """The host resolution's scratch buffers (levels.LevelsWork) are the calling thread's, one set per frame size:
+    frames of two sizes in turn and two threads at once give the masks of fresh buffers, and the buffers are reused
+    (no allocation per frame)."""
+    import threading
+
+    from wptrack.motion.levels import LevelsWork, resolve_levels, thread_work
+
+    def frame(h: int, w: int) -> np.ndarray:
+        levels = (rng.random((h, w)) < 0.4).astype(np.uint8)
+        levels[rng.random((h, w)) < 0.02] = 2
+        shadow = (rng.random((h, w)) < 0.1).astype(np.uint8) * rng.integers(1, 3, (h, w)).astype(np.uint8)
+        return (levels + 4 * shadow).astype(np.uint8)
+
+    frames = [frame(30, 40), frame(25, 60), frame(30, 40), frame(25, 60)]
+    expected = [resolve_levels(f.copy(), None, LevelsWork(f.shape)) for f in frames]
+    for f, e in zip(frames, expected, strict=True):
+        np.testing.assert_array_equal(resolve_levels(f.copy()), e)
+    assert thread_work((30, 40)) is thread_work((30, 40)) and thread_work((25, 60)).fits((25, 60))
+    packed = frames[0].copy()
+    before = packed.copy()
+    resolve_levels(packed)
+    np.testing.assert_array_equal(packed, before)  # the kernel's output is not changed
+    got: dict[int, list[np.ndarray]] = {}
+    mine = thread_work((30, 40))
+
+    def work(k: int) -> None:
+        got[k] = [resolve_levels(f.copy()) for f in frames * 5]
+        assert thread_work((30, 40)) is not mine
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for k in range(3):
+        for g, e in zip(got[k], expected * 5, strict=True):
+            np.testing.assert_array_equal(g, e)
+
+
+@pytest.mark.parametrize(("open_px", "close_px"), [(3, 5), (5, 0), (0, 7), (0, 0)])
+def test_clean_mask_equals_opencv_opening_and_closing(rng, open_px, close_px):
+    """clean_mask's erosions and dilations into scratch images give cv2.morphologyEx's opening then closing, the
+    border included (foreground touching it is not eroded from outside), and a new array the caller owns."""
+    from wptrack.motion.masks import MaskConfig, clean_mask
+
+    mask = (rng.random((33, 47)) < 0.5).astype(np.uint8)
+    mask[0, :] = 1
+    mask[:, -1] = 1
+    expected = mask.copy()
+    for px, op in ((open_px, cv2.MORPH_OPEN), (close_px, cv2.MORPH_CLOSE)):
+        if px > 1:
+            expected = cv2.morphologyEx(expected, op, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (px, px)))
+    first = clean_mask(mask, MaskConfig(open_px=open_px, close_px=close_px))
+    np.testing.assert_array_equal(first, expected)
+    again = clean_mask((rng.random((33, 47)) < 0.5).astype(np.uint8), MaskConfig(open_px=open_px, close_px=close_px))
+    np.testing.assert_array_equal(first, expected)  # the next call does not overwrite what the first returned
+    assert again.shape == first.shape

@@ -15,9 +15,10 @@ class LevelsWork:
     resolution allocates nothing but the mask it returns (and the few labels it gathers).
 
     A 1080p frame's temporaries (levels, shadow flags, the dilated umbra, the int32 components image: ~17 MB) were
-    allocated afresh every frame, and fresh pages cost a page fault each: on an H100 host's mask thread
-    ``resolve_levels`` took 7.9 ms a 1080p frame, two thirds of it the kernel zeroing new pages (docs/notes.md). One
-    instance per thread (an :class:`~wptrack.motion.background.OfflineBackground` keeps its own); not thread-safe.
+    allocated afresh every frame, and fresh pages cost a page fault each: on this project's 2-core CPU
+    ``resolve_levels`` took 9.9 ms a 1080p frame, 3.8 ms with freed memory kept for reuse, 5.6 ms with these buffers
+    (the clean-up's 5.0 -> 1.2 ms; docs/notes.md). ~22 MB at 1080p, held by each thread that resolves masks
+    (:func:`thread_work`) for its lifetime; not thread-safe.
 
     Args:
         shape: ``(H, W)`` of the frames, pixels.
@@ -43,11 +44,16 @@ _local = threading.local()
 
 
 def thread_work(shape: tuple[int, ...]) -> LevelsWork:
-    """The calling thread's :class:`LevelsWork` for frames of ``shape`` (made on its first use, remade when the
-    size changes, released with the thread): the mask threads of a run each have their own."""
-    work = getattr(_local, "work", None)
-    if work is None or not work.fits(shape):
-        work = _local.work = LevelsWork(shape)
+    """The calling thread's :class:`LevelsWork` for frames of ``shape`` (made on its first use, one per frame size:
+    a thread serving cameras of several sizes keeps one for each; released with the thread): the mask threads of a
+    run each have their own."""
+    works = getattr(_local, "works", None)
+    if works is None:
+        works = _local.works = {}
+    key = (int(shape[0]), int(shape[1]))
+    work = works.get(key)
+    if work is None:
+        work = works[key] = LevelsWork(key)
     return work
 
 
