@@ -205,14 +205,17 @@ class Groups:
         self.group_first = wp.full(r, -7, dtype=wp.int32, device=d)
         self.group_active = wp.full(r, -7, dtype=wp.int32, device=d)
         self.n_groups = wp.full(1, -7, dtype=wp.int32, device=d)
+        self.slot_hi = wp.full(1, -7, dtype=wp.int32, device=d)
         wp.launch(
             kpart.group_slots_kernel,
             dim=1,
             inputs=[acc, partition],
             outputs=[self.slot_box, self.slot_alive, self.slot_group, self.group_box, self.group_first,
-                     self.group_active, self.n_groups],
+                     self.group_active, self.n_groups, self.slot_hi],
             device=d,
         )  # fmt: skip
+        held = np.flatnonzero((kind > 0).any(axis=0))
+        assert int(self.slot_hi.numpy()[0]) == (int(held[-1]) + 1 if held.size else 0)  # one past the last held slot
         # the maxima are left as the next frame's slot_box_kernel expects them
         np.testing.assert_array_equal(acc.numpy(), empty_slot_acc(r, d).numpy())
         self.count = int(self.n_groups.numpy()[0])
@@ -304,7 +307,10 @@ class GroupScore:
             wp.array(self.dims, dtype=wp.vec3, device=d),
         ]
 
-    def score(self, band: int, grouped: bool, bg_weight: float = 0.6, exclusion: float = 300.0, finish: bool = True):
+    def score(
+        self, band: int, grouped: bool, bg_weight: float = 0.6, exclusion: float = 300.0, finish: bool = True,
+        slot_hi: wp.array | None = None,
+    ):  # fmt: skip
         d, n = self.device, self.n
         logw = wp.zeros(n, dtype=wp.float32, device=d)
         penalty = wp.zeros(n, dtype=wp.int32, device=d)
@@ -317,6 +323,7 @@ class GroupScore:
             self.hulls, *self.arrays, self.qrow, self.qtotal, wp.vec4(*self.cost_a), wp.vec4(*self.cost_b),
             self.scale, bg_weight, exclusion, sums, logw, penalty, complexity, cov_diff, d, band=band,
             groups=(g.group_box, g.n_groups, g.slot_group, group_sums) if grouped else None, finish=finish,
+            slot_hi=slot_hi,
         )  # fmt: skip
         return logw, penalty, complexity, cov_diff, group_sums, sums
 
@@ -355,6 +362,24 @@ def test_group_sums_match_numpy_and_leave_the_joint_scores_unchanged(device, rng
     q = case.q != 0
     covered = ref[..., 0].sum(axis=1)
     np.testing.assert_array_equal(grouped[1].numpy(), q.sum() + covered - 2 * ref[..., 1].sum(axis=1))  # eq. 4
+
+
+@pytest.mark.parametrize(("band", "scene"), [(0, "jittered"), (8, "jittered"), (0, "crowd"), (8, "crowd")])
+def test_scoring_scans_only_the_held_slots(device, rng, band, scene):
+    """With the bound of group_slots_kernel (one past the last slot some particle holds: 7 of 8, 52 of 64 slots) the
+    row and band kernels scan fewer pieces and give the full scan's log-weights, penalties, complexities, coverage
+    counts and group sums bit for bit, grouped or not; a bound below a held slot leaves its pieces out (the bound is
+    read)."""
+    case = GroupScore(device, rng, n=12 if scene == "crowd" else 30, scene=scene)
+    hi = int(case.groups.slot_hi.numpy()[0])
+    assert 0 < hi < case.r
+    for grouped in (False, True):
+        full = case.score(band, grouped)
+        bounded = case.score(band, grouped, slot_hi=case.groups.slot_hi)
+        for a, b in zip(full, bounded, strict=True):
+            np.testing.assert_array_equal(b.numpy(), a.numpy())
+    short = case.score(band, False, slot_hi=wp.full(1, 1, dtype=wp.int32, device=device))
+    assert (short[1].numpy() != full[1].numpy()).any()
 
 
 @pytest.mark.parametrize(("band", "scene"), [(0, "jittered"), (8, "jittered"), (8, "crowd")])

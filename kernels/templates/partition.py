@@ -151,9 +151,11 @@ def group_slots_kernel(
     group_first: wp.array(dtype=wp.int32),
     group_active: wp.array(dtype=wp.int32),
     n_groups: wp.array(dtype=wp.int32),
+    slot_hi: wp.array(dtype=wp.int32),
 ):
     """The slot boxes from :func:`slot_box_kernel`'s maxima, which it resets for the next frame, then the slots'
-    groups (see the module docstring). One thread (``dim=1``); R <= ``raster.MAX_SLOTS`` slots.
+    groups (see the module docstring) and the bound of the slots in use. One thread (``dim=1``); R <=
+    ``raster.MAX_SLOTS`` slots.
 
     Groups are numbered by their lowest slot, in slot order. With ``partition`` 0 every alive slot is put in group
     0 (the joint filter of the paper: one factor, one resampling).
@@ -168,6 +170,9 @@ def group_slots_kernel(
         group_first: (R,) lowest slot of each group (-1 past the last group).
         group_active: (R,) 1 for the groups in use (``g < n_groups[0]``), else 0.
         n_groups: (1,) number of groups.
+        slot_hi: (1,) one past the highest slot some particle holds (0: none): the slots from it on are empty in
+            every particle, so their pieces are not drawn (``kernels.templates.xor`` scans the pieces below it only;
+            an R_max well above the scene's count costs the scoring little).
     """
     r = slot_group.shape[0]
     parent = vec_slots_i()
@@ -249,6 +254,11 @@ def group_slots_kernel(
             group_first[g] = -1
             group_box[g] = wp.vec4i(0, 0, -1, -1)
     n_groups[0] = count
+    top = int(0)
+    for s in range(r):
+        if alive[s] != 0:
+            top = s + 1
+    slot_hi[0] = top
 
 
 @wp.func

@@ -138,6 +138,7 @@ def xor_score_kernel(
     exclusion: float,
     group_box: wp.array(dtype=wp.vec4i),
     n_groups: wp.array(dtype=wp.int32),
+    slot_hi: wp.array(dtype=wp.int32),
     logw: wp.array(dtype=wp.float32),
     penalty: wp.array(dtype=wp.int32),
     complexity: wp.array(dtype=wp.float32),
@@ -168,6 +169,9 @@ def xor_score_kernel(
             this prior says so directly (it keeps two hypotheses off one person and humans off a car).
         group_box, n_groups: the boxes of the slots' independent groups (``kernels.templates.partition``); with
             ``n_groups[0]`` = 0 no group sums are kept (the joint filter).
+        slot_hi: (1,) the slots from ``slot_hi[0]`` on are empty in every particle (``partition.group_slots_kernel``;
+            R when unknown): only the pieces of the slots below it are scanned (the same sums: empty slots draw no
+            piece).
         logw: (N,) log-weight, updated in place: ``logw_i += -(m'_i + c_i) s / (W H)`` (it holds the prior
             log-weight after prediction: 0 after resampling).
         penalty: (N,) m_i, pixels (exact). complexity: (N,) c_i, pixels.
@@ -179,7 +183,7 @@ def xor_score_kernel(
     """
     i, lane = wp.tid()
     slots = kind.shape[1]
-    pieces = slots * PIECES
+    pieces = wp.min(slots, slot_hi[0]) * PIECES  # the pieces of the slots some particle holds
     width = qrow.shape[1] - 1
     y0 = qrow.shape[0]  # empty row range unless a piece is visible
     y1 = int(-1)
@@ -330,6 +334,7 @@ def xor_band_kernel(cap: int, grouped: bool = False) -> wp.Kernel:
         band: rows per band.
         group_box, n_groups, slot_group: the groups' boxes, their count and each slot's group
             (``kernels.templates.partition``); read only when ``grouped``.
+        slot_hi: (1,) only the pieces of the slots below ``slot_hi[0]`` are scanned (see ``xor_score_kernel``).
         sums: (N,) (|v_i|, |q AND v_i|), pixels; must hold zeros (``xor_finish_kernel`` clears it).
         cov_diff: (H, W+1) per-row difference array of coverage counts, as in ``xor_score_kernel``.
         group_sums: (N, R) with ``grouped``: the same sums per group (one atomic add per band and group that covers
@@ -350,11 +355,11 @@ def xor_band_kernel(cap: int, grouped: bool = False) -> wp.Kernel:
         yb: int,
         slot_group: wp.array(dtype=wp.int32),
         g: int,
+        pieces: int,
         cov_diff: wp.array2d(dtype=wp.int32),
     ):
-        """(|v_i|, |q AND v_i|) over rows [ya, yb] of the pieces of particle ``i`` (of group ``g``'s slots only when
-        ``g`` >= 0), with the merged intervals' coverage adds to ``cov_diff``."""
-        pieces = hull_n.shape[1]
+        """(|v_i|, |q AND v_i|) over rows [ya, yb] of the first ``pieces`` pieces of particle ``i`` (of group ``g``'s
+        slots only when ``g`` >= 0), with the merged intervals' coverage adds to ``cov_diff``."""
         width = qrow.shape[1] - 1
         rows = veci()  # each piece's rows within the band, first * PACK + last (PACK: first 1 > last 0, none)
         any_rows = int(0)
@@ -416,6 +421,7 @@ def xor_band_kernel(cap: int, grouped: bool = False) -> wp.Kernel:
         group_box: wp.array(dtype=wp.vec4i),
         n_groups: wp.array(dtype=wp.int32),
         slot_group: wp.array(dtype=wp.int32),
+        slot_hi: wp.array(dtype=wp.int32),
         sums: wp.array(dtype=wp.vec2i),
         cov_diff: wp.array2d(dtype=wp.int32),
         group_sums: wp.array2d(dtype=wp.vec2i),
@@ -433,7 +439,8 @@ def xor_band_kernel(cap: int, grouped: bool = False) -> wp.Kernel:
             if ya > yb:
                 return
             only = g
-        covered, both = band_sums(hull_pts, hull_n, hull_rows, qrow, i, ya, yb, slot_group, only, cov_diff)
+        pieces = wp.min(hull_n.shape[1], slot_hi[0] * PIECES)  # the pieces of the slots some particle holds
+        covered, both = band_sums(hull_pts, hull_n, hull_rows, qrow, i, ya, yb, slot_group, only, pieces, cov_diff)
         if covered > 0:
             wp.atomic_add(sums, i, wp.vec2i(covered, both))
             if wp.static(grouped):

@@ -228,6 +228,7 @@ def launch_xor_score(
     band: int = 0,
     groups: tuple[wp.array, wp.array, wp.array, wp.array] | None = None,
     finish: bool = True,
+    slot_hi: wp.array | None = None,
 ) -> None:
     """Eqs. 4-6 for every particle (``kernels.templates.xor``) and the coverage counts: with ``band`` > 0 a thread per
     band of ``band`` rows and particle (``xor_band_kernel``, then ``xor_finish_kernel``; ``sums`` (N,) vec2i zeros, left
@@ -236,8 +237,12 @@ def launch_xor_score(
     ``groups`` = ``(group_box, n_groups, slot_group, group_sums)`` (``kernels.templates.partition``) also sums |v| and
     |q AND v| per independent group into ``group_sums`` (N, R) vec2i (zeros; ``xor.group_logw_kernel`` reads and clears
     them); the band kernel then runs a thread per (group, band, particle). ``finish`` False leaves the band path's
-    ``sums`` unfinished for ``xor.group_logw_kernel`` (its ``finish`` 1: the same outputs, one launch less)."""
+    ``sums`` unfinished for ``xor.group_logw_kernel`` (its ``finish`` 1: the same outputs, one launch less).
+    ``slot_hi`` (1,) int32: the slots from ``slot_hi[0]`` on are empty in every particle
+    (``partition.group_slots_kernel``), so their pieces are not scanned; ``None``: all R slots (an array made here)."""
     n = kind.shape[0]
+    if slot_hi is None:
+        slot_hi = wp.full(1, kind.shape[1], dtype=wp.int32, device=device)
     cost = [kind, age, pos, heading, dims, qtotal, cost_a, cost_b, scale, bg_weight, exclusion]
     grouped = groups is not None
     group_box, n_groups, slot_group, group_sums = groups if grouped else _no_groups(str(device))
@@ -247,7 +252,7 @@ def launch_xor_score(
         wp.launch(
             kxor.xor_band_kernel(piece_cap(hulls.n.shape[1]), grouped),
             dim=(group_sums.shape[1] if grouped else 1, bands, n),
-            inputs=[hulls.pts, hulls.n, hulls.rows, qrow, int(band), group_box, n_groups, slot_group],
+            inputs=[hulls.pts, hulls.n, hulls.rows, qrow, int(band), group_box, n_groups, slot_group, slot_hi],
             outputs=[sums, cov_diff, group_sums],
             device=device,
         )
@@ -259,7 +264,21 @@ def launch_xor_score(
     wp.launch_tiled(
         kxor.xor_score_kernel,
         dim=[n],
-        inputs=[hulls.pts, hulls.n, hulls.rows, kind, age, pos, heading, dims, qrow, *cost[5:], group_box, n_groups],
+        inputs=[
+            hulls.pts,
+            hulls.n,
+            hulls.rows,
+            kind,
+            age,
+            pos,
+            heading,
+            dims,
+            qrow,
+            *cost[5:],
+            group_box,
+            n_groups,
+            slot_hi,
+        ],
         outputs=[logw, penalty, complexity, cov_diff, group_sums],
         block_dim=SCORE_BLOCK,
         device=device,

@@ -208,6 +208,9 @@ class TemplateTracker(FrameChain):
         self.group_first = wp.full(r, -1, dtype=wp.int32, device=d)
         self.group_active = wp.zeros(r, dtype=wp.int32, device=d)
         self.n_groups = wp.zeros(1, dtype=wp.int32, device=d)
+        # one past the highest slot some particle holds (partition.group_slots_kernel each frame; R for the joint
+        # filter): the XOR scoring scans the pieces below it only
+        self.slot_hi = wp.full(1, r, dtype=wp.int32, device=d)
         gn, gr, gb = (n, r, self.blocks) if self.partition else (1, 1, 1)  # unused 1 x 1 stand-ins when joint
         self.slot_acc = empty_slot_acc(
             r, d
@@ -336,7 +339,7 @@ class TemplateTracker(FrameChain):
                 dim=1,
                 inputs=[self.slot_acc, 1],
                 outputs=[self.slot_box, self.slot_alive, self.slot_group, self.group_box, self.group_first,
-                         self.group_active, self.n_groups],
+                         self.group_active, self.n_groups, self.slot_hi],
                 device=self.device,
             )  # fmt: skip
         if (
@@ -360,7 +363,7 @@ class TemplateTracker(FrameChain):
             self.score_scale, float(cfg.bg_weight), self.exclusion, self.xor_sums, s.logw, self.penalty,
             self.complexity, self.cov_diff, self.device, band=self.xor_band,
             groups=(self.group_box, self.n_groups, self.slot_group, self.group_sums) if self.partition else None,
-            finish=finish_here,
+            finish=finish_here, slot_hi=self.slot_hi,
         )  # fmt: skip
         if self.partition:  # each group's factor of eq. 6 (kernels.templates.xor.group_logw_kernel)
             wp.launch_tiled(
