@@ -170,8 +170,7 @@ def xor_score_kernel(
         group_box, n_groups: the boxes of the slots' independent groups (``kernels.templates.partition``); with
             ``n_groups[0]`` = 0 no group sums are kept (the joint filter).
         slot_hi: (1,) the slots from ``slot_hi[0]`` on are empty in every particle (``partition.group_slots_kernel``;
-            R when unknown): only the pieces of the slots below it are scanned (the same sums: empty slots draw no
-            piece).
+            R when unknown): only the pieces below it are scanned (the same sums: empty slots draw no piece).
         logw: (N,) log-weight, updated in place: ``logw_i += -(m'_i + c_i) s / (W H)`` (it holds the prior
             log-weight after prediction: 0 after resampling).
         penalty: (N,) m_i, pixels (exact). complexity: (N,) c_i, pixels.
