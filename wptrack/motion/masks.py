@@ -435,11 +435,14 @@ class MotionMasks:
         """On a CUDA device (issue 27) the model resolves and cleans its masks on the device
         (:class:`wptrack.motion.cleanup.DeviceCleanup`, the same masks) and downloads the mask instead of the levels;
         not with ``min_area`` (a host filter). ``WPTRACK_DEVICE_CLEANUP=1`` asks for it on the CPU device too (slower
-        there), ``=0`` keeps the host's clean-up on a GPU."""
+        there), ``=0`` keeps the host's clean-up on a GPU. Call it outside the device guard's shared sections (it
+        takes one for its allocations)."""
         if self.config.min_area <= 1 and device_cleanup(model.device):
+            from wptrack.core.device import device_guard
             from wptrack.motion.cleanup import DeviceCleanup
 
-            model.cleanup = DeviceCleanup(*self.size, self.config.open_px, self.config.close_px, model.device)
+            with device_guard(model.device).shared():  # allocations: never inside a tracker's graph capture
+                model.cleanup = DeviceCleanup(*self.size, self.config.open_px, self.config.close_px, model.device)
 
     def background(self, window: int = 0) -> np.ndarray | None:
         """``(H, W, 3)`` uint8 BGR background of an offline window (for reports); ``None`` for other methods."""
