@@ -205,6 +205,12 @@ def _no_groups(device: str) -> tuple[wp.array, wp.array, wp.array, wp.array]:
     )
 
 
+@functools.cache
+def _all_slots(device: str, slots: int) -> wp.array:
+    """``slot_hi`` of :func:`launch_xor_score` that scans every one of ``slots`` slots (allocated once; read only)."""
+    return wp.full(1, slots, dtype=wp.int32, device=device)
+
+
 def launch_xor_score(
     hulls: Any,
     kind: wp.array,
@@ -239,10 +245,10 @@ def launch_xor_score(
     them); the band kernel then runs a thread per (group, band, particle). ``finish`` False leaves the band path's
     ``sums`` unfinished for ``xor.group_logw_kernel`` (its ``finish`` 1: the same outputs, one launch less).
     ``slot_hi`` (1,) int32: the slots from ``slot_hi[0]`` on are empty in every particle
-    (``partition.group_slots_kernel``), so their pieces are not scanned; ``None``: all R slots (an array made here)."""
+    (``partition.group_slots_kernel``), so their pieces are not scanned; ``None``: all R slots."""
     n = kind.shape[0]
     if slot_hi is None:
-        slot_hi = wp.full(1, kind.shape[1], dtype=wp.int32, device=device)
+        slot_hi = _all_slots(str(device), kind.shape[1])
     cost = [kind, age, pos, heading, dims, qtotal, cost_a, cost_b, scale, bg_weight, exclusion]
     grouped = groups is not None
     group_box, n_groups, slot_group, group_sums = groups if grouped else _no_groups(str(device))
