@@ -7,8 +7,8 @@ on the GPU can stay there (no download of the levels, no host connected componen
 structuring elements are OpenCV's ellipses). What it leaves to the host: ``min_area`` (a connected-components size
 filter; off by default). On the CPU backend the host functions are faster (OpenCV's SIMD code against Warp launches
 on one core), so the offline model keeps them there; on a GPU the kernels (a fixed chain of launches, no read-back:
-the hysteresis is a union-find labelling, ``kernels.core.morphology``) replace ~9 ms of host work a 1080p frame in
-each mask thread (the levels' download, the penumbra test, the connected components, the opening and closing) with
+the hysteresis is a union-find labelling, ``kernels.core.morphology``) replace 7-9 ms of host work a 1080p frame in
+each mask thread alone on an H100 host (the penumbra test, the connected components, the opening and closing) with
 one download of the mask (docs/notes.md).
 """
 
